@@ -1,0 +1,170 @@
+"""Typed parameters: frozen dataclasses set from ``-p key=value`` strings or a TOML table.
+
+Scenarios and filters declare their parameters as frozen, keyword-only dataclasses with SI units
+in the field docstrings; this module turns user text into such an instance with clear errors.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+import tomllib
+import types
+import typing
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+
+class ParamError(ValueError):
+    """A parameter that does not exist or has a value of the wrong type or range."""
+
+
+def parse_assignments(items: Iterable[str]) -> dict[str, str]:
+    """Split ``key=value`` strings; raise :class:`ParamError` on a malformed item."""
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ParamError(f"parameter {item!r} is not of the form key=value")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def load_toml(path: str | Path, table: str | None = None) -> dict[str, Any]:
+    """Read a TOML file (optionally one table of it) as parameter values."""
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise ParamError(f"{path}: no such config file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ParamError(f"{path}: invalid TOML: {e}") from None
+    if table is not None:
+        data = data.get(table, {})
+        if not isinstance(data, dict):
+            raise ParamError(f"{path}: [{table}] is not a table")
+    return data
+
+
+def _coerce(name: str, tp: Any, value: Any) -> Any:
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if value is None or (isinstance(value, str) and value.lower() in ("none", "null", "")):
+            if len(args) < len(typing.get_args(tp)):
+                return None
+        return _coerce(name, args[0], value)
+    if origin in (tuple, list):
+        args = typing.get_args(tp)
+        if isinstance(value, str):
+            parts = [p for p in value.replace(";", ",").split(",") if p.strip()]
+        else:
+            parts = list(value)
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(parts) != len(args):
+                raise ParamError(f"parameter {name}: expected {len(args)} values, got {len(parts)}")
+            elem_types = list(args)
+        else:
+            elem_types = [args[0] if args else float] * len(parts)
+        return origin(_coerce(name, t, p) for t, p in zip(elem_types, parts, strict=True))
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        try:
+            return tp(value) if not isinstance(value, tp) else value
+        except ValueError:
+            choices = ", ".join(str(m.value) for m in tp)
+            raise ParamError(f"parameter {name}: {value!r} is not one of {choices}") from None
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        s = str(value).strip().lower()
+        if s in ("1", "true", "yes", "on"):
+            return True
+        if s in ("0", "false", "no", "off"):
+            return False
+        raise ParamError(f"parameter {name}: {value!r} is not a boolean (true/false)")
+    if tp is int:
+        if isinstance(value, bool):
+            raise ParamError(f"parameter {name}: expected an integer, got {value!r}")
+        try:
+            f = float(value)
+        except (TypeError, ValueError):
+            raise ParamError(f"parameter {name}: {value!r} is not an integer") from None
+        if not f.is_integer():
+            raise ParamError(f"parameter {name}: {value!r} is not an integer")
+        return int(f)
+    if tp is float:
+        try:
+            f = float(value)
+        except (TypeError, ValueError):
+            raise ParamError(f"parameter {name}: {value!r} is not a number") from None
+        if not math.isfinite(f):
+            raise ParamError(f"parameter {name}: {value!r} is not finite")
+        return f
+    if tp is str:
+        return str(value)
+    return value
+
+
+def build(cls: type, values: Mapping[str, Any] | None = None, *, where: str = "") -> Any:
+    """Instantiate parameter dataclass ``cls`` from user values (strings or TOML values).
+
+    Unknown keys raise :class:`ParamError` listing the valid ones; the dataclass's own
+    ``__post_init__`` validation errors are re-raised as :class:`ParamError`.
+    """
+    values = dict(values or {})
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(values) - set(fields))
+    prefix = f"{where}: " if where else ""
+    if unknown:
+        raise ParamError(
+            f"{prefix}unknown parameter(s) {', '.join(unknown)}; valid: {', '.join(fields)}"
+        )
+    kwargs = {k: _coerce(k, hints[k], v) for k, v in values.items()}
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError) as e:
+        raise ParamError(f"{prefix}{e}") from None
+
+
+def as_dict(params: Any) -> dict[str, Any]:
+    """JSON-friendly dict of a parameter dataclass (enums by value, tuples as lists)."""
+    out = {}
+    for f in dataclasses.fields(params):
+        v = getattr(params, f.name)
+        if isinstance(v, enum.Enum):
+            v = v.value
+        elif isinstance(v, tuple):
+            v = list(v)
+        out[f.name] = v
+    return out
+
+
+def describe(cls: type) -> list[tuple[str, str, Any, str]]:
+    """(name, type, default, docstring) of each field, for listings."""
+    import ast
+    import inspect
+    import textwrap
+
+    docs: dict[str, str] = {}
+    try:
+        tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+        body = tree.body[0].body  # type: ignore[attr-defined]
+        for a, b in zip(body, body[1:], strict=False):
+            if (isinstance(a, ast.AnnAssign) and isinstance(a.target, ast.Name)
+                    and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)
+                    and isinstance(b.value.value, str)):
+                docs[a.target.id] = " ".join(b.value.value.split())
+    except (OSError, TypeError, SyntaxError):
+        pass
+    hints = typing.get_type_hints(cls)
+    rows = []
+    for f in dataclasses.fields(cls):
+        default = f.default if f.default is not dataclasses.MISSING else (
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+        tp = hints.get(f.name, f.type)
+        rows.append((f.name, getattr(tp, "__name__", str(tp)), default, docs.get(f.name, "")))
+    return rows

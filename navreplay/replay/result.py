@@ -1,0 +1,61 @@
+"""Columnar result of replaying one filter over one recording."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+
+@dataclasses.dataclass
+class InnovationSeries:
+    """All updates of one measurement: t (K,) [s], nu (K, m), S (K, m, m), nis (K,)."""
+
+    t: np.ndarray
+    nu: np.ndarray
+    S: np.ndarray
+    nis: np.ndarray
+
+
+@dataclasses.dataclass
+class RunResult:
+    """Estimates of one filter over one recording, in columns.
+
+    Attributes
+    ----------
+    filter_name, label : str
+        Registry name and display label (unique per run command, e.g. ``gps-ins`` or
+        ``transfer-alignment[match=vel_only]``).
+    recording : str
+        Path or name of the recording.
+    t0_ns : int
+        Recording start [ns]; ``t`` is relative to it.
+    t : (M,) [s]
+    state_names : tuple[str, ...]
+    x : (M, n)
+    P : (M, n, n)
+    nav_pos : (M, 3) or None   latitude, longitude [rad], height [m]
+    nav_v_n : (M, 3) or None
+    nav_q_nb : (M, 4) or None
+    extras : dict[str, (M, ...)]
+    innovations : dict[str, InnovationSeries]
+    """
+
+    filter_name: str
+    label: str
+    recording: str
+    t0_ns: int
+    t: np.ndarray
+    state_names: tuple[str, ...]
+    x: np.ndarray
+    P: np.ndarray
+    nav_pos: np.ndarray | None = None
+    nav_v_n: np.ndarray | None = None
+    nav_q_nb: np.ndarray | None = None
+    extras: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    innovations: dict[str, InnovationSeries] = dataclasses.field(default_factory=dict)
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """1-sigma of each state, (M, n)."""
+        return np.sqrt(np.clip(np.diagonal(self.P, axis1=1, axis2=2), 0.0, None))

@@ -1,0 +1,1 @@
+"""Built-in scenarios; importing this package registers them."""
