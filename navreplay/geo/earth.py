@@ -122,7 +122,7 @@ def omega_en_n(lat, h, v_n):
     v_n = np.asarray(v_n, dtype=float)
     R_M, R_N = radii(lat)
     h = np.asarray(h, dtype=float)
-    out = np.empty(np.broadcast_shapes(np.shape(R_M), v_n.shape[:-1]) + (3,))
+    out = np.empty(np.broadcast_shapes(np.shape(R_M), h.shape, v_n.shape[:-1]) + (3,))
     out[..., 0] = v_n[..., 1] / (R_N + h)
     out[..., 1] = -v_n[..., 0] / (R_M + h)
     out[..., 2] = -v_n[..., 1] * np.tan(lat) / (R_N + h)

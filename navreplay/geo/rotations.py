@@ -169,17 +169,18 @@ def dcm_to_euler(C):
 
     At gimbal lock (pitch = +-90 deg) roll and yaw are not separable; the split returned puts the
     whole rotation about the vertical into yaw (roll = 0), so that ``euler_to_dcm`` of the result
-    reproduces C.
+    reproduces C. Near the lock the angles stay accurate: pitch comes from atan2 (not arcsin,
+    which loses half the digits near +-1) and yaw from the columns of ``C Rx(roll)^T``, which
+    stay well conditioned whatever the pitch.
     """
     C = np.asarray(C, dtype=float)
-    sp = np.clip(-C[..., 2, 0], -1.0, 1.0)
-    pitch = np.arcsin(sp)
-    lock = np.hypot(C[..., 2, 1], C[..., 2, 2]) < 1e-12
+    cp = np.hypot(C[..., 2, 1], C[..., 2, 2])
+    lock = cp < 1e-15  # below rounding noise of a unit DCM: roll is not observable
     roll = np.where(lock, 0.0, np.arctan2(C[..., 2, 1], C[..., 2, 2]))
-    yaw_free = np.arctan2(C[..., 1, 0], C[..., 0, 0])
-    # at lock: C[0,1] = sp*sr*cy - cr*sy, C[1,1] = sp*sr*sy + cr*cy with roll = 0
-    yaw_lock = np.arctan2(-C[..., 0, 1], C[..., 1, 1])
-    yaw = np.where(lock, yaw_lock, yaw_free)
+    pitch = np.arctan2(-C[..., 2, 0], cp)
+    # C Rx(roll)^T = Rz(yaw) Ry(pitch), whose column 1 is [-sin(yaw), cos(yaw), 0]
+    sr, cr = np.sin(roll), np.cos(roll)
+    yaw = np.arctan2(C[..., 0, 2] * sr - C[..., 0, 1] * cr, C[..., 1, 1] * cr - C[..., 1, 2] * sr)
     return np.stack([roll, pitch, yaw], axis=-1)
 
 

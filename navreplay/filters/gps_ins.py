@@ -1,0 +1,296 @@
+"""Loosely coupled GPS/INS ("gps-ins"): error-state EKF with feedback on the NED INS error model.
+
+The strapdown INS of :class:`navreplay.filters.ins.InsFilter` (initial solution from
+``metadata.initial_nav``, IMU compensated with the bias estimates) is corrected by GPS position
+fixes and, when the recording has them, GPS NED velocities. The filter estimates the errors of
+the navigation solution and of the IMU biases (and optionally of the GPS antenna lever arm),
+feeds them back into the solution after every update, and so keeps its error state at 0.
+
+States
+------
+===== ==================== ========= ============ =============================================
+index name (Estimate.x)    frame     unit         state (error, estimate minus truth)
+===== ==================== ========= ============ =============================================
+0-2   dlat, dlon, dh       -         rad, rad, m  position error (0 after feedback)
+3-5   dv_N, dv_E, dv_D     n (NED)   m/s          velocity error (0)
+6-8   phi_N, phi_E, phi_D  n         rad          attitude error, phi angle (0)
+9-11  b_a_x, b_a_y, b_a_z  b (FRD)   m/s^2        accelerometer bias error; x holds the estimate
+12-14 b_g_x, b_g_y, b_g_z  b (FRD)   rad/s        gyro bias error; x holds the estimate
+15-17 l_x, l_y, l_z        b (FRD)   m            lever-arm error (``estimate_lever_arm``);
+                                                  x holds the lever-arm estimate
+===== ==================== ========= ============ =============================================
+
+Errors (signs)
+--------------
+Position, velocity, biases and lever arm: estimate minus truth, ``dx = x_hat - x``. Attitude:
+``C_nb_hat = (I - [phi x]) C_nb`` (a positive phi_D is an estimated heading smaller than the
+truth). Feedback subtracts: ``lat, lon, h, v_n, b_a, b_g, l -= dx`` and
+``q_nb_hat <- normalize([1, phi/2] (x) q_nb_hat)``, then ``dx = 0``.
+
+Models
+------
+Process (continuous, :mod:`navreplay.filters.ins_error`)::
+
+    dx' = F dx + G w,   w = [n_a, n_g, n_ba, n_bg]                                      (1)
+    F: the 15x15 NED error model, eqs. (6)-(19) there; lever arm: F = 0, Q = 0          (2)
+    Phi = I + F T + (F T)^2 / 2,  Qd = G Qc G^T T,  T = cov_step (10 Hz), cut at updates  (3)
+
+GPS position (antenna at ``l_b`` from the IMU, body frame), residual in NED metres::
+
+    D = diag(R_M + h, (R_N + h) cos lat, -1)                   (dlat, dlon, dh) -> N, E, D
+    p_ant_hat = p_hat + D^-1 (C_nb_hat l_hat + v_hat tau)       tau = t_fix - t_ins >= 0 (4)
+    z = D (p_ant_hat - p_gps)                                   (3,) [m]                  (5)
+    H = [ D | 0 | [(C_nb_hat l_hat) x] | 0 | 0 | C_nb_hat ]                               (6)
+    R = diag(pos_sigma^2) * gps_pos_sigma_scale^2               from the fix              (7)
+
+GPS velocity, with ``w = omega_ib_b_hat`` (last compensated gyro sample) and
+``w_in = w_ie + w_en``::
+
+    v_ant_hat = v_hat + C_nb_hat (w x l_hat) - w_in x (C_nb_hat l_hat)                    (8)
+    z = v_ant_hat - v_gps                                       (3,) [m/s]                (9)
+    H = [ 0 | I | [(C (w x l)) x] - [w_in x][(C l) x] | 0 | C [l x] | C [w x] - [w_in x] C ] (10)
+    R = diag(vel_sigma^2) * gps_vel_sigma_scale^2                                          (11)
+
+Update (shared :func:`navreplay.filters.kalman.correct`, Cholesky + Joseph form) of the error
+state dx = 0, then feedback (12). Each update returns its innovation ``nu = z`` and ``S`` for
+NIS statistics (``"gps_pos"`` [m], ``"gps_vel"`` [m/s]).
+
+The first-order terms of (6) and (10) were checked against central differences of (4)-(5) and
+(8)-(9) in tests/test_gps_ins.py.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+
+from navreplay import strapdown
+from navreplay.filters import ins_error as ie
+from navreplay.filters import kalman
+from navreplay.filters.base import FilterContext, FilterParams, Innovation
+from navreplay.filters.ins import InsFilter, InsParams
+from navreplay.filters.registry import register_filter
+from navreplay.geo import earth
+from navreplay.geo.rotations import quat_to_dcm
+from navreplay.streams import StreamKind
+
+LEVER = slice(15, 18)
+"""Lever-arm error states (present with ``estimate_lever_arm``)."""
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GpsInsParams(InsParams):
+    """Parameters of ``gps-ins``: the INS error model of ``ins`` plus the GPS measurements."""
+
+    lever_arm_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """GPS antenna position relative to the IMU, body FRD [m] (initial estimate)."""
+    estimate_lever_arm: bool = False
+    """Add the three lever-arm error states (random constants)."""
+    lever_arm_sigma: float = 0.1
+    """Initial 1-sigma of the lever arm per axis [m] (with ``estimate_lever_arm``)."""
+    gps_pos_sigma_scale: float = 1.0
+    """Factor on the fix's ``pos_sigma`` in R [-]."""
+    gps_vel_sigma_scale: float = 1.0
+    """Factor on the velocity's ``vel_sigma`` in R [-]."""
+    use_gps_vel: bool = True
+    """Use the ``gps_vel`` stream when the recording has it."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        lever = tuple(float(v) for v in self.lever_arm_b)
+        if len(lever) != 3 or not all(math.isfinite(v) for v in lever):
+            raise ValueError(f"lever_arm_b must be three finite values [m], got {lever!r}")
+        if max(abs(v) for v in lever) > 100.0:
+            raise ValueError(f"lever_arm_b must be within 100 m per axis, got {lever!r}")
+        object.__setattr__(self, "lever_arm_b", lever)
+        for name in ("lever_arm_sigma",):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        for name in ("gps_pos_sigma_scale", "gps_vel_sigma_scale"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def gps_position_model(
+    nav: np.ndarray,
+    lever_arm_b: np.ndarray,
+    pos_gps: np.ndarray,
+    pos_sigma: np.ndarray,
+    n_states: int,
+    *,
+    lag: float = 0.0,
+    lever_states: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """GPS position measurement, eqs. (4)-(7).
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+        INS navigation vector at ``t_fix - lag``.
+    lever_arm_b : ndarray, shape (3,)
+        Antenna lever arm estimate, body [m].
+    pos_gps : ndarray, shape (3,)
+        GPS latitude [rad], longitude [rad], height [m].
+    pos_sigma : ndarray, shape (3,)
+        GPS 1-sigma N, E, D [m].
+    n_states : int
+        Length of the error state.
+    lag : float
+        Time of the fix after the INS solution [s] (the position is extrapolated over it).
+    lever_states : bool
+        Whether states 15-17 are the lever-arm errors.
+
+    Returns
+    -------
+    z : ndarray, shape (3,)
+        Residual INS minus GPS, N, E, D [m].
+    H : ndarray, shape (3, n_states)
+    R : ndarray, shape (3,)
+        Diagonal of R [m^2].
+    """
+    pos = nav[strapdown.POS]
+    D = ie.position_scale(pos)
+    C = quat_to_dcm(nav[strapdown.QUAT])
+    l_n = C @ lever_arm_b
+    d = pos - pos_gps
+    d[1] = (d[1] + math.pi) % (2.0 * math.pi) - math.pi
+    z = D * d + l_n + nav[strapdown.VEL] * lag  # (4), (5)
+    H = np.zeros((3, n_states))  # (6)
+    H[:, ie.POS] = np.diag(D)
+    H[:, ie.ATT] = _skew(l_n)
+    if lever_states:
+        H[:, LEVER] = C
+    return z, H, np.asarray(pos_sigma, dtype=float) ** 2  # (7)
+
+
+def gps_velocity_model(
+    nav: np.ndarray,
+    lever_arm_b: np.ndarray,
+    omega_ib_b: np.ndarray,
+    v_gps: np.ndarray,
+    vel_sigma: np.ndarray,
+    n_states: int,
+    *,
+    lever_states: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """GPS velocity measurement, eqs. (8)-(11).
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+    lever_arm_b : ndarray, shape (3,)
+        [m].
+    omega_ib_b : ndarray, shape (3,)
+        Bias-compensated body rate [rad/s].
+    v_gps : ndarray, shape (3,)
+        GPS velocity NED [m/s].
+    vel_sigma : ndarray, shape (3,)
+        [m/s].
+    n_states : int
+    lever_states : bool
+
+    Returns
+    -------
+    z : ndarray, shape (3,)
+        Residual INS minus GPS [m/s].
+    H : ndarray, shape (3, n_states)
+    R : ndarray, shape (3,)
+        Diagonal of R [(m/s)^2].
+    """
+    pos = nav[strapdown.POS]
+    v = nav[strapdown.VEL]
+    C = quat_to_dcm(nav[strapdown.QUAT])
+    w_in = earth.omega_ie_n(pos[0]) + earth.omega_en_n(pos[0], pos[2], v)
+    l_n = C @ lever_arm_b
+    rot_n = C @ np.cross(omega_ib_b, lever_arm_b)
+    z = v + rot_n - np.cross(w_in, l_n) - v_gps  # (8), (9)
+    H = np.zeros((3, n_states))  # (10)
+    H[:, ie.VEL] = np.eye(3)
+    H[:, ie.ATT] = _skew(rot_n) - _skew(w_in) @ _skew(l_n)
+    H[:, ie.BG] = C @ _skew(lever_arm_b)
+    if lever_states:
+        H[:, LEVER] = C @ _skew(omega_ib_b) - _skew(w_in) @ C
+    return z, H, np.asarray(vel_sigma, dtype=float) ** 2  # (11)
+
+
+@register_filter
+class GpsInsFilter(InsFilter):
+    """Loosely coupled GPS/INS error-state EKF with feedback (see the module docstring)."""
+
+    name: ClassVar[str] = "gps-ins"
+    summary: ClassVar[str] = (
+        "loosely coupled GPS/INS: 15-state NED error-state EKF with feedback, GPS position"
+        " (+ velocity), optional lever arm"
+    )
+    requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU, StreamKind.GPS)
+    optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.GPS_VEL,)
+    Params: ClassVar[type[FilterParams]] = GpsInsParams
+    truth_keys: ClassVar[dict[str, str]] = InsFilter.truth_keys
+
+    params: GpsInsParams
+
+    def __init__(self, params: GpsInsParams, context: FilterContext) -> None:
+        self.lever_arm_b = np.array(params.lever_arm_b, dtype=float)
+        super().__init__(params, context)
+
+    # -- extra states ----------------------------------------------------------------------
+
+    def _extra_states(self) -> int:
+        return 3 if self.params.estimate_lever_arm else 0
+
+    def _extra_names(self) -> tuple[str, ...]:
+        return ("l_x", "l_y", "l_z") if self.params.estimate_lever_arm else ()
+
+    def _init_extra(self) -> None:
+        if self.params.estimate_lever_arm:
+            self.P[LEVER, LEVER] = np.eye(3) * self.params.lever_arm_sigma**2
+
+    def _extra_values(self) -> np.ndarray:
+        return self.lever_arm_b.copy() if self.params.estimate_lever_arm else np.zeros(0)
+
+    # -- updates ---------------------------------------------------------------------------
+
+    def update(
+        self, kind: StreamKind, t: float, sample: Mapping[str, Any]
+    ) -> list[Innovation] | None:
+        n = self.P.shape[0]
+        lever_states = self.params.estimate_lever_arm
+        if kind is StreamKind.GPS:
+            lag = max(t - self.t, 0.0)
+            z, H, R = gps_position_model(
+                self.nav, self.lever_arm_b, np.asarray(sample["pos"]),
+                np.asarray(sample["pos_sigma"]) * self.params.gps_pos_sigma_scale, n,
+                lag=lag, lever_states=lever_states,
+            )
+            name = "gps_pos"
+        elif kind is StreamKind.GPS_VEL and self.params.use_gps_vel:
+            omega = self._prev[0] if self._prev is not None else np.zeros(3)
+            z, H, R = gps_velocity_model(
+                self.nav, self.lever_arm_b, omega, np.asarray(sample["v_n"]),
+                np.asarray(sample["vel_sigma"]) * self.params.gps_vel_sigma_scale, n,
+                lever_states=lever_states,
+            )
+            name = "gps_vel"
+        else:
+            return None
+        self._sync_covariance()
+        c = kalman.correct(np.zeros(n), self.P, z, H, R, t=t)  # (12)
+        self.P = c.P
+        self._feedback(c.x)
+        return [Innovation(name, t, c.nu, c.S)]
+
+    def _feedback(self, dx: np.ndarray) -> None:
+        super()._feedback(dx)
+        if self.params.estimate_lever_arm:
+            self.lever_arm_b = self.lever_arm_b - dx[LEVER]
+

@@ -1,0 +1,339 @@
+"""Free-inertial navigation ("ins"): the strapdown solution and its predicted error covariance.
+
+The baseline every aided filter is compared to. It integrates the IMU with
+:func:`navreplay.strapdown.integrate` from the initial solution in ``metadata.initial_nav``
+and propagates the covariance of the 15 navigation error states of
+:mod:`navreplay.filters.ins_error` with the IMU error model. It makes no measurement update.
+The class also carries the machinery that the aided INS filters build on
+(:class:`navreplay.filters.gps_ins.GpsInsFilter`): IMU compensation, the covariance step
+schedule, feedback of estimated errors.
+
+States (``Estimate.x``)
+-----------------------
+===== ====================== ========= ========== ==========================================
+index name                   frame     unit       value in ``Estimate.x``
+===== ====================== ========= ========== ==========================================
+0-2   dlat, dlon, dh         -         rad, rad, m position error estimate (0 after feedback)
+3-5   dv_N, dv_E, dv_D       n (NED)   m/s        velocity error estimate (0)
+6-8   phi_N, phi_E, phi_D    n         rad        attitude error estimate (0)
+9-11  b_a_x, b_a_y, b_a_z    b (FRD)   m/s^2      accelerometer bias estimate (total)
+12-14 b_g_x, b_g_y, b_g_z    b (FRD)   rad/s      gyro bias estimate (total)
+===== ====================== ========= ========== ==========================================
+
+``Estimate.P`` is the covariance of the errors of the navigation solution and of the bias
+estimates in these units. A free INS has nothing to feed back: its navigation error states stay
+0 and its bias estimates stay at their initial value (0).
+
+Errors (signs)
+--------------
+Estimate minus truth, ``dx = x_hat - x``, for position, velocity and biases; the attitude error
+is the phi angle with ``C_nb_hat = (I - [phi x]) C_nb`` (positive phi_D: estimated heading too
+small). Feedback subtracts. See :mod:`navreplay.filters.ins_error`.
+
+Models
+------
+::
+
+    f_hat = f_meas - b_a_hat,   omega_hat = omega_meas - b_g_hat                          (1)
+    nav_k = strapdown(nav_k-1, omega_hat, f_hat, dt)            at the IMU rate           (2)
+    dx' = F(nav, f_hat) dx + G w                                ins_error eqs. (5)-(18)    (3)
+    Phi = I + F T + (F T)^2 / 2,  Qd = diag(q) T                every T = cov_step        (4)
+    q   = [0, 0, 0, VRW^2 I3, ARW^2 I3, q_ba I3, q_bg I3]       per second                 (5)
+    P0  = diag(sigma_N^2/(R_M+h)^2, sigma_E^2/((R_N+h) cos lat)^2, sigma_D^2,
+               sigma_v^2, sigma_phi^2, sigma_ba^2, sigma_bg^2)                             (6)
+
+The covariance step (4) uses F at the navigation solution at the start of the step and the mean
+compensated specific force over the step; a step is cut short at an update or an output so
+that ``Estimate.P`` always belongs to ``Estimate.t``. The biases are random constants plus a
+random walk whose density covers the bias instability: for a first-order Gauss-Markov
+instability of sigma and correlation time tau, ``q_b = 2 sigma^2 / tau`` (the initial slope of
+its variance).
+
+The model has no scale-factor, misalignment or g-sensitivity states. At a roughly level
+attitude the accelerometer misalignment times gravity and the gyro g-sensitivity times
+gravity act as constant biases; the default bias sigmas are those *effective* values for the
+``tactical`` IMU grade of :func:`navreplay.sensors.imu_grade` (0.3 mg bias + 0.5 mrad x g;
+1 deg/h bias + 1 deg/h/g x g).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+
+from navreplay import strapdown
+from navreplay.filters import ins_error as ie
+from navreplay.filters import kalman
+from navreplay.filters.base import (
+    Estimate,
+    Filter,
+    FilterContext,
+    FilterParams,
+    Innovation,
+    NavSolution,
+)
+from navreplay.filters.registry import register_filter
+from navreplay.streams import StreamKind
+from navreplay.units import (
+    DEG_PER_HOUR,
+    DEG_PER_SQRT_HOUR,
+    MICRO_G,
+    MICRO_G_PER_SQRT_HZ,
+)
+
+_TIME_TOL = 1e-9
+"""Slack [s] when comparing sample times with step ends."""
+
+
+def _check(owner: object, name: str, *, positive: bool = False, upper: float | None = None):
+    v = getattr(owner, name)
+    if v is None:
+        return
+    ok = isinstance(v, int | float) and math.isfinite(v) and (v > 0.0 if positive else v >= 0.0)
+    if ok and upper is not None:
+        ok = v <= upper
+    if not ok:
+        rng = "> 0" if positive else ">= 0"
+        if upper is not None:
+            rng += f" and <= {upper:g}"
+        raise ValueError(f"{name} must be finite and {rng}, got {v!r}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class InsParams(FilterParams):
+    """IMU error model and covariance schedule of the INS filters (SI)."""
+
+    accel_vrw: float = 50.0 * MICRO_G_PER_SQRT_HZ
+    """Accelerometer white noise, velocity random walk [(m/s)/sqrt(s)]."""
+    gyro_arw: float = 0.1 * DEG_PER_SQRT_HOUR
+    """Gyro white noise, angle random walk [rad/sqrt(s)]."""
+    accel_bias_sigma: float = 600.0 * MICRO_G
+    """Initial 1-sigma of the (effective) accelerometer bias, per axis [m/s^2]."""
+    gyro_bias_sigma: float = 1.5 * DEG_PER_HOUR
+    """Initial 1-sigma of the (effective) gyro bias, per axis [rad/s]."""
+    accel_bias_rw: float = 50.0 * MICRO_G * math.sqrt(2.0 / 600.0)
+    """Accelerometer bias random walk density [(m/s^2)/sqrt(s)]; default: a 50 ug, 600 s
+    Gauss-Markov instability as sigma sqrt(2 / tau)."""
+    gyro_bias_rw: float = 0.3 * DEG_PER_HOUR * math.sqrt(2.0 / 600.0)
+    """Gyro bias random walk density [(rad/s)/sqrt(s)]; default: a 0.3 deg/h, 600 s
+    Gauss-Markov instability."""
+    init_pos_sigma: float | None = None
+    """Initial position 1-sigma per N, E, D axis [m]; None: ``initial_nav["sigma"]["pos_ned"]``."""
+    init_vel_sigma: float | None = None
+    """Initial velocity 1-sigma per axis [m/s]; None: ``initial_nav["sigma"]["v_n"]``."""
+    init_att_sigma: float | None = None
+    """Initial attitude 1-sigma per axis [rad]; None: ``initial_nav["sigma"]["phi"]``."""
+    cov_step: float = 0.1
+    """Covariance propagation step [s] (cut short at updates and outputs)."""
+
+    def __post_init__(self) -> None:
+        for name in ("accel_vrw", "gyro_arw", "accel_bias_sigma", "gyro_bias_sigma",
+                     "accel_bias_rw", "gyro_bias_rw", "init_pos_sigma", "init_vel_sigma",
+                     "init_att_sigma"):
+            _check(self, name)
+        _check(self, "cov_step", positive=True, upper=10.0)
+
+    def noise_density(self) -> np.ndarray:
+        """Diagonal Qc of ``[n_a, n_g, n_ba, n_bg]``, shape (12,), eq. (5)."""
+        return ie.noise_densities(self.accel_vrw, self.gyro_arw, self.accel_bias_rw,
+                                  self.gyro_bias_rw)
+
+
+def initial_covariance(
+    pos: np.ndarray,
+    pos_sigma_ned: np.ndarray,
+    vel_sigma: np.ndarray,
+    att_sigma: np.ndarray,
+    accel_bias_sigma: float,
+    gyro_bias_sigma: float,
+) -> np.ndarray:
+    """P0 of the 15 states, eq. (6).
+
+    Parameters
+    ----------
+    pos : ndarray, shape (3,)
+        Initial latitude [rad], longitude [rad], height [m].
+    pos_sigma_ned : ndarray, shape (3,)
+        Position 1-sigma N, E, D [m].
+    vel_sigma : ndarray, shape (3,)
+        [m/s].
+    att_sigma : ndarray, shape (3,)
+        phi 1-sigma [rad].
+    accel_bias_sigma, gyro_bias_sigma : float
+        [m/s^2], [rad/s].
+
+    Returns
+    -------
+    P0 : ndarray, shape (15, 15)
+    """
+    d = np.empty(ie.N_STATES)
+    d[ie.POS] = np.asarray(pos_sigma_ned, dtype=float) / np.abs(ie.position_scale(pos))
+    d[ie.VEL] = vel_sigma
+    d[ie.ATT] = att_sigma
+    d[ie.BA] = accel_bias_sigma
+    d[ie.BG] = gyro_bias_sigma
+    return np.diag(d**2)
+
+
+def _sigma3(value: float | None, init: Mapping[str, Any], key: str) -> np.ndarray:
+    if value is not None:
+        return np.full(3, float(value))
+    sigma = init.get("sigma", {})
+    if key not in sigma:
+        raise ValueError(
+            f"metadata.initial_nav has no sigma[{key!r}] (has: {', '.join(sigma) or 'none'}); "
+            f"set the filter parameter for it"
+        )
+    out = np.asarray(sigma[key], dtype=float).reshape(-1)
+    if out.shape != (3,) or not np.all(np.isfinite(out)) or np.any(out < 0):
+        raise ValueError(f"metadata.initial_nav sigma[{key!r}] must be 3 values >= 0, got {out}")
+    return out
+
+
+NAV_STATE_NAMES: tuple[str, ...] = (
+    "dlat", "dlon", "dh", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
+    "b_a_x", "b_a_y", "b_a_z", "b_g_x", "b_g_y", "b_g_z",
+)
+"""Names of the 15 entries of ``Estimate.x`` (biases as total estimates)."""
+
+NAV_TRUTH_KEYS: dict[str, str] = {
+    "dlat": "nav:lat", "dlon": "nav:lon", "dh": "nav:h",
+    "dv_N": "nav:v_N", "dv_E": "nav:v_E", "dv_D": "nav:v_D",
+    "phi_N": "nav:phi_N", "phi_E": "nav:phi_E", "phi_D": "nav:phi_D",
+    **{f"b_a_{a}": f"truth:accel_bias[{i}]" for i, a in enumerate("xyz")},
+    **{f"b_g_{a}": f"truth:gyro_bias[{i}]" for i, a in enumerate("xyz")},
+}
+"""Scoring keys (see :mod:`navreplay.metrics`): the navigation error states are scored by the
+navigation solution's error, the biases by the truth stream's total bias columns."""
+
+
+@register_filter
+class InsFilter(Filter):
+    """Free-inertial navigation with the predicted error covariance (see the module docstring)."""
+
+    name: ClassVar[str] = "ins"
+    summary: ClassVar[str] = (
+        "free-inertial strapdown INS from metadata.initial_nav, 15-state error covariance"
+    )
+    requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
+    Params: ClassVar[type[FilterParams]] = InsParams
+    truth_keys: ClassVar[dict[str, str]] = NAV_TRUTH_KEYS
+
+    params: InsParams
+
+    def __init__(self, params: InsParams, context: FilterContext) -> None:
+        super().__init__(params, context)
+        init = context.metadata.initial_nav
+        missing = [k for k in ("t_ns", "pos", "v_n", "q_nb") if k not in init]
+        if missing:
+            raise ValueError(
+                f"filter {self.name!r} needs metadata.initial_nav with t_ns, pos, v_n, q_nb "
+                f"(missing: {', '.join(missing)})"
+            )
+        self.nav = strapdown.nav_vector(init["pos"], init["v_n"], init["q_nb"])
+        if not np.all(np.isfinite(self.nav)):
+            raise ValueError(f"metadata.initial_nav is not finite: {self.nav}")
+        self.t = (int(init["t_ns"]) - int(context.t0_ns)) * 1e-9
+        self.b_a = np.zeros(3)
+        self.b_g = np.zeros(3)
+        p = params
+        P0 = initial_covariance(
+            self.nav[strapdown.POS],
+            _sigma3(p.init_pos_sigma, init, "pos_ned"),
+            _sigma3(p.init_vel_sigma, init, "v_n"),
+            _sigma3(p.init_att_sigma, init, "phi"),
+            p.accel_bias_sigma,
+            p.gyro_bias_sigma,
+        )
+        n = ie.N_STATES + self._extra_states()
+        self.P = np.zeros((n, n))
+        self.P[: ie.N_STATES, : ie.N_STATES] = P0
+        self._q = np.zeros(n)
+        self._q[: ie.N_STATES] = ie.process_noise_diagonal(p.noise_density(), 1.0)
+        self._open = ie.OpenStep()  # the covariance step in progress
+        # the last compensated IMU sample (coning / sculling across blocks, lever-arm rate)
+        self._prev: tuple[np.ndarray, np.ndarray, float] | None = None
+        self.state_names = NAV_STATE_NAMES + self._extra_names()
+        self._init_extra()
+        kalman.check_covariance(self.P, name="P0", t=self.t)
+
+    # -- hooks for filters with more states ----------------------------------------------
+
+    def _extra_states(self) -> int:
+        """Number of states after the 15 (random constants; F = 0, Q = 0 for them)."""
+        return 0
+
+    def _extra_names(self) -> tuple[str, ...]:
+        return ()
+
+    def _init_extra(self) -> None:
+        """Set P0 and estimates of the extra states (self.P is allocated)."""
+
+    def _extra_values(self) -> np.ndarray:
+        return np.zeros(0)
+
+    # -- the Filter interface --------------------------------------------------------------
+
+    def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
+        t = np.asarray(t, dtype=np.float64)
+        first = int(np.searchsorted(t, self.t + _TIME_TOL, side="right"))
+        if first == t.shape[0]:
+            return  # all samples at or before the current time (before the initial solution)
+        t = t[first:]
+        omega = imu["omega_ib_b"][first:] - self.b_g  # (1)
+        f = imu["f_b"][first:] - self.b_a
+        dt = np.diff(t, prepend=self.t)
+        hist = strapdown.integrate(self.nav, omega, f, dt, prev=self._prev)  # (2)
+        self._prev = (omega[-1], f[-1], float(dt[-1]))
+        self._covariance_steps(hist, f, dt)
+        self.nav = hist[-1]
+        self.t = float(t[-1])
+
+    def update(
+        self, kind: StreamKind, t: float, sample: Mapping[str, Any]
+    ) -> list[Innovation] | None:
+        return None
+
+    def estimate(self) -> Estimate:
+        self._sync_covariance()
+        x = np.zeros(self.P.shape[0])
+        x[ie.BA] = self.b_a
+        x[ie.BG] = self.b_g
+        x[ie.N_STATES:] = self._extra_values()
+        nav = self.nav
+        return Estimate(
+            self.t, x, self.P,
+            NavSolution(pos=nav[strapdown.POS], v_n=nav[strapdown.VEL], q_nb=nav[strapdown.QUAT]),
+        )
+
+    # -- covariance propagation ------------------------------------------------------------
+
+    def _covariance_steps(self, hist: np.ndarray, f: np.ndarray, dt: np.ndarray) -> None:
+        """Propagate P over the steps of cov_step that end in this block, eqs. (3)-(5)."""
+        P = ie.accumulate_covariance(self.P, hist, f, dt, self.params.cov_step, self._q,
+                                     self._open)  # (4)
+        kalman.check_covariance(P, t=float(self.t + dt.sum()))
+        self.P = P
+
+    def _sync_covariance(self) -> None:
+        """Close the open covariance step so that P belongs to the current time."""
+        if self._open.dt > 0.0:
+            P = ie.propagate_covariance(self.P, self._open.nav[None, :],
+                                        self._open.f_mean()[None, :],
+                                        np.array([self._open.dt]), self._q)
+            kalman.check_covariance(P, t=self.t)
+            self.P = P
+            self._open.sums[:] = 0.0
+
+    # -- feedback --------------------------------------------------------------------------
+
+    def _feedback(self, dx: np.ndarray) -> None:
+        """Subtract estimated errors (n,) from the navigation solution and the estimates."""
+        self.nav = ie.apply_correction(self.nav, dx)
+        self.b_a = self.b_a - dx[ie.BA]
+        self.b_g = self.b_g - dx[ie.BG]
+

@@ -1,0 +1,667 @@
+"""Linear INS error model in NED: the 15 navigation error states every INS filter shares.
+
+A filter with more states (sensor scale factors, current, lever arm, ...) places these 15 first
+and adds its own columns: the blocks here are the navigation part of its F and G.
+
+States
+------
+===== =============== ========= ========== ===========================================
+index symbol          frame     unit       meaning
+===== =============== ========= ========== ===========================================
+0     dlat            -         rad        latitude error
+1     dlon            -         rad        longitude error
+2     dh  (or dd)     -         m          height error (or depth error, ``Vertical.DEPTH``)
+3-5   dv_N, dv_E, dv_D n        m/s        velocity error
+6-8   phi_N, _E, _D   n         rad        attitude error (phi angle)
+9-11  db_a            b (FRD)   m/s^2      accelerometer bias error
+12-14 db_g            b (FRD)   rad/s      gyro bias error
+===== =============== ========= ========== ===========================================
+
+Error definitions (signs)
+-------------------------
+Every error is estimate minus truth, ``dx = x_hat - x``, except the attitude, which is the phi
+angle of Titterton & Weston::
+
+    C_nb_hat = (I - [phi x]) C_nb                                               (1)
+
+so a positive phi_D means the estimated heading is smaller than the true one (this is
+:func:`navreplay.geo.attitude_error`). With depth as the vertical coordinate, ``dd = d_hat - d
+= -dh``. Feedback subtracts: ``x_hat <- x_hat - dx`` and, for the attitude,
+``q_nb_hat <- normalize([1, phi/2] (x) q_nb_hat)`` (:func:`apply_correction`).
+
+The IMU output is compensated with the bias estimates, ``f_hat = f_meas - b_a_hat`` and
+``omega_hat = omega_meas - b_g_hat``. With ``f_meas = f + b_a + n_a`` and
+``omega_meas = omega + b_g + n_g`` this gives ``df_b = -db_a + n_a`` and
+``domega_ib_b = -db_g + n_g``.
+
+Continuous model
+----------------
+Mechanization (NED, eqs. 2-4), with R_Mh = R_M + h, R_Nh = R_N + h, s = sin lat, c = cos lat,
+t = tan lat, w_in = w_ie + w_en::
+
+    lat' = v_N / R_Mh,  lon' = v_E / (R_Nh c),  h' = -v_D                        (2)
+    v_n' = C_nb f_b - (2 w_ie + w_en) x v_n + g_n                                (3)
+    C_nb' = C_nb [w_ib_b x] - [w_in x] C_nb                                      (4)
+
+Perturbing (2)-(4) to first order gives ``dx' = F dx + G w`` (eq. 5). With
+V = v_n, f_n = C_nb_hat f_hat, R'_M = dR_M/dlat, R'_N = dR_N/dlat, and p = (dlat, dlon, dh)::
+
+    Wp  = d w_ie / dp = [[-W s, 0, 0], [0, 0, 0], [-W c, 0, 0]]                  (6)
+    Ep  = d w_en / dp = [[-V_E R'_N/R_Nh^2,                  0, -V_E/R_Nh^2  ],
+                         [ V_N R'_M/R_Mh^2,                  0,  V_N/R_Mh^2  ],
+                         [-V_E/(R_Nh c^2) + V_E t R'_N/R_Nh^2, 0, V_E t/R_Nh^2]]  (7)
+    Ev  = d w_en / dv = [[0, 1/R_Nh, 0], [-1/R_Mh, 0, 0], [0, -t/R_Nh, 0]]       (8)
+
+    F_pp   = [[-V_N R'_M/R_Mh^2,                     0, -V_N/R_Mh^2     ],
+              [ V_E (s/(R_Nh c^2) - R'_N/(R_Nh^2 c)), 0, -V_E/(R_Nh^2 c) ],
+              [ 0,                                    0,  0              ]]      (9)
+    F_pv   = diag(1/R_Mh, 1/(R_Nh c), -1)                                        (10)
+    F_vp   = [V x] (2 Wp + Ep) + Gp,  Gp[2, :] = [dg/dlat, 0, dg/dh]              (11)
+    F_vv   = -[(2 w_ie + w_en) x] + [V x] Ev                                     (12)
+    F_vphi = [f_n x]                                                             (13)
+    F_vba  = -C_nb_hat                                                           (14)
+    F_phip = Wp + Ep,  F_phiv = Ev,  F_phiphi = -[w_in x]                        (15)
+    F_phibg = +C_nb_hat                                                          (16)
+    F_bb   = 0 (random constants plus random walk)                               (17)
+
+Noise ``w = [n_a, n_g, n_ba, n_bg]`` (each 3, white, densities q_a, q_g, q_ba, q_bg)::
+
+    G[v, n_a] = C_nb_hat, G[phi, n_g] = -C_nb_hat, G[ba, n_ba] = I, G[bg, n_bg] = I  (18)
+
+For isotropic triad noise ``C q I C^T = q I``, so ``G Qc G^T`` is diagonal and does not depend
+on the attitude (:func:`process_noise_diagonal`).
+
+With depth as the vertical coordinate the model is transformed by T = diag(1, 1, -1, 1, ...):
+``F_d = T F T`` (row 2 and column 2 change sign, eq. 19). This is the form of the RPM-aided INS
+spec, section 4.2 (its eqs. 14-19 in NED).
+
+Every block was checked against central finite differences of (2)-(4) and of
+:func:`navreplay.strapdown.propagate` (tests/test_ins_filter.py).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+
+import numba
+import numpy as np
+
+from navreplay.geo import earth
+from navreplay.geo.rotations import (
+    attitude_error,
+    quat_mult,
+    quat_normalize,
+    quat_to_dcm,
+    rotvec_to_quat,
+    wrap_angle,
+)
+
+# -- state layout ----------------------------------------------------------------------------
+
+POS = slice(0, 3)
+"""Position error (dlat [rad], dlon [rad], dh [m] or dd [m])."""
+VEL = slice(3, 6)
+"""Velocity error, NED [m/s]."""
+ATT = slice(6, 9)
+"""Attitude error phi, NED [rad]."""
+BA = slice(9, 12)
+"""Accelerometer bias error, body [m/s^2]."""
+BG = slice(12, 15)
+"""Gyro bias error, body [rad/s]."""
+NAV = slice(0, 9)
+"""Position, velocity and attitude errors."""
+N_STATES = 15
+
+# -- noise layout (columns of G) --------------------------------------------------------------
+
+W_ACC = slice(0, 3)
+"""Accelerometer white noise [(m/s^2) sqrt(s)] -> velocity."""
+W_GYRO = slice(3, 6)
+"""Gyro white noise [(rad/s) sqrt(s)] -> attitude."""
+W_BA = slice(6, 9)
+"""Accelerometer bias random walk [(m/s^2)/sqrt(s)]."""
+W_BG = slice(9, 12)
+"""Gyro bias random walk [(rad/s)/sqrt(s)]."""
+N_NOISE = 12
+
+# -- the navigation vector of navreplay.strapdown ---------------------------------------------
+
+_A = earth.A
+_E2 = earth.E2
+_FLAT = earth.F
+_OMEGA_IE = earth.OMEGA_IE
+_GAMMA_E = earth.GAMMA_E
+_K_SOM = earth.K_SOMIGLIANA
+_M_GRAV = earth.M_GRAV
+
+NAV_POS = slice(0, 3)
+NAV_VEL = slice(3, 6)
+NAV_Q = slice(6, 10)
+
+
+class Vertical(enum.StrEnum):
+    """Vertical coordinate of the position error state."""
+
+    HEIGHT = "height"
+    """dh, ellipsoidal height error [m], positive up."""
+    DEPTH = "depth"
+    """dd = -dh, depth error [m], positive down."""
+
+
+STATE_NAMES: tuple[str, ...] = (
+    "dlat", "dlon", "dh", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
+    "db_a_x", "db_a_y", "db_a_z", "db_g_x", "db_g_y", "db_g_z",
+)
+"""Names of the 15 error states (height form; the depth form names index 2 ``dd``)."""
+
+
+@numba.njit(cache=True)
+def _gravity_derivatives(lat: float, h: float) -> tuple[float, float]:
+    s, c = math.sin(lat), math.cos(lat)
+    s2 = s * s
+    w = 1.0 - _E2 * s2
+    g0 = _GAMMA_E * (1.0 + _K_SOM * s2) / math.sqrt(w)
+    dg0 = _GAMMA_E * (
+        2.0 * _K_SOM * s * c / math.sqrt(w) + (1.0 + _K_SOM * s2) * _E2 * s * c / w**1.5
+    )
+    k = 1.0 + _FLAT + _M_GRAV - 2.0 * _FLAT * s2
+    hfac = 1.0 - 2.0 / _A * k * h + 3.0 / _A**2 * h * h
+    dhfac_dlat = 8.0 * _FLAT * s * c * h / _A
+    dhfac_dh = -2.0 / _A * k + 6.0 * h / _A**2
+    return dg0 * hfac + g0 * dhfac_dlat, g0 * dhfac_dh
+
+
+def gravity_derivatives(lat: float, h: float) -> tuple[float, float]:
+    """Derivatives of the normal gravity :func:`navreplay.geo.gravity`.
+
+    Parameters
+    ----------
+    lat : float
+        Latitude [rad].
+    h : float
+        Height [m].
+
+    Returns
+    -------
+    dg_dlat : float
+        [m/s^2 per rad].
+    dg_dh : float
+        [m/s^2 per m], about -2 g / R.
+    """
+    return _gravity_derivatives(float(lat), float(h))
+
+
+@numba.njit(cache=True)
+def _set_skew(M: np.ndarray, r: int, c: int, x: float, y: float, z: float, k: float) -> None:
+    """M[r:r+3, c:c+3] += k [v x] with v = (x, y, z)."""
+    M[r, c + 1] -= k * z
+    M[r, c + 2] += k * y
+    M[r + 1, c] += k * z
+    M[r + 1, c + 2] -= k * x
+    M[r + 2, c] -= k * y
+    M[r + 2, c + 1] += k * x
+
+
+@numba.njit(cache=True)
+def _fill_system_matrix(
+    lat: float, h: float, vN: float, vE: float, vD: float,
+    C: np.ndarray, f_b: np.ndarray, depth: bool, F: np.ndarray,
+) -> None:
+    """Write eqs. (6)-(19) into F[:15, :15] (F zeroed by the caller)."""
+    s, c = math.sin(lat), math.cos(lat)
+    t = s / c
+    w = 1.0 - _E2 * s * s
+    R_N = _A / math.sqrt(w)
+    R_M = _A * (1.0 - _E2) / w**1.5
+    dR_M = 3.0 * _A * (1.0 - _E2) * _E2 * s * c / w**2.5
+    dR_N = _A * _E2 * s * c / w**1.5
+    R_Mh = R_M + h
+    R_Nh = R_N + h
+    W = _OMEGA_IE
+    w_ie = np.array([W * c, 0.0, -W * s])
+    w_en = np.array([vE / R_Nh, -vN / R_Mh, -vE * t / R_Nh])
+    Wp = np.zeros((3, 3))  # (6)
+    Wp[0, 0] = -W * s
+    Wp[2, 0] = -W * c
+    Ep = np.zeros((3, 3))  # (7)
+    Ep[0, 0] = -vE * dR_N / R_Nh**2
+    Ep[0, 2] = -vE / R_Nh**2
+    Ep[1, 0] = vN * dR_M / R_Mh**2
+    Ep[1, 2] = vN / R_Mh**2
+    Ep[2, 0] = -vE / (R_Nh * c * c) + vE * t * dR_N / R_Nh**2
+    Ep[2, 2] = vE * t / R_Nh**2
+    Ev = np.zeros((3, 3))  # (8)
+    Ev[0, 1] = 1.0 / R_Nh
+    Ev[1, 0] = -1.0 / R_Mh
+    Ev[2, 1] = -t / R_Nh
+    Vx = np.zeros((3, 3))
+    _set_skew(Vx, 0, 0, vN, vE, vD, 1.0)
+    f_n = np.zeros(3)
+    for i in range(3):
+        for j in range(3):
+            f_n[i] += C[i, j] * f_b[j]
+
+    F[0, 0] = -vN * dR_M / R_Mh**2  # (9)
+    F[0, 2] = -vN / R_Mh**2
+    F[1, 0] = vE * (s / (R_Nh * c * c) - dR_N / (R_Nh**2 * c))
+    F[1, 2] = -vE / (R_Nh**2 * c)
+    F[0, 3] = 1.0 / R_Mh  # (10)
+    F[1, 4] = 1.0 / (R_Nh * c)
+    F[2, 5] = -1.0
+    for i in range(3):
+        for j in range(3):
+            vp = 0.0  # (11) [V x] (2 Wp + Ep)
+            vv = 0.0  # (12) [V x] Ev
+            for k in range(3):
+                vp += Vx[i, k] * (2.0 * Wp[k, j] + Ep[k, j])
+                vv += Vx[i, k] * Ev[k, j]
+            F[3 + i, j] = vp
+            F[3 + i, 3 + j] = vv
+            F[3 + i, 9 + j] = -C[i, j]  # (14)
+            F[6 + i, j] = Wp[i, j] + Ep[i, j]  # (15)
+            F[6 + i, 3 + j] = Ev[i, j]
+            F[6 + i, 12 + j] = C[i, j]  # (16)
+    dg_dlat, dg_dh = _gravity_derivatives(lat, h)  # (11) Gp
+    F[5, 0] += dg_dlat
+    F[5, 2] += dg_dh
+    _set_skew(F, 3, 3, 2.0 * w_ie[0] + w_en[0], 2.0 * w_ie[1] + w_en[1],
+              2.0 * w_ie[2] + w_en[2], -1.0)  # (12)
+    _set_skew(F, 3, 6, f_n[0], f_n[1], f_n[2], 1.0)  # (13)
+    _set_skew(F, 6, 6, w_ie[0] + w_en[0], w_ie[1] + w_en[1], w_ie[2] + w_en[2], -1.0)  # (15)
+    if depth:  # (19)
+        for j in range(F.shape[1]):
+            F[2, j] = -F[2, j]
+        for i in range(F.shape[0]):
+            F[i, 2] = -F[i, 2]
+
+
+def system_matrix(
+    pos: np.ndarray,
+    v_n: np.ndarray,
+    C_nb: np.ndarray,
+    f_b: np.ndarray,
+    *,
+    vertical: Vertical = Vertical.HEIGHT,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """The system matrix F of the 15 navigation error states, eqs. (6)-(19).
+
+    Parameters
+    ----------
+    pos : ndarray, shape (3,)
+        Estimated latitude [rad], longitude [rad], height [m] (height also in the depth form).
+    v_n : ndarray, shape (3,)
+        Estimated velocity NED [m/s].
+    C_nb : ndarray, shape (3, 3)
+        Estimated attitude DCM, b to n.
+    f_b : ndarray, shape (3,)
+        Bias-compensated specific force, body [m/s^2] (mean over the step).
+    vertical : Vertical
+        Height or depth as the third position error state.
+    out : ndarray, shape (n, n) with n >= 15, optional
+        A larger filter's F: its top-left 15x15 block is overwritten, the rest left as it is.
+
+    Returns
+    -------
+    F : ndarray, shape (15, 15), or ``out``
+    """
+    if out is None:
+        F = np.zeros((N_STATES, N_STATES))
+    else:
+        F = out
+        F[:N_STATES, :N_STATES] = 0.0
+    _fill_system_matrix(
+        float(pos[0]), float(pos[2]), float(v_n[0]), float(v_n[1]), float(v_n[2]),
+        np.ascontiguousarray(C_nb, dtype=np.float64), np.ascontiguousarray(f_b, dtype=np.float64),
+        vertical is Vertical.DEPTH, F,
+    )
+    return F
+
+
+@numba.njit(cache=True)
+def _quat_to_dcm(q: np.ndarray) -> np.ndarray:
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+    C = np.empty((3, 3))
+    C[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
+    C[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
+    C[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
+    C[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
+    C[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
+    C[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
+    C[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
+    C[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
+    C[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+    return C
+
+
+@numba.njit(cache=True)
+def _covariance_step(
+    P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, dt: float, q: np.ndarray, depth: bool,
+    F: np.ndarray, eye: np.ndarray,
+) -> np.ndarray:
+    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19); F is scratch."""
+    n = P.shape[0]
+    F[:, :] = 0.0
+    _fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], _quat_to_dcm(nav[6:10]), f_b,
+                        depth, F)
+    Fdt = F * dt
+    Phi = eye + Fdt + 0.5 * (Fdt @ Fdt)  # kalman (3)
+    P = Phi @ P @ Phi.T  # kalman (6)
+    for i in range(n):
+        P[i, i] += q[i] * dt  # kalman (4), diagonal
+    return 0.5 * (P + P.T)
+
+
+@numba.njit(cache=True)
+def _propagate_covariance(
+    P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, dt: np.ndarray, q: np.ndarray,
+    depth: bool,
+) -> np.ndarray:
+    n = P.shape[0]
+    F = np.zeros((n, n))
+    eye = np.eye(n)
+    for k in range(dt.shape[0]):
+        P = _covariance_step(P, nav[k], f_b[k], dt[k], q, depth, F, eye)
+    return P
+
+
+@numba.njit(cache=True)
+def _accumulate_covariance(
+    P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, dt: np.ndarray, step: float,
+    q: np.ndarray, depth: bool, open_nav: np.ndarray, open_sums: np.ndarray,
+) -> np.ndarray:
+    n = P.shape[0]
+    F = np.zeros((n, n))
+    eye = np.eye(n)
+    f_mean = np.empty(3)
+    for k in range(dt.shape[0]):
+        if open_sums[0] == 0.0:
+            open_nav[:] = hist[k]
+        open_sums[0] += dt[k]
+        for j in range(3):
+            open_sums[1 + j] += f_b[k, j] * dt[k]
+        if open_sums[0] >= step - 1e-9:
+            for j in range(3):
+                f_mean[j] = open_sums[1 + j] / open_sums[0]
+            P = _covariance_step(P, open_nav, f_mean, open_sums[0], q, depth, F, eye)
+            open_sums[:] = 0.0
+    return P
+
+
+def propagate_covariance(
+    P: np.ndarray,
+    nav: np.ndarray,
+    f_b: np.ndarray,
+    dt: np.ndarray,
+    q: np.ndarray,
+    *,
+    vertical: Vertical = Vertical.HEIGHT,
+) -> np.ndarray:
+    """Covariance propagation over k steps of a filter whose first 15 states are these.
+
+    The same as k calls of ``kalman.predict`` with ``Phi = kalman.discretize(F, dt)``
+    (``F = system_matrix(...)`` in the top-left block, 0 elsewhere: extra states are random
+    constants or random walks) and ``Qd = diag(q) dt``, compiled into one loop. The result is
+    symmetrised but not checked: check it with ``kalman.check_covariance``.
+
+    Parameters
+    ----------
+    P : ndarray, shape (n, n), n >= 15
+        Covariance at the start.
+    nav : ndarray, shape (k, 10)
+        Navigation vector at which F is evaluated for each step.
+    f_b : ndarray, shape (k, 3)
+        Bias-compensated mean specific force of each step, body [m/s^2].
+    dt : ndarray, shape (k,)
+        Step lengths [s].
+    q : ndarray, shape (n,)
+        Diagonal of ``G Qc G^T`` per second (isotropic triad noise, see
+        :func:`process_noise_diagonal` with dt = 1), units of state^2/s.
+    vertical : Vertical
+
+    Returns
+    -------
+    P : ndarray, shape (n, n)
+    """
+    n = P.shape[0]
+    if P.shape != (n, n) or n < N_STATES or q.shape != (n,):
+        raise ValueError(f"P must be (n, n) with n >= 15 and q (n,); got {P.shape}, {q.shape}")
+    k = dt.shape[0]
+    if nav.shape != (k, 10) or f_b.shape != (k, 3):
+        raise ValueError(
+            f"nav must be ({k}, 10) and f_b ({k}, 3) for {k} steps; got {nav.shape}, {f_b.shape}"
+        )
+    return _propagate_covariance(
+        np.ascontiguousarray(P, dtype=np.float64), np.ascontiguousarray(nav, dtype=np.float64),
+        np.ascontiguousarray(f_b, dtype=np.float64), np.ascontiguousarray(dt, dtype=np.float64),
+        np.ascontiguousarray(q, dtype=np.float64), vertical is Vertical.DEPTH,
+    )
+
+
+def noise_matrix(C_nb: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:
+    """Noise input matrix G, eq. (18), columns ``[n_a, n_g, n_ba, n_bg]``.
+
+    Parameters
+    ----------
+    C_nb : ndarray, shape (3, 3)
+    out : ndarray, shape (n, p), optional
+        Write into the top-left 15x12 block of this (zeroed) array and return it.
+
+    Returns
+    -------
+    G : ndarray, shape (15, 12) or the shape of ``out``
+    """
+    G = np.zeros((N_STATES, N_NOISE)) if out is None else out
+    G[VEL, W_ACC] = C_nb
+    G[ATT, W_GYRO] = -C_nb
+    G[BA, W_BA] = np.eye(3)
+    G[BG, W_BG] = np.eye(3)
+    return G
+
+
+def noise_densities(
+    accel_vrw: float, gyro_arw: float, accel_bias_rw: float, gyro_bias_rw: float
+) -> np.ndarray:
+    """Diagonal Qc of ``[n_a, n_g, n_ba, n_bg]`` from the four densities, shape (12,).
+
+    Parameters
+    ----------
+    accel_vrw : float
+        Velocity random walk [(m/s)/sqrt(s)].
+    gyro_arw : float
+        Angle random walk [rad/sqrt(s)].
+    accel_bias_rw : float
+        Accelerometer bias random walk [(m/s^2)/sqrt(s)].
+    gyro_bias_rw : float
+        Gyro bias random walk [(rad/s)/sqrt(s)].
+    """
+    return np.repeat(np.array([accel_vrw, gyro_arw, accel_bias_rw, gyro_bias_rw]) ** 2, 3)
+
+
+def process_noise_diagonal(Qc: np.ndarray, dt: float) -> np.ndarray:
+    """Diagonal of ``G Qc G^T dt`` for isotropic triad noise, shape (15,).
+
+    Equal to ``kalman.discrete_noise(noise_matrix(C_nb), Qc, dt)`` for any C_nb when each triad
+    of Qc has equal entries (``C q I C^T = q I``).
+    """
+    d = np.zeros(N_STATES)
+    d[VEL] = Qc[W_ACC]
+    d[ATT] = Qc[W_GYRO]
+    d[BA] = Qc[W_BA]
+    d[BG] = Qc[W_BG]
+    return d * dt
+
+
+# -- error definitions on the navigation vector ----------------------------------------------
+
+
+def position_scale(pos: np.ndarray, vertical: Vertical = Vertical.HEIGHT) -> np.ndarray:
+    """Metres per unit of (dlat, dlon, dh or dd) along N, E, D: ``dr_ned = D dp``, shape (3,).
+
+    ``D = diag(R_M + h, (R_N + h) cos lat, -1)`` for height (``+1`` for depth).
+    """
+    lat, _, h = pos
+    R_M, R_N = earth.radii(lat)
+    return np.array(
+        [float(R_M) + h, (float(R_N) + h) * math.cos(lat),
+         -1.0 if vertical is Vertical.HEIGHT else 1.0]
+    )
+
+
+def nav_error(
+    nav_hat: np.ndarray, nav_true: np.ndarray, vertical: Vertical = Vertical.HEIGHT
+) -> np.ndarray:
+    """The 9 navigation error states of an estimate against the truth, eq. (1).
+
+    Parameters
+    ----------
+    nav_hat, nav_true : ndarray, shape (..., 10)
+        Navigation vectors ``[lat, lon, h, v_N, v_E, v_D, q0, q1, q2, q3]``.
+    vertical : Vertical
+
+    Returns
+    -------
+    dx : ndarray, shape (..., 9)
+        (dlat, dlon, dh or dd, dv_n, phi).
+    """
+    nav_hat = np.asarray(nav_hat, dtype=float)
+    nav_true = np.asarray(nav_true, dtype=float)
+    dx = np.empty(nav_hat.shape[:-1] + (9,))
+    dx[..., 0:3] = nav_hat[..., NAV_POS] - nav_true[..., NAV_POS]
+    dx[..., 1] = wrap_angle(dx[..., 1])
+    if vertical is Vertical.DEPTH:
+        dx[..., 2] *= -1.0
+    dx[..., 3:6] = nav_hat[..., NAV_VEL] - nav_true[..., NAV_VEL]
+    dx[..., 6:9] = attitude_error(
+        quat_to_dcm(nav_hat[..., NAV_Q]), quat_to_dcm(nav_true[..., NAV_Q])
+    )
+    return dx
+
+
+def inject_error(
+    nav_true: np.ndarray, dx: np.ndarray, vertical: Vertical = Vertical.HEIGHT
+) -> np.ndarray:
+    """A navigation vector with the errors ``dx`` (9,), the inverse of :func:`nav_error`.
+
+    The attitude is ``q_hat = q(-phi) (x) q`` (exact rotation by -phi, first order eq. 1).
+    """
+    nav = np.array(nav_true, dtype=float)
+    dp = np.array(dx[0:3], dtype=float)
+    if vertical is Vertical.DEPTH:
+        dp[2] = -dp[2]
+    nav[NAV_POS] += dp
+    nav[NAV_VEL] += dx[3:6]
+    nav[NAV_Q] = quat_normalize(quat_mult(rotvec_to_quat(-np.asarray(dx[6:9])), nav[NAV_Q]))
+    return nav
+
+
+def apply_correction(
+    nav: np.ndarray, dx: np.ndarray, vertical: Vertical = Vertical.HEIGHT
+) -> np.ndarray:
+    """Feedback of the estimated navigation errors ``dx`` (9,): subtract, eq. (1).
+
+    Position and velocity: ``x_hat - dx``; attitude: ``q_hat <- normalize([1, phi/2] (x) q_hat)``.
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+        Navigation vector to correct (not modified).
+    dx : ndarray, shape (>= 9,)
+        Estimated errors; only the first 9 entries are used.
+    vertical : Vertical
+
+    Returns
+    -------
+    ndarray, shape (10,)
+    """
+    out = np.array(nav, dtype=float)
+    out[0] -= dx[0]
+    out[1] -= dx[1]
+    out[2] -= dx[2] if vertical is Vertical.HEIGHT else -dx[2]
+    out[NAV_VEL] -= dx[VEL]
+    p = dx[ATT]
+    dq = np.array([1.0, 0.5 * p[0], 0.5 * p[1], 0.5 * p[2]])
+    out[NAV_Q] = quat_normalize(quat_mult(dq, out[NAV_Q]))
+    return out
+
+
+class OpenStep:
+    """The covariance step in progress: its start state and the sums over its IMU samples.
+
+    Attributes
+    ----------
+    nav : ndarray, shape (10,)
+        Navigation vector at the start of the step (valid while ``sums[0] > 0``).
+    sums : ndarray, shape (4,)
+        Length of the step so far [s] and the integral of the specific force over it
+        [m/s, body].
+    """
+
+    def __init__(self) -> None:
+        self.nav = np.zeros(10)
+        self.sums = np.zeros(4)
+
+    @property
+    def dt(self) -> float:
+        """Length of the open step [s] (0: none open)."""
+        return float(self.sums[0])
+
+    def f_mean(self) -> np.ndarray:
+        """Mean specific force over the open step, body [m/s^2], shape (3,)."""
+        return self.sums[1:] / self.sums[0]
+
+
+def accumulate_covariance(
+    P: np.ndarray,
+    hist: np.ndarray,
+    f_b: np.ndarray,
+    dt: np.ndarray,
+    step: float,
+    q: np.ndarray,
+    open_step: OpenStep,
+    *,
+    vertical: Vertical = Vertical.HEIGHT,
+) -> np.ndarray:
+    """Propagate P over IMU samples in steps of length ``step`` (compiled loop).
+
+    Samples are collected into the open step; when it reaches ``step`` seconds, P is
+    propagated over it as in :func:`propagate_covariance`, with F at the navigation state at the
+    start of the step and the mean specific force over it. A step still open at the end stays
+    in ``open_step`` (updated in place) for the next call; close it early with
+    :func:`propagate_covariance` at ``open_step.nav``, ``open_step.f_mean()``, ``open_step.dt``.
+
+    Parameters
+    ----------
+    P : ndarray, shape (n, n), n >= 15
+    hist : ndarray, shape (k + 1, 10)
+        Navigation states at the start of each sample and after the last (the output of
+        :func:`navreplay.strapdown.integrate`).
+    f_b : ndarray, shape (k, 3)
+        Bias-compensated specific force of each sample, body [m/s^2].
+    dt : ndarray, shape (k,)
+        Sample intervals [s].
+    step : float
+        Step length [s].
+    q : ndarray, shape (n,)
+        As for :func:`propagate_covariance`.
+    open_step : OpenStep
+        The step carried over from the previous call; updated in place.
+    vertical : Vertical
+
+    Returns
+    -------
+    P : ndarray, shape (n, n)
+        Symmetrised, not checked.
+    """
+    k = dt.shape[0]
+    if hist.shape != (k + 1, 10) or f_b.shape != (k, 3) or q.shape != (P.shape[0],):
+        raise ValueError(
+            f"hist must be ({k + 1}, 10), f_b ({k}, 3) and q ({P.shape[0]},); got "
+            f"{hist.shape}, {f_b.shape}, {q.shape}"
+        )
+    return _accumulate_covariance(
+        np.ascontiguousarray(P, dtype=np.float64), hist, np.ascontiguousarray(f_b),
+        np.ascontiguousarray(dt), float(step), q, vertical is Vertical.DEPTH, open_step.nav,
+        open_step.sums,
+    )

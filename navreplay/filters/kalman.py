@@ -1,0 +1,426 @@
+"""Kalman filter math shared by every filter: discretisation, prediction, correction, checks.
+
+Everything here is a pure function of arrays. State vectors have shape (n,), covariances
+(n, n), measurement matrices (m, n); column vectors (n, 1) are rejected.
+
+Models
+------
+Continuous error dynamics and their discrete form over a step dt::
+
+    dx/dt = F x + G w,        E[w w^T] = Qc delta(t - s)                       (1)
+    x_k+1 = Phi x_k + w_k,    E[w_k w_k^T] = Qd                                 (2)
+    Phi   = I + F dt + (F dt)^2 / 2              (second-order series)          (3)
+    Qd    = G Qc G^T dt                          (rectangular rule)             (4)
+    Qd    = Phi B12,  [[B11, B12], [0, B22]] = expm([[-F, G Qc G^T], [0, F^T]] dt)
+                                                 (Van Loan, exact for constant F) (5)
+
+Prediction and correction (Joseph form, valid for any gain, hence for frozen states)::
+
+    x^- = Phi x,   P^- = Phi P Phi^T + Qd                                        (6)
+    nu  = z - H x                                 innovation                     (7)
+    S   = H P H^T + R = L L^T                     Cholesky factor, no inverse    (8)
+    K^T = L^-T L^-1 H P                           two triangular solves          (9)
+    K[frozen, :] = 0                              frozen states keep x and P     (10)
+    x+  = x + K nu                                                               (11)
+    P+  = (I - K H) P (I - K H)^T + K R K^T       Joseph form                    (12)
+    NIS = nu^T S^-1 nu = |L^-1 nu|^2,  L^-1 nu is the normalised innovation      (13)
+
+Checks
+------
+Inputs are checked for shape, finiteness, symmetry and positive semi-definiteness; a
+failure raises (:class:`FilterDivergedError` for a covariance that lost its meaning, naming the
+time when the caller passes it), never repairs. The checks work on the correlation form
+``D^-1/2 P D^-1/2`` (D = diag P), so a relative tolerance means the same for states of very
+different units (radians of latitude next to metres per second). States with zero variance
+(inert or frozen states) are allowed: P must be PSD, not PD. Outputs of (6) and (12) are
+symmetrised to remove rounding-level asymmetry of the matrix products, then checked.
+
+Examples
+--------
+Scalar random constant, measured once with unit noise:
+
+>>> import numpy as np
+>>> c = correct(np.zeros(1), np.eye(1), np.array([2.0]), np.eye(1), np.eye(1))
+>>> c.x, c.P, round(c.nis, 12)
+(array([1.]), array([[0.5]]), 2.0)
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+DEFAULT_RTOL = 1e-9
+"""Default relative tolerance of the symmetry and PSD checks (on the correlation form)."""
+
+
+class FilterDivergedError(RuntimeError):
+    """A covariance that is not symmetric positive semi-definite (or not finite).
+
+    Attributes
+    ----------
+    t : float | None
+        Filter time [s] of the failure, when known.
+    """
+
+    def __init__(self, message: str, t: float | None = None) -> None:
+        self.t = t
+        super().__init__(message if t is None else f"t = {t:.6f} s: {message}")
+
+
+class Correction(NamedTuple):
+    """Result of :func:`correct`.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n,)
+        Corrected state.
+    P : ndarray, shape (n, n)
+        Corrected covariance.
+    nis : float
+        Normalised innovation squared ``nu^T S^-1 nu``; chi-square with m dof when consistent.
+    nu : ndarray, shape (m,)
+        Innovation ``z - H x``.
+    S : ndarray, shape (m, m)
+        Innovation covariance ``H P H^T + R``.
+    nu_normalised : ndarray, shape (m,)
+        ``L^-1 nu`` with ``S = L L^T``: unit-covariance white noise when consistent.
+    """
+
+    x: np.ndarray
+    P: np.ndarray
+    nis: float
+    nu: np.ndarray
+    S: np.ndarray
+    nu_normalised: np.ndarray
+
+
+# --------------------------------------------------------------------------------------------
+# checks
+
+
+@numba.njit(cache=True)
+def _covariance_ok(P: np.ndarray, rtol: float) -> bool:
+    """Fast path of :func:`check_covariance`: True when all its checks pass."""
+    n = P.shape[0]
+    s = np.empty(n)
+    for i in range(n):
+        d = P[i, i]
+        if not (np.isfinite(d) and d >= 0.0):
+            return False
+        s[i] = np.sqrt(d) if d > 0.0 else 1.0
+    # Cholesky of the correlation form plus rtol I, checking symmetry on the way
+    L = np.zeros((n, n))
+    for j in range(n):
+        for i in range(j, n):
+            c = P[i, j] / (s[i] * s[j])
+            if not np.isfinite(c) or abs(c - P[j, i] / (s[i] * s[j])) > rtol:
+                return False
+            if i == j:
+                c += rtol
+            for k in range(j):
+                c -= L[i, k] * L[j, k]
+            if i == j:
+                if c <= 0.0:
+                    return False
+                L[j, j] = np.sqrt(c)
+            else:
+                L[i, j] = c / L[j, j]
+    return True
+
+
+def check_covariance(
+    P: np.ndarray,
+    *,
+    name: str = "P",
+    t: float | None = None,
+    rtol: float = DEFAULT_RTOL,
+) -> None:
+    """Raise unless P is a finite, symmetric, positive semi-definite square matrix.
+
+    Parameters
+    ----------
+    P : ndarray, shape (n, n)
+        Covariance to check.
+    name : str
+        Name used in the message (``"P"``, ``"R"``, ``"S"``, ...).
+    t : float, optional
+        Filter time [s], reported in the error.
+    rtol : float
+        Tolerance on the correlation form ``D^-1/2 P D^-1/2`` (D = diag P; zero diagonal
+        entries are scaled by 1): asymmetry above ``rtol`` or an eigenvalue below ``-rtol``
+        fails.
+
+    Raises
+    ------
+    ValueError
+        P is not a square 2-D array.
+    FilterDivergedError
+        P has non-finite entries, a negative variance, or is not symmetric / PSD.
+    """
+    if P.ndim != 2 or P.shape[0] != P.shape[1]:
+        raise ValueError(f"{name} must be a square matrix, got shape {P.shape}")
+    if P.dtype == np.float64 and _covariance_ok(P, rtol):
+        return
+    # slow path: find what is wrong and say so
+    if not np.all(np.isfinite(P)):
+        raise FilterDivergedError(f"{name} has non-finite entries", t)
+    d = np.diagonal(P)
+    if np.any(d < 0.0):
+        i = int(np.argmin(d))
+        raise FilterDivergedError(f"{name}[{i},{i}] = {d[i]:.3e} is a negative variance", t)
+    s = np.sqrt(d)
+    s[s == 0.0] = 1.0
+    C = P / s[:, None] / s[None, :]
+    asym = np.abs(C - C.T)
+    if asym.max(initial=0.0) > rtol:
+        i, j = np.unravel_index(int(np.argmax(asym)), asym.shape)
+        raise FilterDivergedError(
+            f"{name} is not symmetric: {name}[{i},{j}] = {P[i, j]:.6e} vs "
+            f"{name}[{j},{i}] = {P[j, i]:.6e}",
+            t,
+        )
+    w = np.linalg.eigvalsh(0.5 * (C + C.T))
+    if P.dtype == np.float64 or w[0] < -rtol:
+        raise FilterDivergedError(
+            f"{name} is not positive semi-definite: smallest eigenvalue of its correlation "
+            f"form is {w[0]:.3e} (tolerance -{rtol:.1e})",
+            t,
+        )
+
+
+def _check_matrix(a: np.ndarray, shape: tuple[int, ...], name: str) -> None:
+    if a.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {a.shape}")
+
+
+def _finite(a: np.ndarray, name: str, t: float | None) -> None:
+    if not np.all(np.isfinite(a)):
+        raise FilterDivergedError(f"{name} has non-finite entries", t)
+
+
+# --------------------------------------------------------------------------------------------
+# discretisation
+
+
+def discretize(F: np.ndarray, dt: float) -> np.ndarray:
+    """Transition matrix by the second-order series, eq. (3).
+
+    Parameters
+    ----------
+    F : ndarray, shape (n, n)
+        Continuous system matrix.
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    Phi : ndarray, shape (n, n)
+    """
+    Fdt = F * dt
+    Phi = Fdt @ Fdt
+    Phi *= 0.5
+    Phi += Fdt
+    Phi[np.diag_indices_from(Phi)] += 1.0
+    return Phi
+
+
+def discrete_noise(G: np.ndarray, Qc: np.ndarray, dt: float) -> np.ndarray:
+    """Discrete process noise ``Qd = G Qc G^T dt``, eq. (4).
+
+    Parameters
+    ----------
+    G : ndarray, shape (n, p)
+        Noise input matrix.
+    Qc : ndarray, shape (p,) or (p, p)
+        Continuous noise power spectral densities (a diagonal as a vector), units of
+        ``w^2 s``.
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    Qd : ndarray, shape (n, n)
+    """
+    if Qc.ndim == 1:
+        GQ = G * Qc[None, :]
+    else:
+        GQ = G @ Qc
+    Qd = GQ @ G.T
+    Qd *= dt
+    return Qd
+
+
+def van_loan(
+    F: np.ndarray, G: np.ndarray, Qc: np.ndarray, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact discretisation for constant F and white noise (Van Loan's method), eq. (5).
+
+    Parameters
+    ----------
+    F : ndarray, shape (n, n)
+    G : ndarray, shape (n, p)
+    Qc : ndarray, shape (p,) or (p, p)
+    dt : float
+
+    Returns
+    -------
+    Phi : ndarray, shape (n, n)
+        ``expm(F dt)``.
+    Qd : ndarray, shape (n, n)
+        ``integral_0^dt expm(F s) G Qc G^T expm(F s)^T ds``.
+    """
+    from scipy.linalg import expm
+
+    n = F.shape[0]
+    GQG = discrete_noise(G, Qc, 1.0)
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n] = -F
+    M[:n, n:] = GQG
+    M[n:, n:] = F.T
+    E = expm(M * dt)
+    Phi = E[n:, n:].T
+    Qd = Phi @ E[:n, n:]
+    return Phi, 0.5 * (Qd + Qd.T)
+
+
+# --------------------------------------------------------------------------------------------
+# predict / correct
+
+
+def predict(
+    x: np.ndarray,
+    P: np.ndarray,
+    Phi: np.ndarray,
+    Qd: np.ndarray,
+    *,
+    t: float | None = None,
+    check: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Time update, eq. (6).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+    P : ndarray, shape (n, n)
+    Phi : ndarray, shape (n, n)
+    Qd : ndarray, shape (n, n)
+    t : float, optional
+        Filter time [s] after the step, for error messages.
+    check : bool
+        Check the shapes and that the predicted P is symmetric PSD.
+
+    Returns
+    -------
+    x, P : ndarray
+        Predicted state (n,) and covariance (n, n).
+    """
+    n = x.shape[0]
+    if check:
+        if x.ndim != 1:
+            raise ValueError(f"x must be a vector (n,), got shape {x.shape}")
+        _check_matrix(P, (n, n), "P")
+        _check_matrix(Phi, (n, n), "Phi")
+        _check_matrix(Qd, (n, n), "Qd")
+        _finite(Phi, "Phi", t)
+    x = Phi @ x
+    P = Phi @ P @ Phi.T
+    P += Qd
+    P = 0.5 * (P + P.T)
+    if check:
+        check_covariance(P, name="predicted P", t=t)
+    return x, P
+
+
+def correct(
+    x: np.ndarray,
+    P: np.ndarray,
+    z: np.ndarray,
+    H: np.ndarray,
+    R: np.ndarray,
+    *,
+    frozen: np.ndarray | None = None,
+    t: float | None = None,
+    check: bool = True,
+) -> Correction:
+    """Measurement update with a Cholesky solve and the Joseph form, eqs. (7)-(13).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Prior state (zeros for an error-state filter after feedback).
+    P : ndarray, shape (n, n)
+        Prior covariance.
+    z : ndarray, shape (m,)
+        Measurement; the innovation is ``z - H x``.
+    H : ndarray, shape (m, n)
+        Measurement matrix.
+    R : ndarray, shape (m, m) or (m,)
+        Measurement noise covariance (a diagonal as a vector).
+    frozen : ndarray of bool, shape (n,), optional
+        States that the update must not change: their gain rows are 0, eq. (10), so their
+        estimate and (by the Joseph form) their covariance row stay as they were.
+    t : float, optional
+        Filter time [s], for error messages.
+    check : bool
+        Check shapes, finiteness, R and the posterior P. (S is checked by its Cholesky
+        factorisation in any case.)
+
+    Returns
+    -------
+    Correction
+        ``(x, P, nis, nu, S, nu_normalised)``.
+
+    Raises
+    ------
+    ValueError
+        Inconsistent shapes.
+    FilterDivergedError
+        S not positive definite, or a non-finite / non-PSD result.
+    """
+    n = x.shape[0]
+    m = z.shape[0]
+    if R.ndim == 1:
+        R = np.diag(R)
+    if check:
+        if x.ndim != 1 or z.ndim != 1:
+            raise ValueError(
+                f"x and z must be vectors (n,), (m,); got shapes {x.shape}, {z.shape}"
+            )
+        _check_matrix(P, (n, n), "P")
+        _check_matrix(H, (m, n), "H")
+        _check_matrix(R, (m, m), "R")
+        _finite(z, "z", t)
+        _finite(H, "H", t)
+        check_covariance(R, name="R", t=t)
+        if frozen is not None and frozen.shape != (n,):
+            raise ValueError(f"frozen must have shape ({n},), got {frozen.shape}")
+    nu = z - H @ x  # (7)
+    HP = H @ P
+    S = HP @ H.T + R  # (8)
+    S = 0.5 * (S + S.T)
+    try:
+        L = np.linalg.cholesky(S)  # (8)
+    except np.linalg.LinAlgError:
+        raise FilterDivergedError(
+            f"innovation covariance S is not positive definite (diag {np.diagonal(S)})", t
+        ) from None
+    W = np.linalg.solve(L, np.column_stack((nu, HP)))  # (9), (13): L^-1 [nu, H P]
+    nu_w = W[:, 0]
+    K = np.linalg.solve(L.T, W[:, 1:]).T  # (9)
+    if frozen is not None:
+        K[frozen, :] = 0.0  # (10)
+    x = x + K @ nu  # (11)
+    IKH = -K @ H  # (12)
+    IKH[np.diag_indices(n)] += 1.0
+    KR = K @ R
+    P = IKH @ P @ IKH.T
+    P += KR @ K.T
+    P = 0.5 * (P + P.T)
+    if check:
+        _finite(x, "corrected x", t)
+        check_covariance(P, name="corrected P", t=t)
+    nis = float(nu_w @ nu_w)  # (13)
+    return Correction(x, P, nis, nu, S, nu_w)

@@ -1,0 +1,900 @@
+"""Transfer alignment by velocity and quaternion (partial) matching: a 9-state Kalman filter.
+
+Aligns a strapdown slave INS (SDINS, frame b) to a ship's master gimballed INS (GINS, frame r)
+while the ship rolls, pitches and bends, after Song, Jeon and Lyou, "A Transfer Alignment
+Algorithm Using Velocity and Quaternion Partial Matching Methods" (equation numbers below are
+the paper's, with the errata of the transfer-alignment spec, section 7, applied).
+
+The filter matches the lever-arm compensated north and east velocity and three of the four
+components of the misalignment quaternion Q_br. The component q_br2, which the ship's Y-axis
+(hull bending) flexure corrupts, is left out of the filter and recovered from the SDINS and
+GINS attitudes after every update (eq. 11), so that flexure does not bias the azimuth estimate.
+
+Names: the paper's Q_bn is ``q_nb`` (SDINS attitude, rotates b to n), Q_m = Q_rn is ``q_nr``
+(GINS attitude from its Euler angles), Q_br is ``q_rb`` (misalignment, rotates b to r); all are
+Hamilton, scalar first, and ``q_nb = q_nr (x) q_rb``, hence eq. (4): ``Q_br = Q_m* (x) Q_bn``.
+
+States, eq. (13)
+----------------
+===== ===================== ====== ===== ================================================
+index symbol                frame  unit  meaning
+===== ===================== ====== ===== ================================================
+0-1   dV_n, dV_e            n      m/s   SDINS north and east velocity error
+2-5   dq_bn0 .. dq_bn3      b -> n -     additive error of the SDINS quaternion Q_bn
+6-8   dq_br0, dq_br1, dq_br3 b -> r -    additive error of the matched components of Q_br
+===== ===================== ====== ===== ================================================
+
+Variants (parameter ``match``, :class:`Match`) differ only in the index set s of matched
+quaternion components; one code path serves all three:
+
+- ``vel_quat_partial`` (default): s = {0, 1, 3}, 9 states, 2 + 3 measurements;
+- ``vel_quat_full``: s = {0, 1, 2, 3}, 10 states, 2 + 4 measurements (flexure unmodelled);
+- ``vel_only``: s = {}, 6 states, 2 measurements (azimuth unobservable without manoeuvres).
+
+``Estimate.x`` holds the *total* quantities whose errors are the states:
+``[v_N, v_E, q_nb0..3, q_rb[s]]``, and ``Estimate.P`` the covariance of those errors.
+
+Error definitions (signs)
+-------------------------
+Additive, estimate minus truth::
+
+    dV = V_hat - V,   dQ_bn = Q_bn_hat - Q_bn,   dQ_br = Q_br_hat - Q_br
+
+The correction after an update subtracts: ``x_hat <- x_hat - dx_hat``. For reporting, the
+alignment error is the small-angle vector phi [rad] in n with
+
+    C_nb_hat C_nb^T = I - [phi x],   phi = -2 R(Q_bn)^T dQ_bn
+
+(:func:`navreplay.geo.attitude_error`): phi_N, phi_E are the level errors, phi_D the azimuth
+error, and a positive phi_D means the estimated heading is smaller than the true one. The
+filter's predicted covariance of phi is ``Sigma_phi = 4 R^T P_qq R`` (extras
+``attitude_sigma_n``). The filter never sees the truth; metrics compute phi against it.
+
+Process model, eqs. (1), (2), (9), (14)
+---------------------------------------
+Continuous, evaluated at the current estimate (V = [V_n, V_e, V_d], latitude L, earth rate W,
+R = sqrt(R_M R_N) + h, f^n = C_nb_hat f^b, f^b and w_ib^b the mean raw IMU samples of the
+last filter interval)::
+
+    d/dt [dV; dQ_bn; dQ_br] = A [dV; dQ_bn; dQ_br] + G [n_a; n_g]
+
+    A = [[ M_vv  A_vq  0 ],
+         [ A_qv  A_qq  0 ],
+         [ 0     0     0 ]]                               dQ_br: random constant (eq. 9, w_rb = 0)
+    M_vv = [[ V_d/R,                  -(2 W sinL + 2 V_e tanL/R) ],
+            [ 2 W sinL + V_e tanL/R,   (V_d + V_n tanL)/R        ]]           (1), E1, E2
+    A_vq = -2 [f^n x]_(N,E) R(Q_bn)^T                                        (1), E3, E4
+    A_qv = -1/2 R(Q_bn) Gamma2,  Gamma2 = [[0, 1/R], [-1/R, 0], [0, -tanL/R]]        (2)
+    A_qq = 1/2 (right(w_ib^b) - left(w_in^n))            the 4x4 [w_ib - w_in] of (2)
+    G    = [[ C_nb(rows N,E)  0          ],
+            [ 0               1/2 T(Q_bn) ],
+            [ 0               0          ]]
+    Phi  = I + A dt + (A dt)^2 / 2,   Q_d = G diag(q_a I3, q_g I3) G^T dt + diag(0, q_br dt I)
+
+Measurement model, eqs. (3), (5), (6), (15)
+-------------------------------------------
+::
+
+    Z_V = [ V_B_hat - V_R_meas - C_nb_hat (w_nb_hat^b x L^b) ]_(N,E)      (3), (6)
+          with w_nb_hat^b = w_ib^b - C_nb_hat^T w_in^n and L^b = C_nb_hat^T C(Q_m) L^r_nom,
+          i.e. the lever-arm velocity (C_nb_hat w_ib^b - w_in^n) x (C(Q_m) L^r_nom)
+    Z_Q = [ Q_m* (x) Q_bn_hat - Q_br_hat ]_s                                 (5)
+    H   = [[ I2  0             0      ],
+           [ 0   L(Q_m*)[s,:]  -I_s   ]]                                     (15)
+
+The rate w_ib^b of the lever-arm term is extrapolated to the GINS time from the last two IMU
+samples (each a mean over its interval, half a sample old). R = diag(r_v I2, r_q I_s).
+
+Cycle (at every GINS sample)
+----------------------------
+1. SDINS mechanization (:func:`navreplay.strapdown.propagate`) at the IMU rate, raw IMU.
+2. Q_m from the GINS Euler angles, its sign such that ``(Q_m* (x) Q_bn_hat)_0 >= 0``.
+3. Predict P with (Phi, Q_d); update with the shared Joseph-form correction.
+4. Feedback: V_ne -= dV; Q_bn -= dQ_bn, normalised; Q_br[s] -= dQ_br.
+5. Recover the unmatched components u of Q_br (q_br2 for partial matching, eq. 11, E8) as
+   component u of ``Q_m* (x) Q_bn_hat``, then normalise Q_br (eq. 10, E10).
+6. Slave the SDINS vertical velocity and the position to the GINS (the vertical channel is not
+   a state): ``V_d = V_R,d + [lever-arm velocity]_d``, (lat, lon, h) = GINS.
+7. x = 0; P keeps its value through the normalisations (as in the paper) and is checked to be
+   symmetric and PSD.
+
+Initialisation, eqs. (16), (17)
+-------------------------------
+At the first GINS sample after an IMU sample: ``Q_bn_hat = Q_m``, ``Q_br_hat = [1, 0, 0, 0]``,
+``V_B_hat = V_R_meas + lever-arm velocity``. Because the SDINS starts from the GINS attitude,
+``dQ_bn = L(Q_m) dQ_br`` (eq. 16) and P0 is full (eq. 17, E16), with
+``P_hat = diag(p0, p1, p1, p1)``, ``p1 = sin(mounting_sigma / 2)^2``::
+
+    P0 = [[ r_V I2   0                   0               ],
+          [ 0        L P_hat L^T         L P_hat[:, s]   ],
+          [ 0        P_hat[s, :] L^T     P_hat[s, s]     ]],   L = L(Q_m(0))
+
+Lever arm
+---------
+``lever_arm_r`` is the surveyed GINS-to-SDINS lever arm in the ship frame. When it is not set,
+the filter reads ``Metadata.params["lever_arm_r_nom"]`` (the ship-transfer-alignment scenario
+writes the nominal lever arm there, with its knowledge error) and fails if that is missing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numba
+import numpy as np
+
+from navreplay import strapdown
+from navreplay.filters import kalman
+from navreplay.filters.base import (
+    Estimate,
+    Filter,
+    FilterContext,
+    FilterParams,
+    Innovation,
+    NavSolution,
+)
+from navreplay.filters.registry import register_filter
+from navreplay.geo import earth
+from navreplay.streams import StreamKind
+from navreplay.units import ARCMIN, DEG, FOOT
+
+
+class Match(enum.StrEnum):
+    """What the filter matches (spec section 5)."""
+
+    VEL_QUAT_PARTIAL = "vel_quat_partial"
+    """Velocity + quaternion components {0, 1, 3} (the paper's proposal)."""
+    VEL_QUAT_FULL = "vel_quat_full"
+    """Velocity + all four quaternion components."""
+    VEL_ONLY = "vel_only"
+    """Velocity only (azimuth unobservable without manoeuvres)."""
+
+    @property
+    def components(self) -> tuple[int, ...]:
+        """Index set s of the matched components of Q_br."""
+        return _COMPONENTS[self]
+
+
+_COMPONENTS = {
+    Match.VEL_QUAT_PARTIAL: (0, 1, 3),
+    Match.VEL_QUAT_FULL: (0, 1, 2, 3),
+    Match.VEL_ONLY: (),
+}
+
+_A = earth.A
+_E2 = earth.E2
+_OMEGA = earth.OMEGA_IE
+
+# state layout, eq. (13): the dQ_br block holds the matched components s, in order
+DV = slice(0, 2)
+"""dV_n, dV_e [m/s]."""
+DQ_BN = slice(2, 6)
+"""dq_bn0..3 [-]."""
+DQ_BR = slice(6, None)
+"""dq_br[s] [-]."""
+N_NAV = 6
+"""States before the dQ_br block."""
+
+# measurement layout, eq. (15)
+ZV = slice(0, 2)
+"""Velocity rows."""
+ZQ = slice(2, None)
+"""Quaternion rows s."""
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class TransferAlignmentParams(FilterParams):
+    """Parameters of the transfer-alignment filter (SI). Tuning defaults: spec sections 4.3-4.5."""
+
+    match: Match = Match.VEL_QUAT_PARTIAL
+    """Matched quantities: vel_quat_partial, vel_quat_full or vel_only."""
+    lever_arm_r: tuple[float, float, float] | None = None
+    """Surveyed lever arm GINS -> SDINS in the ship frame (X, Y, Z) [m]; None: the recording's
+    ``Metadata.params["lever_arm_r_nom"]``."""
+    accel_noise: float = 5e-4
+    """Velocity process noise density sqrt(q_a) [(m/s)/sqrt(s)]."""
+    gyro_noise: float = 3e-5
+    """Attitude process noise density sqrt(q_g) [rad/sqrt(s)]."""
+    misalignment_noise: float = 1e-6
+    """Process noise density of the dQ_br states sqrt(q_br) [1/sqrt(s)]."""
+    vel_sigma: float = 0.3 * FOOT
+    """Velocity measurement noise, 1 sigma per axis [m/s] (the GINS white velocity noise)."""
+    quat_sigma: float = 0.5 * ARCMIN * math.sqrt(2.0)
+    """Quaternion measurement noise, 1 sigma per component [-] (1/2 x 1 arcmin x sqrt 2)."""
+    init_vel_sigma: float = 0.25
+    """Initial velocity error, 1 sigma per axis [m/s]."""
+    init_misalignment: float = 3.0 * DEG
+    """Initial mounting misalignment per axis [rad]; p1 = sin(init_misalignment / 2)^2."""
+    init_q0_sigma: float = 1.5e-3
+    """Initial 1 sigma of the scalar part of dQ_br, sqrt(p0) [-]."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "match", Match(self.match))
+        for name in ("accel_noise", "gyro_noise", "misalignment_noise", "vel_sigma",
+                     "quat_sigma", "init_vel_sigma", "init_misalignment", "init_q0_sigma"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+        if self.init_misalignment >= math.pi:
+            raise ValueError(f"init_misalignment must be < pi rad, got {self.init_misalignment}")
+        if self.lever_arm_r is not None:
+            arm = tuple(float(v) for v in self.lever_arm_r)
+            if len(arm) != 3 or not all(math.isfinite(v) for v in arm):
+                raise ValueError(f"lever_arm_r needs three finite values, got {self.lever_arm_r}")
+            object.__setattr__(self, "lever_arm_r", arm)
+
+
+# --------------------------------------------------------------------------------------------
+# Model and cycle as numba kernels: the per-GINS-sample step is ~40 small matrix operations,
+# which numpy pays for in call overhead. The quaternion helpers are single-quaternion forms of
+# navreplay.geo (tests check them against it); the Joseph correction mirrors
+# navreplay.filters.kalman.correct (tests check it against that function).
+
+RTOL = kalman.DEFAULT_RTOL
+"""Relative tolerance of the symmetry and PSD checks of P (on its correlation form)."""
+
+_OK, _S_NOT_PD, _P_NOT_PSD = 0, 1, 2
+
+
+@numba.njit(cache=True)
+def left(p):
+    """``L(p)`` with ``p (x) q = L(p) q``, (4, 4) (= :func:`navreplay.geo.quat_left_matrix`)."""
+    L = np.empty((4, 4))
+    L[0, 0], L[0, 1], L[0, 2], L[0, 3] = p[0], -p[1], -p[2], -p[3]
+    L[1, 0], L[1, 1], L[1, 2], L[1, 3] = p[1], p[0], -p[3], p[2]
+    L[2, 0], L[2, 1], L[2, 2], L[2, 3] = p[2], p[3], p[0], -p[1]
+    L[3, 0], L[3, 1], L[3, 2], L[3, 3] = p[3], -p[2], p[1], p[0]
+    return L
+
+
+@numba.njit(cache=True)
+def rmat(q):
+    """The paper's R(q), (4, 3): ``[0, w] (x) q = R(q) w``."""
+    R = np.empty((4, 3))
+    R[0, 0], R[0, 1], R[0, 2] = -q[1], -q[2], -q[3]
+    R[1, 0], R[1, 1], R[1, 2] = q[0], q[3], -q[2]
+    R[2, 0], R[2, 1], R[2, 2] = -q[3], q[0], q[1]
+    R[3, 0], R[3, 1], R[3, 2] = q[2], -q[1], q[0]
+    return R
+
+
+@numba.njit(cache=True)
+def tmat(q):
+    """The paper's T(q), (4, 3): ``q (x) [0, w] = T(q) w``."""
+    T = np.empty((4, 3))
+    T[0, 0], T[0, 1], T[0, 2] = -q[1], -q[2], -q[3]
+    T[1, 0], T[1, 1], T[1, 2] = q[0], -q[3], q[2]
+    T[2, 0], T[2, 1], T[2, 2] = q[3], q[0], -q[1]
+    T[3, 0], T[3, 1], T[3, 2] = -q[2], q[1], q[0]
+    return T
+
+
+@numba.njit(cache=True)
+def rate_matrix(w_ib, w_in):
+    """The 4x4 ``[w_ib^b - w_in^n]`` of eq. (2), = right(w_ib) - left(w_in), (4, 4)."""
+    wx, wy, wz = w_ib[0], w_ib[1], w_ib[2]
+    wn, we, wd = w_in[0], w_in[1], w_in[2]
+    W = np.empty((4, 4))
+    W[0, 0], W[0, 1], W[0, 2], W[0, 3] = 0.0, -(wx - wn), -(wy - we), -(wz - wd)
+    W[1, 0], W[1, 1], W[1, 2], W[1, 3] = wx - wn, 0.0, wz + wd, -(wy + we)
+    W[2, 0], W[2, 1], W[2, 2], W[2, 3] = wy - we, -(wz + wd), 0.0, wx + wn
+    W[3, 0], W[3, 1], W[3, 2], W[3, 3] = wz - wd, wy + we, -(wx + wn), 0.0
+    return W
+
+
+@numba.njit(cache=True)
+def dcm(q):
+    """``C(q)``, (3, 3) (= :func:`navreplay.geo.quat_to_dcm` for one quaternion)."""
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+    C = np.empty((3, 3))
+    C[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
+    C[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
+    C[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
+    C[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
+    C[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
+    C[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
+    C[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
+    C[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
+    C[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+    return C
+
+
+@numba.njit(cache=True)
+def euler_quat(euler):
+    """Quaternion of ZYX ``[roll, pitch, yaw]``, (4,) (= :func:`navreplay.geo.euler_to_quat`
+    up to sign)."""
+    r, p, y = 0.5 * euler[0], 0.5 * euler[1], 0.5 * euler[2]
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), \
+        math.cos(y), math.sin(y)
+    q = np.empty(4)
+    q[0] = cr * cp * cy + sr * sp * sy
+    q[1] = sr * cp * cy - cr * sp * sy
+    q[2] = cr * sp * cy + sr * cp * sy
+    q[3] = cr * cp * sy - sr * sp * cy
+    return q
+
+
+@numba.njit(cache=True)
+def quat_euler(q):
+    """ZYX ``[roll, pitch, yaw]`` of a unit quaternion away from gimbal lock, (3,)
+    (= :func:`navreplay.geo.quat_to_euler`)."""
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+    e = np.empty(3)
+    e[0] = math.atan2(2.0 * (q2 * q3 + q0 * q1), q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
+    e[1] = math.asin(max(-1.0, min(1.0, -2.0 * (q1 * q3 - q0 * q2))))
+    e[2] = math.atan2(2.0 * (q1 * q2 + q0 * q3), q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3)
+    return e
+
+
+@numba.njit(cache=True)
+def earth_terms(lat, h, v_n):
+    """Earth radius of eq. (14) and w_in^n at a position and velocity.
+
+    Returns
+    -------
+    R : float
+        ``sqrt(R_M R_N) + h`` [m], the single radius of eq. (14).
+    w_in : ndarray, shape (3,)
+        ``w_ie^n + w_en^n`` with the WGS84 radii [rad/s].
+    """
+    s, c = math.sin(lat), math.cos(lat)
+    w = 1.0 - _E2 * s * s
+    R_N = _A / math.sqrt(w)
+    R_M = R_N * (1.0 - _E2) / w
+    w_in = np.empty(3)
+    w_in[0] = _OMEGA * c + v_n[1] / (R_N + h)
+    w_in[1] = -v_n[0] / (R_M + h)
+    w_in[2] = -_OMEGA * s - v_n[1] * s / c / (R_N + h)
+    return math.sqrt(R_M * R_N) + h, w_in
+
+
+@numba.njit(cache=True)
+def system_matrix(q_bn, v_n, lat, R, w_ib_b, w_in_n, f_b, n):
+    """A of eq. (14) (errata E1-E5 applied) and G of the process noise, at the estimate.
+
+    Parameters
+    ----------
+    q_bn : ndarray, shape (4,)
+        SDINS attitude Q_bn (q_nb).
+    v_n : ndarray, shape (3,)
+        SDINS velocity NED [m/s].
+    lat : float
+        Latitude [rad].
+    R : float
+        Earth radius of eq. (14) [m].
+    w_ib_b : ndarray, shape (3,)
+        Body rate, mean over the filter interval [rad/s].
+    w_in_n : ndarray, shape (3,)
+        Rate of n w.r.t. inertial space [rad/s].
+    f_b : ndarray, shape (3,)
+        Specific force, mean over the filter interval [m/s^2].
+    n : int
+        Number of states (6 + len(s)).
+
+    Returns
+    -------
+    A : ndarray, shape (n, n)
+    G : ndarray, shape (n, 6)
+        Input of the noise [n_a (3), n_g (3)].
+    """
+    vn, ve, vd = v_n[0], v_n[1], v_n[2]
+    ws = 2.0 * _OMEGA * math.sin(lat)
+    tl = math.tan(lat)
+    C = dcm(q_bn)
+    f_n = C @ f_b
+    Rq = rmat(q_bn)
+    A = np.zeros((n, n))
+    # (1) velocity error, E1/E2: M_vv
+    A[0, 0] = vd / R
+    A[0, 1] = -(ws + 2.0 * ve * tl / R)
+    A[1, 0] = ws + ve * tl / R
+    A[1, 1] = (vd + vn * tl) / R
+    # (1), E3/E4: A_vq = -2 [f^n x]_(N,E) R(Q_bn)^T
+    F2 = np.zeros((2, 3))
+    F2[0, 1], F2[0, 2] = -f_n[2], f_n[1]
+    F2[1, 0], F2[1, 2] = f_n[2], -f_n[0]
+    A[0:2, 2:6] = -2.0 * (F2 @ Rq.T)
+    # (2): A_qv = -1/2 R(Q_bn) Gamma2
+    Gamma2 = np.zeros((3, 2))
+    Gamma2[0, 1], Gamma2[1, 0], Gamma2[2, 1] = 1.0 / R, -1.0 / R, -tl / R
+    A[2:6, 0:2] = -0.5 * (Rq @ Gamma2)
+    # (2): A_qq = 1/2 [w_ib^b - w_in^n]
+    A[2:6, 2:6] = 0.5 * rate_matrix(w_ib_b, w_in_n)
+    G = np.zeros((n, 6))
+    G[0:2, 0:3] = C[0:2]
+    G[2:6, 3:6] = 0.5 * tmat(q_bn)
+    return A, G
+
+
+@numba.njit(cache=True)
+def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
+    """(6): ``C_nb (w_nb^b x L^b)`` with ``L^b = C_nb^T C(Q_m) L^r``, NED [m/s], (3,).
+
+    Equal to ``(C_nb w_ib^b - w_in^n) x (C(Q_m) L^r)`` (a rotation preserves cross products).
+    """
+    a = dcm(q_bn) @ w_ib_b - w_in_n
+    b = dcm(q_m) @ lever_arm_r
+    out = np.empty(3)
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
+
+
+@numba.njit(cache=True)
+def _cholesky(A, L):
+    """Lower Cholesky factor of symmetric A into L (zeroed by the caller); False unless PD."""
+    n = A.shape[0]
+    for j in range(n):
+        d = A[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, n):
+            v = A[i, j]
+            for k in range(j):
+                v -= L[i, k] * L[j, k]
+            L[i, j] = v / L[j, j]
+    return True
+
+
+@numba.njit(cache=True)
+def _is_psd(P, rtol):
+    """The test of :func:`navreplay.filters.kalman.check_covariance`: finite, symmetric and
+    PSD on the correlation form, to ``rtol``."""
+    n = P.shape[0]
+    s = np.empty(n)
+    for i in range(n):
+        d = P[i, i]
+        if not (math.isfinite(d) and d >= 0.0):
+            return False
+        s[i] = math.sqrt(d) if d > 0.0 else 1.0
+    C = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            C[i, j] = P[i, j] / (s[i] * s[j])
+            if not math.isfinite(C[i, j]):
+                return False
+    for i in range(n):
+        for j in range(i):
+            if abs(C[i, j] - C[j, i]) > rtol:
+                return False
+        C[i, i] += rtol
+    return _cholesky(C, np.zeros((n, n)))
+
+
+@numba.njit(cache=True)
+def joseph_correct(P, nu, H, r):
+    """Kalman correction of a zero prior state, the kernel of
+    :func:`navreplay.filters.kalman.correct` (its eqs. 7-13) for a diagonal R.
+
+    Parameters
+    ----------
+    P : ndarray, shape (n, n)
+        Prior covariance.
+    nu : ndarray, shape (m,)
+        Innovation (the measurement, as the prior state is 0).
+    H : ndarray, shape (m, n)
+    r : ndarray, shape (m,)
+        Diagonal of R.
+
+    Returns
+    -------
+    dx : ndarray, shape (n,)
+        Corrected state.
+    P : ndarray, shape (n, n)
+        Corrected covariance (Joseph form, symmetrised).
+    S : ndarray, shape (m, m)
+        Innovation covariance.
+    ok : bool
+        False when S is not positive definite (then dx and P are not meaningful).
+    """
+    m, n = H.shape
+    HP = H @ P
+    S = HP @ H.T  # (8)
+    for i in range(m):
+        S[i, i] += r[i]
+    S = 0.5 * (S + S.T)
+    L = np.zeros((m, m))
+    if not _cholesky(S, L):
+        return np.zeros(n), P, S, False
+    # (9), (13): W = L^-1 [nu, H P] by forward substitution
+    W = np.empty((m, n + 1))
+    W[:, 0] = nu
+    W[:, 1:] = HP
+    for i in range(m):
+        for k in range(i):
+            W[i] -= L[i, k] * W[k]
+        W[i] /= L[i, i]
+    # (9): K^T = L^-T W[:, 1:] by back substitution
+    KT = W[:, 1:].copy()
+    for i in range(m - 1, -1, -1):
+        for k in range(i + 1, m):
+            KT[i] -= L[k, i] * KT[k]
+        KT[i] /= L[i, i]
+    K = KT.T.copy()
+    dx = K @ nu  # (11)
+    IKH = -(K @ H)  # (12)
+    for i in range(n):
+        IKH[i, i] += 1.0
+    P = IKH @ P @ IKH.T + (K * r) @ K.T
+    return dx, 0.5 * (P + P.T), S, True
+
+
+@numba.njit(cache=True)
+def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, w_ib, f_b, w_now, lever_arm_r, dt, qc, q_br, r):
+    """One filter cycle at a GINS sample (module docstring, steps 2-7), in place on nav, q_rb.
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+        SDINS state [lat, lon, h, v_n, q_nb] at the GINS time; corrected in place.
+    q_rb : ndarray, shape (4,)
+        Q_br estimate; corrected in place.
+    P : ndarray, shape (n, n)
+        Covariance after the previous cycle.
+    s, u : ndarray of int
+        Matched and unmatched components of Q_br.
+    q_m : ndarray, shape (4,)
+        GINS attitude Q_m from its Euler angles (either sign).
+    v_r, pos : ndarray, shape (3,)
+        GINS velocity NED [m/s] and position [rad, rad, m].
+    w_ib, f_b : ndarray, shape (3,)
+        Mean IMU rate [rad/s] and specific force [m/s^2] over the filter interval.
+    w_now : ndarray, shape (3,)
+        Body rate at the GINS time [rad/s] (lever-arm term).
+    lever_arm_r : ndarray, shape (3,)
+        Lever arm GINS -> SDINS, ship frame [m].
+    dt : float
+        Filter interval [s].
+    qc : ndarray, shape (6,)
+        Noise densities squared [q_a x3, q_g x3].
+    q_br : float
+        Density squared of the dQ_br states [1/s].
+    r : ndarray, shape (2 + len(s),)
+        Diagonal of R.
+
+    Returns
+    -------
+    P : ndarray, shape (n, n)
+        Corrected covariance.
+    nu : ndarray, shape (m,)
+        Innovation.
+    S : ndarray, shape (m, m)
+        Innovation covariance.
+    sigma_phi : ndarray, shape (3,)
+        Predicted 1 sigma of phi N, E, D [rad] after the update.
+    status : int
+        0, or 1 when S is not positive definite, or 2 when P is not symmetric PSD.
+    """
+    n = P.shape[0]
+    ns = s.shape[0]
+    q_bn = nav[6:10].copy()
+    # (4): Q_m* (x) Q_bn_hat; the sign of Q_m puts Q_br in the hemisphere of [1, 0, 0, 0]
+    Lc = left(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]]))
+    q_br_meas = Lc @ q_bn
+    if q_br_meas[0] < 0.0:
+        q_m = -q_m
+        Lc = -Lc
+        q_br_meas = -q_br_meas
+
+    # prediction: (14), then Phi = I + A dt + (A dt)^2/2 and Qd = G Qc G^T dt (kalman (3), (4))
+    R, w_in = earth_terms(nav[0], nav[2], nav[3:6])
+    A, G = system_matrix(q_bn, nav[3:6], nav[0], R, w_ib, w_in, f_b, n)
+    Ad = A * dt
+    Phi = Ad + 0.5 * (Ad @ Ad)
+    for i in range(n):
+        Phi[i, i] += 1.0
+    Qd = ((G * qc) @ G.T) * dt
+    for i in range(6, n):
+        Qd[i, i] += q_br * dt
+    P = Phi @ P @ Phi.T + Qd  # kalman (6)
+    P = 0.5 * (P + P.T)
+
+    # measurement: (3), (6) velocity; (5) quaternion rows s; H of (15)
+    m = 2 + ns
+    lever_v = lever_velocity(q_bn, q_m, w_now, w_in, lever_arm_r)
+    z = np.empty(m)
+    H = np.zeros((m, n))
+    z[0] = nav[3] - v_r[0] - lever_v[0]
+    z[1] = nav[4] - v_r[1] - lever_v[1]
+    H[0, 0] = 1.0
+    H[1, 1] = 1.0
+    for i in range(ns):
+        z[2 + i] = q_br_meas[s[i]] - q_rb[s[i]]
+        H[2 + i, 2:6] = Lc[s[i]]
+        H[2 + i, 6 + i] = -1.0
+    dx, P, S, ok = joseph_correct(P, z, H, r)
+    sigma_phi = np.zeros(3)
+    if not ok:
+        return P, z, S, sigma_phi, _S_NOT_PD
+
+    # feedback: x_hat <- x_hat - dx
+    nav[3] -= dx[0]
+    nav[4] -= dx[1]
+    q = q_bn - dx[2:6]
+    q /= math.sqrt(q @ q)
+    nav[6:10] = q
+    for i in range(ns):
+        q_rb[s[i]] -= dx[6 + i]
+    # (11), E8: unmatched components (q_br2 for partial matching) of Q_m* (x) Q_bn_hat
+    q_br_new = Lc @ q
+    for i in u:
+        q_rb[i] = q_br_new[i]
+    q_rb /= math.sqrt(q_rb @ q_rb)  # (10), E10
+    # the vertical channel and the position are slaved to the GINS (spec 4.1)
+    nav[5] = v_r[2] + lever_velocity(q, q_m, w_now, w_in, lever_arm_r)[2]
+    nav[0:3] = pos
+
+    # predicted covariance of phi = -2 R(q)^T dQ_bn: Sigma_phi = 4 R^T P_qq R
+    Rq = rmat(q)
+    Sp = 4.0 * (Rq.T @ np.ascontiguousarray(P[2:6, 2:6]) @ Rq)
+    for i in range(3):
+        sigma_phi[i] = math.sqrt(max(Sp[i, i], 0.0))
+    if not _is_psd(P, RTOL):
+        return P, z, S, sigma_phi, _P_NOT_PSD
+    return P, z, S, sigma_phi, _OK
+
+
+@numba.njit(cache=True)
+def propagate_block(nav, omega_ib_b, f_b, t, t_prev, prev, sums):
+    """Step 1: the SDINS mechanization over a block of raw IMU samples.
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+        SDINS state at ``t_prev``.
+    omega_ib_b, f_b : ndarray, shape (k, 3)
+        Raw IMU samples [rad/s], [m/s^2], each the mean over its interval.
+    t : ndarray, shape (k,)
+        Sample times [s].
+    t_prev : float
+        Time of the sample before the block [s].
+    prev : ndarray, shape (6,)
+        Increments [dtheta, dv] of the sample before the block (coning and sculling terms of
+        :func:`navreplay.strapdown.propagate_kernel`); replaced by the block's last.
+    sums : ndarray, shape (6,)
+        Running sums of the samples [omega, f] for the interval means of eq. (14); updated.
+
+    Returns
+    -------
+    nav : ndarray, shape (10,)
+        State at ``t[-1]``.
+    bad : int
+        -1, or what :func:`navreplay.strapdown.propagate_kernel` reports for invalid input
+        (then nothing was updated).
+    """
+    k = t.shape[0]
+    dt = np.empty(k)
+    dt[0] = t[0] - t_prev
+    for i in range(1, k):
+        dt[i] = t[i] - t[i - 1]
+    out = np.empty(10)
+    bad = strapdown.propagate_kernel(nav, omega_ib_b, f_b, dt, prev, out)
+    if bad != -1:
+        return nav, bad
+    for i in range(k):
+        for j in range(3):
+            sums[j] += omega_ib_b[i, j]
+            sums[3 + j] += f_b[i, j]
+    for j in range(3):
+        prev[j] = omega_ib_b[k - 1, j] * dt[k - 1]
+        prev[3 + j] = f_b[k - 1, j] * dt[k - 1]
+    return out, -1
+
+
+def initial_covariance(
+    q_m: np.ndarray, s: np.ndarray, vel_var: float, p0: float, p1: float
+) -> np.ndarray:
+    """P0 of eq. (17) for the matched index set s.
+
+    Parameters
+    ----------
+    q_m : ndarray, shape (4,)
+        GINS attitude Q_m at the initialisation.
+    s : ndarray of int
+        Matched components of Q_br.
+    vel_var : float
+        Initial velocity error variance per axis [(m/s)^2].
+    p0, p1 : float
+        Variances of the scalar and of each vector component of dQ_br [-].
+
+    Returns
+    -------
+    ndarray, shape (6 + len(s), 6 + len(s))
+    """
+    n = N_NAV + len(s)
+    P_hat = np.diag([p0, p1, p1, p1])
+    Lm = left(q_m)
+    P = np.zeros((n, n))
+    P[DV, DV] = vel_var * np.eye(2)
+    P[DQ_BN, DQ_BN] = Lm @ P_hat @ Lm.T  # (16): dQ_bn = L(Q_m) dQ_br
+    P[DQ_BN, DQ_BR] = Lm @ P_hat[:, s]
+    P[DQ_BR, DQ_BN] = P[DQ_BN, DQ_BR].T
+    P[DQ_BR, DQ_BR] = P_hat[np.ix_(s, s)]
+    return P
+
+
+@register_filter
+class TransferAlignment(Filter):
+    """SDINS transfer alignment to a ship's GINS: velocity + quaternion (partial) matching."""
+
+    name = "transfer-alignment"
+    summary = (
+        "Shipboard transfer alignment, velocity + quaternion partial matching (Song et al.);"
+        " match=vel_quat_partial|vel_quat_full|vel_only"
+    )
+    requires = (StreamKind.IMU, StreamKind.MASTER_INS)
+    Params = TransferAlignmentParams
+    truth_keys = {
+        "misalignment_euler": "truth:misalignment_euler",
+        "q_rb": "truth:q_rb",
+    }
+
+    def __init__(self, params: TransferAlignmentParams, context: FilterContext) -> None:
+        super().__init__(params, context)
+        p = params
+        if p.lever_arm_r is not None:
+            arm = p.lever_arm_r
+        else:
+            arm = context.metadata.params.get("lever_arm_r_nom")
+            if arm is None:
+                raise ValueError(
+                    "transfer-alignment: set the filter parameter lever_arm_r (the recording's"
+                    " metadata has no params.lever_arm_r_nom)"
+                )
+        self.lever_arm_r = np.asarray(arm, dtype=float)
+        if self.lever_arm_r.shape != (3,) or not np.all(np.isfinite(self.lever_arm_r)):
+            raise ValueError(f"transfer-alignment: lever arm needs three finite values, got {arm!r}")
+        self.s = np.array(p.match.components, dtype=np.int64)
+        self.u = np.array([i for i in range(4) if i not in p.match.components], dtype=np.int64)
+        self.n = N_NAV + len(self.s)
+        self.state_names = ("v_N", "v_E", "q_nb0", "q_nb1", "q_nb2", "q_nb3") + tuple(
+            f"q_rb{i}" for i in self.s
+        )
+        self._qc = np.array([p.accel_noise**2] * 3 + [p.gyro_noise**2] * 3)
+        self._q_br = p.misalignment_noise**2
+        self._r = np.array([p.vel_sigma**2] * 2 + [p.quat_sigma**2] * len(self.s))
+
+        self.t = 0.0
+        self.nav: np.ndarray | None = None  # [lat, lon, h, v_n, q_nb], strapdown layout
+        self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])
+        self.P = np.zeros((self.n, self.n))
+        self.sigma_phi = np.zeros(3)
+        # IMU bookkeeping: last sample time, last two rates, the increments of the last sample
+        # (coning and sculling of the next) and the sums [omega, f] for the means of eq. (14)
+        self._t_imu: float | None = None
+        self._w_last: np.ndarray | None = None
+        self._w_prev: np.ndarray | None = None
+        self._prev = np.zeros(6)
+        self._sums = np.zeros(6)
+        self._count = 0
+
+    # ---------------------------------------------------------------------------------------
+    # engine callbacks
+
+    def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
+        w = imu["omega_ib_b"]
+        f = imu["f_b"]
+        k = t.shape[0]
+        if w.shape != (k, 3) or f.shape != (k, 3):
+            raise ValueError(
+                f"IMU block: expected omega_ib_b and f_b of shape ({k}, 3), got {w.shape}, "
+                f"{f.shape}"
+            )
+        if self.nav is not None:
+            # step 1: SDINS mechanization with the raw IMU
+            nav, bad = propagate_block(self.nav, w, f, t, self._t_imu, self._prev, self._sums)
+            if bad != -1:  # let the checked wrapper name the bad sample
+                dt = np.diff(t, prepend=self._t_imu)
+                strapdown.propagate(self.nav, w, f, dt)
+                raise ValueError(f"IMU block at t = {t[0]:.6f} s: invalid sample {bad}")
+            self.nav = nav
+            self._count += k
+        elif k > 1 or self._t_imu is not None:
+            dt_last = t[-1] - (t[-2] if k > 1 else self._t_imu)
+            self._prev[0:3] = w[-1] * dt_last
+            self._prev[3:6] = f[-1] * dt_last
+        self._w_prev = w[-2] if k > 1 else self._w_last if self._w_last is not None else w[0]
+        self._w_last = w[-1]
+        self._t_imu = float(t[-1])
+
+    def update(
+        self, kind: StreamKind, t: float, sample: Mapping[str, Any]
+    ) -> list[Innovation] | None:
+        if kind != StreamKind.MASTER_INS:
+            return None
+        euler = sample["euler"]
+        v_r = sample["v_n"]
+        pos = sample["pos"]
+        if euler.shape != (3,) or v_r.shape != (3,) or pos.shape != (3,):
+            raise ValueError("master_ins sample: euler, v_n and pos must have shape (3,)")
+        q_m = euler_quat(euler)
+        if self.nav is None:
+            if self._w_last is not None:  # the lever-arm velocity needs a body rate
+                self._initialise(t, q_m, v_r, pos)
+            return None
+        return self._step(t, q_m, v_r, pos)
+
+    def estimate(self) -> Estimate | None:
+        if self.nav is None:
+            return None
+        nav = self.nav
+        return Estimate(
+            t=self.t,
+            x=np.concatenate((nav[3:5], nav[6:10], self.q_rb[self.s])),
+            P=self.P.copy(),
+            nav=NavSolution(pos=nav[0:3].copy(), v_n=nav[3:6].copy(), q_nb=nav[6:10].copy()),
+            extras={
+                "q_rb": self.q_rb.copy(),
+                "misalignment_euler": quat_euler(self.q_rb),
+                "attitude_sigma_n": self.sigma_phi.copy(),
+            },
+        )
+
+    # ---------------------------------------------------------------------------------------
+    # steps
+
+    def _w_now(self) -> np.ndarray:
+        """Body rate at the latest IMU time, extrapolated from the last two interval means."""
+        return 1.5 * self._w_last - 0.5 * self._w_prev
+
+    def _initialise(
+        self, t: float, q_m: np.ndarray, v_r: np.ndarray, pos: np.ndarray
+    ) -> None:
+        """(16), (17): start from the GINS attitude, lever-arm compensated GINS velocity."""
+        p = self.params
+        _, w_in = earth_terms(pos[0], pos[2], v_r)
+        v_b = v_r + lever_velocity(q_m, q_m, self._w_now(), w_in, self.lever_arm_r)
+        self.nav = np.concatenate((pos, v_b, q_m))
+        self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])
+        self.P = initial_covariance(
+            q_m, self.s, p.init_vel_sigma**2, p.init_q0_sigma**2,
+            math.sin(0.5 * p.init_misalignment) ** 2,
+        )
+        kalman.check_covariance(self.P, name="P0", t=t)
+        Rq = rmat(q_m)
+        self.sigma_phi = np.sqrt(np.diagonal(4.0 * Rq.T @ self.P[DQ_BN, DQ_BN] @ Rq))
+        self.t = t
+        self._reset_sums()
+
+    def _reset_sums(self) -> None:
+        self._sums[:] = 0.0
+        self._count = 0
+
+    def _step(
+        self, t: float, q_m: np.ndarray, v_r: np.ndarray, pos: np.ndarray
+    ) -> list[Innovation]:
+        dt = t - self.t
+        if not dt > 0.0:
+            raise ValueError(f"master_ins time does not increase: {t} s after {self.t} s")
+        if self._count:
+            w_ib = self._sums[0:3] / self._count
+            f_b = self._sums[3:6] / self._count
+        else:  # no IMU sample since the last GINS sample: hold the last rate, no force term
+            w_ib, f_b = self._w_last, np.zeros(3)
+        P, nu, S, sigma_phi, status = cycle(
+            self.nav, self.q_rb, self.P, self.s, self.u, q_m, v_r, pos, w_ib, f_b,
+            self._w_now(), self.lever_arm_r, dt, self._qc, self._q_br, self._r,
+        )
+        if status == _S_NOT_PD:
+            raise kalman.FilterDivergedError(
+                f"innovation covariance S is not positive definite (diag {np.diagonal(S)})", t
+            )
+        if status == _P_NOT_PSD:
+            kalman.check_covariance(P, name="corrected P", t=t)  # raises with the details
+            raise kalman.FilterDivergedError("corrected P is not symmetric PSD", t)
+        self.P = P
+        self.sigma_phi = sigma_phi
+        self.t = t
+        self._reset_sums()
+        out = [Innovation("velocity", t, nu[ZV], S[ZV, ZV])]
+        if len(self.s):
+            out.append(Innovation("quaternion", t, nu[ZQ], S[ZQ, ZQ]))
+        return out

@@ -1,0 +1,908 @@
+"""Gyro-free attitude by vector matching: specific force (proposed) or gravity (conventional).
+
+Estimates the attitude of a vehicle without gyros from an accelerometer, a magnetometer and GNSS
+velocity sampled together at a few hertz, with a 3-state error-quaternion EKF that matches two
+vectors per epoch: the acceleration-compensated specific force and the geomagnetic field
+(Choe & Park, "Improvement of Attitude Determination Based on Specific Force Vector Matching",
+JKSAS 45(2), 2017; specification ``spec/vector-matching.md``). Equation numbers are the
+paper's; E1-E11 are the errata of the specification, section 7.
+
+State
+-----
+===== ========================= ===== ==== ===============================================
+index symbol                    frame unit meaning
+===== ========================= ===== ==== ===============================================
+0-2   q_ev = [q_e1, q_e2, q_e3] n     -    vector part of the attitude-error quaternion q_e
+===== ========================= ===== ==== ===============================================
+
+The nominal attitude ``q_nb_hat`` is the only navigation output. It is held constant between
+updates (no gyros, no time propagation); after every update the error estimate is fed back and
+reset to zero, so only P is propagated.
+
+Error definition and sign (E9)
+------------------------------
+::
+
+    q_nb_true = q_e (x) q_nb_hat          (Hamilton product; q_e = [q_e0, q_ev], q_e0 ~ 1)
+    C_nb_hat  = (I - 2[q_ev x]) C_nb_true = (I - [phi x]) C_nb_true,   phi = 2 q_ev    (3)-(5)
+
+phi [rad] has the sign of :func:`navreplay.geo.attitude_error` (a positive phi_D means the
+estimated heading is smaller than the true one).
+
+Process model, first-order Gauss-Markov (16)-(18), exactly discretised
+----------------------------------------------------------------------
+::
+
+    d/dt q_ev = F q_ev + G w,   F = -(1/tau) I3,   G = -tau F = I3,   E[w w^T] = q_w delta(t) I3
+    Phi = exp(-dt/tau) I3,   Q_d = (q_w tau / 2) (1 - exp(-2 dt/tau)) I3
+    P <- Phi P Phi^T + Q_d
+
+The process noise stands in for the missing gyros.
+
+Measurement model, at each epoch k >= 1 (accelerometer, magnetometer, GNSS velocity at t_k)
+-------------------------------------------------------------------------------------------
+::
+
+    a_hat_n = (v_gps_n(k) - v_gps_n(k-1)) / dt                                        (13)
+    z_g = g_n - (a_hat_n - C_nb_hat f_b)       = -2[u_n x] q_ev + v_g                 (14), (28)
+    z_h = h_n - C_nb_hat m_b                   = -2[h_n x] q_ev + v_h                 (10), E4
+    z = [z_g; z_h] (6),   H = [-2[u_n x]; -2[h_n x]] (6x3)
+
+    model "gravity"        (conventional, (14)):  u_n = g_n
+    model "specific-force" (proposed, (28)):      u_n = g_n - a_hat_n = -f_ref_n
+
+The true first-order model of z_g is ``-2[(g_n - a_n) x] q_ev`` (derivation (19)-(21), E7,
+E8): the conventional model drops ``+2[a_n x] q_ev``. Eq. (29) is the same update written with
+``z_f = -z_g`` and ``H_f = -2[f_ref_n x]``; this module uses the (14) residual with the (28)
+matrix throughout (never z_g with H_f: E6). The residual, the noise, the process model and the
+initialisation are the same for both models: the model only chooses u_n.
+
+Noise (11), (15), E3, E5, E10::
+
+    R_g = diag(s_v(k)^2 + s_v(k-1)^2) / dt^2 + s_f^2 I3     (= (2/dt^2) s_v^2 + s_f^2 for constant s_v)
+    R_h = C_nb_hat (s_h^2 I3) C_nb_hat^T = s_h^2 I3
+    R   = blkdiag(R_g, R_h)
+
+s_v is the GNSS velocity 1-sigma per NED axis as reported in the stream (``vel_sigma``), s_f and
+s_h the per-sample white noise of the accelerometer and magnetometer (parameters). Sensor biases
+are not modelled, so R_h is optimistic by design (the paper's).
+
+Update and feedback (4.4 of the specification)
+----------------------------------------------
+::
+
+    S = H P H^T + R;  K = P H^T S^-1 (Cholesky);  dq = K z;  P = (I-KH) P (I-KH)^T + K R K^T
+    q_nb_hat <- normalize([1, dq] (x) q_nb_hat);  x_hat <- 0
+
+C_nb_hat is the one from before the correction; no iterations (plain EKF).
+
+Initialisation (our choice): TRIAD at the first complete epoch, which must be at rest: primary
+pair (-g_n/|g_n|, f_b/|f_b|), secondary pair (h_n, m_b); P0 = p0_sigma^2 I3.
+
+Model-induced error diagnostic, eqs. (23)-(25) with E7 (gravity model only)::
+
+    dq_conv - dq_true = pinv([-2[g_n x]; -2[h_n x]]) z - pinv([-2[(g_n - a_hat_n) x]; -2[h_n x]]) z
+
+reported as the angle ``2 (dq_conv - dq_true)`` [rad].
+
+Dimensions: x 3, Phi and Q_d 3x3, z 6, H 6x3, R 6x6, K 3x6, P 3x3.
+
+Two code paths, one model
+-------------------------
+:class:`VectorMatchingFilter` is the reference: it runs through the replay engine, one epoch at
+a time, with the shared :func:`navreplay.filters.kalman.correct`. :func:`run_batch` runs the
+same epochs for many synchronous runs at once (arrays with a leading run axis) for Monte Carlo
+campaigns; it calls the same model functions (:func:`process_noise`, :func:`gps_acceleration`,
+:func:`measurement`, :func:`triad`, :func:`feedback`) and differs only in doing the Kalman
+correction for a stack of runs (:func:`correct_batch`, the same equations as
+:func:`navreplay.filters.kalman.correct`).
+
+Outputs (:meth:`VectorMatchingFilter.estimate`)
+-----------------------------------------------
+``x`` is the error state after feedback (zero), ``P`` its covariance; ``nav`` is None (the
+filter estimates attitude only); extras:
+
+- ``q_nb`` (4,): attitude estimate, Hamilton scalar first;
+- ``euler`` (3,) [rad]: roll, pitch, yaw of ``q_nb``;
+- ``euler_sigma`` (3,) [rad]: predicted 1-sigma of the Euler angle errors, from P;
+- ``model_induced_phi`` (3,) [rad]: the diagnostic above (model "gravity" only).
+
+Errors against the truth are computed outside the filter.
+
+Examples
+--------
+At rest and level, both models see the same residual and matrices:
+
+>>> import numpy as np
+>>> g_n, h_n = np.array([0.0, 0.0, 9.8]), np.array([3e-5, -4e-6, 4e-5])
+>>> f_b, m_b, a_n = -g_n, h_n, np.zeros(3)
+>>> zg, Hg = measurement(MatchModel.GRAVITY, np.eye(3), f_b, m_b, a_n, g_n, h_n)
+>>> zs, Hs = measurement(MatchModel.SPECIFIC_FORCE, np.eye(3), f_b, m_b, a_n, g_n, h_n)
+>>> bool(np.allclose(zg, 0.0) and np.array_equal(Hg, Hs))
+True
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from collections.abc import Callable, Mapping
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from navreplay.filters import kalman
+from navreplay.filters.base import (
+    Estimate,
+    Filter,
+    FilterContext,
+    FilterParams,
+    Innovation,
+)
+from navreplay.filters.kalman import FilterDivergedError
+from navreplay.filters.registry import register_filter
+from navreplay.geo.earth import gravity as normal_gravity
+from navreplay.geo.rotations import (
+    dcm_to_quat,
+    quat_mult,
+    quat_normalize,
+    quat_to_dcm,
+    quat_to_euler,
+    skew,
+)
+from navreplay.streams import StreamKind
+from navreplay.units import DEG, GAUSS, MICRO_G_PER_SQRT_HZ
+
+# --------------------------------------------------------------------------------------------
+# indices
+
+QE = slice(0, 3)
+"""Error state: vector part of the attitude-error quaternion."""
+N_STATES = 3
+
+Z_G = slice(0, 3)
+"""Acceleration (gravity / specific-force) residual rows of z and H."""
+Z_H = slice(3, 6)
+"""Magnetic-field residual rows of z and H."""
+N_MEAS = 6
+
+STATE_NAMES = ("q_e1", "q_e2", "q_e3")
+
+# --------------------------------------------------------------------------------------------
+# datasheet values of the specification (section 3.1, paper Table 1), converted once
+
+SENSOR_RATE = 4.0
+"""Accelerometer, magnetometer and GNSS rate of the paper's simulation [Hz]."""
+ACCEL_NOISE_DENSITY = 80.0 * MICRO_G_PER_SQRT_HZ
+"""Accelerometer white-noise density, 80 ug/sqrt(Hz) [(m/s^2)/sqrt(Hz)]."""
+MAG_NOISE_DENSITY = 100e-6 * GAUSS
+"""Magnetometer white-noise density, 100 uG/sqrt(Hz) [T/sqrt(Hz)]."""
+ACCEL_NOISE_SIGMA = ACCEL_NOISE_DENSITY * math.sqrt(0.5 * SENSOR_RATE)
+"""Per-sample accelerometer sigma at 4 Hz, Nyquist bandwidth: 113.1 ug = 1.109e-3 m/s^2."""
+MAG_NOISE_SIGMA = MAG_NOISE_DENSITY * math.sqrt(0.5 * SENSOR_RATE)
+"""Per-sample magnetometer sigma at 4 Hz, Nyquist bandwidth: 141.4 uG = 14.14 nT."""
+
+
+class MatchModel(enum.StrEnum):
+    """Measurement model of the acceleration vector (specification section 5)."""
+
+    GRAVITY = "gravity"
+    """Conventional acceleration-compensated gravity matching, H_g = -2[g_n x], eq. (14)."""
+    SPECIFIC_FORCE = "specific-force"
+    """Proposed specific-force matching, H_g = -2[(g_n - a_hat_n) x], eqs. (28)-(29)."""
+
+    @classmethod
+    def _missing_(cls, value: object) -> MatchModel | None:
+        # the specification spells it specific_force
+        if isinstance(value, str):
+            key = value.strip().lower().replace("_", "-")
+            for member in cls:
+                if member.value == key:
+                    return member
+        return None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class VectorMatchingParams(FilterParams):
+    """Parameters of :class:`VectorMatchingFilter` (SI)."""
+
+    model: MatchModel = MatchModel.SPECIFIC_FORCE
+    """Acceleration measurement model: ``gravity`` (conventional) or ``specific-force``."""
+    tau: float = 10.0
+    """Correlation time of the attitude-error Gauss-Markov process [s] (our choice)."""
+    q_w: float = 0.01
+    """Power spectral density of the Gauss-Markov driving noise [1/s] (our choice)."""
+    accel_noise_sigma: float = ACCEL_NOISE_SIGMA
+    """Accelerometer white noise, 1-sigma per sample and axis [m/s^2] (s_f of eq. 15)."""
+    mag_noise_sigma: float = MAG_NOISE_SIGMA
+    """Magnetometer white noise, 1-sigma per sample and axis [T] (s_h of eq. 11)."""
+    p0_sigma: float = 0.5 * DEG
+    """Initial 1-sigma of each q_ev component after TRIAD [-] (half of 1 deg in rad)."""
+    earth_field_n: tuple[float, float, float] | None = None
+    """Reference geomagnetic field N, E, D [T]; None: the recording's
+    ``metadata.extra["earth_field_n"]`` (the field model the recording was made with)."""
+    gravity: float | None = None
+    """Gravity magnitude [m/s^2]; None: normal gravity at ``metadata.initial_nav["pos"]``."""
+    sync_tolerance: float = 1e-6
+    """Largest time difference of samples that belong to one epoch [s]."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "model", MatchModel(self.model))
+        for name in ("tau", "accel_noise_sigma", "mag_noise_sigma", "p0_sigma",
+                     "sync_tolerance"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+        if not (math.isfinite(self.q_w) and self.q_w >= 0.0):
+            raise ValueError(f"q_w must be finite and >= 0, got {self.q_w!r}")
+        if self.earth_field_n is not None:
+            h = np.asarray(self.earth_field_n, dtype=float)
+            if h.shape != (3,) or not np.all(np.isfinite(h)) or not np.any(h):
+                raise ValueError(
+                    f"earth_field_n must be three finite values [T], not all zero; got "
+                    f"{self.earth_field_n!r}"
+                )
+            object.__setattr__(self, "earth_field_n", tuple(float(v) for v in h))
+        if self.gravity is not None and not (math.isfinite(self.gravity) and self.gravity > 0):
+            raise ValueError(f"gravity must be finite and > 0 [m/s^2], got {self.gravity!r}")
+
+
+class Reference(NamedTuple):
+    """Reference vectors in the navigation frame.
+
+    g_n : ndarray, shape (3,)  gravity [m/s^2], ``[0, 0, g]``.
+    h_n : ndarray, shape (3,)  geomagnetic field [T].
+    """
+
+    g_n: np.ndarray
+    h_n: np.ndarray
+
+
+class EpochSample(NamedTuple):
+    """The synchronous samples of one epoch; every array may carry leading run axes.
+
+    t : float or ndarray  [s]
+    f_b : ndarray, (..., 3)  measured specific force [m/s^2]
+    m_b : ndarray, (..., 3)  measured magnetic field [T]
+    v_n : ndarray, (..., 3)  GNSS velocity [m/s]
+    vel_sigma : ndarray, (..., 3)  reported GNSS velocity 1-sigma per NED axis [m/s]
+    """
+
+    t: float | np.ndarray
+    f_b: np.ndarray
+    m_b: np.ndarray
+    v_n: np.ndarray
+    vel_sigma: np.ndarray
+
+
+# --------------------------------------------------------------------------------------------
+# model functions (pure; they broadcast over leading axes)
+
+
+def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Matrix times vector over leading axes: (..., n, m) x (..., m) -> (..., n)."""
+    return (M @ v[..., None])[..., 0]
+
+
+def process_noise(dt: float | np.ndarray, tau: float, q_w: float) -> tuple[Any, Any]:
+    """Scalar factors of ``Phi = phi I3`` and ``Q_d = qd I3``, exact discretisation, (16)-(18).
+
+    Parameters
+    ----------
+    dt : float or ndarray
+        Step [s].
+    tau : float
+        Correlation time [s].
+    q_w : float
+        Driving-noise power spectral density [1/s].
+
+    Returns
+    -------
+    phi, qd : float or ndarray
+        ``exp(-dt/tau)`` and ``(q_w tau / 2)(1 - exp(-2 dt/tau))``.
+
+    Examples
+    --------
+    >>> phi, qd = process_noise(0.25, 10.0, 0.01)
+    >>> round(float(qd), 7)
+    0.0024385
+    """
+    phi = np.exp(-np.asarray(dt, dtype=float) / tau)
+    qd = 0.5 * q_w * tau * -np.expm1(-2.0 * np.asarray(dt, dtype=float) / tau)
+    return phi, qd
+
+
+def gps_acceleration(v_n: np.ndarray, v_n_prev: np.ndarray, dt: Any) -> np.ndarray:
+    """Backward difference of GNSS velocities, eq. (13) (its half-step lag is ignored, E11).
+
+    Parameters
+    ----------
+    v_n, v_n_prev : ndarray, shape (..., 3)
+        Velocities at t_k and t_k-1 [m/s].
+    dt : float or ndarray
+        t_k - t_k-1 [s], broadcastable against ``v_n[..., 0]``.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        [m/s^2].
+    """
+    return (v_n - v_n_prev) / np.asarray(dt, dtype=float)[..., None]
+
+
+def measurement(
+    model: MatchModel,
+    C_nb_hat: np.ndarray,
+    f_b: np.ndarray,
+    m_b: np.ndarray,
+    a_n: np.ndarray,
+    g_n: np.ndarray,
+    h_n: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Stacked residual z and its matrix H for either model, eqs. (10), (14), (28).
+
+    Parameters
+    ----------
+    model : MatchModel
+    C_nb_hat : ndarray, shape (..., 3, 3)
+        Attitude estimate before the correction.
+    f_b : ndarray, shape (..., 3)
+        Measured specific force [m/s^2].
+    m_b : ndarray, shape (..., 3)
+        Measured magnetic field [T].
+    a_n : ndarray, shape (..., 3)
+        Motion acceleration from GNSS, eq. (13) [m/s^2].
+    g_n, h_n : ndarray, shape (3,) or (..., 3)
+        Reference gravity [m/s^2] and geomagnetic field [T].
+
+    Returns
+    -------
+    z : ndarray, shape (..., 6)
+        ``[z_g; z_h]``, [m/s^2] and [T].
+    H : ndarray, shape (..., 6, 3)
+        ``dz / dq_ev``.
+    """
+    z_g = g_n - (a_n - _mv(C_nb_hat, f_b))  # (14)
+    z_h = h_n - _mv(C_nb_hat, m_b)  # (10) with E4: the magnetometer reading
+    u_n = g_n if model is MatchModel.GRAVITY else g_n - a_n  # (14) vs (28)
+    shape = np.broadcast_shapes(z_g.shape, z_h.shape)
+    z = np.empty(shape[:-1] + (N_MEAS,))
+    z[..., Z_G] = z_g
+    z[..., Z_H] = z_h
+    H = np.empty(shape[:-1] + (N_MEAS, N_STATES))
+    H[..., Z_G, QE] = -2.0 * skew(u_n)  # (14) / (28)
+    H[..., Z_H, QE] = -2.0 * skew(h_n)  # (10)
+    return z, H
+
+
+def measurement_noise(
+    vel_sigma: np.ndarray,
+    vel_sigma_prev: np.ndarray,
+    dt: Any,
+    accel_noise_sigma: float,
+    mag_noise_sigma: float,
+) -> np.ndarray:
+    """R = blkdiag(R_g, R_h), eqs. (11) and (15).
+
+    Parameters
+    ----------
+    vel_sigma, vel_sigma_prev : ndarray, shape (..., 3)
+        GNSS velocity 1-sigma per NED axis at t_k and t_k-1 [m/s].
+    dt : float or ndarray
+        t_k - t_k-1 [s].
+    accel_noise_sigma : float
+        s_f [m/s^2].
+    mag_noise_sigma : float
+        s_h [T].
+
+    Returns
+    -------
+    ndarray, shape (..., 6, 6)
+    """
+    var_a = (vel_sigma**2 + vel_sigma_prev**2) / (np.asarray(dt, dtype=float)[..., None] ** 2)
+    R = np.zeros(var_a.shape[:-1] + (N_MEAS, N_MEAS))
+    i = np.arange(3)
+    R[..., i, i] = var_a + accel_noise_sigma**2  # (15)
+    R[..., 3 + i, 3 + i] = mag_noise_sigma**2  # (11), E5: C (s_h^2 I) C^T = s_h^2 I
+    return R
+
+
+def triad(f_b: np.ndarray, m_b: np.ndarray, g_n: np.ndarray, h_n: np.ndarray) -> np.ndarray:
+    """Attitude from two vector pairs by TRIAD, for a vehicle at rest.
+
+    The primary pair (exactly matched) is the up direction ``-g_n/|g_n|`` and ``f_b/|f_b|``;
+    the secondary pair is (h_n, m_b).
+
+    Parameters
+    ----------
+    f_b, m_b : ndarray, shape (..., 3)
+        Measured specific force [m/s^2] and magnetic field [T].
+    g_n, h_n : ndarray, shape (3,)
+        Reference gravity and field.
+
+    Returns
+    -------
+    q_nb : ndarray, shape (..., 4)
+
+    Raises
+    ------
+    ValueError
+        A zero vector, or the two vectors of a pair parallel.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from navreplay.geo import euler_to_dcm, quat_to_euler
+    >>> g_n, h_n = np.array([0.0, 0.0, 9.8]), np.array([3e-5, -4e-6, 4e-5])
+    >>> C = euler_to_dcm([0.1, -0.2, 2.0])
+    >>> q = triad(C.T @ -g_n, C.T @ h_n, g_n, h_n)
+    >>> np.round(quat_to_euler(q), 12).tolist()
+    [0.1, -0.2, 2.0]
+    """
+
+    def frame(v1: np.ndarray, v2: np.ndarray, what: str) -> np.ndarray:
+        n1 = np.linalg.norm(v1, axis=-1, keepdims=True)
+        c = np.cross(v1, v2)
+        nc = np.linalg.norm(c, axis=-1, keepdims=True)
+        scale = n1 * np.linalg.norm(v2, axis=-1, keepdims=True)
+        if np.any(n1 == 0.0) or np.any(nc <= 1e-6 * scale):
+            raise ValueError(f"TRIAD: the {what} vectors are zero or parallel")
+        t1 = v1 / n1
+        t2 = c / nc
+        return np.stack([t1, t2, np.cross(t1, t2)], axis=-1)
+
+    T_n = frame(-np.asarray(g_n, dtype=float), np.asarray(h_n, dtype=float), "reference")
+    T_b = frame(np.asarray(f_b, dtype=float), np.asarray(m_b, dtype=float), "measured")
+    return dcm_to_quat(T_n @ np.swapaxes(T_b, -1, -2))
+
+
+def feedback(q_nb_hat: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """Apply the estimated q_ev: ``normalize([1, dq] (x) q_nb_hat)``.
+
+    Parameters
+    ----------
+    q_nb_hat : ndarray, shape (..., 4)
+    dq : ndarray, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+    """
+    q_e = np.concatenate([np.ones(dq.shape[:-1] + (1,)), dq], axis=-1)
+    return quat_normalize(quat_mult(q_e, q_nb_hat))
+
+
+def euler_sigma(euler: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Predicted 1-sigma of the roll, pitch, yaw errors from the covariance of q_ev.
+
+    A small rotation phi = 2 q_ev of the navigation frame changes the ZYX angles by
+    ``d_euler = -M^-1 phi`` with ``M = [Rz Ry e1, Rz e2, e3]`` (the frame rate of each angle),
+    so ``cov(d_euler) = 4 M^-1 P M^-T``. Infinite at pitch = +-90 deg.
+
+    Parameters
+    ----------
+    euler : ndarray, shape (..., 3)
+        Roll, pitch, yaw [rad].
+    P : ndarray, shape (..., 3, 3)
+        Covariance of q_ev.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        [rad].
+    """
+    sp, cp = np.sin(euler[..., 1]), np.cos(euler[..., 1])
+    sy, cy = np.sin(euler[..., 2]), np.cos(euler[..., 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sec = 1.0 / cp
+        Minv = np.zeros(euler.shape[:-1] + (3, 3))
+        Minv[..., 0, 0] = cy * sec
+        Minv[..., 0, 1] = sy * sec
+        Minv[..., 1, 0] = -sy
+        Minv[..., 1, 1] = cy
+        Minv[..., 2, 0] = sp * cy * sec
+        Minv[..., 2, 1] = sp * sy * sec
+        Minv[..., 2, 2] = 1.0
+        cov = 4.0 * Minv @ P @ np.swapaxes(Minv, -1, -2)
+    return np.sqrt(np.clip(np.diagonal(cov, axis1=-2, axis2=-1), 0.0, None))
+
+
+def model_induced_error(
+    z: np.ndarray, a_n: np.ndarray, g_n: np.ndarray, h_n: np.ndarray
+) -> np.ndarray:
+    """Attitude error caused by the conventional model's dropped term, eqs. (23)-(25), E7.
+
+    Parameters
+    ----------
+    z : ndarray, shape (..., 6)
+        Stacked residual.
+    a_n : ndarray, shape (..., 3)
+        GNSS acceleration [m/s^2].
+    g_n, h_n : ndarray, shape (3,)
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``2 (pinv(H_conv) z - pinv(H_true) z)`` [rad].
+    """
+    z_dummy = np.zeros(3)
+    _, H_conv = measurement(MatchModel.GRAVITY, np.eye(3), z_dummy, z_dummy, a_n, g_n, h_n)
+    _, H_true = measurement(
+        MatchModel.SPECIFIC_FORCE, np.eye(3), z_dummy, z_dummy, a_n, g_n, h_n
+    )
+    dq_conv = _mv(np.linalg.pinv(H_conv), z)  # (24)
+    dq_true = _mv(np.linalg.pinv(H_true), z)  # (23)
+    return 2.0 * (dq_conv - dq_true)  # (25)
+
+
+# --------------------------------------------------------------------------------------------
+# the reference filter
+
+
+@register_filter
+class VectorMatchingFilter(Filter):
+    """Gyro-free attitude EKF; see the module docstring.
+
+    Streams: ``imu`` (accelerometer only: the ``f_b`` column; a gyro column is ignored),
+    ``mag`` and ``gps_vel`` sampled at the same times. An epoch is processed once all three
+    samples of one time (within ``sync_tolerance``) have arrived, in whatever order the
+    engine hands them over.
+    """
+
+    name = "vector-matching"
+    summary = (
+        "Gyro-free attitude from accelerometer, magnetometer and GPS velocity "
+        "(specific-force or gravity vector matching, Choe & Park 2017)"
+    )
+    # The IMU stream is required too, but only its f_b column: it is checked in __init__,
+    # because the engine's check would also demand the gyro column.
+    requires = (StreamKind.MAG, StreamKind.GPS_VEL)
+    optional = (StreamKind.IMU,)
+    Params = VectorMatchingParams
+    truth_keys: dict[str, str] = {}
+
+    def __init__(self, params: VectorMatchingParams, context: FilterContext) -> None:
+        super().__init__(params, context)
+        if StreamKind.IMU not in context.streams:
+            raise ValueError(
+                "filter 'vector-matching' needs an accelerometer (stream imu, column f_b); "
+                f"the recording has: {', '.join(sorted(context.streams))}"
+            )
+        self.params: VectorMatchingParams = params
+        self.ref = reference(params, context.metadata.extra, context.metadata.initial_nav)
+        self.state_names = STATE_NAMES
+        self.extras_names = ("q_nb", "euler", "euler_sigma") + (
+            ("model_induced_phi",) if params.model is MatchModel.GRAVITY else ()
+        )
+        self._f: tuple[np.ndarray, np.ndarray] | None = None  # accelerometer block (t, f_b)
+        self._m: tuple[float, np.ndarray] | None = None
+        self._v: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._prev: EpochSample | None = None
+        self.t = 0.0
+        self.q_nb: np.ndarray | None = None
+        self.P = np.zeros((N_STATES, N_STATES))
+        self._diag = np.zeros(3)
+
+    # -- engine callbacks
+
+    def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
+        # Gyro-free: the attitude is not propagated; keep the accelerometer samples for the
+        # epoch they belong to.
+        if "f_b" not in imu:
+            raise ValueError("filter 'vector-matching': the imu stream has no f_b column")
+        self._f = (np.asarray(t, dtype=float), np.asarray(imu["f_b"], dtype=float))
+        self._try_epoch()
+
+    def update(
+        self, kind: StreamKind, t: float, sample: Mapping[str, Any]
+    ) -> list[Innovation] | None:
+        if kind is StreamKind.MAG:
+            self._m = (t, np.asarray(sample["m_b"], dtype=float))
+        elif kind is StreamKind.GPS_VEL:
+            self._v = (
+                t,
+                np.asarray(sample["v_n"], dtype=float),
+                np.asarray(sample["vel_sigma"], dtype=float),
+            )
+        else:
+            return None
+        return self._try_epoch()
+
+    def estimate(self) -> Estimate | None:
+        if self.q_nb is None:
+            return None
+        euler = quat_to_euler(self.q_nb)
+        extras = {
+            "q_nb": self.q_nb.copy(),
+            "euler": euler,
+            "euler_sigma": euler_sigma(euler, self.P),
+        }
+        if self.params.model is MatchModel.GRAVITY:
+            extras["model_induced_phi"] = self._diag.copy()
+        return Estimate(self.t, np.zeros(N_STATES), self.P.copy(), None, extras)
+
+    # -- epochs
+
+    def _try_epoch(self) -> list[Innovation] | None:
+        """Run the epoch whose accelerometer, magnetometer and GNSS samples are all in."""
+        if self._m is None or self._v is None or self._f is None:
+            return None
+        t = self._v[0]
+        tol = self.params.sync_tolerance
+        if abs(self._m[0] - t) > tol or (self._prev is not None and t <= self._prev.t + tol):
+            return None
+        t_f, f_b = self._f
+        j = np.flatnonzero(np.abs(t_f - t) <= tol)
+        if j.size == 0:
+            return None
+        cur = EpochSample(t, f_b[j[-1]], self._m[1], self._v[1], self._v[2])
+        if self._prev is None:
+            self._initialise(cur)
+            return None
+        return [self._epoch(cur)]
+
+    def _initialise(self, cur: EpochSample) -> None:
+        self.q_nb = triad(cur.f_b, cur.m_b, self.ref.g_n, self.ref.h_n)
+        self.P = self.params.p0_sigma**2 * np.eye(N_STATES)
+        self.t = float(cur.t)
+        self._prev = cur
+
+    def _epoch(self, cur: EpochSample) -> Innovation:
+        p = self.params
+        prev = self._prev
+        assert prev is not None and self.q_nb is not None
+        dt = float(cur.t) - float(prev.t)
+        phi, qd = process_noise(dt, p.tau, p.q_w)  # (16)-(18)
+        _, P = kalman.predict(
+            np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
+            float(qd) * np.eye(N_STATES), t=cur.t,
+        )
+        a_n = gps_acceleration(cur.v_n, prev.v_n, dt)  # (13)
+        z, H = measurement(
+            p.model, quat_to_dcm(self.q_nb), cur.f_b, cur.m_b, a_n, self.ref.g_n, self.ref.h_n
+        )
+        R = measurement_noise(
+            cur.vel_sigma, prev.vel_sigma, dt, p.accel_noise_sigma, p.mag_noise_sigma
+        )
+        c = kalman.correct(np.zeros(N_STATES), P, z, H, R, t=cur.t)
+        self.q_nb = feedback(self.q_nb, c.x[QE])  # x_hat <- 0
+        self.P = c.P
+        if p.model is MatchModel.GRAVITY:
+            self._diag = model_induced_error(z, a_n, self.ref.g_n, self.ref.h_n)
+        self.t = float(cur.t)
+        self._prev = cur
+        return Innovation("vector", self.t, c.nu, c.S)
+
+
+def reference(
+    params: VectorMatchingParams, extra: Mapping[str, Any], initial_nav: Mapping[str, Any]
+) -> Reference:
+    """Reference gravity and field from the parameters, else from the recording's metadata.
+
+    Raises
+    ------
+    ValueError
+        Neither the parameters nor the metadata give the value.
+    """
+    if params.earth_field_n is not None:
+        h_n = np.array(params.earth_field_n)
+    elif "earth_field_n" in extra:
+        h_n = np.asarray(extra["earth_field_n"], dtype=float)
+        if h_n.shape != (3,) or not np.all(np.isfinite(h_n)):
+            raise ValueError(f"metadata earth_field_n must be three finite values, got {h_n}")
+    else:
+        raise ValueError(
+            "filter 'vector-matching' needs the reference geomagnetic field: set the parameter "
+            "earth_field_n (N, E, D in tesla) or record metadata extra['earth_field_n']"
+        )
+    if params.gravity is not None:
+        g = params.gravity
+    elif "pos" in initial_nav:
+        lat, _, h = np.asarray(initial_nav["pos"], dtype=float)
+        g = float(normal_gravity(lat, h))
+    else:
+        raise ValueError(
+            "filter 'vector-matching' needs gravity: set the parameter gravity [m/s^2] or "
+            "record the site in metadata initial_nav['pos']"
+        )
+    return Reference(np.array([0.0, 0.0, g]), h_n)
+
+
+# --------------------------------------------------------------------------------------------
+# the batched path
+
+
+class Correction(NamedTuple):
+    """Result of :func:`correct_batch` (leading run axes B).
+
+    dx : (B..., 3); P : (B..., 3, 3); nu : (B..., 6); S : (B..., 6, 6); nis : (B...,).
+    """
+
+    dx: np.ndarray
+    P: np.ndarray
+    nu: np.ndarray
+    S: np.ndarray
+    nis: np.ndarray
+
+
+def _mT(a: np.ndarray) -> np.ndarray:
+    return np.swapaxes(a, -1, -2)
+
+
+def _solve_lower(L: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Forward substitution ``L X = B`` over a stack: L (..., n, n) lower, B (..., n, k).
+
+    Vectorised across the stack, looping over the n rows (LAPACK's per-matrix call costs more
+    than the arithmetic for n = 6).
+    """
+    X = np.empty(np.broadcast_shapes(L.shape[:-2], B.shape[:-2]) + B.shape[-2:])
+    for i in range(L.shape[-1]):
+        acc = B[..., i, :] - np.einsum("...j,...jk->...k", L[..., i, :i], X[..., :i, :])
+        X[..., i, :] = acc / L[..., i, i, None]
+    return X
+
+
+def _solve_lower_T(L: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Back substitution ``L^T X = B`` over a stack: L (..., n, n) lower, B (..., n, k)."""
+    n = L.shape[-1]
+    X = np.empty(np.broadcast_shapes(L.shape[:-2], B.shape[:-2]) + B.shape[-2:])
+    for i in range(n - 1, -1, -1):
+        acc = B[..., i, :] - np.einsum("...j,...jk->...k", L[..., i + 1:, i], X[..., i + 1:, :])
+        X[..., i, :] = acc / L[..., i, i, None]
+    return X
+
+
+def correct_batch(
+    P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray, *, t: float | None = None
+) -> Correction:
+    """Kalman correction of a stack of independent filters with prior state zero.
+
+    The equations and their order are those of :func:`navreplay.filters.kalman.correct`:
+    ``S = H P H^T + R = L L^T`` (Cholesky), ``K^T = L^-T L^-1 H P``, Joseph form.
+
+    Parameters
+    ----------
+    P : ndarray, shape (..., n, n)
+    z : ndarray, shape (..., m)
+    H : ndarray, shape (..., m, n)
+    R : ndarray, shape (..., m, m)
+    t : float, optional
+        Filter time [s], for error messages.
+
+    Returns
+    -------
+    Correction
+
+    Raises
+    ------
+    FilterDivergedError
+        Some S is not positive definite, or a result is not finite.
+    """
+    n = P.shape[-1]
+    HP = H @ P
+    S = HP @ _mT(H) + R  # (8)
+    S = 0.5 * (S + _mT(S))
+    try:
+        L = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        raise FilterDivergedError("innovation covariance S is not positive definite", t) from None
+    W = _solve_lower(L, np.concatenate([z[..., None], HP], axis=-1))  # (9), (13)
+    nu_w = W[..., 0]
+    K = _mT(_solve_lower_T(L, W[..., 1:]))  # (9)
+    dx = _mv(K, z)  # (11)
+    IKH = -K @ H  # (12)
+    IKH[..., np.arange(n), np.arange(n)] += 1.0
+    KR = K @ R
+    P = IKH @ P @ _mT(IKH)
+    P += KR @ _mT(K)
+    P = 0.5 * (P + _mT(P))
+    if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P))):
+        raise FilterDivergedError("non-finite corrected state or covariance", t)
+    try:
+        np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        raise FilterDivergedError("corrected P is not positive definite", t) from None
+    return Correction(dx, P, z, S, np.einsum("...i,...i->...", nu_w, nu_w))
+
+
+@dataclasses.dataclass
+class BatchEstimates:
+    """Estimates of :func:`run_batch` at every epoch; leading axes (B, K) = (runs, epochs).
+
+    Attributes
+    ----------
+    t : ndarray, shape (K,)
+        Epoch times [s].
+    q_nb : ndarray, shape (B, K, 4)
+    P : ndarray, shape (B, K, 3, 3)
+        Covariance of q_ev after the epoch's update.
+    model_induced_phi : ndarray, shape (B, K, 3) or None
+        The gravity-model diagnostic [rad] (zero at the first epoch); None for the
+        specific-force model or when not asked for.
+    """
+
+    t: np.ndarray
+    q_nb: np.ndarray
+    P: np.ndarray
+    model_induced_phi: np.ndarray | None
+
+    def euler(self) -> np.ndarray:
+        """Roll, pitch, yaw [rad], shape (B, K, 3)."""
+        return quat_to_euler(self.q_nb)
+
+    def euler_sigma(self) -> np.ndarray:
+        """Predicted 1-sigma of the Euler angle errors [rad], shape (B, K, 3)."""
+        return euler_sigma(self.euler(), self.P)
+
+
+def run_batch(
+    params: VectorMatchingParams,
+    ref: Reference,
+    t: np.ndarray,
+    f_b: np.ndarray,
+    m_b: np.ndarray,
+    v_n: np.ndarray,
+    vel_sigma: np.ndarray,
+    *,
+    correct: Callable[..., Correction] = correct_batch,
+    diagnostic: bool = False,
+) -> BatchEstimates:
+    """Run the filter over B synchronous recordings at once (the Monte Carlo fast path).
+
+    Epoch 0 initialises by TRIAD; epochs 1..K-1 propagate and update exactly as
+    :class:`VectorMatchingFilter` does.
+
+    Parameters
+    ----------
+    params : VectorMatchingParams
+    ref : Reference
+    t : ndarray, shape (K,)
+        Epoch times [s], common to all runs, increasing.
+    f_b, m_b, v_n, vel_sigma : ndarray, shape (B, K, 3)
+        Accelerometer [m/s^2], magnetometer [T], GNSS velocity and its reported 1-sigma [m/s].
+    correct : callable
+        The stacked Kalman correction (default :func:`correct_batch`).
+    diagnostic : bool
+        Also compute the model-induced error of the gravity model (a pseudo-inverse per run
+        and epoch: it triples the cost).
+
+    Returns
+    -------
+    BatchEstimates
+    """
+    t = np.asarray(t, dtype=float)
+    B, K = f_b.shape[:2]
+    for name, a in (("f_b", f_b), ("m_b", m_b), ("v_n", v_n), ("vel_sigma", vel_sigma)):
+        if a.shape != (B, K, 3):
+            raise ValueError(f"{name} must have shape ({B}, {K}, 3), got {a.shape}")
+    if t.shape != (K,) or K < 1 or np.any(np.diff(t) <= 0.0):
+        raise ValueError(f"t must be {K} increasing epoch times, got shape {t.shape}")
+    gravity_model = params.model is MatchModel.GRAVITY
+    q_out = np.empty((B, K, 4))
+    P_out = np.empty((B, K, N_STATES, N_STATES))
+    diag = np.zeros((B, K, 3)) if gravity_model and diagnostic else None
+
+    q = triad(f_b[:, 0], m_b[:, 0], ref.g_n, ref.h_n)
+    P = np.broadcast_to(params.p0_sigma**2 * np.eye(N_STATES), (B, N_STATES, N_STATES)).copy()
+    q_out[:, 0], P_out[:, 0] = q, P
+    eye = np.eye(N_STATES)
+    for k in range(1, K):
+        dt = t[k] - t[k - 1]
+        phi, qd = process_noise(dt, params.tau, params.q_w)  # (16)-(18)
+        P = (float(phi) * eye) @ P @ (float(phi) * eye).T + float(qd) * eye
+        P = 0.5 * (P + _mT(P))
+        a_n = gps_acceleration(v_n[:, k], v_n[:, k - 1], dt)  # (13)
+        z, H = measurement(params.model, quat_to_dcm(q), f_b[:, k], m_b[:, k], a_n,
+                           ref.g_n, ref.h_n)
+        R = measurement_noise(
+            vel_sigma[:, k], vel_sigma[:, k - 1], dt, params.accel_noise_sigma,
+            params.mag_noise_sigma,
+        )
+        c = correct(P, z, H, R, t=float(t[k]))
+        q = feedback(q, c.dx[..., QE])  # x_hat <- 0
+        P = c.P
+        q_out[:, k], P_out[:, k] = q, P
+        if diag is not None:
+            diag[:, k] = model_induced_error(z, a_n, ref.g_n, ref.h_n)
+    return BatchEstimates(t, q_out, P_out, diag)

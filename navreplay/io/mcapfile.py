@@ -1,0 +1,494 @@
+"""Low-level MCAP access for bulk reading: file probing, integrity checks and chunk scanning.
+
+The python ``mcap`` package reads one message at a time (tens of thousands per second). A
+recording is read faster by taking whole chunks: each chunk is decompressed and CRC-checked with
+mcap's own routines, its record offsets are found in one pass over the record headers, and the
+payloads of a topic are then gathered with numpy. Two ways through a file:
+
+* intact (both magics, a footer, a summary whose CRC holds): mcap's ``SeekingReader`` gives the
+  summary (schemas, channels, statistics, chunk and metadata indexes); the chunks are read through
+  the chunk index; the data-section CRC is checked in one sequential pass;
+* anything else: mcap's ``StreamReader`` walks the records from the start (the engine under
+  ``NonSeekingReader``) and stops at the first record that cannot be read, so a truncated or
+  unfinished file yields every complete chunk before the damage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import struct
+import zlib
+from collections.abc import Callable, Iterator
+from io import BytesIO
+from typing import BinaryIO
+
+import numpy as np
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
+from mcap.opcode import Opcode
+from mcap.reader import SeekingReader
+from mcap.records import (
+    Channel,
+    Chunk,
+    DataEnd,
+    Footer,
+    Header,
+    Message,
+    Metadata,
+    Schema,
+    Statistics,
+)
+from mcap.stream_reader import CRCValidationError, StreamReader, get_chunk_data_stream
+
+from navreplay.io.errors import RecordingError
+
+MAGIC = b"\x89MCAP0\r\n"
+_FOOTER = struct.Struct("<BQQQI")
+_DATA_END = struct.Struct("<BQI")
+_RECORD = struct.Struct("<BQ")
+_MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
+"""Bytes of a Message record before its payload: opcode, length, channel, sequence, 2 times."""
+_CRC_BLOCK = 8 << 20
+
+DAMAGE_ERRORS: tuple[type[BaseException], ...] = (
+    McapError,
+    struct.error,
+    ValueError,
+    UnicodeDecodeError,
+    EOFError,
+    KeyError,
+)
+"""Exceptions of mcap's record reader that mean "this record cannot be read"."""
+
+
+@dataclasses.dataclass
+class Tail:
+    """What the end of an intact file says.
+
+    Attributes
+    ----------
+    summary_start : int
+        Byte offset of the summary section, 0 when there is none.
+    data_end : int | None
+        Byte offset of the DataEnd record, None when it cannot be located.
+    data_crc : int
+        CRC-32 of the data section stored in DataEnd (0: not computed by the writer).
+    """
+
+    summary_start: int
+    data_end: int | None
+    data_crc: int
+
+
+def probe(f: BinaryIO, size: int, where: str) -> Tail | None:
+    """Check the leading magic and, if the file ends properly, verify the summary CRC.
+
+    Returns
+    -------
+    Tail | None
+        None when the file does not end with a valid footer and magic (truncated, unfinished).
+
+    Raises
+    ------
+    RecordingError
+        If the file is not an MCAP file, or its summary CRC does not match.
+    """
+    f.seek(0)
+    head = f.read(len(MAGIC))
+    if head != MAGIC:
+        if len(head) < len(MAGIC) and MAGIC.startswith(head):
+            raise RecordingError(f"{where}: file is truncated to {size} bytes, nothing to read")
+        raise RecordingError(f"{where}: not an MCAP file (bad magic {head!r})")
+    end = size - len(MAGIC) - _FOOTER.size
+    if end < len(MAGIC):
+        return None
+    f.seek(end)
+    tail = f.read(_FOOTER.size + len(MAGIC))
+    if tail[_FOOTER.size :] != MAGIC:
+        return None
+    opcode, length, summary_start, _, summary_crc = _FOOTER.unpack(tail[: _FOOTER.size])
+    if opcode != Opcode.FOOTER or length != _FOOTER.size - 9 or summary_start > end:
+        return None
+    if summary_start and summary_crc:
+        crc = crc_of_range(f, summary_start, end)
+        crc = zlib.crc32(tail[: _FOOTER.size - 4], crc)
+        if crc != summary_crc:
+            raise RecordingError(
+                f"{where}: summary section CRC mismatch (stored {summary_crc:#010x}, computed "
+                f"{crc:#010x}): the file is corrupt"
+            )
+    data_end = (summary_start or end) - _DATA_END.size
+    data_crc = 0
+    f.seek(data_end)
+    raw = f.read(_DATA_END.size)
+    if len(raw) == _DATA_END.size:
+        opcode, length, data_crc = _DATA_END.unpack(raw)
+        if opcode != Opcode.DATA_END or length != 4:
+            return Tail(summary_start, None, 0)
+    return Tail(summary_start, data_end, data_crc)
+
+
+def crc_of_range(f: BinaryIO, start: int, stop: int, crc: int = 0) -> int:
+    """CRC-32 of bytes [start, stop) of a file."""
+    f.seek(start)
+    left = stop - start
+    while left > 0:
+        block = f.read(min(left, _CRC_BLOCK))
+        if not block:
+            break
+        crc = zlib.crc32(block, crc)
+        left -= len(block)
+    return crc
+
+
+def check_data_crc(f: BinaryIO, tail: Tail, where: str) -> None:
+    """Verify the data-section CRC of an intact file (when the writer stored one)."""
+    if tail.data_end is None or tail.data_crc == 0:
+        return
+    crc = crc_of_range(f, 0, tail.data_end)
+    if crc != tail.data_crc:
+        raise RecordingError(
+            f"{where}: data section CRC mismatch (stored {tail.data_crc:#010x}, computed "
+            f"{crc:#010x}): the file is corrupt"
+        )
+
+
+def chunk_bytes(chunk: Chunk, where: str, offset: int) -> bytes:
+    """Decompressed, CRC-checked records of a chunk.
+
+    Raises
+    ------
+    RecordingError
+        On a CRC mismatch or data that does not decompress.
+    """
+    try:
+        stream, length = get_chunk_data_stream(chunk, validate_crc=True)
+        data = stream.read(length)
+    except CRCValidationError as exc:
+        raise RecordingError(
+            f"{where}: chunk at byte {offset}: CRC mismatch (stored {exc.expected:#010x}, "
+            f"computed {exc.actual:#010x}): the file is corrupt"
+        ) from None
+    except Exception as exc:  # zstd/lz4 raise their own types
+        raise RecordingError(
+            f"{where}: chunk at byte {offset} does not decompress ({exc}): the file is corrupt"
+        ) from None
+    if len(data) != length:
+        raise RecordingError(f"{where}: chunk at byte {offset} is shorter than it claims")
+    return data
+
+
+@dataclasses.dataclass
+class MessageBlock:
+    """Messages of one chunk (or of loose records), columnar.
+
+    Attributes
+    ----------
+    data : bytes
+        Buffer holding the payloads.
+    channel : ndarray (N,), uint16
+    log_time : ndarray (N,), int64
+        MCAP log times [ns].
+    start : ndarray (N,), int64
+        Payload offsets in ``data``.
+    length : ndarray (N,), int64
+        Payload lengths [bytes].
+    """
+
+    data: bytes
+    channel: np.ndarray
+    log_time: np.ndarray
+    start: np.ndarray
+    length: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.channel)
+
+    def rows(self, index: np.ndarray, width: int) -> np.ndarray:
+        """Payloads ``index`` (all ``width`` bytes long) as an (n, width) uint8 array."""
+        u8 = np.frombuffer(self.data, dtype=np.uint8)
+        if width == 0 or len(u8) < width:
+            return np.zeros((len(index), width), dtype=np.uint8)
+        view = np.lib.stride_tricks.as_strided(u8, (len(u8) - width + 1, width), (1, 1))
+        return view[self.start[index]]
+
+    def payload(self, i: int) -> bytes:
+        s = int(self.start[i])
+        return self.data[s : s + int(self.length[i])]
+
+
+def scan_chunk(
+    data: bytes, on_record: Callable[[int, bytes], None], where: str, offset: int
+) -> MessageBlock:
+    """Find the messages of a decompressed chunk; hand its schema and channel records over.
+
+    Parameters
+    ----------
+    data : bytes
+        Decompressed chunk records.
+    on_record : callable(opcode, body)
+        Called for every Schema and Channel record inside the chunk.
+    where, offset
+        File and chunk offset for error messages.
+    """
+    offsets: list[int] = []
+    pos, n = 0, len(data)
+    unpack = _RECORD.unpack_from
+    append = offsets.append
+    message = Opcode.MESSAGE
+    try:
+        while pos < n:
+            opcode, length = unpack(data, pos)
+            if opcode == message:
+                append(pos)
+            elif opcode == Opcode.SCHEMA or opcode == Opcode.CHANNEL:
+                on_record(opcode, data[pos + 9 : pos + 9 + length])
+            pos += 9 + length
+    except struct.error:
+        pos = n + 1
+    if pos != n:
+        raise RecordingError(f"{where}: chunk at byte {offset} has a malformed record")
+    u8 = np.frombuffer(data, dtype=np.uint8)
+    idx = np.asarray(offsets, dtype=np.int64)
+    if idx.size:
+        if idx[-1] + _MESSAGE_HEADER > n:
+            raise RecordingError(f"{where}: chunk at byte {offset} has a malformed message")
+        view = np.lib.stride_tricks.as_strided(
+            u8, (n - _MESSAGE_HEADER + 1, _MESSAGE_HEADER), (1, 1)
+        )
+        head = view[idx]
+        length = head[:, 1:9].copy().view("<u8")[:, 0].astype(np.int64)
+        channel = head[:, 9:11].copy().view("<u2")[:, 0]
+        log_time = head[:, 15:23].copy().view("<u8")[:, 0].astype(np.int64)
+        return MessageBlock(data, channel, log_time, idx + _MESSAGE_HEADER, length - 22)
+    empty = np.zeros(0, dtype=np.int64)
+    return MessageBlock(data, np.zeros(0, np.uint16), empty, empty, empty)
+
+
+def loose_block(messages: list[Message]) -> MessageBlock:
+    """A MessageBlock of Message records read outside chunks."""
+    data = b"".join(m.data for m in messages)
+    length = np.array([len(m.data) for m in messages], dtype=np.int64)
+    start = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
+    return MessageBlock(
+        data,
+        np.array([m.channel_id for m in messages], dtype=np.uint16),
+        np.array([m.log_time for m in messages], dtype=np.int64),
+        start,
+        length,
+    )
+
+
+def parse_schema(body: bytes) -> Schema:
+    return Schema.read(ReadDataStream(BytesIO(body)))
+
+
+def parse_channel(body: bytes) -> Channel:
+    return Channel.read(ReadDataStream(BytesIO(body)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Walking a file
+
+
+class _StreamReader(StreamReader):
+    """mcap's sequential record reader, skipping index records it would parse entry by entry.
+
+    Message and chunk indexes are not needed to read a file front to back; mcap's reader skips the
+    body of a record whose parser returns None, so returning None here saves parsing one Python
+    tuple per message. Everything else (CRCs, limits, chunk records) is mcap's own.
+    """
+
+    def _read_record(self, opcode: int, length: int):  # type: ignore[no-untyped-def]
+        if opcode in (Opcode.MESSAGE_INDEX, Opcode.CHUNK_INDEX):
+            return None
+        return super()._read_record(opcode, length)
+
+
+@dataclasses.dataclass
+class Damage:
+    """Where and why sequential reading stopped early.
+
+    Attributes
+    ----------
+    offset : int
+        Byte offset of the first record that could not be read.
+    reason : str
+    data_complete : bool
+        True when the whole data section was read (only the summary or footer is missing).
+    """
+
+    offset: int
+    reason: str
+    data_complete: bool
+
+
+@dataclasses.dataclass
+class FileContents:
+    """Everything but the messages, gathered while walking a file.
+
+    Attributes
+    ----------
+    size : int
+    profile, library : str
+        From the MCAP header.
+    schemas : dict[int, Schema]
+    channels : dict[int, Channel]
+    metadata : list[Metadata]
+    statistics : Statistics | None
+    intact : bool
+        Whether the seeking (summary) path was used.
+    damage : Damage | None
+    first_log_time, last_log_time : int | None
+        Extremes of the log times of the messages read (all topics).
+    message_count : int
+        Messages read (all topics).
+    """
+
+    size: int
+    profile: str = ""
+    library: str = ""
+    schemas: dict[int, Schema] = dataclasses.field(default_factory=dict)
+    channels: dict[int, Channel] = dataclasses.field(default_factory=dict)
+    metadata: list[Metadata] = dataclasses.field(default_factory=list)
+    statistics: Statistics | None = None
+    intact: bool = False
+    damage: Damage | None = None
+    first_log_time: int | None = None
+    last_log_time: int | None = None
+    message_count: int = 0
+
+    def on_record(self, opcode: int, body: bytes) -> None:
+        if opcode == Opcode.SCHEMA:
+            schema = parse_schema(body)
+            self.schemas.setdefault(schema.id, schema)
+        elif opcode == Opcode.CHANNEL:
+            channel = parse_channel(body)
+            self.channels.setdefault(channel.id, channel)
+
+    def saw(self, block: MessageBlock) -> None:
+        if not len(block):
+            return
+        lo, hi = int(block.log_time.min()), int(block.log_time.max())
+        self.first_log_time = lo if self.first_log_time is None else min(lo, self.first_log_time)
+        self.last_log_time = hi if self.last_log_time is None else max(hi, self.last_log_time)
+        self.message_count += len(block)
+
+
+def walk(
+    f: BinaryIO,
+    where: str,
+    contents: FileContents,
+    wanted: Callable[[FileContents, set[int]], bool] | None = None,
+) -> Iterator[MessageBlock]:
+    """Yield the message blocks of a file, filling ``contents`` on the way.
+
+    Parameters
+    ----------
+    f : binary file
+    where : str
+        The file, for messages.
+    contents : FileContents
+        Filled with header, schemas, channels, metadata, statistics, damage.
+    wanted : callable(contents, channel ids) -> bool, optional
+        On the intact path, whether a chunk holding these channels must be read (all when None).
+        Chunks are always read on the sequential path.
+
+    Raises
+    ------
+    RecordingError
+        For a file that is not MCAP, a CRC mismatch, or a corrupt chunk.
+    """
+    tail = probe(f, contents.size, where)
+    summary = None
+    if tail is not None and tail.summary_start:
+        try:
+            f.seek(0)
+            reader = SeekingReader(f, validate_crcs=True, record_size_limit=contents.size)
+            summary = reader.get_summary()
+            header = reader.get_header()
+            metadata = list(reader.iter_metadata())
+        except DAMAGE_ERRORS:
+            summary = None
+    if tail is not None and summary is not None and summary.chunk_indexes:
+        contents.intact = True
+        contents.profile, contents.library = header.profile, header.library
+        contents.schemas.update(summary.schemas)
+        contents.channels.update(summary.channels)
+        contents.statistics = summary.statistics
+        contents.metadata.extend(metadata)
+        check_data_crc(f, tail, where)
+        for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+            ids = set(index.message_index_offsets) or set(contents.channels)
+            if wanted is not None and index.message_index_offsets and not wanted(contents, ids):
+                continue
+            offset = index.chunk_start_offset
+            f.seek(offset)
+            try:
+                opcode, _ = _RECORD.unpack(f.read(9))
+                if opcode != Opcode.CHUNK:
+                    raise ValueError(f"opcode {opcode:#x}")
+                chunk = Chunk.read(ReadDataStream(f))
+            except DAMAGE_ERRORS as exc:
+                raise RecordingError(
+                    f"{where}: chunk at byte {offset} cannot be read ({exc!r}): the file is corrupt"
+                ) from None
+            block = scan_chunk(chunk_bytes(chunk, where, offset), contents.on_record, where, offset)
+            contents.saw(block)
+            yield block
+        return
+    yield from _walk_sequential(f, where, contents, expect_complete=tail is not None)
+
+
+def _walk_sequential(
+    f: BinaryIO, where: str, contents: FileContents, expect_complete: bool
+) -> Iterator[MessageBlock]:
+    f.seek(0)
+    stream = _StreamReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=contents.size)
+    records = stream.records
+    loose: list[Message] = []
+    good = 0
+    data_complete = False
+    while True:
+        try:
+            record = next(records)
+        except StopIteration:
+            break
+        except CRCValidationError as exc:
+            raise RecordingError(
+                f"{where}: data section CRC mismatch (stored {exc.expected:#010x}, computed "
+                f"{exc.actual:#010x}): the file is corrupt"
+            ) from None
+        except DAMAGE_ERRORS as exc:
+            reason = str(exc) or type(exc).__name__
+            contents.damage = Damage(good, reason, data_complete)
+            break
+        if isinstance(record, Chunk):
+            offset = good
+            block = scan_chunk(chunk_bytes(record, where, offset), contents.on_record, where, offset)
+            contents.saw(block)
+            yield block
+        elif isinstance(record, Message):
+            loose.append(record)
+        elif isinstance(record, Header):
+            contents.profile, contents.library = record.profile, record.library
+        elif isinstance(record, Schema):
+            contents.schemas.setdefault(record.id, record)
+        elif isinstance(record, Channel):
+            contents.channels.setdefault(record.id, record)
+        elif isinstance(record, Metadata):
+            contents.metadata.append(record)
+        elif isinstance(record, Statistics):
+            contents.statistics = record
+        elif isinstance(record, DataEnd):
+            data_complete = True
+        elif isinstance(record, Footer):
+            good = f.tell()
+            break
+        good = f.tell()
+    if contents.damage is None and not expect_complete:
+        contents.damage = Damage(good, "the file ends without a valid footer", data_complete)
+    if loose:
+        block = loose_block(loose)
+        contents.saw(block)
+        yield block

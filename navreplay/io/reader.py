@@ -1,0 +1,404 @@
+"""Read an MCAP recording into a :class:`~navreplay.streams.Recording`, bulk-decoded.
+
+Topics map to stream kinds by name (:data:`~navreplay.io.schemas.TOPICS`), or, in a recording from
+elsewhere, by message type when exactly one topic carries it. Payloads are decoded chunk by chunk:
+equally long payloads with one fixed layout are viewed as a numpy structured array; anything else
+goes through mcap-ros2-support's generic decoder. Decoded fields are reduced at once to what the
+columns need, so memory stays close to the size of the resulting columns.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import warnings
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+from mcap.records import Channel, Schema
+
+from navreplay.io import cdr
+from navreplay.io.checks import first_problem, gap_report, when
+from navreplay.io.convert import DECODERS, REDUCE, AuxColumn
+from navreplay.io.errors import RecordingError, RecordingWarning
+from navreplay.io.mcapfile import FileContents, MessageBlock, walk
+from navreplay.io.metadata import decode_metadata
+from navreplay.io.schemas import (
+    KIND_BY_TYPE,
+    METADATA_NAME,
+    SPECS,
+    MessageType,
+    normalize_type_name,
+)
+from navreplay.streams import Metadata, Recording, Stream, StreamKind
+
+_PART_ROWS = 1 << 16
+
+
+def _warn(message: str) -> None:
+    warnings.warn(RecordingWarning(message), stacklevel=3)
+
+
+class _Topic:
+    """Decoded fields of one channel, accumulated block by block."""
+
+    def __init__(self, channel: Channel, schema: Schema | None, message: MessageType, where: str):
+        self.channel = channel
+        self.schema = schema
+        self.message = message
+        self.where = where
+        self.reduce = REDUCE[KIND_BY_TYPE[message.name]]
+        self.parts: list[dict[str, np.ndarray]] = []
+        self.frame_ids: set[str] = set()
+        self.first_frame_id: str | None = None
+        self._generic: cdr.GenericDecoder | None = None
+        self._ordinal = 0
+
+    @property
+    def label(self) -> str:
+        return f"{self.where}: topic {self.channel.topic} ({self.message.name})"
+
+    def add(self, block: MessageBlock, index: np.ndarray) -> None:
+        """Decode messages ``index`` of a block (all of this channel)."""
+        ordinal = self._ordinal + np.arange(len(index), dtype=np.int64)
+        self._ordinal += len(index)
+        lengths = block.length[index]
+        for width in np.unique(lengths):
+            sel = np.flatnonzero(lengths == width)
+            self._add_equal(block, index[sel], ordinal[sel], int(width))
+
+    def _add_equal(self, block: MessageBlock, index: np.ndarray, ordinal: np.ndarray, width: int):
+        rows = block.rows(index, width)
+        remaining = np.arange(len(index))
+        while remaining.size:
+            lay = cdr.peek_layout(rows[remaining[:1]], self.message)
+            if lay is None:
+                payloads = [block.payload(int(i)) for i in index[remaining]]
+                self._keep(self._decode_generic(payloads), block, index[remaining], ordinal[remaining])
+                return
+            sub = rows if remaining.size == len(rows) else rows[remaining]
+            ok = cdr.matches_layout(sub, lay)  # true for the first row, which defined `lay`
+            take = remaining[ok]
+            records = cdr.view_records(rows[take] if take.size != len(rows) else rows, lay)
+            fields = cdr.records_to_fields(records, self.message)
+            self._keep(fields, block, index[take], ordinal[take])
+            remaining = remaining[~ok]
+
+    def _decode_generic(self, payloads: list[bytes]) -> dict[str, np.ndarray]:
+        try:
+            if self._generic is None:
+                if self.schema is None:
+                    raise RecordingError("the channel has no schema")
+                self._generic = cdr.GenericDecoder(self.schema)
+            return self._generic.decode(payloads, self.message)
+        except RecordingError as exc:
+            raise RecordingError(f"{self.label}: {exc}") from None
+        except Exception as exc:  # the generic decoder raises many types on foreign data
+            raise RecordingError(
+                f"{self.label}: messages do not decode with schema "
+                f"{self.schema.name if self.schema else None!r} ({exc!r})"
+            ) from None
+
+    def _keep(
+        self,
+        fields: dict[str, np.ndarray],
+        block: MessageBlock,
+        index: np.ndarray,
+        ordinal: np.ndarray,
+    ) -> None:
+        frames = fields["frame_id"]
+        if len(frames):
+            if self.first_frame_id is None:
+                self.first_frame_id = str(frames[0])
+            self.frame_ids.update(set(frames.tolist()))
+        part = {"t_ns": np.asarray(fields["t_ns"], dtype=np.int64)}
+        for name, columns in self.reduce.items():
+            value = np.asarray(fields[name])
+            part[name] = np.array(value if columns is None else value[:, columns])
+        part["log_time"] = block.log_time[index]
+        part["ordinal"] = ordinal
+        self.parts.append(part)
+
+    def finish(self) -> dict[str, np.ndarray]:
+        """Concatenated fields in log-time order (file order among equal log times)."""
+        if not self.parts:
+            return {
+                "t_ns": np.zeros(0, np.int64),
+                **{
+                    name: _empty_leaf(self.message, name, columns)
+                    for name, columns in self.reduce.items()
+                },
+            }
+        keys = self.parts[0].keys()
+        try:
+            out = {k: np.concatenate([p[k] for p in self.parts]) for k in keys}
+        except ValueError as exc:
+            raise RecordingError(f"{self.label}: message layout changes ({exc})") from None
+        self.parts.clear()
+        order = None
+        if np.any(np.diff(out["ordinal"]) < 0):
+            order = np.argsort(out["ordinal"], kind="stable")
+        log_time = out["log_time"] if order is None else out["log_time"][order]
+        if np.any(np.diff(log_time) < 0):
+            by_time = np.argsort(log_time, kind="stable")
+            order = by_time if order is None else order[by_time]
+        if order is not None:
+            out = {k: v[order] for k, v in out.items()}
+        del out["ordinal"], out["log_time"]
+        return out
+
+
+def _empty_leaf(message: MessageType, name: str, columns: list[int] | None) -> np.ndarray:
+    leaves = {leaf.name: leaf for leaf in message.leaves}
+    if message.sequence is not None:
+        leaves[message.sequence.name] = dataclasses.replace(message.sequence, count=0)
+    leaf = leaves[name]
+    width = leaf.count if columns is None else len(columns)
+    shape = (0,) if leaf.count == 1 and columns is None else (0, width)
+    return np.zeros(shape, dtype=np.dtype(leaf.ctype))
+
+
+@dataclasses.dataclass
+class _Candidate:
+    channel: Channel
+    schema: Schema | None
+    kind: StreamKind
+    canonical: bool
+    type_name: str
+
+
+def _candidate(
+    channel: Channel,
+    schemas: Mapping[int, Schema],
+    topic_kinds: Mapping[str, StreamKind],
+) -> _Candidate | None:
+    schema = schemas.get(channel.schema_id)
+    type_name = normalize_type_name(schema.name) if schema is not None else ""
+    kind = topic_kinds.get(channel.topic)
+    if kind is not None:
+        return _Candidate(channel, schema, kind, True, type_name)
+    kind = KIND_BY_TYPE.get(type_name)
+    if kind is not None and SPECS[kind].by_schema:
+        return _Candidate(channel, schema, kind, False, type_name)
+    return None
+
+
+class _Plan:
+    """Which channels to decode, decided as channels become known."""
+
+    def __init__(self, where: str, wanted: set[StreamKind], topic_kinds: dict[str, StreamKind]):
+        self.where = where
+        self.wanted = wanted
+        self.topic_kinds = topic_kinds
+        self.candidates: dict[int, _Candidate | None] = {}
+        self.topics: dict[int, _Topic] = {}
+
+    def topic_of(self, contents: FileContents, channel_id: int) -> _Topic | None:
+        if channel_id not in self.candidates:
+            channel = contents.channels.get(channel_id)
+            cand = None
+            if channel is not None:
+                cand = _candidate(channel, contents.schemas, self.topic_kinds)
+                if cand is not None and cand.kind not in self.wanted:
+                    cand = None
+            self.candidates[channel_id] = cand
+            spec = SPECS[cand.kind] if cand is not None else None
+            if cand is not None and spec is not None and cand.type_name == spec.message.name:
+                self.topics[channel_id] = _Topic(cand.channel, cand.schema, spec.message, self.where)
+        return self.topics.get(channel_id)
+
+    def wants_chunk(self, contents: FileContents, channel_ids: set[int]) -> bool:
+        return any(self.topic_of(contents, c) is not None for c in channel_ids)
+
+    def feed(self, contents: FileContents, block: MessageBlock) -> None:
+        if not len(block):
+            return
+        channels = block.channel
+        for cid in np.unique(channels):
+            topic = self.topic_of(contents, int(cid))
+            if topic is not None:
+                topic.add(block, np.flatnonzero(channels == cid))
+
+    def resolve(self, contents: FileContents, explicit: bool) -> dict[StreamKind, _Topic]:
+        """Pick one topic per wanted kind; raise for a kind that cannot be mapped."""
+        for cid in contents.channels:
+            self.topic_of(contents, cid)
+        chosen: dict[StreamKind, _Topic] = {}
+        for kind in SPECS:
+            if kind not in self.wanted:
+                continue
+            cands = [c for c in self.candidates.values() if c is not None and c.kind is kind]
+            canonical = [c for c in cands if c.canonical]
+            spec = SPECS[kind]
+            for c in canonical:
+                if c.type_name != spec.message.name:
+                    raise RecordingError(
+                        f"{self.where}: topic {c.channel.topic} has schema "
+                        f"{c.schema.name if c.schema else None!r}; stream {kind.value} needs "
+                        f"{spec.message.name}"
+                    )
+            pick = canonical or cands
+            if len(pick) == 1:
+                chosen[kind] = self.topics[pick[0].channel.id]
+            elif len(pick) > 1:
+                names = ", ".join(sorted(c.channel.topic for c in pick))
+                message = (
+                    f"{self.where}: several topics could be stream {kind.value} ({names}); "
+                    "name one with read_recording(..., topics={...})"
+                )
+                if explicit:
+                    raise RecordingError(message)
+                _warn(message + "; stream skipped")
+        return chosen
+
+
+def _describe_topics(contents: FileContents) -> str:
+    items = []
+    for ch in sorted(contents.channels.values(), key=lambda c: c.topic):
+        schema = contents.schemas.get(ch.schema_id)
+        items.append(f"{ch.topic} ({schema.name if schema else 'no schema'})")
+    return ", ".join(items) or "no topics"
+
+
+def read_recording(
+    path: str | os.PathLike[str],
+    *,
+    kinds: Iterable[StreamKind | str] | None = None,
+    validate: bool = True,
+    topics: Mapping[StreamKind | str, str] | None = None,
+) -> Recording:
+    """Read a recording into columnar streams.
+
+    Parameters
+    ----------
+    path : path-like
+        An MCAP file (ROS 2 profile, CDR messages).
+    kinds : iterable of StreamKind or str, optional
+        Streams to read (all known ones when None). A kind asked for and absent is an error.
+    validate : bool
+        Check every stream: a non-finite value or a timestamp that repeats or goes backwards raises
+        :class:`RecordingError`; gaps longer than 5x the median interval give a
+        :class:`RecordingWarning`.
+    topics : mapping of StreamKind or str to str, optional
+        Topic to read for a kind, overriding :data:`~navreplay.io.schemas.TOPICS` (for recordings
+        from elsewhere).
+
+    Returns
+    -------
+    Recording
+        Streams in :class:`StreamKind` order; ``t_ns`` are the header stamps [ns]. The metadata is
+        the file's ``navreplay`` record, or ``Metadata()`` for a recording without one, whose
+        ``t0_ns`` is then its first message's log time.
+
+    Raises
+    ------
+    RecordingError
+        Not an MCAP file, a CRC mismatch or corrupt chunk, a damaged file with nothing to salvage,
+        a topic whose schema does not fit its stream, a stream asked for and absent, or (with
+        ``validate``) bad samples. The message names the file, and the topic and time where it
+        applies.
+
+    Warns
+    -----
+    RecordingWarning
+        The file is truncated or unfinished (the messages before the damage are returned and the
+        warning tells the time of the last one), conversions of a foreign frame convention, gaps.
+    """
+    path = Path(path)
+    where = str(path)
+    explicit = kinds is not None
+    wanted = set(SPECS) if kinds is None else {StreamKind(k) for k in kinds}
+    topic_kinds = {spec.topic: kind for kind, spec in SPECS.items()}
+    for kind, topic in (topics or {}).items():
+        kind = StreamKind(kind)
+        topic_kinds = {t: k for t, k in topic_kinds.items() if k is not kind}
+        topic_kinds[topic] = kind
+    plan = _Plan(where, wanted, topic_kinds)
+    try:
+        f = open(path, "rb")  # noqa: SIM115 - closed below
+    except FileNotFoundError:
+        raise RecordingError(f"{where}: no such file") from None
+    with f:
+        contents = FileContents(size=os.fstat(f.fileno()).st_size)
+        for block in walk(f, where, contents, plan.wants_chunk):
+            plan.feed(contents, block)
+    damage = contents.damage
+    if damage is not None and contents.message_count == 0:
+        raise RecordingError(
+            f"{where}: file is damaged at byte {damage.offset} of {contents.size} "
+            f"({damage.reason}) before any complete message; nothing to salvage"
+        )
+    meta, t0_ns, aux = _metadata(contents, where)
+    if damage is not None:
+        last = contents.last_log_time
+        if damage.data_complete:
+            _warn(
+                f"{where}: summary or footer missing or damaged at byte {damage.offset} of "
+                f"{contents.size} ({damage.reason}); all {contents.message_count} messages "
+                f"were recovered, the last at {when(last, t0_ns)}"
+            )
+        else:
+            _warn(
+                f"{where}: file is truncated or damaged at byte {damage.offset} of "
+                f"{contents.size} ({damage.reason}); salvaged {contents.message_count} messages, "
+                f"the last good one at {when(last, t0_ns)}; anything after is lost"
+            )
+    chosen = plan.resolve(contents, explicit)
+    if explicit:
+        missing = [k.value for k in SPECS if k in wanted and k not in chosen]
+        if missing:
+            raise RecordingError(
+                f"{where}: no topic for stream(s) {', '.join(missing)}; the file has "
+                f"{_describe_topics(contents)}"
+            )
+    streams: dict[StreamKind, Stream] = {}
+    for kind, topic in chosen.items():
+        streams[kind] = _stream(kind, topic, aux, t0_ns, validate)
+    return Recording(streams=streams, metadata=meta, t0_ns=t0_ns)
+
+
+def _metadata(contents: FileContents, where: str) -> tuple[Metadata, int, list[AuxColumn]]:
+    records = [m for m in contents.metadata if m.name == METADATA_NAME]
+    meta, t0_ns, aux = Metadata(), None, []
+    if records:
+        meta, t0_ns, aux = decode_metadata(records[-1].metadata, where)
+    if t0_ns is None:
+        stats = contents.statistics
+        if contents.intact and stats is not None and stats.message_count:
+            t0_ns = int(stats.message_start_time)
+        else:
+            t0_ns = contents.first_log_time or 0
+    return meta, t0_ns, aux
+
+
+def _stream(
+    kind: StreamKind, topic: _Topic, aux: list[AuxColumn], t0_ns: int, validate: bool
+) -> Stream:
+    fields = topic.finish()
+    frame_id = topic.first_frame_id or SPECS[kind].frame_id
+    if len(topic.frame_ids) > 1:
+        _warn(
+            f"{topic.label}: frame_id changes between messages ({sorted(topic.frame_ids)}); "
+            f"using {frame_id!r}"
+        )
+    try:
+        decoded = DECODERS[kind](fields, frame_id, aux)
+    except RecordingError as exc:
+        raise RecordingError(f"{topic.label}: {exc}") from None
+    t_ns = fields["t_ns"]
+    columns = decoded.columns
+    if decoded.keep is not None:
+        t_ns = t_ns[decoded.keep]
+        columns = {k: v[decoded.keep] for k, v in columns.items()}
+    for note in decoded.notes:
+        _warn(f"{topic.label}: {note}")
+    stream = Stream(kind, t_ns, columns, decoded.frame_id or frame_id)
+    if validate:
+        problem = first_problem(stream, t0_ns)
+        if problem:
+            raise RecordingError(f"{topic.label}: {problem}")
+        gaps = gap_report(stream, t0_ns)
+        if gaps:
+            _warn(f"{topic.label}: {gaps}")
+    return stream

@@ -1,0 +1,609 @@
+"""The replay loop: merge a recording's streams by time and drive one filter over them.
+
+Event order
+-----------
+Every aiding stream (every stream except ``imu`` and ``truth``) that the filter consumes
+(``requires`` + ``optional``; a filter that declares no stream at all consumes every aiding
+stream) contributes one event per sample; IMU samples reach the filter in blocks whenever the
+recording has an IMU, whether declared or not, and the truth never does. Events are ordered by timestamp; samples with equal timestamps are ordered by stream
+priority, :data:`STREAM_PRIORITY` (master INS, GNSS position, GNSS velocity, magnetometer, speed
+log, depth, then any other kind by name), then by row. When the recording has an IMU stream, an
+output tick at ``output_rate`` [Hz] (on the grid ``t = k / output_rate`` since the recording
+start) is added in every tick interval ``(t_k-1, t_k]`` that holds no aiding sample, so that a
+free-inertial run still has outputs; ticks at a time equal to an event's come after it.
+
+For each event at time ``t_e`` the engine
+
+1. hands the filter the IMU samples with ``t_prev < t <= t_e`` as one block
+   (:meth:`~navreplay.filters.base.Filter.propagate`; skipped when the block is empty),
+2. hands it the aiding sample (:meth:`~navreplay.filters.base.Filter.update`; not for ticks) and
+   collects the innovations it returns,
+3. stores :meth:`~navreplay.filters.base.Filter.estimate` in preallocated columns (skipped while
+   the filter returns None).
+
+IMU samples after the last event are handed over at the end, followed by a last estimate. Every
+IMU sample is thus delivered exactly once and in order. The work per event is slicing views and
+one call per step; everything else (planning, innovation statistics, checks) is vectorised.
+
+Examples
+--------
+>>> import numpy as np
+>>> from navreplay.streams import Metadata, Recording, Stream, StreamKind
+>>> from navreplay.filters.base import Estimate, Filter
+>>> class Count(Filter):
+...     name = "count"
+...     requires = (StreamKind.IMU,)
+...     state_names = ("n",)
+...     def __init__(self, params, context):
+...         super().__init__(params, context)
+...         self.n, self.t = 0, 0.0
+...     def propagate(self, t, imu):
+...         self.n += len(t)
+...         self.t = float(t[-1])
+...     def update(self, kind, t, sample):
+...         return None
+...     def estimate(self):
+...         return Estimate(self.t, np.array([float(self.n)]), np.zeros((1, 1)))
+>>> t_ns = np.arange(1, 201) * 10_000_000  # 100 Hz for 2 s
+>>> imu = Stream(StreamKind.IMU, t_ns, {"omega_ib_b": np.zeros((200, 3)),
+...                                     "f_b": np.zeros((200, 3))})
+>>> rec = Recording({StreamKind.IMU: imu}, Metadata())
+>>> result = replay(rec, Count, output_rate=1.0)
+>>> result.t.tolist(), result.x[:, 0].tolist()
+([1.0, 2.0], [100.0, 200.0])
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
+
+import numpy as np
+
+from navreplay import params as _params
+from navreplay.filters.base import Estimate, Filter, FilterContext, FilterParams
+from navreplay.filters.kalman import FilterDivergedError
+from navreplay.io.errors import RecordingError
+from navreplay.replay.result import InnovationSeries, RunResult
+from navreplay.streams import Recording, Stream, StreamKind
+
+STREAM_PRIORITY: tuple[StreamKind, ...] = (
+    StreamKind.MASTER_INS,
+    StreamKind.GPS,
+    StreamKind.GPS_VEL,
+    StreamKind.MAG,
+    StreamKind.SPEED_LOG,
+    StreamKind.DEPTH,
+)
+"""Order of aiding samples that share a timestamp (earlier in the tuple = handed over first)."""
+
+NOT_AIDING: frozenset[StreamKind] = frozenset({StreamKind.IMU, StreamKind.TRUTH})
+"""Streams that never produce events: the IMU is propagated in blocks, the truth is for scoring."""
+
+TICK = -1
+"""Event code of an output tick (aiding events carry the index of their stream)."""
+
+_CHECK_EVERY = 1024
+"""Outputs between divergence (non-finite) checks and progress reports."""
+
+
+class ReplayError(RuntimeError):
+    """A replay that cannot start or cannot go on (base of the replay errors)."""
+
+
+class MissingStreamError(ReplayError):
+    """The recording lacks a stream (or a stream lacks a column) that the filter requires."""
+
+
+class InvalidRecordingError(ReplayError, RecordingError):
+    """An in-memory recording with non-finite samples or timestamps that do not increase."""
+
+
+# --------------------------------------------------------------------------------------------
+# checks before running
+
+
+def recording_name(recording: Recording) -> str:
+    """A display name for an in-memory recording: ``scenario#seed`` or ``recording``."""
+    md = recording.metadata
+    if md.scenario:
+        return md.scenario if md.seed is None else f"{md.scenario}#seed={md.seed}"
+    return "recording"
+
+
+def check_streams(recording: Recording, filter_cls: type[Filter], source: str = "") -> None:
+    """Raise :class:`MissingStreamError` unless the recording has what the filter requires.
+
+    The message names the missing streams (or columns) and what the recording holds.
+    """
+    source = source or recording_name(recording)
+    have = [str(k) for k in recording.kinds()]
+    missing = [str(k) for k in filter_cls.requires if k not in recording]
+    if missing:
+        raise MissingStreamError(
+            f"filter {filter_cls.name!r} needs stream(s) {', '.join(missing)} that "
+            f"{source} does not have (it has: {', '.join(have) or 'no streams'})"
+        )
+    for kind in filter_cls.requires:
+        lacking = recording[kind].missing_fields()
+        if lacking:
+            raise MissingStreamError(
+                f"{source}: stream {kind} lacks column(s) {', '.join(lacking)} that filter "
+                f"{filter_cls.name!r} needs (it has: {', '.join(recording[kind].columns)})"
+            )
+
+
+def consumed_streams(filter_cls: type[Filter]) -> tuple[StreamKind, ...] | None:
+    """Aiding streams the filter is handed: ``requires`` + ``optional``, or None (all) when it
+    declares no stream at all."""
+    declared = tuple(filter_cls.requires) + tuple(filter_cls.optional)
+    return declared or None
+
+
+def validate_recording(recording: Recording, source: str = "") -> None:
+    """Raise :class:`InvalidRecordingError` on non-finite samples or non-increasing time.
+
+    Files are validated by the reader; call this for recordings built in memory. The message
+    names the recording, the stream, the column and the time of the first bad sample.
+    """
+    source = source or recording_name(recording)
+    for kind, stream in recording.streams.items():
+        t_ns = stream.t_ns
+        if len(t_ns) > 1:
+            d = np.diff(t_ns)
+            bad = np.flatnonzero(d <= 0)
+            if bad.size:
+                i = int(bad[0]) + 1
+                what = "repeats" if d[i - 1] == 0 else "goes backwards"
+                raise InvalidRecordingError(
+                    f"{source}: stream {kind}: time {what} at sample {i} "
+                    f"(t = {_t_str(t_ns[i], recording.t0_ns)} after "
+                    f"{_t_str(t_ns[i - 1], recording.t0_ns)})"
+                )
+        for name, col in stream.columns.items():
+            finite = np.isfinite(col)
+            if not finite.all():
+                rows = ~finite.reshape(len(col), -1).all(axis=1)
+                i = int(np.argmax(rows))
+                raise InvalidRecordingError(
+                    f"{source}: stream {kind}: column {name} has a non-finite value "
+                    f"({col[i].tolist()}) at sample {i} (t = {_t_str(t_ns[i], recording.t0_ns)})"
+                )
+
+
+def _t_str(t_ns: int | np.integer, t0_ns: int) -> str:
+    return f"{(int(t_ns) - int(t0_ns)) * 1e-9:.6f} s"
+
+
+def build_params(
+    filter_cls: type[Filter], params: FilterParams | Mapping[str, Any] | None
+) -> FilterParams:
+    """The filter's parameter instance from an instance, a mapping of values, or defaults."""
+    if isinstance(params, FilterParams):
+        return params
+    return _params.build(filter_cls.Params, params, where=f"filter {filter_cls.name}")
+
+
+# --------------------------------------------------------------------------------------------
+# the event plan
+
+
+@dataclasses.dataclass(frozen=True)
+class EventPlan:
+    """The merged event sequence of a recording, in columns.
+
+    Attributes
+    ----------
+    kinds : tuple[StreamKind, ...]
+        Aiding streams in priority order; ``code`` indexes this tuple.
+    t_ns : ndarray, shape (E,), int64
+        Event times [ns].
+    code : ndarray, shape (E,), int64
+        Index into ``kinds``, or :data:`TICK` for an output tick.
+    row : ndarray, shape (E,), int64
+        Row of the sample in its stream (0 for ticks).
+    imu_end : ndarray, shape (E,), int64
+        Number of IMU samples with ``t <= t_ns`` (end of the block handed over before the event).
+    """
+
+    kinds: tuple[StreamKind, ...]
+    t_ns: np.ndarray
+    code: np.ndarray
+    row: np.ndarray
+    imu_end: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t_ns.shape[0])
+
+
+def aiding_kinds(
+    recording: Recording, consumes: Iterable[StreamKind] | None = None
+) -> tuple[StreamKind, ...]:
+    """The recording's aiding streams (those in ``consumes``, if given) in priority order."""
+    wanted = None if consumes is None else {StreamKind(k) for k in consumes}
+    present = [k for k in recording.kinds()
+               if k not in NOT_AIDING and (wanted is None or k in wanted)]
+    known = [k for k in STREAM_PRIORITY if k in present]
+    return tuple(known + sorted(k for k in present if k not in STREAM_PRIORITY))
+
+
+def plan_events(
+    recording: Recording,
+    output_rate: float | None = 10.0,
+    consumes: Iterable[StreamKind] | None = None,
+) -> EventPlan:
+    """Merge the aiding streams by time and add output ticks (see the module docstring).
+
+    Parameters
+    ----------
+    recording : Recording
+    output_rate : float or None
+        Output tick rate [Hz] for intervals without aiding samples; None or 0 for none.
+    consumes : iterable of StreamKind, optional
+        Aiding streams to merge (default: all of the recording's).
+
+    Returns
+    -------
+    EventPlan
+    """
+    kinds = aiding_kinds(recording, consumes)
+    streams = [recording[k] for k in kinds]
+    t_all = np.concatenate([s.t_ns for s in streams] + [np.zeros(0, np.int64)])
+    code = np.concatenate(
+        [np.full(len(s), i, np.int64) for i, s in enumerate(streams)] + [np.zeros(0, np.int64)]
+    )
+    row = np.concatenate([np.arange(len(s), dtype=np.int64) for s in streams]
+                         + [np.zeros(0, np.int64)])
+    # concatenated in priority order, rows increasing: a stable sort by time gives
+    # (time, priority, row) order
+    order = np.argsort(t_all, kind="stable")
+    t_all, code, row = t_all[order], code[order], row[order]
+
+    imu = recording.streams.get(StreamKind.IMU)
+    imu_t = imu.t_ns if imu is not None else np.zeros(0, np.int64)
+    if output_rate and len(imu_t):
+        ticks = _ticks(imu_t[0], imu_t[-1], recording.t0_ns, float(output_rate))
+        period = ticks[1] - ticks[0] if len(ticks) > 1 else np.int64(round(1e9 / output_rate))
+        before = np.searchsorted(t_all, ticks - period, side="right")
+        upto = np.searchsorted(t_all, ticks, side="right")
+        ticks = ticks[upto == before]
+        t_all = np.concatenate([t_all, ticks])
+        code = np.concatenate([code, np.full(len(ticks), TICK, np.int64)])
+        row = np.concatenate([row, np.zeros(len(ticks), np.int64)])
+        order = np.argsort(t_all, kind="stable")
+        t_all, code, row = t_all[order], code[order], row[order]
+    imu_end = np.searchsorted(imu_t, t_all, side="right").astype(np.int64)
+    return EventPlan(kinds, t_all, code, row, imu_end)
+
+
+def _ticks(first_ns: int, last_ns: int, t0_ns: int, rate: float) -> np.ndarray:
+    """Tick times on the grid ``t0 + k / rate`` within [first, last] [ns]."""
+    if rate <= 0 or not np.isfinite(rate):
+        raise ValueError(f"output_rate must be positive, got {rate}")
+    period_s = 1.0 / rate
+    k0 = int(np.ceil((int(first_ns) - int(t0_ns)) * 1e-9 / period_s - 1e-9))
+    k1 = int(np.floor((int(last_ns) - int(t0_ns)) * 1e-9 / period_s + 1e-9))
+    k = np.arange(k0, k1 + 1, dtype=np.int64)
+    return np.int64(t0_ns) + np.rint(k * (period_s * 1e9)).astype(np.int64)
+
+
+# --------------------------------------------------------------------------------------------
+# output columns
+
+
+class _Columns:
+    """Estimate columns with geometric growth up to a known upper bound."""
+
+    def __init__(self, first: Estimate, upper: int) -> None:
+        self.upper = max(upper, 1)
+        self.cap = min(self.upper, 1024)
+        self.m = 0
+        n = first.x.shape[0]
+        self.t = np.empty(self.cap)
+        self.x = np.empty((self.cap, n))
+        self.P = np.empty((self.cap, n, n))
+        self.has_nav = first.nav is not None
+        if self.has_nav:
+            self.pos = np.empty((self.cap, 3))
+            self.v_n = np.empty((self.cap, 3))
+            self.q_nb = np.empty((self.cap, 4))
+        self.extras = {k: np.empty((self.cap, *np.shape(v))) for k, v in first.extras.items()}
+
+    def _grow(self) -> None:
+        cap = min(self.upper, 2 * self.cap)
+        if cap <= self.cap:  # more outputs than events: cannot happen, but never lose data
+            cap = 2 * self.cap
+        names = ["t", "x", "P"] + (["pos", "v_n", "q_nb"] if self.has_nav else [])
+        for name in names:
+            old = getattr(self, name)
+            new = np.empty((cap, *old.shape[1:]))
+            new[: self.m] = old[: self.m]
+            setattr(self, name, new)
+        for k, old in self.extras.items():
+            new = np.empty((cap, *old.shape[1:]))
+            new[: self.m] = old[: self.m]
+            self.extras[k] = new
+        self.cap = cap
+
+    def add(self, est: Estimate) -> None:
+        m = self.m
+        if m == self.cap:
+            self._grow()
+        self.t[m] = est.t
+        self.x[m] = est.x
+        self.P[m] = est.P
+        if self.has_nav:
+            nav = est.nav
+            self.pos[m] = nav.pos
+            self.v_n[m] = nav.v_n
+            self.q_nb[m] = nav.q_nb
+        for k, col in self.extras.items():
+            col[m] = est.extras[k]
+        self.m = m + 1
+
+    def first_nonfinite(self, start: int) -> tuple[int, str] | None:
+        """First row >= start with a non-finite entry, and the column's name."""
+        stop = self.m
+        cols: list[tuple[str, np.ndarray]] = [("state", self.x), ("covariance", self.P)]
+        if self.has_nav:
+            cols += [("position", self.pos), ("velocity", self.v_n), ("attitude", self.q_nb)]
+        cols += [(k, v) for k, v in self.extras.items()]
+        found: tuple[int, str] | None = None
+        for name, col in cols:
+            block = col[start:stop].reshape(stop - start, -1)
+            ok = np.isfinite(block).all(axis=1)
+            if not ok.all():
+                i = start + int(np.argmin(ok))
+                if found is None or i < found[0]:
+                    found = (i, name)
+        return found
+
+    def result(self, **kw: Any) -> RunResult:
+        m = self.m
+        return RunResult(
+            t=self.t[:m].copy(),
+            x=self.x[:m].copy(),
+            P=self.P[:m].copy(),
+            nav_pos=self.pos[:m].copy() if self.has_nav else None,
+            nav_v_n=self.v_n[:m].copy() if self.has_nav else None,
+            nav_q_nb=self.q_nb[:m].copy() if self.has_nav else None,
+            extras={k: v[:m].copy() for k, v in self.extras.items()},
+            **kw,
+        )
+
+    def view(self, **kw: Any) -> RunResult:
+        """The rows so far, without copying (for live observers)."""
+        m = self.m
+        return RunResult(
+            t=self.t[:m],
+            x=self.x[:m],
+            P=self.P[:m],
+            nav_pos=self.pos[:m] if self.has_nav else None,
+            nav_v_n=self.v_n[:m] if self.has_nav else None,
+            nav_q_nb=self.q_nb[:m] if self.has_nav else None,
+            extras={k: v[:m] for k, v in self.extras.items()},
+            **kw,
+        )
+
+
+def _innovation_series(items: list[tuple[float, np.ndarray, np.ndarray]]) -> InnovationSeries:
+    t = np.array([it[0] for it in items], dtype=np.float64)
+    nu = np.stack([np.asarray(it[1], dtype=np.float64) for it in items])
+    S = np.stack([np.asarray(it[2], dtype=np.float64) for it in items])
+    nis = np.einsum("ki,ki->k", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+    return InnovationSeries(t=t, nu=nu, S=S, nis=nis)
+
+
+# --------------------------------------------------------------------------------------------
+# the loop
+
+Observer = Callable[[RunResult], None]
+"""Called with the rows so far (views, valid only during the call) during a replay."""
+
+Progress = Callable[[int, int], None]
+"""Called with (events done, events in total)."""
+
+
+def replay(
+    recording: Recording,
+    filter_cls: type[Filter],
+    params: FilterParams | Mapping[str, Any] | None = None,
+    *,
+    label: str | None = None,
+    source: str | None = None,
+    output_rate: float | None = 10.0,
+    pacing: float | None = None,
+    validate: bool = True,
+    progress: Progress | None = None,
+    observer: Observer | None = None,
+    observe_interval: float = 0.25,
+) -> RunResult:
+    """Replay one filter over one recording.
+
+    Parameters
+    ----------
+    recording : Recording
+        The streams; a file read with :func:`navreplay.io.read_recording` is already validated
+        (pass ``validate=False`` to skip the second check).
+    filter_cls : type[Filter]
+        The filter class (see :func:`navreplay.filters.registry.load_filter`).
+    params : FilterParams or mapping, optional
+        Parameters: an instance of ``filter_cls.Params``, or ``{name: value}`` (strings as from
+        ``-p key=value`` are converted), or None for the defaults.
+    label : str, optional
+        Display label of the run (default: the filter's name).
+    source : str, optional
+        Name of the recording in messages and in the result (default: its file name if the
+        caller knows it, else ``scenario#seed=N``).
+    output_rate : float or None
+        Output tick rate [Hz] where no aiding sample falls (see the module docstring); None or 0
+        for outputs at aiding samples only.
+    pacing : float, optional
+        Replay at this multiple of real time (1.0 = real time), for live viewing; None (the
+        default) runs as fast as possible.
+    validate : bool
+        Check the recording for non-finite samples and non-increasing timestamps first.
+    progress : callable, optional
+        ``progress(done, total)`` in events, called every few thousand events and at the end.
+    observer : callable, optional
+        Called with the rows so far about every ``observe_interval`` seconds of wall time and at
+        the end (for live sinks; the arrays are views valid during the call only).
+    observe_interval : float
+        Wall time between observer calls [s].
+
+    Returns
+    -------
+    RunResult
+        Estimates at every event (times from :attr:`Estimate.t`), innovations per measurement
+        with their NIS.
+
+    Raises
+    ------
+    MissingStreamError
+        The recording lacks a required stream or column (raised before the filter is built).
+    InvalidRecordingError
+        ``validate`` and a non-finite sample or a timestamp that repeats or goes backwards.
+    navreplay.params.ParamError
+        Parameters that do not fit ``filter_cls.Params``.
+    navreplay.filters.kalman.FilterDivergedError
+        The filter raised it, a linear-algebra error, or produced a non-finite estimate; the
+        message names the filter, the recording and the time.
+    """
+    label = label or filter_cls.name
+    source = source or recording_name(recording)
+    check_streams(recording, filter_cls, source)
+    if validate:
+        validate_recording(recording, source)
+    p = build_params(filter_cls, params)
+    context = FilterContext(
+        metadata=recording.metadata,
+        t0_ns=recording.t0_ns,
+        streams=frozenset(recording.kinds()),
+    )
+    filt = filter_cls(p, context)
+    plan = plan_events(recording, output_rate, consumed_streams(filter_cls))
+    t0_ns = recording.t0_ns
+
+    # per-stream inputs, converted once
+    imu = recording.streams.get(StreamKind.IMU)
+    if imu is not None:
+        imu_t = (imu.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9
+        imu_cols = list(imu.columns.items())
+        n_imu = len(imu)
+    else:
+        imu_t = np.zeros(0)
+        imu_cols = []
+        n_imu = 0
+    aiding: list[Stream] = [recording[k] for k in plan.kinds]
+    sample_cols = [list(s.columns.items()) for s in aiding]
+    ev_t = ((plan.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9).tolist()
+    ev_code = plan.code.tolist()
+    ev_row = plan.row.tolist()
+    ev_end = plan.imu_end.tolist()
+    kinds = plan.kinds
+
+    propagate = filt.propagate
+    update = filt.update
+    estimate = filt.estimate
+    innovations: dict[str, list[tuple[float, np.ndarray, np.ndarray]]] = {}
+    columns: _Columns | None = None
+    checked = 0
+    n_events = len(ev_t)
+    upper = n_events + 1
+    meta = dict(
+        filter_name=filter_cls.name,
+        label=label,
+        recording=source,
+        t0_ns=t0_ns,
+        state_names=(),
+    )
+
+    wall0 = time.perf_counter()
+    t_first = ev_t[0] if ev_t else 0.0
+    next_observe = wall0 + observe_interval
+    slow = pacing is not None or observer is not None or progress is not None
+
+    start = 0
+    i = -1
+    t_now = 0.0
+    try:
+        for i in range(n_events + 1):
+            if i < n_events:
+                t_now = ev_t[i]
+                end = ev_end[i]
+                c = ev_code[i]
+            else:  # the IMU samples after the last event, then a last estimate
+                end = n_imu
+                c = TICK
+                if end == start:
+                    break
+                t_now = float(imu_t[end - 1])
+            if end > start:
+                propagate(imu_t[start:end], {k: v[start:end] for k, v in imu_cols})
+                start = end
+            if c != TICK:
+                r = ev_row[i]
+                inn = update(kinds[c], t_now, {k: v[r] for k, v in sample_cols[c]})
+                if inn:
+                    for it in inn:
+                        innovations.setdefault(it.name, []).append((it.t, it.nu, it.S))
+            est = estimate()
+            if est is not None:
+                if columns is None:
+                    columns = _Columns(est, upper)
+                    meta["state_names"] = tuple(getattr(filt, "state_names", ()))
+                columns.add(est)
+                if columns.m - checked >= _CHECK_EVERY:
+                    _check_finite(columns, checked, label, source)
+                    checked = columns.m
+            if slow:
+                if pacing is not None:
+                    delay = (t_now - t_first) / pacing - (time.perf_counter() - wall0)
+                    if delay > 0:
+                        time.sleep(delay)
+                if observer is not None and columns is not None:
+                    now = time.perf_counter()
+                    if now >= next_observe:
+                        observer(columns.view(**meta))
+                        next_observe = now + observe_interval
+                if progress is not None and i % _CHECK_EVERY == 0:
+                    progress(min(i + 1, n_events), n_events)
+    except FilterDivergedError as e:
+        raise _diverged(label, source, e.t if e.t is not None else t_now, str(e)) from e
+    except (np.linalg.LinAlgError, FloatingPointError) as e:
+        raise _diverged(label, source, t_now, f"{type(e).__name__}: {e}") from e
+    except Exception as e:
+        e.add_note(f"while replaying filter {label!r} over {source} at t = {t_now:.6f} s")
+        raise
+
+    if columns is not None:
+        _check_finite(columns, checked, label, source)
+    if observer is not None and columns is not None:
+        observer(columns.view(**meta))
+    if progress is not None:
+        progress(n_events, n_events)
+
+    inn_series = {name: _innovation_series(items) for name, items in innovations.items()}
+    if columns is None:
+        n = len(getattr(filt, "state_names", ()))
+        return RunResult(
+            t=np.zeros(0), x=np.zeros((0, n)), P=np.zeros((0, n, n)),
+            innovations=inn_series, **meta,
+        )
+    return columns.result(innovations=inn_series, **meta)
+
+
+def _check_finite(columns: _Columns, start: int, label: str, source: str) -> None:
+    bad = columns.first_nonfinite(start)
+    if bad is not None:
+        i, what = bad
+        t = float(columns.t[i])
+        raise _diverged(label, source, t, f"non-finite {what} estimate")
+
+
+def _diverged(label: str, source: str, t: float, why: str) -> FilterDivergedError:
+    err = FilterDivergedError(f"filter {label!r} diverged on {source} at t = {t:.3f} s: {why}")
+    err.t = t
+    return err

@@ -1,0 +1,162 @@
+"""GNSS receiver error model: position fix and NED velocity.
+
+    pos_meas = pos + (white_N,E,D + gm_N,E,D)  (NED metres, mapped to latitude/longitude/height)
+    v_meas   = v_n + white velocity noise
+
+The white parts are independent per epoch and axis; the optional Gauss-Markov part (per-axis
+steady-state sigma, one correlation time) models the slowly wandering position error of a
+real receiver. The reported ``pos_sigma`` is the total stationary 1-sigma per axis,
+sqrt(white^2 + gm^2); ``vel_sigma`` the velocity white-noise sigma.
+
+Examples
+--------
+>>> import numpy as np
+>>> gps = GpsModel(pos_sigma=(2.0, 2.0, 4.0), vel_sigma=0.05)
+>>> rng = np.random.default_rng(1)
+>>> pos = np.tile([0.6, 2.2, 40.0], (5, 1)); v = np.zeros((5, 3))
+>>> out = gps.measure(gps.draw(rng), pos, v, rng)
+>>> sorted(out.fix_columns()), sorted(out.velocity_columns())
+(['pos', 'pos_sigma'], ['v_n', 'vel_sigma'])
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from navreplay.geo.earth import radii
+from navreplay.sensors._common import (
+    RealisedErrors,
+    Vec3,
+    as_vec3,
+    check_nonnegative,
+    check_positive,
+)
+from navreplay.sensors.noise import gauss_markov
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GpsModel:
+    """1-sigma error specification of a GNSS receiver (SI). A scalar applies to all axes."""
+
+    pos_sigma: float | Vec3 = (2.5, 2.5, 5.0)
+    """White position noise per axis N, E, D [m]."""
+    pos_gm_sigma: float | Vec3 = 0.0
+    """Steady-state sigma of the Gauss-Markov position error per axis N, E, D [m]."""
+    pos_gm_tau: float = 300.0
+    """Correlation time of the Gauss-Markov position error [s]."""
+    vel_sigma: float | Vec3 = 0.05
+    """White velocity noise per axis N, E, D [m/s]."""
+    rate: float = 1.0
+    """Output rate [Hz]."""
+
+    def __post_init__(self) -> None:
+        for name in ("pos_sigma", "pos_gm_sigma", "vel_sigma"):
+            as_vec3(self, name)
+        check_nonnegative(self, "pos_sigma", "pos_gm_sigma", "vel_sigma")
+        check_positive(self, "pos_gm_tau", "rate")
+
+    def draw(self, rng: np.random.Generator) -> GpsErrors:
+        """Draw the random constants of one run: the initial Gauss-Markov position error."""
+        return GpsErrors(pos_gm0_ned=rng.standard_normal(3) * np.asarray(self.pos_gm_sigma))
+
+    def measure(
+        self,
+        errors: GpsErrors,
+        pos: np.ndarray,
+        v_n: np.ndarray,
+        rng: np.random.Generator,
+    ) -> GpsMeasurement:
+        """Fixes and velocities at the given truth samples, taken at ``rate``.
+
+        Parameters
+        ----------
+        errors : GpsErrors
+        pos : ndarray, shape (M, 3)
+            True position [rad, rad, m] at the GPS epochs (1 / rate apart).
+        v_n : ndarray, shape (M, 3)
+            True ground velocity NED [m/s] at the GPS epochs.
+        rng : numpy.random.Generator
+
+        Returns
+        -------
+        GpsMeasurement
+        """
+        pos = np.asarray(pos, dtype=float)
+        v_n = np.asarray(v_n, dtype=float)
+        if pos.ndim != 2 or pos.shape[1] != 3 or v_n.shape != pos.shape:
+            raise ValueError(f"pos and v_n must have shape (M, 3), got {pos.shape}, {v_n.shape}")
+        m = pos.shape[0]
+        dt = 1.0 / self.rate
+        gm_sigma = np.asarray(self.pos_gm_sigma)
+        white = np.asarray(self.pos_sigma)
+        gm = gauss_markov(m, dt, gm_sigma, self.pos_gm_tau, rng, x0=errors.pos_gm0_ned)
+        err_ned = gm + rng.standard_normal((m, 3)) * white
+        vel_err = rng.standard_normal((m, 3)) * np.asarray(self.vel_sigma)
+
+        R_M, R_N = radii(pos[:, 0])
+        h = pos[:, 2]
+        meas = pos.copy()
+        meas[:, 0] += err_ned[:, 0] / (R_M + h)
+        meas[:, 1] += err_ned[:, 1] / ((R_N + h) * np.cos(pos[:, 0]))
+        meas[:, 2] -= err_ned[:, 2]
+        pos_sigma = np.broadcast_to(np.hypot(white, gm_sigma), (m, 3))
+        vel_sigma = np.broadcast_to(np.asarray(self.vel_sigma), (m, 3))
+        return GpsMeasurement(
+            pos=meas,
+            pos_sigma=np.array(pos_sigma),
+            v_n=v_n + vel_err,
+            vel_sigma=np.array(vel_sigma),
+            pos_error_ned=err_ned,
+            vel_error_n=vel_err,
+        )
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GpsErrors(RealisedErrors):
+    """Random constants of one run.
+
+    Attributes
+    ----------
+    pos_gm0_ned : ndarray, shape (3,)
+        Gauss-Markov position error at the first epoch, N, E, D [m].
+    """
+
+    pos_gm0_ned: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GpsMeasurement:
+    """Output of :meth:`GpsModel.measure`; all arrays have M rows.
+
+    Attributes
+    ----------
+    pos : ndarray, shape (M, 3)
+        Measured latitude [rad], longitude [rad], height [m].
+    pos_sigma : ndarray, shape (M, 3)
+        Reported 1-sigma N, E, D [m].
+    v_n : ndarray, shape (M, 3)
+        Measured velocity NED [m/s].
+    vel_sigma : ndarray, shape (M, 3)
+        Reported 1-sigma velocity N, E, D [m/s].
+    pos_error_ned : ndarray, shape (M, 3)
+        True position error N, E, D [m] (measured minus true).
+    vel_error_n : ndarray, shape (M, 3)
+        True velocity error NED [m/s].
+    """
+
+    pos: np.ndarray
+    pos_sigma: np.ndarray
+    v_n: np.ndarray
+    vel_sigma: np.ndarray
+    pos_error_ned: np.ndarray
+    vel_error_n: np.ndarray
+
+    def fix_columns(self) -> dict[str, np.ndarray]:
+        """Columns of the GPS stream (``FIELDS[StreamKind.GPS]``)."""
+        return {"pos": self.pos, "pos_sigma": self.pos_sigma}
+
+    def velocity_columns(self) -> dict[str, np.ndarray]:
+        """Columns of the GPS velocity stream (``FIELDS[StreamKind.GPS_VEL]``)."""
+        return {"v_n": self.v_n, "vel_sigma": self.vel_sigma}

@@ -1,0 +1,422 @@
+"""Land-vehicle scenarios: a drive with GPS and magnetometer aiding, and a stationary IMU.
+
+``vehicle-drive``
+    A deterministic route (it does not depend on the seed) made of 150-s blocks repeated up to
+    the duration: stand still 10 s, accelerate to the cruise speed, turn right 90 deg, climb a
+    2 deg slope, speed up by a third, turn left 45 deg while going down a 1.5 deg slope, slow
+    down, turn right 45 deg and stop.
+    Each block turns the vehicle by +90 deg, so four blocks drive a loop. Turns are flat (car)
+    or coordinated (``turn_mode``). Streams: imu, gps, gps_vel, mag, truth.
+
+``stationary``
+    A level IMU at rest at a chosen site and heading, for free-inertial tests, gyro-compassing
+    and the Schuler oscillation from an initial tilt. Streams: imu, truth.
+
+Both record the truth at the IMU rate with the extra columns ``euler`` (roll, pitch, yaw [rad]),
+``gyro_bias`` [rad/s] and ``accel_bias`` [m/s^2] (the true total IMU biases, including the
+Gauss-Markov instability, at each truth sample; see :class:`navreplay.sensors.ImuMeasurement`),
+described in ``metadata.extra["truth_columns"]``.
+
+Metadata
+    ``true_errors``: ``imu`` (:class:`~navreplay.sensors.ImuErrors`), ``gps``, ``mag``, and
+    ``initial_nav`` (the realised initial errors, estimate minus truth: ``pos_ned`` [m],
+    ``v_n`` [m/s], ``phi`` [rad] with ``C_nb_hat = exp(-[phi x]) C_nb``).
+    ``initial_nav``: truth at t0 plus those errors, with ``sigma`` = {``pos_ned``, ``v_n``,
+    ``phi``} (1-sigma per axis) for a filter's P0. ``extra``: ``site``, ``date``,
+    ``decimal_year``, ``rates`` [Hz], ``truth_columns``, and for the drive ``mag_field_n``
+    [T, NED] (the WMM field at the start, used for every magnetometer sample) and ``wmm``.
+``t0_ns`` is the scenario date (UTC) in UNIX nanoseconds; the streams start there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, ClassVar
+
+import numpy as np
+
+import navreplay
+from navreplay import params as _params
+from navreplay.sensors.gps import GpsModel
+from navreplay.sensors.imu import ImuGrade, ImuMeasurement, imu_grade
+from navreplay.sensors.magnetometer import (
+    MagnetometerModel,
+    WmmEpoch,
+    decimal_year,
+    earth_field_n,
+)
+from navreplay.sim.scenario import Scenario, register_scenario
+from navreplay.sim.trajectory import (
+    Channel,
+    Manoeuvre,
+    Ramp,
+    Route,
+    Trajectory,
+    TurnMode,
+    generate,
+    initial_nav,
+    parse_utc,
+    sample_indices,
+    utc_ns,
+)
+from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
+from navreplay.units import DEG
+
+_TRUTH_COLUMNS = {
+    "pos": "true latitude [rad], longitude [rad], ellipsoidal height [m]",
+    "v_n": "true ground velocity NED [m/s]",
+    "q_nb": "true attitude quaternion b->n, Hamilton, scalar first",
+    "euler": "true roll, pitch, yaw (ZYX) [rad], yaw in [-pi, pi)",
+    "gyro_bias": "true total gyro bias (constant + Gauss-Markov + random walk), FRD [rad/s]",
+    "accel_bias": "true total accelerometer bias, FRD [m/s^2]",
+}
+
+
+def _check_rate_ratio(owner: object, fast: str, slow: str) -> None:
+    a, b = getattr(owner, fast), getattr(owner, slow)
+    k = a / b
+    if abs(k - round(k)) > 1e-9 * k or round(k) < 1:
+        raise ValueError(f"{slow} ({b:g} Hz) must divide {fast} ({a:g} Hz) a whole number of times")
+
+
+def _check_common(p: Any) -> None:
+    """Validation shared by both scenarios' parameters."""
+    for name in ("duration", "imu_rate"):
+        v = getattr(p, name)
+        if not (math.isfinite(v) and v > 0.0):
+            raise ValueError(f"{name} must be > 0, got {v!r}")
+    n = p.duration * p.imu_rate
+    if abs(n - round(n)) > 1e-6:
+        raise ValueError(
+            f"duration ({p.duration:g} s) must be a whole number of IMU intervals (1/{p.imu_rate:g} s)"
+        )
+    if not -90.0 <= p.lat_deg <= 90.0:
+        raise ValueError(f"lat_deg must be within [-90, 90], got {p.lat_deg!r}")
+    parse_utc(p.date)
+    for name in ("init_pos_sigma", "init_vel_sigma", "init_tilt_sigma", "init_heading_sigma"):
+        v = getattr(p, name)
+        if not (math.isfinite(v) and v >= 0.0):
+            raise ValueError(f"{name} must be >= 0, got {v!r}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class VehicleDriveParams:
+    """Parameters of ``vehicle-drive`` (SI unless the name says otherwise)."""
+
+    duration: float = 600.0
+    """Length of the recording [s]."""
+    lat_deg: float = 37.55
+    """Start latitude [deg]."""
+    lon_deg: float = 126.80
+    """Start longitude [deg]."""
+    h: float = 40.0
+    """Start height above the WGS84 ellipsoid [m]."""
+    heading_deg: float = 0.0
+    """Initial heading [deg]."""
+    date: str = "2017-01-01T00:00:00"
+    """Start date-time, ISO 8601, UTC: the recording's t0 and the magnetic-model epoch."""
+    cruise_speed: float = 15.0
+    """Cruise speed of the route [m/s]."""
+    turn_mode: TurnMode = TurnMode.FLAT
+    """Flat turns (car) or coordinated, banked turns (aircraft-like)."""
+    imu_grade: ImuGrade = ImuGrade.TACTICAL
+    """IMU error level (see :func:`navreplay.sensors.imu_grade`)."""
+    imu_rate: float = 100.0
+    """IMU and truth rate [Hz]."""
+    gps_rate: float = 1.0
+    """GPS fix and velocity rate [Hz]; must divide imu_rate."""
+    gps_pos_sigma_h: float = 2.5
+    """GPS white position noise, north and east [m]."""
+    gps_pos_sigma_v: float = 5.0
+    """GPS white position noise, down [m]."""
+    gps_pos_gm_sigma: float = 0.0
+    """GPS Gauss-Markov position error, each axis [m] (0: white noise only)."""
+    gps_pos_gm_tau: float = 300.0
+    """GPS Gauss-Markov correlation time [s]."""
+    gps_vel_sigma: float = 0.05
+    """GPS velocity noise per axis [m/s]."""
+    mag_rate: float = 10.0
+    """Magnetometer rate [Hz]; must divide imu_rate."""
+    mag_noise: float = 100e-9
+    """Magnetometer white noise per sample and axis [T]."""
+    mag_bias: float = 300e-9
+    """Magnetometer hard-iron bias, random constant per axis [T]."""
+    mag_scale_factor: float = 0.005
+    """Magnetometer scale-factor error, random constant per axis [-]."""
+    init_pos_sigma: float = 3.0
+    """Initial position error handed to filters, per N, E, D axis [m]."""
+    init_vel_sigma: float = 0.05
+    """Initial velocity error per axis [m/s]."""
+    init_tilt_sigma: float = 2e-3
+    """Initial level attitude error phi_N, phi_E [rad]."""
+    init_heading_sigma: float = 2e-2
+    """Initial heading error phi_D [rad]."""
+
+    def __post_init__(self) -> None:
+        _check_common(self)
+        for name in ("cruise_speed", "gps_rate", "mag_rate", "gps_pos_gm_tau"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be > 0, got {v!r}")
+        for name in ("gps_pos_sigma_h", "gps_pos_sigma_v", "gps_pos_gm_sigma", "gps_vel_sigma",
+                     "mag_noise", "mag_bias", "mag_scale_factor"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be >= 0, got {v!r}")
+        _check_rate_ratio(self, "imu_rate", "gps_rate")
+        _check_rate_ratio(self, "imu_rate", "mag_rate")
+        try:
+            WmmEpoch.for_year(decimal_year(parse_utc(self.date)))
+        except ValueError as e:
+            raise ValueError(f"date {self.date!r}: {e}") from None
+
+
+def drive_manoeuvres(duration: float, cruise_speed: float) -> tuple[Manoeuvre, ...]:
+    """The ``vehicle-drive`` route: 150-s blocks repeated while they start before ``duration``.
+
+    Parameters
+    ----------
+    duration : float
+        [s].
+    cruise_speed : float
+        [m/s].
+
+    Returns
+    -------
+    tuple of Manoeuvre
+    """
+    v = cruise_speed
+    # (start [s], duration [s], channel, change [m/s or rad]) within one block; all smooth ramps
+    block = (
+        (10.0, 15.0, Channel.SPEED, v),            # pull away
+        (40.0, 16.0, Channel.HEADING, 90.0 * DEG),  # right turn
+        (60.0, 6.0, Channel.PITCH, 2.0 * DEG),      # up a slope
+        (72.0, 6.0, Channel.PITCH, -2.0 * DEG),     # level again
+        (75.0, 10.0, Channel.SPEED, v / 3.0),       # speed up
+        (90.0, 12.0, Channel.HEADING, -45.0 * DEG),  # left turn
+        (92.0, 6.0, Channel.PITCH, -1.5 * DEG),     # down a slope
+        (104.0, 6.0, Channel.PITCH, 1.5 * DEG),     # level again
+        (110.0, 10.0, Channel.SPEED, -v / 3.0),     # slow down
+        (115.0, 10.0, Channel.HEADING, 45.0 * DEG),  # right turn
+        (130.0, 15.0, Channel.SPEED, -v),           # stop (stand still 145-160 s)
+    )
+    period = 150.0
+    out = []
+    k = 0
+    while k * period < duration:
+        for start, length, channel, change in block:
+            t = k * period + start
+            if t < duration:
+                out.append(Manoeuvre(channel=channel, start=t, duration=length, change=change,
+                                     ramp=Ramp.SMOOTH))
+        k += 1
+    return tuple(out)
+
+
+def _imu_streams(
+    traj: Trajectory, meas: ImuMeasurement, t0_ns: int
+) -> tuple[Stream, Stream]:
+    """IMU stream (samples k = 1..N-1) and the truth stream with the extra columns."""
+    imu = Stream(StreamKind.IMU, nanoseconds(traj.t[1:], t0_ns), meas.columns(), "imu_frd")
+    truth = Stream(
+        StreamKind.TRUTH,
+        nanoseconds(traj.t, t0_ns),
+        {
+            "pos": traj.pos,
+            "v_n": traj.v_n,
+            "q_nb": traj.q_nb,
+            "euler": traj.euler,
+            "gyro_bias": meas.gyro_bias,
+            "accel_bias": meas.accel_bias,
+        },
+        "ned",
+    )
+    return imu, truth
+
+
+def _site(p: Any) -> dict[str, float]:
+    return {"lat_deg": p.lat_deg, "lon_deg": p.lon_deg, "h": p.h}
+
+
+@register_scenario
+class VehicleDrive(Scenario):
+    """Car-like drive with turns, slopes, speed changes and stops; IMU, GPS and magnetometer."""
+
+    name: ClassVar[str] = "vehicle-drive"
+    summary: ClassVar[str] = (
+        "land vehicle: turns, slopes, stops; IMU 100 Hz, GPS fix + velocity 1 Hz, magnetometer"
+        " 10 Hz (WMM field)"
+    )
+    streams: ClassVar[tuple[StreamKind, ...]] = (
+        StreamKind.IMU, StreamKind.GPS, StreamKind.GPS_VEL, StreamKind.MAG, StreamKind.TRUTH,
+    )
+    Params: ClassVar[type] = VehicleDriveParams
+
+    def simulate(self, params: VehicleDriveParams, rng: np.random.Generator, seed: int) -> Recording:
+        p = params
+        rng_imu, rng_gps, rng_mag, rng_init = rng.spawn(4)
+        start = parse_utc(p.date)
+        t0_ns = utc_ns(start)
+        year = decimal_year(start)
+        route = Route(
+            lat=p.lat_deg * DEG, lon=p.lon_deg * DEG, h=p.h, heading=p.heading_deg * DEG,
+            speed=0.0, manoeuvres=drive_manoeuvres(p.duration, p.cruise_speed),
+            turn_mode=p.turn_mode,
+        )
+        traj = generate(route, p.duration, p.imu_rate)
+        n = traj.t.shape[0]
+
+        imu_model = imu_grade(p.imu_grade)
+        imu_errors = imu_model.draw(rng_imu)
+        imu_meas = imu_model.measure(imu_errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate,
+                                     rng_imu)
+        imu, truth = _imu_streams(traj, imu_meas, t0_ns)
+
+        gps_model = GpsModel(
+            pos_sigma=(p.gps_pos_sigma_h, p.gps_pos_sigma_h, p.gps_pos_sigma_v),
+            pos_gm_sigma=p.gps_pos_gm_sigma, pos_gm_tau=p.gps_pos_gm_tau,
+            vel_sigma=p.gps_vel_sigma, rate=p.gps_rate,
+        )
+        gi = sample_indices(n, p.imu_rate, p.gps_rate)
+        gps_errors = gps_model.draw(rng_gps)
+        gps_meas = gps_model.measure(gps_errors, traj.pos[gi], traj.v_n[gi], rng_gps)
+        t_gps = nanoseconds(traj.t[gi], t0_ns)
+
+        h_n = earth_field_n(route.lat, route.lon, route.h, year)
+        mag_model = MagnetometerModel(
+            scale_factor=p.mag_scale_factor, bias=p.mag_bias, noise=p.mag_noise, rate=p.mag_rate
+        )
+        mi = sample_indices(n, p.imu_rate, p.mag_rate)
+        mag_errors = mag_model.draw(rng_mag)
+        mag_cols = mag_model.measure(mag_errors, traj.q_nb[mi], h_n, rng_mag)
+
+        nav0, init_errors = initial_nav(
+            traj, t0_ns, rng_init,
+            pos_sigma_ned=(p.init_pos_sigma,) * 3,
+            vel_sigma_n=(p.init_vel_sigma,) * 3,
+            phi_sigma=(p.init_tilt_sigma, p.init_tilt_sigma, p.init_heading_sigma),
+        )
+        streams = {
+            StreamKind.IMU: imu,
+            StreamKind.GPS: Stream(StreamKind.GPS, t_gps, gps_meas.fix_columns(), "wgs84"),
+            StreamKind.GPS_VEL: Stream(StreamKind.GPS_VEL, t_gps, gps_meas.velocity_columns(),
+                                       "ned"),
+            StreamKind.MAG: Stream(StreamKind.MAG, nanoseconds(traj.t[mi], t0_ns), mag_cols,
+                                   "mag_frd"),
+            StreamKind.TRUTH: truth,
+        }
+        meta = Metadata(
+            scenario=self.name,
+            seed=seed,
+            params=_params.as_dict(p),
+            true_errors={
+                "imu": imu_errors.as_dict(),
+                "gps": gps_errors.as_dict(),
+                "mag": mag_errors.as_dict(),
+                "initial_nav": init_errors,
+            },
+            initial_nav=nav0,
+            navreplay_version=navreplay.__version__,
+            extra={
+                "site": _site(p),
+                "date": start.isoformat(),
+                "decimal_year": year,
+                "wmm": WmmEpoch.for_year(year).value,
+                "mag_field_n": h_n.tolist(),
+                "rates": {"imu": p.imu_rate, "gps": p.gps_rate, "gps_vel": p.gps_rate,
+                          "mag": p.mag_rate, "truth": p.imu_rate},
+                "truth_columns": dict(_TRUTH_COLUMNS),
+            },
+        )
+        return Recording(streams=streams, metadata=meta, t0_ns=t0_ns)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StationaryParams:
+    """Parameters of ``stationary`` (SI unless the name says otherwise)."""
+
+    duration: float = 600.0
+    """Length of the recording [s]."""
+    lat_deg: float = 37.0
+    """Latitude [deg]."""
+    lon_deg: float = 127.0
+    """Longitude [deg]."""
+    h: float = 0.0
+    """Height above the WGS84 ellipsoid [m]."""
+    heading_deg: float = 0.0
+    """Heading [deg]; roll and pitch are 0."""
+    date: str = "2017-01-01T00:00:00"
+    """Start date-time, ISO 8601, UTC: the recording's t0."""
+    imu_grade: ImuGrade = ImuGrade.TACTICAL
+    """IMU error level (see :func:`navreplay.sensors.imu_grade`)."""
+    imu_rate: float = 100.0
+    """IMU and truth rate [Hz]."""
+    init_pos_sigma: float = 0.0
+    """Initial position error handed to filters, per N, E, D axis [m]."""
+    init_vel_sigma: float = 0.0
+    """Initial velocity error per axis [m/s]."""
+    init_tilt_sigma: float = 0.0
+    """Initial level attitude error phi_N, phi_E, random [rad]."""
+    init_heading_sigma: float = 0.0
+    """Initial heading error phi_D, random [rad]."""
+    init_attitude_error: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Deterministic initial attitude error phi_N, phi_E, phi_D added to the random one [rad]
+    (e.g. a tilt for the Schuler oscillation); not included in the reported sigma."""
+
+    def __post_init__(self) -> None:
+        _check_common(self)
+        vec = tuple(float(v) for v in self.init_attitude_error)
+        if len(vec) != 3 or not all(math.isfinite(v) for v in vec):
+            raise ValueError(f"init_attitude_error needs three finite values, got {vec!r}")
+        object.__setattr__(self, "init_attitude_error", vec)
+
+
+@register_scenario
+class Stationary(Scenario):
+    """A level IMU at rest: free-inertial tests, gyro-compassing, Schuler oscillation."""
+
+    name: ClassVar[str] = "stationary"
+    summary: ClassVar[str] = (
+        "IMU at rest at a chosen latitude (free inertial, Schuler); optional initial tilt"
+    )
+    streams: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU, StreamKind.TRUTH)
+    Params: ClassVar[type] = StationaryParams
+
+    def simulate(self, params: StationaryParams, rng: np.random.Generator, seed: int) -> Recording:
+        p = params
+        rng_imu, rng_init = rng.spawn(2)
+        start = parse_utc(p.date)
+        t0_ns = utc_ns(start)
+        route = Route(lat=p.lat_deg * DEG, lon=p.lon_deg * DEG, h=p.h, heading=p.heading_deg * DEG)
+        traj = generate(route, p.duration, p.imu_rate)
+        imu_model = imu_grade(p.imu_grade)
+        imu_errors = imu_model.draw(rng_imu)
+        imu_meas = imu_model.measure(imu_errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate,
+                                     rng_imu)
+        imu, truth = _imu_streams(traj, imu_meas, t0_ns)
+        nav0, init_errors = initial_nav(
+            traj, t0_ns, rng_init,
+            pos_sigma_ned=(p.init_pos_sigma,) * 3,
+            vel_sigma_n=(p.init_vel_sigma,) * 3,
+            phi_sigma=(p.init_tilt_sigma, p.init_tilt_sigma, p.init_heading_sigma),
+            phi_offset=p.init_attitude_error,
+        )
+        meta = Metadata(
+            scenario=self.name,
+            seed=seed,
+            params=_params.as_dict(p),
+            true_errors={"imu": imu_errors.as_dict(), "initial_nav": init_errors},
+            initial_nav=nav0,
+            navreplay_version=navreplay.__version__,
+            extra={
+                "site": _site(p),
+                "date": start.isoformat(),
+                "decimal_year": decimal_year(start),
+                "rates": {"imu": p.imu_rate, "truth": p.imu_rate},
+                "truth_columns": dict(_TRUTH_COLUMNS),
+            },
+        )
+        return Recording(
+            streams={StreamKind.IMU: imu, StreamKind.TRUTH: truth}, metadata=meta, t0_ns=t0_ns
+        )

@@ -1,0 +1,190 @@
+"""Where Rerun output goes, and whether it can get there.
+
+:class:`Save` writes an .rrd file (headless; atomic in :func:`navreplay.viz.open_sink`);
+:class:`Spawn` starts a local viewer, :class:`Connect` streams to a running one and
+:class:`Serve` serves gRPC and the web viewer from this process. The checks here run before
+anything is logged: Rerun itself would silently drop all data after ~12 s when no viewer
+answers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import shutil
+import socket
+import sys
+import urllib.parse
+from pathlib import Path
+
+DEFAULT_PORT = 9876
+DEFAULT_URL = f"rerun+http://127.0.0.1:{DEFAULT_PORT}/proxy"
+
+
+class VizUnavailableError(RuntimeError):
+    """The requested viewer cannot be reached (nothing was logged)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Save:
+    """Write an .rrd file (headless). Atomic: temporary file beside it, renamed on close.
+
+    Attributes
+    ----------
+    path : str or PathLike
+    overwrite : bool
+        Replace an existing file (on success only); False raises ``FileExistsError`` at open.
+    """
+
+    path: str | os.PathLike[str]
+    overwrite: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class Spawn:
+    """Start a local Rerun viewer (or use the one already listening on ``port``).
+
+    Attributes
+    ----------
+    port : int
+        gRPC port of the viewer.
+    memory_limit : str
+        Viewer memory limit, e.g. ``"75%"`` or ``"8GB"``; the oldest data is dropped beyond it.
+    check_display : bool
+        Refuse to start without a display (X11 socket or Wayland socket on Linux).
+    """
+
+    port: int = DEFAULT_PORT
+    memory_limit: str = "75%"
+    check_display: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class Connect:
+    """Stream to a running viewer.
+
+    Attributes
+    ----------
+    url : str
+        ``rerun+http://host:port/proxy`` (also ``rerun://``, ``rerun+https://``, ``host:port``
+        or a bare port).
+    timeout : float
+        Reachability check timeout [s].
+    """
+
+    url: str = DEFAULT_URL
+    timeout: float = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Serve:
+    """Serve gRPC and the web viewer from this process, for a remote browser.
+
+    The server lives as long as the process: call :meth:`Sink.wait` to keep it up. A second
+    sink with the same ``grpc_port`` streams into the first one's server.
+
+    Attributes
+    ----------
+    grpc_port, web_port : int
+    open_browser : bool
+    server_memory_limit : str
+        Data buffered for late browsers, e.g. ``"1GiB"``.
+    """
+
+    grpc_port: int = DEFAULT_PORT
+    web_port: int = 9090
+    open_browser: bool = False
+    server_memory_limit: str = "1GiB"
+
+
+Target = Save | Spawn | Connect | Serve
+
+
+def parse_url(url: str | int) -> tuple[str, str, int]:
+    """Normalise a viewer address to ``(url, host, port)``.
+
+    Examples
+    --------
+    >>> parse_url("localhost:9000")
+    ('rerun+http://localhost:9000/proxy', 'localhost', 9000)
+    >>> parse_url(9877)[0]
+    'rerun+http://127.0.0.1:9877/proxy'
+    """
+    text = str(url).strip()
+    if text.isdigit():
+        text = f"127.0.0.1:{text}"
+    if "://" not in text:
+        text = f"rerun+http://{text}"
+    parts = urllib.parse.urlsplit(text)
+    schemes = {"rerun": 443, "rerun+https": 443, "rerun+http": 80}
+    if parts.scheme not in schemes:
+        raise ValueError(
+            f"viewer URL {url!r}: scheme must be rerun+http://, rerun+https:// or rerun://"
+        )
+    try:
+        port = parts.port or schemes[parts.scheme]
+    except ValueError:
+        raise ValueError(f"viewer URL {url!r}: invalid port") from None
+    host = parts.hostname or "127.0.0.1"
+    netloc = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    return urllib.parse.urlunsplit((parts.scheme, netloc, "/proxy", "", "")), host, port
+
+
+def port_error(host: str, port: int, timeout: float) -> str | None:
+    """None if a TCP connection to host:port succeeds within ``timeout`` [s], else why not."""
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            return None
+    except TimeoutError:
+        return f"no answer within {timeout:g} s"
+    except OSError as e:
+        return e.strerror or str(e)
+
+
+def find_viewer() -> str | None:
+    """Path of the ``rerun`` viewer executable: on PATH, else beside the Python interpreter."""
+    found = shutil.which("rerun")
+    if found:
+        return found
+    for name in ("rerun", "rerun.exe"):
+        candidate = Path(sys.executable).parent / name
+        if candidate.is_file() and os.access(candidate, os.X_OK):
+            return str(candidate)
+    return None
+
+
+def display_problem() -> str | None:
+    """Why a native viewer window cannot open here, or None (always None off Linux/BSD)."""
+    if sys.platform in ("darwin", "win32", "cygwin"):
+        return None
+    wayland = os.environ.get("WAYLAND_DISPLAY")
+    if wayland:
+        sock = Path(wayland)
+        if not sock.is_absolute():
+            sock = Path(os.environ.get("XDG_RUNTIME_DIR", f"/run/user/{os.getuid()}")) / wayland
+        if sock.exists():
+            return None
+    display = os.environ.get("DISPLAY")
+    if not display:
+        return "no display (DISPLAY and WAYLAND_DISPLAY are unset)"
+    host, _, rest = display.rpartition(":")
+    number = rest.split(".")[0]
+    if not number.isdigit():
+        return f"cannot parse DISPLAY={display!r}"
+    if host in ("", "unix"):
+        if Path(f"/tmp/.X11-unix/X{number}").exists():
+            return None
+        return f"no X server socket for DISPLAY={display}"
+    err = port_error(host, 6000 + int(number), 0.5)
+    return None if err is None else f"X server for DISPLAY={display} unreachable ({err})"
+
+
+def port_free(port: int) -> bool:
+    """Whether this process could listen on ``port`` (all interfaces)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(("0.0.0.0", port))
+        except OSError:
+            return False
+    return True

@@ -1,0 +1,285 @@
+"""Replay engine: merge order, IMU block delivery, output ticks, checks and errors."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from navreplay.filters.base import Estimate, Filter, Innovation, NavSolution
+from navreplay.filters.kalman import FilterDivergedError
+from navreplay.replay.engine import (
+    STREAM_PRIORITY,
+    TICK,
+    InvalidRecordingError,
+    MissingStreamError,
+    plan_events,
+    replay,
+)
+from navreplay.streams import Metadata, Recording, Stream, StreamKind
+
+T0 = 1_700_000_000_000_000_000
+S = 1_000_000_000
+
+
+def make_recording(duration_s: float = 10.0, imu_hz: float = 100.0) -> Recording:
+    """IMU at 100 Hz, GPS at 1 Hz, magnetometer at 10 Hz (sharing GPS times), depth at 1 Hz
+    offset, and a truth stream that must never reach the filter."""
+    n = int(duration_s * imu_hz)
+    imu_t = T0 + np.rint(np.arange(1, n + 1) * S / imu_hz).astype(np.int64)
+    imu = Stream(StreamKind.IMU, imu_t, {
+        "omega_ib_b": np.arange(3 * n, dtype=float).reshape(n, 3),
+        "f_b": -np.arange(3 * n, dtype=float).reshape(n, 3),
+    })
+    gps_t = T0 + np.arange(1, int(duration_s)) * S
+    gps = Stream(StreamKind.GPS, gps_t, {
+        "pos": np.arange(3 * len(gps_t), dtype=float).reshape(-1, 3),
+        "pos_sigma": np.ones((len(gps_t), 3)),
+    })
+    mag_t = T0 + np.arange(1, int(duration_s * 10)) * (S // 10)
+    mag = Stream(StreamKind.MAG, mag_t, {"m_b": np.ones((len(mag_t), 3)) * 1e-5})
+    depth_t = T0 + np.arange(1, int(duration_s)) * S + S // 2 + 3  # between IMU samples
+    depth = Stream(StreamKind.DEPTH, depth_t, {"depth": np.arange(len(depth_t), dtype=float)})
+    truth = Stream(StreamKind.TRUTH, imu_t.copy(), {
+        "pos": np.zeros((n, 3)), "v_n": np.zeros((n, 3)), "q_nb": np.tile([1.0, 0, 0, 0], (n, 1)),
+    })
+    streams = {s.kind: s for s in (truth, depth, mag, imu, gps)}  # deliberately unordered
+    return Recording(streams, Metadata(scenario="synthetic", seed=7), t0_ns=T0)
+
+
+class Recorder(Filter):
+    """Records every call; estimate is the number of IMU samples seen."""
+
+    name = "recorder"
+    requires = (StreamKind.IMU,)
+    optional = (StreamKind.GPS, StreamKind.MAG, StreamKind.DEPTH, StreamKind.TRUTH)
+    state_names = ("n_imu", "n_updates")
+
+    def __init__(self, params, context):
+        super().__init__(params, context)
+        self.calls: list[tuple] = []
+        self.n_imu = 0
+        self.n_upd = 0
+        self.t = 0.0
+        Recorder.last = self
+
+    def propagate(self, t, imu):
+        assert len(t) > 0
+        assert imu["omega_ib_b"].shape == (len(t), 3)
+        self.calls.append(("propagate", t.copy(), imu["omega_ib_b"].copy()))
+        self.n_imu += len(t)
+        self.t = float(t[-1])
+
+    def update(self, kind, t, sample):
+        self.calls.append(("update", kind, t, {k: np.array(v) for k, v in sample.items()}))
+        self.n_upd += 1
+        self.t = t
+        if kind == StreamKind.GPS:
+            return [Innovation("gps_pos", t, np.array([1.0, 2.0]), np.diag([1.0, 4.0]))]
+        return None
+
+    def estimate(self):
+        self.calls.append(("estimate",))
+        x = np.array([self.n_imu, self.n_upd], dtype=float)
+        nav = NavSolution(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]))
+        return Estimate(self.t, x, np.eye(2), nav, {"k": np.array([self.t])})
+
+
+def test_every_imu_sample_once_in_order_blocks_end_at_events():
+    rec = make_recording()
+    res = replay(rec, Recorder, output_rate=10.0)
+    f = Recorder.last
+    blocks = [c for c in f.calls if c[0] == "propagate"]
+    imu_s = (rec["imu"].t_ns - T0) * 1e-9
+    np.testing.assert_array_equal(np.concatenate([b[1] for b in blocks]), imu_s)
+    np.testing.assert_array_equal(np.concatenate([b[2] for b in blocks]), rec["imu"]["omega_ib_b"])
+    # the block handed over before an update ends at the last IMU sample <= the update time
+    for prev, call in zip(f.calls, f.calls[1:]):
+        if call[0] == "update" and prev[0] == "propagate":
+            t_ev = call[2]
+            assert prev[1][-1] <= t_ev + 1e-12
+            later = imu_s[imu_s > prev[1][-1]]
+            assert later.size == 0 or later[0] > t_ev - 1e-12
+    assert res.x[-1, 0] == len(imu_s)
+
+
+def test_merge_order_by_time_then_priority_and_truth_never_delivered():
+    rec = make_recording()
+    replay(rec, Recorder, output_rate=None)
+    updates = [c for c in Recorder.last.calls if c[0] == "update"]
+    kinds = [c[1] for c in updates]
+    assert StreamKind.TRUTH not in kinds and StreamKind.IMU not in kinds
+    assert kinds.count(StreamKind.GPS) == len(rec["gps"])
+    assert kinds.count(StreamKind.MAG) == len(rec["mag"])
+    assert kinds.count(StreamKind.DEPTH) == len(rec["depth"])
+    times = [c[2] for c in updates]
+    assert times == sorted(times)
+    prio = {k: i for i, k in enumerate(STREAM_PRIORITY)}
+    for a, b in zip(updates, updates[1:]):
+        if a[2] == b[2]:
+            assert prio[a[1]] <= prio[b[1]]
+    # GPS and magnetometer share every whole second: GPS first
+    at_one = [c[1] for c in updates if c[2] == 1.0]
+    assert at_one == [StreamKind.GPS, StreamKind.MAG]
+    # samples are the stream's rows, in order
+    gps_pos = np.stack([c[3]["pos"] for c in updates if c[1] == StreamKind.GPS])
+    np.testing.assert_array_equal(gps_pos, rec["gps"]["pos"])
+    depth = [float(c[3]["depth"]) for c in updates if c[1] == StreamKind.DEPTH]
+    assert depth == rec["depth"]["depth"].tolist()
+
+
+def test_one_estimate_per_event_and_columns():
+    rec = make_recording()
+    res = replay(rec, Recorder, output_rate=None)
+    n_upd = len(rec["gps"]) + len(rec["mag"]) + len(rec["depth"])
+    assert len(res.t) == n_upd + 1  # + the estimate after the trailing IMU samples
+    assert res.x.shape == (n_upd + 1, 2) and res.P.shape == (n_upd + 1, 2, 2)
+    assert res.nav_q_nb.shape == (n_upd + 1, 4)
+    assert res.extras["k"].shape == (n_upd + 1, 1)
+    assert res.state_names == ("n_imu", "n_updates")
+    assert res.recording == "synthetic#seed=7" and res.label == "recorder"
+    np.testing.assert_array_equal(res.x[:, 1], np.r_[np.arange(1, n_upd + 1), n_upd])
+
+
+def test_innovations_collected_with_nis():
+    res = replay(make_recording(), Recorder, output_rate=None)
+    inn = res.innovations["gps_pos"]
+    assert inn.nu.shape == (9, 2) and inn.S.shape == (9, 2, 2)
+    np.testing.assert_allclose(inn.nis, 1.0 + 4.0 / 4.0)
+    np.testing.assert_array_equal(inn.t, np.arange(1.0, 10.0))
+
+
+def test_output_ticks_only_where_no_aiding_sample():
+    rec = make_recording(duration_s=10.0)
+    imu_only = Recording({StreamKind.IMU: rec["imu"]}, rec.metadata, T0)
+    res = replay(imu_only, Recorder, output_rate=10.0)
+    np.testing.assert_allclose(res.t, np.arange(1, 101) / 10.0)
+    np.testing.assert_array_equal(res.x[:, 0], np.arange(1, 101) * 10)
+
+    gps_only = Recording({StreamKind.IMU: rec["imu"], StreamKind.GPS: rec["gps"]},
+                         rec.metadata, T0)
+    plan = plan_events(gps_only, output_rate=2.0)
+    ticks = (plan.t_ns[plan.code == TICK] - T0) / S
+    np.testing.assert_allclose(ticks, [0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5, 8.5, 9.5, 10.0])
+    assert (plan.code >= 0).sum() == len(rec["gps"])
+
+
+class Lazy(Recorder):
+    """Returns no estimate before its first update."""
+
+    name = "lazy"
+
+    def estimate(self):
+        return super().estimate() if self.n_upd else None
+
+
+def test_no_outputs_before_initialisation():
+    res = replay(make_recording(), Lazy, output_rate=10.0)
+    assert res.t[0] >= 0.1  # the first aiding sample (magnetometer at 0.1 s)
+    empty = Recording({StreamKind.IMU: make_recording()["imu"]}, Metadata(), T0)
+    res = replay(empty, Lazy)
+    assert res.t.shape == (0,) and res.x.shape == (0, 2)
+
+
+class GpsOnly(Recorder):
+    name = "gps-only"
+    requires = (StreamKind.GPS,)
+    optional = ()
+
+
+def test_only_declared_streams_are_delivered():
+    replay(make_recording(), GpsOnly, output_rate=None)
+    kinds = {c[1] for c in Recorder.last.calls if c[0] == "update"}
+    assert kinds == {StreamKind.GPS}
+    assert sum(len(c[1]) for c in Recorder.last.calls if c[0] == "propagate") == 1000
+
+
+class NeedsGps(Recorder):
+    name = "needs-gps"
+    requires = (StreamKind.IMU, StreamKind.GPS, StreamKind.SPEED_LOG)
+
+
+def test_missing_stream_names_what_is_missing_and_what_exists():
+    rec = make_recording()
+    with pytest.raises(MissingStreamError) as e:
+        replay(rec, NeedsGps, source="x.mcap")
+    msg = str(e.value)
+    assert "'needs-gps'" in msg and "speed_log" in msg and "x.mcap" in msg
+    assert "it has: " in msg and "gps" in msg and "imu" in msg
+
+
+def test_missing_column_named():
+    rec = make_recording()
+    del rec["imu"].columns["f_b"]
+    with pytest.raises(MissingStreamError, match="imu lacks column.*f_b"):
+        replay(rec, Recorder)
+
+
+def test_nan_sample_named_with_stream_and_time():
+    rec = make_recording()
+    rec["gps"]["pos"][3, 1] = np.nan
+    with pytest.raises(InvalidRecordingError, match=r"stream gps: column pos .*\(t = 4\.000000 s"):
+        replay(rec, Recorder)
+
+
+def test_time_going_backwards_or_repeating():
+    rec = make_recording()
+    rec["imu"].t_ns[500] = rec["imu"].t_ns[498]
+    with pytest.raises(InvalidRecordingError, match="stream imu: time goes backwards at sample 500"):
+        replay(rec, Recorder)
+    rec = make_recording()
+    rec["mag"].t_ns[5] = rec["mag"].t_ns[4]
+    with pytest.raises(InvalidRecordingError, match="stream mag: time repeats"):
+        replay(rec, Recorder)
+
+
+class Diverges(Recorder):
+    name = "diverges"
+
+    def update(self, kind, t, sample):
+        if t >= 3.0:
+            raise FilterDivergedError("innovation covariance S is not positive definite", t)
+        return super().update(kind, t, sample)
+
+
+class GoesNan(Recorder):
+    name = "goes-nan"
+
+    def estimate(self):
+        est = super().estimate()
+        if self.t > 2.05:
+            est.x[0] = np.nan
+        return est
+
+
+def test_divergence_names_filter_recording_and_time():
+    with pytest.raises(FilterDivergedError) as e:
+        replay(make_recording(), Diverges, source="drive.mcap")
+    msg = str(e.value)
+    assert "'diverges'" in msg and "drive.mcap" in msg and "t = 3.000 s" in msg
+    assert e.value.t == 3.0
+    with pytest.raises(FilterDivergedError, match=r"'goes-nan' diverged on .* t = 2\.1"):
+        replay(make_recording(), GoesNan)
+
+
+def test_pacing_follows_the_recording_clock():
+    rec = make_recording(duration_s=2.0)
+    t = time.perf_counter()
+    replay(rec, Recorder, pacing=10.0)
+    elapsed = time.perf_counter() - t
+    assert 0.15 < elapsed < 1.0  # 2 s of data at 10x real time
+
+
+def test_observer_and_progress_called():
+    seen, prog = [], []
+    replay(make_recording(), Recorder, observer=lambda r: seen.append(len(r.t)),
+           progress=lambda d, n: prog.append((d, n)), observe_interval=0.0)
+    assert seen and seen[-1] == seen[-1] and prog[-1][0] == prog[-1][1]
+
+
+def test_params_from_strings_are_typed():
+    from navreplay.params import ParamError
+
+    with pytest.raises(ParamError, match="unknown parameter"):
+        replay(make_recording(), Recorder, {"gain": "2"})

@@ -1,0 +1,145 @@
+"""The NED INS error model (F, G blocks) and the free-inertial "ins" filter."""
+
+import numpy as np
+import pytest
+
+from navreplay.filters import ins_error as ie
+from navreplay.filters import kalman
+from navreplay.geo import earth, rotations
+
+# --------------------------------------------------------------------------------------------
+# F against finite differences of the continuous nonlinear mechanization, written here
+# independently of the code under test
+
+
+def _rates(lat, lon, h, v, C, f_b, w_ib_b):
+    """Time derivatives of (lat, lon, h), v_n and C_nb: NED mechanization."""
+    R_M, R_N = earth.radii(lat)
+    pos_dot = np.array([v[0] / (R_M + h), v[1] / ((R_N + h) * np.cos(lat)), -v[2]])
+    w_ie = earth.omega_ie_n(lat)
+    w_en = earth.omega_en_n(lat, h, v)
+    g = np.array([0.0, 0.0, float(earth.gravity(lat, h))])
+    v_dot = C @ f_b - np.cross(2 * w_ie + w_en, v) + g
+    C_dot = C @ rotations.skew(w_ib_b) - rotations.skew(w_ie + w_en) @ C
+    return pos_dot, v_dot, C_dot
+
+
+def _error_rate(truth, dx, f_b, w_ib_b):
+    """d(dx)/dt of an estimate carrying the 15 errors dx against the truth."""
+    lat, lon, h, v, C = truth
+    dp, dv, phi, dba, dbg = dx[0:3], dx[3:6], dx[6:9], dx[9:12], dx[12:15]
+    C_hat = rotations.rotvec_to_dcm(-phi) @ C
+    p_t, v_t, C_t = _rates(lat, lon, h, v, C, f_b, w_ib_b)
+    # the estimate runs on the compensated IMU: f_hat = f - db_a, w_hat = w - db_g
+    p_e, v_e, C_e = _rates(lat + dp[0], lon + dp[1], h + dp[2], v + dv, C_hat,
+                           f_b - dba, w_ib_b - dbg)
+    phi_dot = -rotations.vee(C_e @ C.T + C_hat @ C_t.T)
+    return np.concatenate([p_e - p_t, v_e - v_t, phi_dot, np.zeros(6)])
+
+
+STEPS = np.array([1e-6, 1e-6, 1.0, 1e-2, 1e-2, 1e-2, 1e-5, 1e-5, 1e-5,
+                  1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6])
+
+
+def _numeric_F(truth, f_b, w_ib_b):
+    F = np.zeros((15, 15))
+    for j in range(15):
+        e = np.zeros(15)
+        e[j] = STEPS[j]
+        F[:, j] = (_error_rate(truth, e, f_b, w_ib_b) - _error_rate(truth, -e, f_b, w_ib_b)) / (
+            2 * STEPS[j])
+    return F
+
+
+BLOCKS = [ie.POS, ie.VEL, ie.ATT, ie.BA, ie.BG]
+
+
+@pytest.mark.parametrize("lat_deg", [47.0, -33.0])
+def test_F_matches_finite_differences_of_the_mechanization(lat_deg):
+    lat, lon, h = np.deg2rad(lat_deg), 0.3, 350.0
+    v = np.array([25.0, -14.0, 0.8])
+    C = rotations.euler_to_dcm([0.1, -0.05, 2.0])
+    f_b = np.array([0.7, -0.4, -9.7])
+    w_ib_b = np.array([0.01, -0.02, 0.05])
+    F_num = _numeric_F((lat, lon, h, v, C), f_b, w_ib_b)
+    F = ie.system_matrix(np.array([lat, lon, h]), v, C, f_b)
+    for rows in BLOCKS:
+        for cols in BLOCKS:
+            a, b = F[rows, cols], F_num[rows, cols]
+            scale = np.abs(b).max()
+            np.testing.assert_allclose(
+                a, b, rtol=2e-5, atol=1e-6 * scale + 1e-30,
+                err_msg=f"block rows {rows} cols {cols}",
+            )
+
+
+def test_depth_form_is_T_F_T():
+    pos = np.array([0.6, 2.2, -80.0])
+    v = np.array([3.0, 4.0, 0.5])
+    C = rotations.euler_to_dcm([0.0, 0.1, 1.0])
+    f_b = np.array([0.1, 0.0, -9.8])
+    T = np.eye(15)
+    T[2, 2] = -1.0
+    F_h = ie.system_matrix(pos, v, C, f_b)
+    F_d = ie.system_matrix(pos, v, C, f_b, vertical=ie.Vertical.DEPTH)
+    np.testing.assert_allclose(F_d, T @ F_h @ T)
+    # the spec's gravity entry in depth form: +2 g / sqrt(R_M R_N)
+    R_M, R_N = earth.radii(pos[0])
+    assert F_d[5, 2] == pytest.approx(2 * earth.gravity(pos[0], pos[2]) / np.sqrt(R_M * R_N),
+                                      rel=1e-2)
+
+
+def test_F_written_into_a_larger_matrix():
+    big = np.full((18, 18), 7.0)
+    pos, v = np.array([0.5, 0.0, 10.0]), np.array([1.0, 2.0, 0.0])
+    ie.system_matrix(pos, v, np.eye(3), np.array([0.0, 0.0, -9.8]), out=big)
+    np.testing.assert_array_equal(big[:15, :15], ie.system_matrix(pos, v, np.eye(3),
+                                                                  np.array([0.0, 0.0, -9.8])))
+    assert np.all(big[15:, :] == 7.0) and np.all(big[:, 15:] == 7.0)
+
+
+def test_noise_diagonal_equals_G_Qc_G():
+    C = rotations.euler_to_dcm([0.3, -0.2, 1.0])
+    Qc = ie.noise_densities(1e-3, 2e-5, 1e-6, 3e-8)
+    Qd = kalman.discrete_noise(ie.noise_matrix(C), Qc, 0.1)
+    np.testing.assert_allclose(Qd, np.diag(ie.process_noise_diagonal(Qc, 0.1)), atol=1e-22)
+
+
+def test_propagate_covariance_equals_the_reference_loop():
+    rng = np.random.default_rng(0)
+    n, k = 18, 7
+    A = rng.normal(size=(n, n)) * 1e-3
+    P = A @ A.T + np.diag(np.r_[np.full(3, 1e-12), np.full(12, 1e-4), np.full(3, 1e-2)])
+    nav = np.zeros((k, 10))
+    nav[:, 0] = 0.7 + 1e-6 * np.arange(k)
+    nav[:, 2] = 100.0
+    nav[:, 3:6] = [10.0, -5.0, 0.2]
+    nav[:, 6:10] = rotations.euler_to_quat(np.c_[np.zeros(k), np.zeros(k), 0.1 * np.arange(k)])
+    f_b = np.tile([0.2, 0.1, -9.8], (k, 1))
+    dt = np.full(k, 0.1)
+    q = np.r_[np.zeros(3), np.full(3, 1e-6), np.full(3, 1e-10), np.full(6, 1e-14), np.zeros(3)]
+    P_ref = P.copy()
+    for i in range(k):
+        F = np.zeros((n, n))
+        ie.system_matrix(nav[i, :3], nav[i, 3:6], rotations.quat_to_dcm(nav[i, 6:]), f_b[i],
+                         out=F)
+        _, P_ref = kalman.predict(np.zeros(n), P_ref, kalman.discretize(F, dt[i]),
+                                  np.diag(q * dt[i]))
+    np.testing.assert_allclose(ie.propagate_covariance(P, nav, f_b, dt, q), P_ref,
+                               rtol=1e-10, atol=1e-24)
+
+
+def test_error_definitions_round_trip():
+    nav = np.r_[0.7, 0.2, 50.0, 3.0, -2.0, 0.1, rotations.euler_to_quat([0.1, 0.2, -2.5])]
+    dx = np.array([1e-6, -2e-6, 3.0, 0.1, -0.2, 0.05, 1e-3, -2e-3, 3e-3])
+    for vertical in ie.Vertical:
+        est = ie.inject_error(nav, dx, vertical)
+        np.testing.assert_allclose(ie.nav_error(est, nav, vertical), dx, rtol=1e-5, atol=1e-12)
+        back = ie.apply_correction(est, dx, vertical)
+        np.testing.assert_allclose(back[:6], nav[:6], atol=1e-12)
+        assert np.linalg.norm(rotations.attitude_error(rotations.quat_to_dcm(back[6:]),
+                                                       rotations.quat_to_dcm(nav[6:]))) < 1e-8
+    # the sign: a positive phi_D is a smaller estimated heading
+    est = ie.inject_error(nav, np.r_[np.zeros(8), 0.01])
+    yaw = rotations.quat_to_euler(np.array([est[6:], nav[6:]]))[:, 2]
+    assert rotations.wrap_angle(yaw[0] - yaw[1]) == pytest.approx(-0.01, rel=1e-3)

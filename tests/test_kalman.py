@@ -1,0 +1,197 @@
+"""Shared Kalman math: closed-form problems, Joseph form, checks, frozen states, NIS."""
+
+import functools
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from navreplay.filters import kalman
+from navreplay.filters.kalman import FilterDivergedError
+
+
+def test_scalar_random_constant_closed_form():
+    # x constant, z_k = x + v_k, v ~ N(0, R): P_k = P0 R / (R + k P0) and
+    # x_k = (R x0 + P0 sum z) / (R + k P0)
+    rng = np.random.default_rng(1)
+    P0, R, x0 = 4.0, 0.25, 0.3
+    x, P = np.array([x0]), np.array([[P0]])
+    H = np.ones((1, 1))
+    zs = 2.0 + rng.normal(0.0, np.sqrt(R), 50)
+    for k, zk in enumerate(zs, start=1):
+        x, P = kalman.predict(x, P, np.eye(1), np.zeros((1, 1)))
+        c = kalman.correct(x, P, np.array([zk]), H, np.array([R]))
+        x, P = c.x, c.P
+        assert P[0, 0] == pytest.approx(P0 * R / (R + k * P0), rel=1e-12)
+        assert x[0] == pytest.approx((R * x0 + P0 * zs[:k].sum()) / (R + k * P0), rel=1e-12)
+
+
+def _textbook_cv(x, P, zs, dt, q, r):
+    """Constant-velocity filter written the textbook way (explicit inverse, standard form)."""
+    Phi = np.array([[1.0, dt], [0.0, 1.0]])
+    Q = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    H = np.array([[1.0, 0.0]])
+    out = []
+    for zk in zs:
+        x = Phi @ x
+        P = Phi @ P @ Phi.T + Q
+        S = H @ P @ H.T + r
+        K = P @ H.T @ np.linalg.inv(S)
+        x = x + K @ (np.array([zk]) - H @ x)
+        P = (np.eye(2) - K @ H) @ P
+        out.append((x.copy(), P.copy()))
+    return out
+
+
+def test_constant_velocity_matches_textbook():
+    rng = np.random.default_rng(2)
+    dt, q, r = 0.5, 0.01, 0.04
+    zs = 0.3 * np.arange(40) * dt + rng.normal(0.0, 0.2, 40)
+    F = np.array([[0.0, 1.0], [0.0, 0.0]])
+    G = np.array([[0.0], [1.0]])
+    Phi, Qd = kalman.van_loan(F, G, np.array([q]), dt)
+    # exact: F^2 = 0, so the second-order series is exact too
+    np.testing.assert_allclose(kalman.discretize(F, dt), Phi, atol=1e-15)
+    np.testing.assert_allclose(
+        Qd, q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]), rtol=1e-12
+    )
+    x, P = np.zeros(2), np.diag([1.0, 1.0])
+    ref = _textbook_cv(x.copy(), P.copy(), zs, dt, q, r)
+    H = np.array([[1.0, 0.0]])
+    for zk, (x_ref, P_ref) in zip(zs, ref):
+        x, P = kalman.predict(x, P, Phi, Qd)
+        c = kalman.correct(x, P, np.array([zk]), H, np.array([[r]]))
+        x, P = c.x, c.P
+        np.testing.assert_allclose(x, x_ref, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(P, P_ref, rtol=1e-9, atol=1e-14)
+
+
+def test_discrete_noise_approaches_van_loan_for_small_steps():
+    rng = np.random.default_rng(3)
+    F = 0.1 * rng.normal(size=(6, 6))
+    G = rng.normal(size=(6, 3))
+    Qc = np.array([1.0, 2.0, 0.5])
+    _, Qd_exact = kalman.van_loan(F, G, Qc, 1e-3)
+    Qd = kalman.discrete_noise(G, Qc, 1e-3)
+    np.testing.assert_allclose(Qd, Qd_exact, rtol=1e-3, atol=1e-3 * np.abs(Qd_exact).max())
+    np.testing.assert_allclose(
+        kalman.discrete_noise(G, np.diag(Qc), 0.1), kalman.discrete_noise(G, Qc, 0.1)
+    )
+
+
+def test_joseph_form_keeps_P_psd_where_the_standard_form_does_not():
+    # ill-conditioned: huge prior, almost perfect measurements of combinations of the states
+    rng = np.random.default_rng(4)
+    n = 6
+    P = np.diag([1e8, 1e6, 1.0, 1e-4, 1e4, 1e2])
+    P_std = P.copy()
+    x = np.zeros(n)
+    for _ in range(30):
+        H = rng.normal(size=(2, n))
+        R = np.diag([1e-10, 1e-9])
+        c = kalman.correct(x, P, rng.normal(size=2), H, R)
+        P = c.P
+        kalman.check_covariance(P)
+        assert np.linalg.eigvalsh(P / np.sqrt(np.outer(np.diag(P), np.diag(P)))).min() > -1e-9
+        K = P_std @ H.T @ np.linalg.inv(H @ P_std @ H.T + R)
+        P_std = (np.eye(n) - K @ H) @ P_std
+    # the standard form has lost symmetry / definiteness by now
+    with pytest.raises(FilterDivergedError):
+        kalman.check_covariance(P_std)
+
+
+def test_psd_violation_raises_with_time():
+    P = np.array([[1.0, 2.0], [2.0, 1.0]])  # eigenvalues 3 and -1
+    with pytest.raises(FilterDivergedError, match=r"t = 12\.500000 s.*positive semi-definite"):
+        kalman.check_covariance(P, t=12.5)
+    with pytest.raises(FilterDivergedError, match="not symmetric"):
+        kalman.check_covariance(np.array([[1.0, 0.1], [0.2, 1.0]]))
+    with pytest.raises(FilterDivergedError, match="negative variance"):
+        kalman.check_covariance(np.diag([1.0, -1e-30]))
+    with pytest.raises(FilterDivergedError, match="non-finite"):
+        kalman.check_covariance(np.array([[np.nan, 0.0], [0.0, 1.0]]))
+    with pytest.raises(FilterDivergedError, match="t = 3.000000 s"):
+        kalman.predict(np.zeros(2), P, np.eye(2), np.zeros((2, 2)), t=3.0)
+    with pytest.raises(FilterDivergedError, match="S is not positive definite"):
+        kalman.correct(np.zeros(2), np.zeros((2, 2)), np.zeros(1), np.ones((1, 2)), np.zeros(1))
+
+
+def test_shapes_checked():
+    with pytest.raises(ValueError, match="H must have shape"):
+        kalman.correct(np.zeros(3), np.eye(3), np.zeros(2), np.ones((2, 2)), np.ones(2))
+    with pytest.raises(ValueError, match="vector"):
+        kalman.correct(np.zeros((3, 1)), np.eye(3), np.zeros(1), np.ones((1, 3)), np.ones(1))
+    with pytest.raises(ValueError, match="Phi must have shape"):
+        kalman.predict(np.zeros(3), np.eye(3), np.eye(2), np.eye(3))
+
+
+def test_zero_variance_states_are_allowed():
+    # inert states: zero rows and columns, PSD but not PD
+    P = np.diag([1.0, 0.0, 1e-14, 0.0])
+    kalman.check_covariance(P)
+    c = kalman.correct(np.zeros(4), P, np.ones(2), np.eye(2, 4), np.ones(2))
+    assert c.P[1, 1] == 0.0 and c.P[3, 3] == 0.0
+
+
+def test_frozen_states_not_updated():
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(5, 5))
+    P = A @ A.T + np.eye(5)
+    x = rng.normal(size=5)
+    H = rng.normal(size=(3, 5))
+    frozen = np.array([False, True, False, False, True])
+    c = kalman.correct(x, P, rng.normal(size=3), H, np.ones(3), frozen=frozen)
+    np.testing.assert_array_equal(c.x[frozen], x[frozen])
+    np.testing.assert_allclose(c.P[np.ix_(frozen, frozen)], P[np.ix_(frozen, frozen)], rtol=1e-12)
+    free = ~frozen
+    assert np.all(np.diag(c.P)[free] < np.diag(P)[free])
+    # the suboptimal (masked) gain gives a larger covariance than the optimal one
+    c_opt = kalman.correct(x, P, np.zeros(3), H, np.ones(3))
+    assert np.linalg.eigvalsh(c.P - c_opt.P).min() > -1e-12
+
+
+@functools.cache
+def _cv2d():
+    dt, q = 0.1, 0.5
+    F = np.zeros((4, 4))
+    F[0, 2] = F[1, 3] = 1.0
+    G = np.zeros((4, 2))
+    G[2, 0] = G[3, 1] = 1.0
+    Phi, Qd = kalman.van_loan(F, G, np.array([q, q]), dt)
+    return Phi, Qd, np.linalg.cholesky(Qd + 1e-18 * np.eye(4))
+
+
+def _run_cv2d(rng, steps):
+    Phi, Qd, Lq = _cv2d()
+    H = np.eye(2, 4)
+    R = np.diag([0.3**2, 0.5**2])
+    x_true = np.array([0.0, 0.0, 1.0, -1.0])
+    P = np.diag([1.0, 1.0, 0.5, 0.5])
+    x = x_true + np.linalg.cholesky(P) @ rng.normal(size=4)
+    nis = np.empty(steps)
+    for k in range(steps):
+        x_true = Phi @ x_true + Lq @ rng.normal(size=4)
+        x, P = kalman.predict(x, P, Phi, Qd)
+        z = H @ x_true + np.sqrt(np.diag(R)) * rng.normal(size=2)
+        c = kalman.correct(x, P, z, H, R)
+        x, P = c.x, c.P
+        nis[k] = c.nis
+    assert c.nis == pytest.approx(c.nu @ np.linalg.solve(c.S, c.nu))
+    e = x - x_true
+    return nis, e @ np.linalg.solve(P, e)
+
+
+def test_nis_of_a_simulated_linear_system_inside_chi2_bounds():
+    # innovations of a consistent filter are white: the time average has N*m dof
+    nis, _ = _run_cv2d(np.random.default_rng(6), 2000)
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 2 * nis.size) / nis.size
+    assert lo < nis.mean() < hi
+
+
+def test_nees_of_a_simulated_linear_system_inside_chi2_bounds():
+    # estimation errors are correlated in time: average over independent runs instead
+    rng = np.random.default_rng(7)
+    runs = 150
+    nees = np.array([_run_cv2d(rng, 30)[1] for _ in range(runs)])
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 4 * runs) / runs
+    assert lo < nees.mean() < hi
