@@ -270,8 +270,10 @@ def test_euler_round_trips(roll, pitch, yaw):
     np.testing.assert_allclose(rot.quat_to_euler(rot.euler_to_quat(e)), e2, atol=1e-12)
 
 
-@given(vec3.filter(lambda v: np.linalg.norm(v) > 0).map(lambda v: v / np.linalg.norm(v)),
-       st.floats(0.0, PI, **finite))
+@given(
+    vec3.filter(lambda v: np.linalg.norm(v) > 0).map(lambda v: v / np.linalg.norm(v)),
+    st.floats(0.0, PI, **finite),
+)
 def test_rotvec_exp_log_inverse_up_to_pi(axis, angle):
     rv = axis * angle
     q = rot.rotvec_to_quat(rv)
@@ -289,8 +291,12 @@ def test_rotvec_exp_log_inverse_up_to_pi(axis, angle):
 def test_rotvec_small_angles(angle):
     rv = angle * np.array([0.6, -0.8, 0.0])
     q = rot.rotvec_to_quat(rv)
-    np.testing.assert_allclose(q, [np.cos(angle / 2), *(np.sin(angle / 2) * np.array([0.6, -0.8, 0.0]))],
-                               rtol=1e-15, atol=1e-22)
+    np.testing.assert_allclose(
+        q,
+        [np.cos(angle / 2), *(np.sin(angle / 2) * np.array([0.6, -0.8, 0.0]))],
+        rtol=1e-15,
+        atol=1e-22,
+    )
     np.testing.assert_allclose(rot.quat_to_rotvec(q), rv, rtol=1e-12, atol=1e-22)
     # first order: exp([rv x]) = I + [rv x]
     np.testing.assert_allclose(rot.rotvec_to_dcm(rv), np.eye(3) + rot.skew(rv), atol=angle**2)
@@ -306,9 +312,13 @@ def test_rotvec_is_vectorised():
 # gimbal lock ---------------------------------------------------------------------------------
 
 
-@given(st.floats(-PI, PI, **finite), st.sampled_from([1.0, -1.0]),
-       st.sampled_from([0.0, 1e-14, 1e-12, 1e-10, 1e-8, 1e-6, 1e-4]), st.floats(-PI, PI, **finite),
-       vec3)
+@given(
+    st.floats(-PI, PI, **finite),
+    st.sampled_from([1.0, -1.0]),
+    st.sampled_from([0.0, 1e-14, 1e-12, 1e-10, 1e-8, 1e-6, 1e-4]),
+    st.floats(-PI, PI, **finite),
+    vec3,
+)
 def test_dcm_to_euler_near_gimbal_lock_reproduces_the_dcm(roll, sign, eps, yaw, axis):
     e = np.array([roll, sign * (PI / 2 - eps), yaw])
     # a DCM carrying rounding errors like one from a chain of products
@@ -373,8 +383,9 @@ def test_against_scipy_quaternion_and_rotvec(q, rv):
     R = Rotation.from_rotvec(rv)
     assert same_rotation_quat(rot.rotvec_to_quat(rv), rot.quat_xyzw_to_wxyz(R.as_quat()))
     if np.linalg.norm(rv) < PI - 1e-6:
-        np.testing.assert_allclose(rot.quat_to_rotvec(rot.rotvec_to_quat(rv)), R.as_rotvec(),
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            rot.quat_to_rotvec(rot.rotvec_to_quat(rv)), R.as_rotvec(), atol=1e-12
+        )
 
 
 @given(st.floats(-PI, PI, **finite), st.floats(-1.55, 1.55, **finite), st.floats(-PI, PI, **finite))
@@ -382,7 +393,7 @@ def test_against_scipy_euler(roll, pitch, yaw):
     # scipy's intrinsic "ZYX" with angles [yaw, pitch, roll] is Rz(yaw) Ry(pitch) Rx(roll)
     R = Rotation.from_euler("ZYX", [yaw, pitch, roll])
     np.testing.assert_allclose(rot.euler_to_dcm([roll, pitch, yaw]), R.as_matrix(), atol=1e-15)
-    assert same_rotation_quat(rot.euler_to_quat([roll, pitch, yaw]),
-                              rot.quat_xyzw_to_wxyz(R.as_quat()))
-    np.testing.assert_allclose(rot.dcm_to_euler(R.as_matrix())[::-1], R.as_euler("ZYX"),
-                               atol=1e-11)
+    assert same_rotation_quat(
+        rot.euler_to_quat([roll, pitch, yaw]), rot.quat_xyzw_to_wxyz(R.as_quat())
+    )
+    np.testing.assert_allclose(rot.dcm_to_euler(R.as_matrix())[::-1], R.as_euler("ZYX"), atol=1e-11)

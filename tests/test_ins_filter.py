@@ -116,17 +116,43 @@ def test_propagate_covariance_equals_the_reference_loop():
     nav[:, 3:6] = [10.0, -5.0, 0.2]
     nav[:, 6:10] = rotations.euler_to_quat(np.c_[np.zeros(k), np.zeros(k), 0.1 * np.arange(k)])
     f_b = np.tile([0.2, 0.1, -9.8], (k, 1))
+    w_b = np.tile([0.01, -0.02, 0.1], (k, 1))
     dt = np.full(k, 0.1)
     q = np.r_[np.zeros(3), np.full(3, 1e-6), np.full(3, 1e-10), np.full(6, 1e-14), np.zeros(3)]
+    noise = ie.ProcessNoise(q, k_acc=3e-6, k_gyro=4e-6)
     P_ref = P.copy()
     for i in range(k):
         F = np.zeros((n, n))
-        ie.system_matrix(nav[i, :3], nav[i, 3:6], rotations.quat_to_dcm(nav[i, 6:]), f_b[i],
-                         out=F)
+        C = rotations.quat_to_dcm(nav[i, 6:])
+        ie.system_matrix(nav[i, :3], nav[i, 3:6], C, f_b[i], out=F)
+        a_n = C @ f_b[i] + earth.gravity_n(nav[i, 0], 0.0)  # (21) uses g on the ellipsoid
+        Qd = q.copy()
+        Qd[3:6] += noise.k_acc * a_n @ a_n
+        Qd[6:9] += noise.k_gyro * w_b[i] @ w_b[i]
         _, P_ref = kalman.predict(np.zeros(n), P_ref, kalman.discretize(F, dt[i]),
-                                  np.diag(q * dt[i]))
-    np.testing.assert_allclose(ie.propagate_covariance(P, nav, f_b, dt, q), P_ref,
+                                  np.diag(Qd * dt[i]))
+    np.testing.assert_allclose(ie.propagate_covariance(P, nav, f_b, w_b, dt, noise), P_ref,
                                rtol=1e-10, atol=1e-24)
+
+
+def test_accumulate_covariance_steps_and_carries_the_open_step():
+    k = 25
+    hist = np.zeros((k + 1, 10))
+    hist[:, 0] = 0.6
+    hist[:, 6] = 1.0
+    f_b = np.tile([0.0, 0.0, -9.8], (k, 1))
+    w_b = np.zeros((k, 3))
+    dt = np.full(k, 0.01)
+    noise = ie.ProcessNoise(np.r_[np.zeros(3), np.full(3, 1e-4), np.zeros(9)])
+    P0 = np.eye(15) * 1e-6
+    open_step = ie.OpenStep()
+    P = ie.accumulate_covariance(P0, hist, f_b, w_b, dt, 0.1, noise, open_step)
+    assert open_step.dt == pytest.approx(0.05)
+    P = ie.close_step(P, noise, open_step)
+    assert open_step.dt == 0.0
+    ref = ie.propagate_covariance(P0, hist[[0, 10, 20]], f_b[:3], w_b[:3],
+                                  np.array([0.1, 0.1, 0.05]), noise)
+    np.testing.assert_allclose(P, ref, rtol=1e-12, atol=1e-18)
 
 
 def test_error_definitions_round_trip():

@@ -38,8 +38,12 @@ def test_constant_yaw_rate_gives_rate_plus_earth_rate():
     w_n, w_d = W * np.cos(lat), -W * np.sin(lat)
     y0, y1 = yaw[:-1], yaw[1:]
     expected = np.stack(
-        [w_n * (np.sin(y1) - np.sin(y0)) / (w * dt), w_n * (np.cos(y1) - np.cos(y0)) / (w * dt),
-         w + w_d + 0 * y0], axis=-1,
+        [
+            w_n * (np.sin(y1) - np.sin(y0)) / (w * dt),
+            w_n * (np.cos(y1) - np.cos(y0)) / (w * dt),
+            w + w_d + 0 * y0,
+        ],
+        axis=-1,
     )
     # from the second sample on, the two-sample coning inversion recovers the mean rate; the
     # first sample has no predecessor and holds the rotation vector, which differs from the
@@ -60,11 +64,13 @@ def test_stationary_level_reads_earth_rate_and_minus_g():
     q = np.tile(rot.euler_to_quat(euler), (t.size, 1))
     omega, f = km.imu_from_truth(t, *_static(t.size, lat, h), q)
     C_bn = rot.euler_to_dcm(euler).T
-    np.testing.assert_allclose(omega, np.tile(C_bn @ earth.omega_ie_n(lat), (t.size - 1, 1)),
-                               rtol=1e-15, atol=1e-20)
+    np.testing.assert_allclose(
+        omega, np.tile(C_bn @ earth.omega_ie_n(lat), (t.size - 1, 1)), rtol=1e-15, atol=1e-20
+    )
     # the second-order velocity scheme leaves a relative residual ~ |W dt|^2 / 4 (1e-11 here)
-    np.testing.assert_allclose(f, np.tile([0, 0, -earth.gravity(lat, h)], (t.size - 1, 1)),
-                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        f, np.tile([0, 0, -earth.gravity(lat, h)], (t.size - 1, 1)), rtol=0, atol=1e-9
+    )
 
 
 def test_constant_acceleration_north_gives_expected_specific_force():
@@ -88,9 +94,7 @@ def test_constant_acceleration_north_gives_expected_specific_force():
     np.testing.assert_allclose(f, f_expected, rtol=0, atol=1e-10)
     assert np.abs(f[:, 1]).max() > 4e-3  # Coriolis at 55 m/s is resolved
     # the gyro reads the rate of the level frame: earth rate + transport rate -v_N/(R_M+h) on E
-    w_expected = np.stack(
-        [W * np.cos(lat_m), -v_m / (R_M + h), -W * np.sin(lat_m)], axis=-1
-    )
+    w_expected = np.stack([W * np.cos(lat_m), -v_m / (R_M + h), -W * np.sin(lat_m)], axis=-1)
     np.testing.assert_allclose(omega, w_expected, rtol=0, atol=1e-13)
 
 
@@ -110,11 +114,15 @@ def test_agrees_with_spec_first_order_formula():
     v_m = 0.5 * (v[1:] + v[:-1])
     w_ie = earth.omega_ie_n(lat_m)
     w_en = earth.omega_en_n(lat_m, h_m, v_m)
-    q_mid = rot.quat_mult(q[:-1], rot.rotvec_to_quat(0.5 * rot.quat_to_rotvec(
-        rot.quat_mult(rot.quat_conj(q[:-1]), q[1:]))))
+    q_mid = rot.quat_mult(
+        q[:-1],
+        rot.rotvec_to_quat(0.5 * rot.quat_to_rotvec(rot.quat_mult(rot.quat_conj(q[:-1]), q[1:]))),
+    )
     C_bn_mid = np.swapaxes(rot.quat_to_dcm(q_mid), -1, -2)
-    dtheta = rot.dcm_to_rotvec(np.swapaxes(C[:-1], -1, -2) @ C[1:]) + np.einsum(
-        "kij,kj->ki", C_bn_mid, w_ie + w_en) * dt
+    dtheta = (
+        rot.dcm_to_rotvec(np.swapaxes(C[:-1], -1, -2) @ C[1:])
+        + np.einsum("kij,kj->ki", C_bn_mid, w_ie + w_en) * dt
+    )
     acc = earth.gravity_n(lat_m, h_m) - np.cross(2 * w_ie + w_en, v_m)
     dv = np.einsum("kij,kj->ki", C_bn_mid, v[1:] - v[:-1] - acc * dt)
     # they differ by second-order terms only: coning ~ |w x w'| dt^2 / 12 (w ~ 0.26 rad/s,

@@ -156,7 +156,7 @@ def saved(tmp_path_factory):
 
 def test_entity_tree(saved):
     path, *_, data = saved
-    b = naming.entity("gps-ins[q=2]")
+    b = naming.entity_path("gps-ins[q=2]")
     expected = [
         "/truth/nav/roll", "/truth/nav/v_N", "/truth/nav/p_E", "/truth/extra/theta_f",
         "/gps-ins/state/phi_N", "/gps-ins/sigma/db_g_z", "/gps-ins/error/db_g_x",
@@ -302,6 +302,30 @@ def test_observer_then_log_run_logs_each_row_once(tmp_path):
     np.testing.assert_allclose(col["Scalars:scalars"][:, 0], r.x[:, 3])
     assert data["/world/live/body"]["time"].shape == (600,)
     assert "/live/innovation/gps_pos/nis" in data
+
+
+def test_observer_without_navigation_solution(tmp_path):
+    r = make_result("bare", 7, m=300)
+    path = tmp_path / "bare.rrd"
+    with open_sink(path) as sink:
+        observe = sink.observer()
+        for stop in (100, 300):
+            observe(
+                RunResult(
+                    r.filter_name,
+                    r.label,
+                    r.recording,
+                    r.t0_ns,
+                    r.t[:stop],
+                    r.state_names,
+                    r.x[:stop],
+                    r.P[:stop],
+                )  # fmt: skip
+            )
+        sink.log_run(r)
+    data = read_rrd(path)
+    assert data["/bare/state/phi_E"]["time"].shape == (300,)
+    assert not any(p.startswith("/world") for p in [*data, *data["static"]])
 
 
 def test_run_logged_twice_is_refused(tmp_path):

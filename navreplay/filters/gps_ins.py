@@ -75,7 +75,6 @@ from navreplay.filters.base import FilterContext, FilterParams, Innovation
 from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.registry import register_filter
 from navreplay.geo import earth
-from navreplay.geo.rotations import quat_to_dcm
 from navreplay.streams import StreamKind
 
 LEVER = slice(15, 18)
@@ -118,7 +117,8 @@ class GpsInsParams(InsParams):
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    x, y, z = float(v[0]), float(v[1]), float(v[2])
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def gps_position_model(
@@ -160,7 +160,7 @@ def gps_position_model(
     """
     pos = nav[strapdown.POS]
     D = ie.position_scale(pos)
-    C = quat_to_dcm(nav[strapdown.QUAT])
+    C = ie.nav_dcm(nav)
     l_n = C @ lever_arm_b
     d = pos - pos_gps
     d[1] = (d[1] + math.pi) % (2.0 * math.pi) - math.pi
@@ -207,19 +207,26 @@ def gps_velocity_model(
     R : ndarray, shape (3,)
         Diagonal of R [(m/s)^2].
     """
-    pos = nav[strapdown.POS]
+    lat, h = float(nav[0]), float(nav[2])
     v = nav[strapdown.VEL]
-    C = quat_to_dcm(nav[strapdown.QUAT])
-    w_in = earth.omega_ie_n(pos[0]) + earth.omega_en_n(pos[0], pos[2], v)
+    C = ie.nav_dcm(nav)
+    R_M, R_N = earth.radii(lat)
+    w_in = np.array([  # w_ie + w_en
+        earth.OMEGA_IE * math.cos(lat) + v[1] / (R_N + h),
+        -v[0] / (R_M + h),
+        -earth.OMEGA_IE * math.sin(lat) - v[1] * math.tan(lat) / (R_N + h),
+    ])
+    W_in = _skew(w_in)
+    L_b = _skew(lever_arm_b)
     l_n = C @ lever_arm_b
-    rot_n = C @ np.cross(omega_ib_b, lever_arm_b)
-    z = v + rot_n - np.cross(w_in, l_n) - v_gps  # (8), (9)
+    rot_n = C @ (-L_b @ omega_ib_b)  # C (w x l)
+    z = v + rot_n - W_in @ l_n - v_gps  # (8), (9)
     H = np.zeros((3, n_states))  # (10)
     H[:, ie.VEL] = np.eye(3)
-    H[:, ie.ATT] = _skew(rot_n) - _skew(w_in) @ _skew(l_n)
-    H[:, ie.BG] = C @ _skew(lever_arm_b)
+    H[:, ie.ATT] = _skew(rot_n) - W_in @ _skew(l_n)
+    H[:, ie.BG] = C @ L_b
     if lever_states:
-        H[:, LEVER] = C @ _skew(omega_ib_b) - _skew(w_in) @ C
+        H[:, LEVER] = C @ _skew(omega_ib_b) - W_in @ C
     return z, H, np.asarray(vel_sigma, dtype=float) ** 2  # (11)
 
 
@@ -274,9 +281,8 @@ class GpsInsFilter(InsFilter):
             )
             name = "gps_pos"
         elif kind is StreamKind.GPS_VEL and self.params.use_gps_vel:
-            omega = self._prev[0] if self._prev is not None else np.zeros(3)
             z, H, R = gps_velocity_model(
-                self.nav, self.lever_arm_b, omega, np.asarray(sample["v_n"]),
+                self.nav, self.lever_arm_b, self.omega_ib_b, np.asarray(sample["v_n"]),
                 np.asarray(sample["vel_sigma"]) * self.params.gps_vel_sigma_scale, n,
                 lever_states=lever_states,
             )

@@ -37,8 +37,9 @@ Models
     f_hat = f_meas - b_a_hat,   omega_hat = omega_meas - b_g_hat                          (1)
     nav_k = strapdown(nav_k-1, omega_hat, f_hat, dt)            at the IMU rate           (2)
     dx' = F(nav, f_hat) dx + G w                                ins_error eqs. (5)-(18)    (3)
-    Phi = I + F T + (F T)^2 / 2,  Qd = diag(q) T                every T = cov_step        (4)
+    Phi = I + F T + (F T)^2 / 2,  Qd = diag(q) T + motion terms every T = cov_step        (4)
     q   = [0, 0, 0, VRW^2 I3, ARW^2 I3, q_ba I3, q_bg I3]       per second                 (5)
+    motion terms: Qd[v] += s_a^2 tau |a_n|^2 T, Qd[phi] += s_g^2 tau |omega|^2 T          (5a)
     P0  = diag(sigma_N^2/(R_M+h)^2, sigma_E^2/((R_N+h) cos lat)^2, sigma_D^2,
                sigma_v^2, sigma_phi^2, sigma_ba^2, sigma_bg^2)                             (6)
 
@@ -50,10 +51,12 @@ instability of sigma and correlation time tau, ``q_b = 2 sigma^2 / tau`` (the in
 its variance).
 
 The model has no scale-factor, misalignment or g-sensitivity states. At a roughly level
-attitude the accelerometer misalignment times gravity and the gyro g-sensitivity times
-gravity act as constant biases; the default bias sigmas are those *effective* values for the
-``tactical`` IMU grade of :func:`navreplay.sensors.imu_grade` (0.3 mg bias + 0.5 mrad x g;
-1 deg/h bias + 1 deg/h/g x g).
+attitude the accelerometer scale factor and misalignment times gravity, and the gyro
+g-sensitivity times gravity, act as constant biases: the bias states estimate these
+*effective* biases, and the default bias sigmas are the effective values for the ``tactical``
+IMU grade of :func:`navreplay.sensors.imu_grade` (0.3 mg bias + 0.5 mrad x g; 1 deg/h bias +
+1 deg/h/g x g). Under motion, the scale-factor and misalignment errors (s_a, s_g, 1-sigma)
+enter as the motion-dependent noise (5a) (ins_error eq. 21), white over a correlation time tau.
 """
 
 from __future__ import annotations
@@ -127,20 +130,31 @@ class InsParams(FilterParams):
     """Initial velocity 1-sigma per axis [m/s]; None: ``initial_nav["sigma"]["v_n"]``."""
     init_att_sigma: float | None = None
     """Initial attitude 1-sigma per axis [rad]; None: ``initial_nav["sigma"]["phi"]``."""
+    accel_sf_mis: float = 0.5e-3
+    """Unmodelled accelerometer scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off)."""
+    gyro_sf_mis: float = 0.5e-3
+    """Unmodelled gyro scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off)."""
+    sf_mis_time: float = 15.0
+    """Correlation time tau of eq. (5a) [s], about the length of a manoeuvre."""
     cov_step: float = 0.1
     """Covariance propagation step [s] (cut short at updates and outputs)."""
 
     def __post_init__(self) -> None:
         for name in ("accel_vrw", "gyro_arw", "accel_bias_sigma", "gyro_bias_sigma",
                      "accel_bias_rw", "gyro_bias_rw", "init_pos_sigma", "init_vel_sigma",
-                     "init_att_sigma"):
+                     "init_att_sigma", "accel_sf_mis", "gyro_sf_mis", "sf_mis_time"):
             _check(self, name)
         _check(self, "cov_step", positive=True, upper=10.0)
 
-    def noise_density(self) -> np.ndarray:
-        """Diagonal Qc of ``[n_a, n_g, n_ba, n_bg]``, shape (12,), eq. (5)."""
-        return ie.noise_densities(self.accel_vrw, self.gyro_arw, self.accel_bias_rw,
-                                  self.gyro_bias_rw)
+    def process_noise(self, n_states: int = ie.N_STATES) -> ie.ProcessNoise:
+        """The process noise of eqs. (5), (5a) for a filter of ``n_states`` (extra states 0)."""
+        q = np.zeros(n_states)
+        q[: ie.N_STATES] = ie.process_noise_diagonal(
+            ie.noise_densities(self.accel_vrw, self.gyro_arw, self.accel_bias_rw,
+                               self.gyro_bias_rw), 1.0)
+        k = ie.ProcessNoise.motion_coefficient
+        return ie.ProcessNoise(q, k(self.accel_sf_mis, self.sf_mis_time),
+                               k(self.gyro_sf_mis, self.sf_mis_time))
 
 
 def initial_covariance(
@@ -252,11 +266,12 @@ class InsFilter(Filter):
         n = ie.N_STATES + self._extra_states()
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
-        self._q = np.zeros(n)
-        self._q[: ie.N_STATES] = ie.process_noise_diagonal(p.noise_density(), 1.0)
+        self._noise = p.process_noise(n)
         self._open = ie.OpenStep()  # the covariance step in progress
-        # the last compensated IMU sample (coning / sculling across blocks, lever-arm rate)
-        self._prev: tuple[np.ndarray, np.ndarray, float] | None = None
+        # increments of the last IMU sample (coning / sculling across blocks) and its
+        # compensated body rate (lever-arm terms)
+        self._prev = np.zeros(6)
+        self.omega_ib_b = np.zeros(3)
         self.state_names = NAV_STATE_NAMES + self._extra_names()
         self._init_extra()
         kalman.check_covariance(self.P, name="P0", t=self.t)
@@ -280,16 +295,29 @@ class InsFilter(Filter):
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
         t = np.asarray(t, dtype=np.float64)
-        first = int(np.searchsorted(t, self.t + _TIME_TOL, side="right"))
-        if first == t.shape[0]:
-            return  # all samples at or before the current time (before the initial solution)
-        t = t[first:]
+        first = 0
+        if t[0] <= self.t + _TIME_TOL:  # samples before the initial solution are skipped
+            first = int(np.searchsorted(t, self.t + _TIME_TOL, side="right"))
+            if first == t.shape[0]:
+                return
+            t = t[first:]
         omega = imu["omega_ib_b"][first:] - self.b_g  # (1)
         f = imu["f_b"][first:] - self.b_a
-        dt = np.diff(t, prepend=self.t)
-        hist = strapdown.integrate(self.nav, omega, f, dt, prev=self._prev)  # (2)
-        self._prev = (omega[-1], f[-1], float(dt[-1]))
-        self._covariance_steps(hist, f, dt)
+        k = t.shape[0]
+        dt = np.empty(k)
+        dt[0] = t[0] - self.t
+        np.subtract(t[1:], t[:-1], out=dt[1:])
+        hist = np.empty((k + 1, strapdown.NAV_SIZE))
+        bad = strapdown.integrate_kernel(self.nav, omega, f, dt, self._prev, hist)  # (2)
+        if bad != -1:
+            i = max(bad, 0)
+            raise ValueError(
+                f"IMU sample at t = {t[i]:.6f} s is not finite or not after the previous one "
+                f"(omega_ib_b = {omega[i] + self.b_g}, f_b = {f[i] + self.b_a})"
+            )
+        self._prev = np.concatenate((omega[-1] * dt[-1], f[-1] * dt[-1]))
+        self.omega_ib_b = omega[-1]
+        self._covariance_steps(hist, f, omega, dt)
         self.nav = hist[-1]
         self.t = float(t[-1])
 
@@ -312,22 +340,21 @@ class InsFilter(Filter):
 
     # -- covariance propagation ------------------------------------------------------------
 
-    def _covariance_steps(self, hist: np.ndarray, f: np.ndarray, dt: np.ndarray) -> None:
-        """Propagate P over the steps of cov_step that end in this block, eqs. (3)-(5)."""
-        P = ie.accumulate_covariance(self.P, hist, f, dt, self.params.cov_step, self._q,
-                                     self._open)  # (4)
+    def _covariance_steps(
+        self, hist: np.ndarray, f: np.ndarray, omega: np.ndarray, dt: np.ndarray
+    ) -> None:
+        """Propagate P over the steps of cov_step that end in this block, eqs. (3)-(5a)."""
+        P = ie.accumulate_covariance(self.P, hist, f, omega, dt, self.params.cov_step,
+                                     self._noise, self._open)  # (4)
         kalman.check_covariance(P, t=float(self.t + dt.sum()))
         self.P = P
 
     def _sync_covariance(self) -> None:
         """Close the open covariance step so that P belongs to the current time."""
         if self._open.dt > 0.0:
-            P = ie.propagate_covariance(self.P, self._open.nav[None, :],
-                                        self._open.f_mean()[None, :],
-                                        np.array([self._open.dt]), self._q)
+            P = ie.close_step(self.P, self._noise, self._open)
             kalman.check_covariance(P, t=self.t)
             self.P = P
-            self._open.sums[:] = 0.0
 
     # -- feedback --------------------------------------------------------------------------
 

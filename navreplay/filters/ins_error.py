@@ -75,12 +75,24 @@ With depth as the vertical coordinate the model is transformed by T = diag(1, 1,
 ``F_d = T F T`` (row 2 and column 2 change sign, eq. 19). This is the form of the RPM-aided INS
 spec, section 4.2 (its eqs. 14-19 in NED).
 
+Discrete process noise over a step T (diagonal, attitude independent)::
+
+    Qd = diag(q) T,  q = [0 (3), q_a (3), q_g (3), q_ba (3), q_bg (3)]                (20)
+    Qd[v, v] += k_acc |a_n|^2 T,  a_n = C_nb_hat f_hat + g_n;
+    Qd[phi, phi] += k_gyro |omega_hat|^2 T                                             (21)
+
+Eq. (21) is optional: it covers unmodelled scale-factor and misalignment errors, which act only
+under motion (an error ``(S + M) omega`` of 1-sigma ``sigma |omega|`` per axis). Treating it as
+white over a correlation time tau (about the length of a turn) gives ``k = sigma^2 tau``, so
+a turn of that length collects the variance ``(sigma |omega| tau)^2`` of the constant error.
+
 Every block was checked against central finite differences of (2)-(4) and of
 :func:`navreplay.strapdown.propagate` (tests/test_ins_filter.py).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 
@@ -335,110 +347,6 @@ def _quat_to_dcm(q: np.ndarray) -> np.ndarray:
     return C
 
 
-@numba.njit(cache=True)
-def _covariance_step(
-    P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, dt: float, q: np.ndarray, depth: bool,
-    F: np.ndarray, eye: np.ndarray,
-) -> np.ndarray:
-    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19); F is scratch."""
-    n = P.shape[0]
-    F[:, :] = 0.0
-    _fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], _quat_to_dcm(nav[6:10]), f_b,
-                        depth, F)
-    Fdt = F * dt
-    Phi = eye + Fdt + 0.5 * (Fdt @ Fdt)  # kalman (3)
-    P = Phi @ P @ Phi.T  # kalman (6)
-    for i in range(n):
-        P[i, i] += q[i] * dt  # kalman (4), diagonal
-    return 0.5 * (P + P.T)
-
-
-@numba.njit(cache=True)
-def _propagate_covariance(
-    P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, dt: np.ndarray, q: np.ndarray,
-    depth: bool,
-) -> np.ndarray:
-    n = P.shape[0]
-    F = np.zeros((n, n))
-    eye = np.eye(n)
-    for k in range(dt.shape[0]):
-        P = _covariance_step(P, nav[k], f_b[k], dt[k], q, depth, F, eye)
-    return P
-
-
-@numba.njit(cache=True)
-def _accumulate_covariance(
-    P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, dt: np.ndarray, step: float,
-    q: np.ndarray, depth: bool, open_nav: np.ndarray, open_sums: np.ndarray,
-) -> np.ndarray:
-    n = P.shape[0]
-    F = np.zeros((n, n))
-    eye = np.eye(n)
-    f_mean = np.empty(3)
-    for k in range(dt.shape[0]):
-        if open_sums[0] == 0.0:
-            open_nav[:] = hist[k]
-        open_sums[0] += dt[k]
-        for j in range(3):
-            open_sums[1 + j] += f_b[k, j] * dt[k]
-        if open_sums[0] >= step - 1e-9:
-            for j in range(3):
-                f_mean[j] = open_sums[1 + j] / open_sums[0]
-            P = _covariance_step(P, open_nav, f_mean, open_sums[0], q, depth, F, eye)
-            open_sums[:] = 0.0
-    return P
-
-
-def propagate_covariance(
-    P: np.ndarray,
-    nav: np.ndarray,
-    f_b: np.ndarray,
-    dt: np.ndarray,
-    q: np.ndarray,
-    *,
-    vertical: Vertical = Vertical.HEIGHT,
-) -> np.ndarray:
-    """Covariance propagation over k steps of a filter whose first 15 states are these.
-
-    The same as k calls of ``kalman.predict`` with ``Phi = kalman.discretize(F, dt)``
-    (``F = system_matrix(...)`` in the top-left block, 0 elsewhere: extra states are random
-    constants or random walks) and ``Qd = diag(q) dt``, compiled into one loop. The result is
-    symmetrised but not checked: check it with ``kalman.check_covariance``.
-
-    Parameters
-    ----------
-    P : ndarray, shape (n, n), n >= 15
-        Covariance at the start.
-    nav : ndarray, shape (k, 10)
-        Navigation vector at which F is evaluated for each step.
-    f_b : ndarray, shape (k, 3)
-        Bias-compensated mean specific force of each step, body [m/s^2].
-    dt : ndarray, shape (k,)
-        Step lengths [s].
-    q : ndarray, shape (n,)
-        Diagonal of ``G Qc G^T`` per second (isotropic triad noise, see
-        :func:`process_noise_diagonal` with dt = 1), units of state^2/s.
-    vertical : Vertical
-
-    Returns
-    -------
-    P : ndarray, shape (n, n)
-    """
-    n = P.shape[0]
-    if P.shape != (n, n) or n < N_STATES or q.shape != (n,):
-        raise ValueError(f"P must be (n, n) with n >= 15 and q (n,); got {P.shape}, {q.shape}")
-    k = dt.shape[0]
-    if nav.shape != (k, 10) or f_b.shape != (k, 3):
-        raise ValueError(
-            f"nav must be ({k}, 10) and f_b ({k}, 3) for {k} steps; got {nav.shape}, {f_b.shape}"
-        )
-    return _propagate_covariance(
-        np.ascontiguousarray(P, dtype=np.float64), np.ascontiguousarray(nav, dtype=np.float64),
-        np.ascontiguousarray(f_b, dtype=np.float64), np.ascontiguousarray(dt, dtype=np.float64),
-        np.ascontiguousarray(q, dtype=np.float64), vertical is Vertical.DEPTH,
-    )
-
-
 def noise_matrix(C_nb: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:
     """Noise input matrix G, eq. (18), columns ``[n_a, n_g, n_ba, n_bg]``.
 
@@ -580,10 +488,130 @@ def apply_correction(
     out[1] -= dx[1]
     out[2] -= dx[2] if vertical is Vertical.HEIGHT else -dx[2]
     out[NAV_VEL] -= dx[VEL]
-    p = dx[ATT]
-    dq = np.array([1.0, 0.5 * p[0], 0.5 * p[1], 0.5 * p[2]])
-    out[NAV_Q] = quat_normalize(quat_mult(dq, out[NAV_Q]))
+    a, b, c = 0.5 * float(dx[6]), 0.5 * float(dx[7]), 0.5 * float(dx[8])
+    q0, q1, q2, q3 = (float(v) for v in nav[NAV_Q])
+    # [1, a, b, c] (x) q, Hamilton product
+    r0 = q0 - a * q1 - b * q2 - c * q3
+    r1 = q1 + a * q0 + b * q3 - c * q2
+    r2 = q2 - a * q3 + b * q0 + c * q1
+    r3 = q3 + a * q2 - b * q1 + c * q0
+    k = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    if r0 < 0.0:
+        k = -k
+    out[6] = r0 * k
+    out[7] = r1 * k
+    out[8] = r2 * k
+    out[9] = r3 * k
     return out
+
+
+def nav_dcm(nav: np.ndarray) -> np.ndarray:
+    """Attitude DCM C_nb of a navigation vector (10,), shape (3, 3)."""
+    return _quat_to_dcm(np.ascontiguousarray(nav[NAV_Q], dtype=np.float64))
+
+
+# -- covariance propagation (compiled) --------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def _covariance_step(
+    P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: float,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, F: np.ndarray, eye: np.ndarray,
+) -> np.ndarray:
+    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19) and Q from (20), (21)."""
+    n = P.shape[0]
+    F[:, :] = 0.0
+    C = _quat_to_dcm(nav[6:10])
+    _fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], C, f_b, depth, F)
+    Fdt = F * dt
+    Phi = eye + Fdt + 0.5 * (Fdt @ Fdt)  # kalman (3)
+    P = Phi @ P @ Phi.T  # kalman (6)
+    for i in range(n):
+        P[i, i] += q[i] * dt  # kalman (4), diagonal
+    if k_acc > 0.0:  # (21): |a_n|^2 = |C f_b + g_n|^2
+        s = math.sin(nav[0])
+        g = _GAMMA_E * (1.0 + _K_SOM * s * s) / math.sqrt(1.0 - _E2 * s * s)
+        a2 = 0.0
+        for i in range(3):
+            a = C[i, 0] * f_b[0] + C[i, 1] * f_b[1] + C[i, 2] * f_b[2]
+            if i == 2:
+                a += g
+            a2 += a * a
+        for i in range(3, 6):
+            P[i, i] += k_acc * a2 * dt
+    if k_gyro > 0.0:  # (21): |omega_ib_b|^2
+        w2 = omega_b[0] ** 2 + omega_b[1] ** 2 + omega_b[2] ** 2
+        for i in range(6, 9):
+            P[i, i] += k_gyro * w2 * dt
+    return 0.5 * (P + P.T)
+
+
+@numba.njit(cache=True)
+def _propagate_covariance(
+    P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool,
+) -> np.ndarray:
+    n = P.shape[0]
+    F = np.zeros((n, n))
+    eye = np.eye(n)
+    for k in range(dt.shape[0]):
+        P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
+                             F, eye)
+    return P
+
+
+@numba.njit(cache=True)
+def _accumulate_covariance(
+    P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
+    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool,
+    open_nav: np.ndarray, open_sums: np.ndarray,
+) -> np.ndarray:
+    n = P.shape[0]
+    F = np.zeros((n, n))
+    eye = np.eye(n)
+    f_mean = np.empty(3)
+    w_mean = np.empty(3)
+    for k in range(dt.shape[0]):
+        if open_sums[0] == 0.0:
+            open_nav[:] = hist[k]
+        open_sums[0] += dt[k]
+        for j in range(3):
+            open_sums[1 + j] += f_b[k, j] * dt[k]
+            open_sums[4 + j] += omega_b[k, j] * dt[k]
+        if open_sums[0] >= step - 1e-9:
+            for j in range(3):
+                f_mean[j] = open_sums[1 + j] / open_sums[0]
+                w_mean[j] = open_sums[4 + j] / open_sums[0]
+            P = _covariance_step(P, open_nav, f_mean, w_mean, open_sums[0], q, k_acc, k_gyro,
+                                 depth, F, eye)
+            open_sums[:] = 0.0
+    return P
+
+
+@dataclasses.dataclass(frozen=True)
+class ProcessNoise:
+    """Process noise of the covariance propagation, per second.
+
+    Attributes
+    ----------
+    q : ndarray, shape (n,)
+        Diagonal of ``G Qc G^T`` (isotropic triad noise, :func:`process_noise_diagonal` with
+        dt = 1), units of state^2/s; entries beyond 15 belong to a larger filter's states.
+    k_acc : float
+        Velocity noise per unit squared acceleration, eq. (21) [(m/s)^2/s per (m/s^2)^2 = s].
+    k_gyro : float
+        Attitude noise per unit squared body rate, eq. (21) [rad^2/s per (rad/s)^2 = s].
+    """
+
+    q: np.ndarray
+    k_acc: float = 0.0
+    k_gyro: float = 0.0
+
+    @staticmethod
+    def motion_coefficient(sigma: float, correlation_time: float) -> float:
+        """``k = sigma^2 tau`` of eq. (21) for scale-factor / misalignment errors of 1-sigma
+        ``sigma`` [-, rad] treated as white over ``correlation_time`` [s]."""
+        return sigma * sigma * correlation_time
 
 
 class OpenStep:
@@ -592,15 +620,15 @@ class OpenStep:
     Attributes
     ----------
     nav : ndarray, shape (10,)
-        Navigation vector at the start of the step (valid while ``sums[0] > 0``).
-    sums : ndarray, shape (4,)
-        Length of the step so far [s] and the integral of the specific force over it
-        [m/s, body].
+        Navigation vector at the start of the step (valid while ``dt > 0``).
+    sums : ndarray, shape (7,)
+        Length of the step so far [s], the integral of the specific force over it [m/s, body]
+        and of the body rate [rad].
     """
 
     def __init__(self) -> None:
         self.nav = np.zeros(10)
-        self.sums = np.zeros(4)
+        self.sums = np.zeros(7)
 
     @property
     def dt(self) -> float:
@@ -609,16 +637,85 @@ class OpenStep:
 
     def f_mean(self) -> np.ndarray:
         """Mean specific force over the open step, body [m/s^2], shape (3,)."""
-        return self.sums[1:] / self.sums[0]
+        return self.sums[1:4] / self.sums[0]
+
+    def omega_mean(self) -> np.ndarray:
+        """Mean body rate over the open step [rad/s], shape (3,)."""
+        return self.sums[4:7] / self.sums[0]
+
+    def clear(self) -> None:
+        self.sums[:] = 0.0
+
+
+def _noise_args(noise: ProcessNoise, n: int) -> tuple[np.ndarray, float, float]:
+    q = np.ascontiguousarray(noise.q, dtype=np.float64)
+    if q.shape != (n,):
+        raise ValueError(f"process noise q must have shape ({n},), got {q.shape}")
+    return q, float(noise.k_acc), float(noise.k_gyro)
+
+
+def propagate_covariance(
+    P: np.ndarray,
+    nav: np.ndarray,
+    f_b: np.ndarray,
+    omega_b: np.ndarray,
+    dt: np.ndarray,
+    noise: ProcessNoise,
+    *,
+    vertical: Vertical = Vertical.HEIGHT,
+) -> np.ndarray:
+    """Covariance propagation over k steps of a filter whose first 15 states are these.
+
+    The same as k calls of ``kalman.predict`` with ``Phi = kalman.discretize(F, dt)``
+    (``F = system_matrix(...)`` in the top-left block, 0 elsewhere: extra states are random
+    constants or random walks) and ``Qd`` of eqs. (20)-(21), compiled into one loop. The result
+    is symmetrised but not checked: check it with ``kalman.check_covariance``.
+
+    Parameters
+    ----------
+    P : ndarray, shape (n, n), n >= 15
+        Covariance at the start.
+    nav : ndarray, shape (k, 10)
+        Navigation vector at which F is evaluated for each step.
+    f_b : ndarray, shape (k, 3)
+        Bias-compensated mean specific force of each step, body [m/s^2].
+    omega_b : ndarray, shape (k, 3)
+        Bias-compensated mean body rate of each step [rad/s] (for eq. 21).
+    dt : ndarray, shape (k,)
+        Step lengths [s].
+    noise : ProcessNoise
+    vertical : Vertical
+
+    Returns
+    -------
+    P : ndarray, shape (n, n)
+    """
+    n = P.shape[0]
+    if P.shape != (n, n) or n < N_STATES:
+        raise ValueError(f"P must be (n, n) with n >= 15, got {P.shape}")
+    k = dt.shape[0]
+    if nav.shape != (k, 10) or f_b.shape != (k, 3) or omega_b.shape != (k, 3):
+        raise ValueError(
+            f"nav must be ({k}, 10), f_b and omega_b ({k}, 3) for {k} steps; got {nav.shape}, "
+            f"{f_b.shape}, {omega_b.shape}"
+        )
+    q, k_acc, k_gyro = _noise_args(noise, n)
+    f64 = np.ascontiguousarray
+    return _propagate_covariance(
+        f64(P, dtype=np.float64), f64(nav, dtype=np.float64), f64(f_b, dtype=np.float64),
+        f64(omega_b, dtype=np.float64), f64(dt, dtype=np.float64), q, k_acc, k_gyro,
+        vertical is Vertical.DEPTH,
+    )
 
 
 def accumulate_covariance(
     P: np.ndarray,
     hist: np.ndarray,
     f_b: np.ndarray,
+    omega_b: np.ndarray,
     dt: np.ndarray,
     step: float,
-    q: np.ndarray,
+    noise: ProcessNoise,
     open_step: OpenStep,
     *,
     vertical: Vertical = Vertical.HEIGHT,
@@ -627,9 +724,9 @@ def accumulate_covariance(
 
     Samples are collected into the open step; when it reaches ``step`` seconds, P is
     propagated over it as in :func:`propagate_covariance`, with F at the navigation state at the
-    start of the step and the mean specific force over it. A step still open at the end stays
-    in ``open_step`` (updated in place) for the next call; close it early with
-    :func:`propagate_covariance` at ``open_step.nav``, ``open_step.f_mean()``, ``open_step.dt``.
+    start of the step and the mean specific force and body rate over it. A step still open at
+    the end stays in ``open_step`` (updated in place) for the next call; close it early with
+    :func:`close_step`.
 
     Parameters
     ----------
@@ -639,12 +736,13 @@ def accumulate_covariance(
         :func:`navreplay.strapdown.integrate`).
     f_b : ndarray, shape (k, 3)
         Bias-compensated specific force of each sample, body [m/s^2].
+    omega_b : ndarray, shape (k, 3)
+        Bias-compensated body rate of each sample [rad/s].
     dt : ndarray, shape (k,)
         Sample intervals [s].
     step : float
         Step length [s].
-    q : ndarray, shape (n,)
-        As for :func:`propagate_covariance`.
+    noise : ProcessNoise
     open_step : OpenStep
         The step carried over from the previous call; updated in place.
     vertical : Vertical
@@ -654,14 +752,32 @@ def accumulate_covariance(
     P : ndarray, shape (n, n)
         Symmetrised, not checked.
     """
+    n = P.shape[0]
     k = dt.shape[0]
-    if hist.shape != (k + 1, 10) or f_b.shape != (k, 3) or q.shape != (P.shape[0],):
+    if hist.shape != (k + 1, 10) or f_b.shape != (k, 3) or omega_b.shape != (k, 3):
         raise ValueError(
-            f"hist must be ({k + 1}, 10), f_b ({k}, 3) and q ({P.shape[0]},); got "
-            f"{hist.shape}, {f_b.shape}, {q.shape}"
+            f"hist must be ({k + 1}, 10), f_b and omega_b ({k}, 3); got {hist.shape}, "
+            f"{f_b.shape}, {omega_b.shape}"
         )
+    q, k_acc, k_gyro = _noise_args(noise, n)
+    f64 = np.ascontiguousarray
     return _accumulate_covariance(
-        np.ascontiguousarray(P, dtype=np.float64), hist, np.ascontiguousarray(f_b),
-        np.ascontiguousarray(dt), float(step), q, vertical is Vertical.DEPTH, open_step.nav,
-        open_step.sums,
+        f64(P, dtype=np.float64), f64(hist, dtype=np.float64), f64(f_b, dtype=np.float64),
+        f64(omega_b, dtype=np.float64), f64(dt, dtype=np.float64), float(step), q, k_acc,
+        k_gyro, vertical is Vertical.DEPTH, open_step.nav, open_step.sums,
     )
+
+
+def close_step(
+    P: np.ndarray, noise: ProcessNoise, open_step: OpenStep, *,
+    vertical: Vertical = Vertical.HEIGHT,
+) -> np.ndarray:
+    """Propagate P over the open step (if any) and clear it; P at the last sample's time."""
+    if open_step.dt <= 0.0:
+        return P
+    P = propagate_covariance(
+        P, open_step.nav[None, :], open_step.f_mean()[None, :],
+        open_step.omega_mean()[None, :], np.array([open_step.dt]), noise, vertical=vertical,
+    )
+    open_step.clear()
+    return P

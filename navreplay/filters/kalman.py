@@ -196,8 +196,16 @@ def _check_matrix(a: np.ndarray, shape: tuple[int, ...], name: str) -> None:
         raise ValueError(f"{name} must have shape {shape}, got {a.shape}")
 
 
+@numba.njit(cache=True)
+def _all_finite(a: np.ndarray) -> bool:
+    for v in a.flat:
+        if not np.isfinite(v):
+            return False
+    return True
+
+
 def _finite(a: np.ndarray, name: str, t: float | None) -> None:
-    if not np.all(np.isfinite(a)):
+    if not (_all_finite(a) if a.dtype == np.float64 else np.all(np.isfinite(a))):
         raise FilterDivergedError(f"{name} has non-finite entries", t)
 
 

@@ -241,6 +241,47 @@ _OK, _S_NOT_PD, _P_NOT_PSD = 0, 1, 2
 
 
 @numba.njit(cache=True)
+def _mm(A, B):
+    """A @ B for small matrices (loops: no BLAS call, quick to compile)."""
+    n, k = A.shape
+    m = B.shape[1]
+    out = np.zeros((n, m))
+    for i in range(n):
+        for l in range(k):
+            a = A[i, l]
+            if a != 0.0:
+                for j in range(m):
+                    out[i, j] += a * B[l, j]
+    return out
+
+
+@numba.njit(cache=True)
+def _mmt(A, B):
+    """A @ B.T for small matrices."""
+    n, k = A.shape
+    m = B.shape[0]
+    out = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            v = 0.0
+            for l in range(k):
+                v += A[i, l] * B[j, l]
+            out[i, j] = v
+    return out
+
+
+@numba.njit(cache=True)
+def _mv(A, x):
+    """A @ x."""
+    n, k = A.shape
+    out = np.zeros(n)
+    for i in range(n):
+        for l in range(k):
+            out[i] += A[i, l] * x[l]
+    return out
+
+
+@numba.njit(cache=True)
 def left(p):
     """``L(p)`` with ``p (x) q = L(p) q``, (4, 4) (= :func:`navreplay.geo.quat_left_matrix`)."""
     L = np.empty((4, 4))
@@ -385,7 +426,7 @@ def system_matrix(q_bn, v_n, lat, R, w_ib_b, w_in_n, f_b, n):
     ws = 2.0 * _OMEGA * math.sin(lat)
     tl = math.tan(lat)
     C = dcm(q_bn)
-    f_n = C @ f_b
+    f_n = _mv(C, f_b)
     Rq = rmat(q_bn)
     A = np.zeros((n, n))
     # (1) velocity error, E1/E2: M_vv
@@ -397,11 +438,11 @@ def system_matrix(q_bn, v_n, lat, R, w_ib_b, w_in_n, f_b, n):
     F2 = np.zeros((2, 3))
     F2[0, 1], F2[0, 2] = -f_n[2], f_n[1]
     F2[1, 0], F2[1, 2] = f_n[2], -f_n[0]
-    A[0:2, 2:6] = -2.0 * (F2 @ Rq.T)
+    A[0:2, 2:6] = -2.0 * _mmt(F2, Rq)
     # (2): A_qv = -1/2 R(Q_bn) Gamma2
     Gamma2 = np.zeros((3, 2))
     Gamma2[0, 1], Gamma2[1, 0], Gamma2[2, 1] = 1.0 / R, -1.0 / R, -tl / R
-    A[2:6, 0:2] = -0.5 * (Rq @ Gamma2)
+    A[2:6, 0:2] = -0.5 * _mm(Rq, Gamma2)
     # (2): A_qq = 1/2 [w_ib^b - w_in^n]
     A[2:6, 2:6] = 0.5 * rate_matrix(w_ib_b, w_in_n)
     G = np.zeros((n, 6))
@@ -416,8 +457,8 @@ def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
 
     Equal to ``(C_nb w_ib^b - w_in^n) x (C(Q_m) L^r)`` (a rotation preserves cross products).
     """
-    a = dcm(q_bn) @ w_ib_b - w_in_n
-    b = dcm(q_m) @ lever_arm_r
+    a = _mv(dcm(q_bn), w_ib_b) - w_in_n
+    b = _mv(dcm(q_m), lever_arm_r)
     out = np.empty(3)
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
@@ -496,8 +537,8 @@ def joseph_correct(P, nu, H, r):
         False when S is not positive definite (then dx and P are not meaningful).
     """
     m, n = H.shape
-    HP = H @ P
-    S = HP @ H.T  # (8)
+    HP = _mm(H, P)
+    S = _mmt(HP, H)  # (8)
     for i in range(m):
         S[i, i] += r[i]
     S = 0.5 * (S + S.T)
@@ -519,16 +560,17 @@ def joseph_correct(P, nu, H, r):
             KT[i] -= L[k, i] * KT[k]
         KT[i] /= L[i, i]
     K = KT.T.copy()
-    dx = K @ nu  # (11)
-    IKH = -(K @ H)  # (12)
+    dx = _mv(K, nu)  # (11)
+    IKH = -_mm(K, H)  # (12)
     for i in range(n):
         IKH[i, i] += 1.0
-    P = IKH @ P @ IKH.T + (K * r) @ K.T
+    P = _mmt(_mm(IKH, P), IKH) + _mmt(K * r, K)
     return dx, 0.5 * (P + P.T), S, True
 
 
 @numba.njit(cache=True)
-def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, w_ib, f_b, w_now, lever_arm_r, dt, qc, q_br, r):
+def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_arm_r, dt, qc,
+          q_br, r):
     """One filter cycle at a GINS sample (module docstring, steps 2-7), in place on nav, q_rb.
 
     Parameters
@@ -545,10 +587,13 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, w_ib, f_b, w_now, lever_arm_r, dt, 
         GINS attitude Q_m from its Euler angles (either sign).
     v_r, pos : ndarray, shape (3,)
         GINS velocity NED [m/s] and position [rad, rad, m].
-    w_ib, f_b : ndarray, shape (3,)
-        Mean IMU rate [rad/s] and specific force [m/s^2] over the filter interval.
-    w_now : ndarray, shape (3,)
-        Body rate at the GINS time [rad/s] (lever-arm term).
+    sums : ndarray, shape (6,)
+        Sums of the raw IMU samples [omega_ib_b, f_b] over the filter interval.
+    count : int
+        Number of samples summed (0: hold the last rate, no specific-force term).
+    w_last, w_prev : ndarray, shape (3,)
+        The last two raw body rates [rad/s]; the lever-arm term extrapolates them to the GINS
+        time (each is a mean over its interval, half a sample old): 1.5 w_last - 0.5 w_prev.
     lever_arm_r : ndarray, shape (3,)
         Lever arm GINS -> SDINS, ship frame [m].
     dt : float
@@ -576,9 +621,16 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, w_ib, f_b, w_now, lever_arm_r, dt, 
     n = P.shape[0]
     ns = s.shape[0]
     q_bn = nav[6:10].copy()
+    w_now = 1.5 * w_last - 0.5 * w_prev
+    if count > 0:  # interval means of the raw IMU for (14)
+        w_ib = sums[0:3] / count
+        f_b = sums[3:6] / count
+    else:
+        w_ib = w_last.copy()
+        f_b = np.zeros(3)
     # (4): Q_m* (x) Q_bn_hat; the sign of Q_m puts Q_br in the hemisphere of [1, 0, 0, 0]
     Lc = left(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]]))
-    q_br_meas = Lc @ q_bn
+    q_br_meas = _mv(Lc, q_bn)
     if q_br_meas[0] < 0.0:
         q_m = -q_m
         Lc = -Lc
@@ -588,13 +640,13 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, w_ib, f_b, w_now, lever_arm_r, dt, 
     R, w_in = earth_terms(nav[0], nav[2], nav[3:6])
     A, G = system_matrix(q_bn, nav[3:6], nav[0], R, w_ib, w_in, f_b, n)
     Ad = A * dt
-    Phi = Ad + 0.5 * (Ad @ Ad)
+    Phi = Ad + 0.5 * _mm(Ad, Ad)
     for i in range(n):
         Phi[i, i] += 1.0
-    Qd = ((G * qc) @ G.T) * dt
+    Qd = _mmt(G * qc, G) * dt
     for i in range(6, n):
         Qd[i, i] += q_br * dt
-    P = Phi @ P @ Phi.T + Qd  # kalman (6)
+    P = _mmt(_mm(Phi, P), Phi) + Qd  # kalman (6)
     P = 0.5 * (P + P.T)
 
     # measurement: (3), (6) velocity; (5) quaternion rows s; H of (15)
@@ -624,7 +676,7 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, w_ib, f_b, w_now, lever_arm_r, dt, 
     for i in range(ns):
         q_rb[s[i]] -= dx[6 + i]
     # (11), E8: unmatched components (q_br2 for partial matching) of Q_m* (x) Q_bn_hat
-    q_br_new = Lc @ q
+    q_br_new = _mv(Lc, q)
     for i in u:
         q_rb[i] = q_br_new[i]
     q_rb /= math.sqrt(q_rb @ q_rb)  # (10), E10
@@ -634,9 +686,12 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, w_ib, f_b, w_now, lever_arm_r, dt, 
 
     # predicted covariance of phi = -2 R(q)^T dQ_bn: Sigma_phi = 4 R^T P_qq R
     Rq = rmat(q)
-    Sp = 4.0 * (Rq.T @ np.ascontiguousarray(P[2:6, 2:6]) @ Rq)
+    X = _mm(P[2:6, 2:6], Rq)
     for i in range(3):
-        sigma_phi[i] = math.sqrt(max(Sp[i, i], 0.0))
+        v = 0.0
+        for k in range(4):
+            v += Rq[k, i] * X[k, i]
+        sigma_phi[i] = math.sqrt(max(4.0 * v, 0.0))
     if not _is_psd(P, RTOL):
         return P, z, S, sigma_phi, _P_NOT_PSD
     return P, z, S, sigma_phi, _OK
@@ -841,17 +896,14 @@ class TransferAlignment(Filter):
     # ---------------------------------------------------------------------------------------
     # steps
 
-    def _w_now(self) -> np.ndarray:
-        """Body rate at the latest IMU time, extrapolated from the last two interval means."""
-        return 1.5 * self._w_last - 0.5 * self._w_prev
-
     def _initialise(
         self, t: float, q_m: np.ndarray, v_r: np.ndarray, pos: np.ndarray
     ) -> None:
         """(16), (17): start from the GINS attitude, lever-arm compensated GINS velocity."""
         p = self.params
         _, w_in = earth_terms(pos[0], pos[2], v_r)
-        v_b = v_r + lever_velocity(q_m, q_m, self._w_now(), w_in, self.lever_arm_r)
+        w_now = 1.5 * self._w_last - 0.5 * self._w_prev  # as in cycle()
+        v_b = v_r + lever_velocity(q_m, q_m, w_now, w_in, self.lever_arm_r)
         self.nav = np.concatenate((pos, v_b, q_m))
         self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])
         self.P = initial_covariance(
@@ -874,14 +926,9 @@ class TransferAlignment(Filter):
         dt = t - self.t
         if not dt > 0.0:
             raise ValueError(f"master_ins time does not increase: {t} s after {self.t} s")
-        if self._count:
-            w_ib = self._sums[0:3] / self._count
-            f_b = self._sums[3:6] / self._count
-        else:  # no IMU sample since the last GINS sample: hold the last rate, no force term
-            w_ib, f_b = self._w_last, np.zeros(3)
         P, nu, S, sigma_phi, status = cycle(
-            self.nav, self.q_rb, self.P, self.s, self.u, q_m, v_r, pos, w_ib, f_b,
-            self._w_now(), self.lever_arm_r, dt, self._qc, self._q_br, self._r,
+            self.nav, self.q_rb, self.P, self.s, self.u, q_m, v_r, pos, self._sums, self._count,
+            self._w_last, self._w_prev, self.lever_arm_r, dt, self._qc, self._q_br, self._r,
         )
         if status == _S_NOT_PD:
             raise kalman.FilterDivergedError(

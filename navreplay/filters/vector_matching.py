@@ -383,7 +383,7 @@ def measurement_noise(
     accel_noise_sigma: float,
     mag_noise_sigma: float,
 ) -> np.ndarray:
-    """R = blkdiag(R_g, R_h), eqs. (11) and (15).
+    """Diagonal of R = blkdiag(R_g, R_h), eqs. (11) and (15) (both blocks are diagonal).
 
     Parameters
     ----------
@@ -398,13 +398,13 @@ def measurement_noise(
 
     Returns
     -------
-    ndarray, shape (..., 6, 6)
+    ndarray, shape (..., 6)
+        [(m/s^2)^2] for the first three, [T^2] for the last three.
     """
     var_a = (vel_sigma**2 + vel_sigma_prev**2) / (np.asarray(dt, dtype=float)[..., None] ** 2)
-    R = np.zeros(var_a.shape[:-1] + (N_MEAS, N_MEAS))
-    i = np.arange(3)
-    R[..., i, i] = var_a + accel_noise_sigma**2  # (15)
-    R[..., 3 + i, 3 + i] = mag_noise_sigma**2  # (11), E5: C (s_h^2 I) C^T = s_h^2 I
+    R = np.empty(var_a.shape[:-1] + (N_MEAS,))
+    R[..., Z_G] = var_a + accel_noise_sigma**2  # (15)
+    R[..., Z_H] = mag_noise_sigma**2  # (11), E5: C (s_h^2 I) C^T = s_h^2 I
     return R
 
 
@@ -753,20 +753,42 @@ def _solve_lower_T(L: np.ndarray, B: np.ndarray) -> np.ndarray:
     return X
 
 
+def _cholesky(A: np.ndarray, name: str, t: float | None) -> np.ndarray:
+    """Lower Cholesky factor of a stack of SPD matrices (..., n, n), column by column.
+
+    Raises :class:`FilterDivergedError` if any matrix is not positive definite.
+    """
+    n = A.shape[-1]
+    L = np.zeros_like(A)
+    for j in range(n):
+        Lj = L[..., j, :j]
+        d = A[..., j, j] - np.einsum("...k,...k->...", Lj, Lj)
+        if not np.all(d > 0.0):
+            raise FilterDivergedError(f"{name} is not positive definite", t)
+        L[..., j, j] = np.sqrt(d)
+        if j + 1 < n:
+            L[..., j + 1:, j] = (
+                A[..., j + 1:, j] - np.einsum("...ik,...k->...i", L[..., j + 1:, :j], Lj)
+            ) / L[..., j, j, None]
+    return L
+
+
 def correct_batch(
     P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray, *, t: float | None = None
 ) -> Correction:
     """Kalman correction of a stack of independent filters with prior state zero.
 
-    The equations and their order are those of :func:`navreplay.filters.kalman.correct`:
-    ``S = H P H^T + R = L L^T`` (Cholesky), ``K^T = L^-T L^-1 H P``, Joseph form.
+    The equations are those of :func:`navreplay.filters.kalman.correct`:
+    ``S = H P H^T + R = L L^T`` (Cholesky), ``K^T = L^-T L^-1 H P``, Joseph form; the
+    triangular factor and solves are vectorised across the stack.
 
     Parameters
     ----------
     P : ndarray, shape (..., n, n)
     z : ndarray, shape (..., m)
     H : ndarray, shape (..., m, n)
-    R : ndarray, shape (..., m, m)
+    R : ndarray, shape (..., m)
+        Diagonal of the measurement noise covariance.
     t : float, optional
         Filter time [s], for error messages.
 
@@ -777,32 +799,27 @@ def correct_batch(
     Raises
     ------
     FilterDivergedError
-        Some S is not positive definite, or a result is not finite.
+        Some S or corrected P is not positive definite, or a result is not finite.
     """
     n = P.shape[-1]
+    m = H.shape[-2]
     HP = H @ P
-    S = HP @ _mT(H) + R  # (8)
+    S = HP @ _mT(H)  # (8)
     S = 0.5 * (S + _mT(S))
-    try:
-        L = np.linalg.cholesky(S)
-    except np.linalg.LinAlgError:
-        raise FilterDivergedError("innovation covariance S is not positive definite", t) from None
+    S[..., np.arange(m), np.arange(m)] += R
+    L = _cholesky(S, "innovation covariance S", t)  # (8)
     W = _solve_lower(L, np.concatenate([z[..., None], HP], axis=-1))  # (9), (13)
     nu_w = W[..., 0]
     K = _mT(_solve_lower_T(L, W[..., 1:]))  # (9)
     dx = _mv(K, z)  # (11)
     IKH = -K @ H  # (12)
     IKH[..., np.arange(n), np.arange(n)] += 1.0
-    KR = K @ R
     P = IKH @ P @ _mT(IKH)
-    P += KR @ _mT(K)
+    P += (K * R[..., None, :]) @ _mT(K)
     P = 0.5 * (P + _mT(P))
     if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P))):
         raise FilterDivergedError("non-finite corrected state or covariance", t)
-    try:
-        np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        raise FilterDivergedError("corrected P is not positive definite", t) from None
+    _cholesky(P, "corrected P", t)
     return Correction(dx, P, z, S, np.einsum("...i,...i->...", nu_w, nu_w))
 
 

@@ -1,9 +1,9 @@
 """Geodesy and rotations: the WGS84 earth model and the attitude algebra every module shares."""
 
 from navreplay.geo.earth import (  # noqa: F401
-    A,
     E2,
     OMEGA_IE,
+    A,
     C_en,
     ecef_to_lla,
     gravity,

@@ -23,6 +23,8 @@ def first_problem(stream: Stream, t0_ns: int) -> str | None:
     """
     t = stream.t_ns
     n = len(t)
+    if n == 0:
+        return None
     bad_row = n
     bad_col = ""
     bad_what = ""

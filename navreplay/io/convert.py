@@ -225,7 +225,7 @@ class Decoded:
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
-    return np.array(a, dtype=np.float64, order="C")
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def _is_frd(frame_id: str) -> bool:

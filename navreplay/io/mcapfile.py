@@ -24,7 +24,7 @@ from typing import BinaryIO
 
 import numpy as np
 from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
+from mcap.exceptions import EndOfFile, McapError, RecordLengthLimitExceeded
 from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import (
@@ -292,17 +292,31 @@ def parse_channel(body: bytes) -> Channel:
 
 
 class _StreamReader(StreamReader):
-    """mcap's sequential record reader, skipping index records it would parse entry by entry.
+    """mcap's sequential record reader, skipping index records and tracking record offsets.
 
     Message and chunk indexes are not needed to read a file front to back; mcap's reader skips the
     body of a record whose parser returns None, so returning None here saves parsing one Python
     tuple per message. Everything else (CRCs, limits, chunk records) is mcap's own.
     """
 
+    def __init__(self, f: BinaryIO, **kwargs) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(f, **kwargs)
+        self._file = f
+        self.record_start = 0
+        self.record_end = len(MAGIC)
+
     def _read_record(self, opcode: int, length: int):  # type: ignore[no-untyped-def]
+        body = self._file.tell()
+        self.record_start, self.record_end = body - 9, body + length
         if opcode in (Opcode.MESSAGE_INDEX, Opcode.CHUNK_INDEX):
             return None
         return super()._read_record(opcode, length)
+
+    def damage_offset(self) -> int:
+        """Start of the record that could not be read (call after a read error)."""
+        if self._file.tell() >= self.record_end:
+            return self.record_end  # the next record's header was cut or invalid
+        return self.record_start
 
 
 @dataclasses.dataclass
@@ -447,7 +461,6 @@ def _walk_sequential(
     stream = _StreamReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=contents.size)
     records = stream.records
     loose: list[Message] = []
-    good = 0
     data_complete = False
     while True:
         try:
@@ -460,11 +473,16 @@ def _walk_sequential(
                 f"{exc.actual:#010x}): the file is corrupt"
             ) from None
         except DAMAGE_ERRORS as exc:
-            reason = str(exc) or type(exc).__name__
-            contents.damage = Damage(good, reason, data_complete)
+            if isinstance(exc, RecordLengthLimitExceeded):
+                reason = "a record runs past the end of the file"
+            elif isinstance(exc, EndOfFile):
+                reason = "the file ends inside a record"
+            else:
+                reason = f"{type(exc).__name__}: {exc}"
+            contents.damage = Damage(stream.damage_offset(), reason, data_complete)
             break
         if isinstance(record, Chunk):
-            offset = good
+            offset = stream.record_start
             block = scan_chunk(chunk_bytes(record, where, offset), contents.on_record, where, offset)
             contents.saw(block)
             yield block
@@ -483,11 +501,11 @@ def _walk_sequential(
         elif isinstance(record, DataEnd):
             data_complete = True
         elif isinstance(record, Footer):
-            good = f.tell()
             break
-        good = f.tell()
     if contents.damage is None and not expect_complete:
-        contents.damage = Damage(good, "the file ends without a valid footer", data_complete)
+        contents.damage = Damage(
+            stream.record_end, "the file does not end with a valid footer", data_complete
+        )
     if loose:
         block = loose_block(loose)
         contents.saw(block)

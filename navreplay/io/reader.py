@@ -33,9 +33,6 @@ from navreplay.io.schemas import (
 )
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
-_PART_ROWS = 1 << 16
-
-
 def _warn(message: str) -> None:
     warnings.warn(RecordingWarning(message), stacklevel=3)
 
@@ -53,6 +50,10 @@ class _Topic:
         self.frame_ids: set[str] = set()
         self.first_frame_id: str | None = None
         self._generic: cdr.GenericDecoder | None = None
+        self.ordinals: list[int | np.ndarray] = []
+        self.log_times: list[np.ndarray | None] = []
+        self.in_order = True
+        self._next = 0
         self._ordinal = 0
 
     @property
@@ -112,13 +113,25 @@ class _Topic:
             if self.first_frame_id is None:
                 self.first_frame_id = str(frames[0])
             self.frame_ids.update(set(frames.tolist()))
-        part = {"t_ns": np.asarray(fields["t_ns"], dtype=np.int64)}
+        t_ns = np.asarray(fields["t_ns"], dtype=np.int64)
+        part = {"t_ns": t_ns}
         for name, columns in self.reduce.items():
             value = np.asarray(fields[name])
             part[name] = np.array(value if columns is None else value[:, columns])
-        part["log_time"] = block.log_time[index]
-        part["ordinal"] = ordinal
         self.parts.append(part)
+        m = len(ordinal)
+        if m and ordinal[0] == self._next and ordinal[-1] == self._next + m - 1:
+            self.ordinals.append(int(ordinal[0]))
+        else:
+            self.ordinals.append(ordinal)
+            self.in_order = False
+        if m:
+            self._next = int(ordinal[-1]) + 1
+        log_time = block.log_time[index]
+        if np.array_equal(log_time, t_ns):
+            self.log_times.append(None)
+        else:
+            self.log_times.append(log_time)
 
     def finish(self) -> dict[str, np.ndarray]:
         """Concatenated fields in log-time order (file order among equal log times)."""
@@ -130,22 +143,37 @@ class _Topic:
                     for name, columns in self.reduce.items()
                 },
             }
-        keys = self.parts[0].keys()
+        log_time = None
+        if any(lt is not None for lt in self.log_times):
+            log_time = np.concatenate(
+                [p["t_ns"] if lt is None else lt for p, lt in zip(self.parts, self.log_times, strict=True)]
+            )
+        ordinal = None
+        if not self.in_order:
+            ordinal = np.concatenate(
+                [
+                    np.arange(o, o + len(p["t_ns"])) if isinstance(o, int) else o
+                    for p, o in zip(self.parts, self.ordinals, strict=True)
+                ]
+            )
+        out: dict[str, np.ndarray] = {}
         try:
-            out = {k: np.concatenate([p[k] for p in self.parts]) for k in keys}
-        except ValueError as exc:
-            raise RecordingError(f"{self.label}: message layout changes ({exc})") from None
+            for key in list(self.parts[0]):  # concatenate key by key, freeing the parts
+                out[key] = np.concatenate([p.pop(key) for p in self.parts])
+        except (KeyError, ValueError) as exc:
+            raise RecordingError(f"{self.label}: message layout changes ({exc!r})") from None
         self.parts.clear()
+        if log_time is None:
+            log_time = out["t_ns"]
         order = None
-        if np.any(np.diff(out["ordinal"]) < 0):
-            order = np.argsort(out["ordinal"], kind="stable")
-        log_time = out["log_time"] if order is None else out["log_time"][order]
+        if ordinal is not None:
+            order = np.argsort(ordinal, kind="stable")
+            log_time = log_time[order]
         if np.any(np.diff(log_time) < 0):
             by_time = np.argsort(log_time, kind="stable")
             order = by_time if order is None else order[by_time]
         if order is not None:
             out = {k: v[order] for k, v in out.items()}
-        del out["ordinal"], out["log_time"]
         return out
 
 

@@ -46,7 +46,9 @@ def _times(t: ArrayLike) -> np.ndarray:
     bad = np.flatnonzero(np.diff(t) <= 0.0)
     if bad.size:
         k = int(bad[0]) + 1
-        raise ValueError(f"t must be strictly increasing: t[{k}] = {t[k]!r} <= t[{k - 1}] = {t[k - 1]!r}")
+        raise ValueError(
+            f"t must be strictly increasing: t[{k}] = {t[k]!r} <= t[{k - 1}] = {t[k - 1]!r}"
+        )
     return t
 
 
@@ -55,7 +57,9 @@ def _column(x: ArrayLike, name: str, n: int, width: int) -> np.ndarray:
     if x.shape != (n, width):
         raise ValueError(f"{name} must have shape ({n}, {width}), got {x.shape}")
     if not np.all(np.isfinite(x)):
-        raise ValueError(f"{name} has non-finite values (first at row {np.argwhere(~np.isfinite(x))[0, 0]})")
+        raise ValueError(
+            f"{name} has non-finite values (first at row {np.argwhere(~np.isfinite(x))[0, 0]})"
+        )
     return x
 
 

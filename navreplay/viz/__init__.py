@@ -5,28 +5,26 @@ Open a sink, log truth, runs and ensembles, close::
     from navreplay.viz import Save, open_sink
 
     with open_sink(Save("out.rrd"), recording_name="ship.mcap") as sink:
-        for result in results:                      # RunResult per filter label
-            sink.log_run(result, truth=recording)   # overlays in the same plots
-    # out.rrd appears only now, complete; the default blueprint is inside
+        for result in results:                      # a RunResult per filter label
+            sink.log_run(result, truth=recording)   # overlaid in the same plots
+    # out.rrd appears only now, complete, with the default blueprint inside
 
-Targets: :class:`Save` (default, headless, atomic), :class:`Spawn`, :class:`Connect`,
-:class:`Serve`; the last three check that the viewer is reachable first and raise
-:class:`VizUnavailableError`. The entity tree is described in :mod:`navreplay.viz.sink` and
-docs/rerun-view.md.
+Targets (:mod:`navreplay.viz.targets`): :class:`Save` (default, headless, atomic),
+:class:`Spawn`, :class:`Connect`, :class:`Serve`; the last three check that the viewer can be
+reached first and raise :class:`VizUnavailableError`. Entity tree, units and blueprint:
+:mod:`navreplay.viz.sink` and docs/rerun-view.md.
 """
 
 from navreplay.viz.blueprint import Catalog, build_blueprint
 from navreplay.viz.convert import chi2_bounds
-from navreplay.viz.sink import (
-    APPLICATION_ID,
+from navreplay.viz.sink import APPLICATION_ID, Sink, open_sink
+from navreplay.viz.targets import (
     Connect,
     Save,
     Serve,
-    Sink,
     Spawn,
     Target,
     VizUnavailableError,
-    open_sink,
 )
 
 __all__ = [

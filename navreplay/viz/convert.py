@@ -18,7 +18,6 @@ from scipy import stats
 from navreplay.geo import (
     dcm_to_quat,
     lla_to_ned_offset,
-    quat_normalize,
     quat_to_euler,
     quat_wxyz_to_xyzw,
     radii,
@@ -250,9 +249,3 @@ def chi2_bounds(dof: int, runs: int = 1, p: float = 0.95) -> tuple[float, float]
     k = dof * runs
     a = 0.5 * (1.0 - p)
     return float(stats.chi2.ppf(a, k) / runs), float(stats.chi2.ppf(1.0 - a, k) / runs)
-
-
-def unit_quaternions(q_nb: np.ndarray) -> np.ndarray:
-    """Normalised quaternions (rows with a zero norm become NaN)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return quat_normalize(q_nb)

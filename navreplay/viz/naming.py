@@ -12,7 +12,7 @@ Examples
 ('rad/s', 'deg/h')
 >>> quantity_of("dv_N"), group_of("db_a_z")
 (<Quantity.VELOCITY: 'velocity'>, 'db_a')
->>> entity("gps-ins[match=vel]", "state", "phi_N")
+>>> entity_path("gps-ins[match=vel]", "state", "phi_N")
 '/gps-ins\\\\[match\\\\=vel\\\\]/state/phi_N'
 """
 
@@ -105,7 +105,7 @@ NAV_TITLES: dict[str, str] = {
 }
 """Plot titles of the navigation quantities (the unit is appended)."""
 
-_COMPONENT = re.compile(r"(_?[NEDxyz]|_?[0-9]+)$")
+_COMPONENT = re.compile(r"(_[NEDxyz]|_?[0-9]+)$")
 
 
 def guess_si_unit(name: str) -> str | None:
@@ -149,8 +149,8 @@ def resolve_unit(name: str, units: Mapping[str, str] | None = None) -> DisplayUn
     return display_unit(guess_si_unit(name))
 
 
-def entity(*parts: str) -> str:
-    """Entity path from unescaped parts: ``entity("a b", "state") == "/a\\\\ b/state"``."""
+def entity_path(*parts: str) -> str:
+    """Entity path from unescaped parts: ``entity_path("a b", "state") == "/a\\\\ b/state"``."""
     return "/" + "/".join(_escape(p) for p in parts)
 
 

@@ -75,7 +75,7 @@ from navreplay.viz.naming import (
     NAV_UNITS,
     Quantity,
     display_unit,
-    entity,
+    entity_path,
     group_of,
     quantity_of,
     resolve_unit,
@@ -127,6 +127,9 @@ def _new_stream(recording_id: str | None, recording_name: str | None) -> rr.Reco
 
 _WEB_VIEWERS: set[int] = set()
 """Web-viewer ports served by this process."""
+_SERVERS: dict[int, rr.RecordingStream] = {}
+"""gRPC servers of this process by port: the serving stream stays alive (not disconnected) so
+that browsers can still connect after its sink is closed; they stop when the process exits."""
 
 
 def open_sink(
@@ -216,19 +219,22 @@ def _open_serve(target: Serve, name: str | None, rid: str | None) -> Sink:
     if start_web and not port_free(target.web_port):
         raise VizUnavailableError(f"cannot serve the web viewer: port {target.web_port} is in use")
     rec = _new_stream(rid, name)
+    owner = False
     if port_error("127.0.0.1", target.grpc_port, 0.5) is None:
         rec.connect_grpc(url)  # the server of an earlier sink (or of another process)
     else:
         url = rec.serve_grpc(
             grpc_port=target.grpc_port, server_memory_limit=target.server_memory_limit
         )
+        _SERVERS[target.grpc_port] = rec
+        owner = True
     if start_web:
         rr.serve_web_viewer(
             web_port=target.web_port, open_browser=target.open_browser, connect_to=url
         )
         _WEB_VIEWERS.add(target.web_port)
     web = f"http://localhost:{target.web_port}/?url={urllib.parse.quote(url, safe='')}"
-    return Sink(rec, target, url=url, web_url=web)
+    return Sink(rec, target, url=url, web_url=web, keep_alive=owner)
 
 
 def _open_save(target: Save, name: str | None, rid: str | None) -> Sink:
@@ -269,11 +275,10 @@ class _Run:
     cov_t: float = -np.inf
     axes: bool = False
     finished: bool = False
-    nav_errors_from_truth: bool = False
 
 
 Truth = Recording | Stream
-Metrics = Mapping[str, "np.ndarray | tuple[np.ndarray, np.ndarray | None]"]
+Metrics = Mapping[str, np.ndarray | tuple[np.ndarray, np.ndarray | None]]
 
 
 class Sink:
@@ -305,8 +310,10 @@ class Sink:
         tmp: Path | None = None,
         url: str | None = None,
         web_url: str | None = None,
+        keep_alive: bool = False,
     ) -> None:
         self._rec = rec
+        self._keep_alive = keep_alive
         self.target = target
         self.path = path
         self._tmp = tmp
@@ -423,7 +430,7 @@ class Sink:
         self,
         truth: Truth,
         t0_ns: int | None = None,
-        entity_root: str = "/truth",
+        entity: str = "/truth",
         *,
         rate_hz: float | None = TRUTH_RATE_HZ,
     ) -> None:
@@ -436,8 +443,8 @@ class Sink:
             [lat, lon rad, h m], ``v_n`` [m/s], ``q_nb`` scalar first).
         t0_ns : int, optional
             Recording start [ns]; default ``Recording.t0_ns`` or the stream's first timestamp.
-        entity_root : str
-            Root of the truth entities.
+        entity : str
+            Root of the truth entities (the 3D trajectory goes to ``/world/<root name>``).
         rate_hz : float or None
             Decimate the time series to this rate [Hz]; None keeps every row. Errors are always
             computed against the full-rate truth.
@@ -453,7 +460,7 @@ class Sink:
         keep = convert.decimate(nav.t, rate_hz) if rate_hz else np.arange(nav.t.shape[0])
         sub = convert.NavColumns(nav.t[keep], nav.pos[keep], nav.v_n[keep], nav.q_nb[keep])
         idx = self._indexes(sub.t, t0)
-        root = entity_root.rstrip("/")
+        root = "/" + entity.strip("/")
         for name, values in convert.nav_values(sub, self._ref).items():
             u = display_unit(NAV_UNITS[name])
             path = f"{root}/nav/{name}"
@@ -463,26 +470,29 @@ class Sink:
         for col, values in stream.columns.items():
             if col in ("pos", "v_n", "q_nb"):
                 continue
-            flat = values[keep].reshape(keep.shape[0], -1)
+            flat = values[keep].reshape(
+                keep.shape[0], int(np.prod(values.shape[1:], dtype=np.int64))
+            )
             if flat.shape[1] > 3:
                 continue
             u = resolve_unit(col)
-            path = f"{root}/extra/{entity(col)[1:]}"
+            path = f"{root}/extra/{entity_path(col)[1:]}"
             names = [col] if flat.shape[1] == 1 else [f"{col}[{j}]" for j in range(flat.shape[1])]
             self._style(path, [f"truth {n}" for n in names], [TRUTH_COLOR] * len(names))
             self._scalars(path, idx, flat * u.scale)
             self.catalog.add(Quantity.SENSOR.value, f"truth:{col}", f"true {col} [{u.label}]", path)
         # 3D
         ned = convert.local_ned(nav.pos, self._ref)
-        self._strip("/world/truth/trajectory", ned, TRUTH_COLOR)
+        world = f"/world{root}"
+        self._strip(f"{world}/trajectory", ned, TRUTH_COLOR)
         w = convert.decimate(nav.t, WORLD_RATE_HZ)
         if w.shape[0]:
             self._rec.send_columns(
-                "/world/truth/body",
+                f"{world}/body",
                 indexes=self._indexes(nav.t[w], t0),
                 columns=rr.Transform3D.columns(translation=ned[w], quaternion=_xyzw(nav.q_nb[w])),
             )
-            self._axes("/world/truth/body/axes", _axis_size(ned))
+            self._axes(f"{world}/body/axes", _axis_size(ned))
 
     def _ensure_truth(self, truth: Truth, t0_ns: int) -> None:
         """Log ``truth`` unless this sink already holds it; refuse a different recording's."""
@@ -549,8 +559,8 @@ class Sink:
         run = self._run(result.label, units)
         if run.finished:
             raise ValueError(f"run {result.label!r} is already logged in this sink")
-        metrics = dict(metrics or {})
-        nav_override = {n: metrics.pop(n) for n in _NAV_ALL if n in metrics}
+        errors = _metric_columns(result, metrics or {})
+        nav_override = {n: errors.pop(n) for n in _NAV_ALL if n in errors}
         if nav_override and run.rows:
             warnings.warn(
                 f"{result.label}: navigation errors were already logged live from the truth; "
@@ -559,11 +569,11 @@ class Sink:
             )
             nav_override = {}
         self._log_rows(run, result, run.rows, result.t.shape[0], nav_override)
-        self._log_metrics(run, result, metrics)
+        self._log_errors(run, result, errors)
         self._log_innovations(run, result)
         if result.nav_pos is not None and self._ref is not None:
             ned = convert.local_ned(result.nav_pos, self._ref)
-            self._strip(entity("world", run.label, "trajectory"), ned, run.color)
+            self._strip(entity_path("world", run.label, "trajectory"), ned, run.color)
         run.finished = True
 
     def _log_rows(
@@ -596,26 +606,45 @@ class Sink:
             shade = _shade(run.color, groups[g].index(n))
             tab = quantity_of(n).value
             legend = L if len(groups[g]) == 1 else f"{L} {n}"
-            p_state = entity(L, "state", n)
+            p_state = entity_path(L, "state", n)
             self._style(p_state, [legend], [shade], [1.5])
             self._scalars(p_state, idx, result.x[a:b, i] * u.scale)
             self.catalog.add(tab, f"state:{g}", title(g, u), p_state)
-            p_sig = entity(L, "sigma", n)
+            p_sig = entity_path(L, "sigma", n)
             self._style(p_sig, [f"σ {legend}"], [shade], [1.5])
             self._scalars(p_sig, idx, sigma[:, i] * u.scale)
-            if not self.catalog.has(entity(L, "error", n)):
+            if not self.catalog.has(entity_path(L, "error", n)):
                 self.catalog.add(tab, f"sigma:{g}", f"σ {title(g, u)}", p_sig)
         for key, arr in result.extras.items():
-            flat = np.asarray(arr[a:b], dtype=np.float64).reshape(b - a, -1)
+            arr = np.asarray(arr[a:b], dtype=np.float64)
+            flat = arr.reshape(b - a, int(np.prod(arr.shape[1:], dtype=np.int64)))
             u = resolve_unit(key, run.units)
-            path = entity(L, "extra", key)
+            path = entity_path(L, "extra", key)
             k = flat.shape[1]
             legend = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
             self._style(path, legend, [_shade(run.color, j) for j in range(k)])
             self._scalars(path, idx, flat * u.scale)
             self.catalog.add(quantity_of(key).value, f"extra:{key}", title(key, u), path)
-        if result.nav_pos is None or result.nav_v_n is None or result.nav_q_nb is None:
-            return
+        if (
+            result.nav_pos is not None
+            and result.nav_v_n is not None
+            and result.nav_q_nb is not None
+        ):
+            self._log_nav(run, result, a, b, idx, nav_override or {})
+        run.rows = b
+
+    def _log_nav(
+        self,
+        run: _Run,
+        result: RunResult,
+        a: int,
+        b: int,
+        idx: list[rr.TimeColumn],
+        nav_override: Mapping[str, tuple[np.ndarray, np.ndarray | None, str]],
+    ) -> None:
+        """Navigation solution rows [a, b): values, errors vs truth, 3D."""
+        L = run.label
+        t = result.t[a:b]
         nav = convert.NavColumns(t, result.nav_pos[a:b], result.nav_v_n[a:b], result.nav_q_nb[a:b])
         if self._ref is None:
             finite = np.flatnonzero(np.isfinite(nav.pos).all(axis=1))
@@ -625,7 +654,7 @@ class Sink:
         values = convert.nav_values(nav, self._ref)
         for n, v in values.items():
             u = display_unit(NAV_UNITS[n])
-            path = entity(L, "nav", n)
+            path = entity_path(L, "nav", n)
             self._style(path, [L], [run.color], [1.5])
             self._scalars(path, idx, v * u.scale)
             self.catalog.add(quantity_of(n).value, f"nav:{n}", title(n, u), path)
@@ -635,19 +664,14 @@ class Sink:
             truth_at = self._truth.at(t)
             for n, e in convert.nav_errors(nav, truth_at).items():
                 errors[n] = (e, nav_sigma.get(n))
-            run.nav_errors_from_truth = True
-        for n, val in (nav_override or {}).items():
-            e, s = _split_metric(val)
-            errors[n] = (np.asarray(e, dtype=np.float64)[a:b], None if s is None else s[a:b])
-            if errors[n][1] is None:
-                errors[n] = (errors[n][0], nav_sigma.get(n))
+        for n, (e, s, _) in nav_override.items():
+            errors[n] = (e[a:b], nav_sigma.get(n) if s is None else s[a:b])
         for n, (e, s) in errors.items():
             u = display_unit(NAV_UNITS[n])
-            path = entity(L, "error", n)
+            path = entity_path(L, "error", n)
             self._bounded(path, idx, e * u.scale, None if s is None else s * u.scale, L, run.color)
             self.catalog.add(quantity_of(n).value, f"error:{n}", title(n, u, "error"), path)
         self._log_world(run, result, nav, a, b, values)
-        run.rows = b
 
     def _log_world(
         self,
@@ -665,7 +689,7 @@ class Sink:
         if w.shape[0]:
             self._set_world()
             self._rec.send_columns(
-                entity("world", L, "body"),
+                entity_path("world", L, "body"),
                 indexes=self._indexes(nav.t[w], result.t0_ns),
                 columns=rr.Transform3D.columns(translation=ned[w], quaternion=_xyzw(nav.q_nb[w])),
             )
@@ -674,7 +698,7 @@ class Sink:
                 ref_ned = (
                     ned if self._truth is None else convert.local_ned(self._truth.pos, self._ref)
                 )
-                self._axes(entity("world", L, "body", "axes"), _axis_size(ref_ned))
+                self._axes(entity_path("world", L, "body", "axes"), _axis_size(ref_ned))
                 run.axes = True
         P_ned = _position_cov(result, a, b)
         if P_ned is None:
@@ -685,7 +709,7 @@ class Sink:
             return
         half, q = convert.ellipsoids(P_ned[c], N_SIGMA)
         self._rec.send_columns(
-            entity("world", L, "covariance"),
+            entity_path("world", L, "covariance"),
             indexes=self._indexes(nav.t[c], result.t0_ns),
             columns=rr.Ellipsoids3D.columns(
                 centers=ned[c],
@@ -696,41 +720,27 @@ class Sink:
         )
         run.cov_t = float(nav.t[c[-1]])
 
-    def _log_metrics(self, run: _Run, result: RunResult, metrics: Mapping[str, Any]) -> None:
-        L = run.label
-        m = result.t.shape[0]
-        if not metrics:
+    def _log_errors(
+        self,
+        run: _Run,
+        result: RunResult,
+        errors: Mapping[str, tuple[np.ndarray, np.ndarray | None, str]],
+    ) -> None:
+        """Whole-run error series of states and extras, with 3-sigma bounds when known."""
+        if not errors:
             return
+        L = run.label
         idx = self._indexes(result.t, result.t0_ns)
-        state_index = {n: i for i, n in enumerate(result.state_names)}
-        sigma_all = result.sigma
-        for name, val in metrics.items():
-            err, sig = _split_metric(val)
-            err = np.asarray(err, dtype=np.float64)
-            if err.shape[0] != m:
-                raise ValueError(f"{L}: metric {name!r} has {err.shape[0]} rows, result has {m}")
-            cols = err.reshape(m, -1)
-            sig_cols = None if sig is None else np.asarray(sig, dtype=np.float64).reshape(m, -1)
-            k = cols.shape[1]
-            for j in range(k):
-                n = name if k == 1 else f"{name}_{j}"
-                s = None if sig_cols is None else sig_cols[:, j]
-                if s is None and n in state_index:
-                    s = sigma_all[:, state_index[n]]
-                u = resolve_unit(n if n in state_index else name, run.units)
-                tab = quantity_of(n if n in state_index else name).value
-                path = entity(L, "error", n)
-                self._bounded(
-                    path,
-                    idx,
-                    cols[:, j] * u.scale,
-                    None if s is None else s * u.scale,
-                    L,
-                    run.color,
-                )
-                self.catalog.add(tab, f"error:{n}", title(n, u, "error"), path)
-                if n in state_index:
-                    self.catalog.discard(tab, f"sigma:{group_of(n)}", entity(L, "sigma", n))
+        states = set(result.state_names)
+        for n, (e, s, key) in errors.items():
+            u = resolve_unit(key, run.units)
+            tab = quantity_of(key).value
+            path = entity_path(L, "error", n)
+            sig = None if s is None else s * u.scale
+            self._bounded(path, idx, e * u.scale, sig, L, run.color)
+            self.catalog.add(tab, f"error:{n}", title(n, u, "error"), path)
+            if n in states:
+                self.catalog.discard(tab, f"sigma:{group_of(n)}", entity_path(L, "sigma", n))
 
     def _log_innovations(self, run: _Run, result: RunResult) -> None:
         L = run.label
@@ -748,13 +758,13 @@ class Sink:
             idx = self._indexes(s.t, result.t0_ns)
             u = resolve_unit(meas, run.units)
             for i in range(dim):
-                path = entity(L, "innovation", meas, str(i))
+                path = entity_path(L, "innovation", meas, str(i))
                 self._bounded(path, idx, nu[:, i] * u.scale, sd[:, i] * u.scale, L, run.color)
                 self.catalog.add(
                     "innovation", f"nu:{meas}:{i}", f"{meas} innovation [{i}] [{u.label}]", path
                 )
             lo, hi = convert.chi2_bounds(dim)
-            path = entity(L, "innovation", meas, "nis")
+            path = entity_path(L, "innovation", meas, "nis")
             faint = (*run.color, 140)
             self._style(
                 path,
@@ -797,7 +807,7 @@ class Sink:
         """
         t = np.asarray(t, dtype=np.float64)
         idx = [rr.TimeColumn(TIMELINE, duration=np.rint(t * 1e9).astype("timedelta64[ns]"))]
-        root = entity("ensemble", name)
+        root = entity_path("ensemble", name)
         plot_title = f"{name} [{unit}]" if unit else name
         for i, (key, values) in enumerate(series.items()):
             values = np.asarray(values, dtype=np.float64)
@@ -805,7 +815,7 @@ class Sink:
                 raise ValueError(
                     f"ensemble {name!r}: series {key!r} has shape {values.shape}, t {t.shape}"
                 )
-            path = f"{root}/{entity(key)[1:]}"
+            path = f"{root}/{entity_path(key)[1:]}"
             self._style(path, [key], [PALETTE[i % len(PALETTE)]], [1.5])
             self._scalars(path, idx, values)
             self.catalog.add("ensemble", f"ensemble:{name}", plot_title, path)
@@ -844,7 +854,8 @@ class Sink:
         try:
             self.send_blueprint()
             self.flush(timeout)
-            self._rec.disconnect()
+            if not self._keep_alive:  # a served stream keeps its server up for late browsers
+                self._rec.disconnect()
         except BaseException:
             self.abort()
             raise
@@ -867,7 +878,8 @@ class Sink:
                 self._tmp.unlink(missing_ok=True)
 
     def wait(self) -> None:
-        """Keep a served viewer up until Ctrl-C (returns at once for the other targets)."""
+        """Keep this process (and so a served viewer) up until Ctrl-C; returns at once for the
+        other targets."""
         if not isinstance(self.target, Serve):
             return
         try:
@@ -922,15 +934,49 @@ def _shade(color: tuple[int, int, int], j: int) -> tuple[int, int, int]:
     return r, g, b
 
 
-def _split_metric(val: Any) -> tuple[np.ndarray, np.ndarray | None]:
-    if isinstance(val, tuple):
-        if len(val) != 2:
-            raise ValueError("a metric is an error array or an (error, sigma) pair")
-        err, sig = val
-        return np.asarray(err, dtype=np.float64), None if sig is None else np.asarray(
-            sig, dtype=np.float64
-        )
-    return np.asarray(val, dtype=np.float64), None
+def _metric_columns(
+    result: RunResult, metrics: Metrics
+) -> dict[str, tuple[np.ndarray, np.ndarray | None, str]]:
+    """Validate metrics and split them into columns: ``name -> (error, sigma or None, key)``.
+
+    An (M, k) entry ``key`` becomes ``key_0 .. key_{k-1}``; a state name without a sigma takes
+    it from P. Raises before anything is logged if a shape does not match ``result.t``.
+    """
+    m = result.t.shape[0]
+    state_index = {n: i for i, n in enumerate(result.state_names)}
+    out: dict[str, tuple[np.ndarray, np.ndarray | None, str]] = {}
+    sigma_all: np.ndarray | None = None
+    for key, val in metrics.items():
+        if isinstance(val, tuple):
+            if len(val) != 2:
+                raise ValueError(f"{result.label}: metric {key!r} is not an (error, sigma) pair")
+            err, sig = val
+        else:
+            err, sig = val, None
+        err = np.asarray(err, dtype=np.float64)
+        if err.ndim == 0 or err.shape[0] != m:
+            raise ValueError(
+                f"{result.label}: metric {key!r} has shape {err.shape}, the result has {m} rows"
+            )
+        cols = err.reshape(m, int(np.prod(err.shape[1:], dtype=np.int64)))
+        sig_cols = None
+        if sig is not None:
+            sig = np.asarray(sig, dtype=np.float64)
+            if sig.size != err.size:
+                raise ValueError(
+                    f"{result.label}: sigma of metric {key!r} has shape {sig.shape}, "
+                    f"the error {err.shape}"
+                )
+            sig_cols = sig.reshape(cols.shape)
+        k = cols.shape[1]
+        for j in range(k):
+            name = key if k == 1 else f"{key}_{j}"
+            s = None if sig_cols is None else sig_cols[:, j]
+            if s is None and name in state_index:
+                sigma_all = result.sigma if sigma_all is None else sigma_all
+                s = sigma_all[:, state_index[name]]
+            out[name] = (cols[:, j], s, name if name in state_index else key)
+    return out
 
 
 def _position_cov(result: RunResult, a: int, b: int) -> np.ndarray | None:

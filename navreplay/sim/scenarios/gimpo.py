@@ -402,6 +402,8 @@ def segment_truth(
             raise ValueError(f"segments must be ordered and non-empty, got {seg}")
         coast((t <= seg.start) if first else (t > t_last) & (t <= seg.start),
               t_last, psi0, v0, d0)
+        if not first:
+            d0 = d0 + v0 * (seg.start - t_last)  # coasted since the previous segment
         inside = (t > seg.start) & (t <= seg.end)
         yaw[inside], a_n[inside], v_n[inside], d_n[inside] = _segment_state(
             psi0, v0, d0, seg, t[inside] - seg.start)

@@ -1,0 +1,489 @@
+"""The ``navreplay`` command: parse arguments into a typed job, make one library call, print.
+
+Each command builds a configuration of :mod:`navreplay.jobs` (or calls a registry) and prints
+the report it gets back. Expected failures (bad input, missing streams, unknown names, an
+unreachable viewer, a diverging filter) print one line on stderr and exit with status 1; usage
+errors exit with 2. ``navreplay --debug COMMAND`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import click
+
+from navreplay import __version__
+
+EXPECTED_ERRORS: tuple[type[BaseException], ...] = ()
+"""Error types reported as one line (filled lazily: importing them loads the package)."""
+
+
+def _expected_errors() -> tuple[type[BaseException], ...]:
+    global EXPECTED_ERRORS
+    if not EXPECTED_ERRORS:
+        from navreplay.filters.kalman import FilterDivergedError
+        from navreplay.filters.registry import FilterLoadError
+        from navreplay.io import RecordingError
+        from navreplay.params import ParamError
+        from navreplay.replay.engine import ReplayError
+        from navreplay.replay.ensemble import RunFailedError
+        from navreplay.viz import VizUnavailableError
+
+        EXPECTED_ERRORS = (
+            RecordingError, ParamError, FilterLoadError, FilterDivergedError, ReplayError,
+            RunFailedError, VizUnavailableError, KeyError, FileExistsError, FileNotFoundError,
+            IsADirectoryError, PermissionError,
+        )
+    return EXPECTED_ERRORS
+
+
+def _message(e: BaseException) -> str:
+    if isinstance(e, KeyError) and e.args:
+        return str(e.args[0])
+    if isinstance(e, OSError) and e.filename and e.strerror:
+        return f"{e.filename}: {e.strerror}"
+    return str(e) or type(e).__name__
+
+
+class _Group(click.Group):
+    """Turns the project's expected errors into one line and shows warnings as one line."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        debug = bool(ctx.params.get("debug"))
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+            warnings.showwarning = _show_warning  # type: ignore[assignment]
+            try:
+                return super().invoke(ctx)
+            except click.exceptions.Exit:
+                raise
+            except (click.ClickException, click.Abort):
+                raise
+            except KeyboardInterrupt:
+                click.echo("interrupted", err=True)
+                raise click.exceptions.Exit(130) from None
+            except Exception as e:
+                if debug or not isinstance(e, _expected_errors()):
+                    raise
+                raise click.ClickException(_message(e)) from None
+
+
+def _show_warning(message: Any, category: Any, filename: str, lineno: int,
+                  file: Any = None, line: Any = None) -> None:
+    click.echo(f"warning: {message}", err=True)
+
+
+class _Progress:
+    """A ``progress(done, total)`` callback drawing a click progress bar on stderr."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.bar: Any = None
+        self.done = 0
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.bar is None:
+            self.bar = click.progressbar(length=max(total, 1), label=self.label, file=sys.stderr)
+            self.bar.__enter__()
+        if done > self.done:
+            self.bar.update(done - self.done)
+            self.done = done
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(None, None, None)
+            self.bar = None
+
+    def __enter__(self) -> _Progress:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def _load_config(path: str | None) -> dict[str, Any] | None:
+    if path is None:
+        return None
+    from navreplay.params import load_toml
+
+    return load_toml(path)
+
+
+def _viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool,
+                 no_viz: bool) -> Any:
+    from navreplay.jobs import VizMode, VizOptions
+
+    chosen = [name for name, on in (("--save", save is not None), ("--spawn", spawn),
+                                    ("--connect", connect is not None), ("--serve", serve),
+                                    ("--no-viz", no_viz)) if on]
+    if len(chosen) > 1:
+        raise click.UsageError(f"{' and '.join(chosen)} exclude each other")
+    if spawn:
+        return VizOptions(VizMode.SPAWN)
+    if connect is not None:
+        return VizOptions(VizMode.CONNECT, url=connect)
+    if serve:
+        return VizOptions(VizMode.SERVE)
+    if no_viz:
+        return VizOptions(VizMode.NONE)
+    return VizOptions(VizMode.SAVE, Path(save) if save else None)
+
+
+def _viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
+    opts = [
+        click.option("--save", "save", metavar="OUT.rrd",
+                     help="Save the Rerun view to this file (default: under out/)."),
+        click.option("--spawn", is_flag=True, help="Open a local Rerun viewer and stream to it."),
+        click.option("--connect", metavar="URL",
+                     help="Stream to a running Rerun viewer (rerun+http://host:9876/proxy)."),
+        click.option("--serve", is_flag=True,
+                     help="Serve the view to a web browser until Ctrl-C."),
+        click.option("--no-viz", is_flag=True, help="No Rerun output."),
+    ]
+    for opt in reversed(opts):
+        fn = opt(fn)
+    return fn
+
+
+_PARAM_HELP = "Parameter as key=value (repeatable)."
+
+
+# --------------------------------------------------------------------------------------------
+# the group
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="navreplay")
+@click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+def cli(debug: bool) -> None:
+    """Simulate navigation sensor recordings (MCAP) and replay estimation filters over them.
+
+    \b
+    Typical loop:
+      navreplay scenarios
+      navreplay simulate vehicle-drive -o recordings/drive.mcap --seed 1
+      navreplay info recordings/drive.mcap
+      navreplay filters
+      navreplay run ins,gps-ins recordings/drive.mcap     # -> out/drive.rrd
+      navreplay montecarlo vehicle-drive gps-ins --runs 20 --workers 2
+    """
+
+
+# --------------------------------------------------------------------------------------------
+# scenarios, simulate, info
+
+
+@cli.command()
+@click.option("-v", "--verbose", is_flag=True, help="Also list each scenario's parameters.")
+def scenarios(verbose: bool) -> None:
+    """List the built-in scenarios."""
+    from navreplay.params import describe
+    from navreplay.sim.scenario import scenarios as table
+
+    items = table()
+    width = max((len(n) for n in items), default=0)
+    for name, cls in items.items():
+        click.echo(f"{name:<{width}}  {cls.summary}")
+        if verbose:
+            click.echo(f"{'':<{width}}  streams: {', '.join(str(s) for s in cls.streams)}")
+            for line in _param_lines(describe(cls.Params)):
+                click.echo(f"{'':<{width}}  {line}")
+    if not verbose:
+        click.echo("\n(`navreplay scenarios -v` lists their parameters.)")
+
+
+@cli.command()
+@click.argument("scenario")
+@click.option("-o", "--output", required=True, metavar="FILE.mcap|DIR",
+              help="Recording to write; with --runs, NAME_0001.mcap... or DIR/SCENARIO_0001.mcap...")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed (run i of --runs uses seed + i).")
+@click.option("--duration", type=float, help="Length [s] (same as -p duration=...).")
+@click.option("-p", "--param", "params", multiple=True, metavar="KEY=VALUE", help=_PARAM_HELP)
+@click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
+              help="TOML file; its [scenario] table sets parameters (-p wins).")
+@click.option("--runs", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Number of recordings (seeds seed, seed+1, ...).")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Processes for --runs.")
+@click.option("--force", is_flag=True, help="Overwrite existing files.")
+def simulate(scenario: str, output: str, seed: int, duration: float | None,
+             params: Sequence[str], config: str | None, runs: int, workers: int,
+             force: bool) -> None:
+    """Simulate SCENARIO into an MCAP recording (or --runs of them)."""
+    from navreplay import jobs
+
+    job = jobs.SimulateJob(
+        scenario=scenario,
+        output=Path(output),
+        values=jobs.scenario_values(params, _load_config(config), duration),
+        seed=seed, runs=runs, force=force, workers=workers,
+    )
+    with _Progress(f"simulate {scenario}") as progress:
+        paths = jobs.simulate(job, progress if runs > 1 else None)
+    if len(paths) <= 3:
+        for p in paths:
+            click.echo(f"wrote {p}")
+    else:
+        click.echo(f"wrote {len(paths)} recordings: {paths[0]} ... {paths[-1]}")
+
+
+@cli.command()
+@click.argument("recording", type=click.Path(dir_okay=False))
+def info(recording: str) -> None:
+    """Topics, rates, durations and scenario metadata of a RECORDING."""
+    from navreplay.io import format_info, recording_info
+
+    click.echo(format_info(recording_info(recording)))
+
+
+# --------------------------------------------------------------------------------------------
+# filters
+
+
+def _param_lines(rows: Sequence[tuple[str, str, Any, str]]) -> list[str]:
+    if not rows:
+        return ["(no parameters)"]
+    width = max(len(r[0]) for r in rows)
+    out = []
+    for name, tp, default, doc in rows:
+        out.append(f"{name:<{width}}  {tp} = {_show(default)}  {doc}".rstrip())
+    return out
+
+
+def _show(value: Any) -> str:
+    """A default value as a user would type it after ``-p key=``."""
+    if hasattr(value, "value"):  # enum
+        return str(value.value)
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, tuple | list):
+        return ",".join(_show(v) for v in value)
+    return str(value)
+
+
+@cli.command()
+@click.argument("name", required=False)
+def filters(name: str | None) -> None:
+    """List the filters (built-in and plug-ins) with their streams and parameters."""
+    from navreplay.filters.registry import filters as table
+    from navreplay.filters.registry import load_filter
+    from navreplay.params import describe
+
+    items = {name: load_filter(name)} if name else table()
+    for i, (fname, cls) in enumerate(items.items()):
+        if i:
+            click.echo("")
+        module = cls.__module__
+        origin = "" if module.startswith("navreplay.") else f"  [plug-in: {module}]"
+        click.echo(f"{fname}: {cls.summary}{origin}")
+        click.echo(f"  requires: {', '.join(str(s) for s in cls.requires) or '-'}")
+        if cls.optional:
+            click.echo(f"  optional: {', '.join(str(s) for s in cls.optional)}")
+        click.echo("  parameters:")
+        for line in _param_lines(describe(cls.Params)):
+            click.echo(f"    {line}")
+
+
+# --------------------------------------------------------------------------------------------
+# run, montecarlo
+
+
+def _looks_like_recording(arg: str) -> bool:
+    return arg.endswith(".mcap") or Path(arg).is_file()
+
+
+@cli.command()
+@click.argument("args", nargs=-1, required=True, metavar="[FILTER[,FILTER...]] RECORDING...")
+@click.option("--filter", "refs", multiple=True, metavar="MODULE:CLASS",
+              help="Add a filter class by import path (repeatable).")
+@click.option("-p", "--param", "params", multiple=True, metavar="[FILTER.]KEY=VALUE",
+              help="Filter parameter; FILTER.KEY targets one filter (repeatable).")
+@click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
+              help="TOML file with [filter.NAME] tables (-p wins).")
+@_viz_flags
+@click.option("--summary", "summary", type=click.Path(dir_okay=False), metavar="OUT.json",
+              help="Write the summary figures as JSON.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Processes (for several recordings).")
+@click.option("--rate", type=float, metavar="X",
+              help="Replay at X times real time (1.0 = real time), for live viewing.")
+@click.option("--output-rate", type=float, default=10.0, show_default=True, metavar="HZ",
+              help="Estimate output rate between aiding samples [Hz].")
+def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
+        save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
+        summary: str | None, workers: int, rate: float | None, output_rate: float) -> None:
+    """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
+
+    \b
+    Examples:
+      navreplay run gps-ins drive.mcap
+      navreplay run ins,gps-ins drive.mcap -p gps-ins.gps_pos_sigma_scale=2 --summary s.json
+      navreplay run 'gps-ins[gps_pos_sigma_scale=1],gps-ins[gps_pos_sigma_scale=3]' drive.mcap
+      navreplay run --filter mypkg.myfilter:MyFilter drive.mcap
+      navreplay run gps-ins runs/*.mcap --workers 2      # ensemble statistics
+    """
+    from navreplay import jobs
+
+    args = list(args)
+    names: str | None = None
+    if not (refs and _looks_like_recording(args[0])):
+        names = args.pop(0)
+    if not args:
+        raise click.UsageError("no RECORDING given")
+    job = jobs.RunJob(
+        filters=jobs.filter_specs(names, refs, params, _load_config(config)),
+        recordings=tuple(Path(a) for a in args),
+        viz=_viz_options(save, spawn, connect, serve, no_viz),
+        summary_path=Path(summary) if summary else None,
+        workers=workers, pacing=rate, output_rate=output_rate,
+    )
+    label = "replay" if len(args) == 1 else f"replay {len(args)} recordings"
+    with _Progress(label) as progress:
+        report = jobs.run(job, progress)
+    _finish(report)
+
+
+def _finish(report: Any) -> None:
+    click.echo(report.format())
+    sink = getattr(report, "sink", None)
+    if sink is not None:  # --serve: keep the server up
+        sink.wait()
+        sink.close()
+
+
+@cli.command()
+@click.argument("scenario")
+@click.argument("filter_names", metavar="FILTER[,FILTER...]", required=False)
+@click.option("--runs", type=click.IntRange(min=1), required=True, help="Number of runs.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Run i uses seed + i.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Processes.")
+@click.option("--filter", "refs", multiple=True, metavar="MODULE:CLASS",
+              help="Add a filter class by import path (repeatable).")
+@click.option("-p", "--param", "params", multiple=True, metavar="[FILTER.|scenario.]KEY=VALUE",
+              help="Filter parameter, or scenario.KEY=VALUE for the scenario (repeatable).")
+@click.option("--duration", type=float, help="Scenario length [s].")
+@click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
+              help="TOML file with [scenario] and [filter.NAME] tables (-p wins).")
+@click.option("--keep", "keep", type=click.Path(file_okay=False), metavar="DIR",
+              help="Also write every run's recording into DIR.")
+@click.option("--force", is_flag=True, help="Overwrite kept recordings.")
+@_viz_flags
+@click.option("--summary", "summary", type=click.Path(dir_okay=False), metavar="OUT.json",
+              help="Write per-run and ensemble figures as JSON.")
+def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, workers: int,
+               refs: Sequence[str], params: Sequence[str], duration: float | None,
+               config: str | None, keep: str | None, force: bool, save: str | None,
+               spawn: bool, connect: str | None, serve: bool, no_viz: bool,
+               summary: str | None) -> None:
+    """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
+
+    Prints per-filter ensemble statistics (RMS error vs mean filter sigma, NEES with its
+    chi-square bounds) and saves them to a Rerun view.
+
+    \b
+    Example:
+      navreplay montecarlo vehicle-drive ins,gps-ins --runs 50 --workers 2 -p scenario.duration=300
+    """
+    from navreplay import jobs
+
+    scenario_items = [p.partition(".")[2] for p in params if p.startswith("scenario.")]
+    filter_items = [p for p in params if not p.startswith("scenario.")]
+    cfg = _load_config(config)
+    job = jobs.MonteCarloJob(
+        scenario=scenario,
+        filters=jobs.filter_specs(filter_names, refs, filter_items, cfg),
+        runs=runs,
+        values=jobs.scenario_values(scenario_items, cfg, duration),
+        seed=seed, workers=workers,
+        keep_dir=Path(keep) if keep else None, force=force,
+        viz=_viz_options(save, spawn, connect, serve, no_viz),
+        summary_path=Path(summary) if summary else None,
+    )
+    with _Progress(f"montecarlo {scenario}") as progress:
+        report = jobs.montecarlo(job, progress)
+    _finish(report)
+
+
+# --------------------------------------------------------------------------------------------
+# reproduce, demo
+
+
+@cli.command()
+@click.argument("name", required=False)
+@click.option("--runs", type=click.IntRange(min=1), help="Runs (default: the paper's).")
+@click.option("--quick", is_flag=True, help="The quick version (fewer runs).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Base seed.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Processes.")
+@click.option("--save", "save", type=click.Path(dir_okay=False), metavar="OUT.rrd",
+              help="Save the Rerun view of the figures.")
+@click.option("--strict", is_flag=True, help="Exit with status 1 if an acceptance check fails.")
+def reproduce(name: str | None, runs: int | None, quick: bool, seed: int, workers: int,
+              save: str | None, strict: bool) -> None:
+    """Reproduce a paper's results (NAME; without it, list them) and check the bands."""
+    from navreplay import reproduce as registry
+
+    if name is None:
+        for n in registry.available():
+            try:
+                summary = registry.get(n).summary
+            except ImportError:
+                summary = "(not available in this build)"
+            click.echo(f"{n:<20}  {summary}")
+        return
+    rep = registry.get(name)
+    if quick and runs is None:
+        runs = getattr(rep, "quick_runs", None)
+    with _Progress(f"reproduce {name}") as progress:
+        report = rep.run(runs=runs, seed=seed, workers=workers,
+                         rrd=Path(save) if save else None, progress=progress)
+    click.echo(report.format())
+    if save:
+        click.echo(f"\nRerun view saved to {save}; open it with: rerun {save}")
+    if strict and not report.passed:
+        failed = sum(not c.passed for c in report.checks)
+        raise click.ClickException(f"{failed} acceptance check(s) failed")
+
+
+@cli.command()
+@click.option("--out", "out", type=click.Path(file_okay=False), default="out", show_default=True,
+              help="Directory for the recording, the .rrd files and the summary.")
+@click.option("--no-reproductions", is_flag=True, help="Skip the paper reproductions.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Processes for the reproductions.")
+@click.option("--view/--no-view", default=None,
+              help="Open the Rerun viewer (default: only if one can be shown here).")
+def demo(out: str, no_reproductions: bool, workers: int, view: bool | None) -> None:
+    """Simulate a drive, replay ins and gps-ins, run the quick paper reproductions, save .rrd."""
+    from navreplay import jobs
+
+    job = jobs.DemoJob(out_dir=Path(out), reproductions=not no_reproductions, workers=workers,
+                       view=view)
+    bars: dict[str, _Progress] = {}
+
+    def progress(stage: str, done: int, total: int) -> None:
+        for other in [s for s in bars if s != stage]:
+            bars.pop(other).close()
+        bars.setdefault(stage, _Progress(stage))(done, total)
+
+    try:
+        report = jobs.demo(job, progress)
+    finally:
+        for bar in bars.values():
+            bar.close()
+    click.echo(report.format())
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Console-script entry point."""
+    cli.main(args=list(argv) if argv is not None else None, prog_name="navreplay")
+
+
+if __name__ == "__main__":
+    main()
