@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -90,10 +91,10 @@ def per_sample_seconds(rows: int, directory: Path) -> float:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_viz")
     parser.add_argument("--minutes", type=float, default=60.0, help="recording length [min]")
     parser.add_argument("--per-sample-rows", type=int, default=3000)
-    args = parser.parse_args(argv)
+    args = parser.parse_args([] if argv is None else argv)
 
     recording = stationary_recording(args.minutes)
     n_imu = len(recording[StreamKind.IMU])
@@ -132,7 +133,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     print(f"filter (replay of 'ins'):          {t_filter:8.2f} s")
     print(
-        f"Rerun logging (open, log_run, close): {t_log:8.2f} s   "
+        f"Rerun logging (open..close):       {t_log:8.2f} s   "
         f"{rows} rows in {n_entities} entities, {size_mb:.1f} MB .rrd"
     )
     print(f"ratio logging / filter:            {t_log / t_filter:8.3f}   (design: <= 1)")
@@ -144,4 +145,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -282,6 +282,33 @@ def _mv(A, x):
 
 
 @numba.njit(cache=True)
+def _put(A, i0, j0, B, scale):
+    """A[i0:i0+k, j0:j0+m] = scale B (loops: 2-D slice expressions compile slowly in numba)."""
+    for i in range(B.shape[0]):
+        for j in range(B.shape[1]):
+            A[i0 + i, j0 + j] = scale * B[i, j]
+
+
+@numba.njit(cache=True)
+def _symmetrise(P):
+    """(P + P^T) / 2 in place."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i):
+            v = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = v
+            P[j, i] = v
+
+
+@numba.njit(cache=True)
+def _normalise(q):
+    """q / |q| in place."""
+    k = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    for i in range(4):
+        q[i] *= k
+
+
+@numba.njit(cache=True)
 def left(p):
     """``L(p)`` with ``p (x) q = L(p) q``, (4, 4) (= :func:`navreplay.geo.quat_left_matrix`)."""
     L = np.empty((4, 4))
@@ -438,16 +465,16 @@ def system_matrix(q_bn, v_n, lat, R, w_ib_b, w_in_n, f_b, n):
     F2 = np.zeros((2, 3))
     F2[0, 1], F2[0, 2] = -f_n[2], f_n[1]
     F2[1, 0], F2[1, 2] = f_n[2], -f_n[0]
-    A[0:2, 2:6] = -2.0 * _mmt(F2, Rq)
+    _put(A, 0, 2, _mmt(F2, Rq), -2.0)
     # (2): A_qv = -1/2 R(Q_bn) Gamma2
     Gamma2 = np.zeros((3, 2))
     Gamma2[0, 1], Gamma2[1, 0], Gamma2[2, 1] = 1.0 / R, -1.0 / R, -tl / R
-    A[2:6, 0:2] = -0.5 * _mm(Rq, Gamma2)
+    _put(A, 2, 0, _mm(Rq, Gamma2), -0.5)
     # (2): A_qq = 1/2 [w_ib^b - w_in^n]
-    A[2:6, 2:6] = 0.5 * rate_matrix(w_ib_b, w_in_n)
+    _put(A, 2, 2, rate_matrix(w_ib_b, w_in_n), 0.5)
     G = np.zeros((n, 6))
-    G[0:2, 0:3] = C[0:2]
-    G[2:6, 3:6] = 0.5 * tmat(q_bn)
+    _put(G, 0, 0, C[0:2], 1.0)
+    _put(G, 2, 3, tmat(q_bn), 0.5)
     return A, G
 
 
@@ -457,7 +484,9 @@ def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
 
     Equal to ``(C_nb w_ib^b - w_in^n) x (C(Q_m) L^r)`` (a rotation preserves cross products).
     """
-    a = _mv(dcm(q_bn), w_ib_b) - w_in_n
+    a = _mv(dcm(q_bn), w_ib_b)
+    for i in range(3):
+        a[i] -= w_in_n[i]
     b = _mv(dcm(q_m), lever_arm_r)
     out = np.empty(3)
     out[0] = a[1] * b[2] - a[2] * b[1]
@@ -541,31 +570,46 @@ def joseph_correct(P, nu, H, r):
     S = _mmt(HP, H)  # (8)
     for i in range(m):
         S[i, i] += r[i]
-    S = 0.5 * (S + S.T)
+    _symmetrise(S)
     L = np.zeros((m, m))
     if not _cholesky(S, L):
         return np.zeros(n), P, S, False
     # (9), (13): W = L^-1 [nu, H P] by forward substitution
     W = np.empty((m, n + 1))
-    W[:, 0] = nu
-    W[:, 1:] = HP
+    for i in range(m):
+        W[i, 0] = nu[i]
+        for j in range(n):
+            W[i, j + 1] = HP[i, j]
     for i in range(m):
         for k in range(i):
-            W[i] -= L[i, k] * W[k]
-        W[i] /= L[i, i]
+            for j in range(n + 1):
+                W[i, j] -= L[i, k] * W[k, j]
+        for j in range(n + 1):
+            W[i, j] /= L[i, i]
     # (9): K^T = L^-T W[:, 1:] by back substitution
-    KT = W[:, 1:].copy()
+    K = np.empty((n, m))
     for i in range(m - 1, -1, -1):
-        for k in range(i + 1, m):
-            KT[i] -= L[k, i] * KT[k]
-        KT[i] /= L[i, i]
-    K = KT.T.copy()
+        for j in range(n):
+            v = W[i, j + 1]
+            for k in range(i + 1, m):
+                v -= L[k, i] * K[j, k]
+            K[j, i] = v / L[i, i]
     dx = _mv(K, nu)  # (11)
-    IKH = -_mm(K, H)  # (12)
+    IKH = _mm(K, H)  # (12): P = (I - K H) P (I - K H)^T + K R K^T
+    KR = np.empty((n, m))
     for i in range(n):
+        for j in range(n):
+            IKH[i, j] = -IKH[i, j]
         IKH[i, i] += 1.0
-    P = _mmt(_mm(IKH, P), IKH) + _mmt(K * r, K)
-    return dx, 0.5 * (P + P.T), S, True
+        for j in range(m):
+            KR[i, j] = K[i, j] * r[j]
+    P = _mmt(_mm(IKH, P), IKH)
+    KRK = _mmt(KR, K)
+    for i in range(n):
+        for j in range(n):
+            P[i, j] += KRK[i, j]
+    _symmetrise(P)
+    return dx, P, S, True
 
 
 @numba.njit(cache=True)
@@ -621,33 +665,43 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
     n = P.shape[0]
     ns = s.shape[0]
     q_bn = nav[6:10].copy()
-    w_now = 1.5 * w_last - 0.5 * w_prev
-    if count > 0:  # interval means of the raw IMU for (14)
-        w_ib = sums[0:3] / count
-        f_b = sums[3:6] / count
-    else:
-        w_ib = w_last.copy()
-        f_b = np.zeros(3)
+    w_now = np.empty(3)
+    w_ib = np.empty(3)
+    f_b = np.zeros(3)
+    for i in range(3):
+        w_now[i] = 1.5 * w_last[i] - 0.5 * w_prev[i]
+        if count > 0:  # interval means of the raw IMU for (14)
+            w_ib[i] = sums[i] / count
+            f_b[i] = sums[3 + i] / count
+        else:  # no sample in the interval: hold the last rate, no specific-force term
+            w_ib[i] = w_last[i]
     # (4): Q_m* (x) Q_bn_hat; the sign of Q_m puts Q_br in the hemisphere of [1, 0, 0, 0]
-    Lc = left(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]]))
+    sign = 1.0
+    if q_m[0] * q_bn[0] + q_m[1] * q_bn[1] + q_m[2] * q_bn[2] + q_m[3] * q_bn[3] < 0.0:
+        sign = -1.0  # (Q_m* (x) Q_bn)_0 is the dot product of Q_m and Q_bn
+    q_m = np.array([sign * q_m[0], sign * q_m[1], sign * q_m[2], sign * q_m[3]])
+    Lc = left(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]]))  # L(Q_m*)
     q_br_meas = _mv(Lc, q_bn)
-    if q_br_meas[0] < 0.0:
-        q_m = -q_m
-        Lc = -Lc
-        q_br_meas = -q_br_meas
 
     # prediction: (14), then Phi = I + A dt + (A dt)^2/2 and Qd = G Qc G^T dt (kalman (3), (4))
     R, w_in = earth_terms(nav[0], nav[2], nav[3:6])
     A, G = system_matrix(q_bn, nav[3:6], nav[0], R, w_ib, w_in, f_b, n)
-    Ad = A * dt
-    Phi = Ad + 0.5 * _mm(Ad, Ad)
+    Phi = _mm(A, A)
+    Gq = np.empty((n, 6))
     for i in range(n):
+        for j in range(n):
+            Phi[i, j] = A[i, j] * dt + 0.5 * dt * dt * Phi[i, j]
         Phi[i, i] += 1.0
-    Qd = _mmt(G * qc, G) * dt
+        for j in range(6):
+            Gq[i, j] = G[i, j] * qc[j] * dt
+    Qd = _mmt(Gq, G)
     for i in range(6, n):
         Qd[i, i] += q_br * dt
-    P = _mmt(_mm(Phi, P), Phi) + Qd  # kalman (6)
-    P = 0.5 * (P + P.T)
+    P = _mmt(_mm(Phi, P), Phi)  # kalman (6)
+    for i in range(n):
+        for j in range(n):
+            P[i, j] += Qd[i, j]
+    _symmetrise(P)
 
     # measurement: (3), (6) velocity; (5) quaternion rows s; H of (15)
     m = 2 + ns
@@ -660,7 +714,8 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
     H[1, 1] = 1.0
     for i in range(ns):
         z[2 + i] = q_br_meas[s[i]] - q_rb[s[i]]
-        H[2 + i, 2:6] = Lc[s[i]]
+        for j in range(4):
+            H[2 + i, 2 + j] = Lc[s[i], j]
         H[2 + i, 6 + i] = -1.0
     dx, P, S, ok = joseph_correct(P, z, H, r)
     sigma_phi = np.zeros(3)
@@ -670,27 +725,31 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
     # feedback: x_hat <- x_hat - dx
     nav[3] -= dx[0]
     nav[4] -= dx[1]
-    q = q_bn - dx[2:6]
-    q /= math.sqrt(q @ q)
-    nav[6:10] = q
+    q = np.empty(4)
+    for i in range(4):
+        q[i] = q_bn[i] - dx[2 + i]
+    _normalise(q)
+    for i in range(4):
+        nav[6 + i] = q[i]
     for i in range(ns):
         q_rb[s[i]] -= dx[6 + i]
     # (11), E8: unmatched components (q_br2 for partial matching) of Q_m* (x) Q_bn_hat
     q_br_new = _mv(Lc, q)
     for i in u:
         q_rb[i] = q_br_new[i]
-    q_rb /= math.sqrt(q_rb @ q_rb)  # (10), E10
+    _normalise(q_rb)  # (10), E10
     # the vertical channel and the position are slaved to the GINS (spec 4.1)
     nav[5] = v_r[2] + lever_velocity(q, q_m, w_now, w_in, lever_arm_r)[2]
-    nav[0:3] = pos
+    for i in range(3):
+        nav[i] = pos[i]
 
     # predicted covariance of phi = -2 R(q)^T dQ_bn: Sigma_phi = 4 R^T P_qq R
     Rq = rmat(q)
-    X = _mm(P[2:6, 2:6], Rq)
     for i in range(3):
         v = 0.0
         for k in range(4):
-            v += Rq[k, i] * X[k, i]
+            for j in range(4):
+                v += Rq[k, i] * P[2 + k, 2 + j] * Rq[j, i]
         sigma_phi[i] = math.sqrt(max(4.0 * v, 0.0))
     if not _is_psd(P, RTOL):
         return P, z, S, sigma_phi, _P_NOT_PSD
