@@ -86,6 +86,8 @@ class _Progress:
         self.done = 0
 
     def __call__(self, done: int, total: int) -> None:
+        if not _stderr_is_tty():
+            return
         if self.bar is None:
             self.bar = click.progressbar(length=max(total, 1), label=self.label, file=sys.stderr)
             self.bar.__enter__()
@@ -103,6 +105,13 @@ class _Progress:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def _stderr_is_tty() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
 
 
 def _load_config(path: str | None) -> dict[str, Any] | None:

@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from navreplay import params as _params
-from navreplay.filters.registry import FilterLoadError, load_filter
-from navreplay.replay.engine import build_params, check_streams, replay
+from navreplay.filters.registry import load_filter
+from navreplay.replay.engine import MissingStreamError, build_params, check_streams, replay
 from navreplay.replay.ensemble import (
     FilterSpec,
     RunOutput,
@@ -288,27 +288,28 @@ class VizOptions:
         return self.mode in (VizMode.SPAWN, VizMode.CONNECT, VizMode.SERVE)
 
 
-@contextmanager
-def _sink(viz_options: VizOptions, default: Path, name: str) -> Iterator[Any]:
-    """Open the Rerun sink (checking a viewer is reachable) or yield None."""
+def _open_sink(viz_options: VizOptions, default: Path, name: str) -> Any:
+    """Open the Rerun sink (checking first that a viewer is reachable), or None."""
     target = viz_options.target(default)
     if target is None:
-        yield None
-        return
+        return None
     from navreplay.viz import open_sink
 
-    with open_sink(target, recording_name=name) as sink:
-        yield sink
+    return open_sink(target, recording_name=name)
 
 
-def _viz_hint(sink: Any, where: Any) -> str:
+def _close_sink(sink: Any, viz_options: VizOptions) -> str:
+    """Finish the sink (a served one stays up) and say where the view is."""
     if sink is None:
         return ""
-    if getattr(sink, "web_url", None):
-        return f"Rerun web viewer: {sink.web_url} (Ctrl-C to stop serving)"
-    if getattr(sink, "path", None) is not None:
+    if viz_options.mode is VizMode.SERVE:
+        sink.send_blueprint()
+        sink.flush()
+        return f"Rerun web viewer: {sink.web_url} (serving until Ctrl-C)"
+    where = sink.close()
+    if sink.path is not None:
         return f"Rerun view saved to {where}; open it with: rerun {where}"
-    return f"Rerun view sent to {where}"
+    return f"Rerun view sent to the viewer at {where}"
 
 
 # --------------------------------------------------------------------------------------------
@@ -316,45 +317,112 @@ def _viz_hint(sink: Any, where: Any) -> str:
 
 
 def run_summary(result: RunResult, recording: Recording) -> dict[str, Any]:
-    """Scalar figures of one run against the recording's truth."""
+    """Scalar figures of one run against the recording's truth (:mod:`navreplay.metrics`)."""
     from navreplay import metrics
 
-    return metrics.summarize(metrics.run_metrics(result, recording))
+    return metrics.run_metrics(result, recording).summary()
 
 
-def run_errors(result: RunResult, recording: Recording) -> dict[str, Any]:
-    """Error series for the Rerun view (``name -> (error, sigma)``)."""
-    from navreplay import metrics
-
-    return metrics.error_series(metrics.run_metrics(result, recording))
-
-
-def summary_table(rows: Mapping[str, Mapping[str, Any]]) -> str:
-    from navreplay import metrics
-
-    return metrics.format_summary(rows)
+def state_errors(m: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Estimation errors and predicted sigmas of the scored states, for the Rerun view."""
+    return {
+        name: (m.state_error[:, j], np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
+        for j, name in enumerate(m.state_names)
+    }
 
 
 @dataclasses.dataclass
-class _PerRun:
-    """What a worker returns for one recording: scalar summaries and the ensemble input."""
+class PerRun:
+    """What a worker returns for one recording: per-filter metrics and scalar summaries."""
 
+    metrics: dict[str, Any]
     summaries: dict[str, dict[str, Any]]
-    ensemble: dict[str, Any]
 
 
 def campaign_extract(
     recording: Recording, results: dict[str, RunResult], task: RunTask
-) -> _PerRun:
-    """Ensemble extractor of ``navreplay run``/``montecarlo``: summaries + time series input."""
+) -> PerRun:
+    """Extractor of ``navreplay run`` over several recordings and ``navreplay montecarlo``."""
     from navreplay import metrics
 
-    summaries, ensemble = {}, {}
-    for label, res in results.items():
-        m = metrics.run_metrics(res, recording)
-        summaries[label] = metrics.summarize(m)
-        ensemble[label] = metrics.ensemble_input(m)
-    return _PerRun(summaries, ensemble)
+    scored = {label: metrics.run_metrics(res, recording) for label, res in results.items()}
+    return PerRun(scored, {label: m.summary() for label, m in scored.items()})
+
+
+ERROR_KEYS = ("runs", "distance", "pos_rms_h", "pos_rms_v", "pos_err_final_h", "pos_err_final_dt",
+              "lat_rms_final", "long_rms_final", "cep50_final", "dt_cep50_final", "vel_rms",
+              "att_rms_level", "att_rms_heading")
+"""Columns of the error table (those present in a summary)."""
+
+
+def format_summaries(summaries: Mapping[str, Mapping[str, Any]]) -> str:
+    """Two tables of summary dicts: errors, then consistency (NEES and NIS against their 95 %
+    chi-square bounds)."""
+    from navreplay import metrics
+
+    if not summaries:
+        return "(nothing to score)"
+    keys = [k for k in ERROR_KEYS if any(k in s for s in summaries.values())]
+    out = [metrics.format_table(summaries, keys)]
+    rows = [("consistency", "dof", "mean", "in 95% bounds")]
+    for label, s in summaries.items():
+        if "nees_mean" in s:
+            rows.append((f"{label} NEES", str(s["nees_dof"]), f"{s['nees_mean']:.3g}",
+                         f"{100 * s['nees_in_bounds']:.0f} %"))
+        for key in s:
+            if key.startswith("nis_mean_"):
+                meas = key.removeprefix("nis_mean_")
+                rows.append((f"{label} NIS {meas}", str(s.get(f"nis_dof_{meas}", "")),
+                             f"{s[key]:.3g}",
+                             f"{100 * s.get(f'nis_in_bounds_{meas}', math.nan):.0f} %"))
+    if len(rows) > 1:
+        widths = [max(len(r[i]) for r in rows) for i in range(4)]
+        out.append("\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
+                             for r in rows))
+    return "\n\n".join(out)
+
+
+_ENSEMBLE_NAV = (("pos_ned", "position", ("N", "E", "D"), "m", 1.0),
+                 ("v_n", "velocity", ("N", "E", "D"), "m/s", 1.0),
+                 ("phi", "attitude", ("phi_N", "phi_E", "phi_D"), "deg", 180.0 / math.pi))
+
+
+def log_ensemble(sink: Any, label: str, ens: Any) -> None:
+    """Log one filter's Monte Carlo statistics: RMS error vs mean predicted sigma over time for
+    the navigation errors and scored states, average NEES and NIS with their 95 % bounds."""
+    from navreplay.viz.naming import resolve_unit
+
+    t = ens.t
+    for key, what, axes, unit, scale in _ENSEMBLE_NAV:
+        if key not in ens.rms:
+            continue
+        for i, axis in enumerate(axes):
+            sigma = ens.sigma.get(key)
+            series = {f"{label} RMS": ens.rms[key][:, i] * scale}
+            if sigma is not None and np.isfinite(sigma[:, i]).any():
+                series[f"{label} σ"] = sigma[:, i] * scale
+            sink.log_ensemble(f"{what} error {axis}", t, series, unit=unit)
+    for j, name in enumerate(ens.state_names):
+        u = resolve_unit(name)
+        sink.log_ensemble(
+            f"{name} error", t,
+            {f"{label} RMS": ens.state_rms[:, j] * u.scale,
+             f"{label} σ": ens.state_sigma[:, j] * u.scale},
+            unit=u.label,
+        )
+    if ens.nees_dof and np.isfinite(ens.nees_mean).any():
+        sink.log_ensemble(f"{label} NEES (dof {ens.nees_dof}, {ens.runs} runs)", t,
+                          {f"{label} NEES": ens.nees_mean}, unit="-", bounds=ens.nees_bounds)
+    from navreplay.metrics import chi2_bounds
+
+    for meas, (t_k, mean, count, dof) in ens.nis_mean.items():
+        ok = count > 0
+        lo = np.full(mean.shape, np.nan)
+        hi = np.full(mean.shape, np.nan)
+        for c in np.unique(count[ok]):
+            lo[count == c], hi[count == c] = chi2_bounds(dof, int(c))
+        sink.log_ensemble(f"{label} NIS {meas} (dof {dof})", t_k[: mean.shape[0]],
+                          {f"{label} NIS": mean}, unit="-", bounds=(lo, hi))
 
 
 # --------------------------------------------------------------------------------------------
@@ -522,10 +590,11 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
     return _campaign(tasks, job.filters, job.viz, default, job.summary_path, job.workers,
-                     progress, title, job.output_rate)
+                     progress, title, job.output_rate, per_run_table=True)
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
+    from navreplay import metrics
     from navreplay.io import read_recording
 
     path = Path(job.recordings[0])
@@ -534,10 +603,10 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     for cls in classes:
         check_streams(recording, cls, str(path))
     has_truth = StreamKind.TRUTH in recording
-    default = DEFAULT_OUT / f"{path.stem}.rrd"
     n_filters = len(classes)
     summaries: dict[str, dict[str, Any]] = {}
-    with _sink(job.viz, default, path.name) as sink:
+    sink = _open_sink(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
+    try:
         if sink is not None and has_truth:
             sink.log_truth(recording)
         for k, (spec, cls) in enumerate(zip(job.filters, classes, strict=True)):
@@ -553,30 +622,32 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
                 output_rate=job.output_rate, pacing=job.pacing, validate=False,
                 progress=prog, observer=observer,
             )
-            summaries[spec.label] = run_summary(result, recording) if has_truth else {}
+            errors = None
+            if has_truth:
+                scored = metrics.run_metrics(result, recording)
+                summaries[spec.label] = scored.summary()
+                errors = state_errors(scored)
             if sink is not None:
-                errors = run_errors(result, recording) if has_truth else None
                 sink.log_run(result, truth=recording if has_truth else None, metrics=errors)
-            del result
-        where = sink.close() if sink is not None and not isinstance(
-            getattr(sink, "target", None), _serve_type()) else (sink.url if sink else None)
-        hint = _viz_hint(sink, where)
+        hint = _close_sink(sink, job.viz)
+    except BaseException:
+        if sink is not None:
+            sink.abort()
+        raise
     summary = {"recording": str(path), "filters": summaries}
+    notes = []
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
-    table = summary_table(summaries) if has_truth else "(no truth in the recording: no errors)"
-    notes = [f"Summary written to {job.summary_path}"] if job.summary_path else []
+        notes.append(f"Summary written to {job.summary_path}")
+    if has_truth:
+        table = format_summaries(summaries)
+    else:
+        table = "(the recording has no truth stream: no errors to show)"
     return RunReport(
         title=f"{', '.join(s.label for s in job.filters)} over {path}",
         table=table, summary=summary, viz=hint, notes=notes,
         sink=sink if job.viz.mode is VizMode.SERVE else None,
     )
-
-
-def _serve_type() -> type:
-    from navreplay.viz import Serve
-
-    return Serve
 
 
 def _campaign(
@@ -589,45 +660,68 @@ def _campaign(
     progress: Progress | None,
     title: str,
     output_rate: float,
+    per_run_table: bool,
 ) -> RunReport:
     from navreplay import metrics
 
-    stats = {spec.label: metrics.EnsembleStats() for spec in filters}
+    stats: dict[str, Any] = {spec.label: metrics.EnsembleStats(spec.label) for spec in filters}
     rows: list[dict[str, Any]] = []
+    notes: list[str] = []
 
-    def sink_fn(out: RunOutput) -> None:
-        per: _PerRun = out.metrics
+    def collect(out: RunOutput) -> None:
+        per: PerRun = out.metrics
         rows.append({"run": out.index + 1, "recording": out.source, "seed": out.seed,
                      "seconds": out.seconds, "filters": per.summaries})
-        for label, item in per.ensemble.items():
-            stats[label].add(item)
+        for label, m in per.metrics.items():
+            if label in stats:
+                try:
+                    stats[label].add(m)
+                except ValueError as e:  # recordings of different lengths or rates
+                    del stats[label]
+                    notes.append(f"no ensemble statistics for {label}: {e}")
 
-    with _sink(viz_options, default_rrd, title) as sink:
-        done = run_ensemble(tasks, filters, sink_fn, extract=campaign_extract, workers=workers,
-                            progress=progress, output_rate=output_rate)
-        ens = {label: s.result() for label, s in stats.items()}
+    sink = _open_sink(viz_options, default_rrd, title)
+    try:
+        done = run_ensemble(tasks, filters, collect, extract=campaign_extract,
+                            workers=workers, progress=progress, output_rate=output_rate)
+        ens = {label: s.result() for label, s in stats.items() if s.runs}
         if sink is not None:
             for label, e in ens.items():
-                metrics.log_ensemble(sink, label, e)
-        where = sink.close() if sink is not None else None
-        hint = _viz_hint(sink, where)
+                log_ensemble(sink, label, e)
+        hint = _close_sink(sink, viz_options)
+    except BaseException:
+        if sink is not None:
+            sink.abort()
+        raise
     summary = {
         "runs": rows,
-        "ensemble": {label: metrics.summarize_ensemble(e) for label, e in ens.items()},
+        "ensemble": {label: e.summary() for label, e in ens.items()},
         "wall_seconds": done.seconds,
-        "failed": done.failed,
     }
     if summary_path is not None:
         write_json(summary_path, summary)
-    table = metrics.format_ensemble({label: e for label, e in ens.items()})
-    notes = [
+    parts = []
+    if per_run_table:
+        names = [Path(r["recording"]).name for r in rows]
+        if len(set(names)) < len(names):
+            names = [f"{n} (run {r['run']})" for n, r in zip(names, rows, strict=True)]
+        per_run = {f"{label} @ {name}": s
+                   for name, r in zip(names, rows, strict=True)
+                   for label, s in r["filters"].items()}
+        keys = [k for k in ERROR_KEYS if any(k in s for s in per_run.values())]
+        parts.append("Per recording:\n" + metrics.format_table(per_run, keys))
+    if ens:
+        parts.append(f"Ensemble over {done.runs} runs:\n"
+                     + format_summaries({label: e.summary() for label, e in ens.items()}))
+    notes += [
         "",
-        f"{done.runs} runs in {done.seconds:.1f} s wall ({done.run_seconds:.1f} s of worker "
-        f"time, {workers} worker(s))",
+        f"{done.runs} runs in {done.seconds:.1f} s wall ({done.run_seconds:.1f} s of run time, "
+        f"{workers} worker(s))",
     ]
     if summary_path is not None:
         notes.append(f"Summary written to {summary_path}")
-    return RunReport(title=title, table=table, summary=summary, viz=hint, notes=notes)
+    return RunReport(title=title, table="\n\n".join(parts), summary=summary, viz=hint,
+                     notes=notes, sink=sink if viz_options.mode is VizMode.SERVE else None)
 
 
 # --------------------------------------------------------------------------------------------
@@ -683,7 +777,7 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
         cls = spec.load()
         missing = [str(k) for k in cls.requires if k not in streams]
         if missing:
-            raise FilterLoadError(
+            raise MissingStreamError(
                 f"filter {spec.label!r} needs stream(s) {', '.join(missing)} that scenario "
                 f"{job.scenario} does not simulate (it has: "
                 f"{', '.join(str(k) for k in get_scenario(job.scenario).streams)})"
@@ -697,7 +791,8 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
     title = (f"Monte Carlo: {', '.join(s.label for s in job.filters)} on {job.scenario}, "
              f"{job.runs} runs, seeds {job.seed}..{job.seed + job.runs - 1}")
     return _campaign(tasks, job.filters, job.viz, DEFAULT_OUT / f"montecarlo-{job.scenario}.rrd",
-                     job.summary_path, job.workers, progress, title, job.output_rate)
+                     job.summary_path, job.workers, progress, title, job.output_rate,
+                     per_run_table=False)
 
 
 # --------------------------------------------------------------------------------------------
@@ -802,7 +897,7 @@ def _open_viewer(rrd: Path, *, required: bool) -> str:
     """Open the Rerun viewer on ``rrd`` when a display is available; say what happened."""
     import subprocess
 
-    from navreplay.viz.sink import display_problem, find_viewer
+    from navreplay.viz.targets import display_problem, find_viewer
 
     exe = find_viewer()
     problem = "no `rerun` viewer executable" if exe is None else display_problem()

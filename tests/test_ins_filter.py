@@ -2,10 +2,15 @@
 
 import numpy as np
 import pytest
+from scipy.linalg import expm
 
+from navreplay import metrics, strapdown
 from navreplay.filters import ins_error as ie
 from navreplay.filters import kalman
+from navreplay.filters.ins import InsFilter
 from navreplay.geo import earth, rotations
+from navreplay.replay.engine import replay
+from navreplay.sim.scenario import simulate
 
 # --------------------------------------------------------------------------------------------
 # F against finite differences of the continuous nonlinear mechanization, written here
@@ -169,3 +174,106 @@ def test_error_definitions_round_trip():
     est = ie.inject_error(nav, np.r_[np.zeros(8), 0.01])
     yaw = rotations.quat_to_euler(np.array([est[6:], nav[6:]]))[:, 2]
     assert rotations.wrap_angle(yaw[0] - yaw[1]) == pytest.approx(-0.01, rel=1e-3)
+
+
+def test_F_matches_finite_differences_of_the_strapdown_integration():
+    # the error after T seconds of navreplay.strapdown with an erroneous start and IMU,
+    # against Phi = expm(F T) of the linear model
+    nav0 = strapdown.nav_vector([np.deg2rad(40.0), 0.5, 120.0], [18.0, -9.0, 0.4],
+                                rotations.euler_to_quat([0.05, -0.03, 2.4]))
+    k, dt = 20, 0.01
+    f_b = np.tile([0.9, -0.6, -9.7], (k, 1))
+    w_b = np.tile([0.004, -0.003, 0.03], (k, 1))
+    T = k * dt
+    nav_T = strapdown.propagate(nav0, w_b, f_b, dt)
+
+    def error_after(dx):
+        est = ie.inject_error(nav0, dx[:9])
+        est_T = strapdown.propagate(est, w_b - dx[12:15], f_b - dx[9:12], dt)
+        return np.r_[ie.nav_error(est_T, nav_T), dx[9:]]
+
+    Phi_num = np.zeros((15, 15))
+    for j in range(15):
+        e = np.zeros(15)
+        e[j] = STEPS[j]
+        Phi_num[:, j] = (error_after(e) - error_after(-e)) / (2 * STEPS[j])
+    # F at the middle of the interval, as the strapdown integrates mid-point quantities
+    nav_m = strapdown.propagate(nav0, w_b[: k // 2], f_b[: k // 2], dt)
+    F = ie.system_matrix(nav_m[:3], nav_m[3:6], rotations.quat_to_dcm(nav_m[6:]), f_b[0])
+    D_num = Phi_num - np.eye(15)
+    D = expm(F * T) - np.eye(15)
+    for rows in BLOCKS[:3]:
+        for cols in BLOCKS:
+            a, b = D[rows, cols], D_num[rows, cols]
+            np.testing.assert_allclose(a, b, rtol=2e-3, atol=2e-3 * np.abs(b).max() + 1e-30,
+                                       err_msg=f"block rows {rows} cols {cols}")
+
+
+# --------------------------------------------------------------------------------------------
+# the "ins" filter
+
+STATIONARY = {"duration": 120, "init_tilt_sigma": 1e-3, "init_heading_sigma": 3e-3,
+              "init_vel_sigma": 0.01, "init_pos_sigma": 0.5}
+RUNS = 40
+
+
+@pytest.fixture(scope="module")
+def stationary_ensemble():
+    stats = metrics.EnsembleStats()
+    for seed in range(RUNS):
+        rec = simulate("stationary", STATIONARY, seed=seed)
+        stats.add(metrics.run_metrics(replay(rec, InsFilter, output_rate=1.0), rec))
+    return stats.result()
+
+
+def _pooled_ratio(res, group, axes):
+    """Ensemble RMS error over predicted sigma, pooled over the given axes, per epoch."""
+    return np.sqrt(np.mean(res.rms[group][:, axes] ** 2, axis=1)
+                   / np.mean(res.sigma[group][:, axes] ** 2, axis=1))
+
+
+def test_ins_sigma_matches_the_ensemble_rms_error(stationary_ensemble):
+    # 40 seeded stationary runs (tactical IMU, random initial errors): the filter's predicted
+    # sigma and the RMS error over the runs agree within 20 % at every output after 5 s
+    res = stationary_ensemble
+    later = res.t >= 5.0
+    horizontal = _pooled_ratio(res, "pos_ned", [0, 1])[later]
+    attitude = _pooled_ratio(res, "phi", [0, 1, 2])[later]
+    velocity = _pooled_ratio(res, "v_n", [0, 1])[later]
+    assert np.all(np.abs(horizontal - 1.0) < 0.2), horizontal
+    assert np.all(np.abs(attitude - 1.0) < 0.2), attitude
+    assert np.all(np.abs(velocity - 1.0) < 0.2), velocity
+    # the errors grow (free inertial): tens of metres after two minutes
+    assert 10.0 < np.hypot(*res.rms["pos_ned"][-1, :2]) < 1000.0
+
+
+def test_ins_runs_from_the_initial_solution_without_updates():
+    rec = simulate("stationary", {"duration": 2, "imu_grade": "ideal"}, seed=0)
+    res = replay(rec, InsFilter, output_rate=10.0)
+    assert res.state_names[:3] == ("dlat", "dlon", "dh") and not res.innovations
+    # a perfect IMU at rest: the free INS stays put (strapdown round trip)
+    m = metrics.run_metrics(res, rec)
+    assert np.abs(m.nav.pos_ned).max() < 1e-6 and np.abs(m.nav.phi).max() < 1e-9
+    np.testing.assert_array_equal(res.x, 0.0)
+    # P0 from initial_nav: zero nav sigmas, bias sigmas from the parameters
+    p = InsFilter.Params()
+    np.testing.assert_allclose(np.sqrt(res.P[0].diagonal()[9:12]), p.accel_bias_sigma, rtol=1e-3)
+
+
+def test_ins_needs_an_initial_solution():
+    rec = simulate("stationary", {"duration": 1}, seed=0)
+    rec.metadata.initial_nav = {}
+    with pytest.raises(ValueError, match="initial_nav"):
+        replay(rec, InsFilter)
+    rec = simulate("stationary", {"duration": 1}, seed=0)
+    del rec.metadata.initial_nav["sigma"]["phi"]
+    with pytest.raises(ValueError, match="init_att_sigma"):
+        replay(rec, InsFilter)
+    replay(rec, InsFilter, {"init_att_sigma": "0.001"})
+
+
+def test_ins_params_validated():
+    with pytest.raises(ValueError, match="cov_step"):
+        InsFilter.Params(cov_step=0.0)
+    with pytest.raises(ValueError, match="gyro_arw"):
+        InsFilter.Params(gyro_arw=-1.0)

@@ -130,8 +130,10 @@ class InsParams(FilterParams):
     """Initial velocity 1-sigma per axis [m/s]; None: ``initial_nav["sigma"]["v_n"]``."""
     init_att_sigma: float | None = None
     """Initial attitude 1-sigma per axis [rad]; None: ``initial_nav["sigma"]["phi"]``."""
-    accel_sf_mis: float = 0.5e-3
-    """Unmodelled accelerometer scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off)."""
+    accel_sf_mis: float = 0.0
+    """Unmodelled accelerometer scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off).
+    Off by default: under the accelerations of a land vehicle these errors act mostly as a
+    slowly changing bias (their gravity part is in the effective bias)."""
     gyro_sf_mis: float = 0.5e-3
     """Unmodelled gyro scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off)."""
     sf_mis_time: float = 15.0
@@ -193,14 +195,15 @@ def initial_covariance(
     return np.diag(d**2)
 
 
-def _sigma3(value: float | None, init: Mapping[str, Any], key: str) -> np.ndarray:
+def _sigma3(params: InsParams, name: str, init: Mapping[str, Any], key: str) -> np.ndarray:
+    value = getattr(params, name)
     if value is not None:
         return np.full(3, float(value))
     sigma = init.get("sigma", {})
     if key not in sigma:
         raise ValueError(
             f"metadata.initial_nav has no sigma[{key!r}] (has: {', '.join(sigma) or 'none'}); "
-            f"set the filter parameter for it"
+            f"set the filter parameter {name}"
         )
     out = np.asarray(sigma[key], dtype=float).reshape(-1)
     if out.shape != (3,) or not np.all(np.isfinite(out)) or np.any(out < 0):
@@ -236,6 +239,9 @@ class InsFilter(Filter):
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     Params: ClassVar[type[FilterParams]] = InsParams
     truth_keys: ClassVar[dict[str, str]] = NAV_TRUTH_KEYS
+    nees_states: ClassVar[tuple[str, ...]] = NAV_STATE_NAMES[:9]
+    """Default NEES block of :func:`navreplay.metrics.run_metrics`: the navigation errors (the
+    bias states estimate effective biases, which the truth's bias columns do not hold)."""
 
     params: InsParams
 
@@ -257,9 +263,9 @@ class InsFilter(Filter):
         p = params
         P0 = initial_covariance(
             self.nav[strapdown.POS],
-            _sigma3(p.init_pos_sigma, init, "pos_ned"),
-            _sigma3(p.init_vel_sigma, init, "v_n"),
-            _sigma3(p.init_att_sigma, init, "phi"),
+            _sigma3(p, "init_pos_sigma", init, "pos_ned"),
+            _sigma3(p, "init_vel_sigma", init, "v_n"),
+            _sigma3(p, "init_att_sigma", init, "phi"),
             p.accel_bias_sigma,
             p.gyro_bias_sigma,
         )

@@ -288,6 +288,11 @@ def _fill_system_matrix(
             F[i, 2] = -F[i, 2]
 
 
+fill_system_matrix = _fill_system_matrix
+"""numba kernel ``fill_system_matrix(lat, h, v_N, v_E, v_D, C_nb, f_b, depth, F)``: writes
+eqs. (6)-(19) into ``F[:15, :15]`` (zeroed by the caller); callable from compiled code."""
+
+
 def system_matrix(
     pos: np.ndarray,
     v_n: np.ndarray,
@@ -511,6 +516,10 @@ def nav_dcm(nav: np.ndarray) -> np.ndarray:
 
 
 # -- covariance propagation (compiled) --------------------------------------------------------
+
+
+quat_to_dcm_kernel = _quat_to_dcm
+"""numba kernel ``quat_to_dcm_kernel(q) -> C`` (3, 3) for one quaternion (4,)."""
 
 
 @numba.njit(cache=True)

@@ -572,9 +572,6 @@ class VectorMatchingFilter(Filter):
         self.params: VectorMatchingParams = params
         self.ref = reference(params, context.metadata.extra, context.metadata.initial_nav)
         self.state_names = STATE_NAMES
-        self.extras_names = ("q_nb", "euler", "euler_sigma") + (
-            ("model_induced_phi",) if params.model is MatchModel.GRAVITY else ()
-        )
         self._f: tuple[np.ndarray, np.ndarray] | None = None  # accelerometer block (t, f_b)
         self._m: tuple[float, np.ndarray] | None = None
         self._v: tuple[float, np.ndarray, np.ndarray] | None = None
@@ -583,6 +580,8 @@ class VectorMatchingFilter(Filter):
         self.q_nb: np.ndarray | None = None
         self.P = np.zeros((N_STATES, N_STATES))
         self._diag = np.zeros(3)
+        self._estimate: Estimate | None = None
+        self._pending: list[Innovation] = []  # of an epoch completed by propagate()
 
     # -- engine callbacks
 
@@ -592,7 +591,7 @@ class VectorMatchingFilter(Filter):
         if "f_b" not in imu:
             raise ValueError("filter 'vector-matching': the imu stream has no f_b column")
         self._f = (np.asarray(t, dtype=float), np.asarray(imu["f_b"], dtype=float))
-        self._try_epoch()
+        self._pending += self._try_epoch()
 
     def update(
         self, kind: StreamKind, t: float, sample: Mapping[str, Any]
@@ -607,11 +606,18 @@ class VectorMatchingFilter(Filter):
             )
         else:
             return None
-        return self._try_epoch()
+        done = self._pending + self._try_epoch()
+        self._pending = []
+        return done or None
 
     def estimate(self) -> Estimate | None:
-        if self.q_nb is None:
-            return None
+        # the estimate changes only at epochs: build it once per epoch
+        if self._estimate is None and self.q_nb is not None:
+            self._estimate = self._build_estimate()
+        return self._estimate
+
+    def _build_estimate(self) -> Estimate:
+        assert self.q_nb is not None
         euler = quat_to_euler(self.q_nb)
         extras = {
             "q_nb": self.q_nb.copy(),
@@ -624,22 +630,22 @@ class VectorMatchingFilter(Filter):
 
     # -- epochs
 
-    def _try_epoch(self) -> list[Innovation] | None:
+    def _try_epoch(self) -> list[Innovation]:
         """Run the epoch whose accelerometer, magnetometer and GNSS samples are all in."""
         if self._m is None or self._v is None or self._f is None:
-            return None
+            return []
         t = self._v[0]
         tol = self.params.sync_tolerance
         if abs(self._m[0] - t) > tol or (self._prev is not None and t <= self._prev.t + tol):
-            return None
+            return []
         t_f, f_b = self._f
         j = np.flatnonzero(np.abs(t_f - t) <= tol)
         if j.size == 0:
-            return None
+            return []
         cur = EpochSample(t, f_b[j[-1]], self._m[1], self._v[1], self._v[2])
         if self._prev is None:
             self._initialise(cur)
-            return None
+            return []
         return [self._epoch(cur)]
 
     def _initialise(self, cur: EpochSample) -> None:
@@ -647,6 +653,7 @@ class VectorMatchingFilter(Filter):
         self.P = self.params.p0_sigma**2 * np.eye(N_STATES)
         self.t = float(cur.t)
         self._prev = cur
+        self._estimate = None
 
     def _epoch(self, cur: EpochSample) -> Innovation:
         p = self.params
@@ -672,6 +679,7 @@ class VectorMatchingFilter(Filter):
             self._diag = model_induced_error(z, a_n, self.ref.g_n, self.ref.h_n)
         self.t = float(cur.t)
         self._prev = cur
+        self._estimate = None
         return Innovation("vector", self.t, c.nu, c.S)
 
 

@@ -69,14 +69,14 @@ class Tail:
     ----------
     summary_start : int
         Byte offset of the summary section, 0 when there is none.
-    data_end : int | None
-        Byte offset of the DataEnd record, None when it cannot be located.
+    data_end : int
+        Byte offset of the DataEnd record.
     data_crc : int
         CRC-32 of the data section stored in DataEnd (0: not computed by the writer).
     """
 
     summary_start: int
-    data_end: int | None
+    data_end: int
     data_crc: int
 
 
@@ -121,10 +121,12 @@ def probe(f: BinaryIO, size: int, where: str) -> Tail | None:
     data_crc = 0
     f.seek(data_end)
     raw = f.read(_DATA_END.size)
-    if len(raw) == _DATA_END.size:
-        opcode, length, data_crc = _DATA_END.unpack(raw)
-        if opcode != Opcode.DATA_END or length != 4:
-            return Tail(summary_start, None, 0)
+    opcode, length, data_crc = _DATA_END.unpack(raw) if len(raw) == _DATA_END.size else (0, 0, 0)
+    if opcode != Opcode.DATA_END or length != 4:
+        raise RecordingError(
+            f"{where}: no valid DataEnd record at byte {data_end} before the "
+            f"{'summary' if summary_start else 'footer'}: the file is corrupt"
+        )
     return Tail(summary_start, data_end, data_crc)
 
 
@@ -143,7 +145,7 @@ def crc_of_range(f: BinaryIO, start: int, stop: int, crc: int = 0) -> int:
 
 def check_data_crc(f: BinaryIO, tail: Tail, where: str) -> None:
     """Verify the data-section CRC of an intact file (when the writer stored one)."""
-    if tail.data_end is None or tail.data_crc == 0:
+    if tail.data_crc == 0:
         return
     crc = crc_of_range(f, 0, tail.data_end)
     if crc != tail.data_crc:
@@ -415,6 +417,8 @@ def walk(
     """
     tail = probe(f, contents.size, where)
     summary = None
+    if tail is not None:
+        check_data_crc(f, tail, where)
     if tail is not None and tail.summary_start:
         try:
             f.seek(0)
@@ -431,7 +435,6 @@ def walk(
         contents.channels.update(summary.channels)
         contents.statistics = summary.statistics
         contents.metadata.extend(metadata)
-        check_data_crc(f, tail, where)
         for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             ids = set(index.message_index_offsets) or set(contents.channels)
             if wanted is not None and index.message_index_offsets and not wanted(contents, ids):
@@ -475,7 +478,7 @@ def _walk_sequential(
         except DAMAGE_ERRORS as exc:
             if isinstance(exc, RecordLengthLimitExceeded):
                 reason = "a record runs past the end of the file"
-            elif isinstance(exc, EndOfFile):
+            elif isinstance(exc, EndOfFile | struct.error):
                 reason = "the file ends inside a record"
             else:
                 reason = f"{type(exc).__name__}: {exc}"

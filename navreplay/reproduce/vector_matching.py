@@ -322,9 +322,9 @@ def _range(v: np.ndarray) -> str:
 def format_table(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray], yaw_t: np.ndarray,
                  runs: int, yaw_runs: int) -> str:
     """The spec section 6 table: prototype (30 runs) next to navreplay."""
-    w = 24
+    w = 32
     head = (f"{'axis, a':<12}| {'gravity: prototype':<{w}}{'navreplay':<{w}}"
-            f"| {'specific-force: prototype':<{w + 2}}{'navreplay':<{w}}")
+            f"| {'specific-force: prototype':<{w}}{'navreplay':<{w}}")
     lines = [
         f"Sweeps: RMS roll / pitch / yaw [deg] at t = 10 s; prototype 30 runs per point, "
         f"navreplay {runs}",
@@ -335,24 +335,24 @@ def format_table(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray], yaw_t
         ours = sweep["N" if axis == "0" else axis][ACCEL_G.index(a)]
         label = "any, 0 g" if axis == "0" else f"{axis} {a:+.1f} g"
         lines.append(f"{label:<12}| {_rpy(proto_g):<{w}}{_rpy(ours[0]):<{w}}"
-                     f"| {_rpy(proto_s):<{w + 2}}{_rpy(ours[1]):<{w}}")
+                     f"| {_rpy(proto_s):<{w}}{_rpy(ours[1]):<{w}}")
     lines.append(f"{'E, sweep':<12}| {PROTOTYPE_E_SWEEP[0]:<{w}}{_range(sweep['E'][:, 0]):<{w}}"
-                 f"| {PROTOTYPE_E_SWEEP[1]:<{w + 2}}{_range(sweep['E'][:, 1]):<{w}}")
+                 f"| {PROTOTYPE_E_SWEEP[1]:<{w}}{_range(sweep['E'][:, 1]):<{w}}")
     k30 = int(np.argmin(np.abs(yaw_t - 30.0)))
     lines += [
         "",
         f"Yaw cases: peak over time of the RMS roll / pitch / yaw [deg]; prototype 30 runs, "
         f"navreplay {yaw_runs}",
         f"{'case':<12}| {'gravity: prototype':<{w}}{'navreplay':<{w}}"
-        f"| {'specific-force: prototype':<{w + 2}}{'navreplay':<{w}}",
+        f"| {'specific-force: prototype':<{w}}{'navreplay':<{w}}",
     ]
     for case, r in yaw.items():
         proto_g, proto_s = PROTOTYPE_YAW_PEAK[case]
         lines.append(f"{case:<12}| {_rpy(proto_g):<{w}}{_rpy(r[0].max(axis=0)):<{w}}"
-                     f"| {_rpy(proto_s):<{w + 2}}{_rpy(r[1].max(axis=0)):<{w}}")
+                     f"| {_rpy(proto_s):<{w}}{_rpy(r[1].max(axis=0)):<{w}}")
     for case, r in yaw.items():
         lines.append(f"{case + ' at 30 s':<12}| {_rpy(PROTOTYPE_YAW_END):<{w}}"
-                     f"{_rpy(r[0, k30]):<{w}}| {_rpy(PROTOTYPE_YAW_END):<{w + 2}}"
+                     f"{_rpy(r[0, k30]):<{w}}| {_rpy(PROTOTYPE_YAW_END):<{w}}"
                      f"{_rpy(r[1, k30]):<{w}}")
     lines += ["", "Paper claims (the figures are not in the seed; checked by the bands below):"]
     lines += [f"  {c}" for c in PAPER_CLAIMS]
@@ -396,6 +396,84 @@ def write_view(path: Path | str, figures: dict[str, Any]) -> Path:
                    recording_name="vector-matching reproduction") as sink:
         log_vector_matching_view(sink, figures)
     return Path(path)
+
+
+# --------------------------------------------------------------------------------------------
+# static figure for the docs (no plotting dependency: a small rasteriser and PNG encoder)
+
+_RED, _BLUE, _GRID, _AXIS = (214, 39, 40), (31, 119, 180), (225, 225, 225), (150, 150, 150)
+
+
+def _png(img: np.ndarray) -> bytes:
+    """Encode an (h, w, 3) uint8 RGB image as PNG."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    h, w, _ = img.shape
+    raw = np.concatenate([np.zeros((h, 1), np.uint8), img.reshape(h, 3 * w)], axis=1)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw.tobytes(), 9)) + chunk(b"IEND", b""))
+
+
+def _polyline(img: np.ndarray, x: np.ndarray, y: np.ndarray, color: tuple[int, ...],
+              width: int = 2) -> None:
+    """Draw a polyline in pixel coordinates (y down), clipped to the image."""
+    h, w, _ = img.shape
+    for x0, y0, x1, y1 in zip(x[:-1], y[:-1], x[1:], y[1:], strict=True):
+        n = int(max(abs(x1 - x0), abs(y1 - y0)) * 2) + 2
+        xs = np.rint(np.linspace(x0, x1, n)).astype(int)
+        ys = np.rint(np.linspace(y0, y1, n)).astype(int)
+        for dx in range(width):
+            for dy in range(width):
+                ok = (xs + dx >= 0) & (xs + dx < w) & (ys + dy >= 0) & (ys + dy < h)
+                img[ys[ok] + dy, xs[ok] + dx] = color
+
+
+def sweep_figure_png(figures: dict[str, Any]) -> bytes:
+    """PNG of the sweeps and the yaw cases, both models (for docs/img).
+
+    Four panels, left to right: N, E, D sweeps (x: acceleration -1.5 .. +1.5 g, grid every
+    0.5 g, darker at 0; y: the largest of the roll, pitch and yaw RMS errors at 10 s, log scale
+    0.2 .. 200 deg, grid at 0.3, 1, 3, 10, 30, 100 deg, darker at 1, 10, 100), then the yaw
+    cases (x: 0 .. 30 s, grid every 5 s; y: RMS yaw error, same scale; case x solid, case y
+    thin). Red: gravity model; blue: specific-force model. No text: the caption says it.
+    """
+    pw, ph, pad = 300, 240, 20
+    img = np.full((ph + 2 * pad, 4 * (pw + pad) + pad, 3), 255, np.uint8)
+    lo, hi = np.log10(0.2), np.log10(200.0)
+
+    def ypix(v: np.ndarray) -> np.ndarray:
+        return pad + (hi - np.log10(np.clip(v, 0.2, 200.0))) / (hi - lo) * ph
+
+    def frame(x0: int, xgrid: np.ndarray, xdark: float) -> None:
+        for g in (0.3, 1.0, 3.0, 10.0, 30.0, 100.0):
+            yy = int(round(float(ypix(np.array(g)))))
+            img[yy, x0:x0 + pw] = _AXIS if g in (1.0, 10.0, 100.0) else _GRID
+        for gx in xgrid:
+            img[pad:pad + ph, int(round(gx))] = _AXIS if gx == xdark else _GRID
+        img[pad, x0:x0 + pw] = img[pad + ph, x0:x0 + pw] = _AXIS
+        img[pad:pad + ph + 1, x0] = img[pad:pad + ph + 1, x0 + pw] = _AXIS
+
+    a = np.asarray(figures["sweep"]["accel_g"], dtype=float)
+    for i, axis in enumerate(AXES):
+        x0 = pad + i * (pw + pad)
+        xp = x0 + (a + 1.5) / 3.0 * pw
+        frame(x0, x0 + np.arange(7) * pw / 6.0, x0 + pw / 2.0)
+        r = np.asarray(figures["sweep"]["rms_deg"][axis])
+        for j, color in enumerate((_RED, _BLUE)):
+            _polyline(img, xp, ypix(r[:, j].max(axis=1)), color)
+    x0 = pad + 3 * (pw + pad)
+    t = np.asarray(figures["yaw"]["t"], dtype=float)
+    frame(x0, x0 + np.arange(7) * pw / 6.0, -1.0)
+    for case, width in zip(CASES, (2, 1), strict=True):
+        r = np.asarray(figures["yaw"]["rms_deg"][case])
+        for j, color in enumerate((_RED, _BLUE)):
+            _polyline(img, x0 + t / 30.0 * pw, ypix(r[j, :, 2]), color, width)
+    return _png(img)
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,0 +1,820 @@
+"""RPM velocity-aided underwater INS with sea-current estimation ("rpm-aided-ins").
+
+An indirect feedback Kalman filter with 24 error states (Choi, JANT 23(3), 2019; spec
+rpm-aided-ins.md, section 4). The NED strapdown mechanization of :mod:`navreplay.strapdown`
+runs on the bias-compensated IMU at the IMU rate; every ``cov_step`` (0.1 s) the error
+covariance is propagated with the 24-state error model; at ``update_rate`` (1 Hz) the
+propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
+back. Besides the navigation errors and the IMU biases the filter estimates the RPM scale
+factor, the RPM-axis misalignment and the horizontal sea current, which removes the drift a
+current causes when water-relative speed is used as ground speed.
+
+States (eq. 20, NED order)
+--------------------------
+===== =================== ========= ======== ===============================================
+index name (Estimate.x)   frame     unit     error state dx (``Estimate.x`` holds)
+===== =================== ========= ======== ===============================================
+0     dlat                -         rad      latitude error (0 after feedback)
+1     dlon                -         rad      longitude error (0)
+2     dd                  -         m        depth error, positive down (0)
+3-5   dv_N, dv_E, dv_D    n (NED)   m/s      velocity error (0)
+6-8   phi_N, phi_E, phi_D n         rad      attitude error, phi angle (0)
+9-11  b_a_x, b_a_y, b_a_z b (FRD)   m/s^2    accelerometer bias error (bias estimate)
+12-14 b_g_x, b_g_y, b_g_z b (FRD)   rad/s    gyro bias error (bias estimate)
+15    k_rpm               -         -        RPM scale-factor error (k estimate)
+16-17 m_y, m_z            b (FRD)   rad      RPM-axis misalignment error (m estimate)
+18-19 vc_N, vc_E          n (NED)   m/s      sea-current velocity error (current estimate)
+20-22 mu_x, mu_y, mu_z    b         rad      mounting misalignment (transfer alignment; inert)
+23    dT                  -         s        master data delay (transfer alignment; inert)
+===== =================== ========= ======== ===============================================
+
+In navigation mode the transfer-alignment states 20-23 are inert: zero rows in F, zero Q, zero
+columns in H, zero P0; they keep the layout of the paper's unified filter.
+
+Errors (signs)
+--------------
+Estimate minus truth, ``dx = x_hat - x``, for every state but the attitude, which is the phi
+angle of eqs. (14)-(15): ``C_nb_hat = (I - [phi x]) C_nb`` (a positive phi_D is an estimated
+heading smaller than the true one). Depth d = -h, so ``dd = d_hat - d = -dh``. The RPM speed
+log reads ``V_rpm = (1 + k) u`` for the true water speed u along the RPM axis, which is body x
+rotated by ``C_bv = exp([m x])``, ``m = [0, m_y, m_z]``. Feedback subtracts (section 4.7)::
+
+    lat, lon, d, v_n, b_a, b_g, k, m, v_c  -=  dx,
+    q_nb_hat <- normalize([1, phi/2] (x) q_nb_hat),   then dx = 0.
+
+Models
+------
+Strapdown and error dynamics (eqs. 1, 8-19, converted from ENU to NED, spec section 4.2)::
+
+    f_hat = f_meas - b_a_hat,  w_hat = w_meas - b_g_hat                                (1)
+    nav_k = strapdown(nav_k-1, w_hat, f_hat)                     IMU rate              (2)
+    dx' = F dx + G w,  F = [[F_pp  F_pv  0       0      0      | 0 ]
+                            [F_vp  F_vv  F_vphi  F_vba  0      | 0 ]
+                            [F_phip F_phiv F_phiphi 0   F_phibg | 0 ]
+                            [0 (15 rows: biases, k, m, v_c, mu, T random constants)]]  (14)-(19)
+
+with the navigation blocks of :mod:`navreplay.filters.ins_error` in their depth form
+(``F_pv = diag(1/(R_M - d), 1/((R_N - d) cos L), 1)``, ``F_vba = -C_nb_hat``,
+``F_phibg = +C_nb_hat``, ...). Discretisation and noise (eqs. 21-23)::
+
+    Phi = I + F T + (F T)^2 / 2,  T = cov_step                                        (23)
+    Qd  = G Qc G^T T = diag(0, q_a I3, q_g I3, 0, 0, 0, 0, q_c I2, 0) T               (22)
+    P   = Phi P Phi^T + Qd                                                            (21)
+
+F has non-zero rows only for position, velocity and attitude, and non-zero columns only for
+those and the biases, so ``Phi = [[M], [0 I]]`` with M the 9 x 15 top block: the product
+touches 9 rows of P (:func:`covariance_step`).
+
+RPM water-velocity measurement (eq. 25, re-derived in spec section 4.4), with the corrected
+speed ``u_hat = c_rpm rpm / (1 + k_hat)``, ``w = v_hat - v_c_hat`` (``v_c_hat = [vc_N, vc_E, 0]``;
+0 in the ``rpm`` mode)::
+
+    z_rpm = C_nb_hat^T w - C_bv_hat [u_hat, 0, 0]^T                       (3,)  [m/s]   (25)
+    H_rpm[:, dv]    = C_nb_hat^T                                                       (27)
+    H_rpm[:, phi]   = -C_nb_hat^T [w x]
+    H_rpm[:, k]     = C_bv_hat e_x u_hat / (1 + k_hat)               = [u_hat, 0, 0]^T (*)
+    H_rpm[:, m_y,z] = u_hat [(C_bv_hat e_x) x] J(m_hat)[:, 1:3]      = [0, 0, u_hat]^T,
+                                                                       [0, -u_hat, 0]^T (*)
+    H_rpm[:, v_c]   = -C_nb_hat^T[:, 0:2]
+    R_rpm = rpm_sigma^2 I3
+
+(*) the printed forms of the spec are the values at k_hat = m_hat = 0; the ones used here are
+the exact first derivatives (J is the left Jacobian of SO(3)), equal to first order.
+
+Depth (spec section 4.5)::
+
+    z_d = d_hat - d_meas,  H_d = e_2^T,  R_d = depth_sigma^2                            (28)
+
+Updates use the shared :func:`navreplay.filters.kalman.correct` (Cholesky, Joseph form) on the
+error state 0, sequentially (RPM first, then depth, at the same update time), with the gain rows
+of frozen states forced to 0: the inert states always, the current in the ``rpm`` mode.
+
+Variants (spec section 5, parameter ``mode``): ``pure`` (free inertial, no updates, P still
+propagated for the sigma plots), ``rpm`` (current frozen at 0: P0 = 0, Q = 0, K rows 0) and
+``rpm_current`` (all 24 states). One code path: the mode only sets P0, Q, the frozen mask and
+whether updates run.
+
+Initial covariance (spec section 4.6): position, velocity and attitude sigmas from
+``metadata.initial_nav["sigma"]`` (or the ``init_*`` parameters), position floored at
+``pos_sigma_floor``; the sensor-error sigmas from the parameters.
+
+Examples
+--------
+>>> from navreplay.sim.scenario import simulate
+>>> from navreplay.replay.engine import replay
+>>> rec = simulate("underwater-rpm", {"duration": 10.0}, seed=0)
+>>> res = replay(rec, RpmAidedIns, {"mode": "rpm_current"})
+>>> res.x.shape[1], sorted(res.innovations)
+(24, ['depth', 'rpm'])
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numba
+import numpy as np
+
+from navreplay import strapdown
+from navreplay.filters import ins_error as ie
+from navreplay.filters import kalman
+from navreplay.filters.base import (
+    Estimate,
+    Filter,
+    FilterContext,
+    FilterParams,
+    Innovation,
+    NavSolution,
+)
+from navreplay.filters.registry import register_filter
+from navreplay.streams import StreamKind
+from navreplay.units import DEG, DEG_PER_HOUR, MICRO_G
+
+# -- state layout (eq. 20) -------------------------------------------------------------------
+
+POS = ie.POS
+"""dlat [rad], dlon [rad], dd [m]."""
+VEL = ie.VEL
+"""dv_N, dv_E, dv_D [m/s]."""
+ATT = ie.ATT
+"""phi_N, phi_E, phi_D [rad]."""
+BA = ie.BA
+"""Accelerometer bias error, body [m/s^2]."""
+BG = ie.BG
+"""Gyro bias error, body [rad/s]."""
+K_RPM = slice(15, 16)
+"""RPM scale-factor error [-]."""
+M_RPM = slice(16, 18)
+"""RPM-axis misalignment error about body y and z [rad]."""
+CURRENT = slice(18, 20)
+"""Sea-current velocity error, N and E [m/s]."""
+MOUNT = slice(20, 23)
+"""Master/slave mounting misalignment [rad] (transfer-alignment mode only; inert)."""
+DELAY = slice(23, 24)
+"""Master data time delay [s] (transfer-alignment mode only; inert)."""
+INERT = slice(20, 24)
+"""States without dynamics, noise or measurement in navigation mode."""
+N_STATES = 24
+N_NAV = 9
+"""Rows of F that are not zero (position, velocity, attitude)."""
+N_DYN = 15
+"""Columns of F that are not zero (navigation states and IMU biases)."""
+
+STATE_NAMES: tuple[str, ...] = (
+    "dlat", "dlon", "dd", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
+    "b_a_x", "b_a_y", "b_a_z", "b_g_x", "b_g_y", "b_g_z",
+    "k_rpm", "m_y", "m_z", "vc_N", "vc_E", "mu_x", "mu_y", "mu_z", "dT",
+)
+"""Names of the entries of ``Estimate.x``."""
+
+STATE_UNITS: dict[str, str] = {
+    name: unit
+    for names, unit in (
+        (("dlat", "dlon"), "rad"), (("dd",), "m"), (("dv_N", "dv_E", "dv_D"), "m/s"),
+        (("phi_N", "phi_E", "phi_D", "m_y", "m_z", "mu_x", "mu_y", "mu_z"), "rad"),
+        (("b_a_x", "b_a_y", "b_a_z"), "m/s^2"), (("b_g_x", "b_g_y", "b_g_z"), "rad/s"),
+        (("k_rpm",), "-"), (("vc_N", "vc_E"), "m/s"), (("dT",), "s"),
+    )
+    for name in names
+}
+"""SI unit of each state (for plots)."""
+
+TRUTH_KEYS: dict[str, str] = {
+    "dlat": "nav:lat", "dlon": "nav:lon", "dd": "nav:depth",
+    "dv_N": "nav:v_N", "dv_E": "nav:v_E", "dv_D": "nav:v_D",
+    "phi_N": "nav:phi_N", "phi_E": "nav:phi_E", "phi_D": "nav:phi_D",
+    **{f"b_a_{a}": f"truth:accel_bias[{i}]" for i, a in enumerate("xyz")},
+    **{f"b_g_{a}": f"truth:gyro_bias[{i}]" for i, a in enumerate("xyz")},
+    "k_rpm": "rpm_scale_factor",
+    "m_y": "rpm_misalignment[1]", "m_z": "rpm_misalignment[2]",
+    "vc_N": "truth:current_n[0]", "vc_E": "truth:current_n[1]",
+}
+"""Scoring keys (see :mod:`navreplay.metrics`): navigation errors by the navigation
+solution's error, biases and current by the truth stream, the RPM parameters by
+``Metadata.true_errors`` of the ``underwater-rpm`` scenario."""
+
+
+class Mode(enum.StrEnum):
+    """Filter variant (spec section 5)."""
+
+    PURE = "pure"
+    """Free inertial: no updates; P is still propagated (the paper's "Pure navigation")."""
+    RPM = "rpm"
+    """RPM (and depth) aiding with the current frozen at 0 ("Aided Navi.")."""
+    RPM_CURRENT = "rpm_current"
+    """RPM aiding with sea-current estimation ("Aided Navi. est Current")."""
+
+
+def _check(owner: object, name: str, *, positive: bool = False, upper: float | None = None):
+    v = getattr(owner, name)
+    if v is None:
+        return
+    ok = isinstance(v, int | float) and math.isfinite(v) and (v > 0.0 if positive else v >= 0.0)
+    if ok and upper is not None:
+        ok = v <= upper
+    if not ok:
+        band = "> 0" if positive else ">= 0"
+        if upper is not None:
+            band += f" and <= {upper:g}"
+        raise ValueError(f"{name} must be finite and {band}, got {v!r}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RpmAidedInsParams(FilterParams):
+    """Parameters of ``rpm-aided-ins`` (SI; defaults from spec sections 4.3-4.6)."""
+
+    mode: Mode = Mode.RPM_CURRENT
+    """Variant: pure | rpm | rpm_current (spec section 5)."""
+    accel_noise: float = 2e-5
+    """sqrt(q_a): velocity process noise density [(m/s)/sqrt(s)] (about 2 x the VRW, covering
+    the unmodelled accelerometer scale factor and misalignment)."""
+    gyro_noise: float = 5e-6
+    """sqrt(q_g): attitude process noise density [rad/sqrt(s)] (about 1.7 x the ARW, covering
+    the gyro scale factor during turns)."""
+    current_noise: float = 1e-3
+    """sqrt(q_c): sea-current random-walk density [(m/s)/sqrt(s)] (``rpm_current`` only)."""
+    accel_bias_sigma: float = 100.0 * MICRO_G
+    """Initial 1-sigma of the accelerometer bias per axis [m/s^2] (100 ug)."""
+    gyro_bias_sigma: float = 0.1 * DEG_PER_HOUR
+    """Initial 1-sigma of the gyro bias per axis [rad/s] (0.1 deg/h)."""
+    rpm_scale_factor_sigma: float = 0.02
+    """Initial 1-sigma of the RPM scale factor k [-] (2 %)."""
+    rpm_misalignment_sigma: float = 0.1 * DEG
+    """Initial 1-sigma of the RPM-axis misalignments m_y, m_z [rad] (0.1 deg)."""
+    current_sigma: float = 0.3
+    """Initial 1-sigma of the current per horizontal axis [m/s] (``rpm_current`` only)."""
+    init_vel_sigma: float | None = None
+    """Initial velocity 1-sigma per axis [m/s]; None: ``initial_nav["sigma"]["v_n"]``."""
+    init_level_sigma: float | None = None
+    """Initial phi_N, phi_E 1-sigma [rad]; None: ``initial_nav["sigma"]["phi"][:2]``."""
+    init_azimuth_sigma: float | None = None
+    """Initial phi_D 1-sigma [rad]; None: ``initial_nav["sigma"]["phi"][2]``."""
+    init_depth_sigma: float | None = None
+    """Initial depth 1-sigma [m]; None: ``initial_nav["sigma"]["pos_ned"][2]``."""
+    pos_sigma_floor: float = 1.0
+    """Lower bound of the initial position 1-sigma per N, E, D axis [m] (conditioning)."""
+    rpm_sigma: float = 0.05
+    """RPM velocity measurement noise per body axis [m/s]."""
+    depth_sigma: float = 0.1
+    """Depth measurement noise [m]."""
+    depth_aiding: bool = True
+    """Use the depth sensor (aided modes)."""
+    speed_per_rpm: float | None = None
+    """Propeller law c_rpm [(m/s)/(rev/min)]; None: ``metadata.params["speed_per_rpm"]``."""
+    update_rate: float = 1.0
+    """Measurement update rate [Hz]; each update uses the RPM sample nearest its time."""
+    cov_step: float = 0.1
+    """Covariance propagation step T [s] (cut short at updates and outputs)."""
+    curvature_derivatives: bool = True
+    """Keep the dR_M/dL, dR_N/dL terms of F (their effect is below 1 %)."""
+
+    def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "mode", Mode(self.mode))
+        except ValueError:
+            raise ValueError(
+                f"mode must be one of {', '.join(m.value for m in Mode)}, got {self.mode!r}"
+            ) from None
+        for name in ("accel_noise", "gyro_noise", "current_noise", "accel_bias_sigma",
+                     "gyro_bias_sigma", "rpm_scale_factor_sigma", "rpm_misalignment_sigma",
+                     "current_sigma", "init_vel_sigma", "init_level_sigma",
+                     "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor"):
+            _check(self, name)
+        for name in ("rpm_sigma", "depth_sigma", "speed_per_rpm"):
+            _check(self, name, positive=True)
+        _check(self, "update_rate", positive=True, upper=100.0)
+        _check(self, "cov_step", positive=True, upper=10.0)
+        if self.rpm_scale_factor_sigma >= 0.5:
+            raise ValueError(
+                f"rpm_scale_factor_sigma must be < 0.5, got {self.rpm_scale_factor_sigma!r}")
+
+
+# --------------------------------------------------------------------------------------------
+# system matrix and covariance propagation (compiled)
+
+
+@numba.njit(cache=True)
+def _fill_nav_rows(F: np.ndarray, nav: np.ndarray, f_b: np.ndarray, curvature: bool) -> None:
+    """F[:15, :15] (zeroed here) from the shared NED blocks in depth form, eqs. (14)-(19)."""
+    F[:, :] = 0.0
+    C = ie._quat_to_dcm(nav[6:10])
+    lat, h, vN, vE, vD = nav[0], nav[2], nav[3], nav[4], nav[5]
+    ie._fill_system_matrix(lat, h, vN, vE, vD, C, f_b, True, F)
+    if not curvature:  # drop the dR_M/dL, dR_N/dL terms (column 0 only)
+        s, c = math.sin(lat), math.cos(lat)
+        w = 1.0 - ie._E2 * s * s
+        R_Mh = ie._A * (1.0 - ie._E2) / w**1.5 + h
+        R_Nh = ie._A / math.sqrt(w) + h
+        dR_M = 3.0 * ie._A * (1.0 - ie._E2) * ie._E2 * s * c / w**2.5
+        dR_N = ie._A * ie._E2 * s * c / w**1.5
+        F[0, 0] += vN * dR_M / R_Mh**2  # (17)
+        F[1, 0] += vE * dR_N / (R_Nh**2 * c)  # (18)
+        e0 = -vE * dR_N / R_Nh**2  # the dR terms of Ep[:, 0]
+        e1 = vN * dR_M / R_Mh**2
+        e2 = vE * (s / c) * dR_N / R_Nh**2
+        F[6, 0] -= e0  # F_phip = Wp + Ep
+        F[7, 0] -= e1
+        F[8, 0] -= e2
+        F[3, 0] -= vE * e2 - vD * e1  # F_vp = [V x] (2 Wp + Ep)
+        F[4, 0] -= vD * e0 - vN * e2
+        F[5, 0] -= vN * e1 - vE * e0
+
+
+@numba.njit(cache=True)
+def _transition_rows(F: np.ndarray, dt: float, M: np.ndarray) -> None:
+    """M = rows 0..8, columns 0..14 of Phi = I + F dt + (F dt)^2 / 2, eq. (23).
+
+    Rows 9.. of F are 0, so (F dt)^2 [0:9, :] = F[0:9, 0:9] F[0:9, :] dt^2.
+    """
+    h = 0.5 * dt * dt
+    for i in range(N_NAV):
+        for j in range(N_DYN):
+            s = 0.0
+            for k in range(N_NAV):
+                s += F[i, k] * F[k, j]
+            M[i, j] = F[i, j] * dt + h * s
+        M[i, i] += 1.0
+
+
+@numba.njit(cache=True)
+def _covariance_step(P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, dt: float,
+                     q: np.ndarray, curvature: bool, F: np.ndarray, M: np.ndarray,
+                     T: np.ndarray) -> np.ndarray:
+    """P <- Phi P Phi^T + diag(q) dt, eqs. (21)-(23), with Phi = [[M], [0 I]] (new array).
+
+    Only the first 9 rows (and columns) of P change: T = M P[0:15, :] gives the new rows,
+    T[:, 0:15] M^T the new navigation block.
+    """
+    n = P.shape[0]
+    _fill_nav_rows(F, nav, f_b, curvature)
+    _transition_rows(F, dt, M)
+    for i in range(N_NAV):
+        for j in range(n):
+            s = 0.0
+            for k in range(N_DYN):
+                s += M[i, k] * P[k, j]
+            T[i, j] = s
+    out = P.copy()
+    for i in range(N_NAV):
+        for j in range(n):
+            out[i, j] = T[i, j]
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(N_DYN):
+                s += T[i, k] * M[j, k]
+            out[i, j] = s
+            out[j, i] = s
+        for j in range(N_NAV, n):
+            out[j, i] = T[i, j]
+    for i in range(n):
+        out[i, i] += q[i] * dt
+    return out
+
+
+@numba.njit(cache=True)
+def _propagate_block(nav, P, omega, f, t, t_prev, b_a, b_g, prev, open_nav, open_sums, step,
+                     q, curvature):
+    """Strapdown (1)-(2) at the IMU rate and covariance steps (21)-(23) over a block.
+
+    ``t`` (k,) are the sample times [s], ``t_prev`` the time of ``nav``. ``prev`` (6,: the last
+    sample's dtheta, dv), ``open_nav`` (10,) and ``open_sums`` (4,: the open step's length and
+    integral of f_hat) are updated in place. Returns (code, nav, P): code is -1 when every
+    sample was valid, else strapdown's index of the first bad sample (-2: bad state); nav and
+    P are then unchanged.
+    """
+    k = t.shape[0]
+    n = P.shape[0]
+    dt = np.empty(k)
+    dt[0] = t[0] - t_prev
+    for i in range(1, k):
+        dt[i] = t[i] - t[i - 1]
+    w = np.empty((k, 3))
+    fc = np.empty((k, 3))
+    for i in range(k):
+        for j in range(3):
+            w[i, j] = omega[i, j] - b_g[j]  # (1)
+            fc[i, j] = f[i, j] - b_a[j]
+    hist = np.empty((k + 1, strapdown.NAV_SIZE))
+    code = strapdown.integrate_kernel(nav, w, fc, dt, prev, hist)  # (2)
+    if code != -1:
+        return code, nav, P
+    for j in range(3):
+        prev[j] = w[k - 1, j] * dt[k - 1]
+        prev[3 + j] = fc[k - 1, j] * dt[k - 1]
+    F = np.zeros((N_DYN, N_DYN))
+    M = np.zeros((N_NAV, N_DYN))
+    T = np.zeros((N_NAV, n))
+    f_mean = np.empty(3)
+    for i in range(k):
+        if open_sums[0] == 0.0:
+            open_nav[:] = hist[i]
+        open_sums[0] += dt[i]
+        for j in range(3):
+            open_sums[1 + j] += fc[i, j] * dt[i]
+        if open_sums[0] >= step - 1e-9:
+            for j in range(3):
+                f_mean[j] = open_sums[1 + j] / open_sums[0]
+            P = _covariance_step(P, open_nav, f_mean, open_sums[0], q, curvature, F, M, T)
+            open_sums[:] = 0.0
+    return code, hist[k].copy(), P
+
+
+@numba.njit(cache=True)
+def _close_step(P, open_nav, open_sums, q, curvature):
+    """Propagate P over the open (partial) step and clear it."""
+    if open_sums[0] <= 0.0:
+        return P
+    n = P.shape[0]
+    f_mean = open_sums[1:4] / open_sums[0]
+    P = _covariance_step(P, open_nav, f_mean, open_sums[0], q, curvature,
+                         np.zeros((N_DYN, N_DYN)), np.zeros((N_NAV, N_DYN)),
+                         np.zeros((N_NAV, n)))
+    open_sums[:] = 0.0
+    return P
+
+
+def system_matrix(nav: np.ndarray, f_b: np.ndarray, *,
+                  curvature_derivatives: bool = True) -> np.ndarray:
+    """The continuous system matrix F of the 24 states, eqs. (14)-(19) in NED.
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+        Navigation vector ``[lat, lon, h, v_N, v_E, v_D, q0, q1, q2, q3]`` (height, as in
+        :mod:`navreplay.strapdown`; the position error state uses depth d = -h).
+    f_b : ndarray, shape (3,)
+        Bias-compensated specific force, body [m/s^2].
+    curvature_derivatives : bool
+        Keep the dR_M/dL, dR_N/dL terms.
+
+    Returns
+    -------
+    F : ndarray, shape (24, 24)
+        Rows 9-23 and columns 15-23 are 0.
+    """
+    F15 = np.zeros((N_DYN, N_DYN))
+    _fill_nav_rows(F15, np.ascontiguousarray(nav, dtype=np.float64),
+                   np.ascontiguousarray(f_b, dtype=np.float64), bool(curvature_derivatives))
+    F = np.zeros((N_STATES, N_STATES))
+    F[:N_DYN, :N_DYN] = F15
+    return F
+
+
+def covariance_step(P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, dt: float,
+                    q: np.ndarray, *, curvature_derivatives: bool = True) -> np.ndarray:
+    """One covariance step ``Phi P Phi^T + diag(q) dt``, eqs. (21)-(23), exploiting the
+    structure of F (equal to ``kalman.predict`` with ``kalman.discretize(system_matrix(...))``).
+
+    Parameters
+    ----------
+    P : ndarray, shape (24, 24)
+    nav : ndarray, shape (10,)
+        Navigation vector at the start of the step.
+    f_b : ndarray, shape (3,)
+        Mean bias-compensated specific force over the step, body [m/s^2].
+    dt : float
+        Step [s].
+    q : ndarray, shape (24,)
+        Diagonal of ``G Qc G^T`` [state^2/s].
+    curvature_derivatives : bool
+
+    Returns
+    -------
+    ndarray, shape (24, 24)
+        Not checked (see :func:`navreplay.filters.kalman.check_covariance`).
+    """
+    n = P.shape[0]
+    return _covariance_step(
+        np.ascontiguousarray(P, dtype=np.float64), np.ascontiguousarray(nav, dtype=np.float64),
+        np.ascontiguousarray(f_b, dtype=np.float64), float(dt),
+        np.ascontiguousarray(q, dtype=np.float64), bool(curvature_derivatives),
+        np.zeros((N_DYN, N_DYN)), np.zeros((N_NAV, N_DYN)), np.zeros((N_NAV, n)),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# measurement models
+
+
+def _skew(x: float, y: float, z: float) -> np.ndarray:
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def _quat_dcm(q: np.ndarray) -> np.ndarray:
+    """C_nb of a unit quaternion (scalar first), shape (3, 3)."""
+    q0, q1, q2, q3 = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    return np.array([
+        [q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2.0 * (q1 * q2 - q0 * q3),
+         2.0 * (q1 * q3 + q0 * q2)],
+        [2.0 * (q1 * q2 + q0 * q3), q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3,
+         2.0 * (q2 * q3 - q0 * q1)],
+        [2.0 * (q1 * q3 - q0 * q2), 2.0 * (q2 * q3 + q0 * q1),
+         q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3],
+    ])
+
+
+def rpm_axis(m_y: float, m_z: float) -> tuple[np.ndarray, np.ndarray]:
+    """RPM axis in the body frame and its derivative by (m_y, m_z).
+
+    Parameters
+    ----------
+    m_y, m_z : float
+        Misalignment ``m = [0, m_y, m_z]`` [rad], ``C_bv = exp([m x])``.
+
+    Returns
+    -------
+    a : ndarray, shape (3,)
+        ``C_bv e_x`` (unit vector).
+    da : ndarray, shape (3, 2)
+        ``d a / d(m_y, m_z) = -[a x] J(m)[:, 1:3]``, J the left Jacobian of SO(3)
+        (``exp([(m + dm) x]) = exp([(J dm) x]) exp([m x])`` to first order).
+    """
+    th2 = m_y * m_y + m_z * m_z
+    th = math.sqrt(th2)
+    if th < 1e-6:  # series of (1 - cos)/th^2, sin/th, (th - sin)/th^3
+        a1, b1, c1 = 0.5 - th2 / 24.0, 1.0 - th2 / 6.0, 1.0 / 6.0 - th2 / 120.0
+    else:
+        a1, b1, c1 = (1.0 - math.cos(th)) / th2, math.sin(th) / th, (th - math.sin(th)) / th**3
+    K = _skew(0.0, m_y, m_z)
+    KK = K @ K
+    a = np.array([1.0 + a1 * KK[0, 0], b1 * m_z + a1 * KK[1, 0], -b1 * m_y + a1 * KK[2, 0]])
+    J = np.eye(3) + a1 * K + c1 * KK
+    da = -_skew(a[0], a[1], a[2]) @ J[:, 1:3]
+    return a, da
+
+
+def rpm_measurement(
+    nav: np.ndarray,
+    v_rpm: float,
+    k_hat: float,
+    m_hat: np.ndarray,
+    v_c_hat: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """RPM water-velocity residual and its Jacobian, eqs. (25)-(27).
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+        INS navigation vector at the measurement time.
+    v_rpm : float
+        RPM speed ``c_rpm rpm`` [m/s], before the scale-factor correction.
+    k_hat : float
+        Scale-factor estimate [-].
+    m_hat : ndarray, shape (2,)
+        Misalignment estimates m_y, m_z [rad].
+    v_c_hat : ndarray, shape (2,)
+        Current estimate N, E [m/s] (zeros when it is not estimated).
+
+    Returns
+    -------
+    z : ndarray, shape (3,)
+        ``C_nb_hat^T (v_hat - v_c_hat) - C_bv_hat [u_hat, 0, 0]`` [m/s], body axes.
+    H : ndarray, shape (3, 24)
+        ``z ~ H dx`` to first order.
+    """
+    C_bn = _quat_dcm(nav[6:10]).T
+    a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
+    u = v_rpm / (1.0 + k_hat)
+    w = nav[3:6].copy()
+    w[0] -= v_c_hat[0]
+    w[1] -= v_c_hat[1]
+    z = C_bn @ w - a * u  # (25)
+    H = np.zeros((3, N_STATES))  # (27)
+    H[:, VEL] = C_bn
+    H[:, ATT] = -C_bn @ _skew(w[0], w[1], w[2])
+    H[:, 15] = a * (u / (1.0 + k_hat))
+    H[:, M_RPM] = -u * da
+    H[:, CURRENT] = -C_bn[:, 0:2]
+    return z, H
+
+
+def depth_measurement(nav: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """Depth residual ``d_hat - d_meas`` [m], shape (1,), and H (1, 24), eq. (28)."""
+    H = np.zeros((1, N_STATES))
+    H[0, 2] = 1.0
+    return np.array([-nav[2] - depth]), H
+
+
+# --------------------------------------------------------------------------------------------
+# the filter
+
+
+def _sigma(value: float | None, init: Mapping[str, Any], key: str, index: slice) -> np.ndarray:
+    """1-sigma from a parameter or ``initial_nav["sigma"][key][index]``."""
+    if value is not None:
+        return np.full(index.stop - index.start, float(value))
+    sigma = init.get("sigma", {})
+    if key not in sigma:
+        raise ValueError(
+            f"rpm-aided-ins: metadata.initial_nav has no sigma[{key!r}] (has: "
+            f"{', '.join(sigma) or 'none'}); set the filter parameter for it"
+        )
+    out = np.asarray(sigma[key], dtype=float).reshape(-1)
+    if out.shape != (3,) or not np.all(np.isfinite(out)) or np.any(out < 0.0):
+        raise ValueError(f"rpm-aided-ins: initial_nav sigma[{key!r}] must be 3 values >= 0, "
+                         f"got {sigma[key]!r}")
+    return out[index]
+
+
+class _Schedule:
+    """Update times k / rate; a sample is used when it is the nearest to the next one."""
+
+    def __init__(self, rate: float) -> None:
+        self.rate = rate
+        self.k = 0
+        self.t_last: float | None = None
+
+    def due(self, t: float) -> bool:
+        half = 0.5 * (t - self.t_last) if self.t_last is not None else 0.0
+        self.t_last = t
+        if t + half < self.k / self.rate - 1e-9:
+            return False
+        self.k = max(self.k + 1, math.floor((t + half) * self.rate + 1e-9) + 1)
+        return True
+
+
+@register_filter
+class RpmAidedIns(Filter):
+    """24-state RPM velocity-aided INS with sea-current estimation (see the module docstring)."""
+
+    name: ClassVar[str] = "rpm-aided-ins"
+    summary: ClassVar[str] = (
+        "underwater INS aided by propeller-RPM speed and depth, 24-state feedback KF with RPM"
+        " scale factor, misalignment and sea current (Choi 2019); mode=pure|rpm|rpm_current"
+    )
+    requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
+    optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.SPEED_LOG, StreamKind.DEPTH)
+    Params: ClassVar[type[FilterParams]] = RpmAidedInsParams
+    truth_keys: ClassVar[dict[str, str]] = TRUTH_KEYS
+    nees_states: ClassVar[tuple[str, ...]] = ("dlat", "dlon")
+    """The NEES of the spec's consistency check: horizontal position, 2 dof."""
+
+    params: RpmAidedInsParams
+
+    def __init__(self, params: RpmAidedInsParams, context: FilterContext) -> None:
+        super().__init__(params, context)
+        p = params
+        self.mode = p.mode
+        if self.mode is not Mode.PURE and StreamKind.SPEED_LOG not in context.streams:
+            have = ", ".join(sorted(str(k) for k in context.streams)) or "no streams"
+            raise ValueError(f"rpm-aided-ins (mode {self.mode}) needs the speed_log stream; "
+                             f"the recording has: {have}")
+        c_rpm = p.speed_per_rpm
+        if c_rpm is None:
+            c_rpm = context.metadata.params.get("speed_per_rpm")
+            if c_rpm is None and self.mode is not Mode.PURE:
+                raise ValueError("rpm-aided-ins: set speed_per_rpm (the recording's metadata "
+                                 "has no params.speed_per_rpm)")
+        self.speed_per_rpm = float(c_rpm) if c_rpm is not None else 0.0
+        init = context.metadata.initial_nav
+        missing = [k for k in ("t_ns", "pos", "v_n", "q_nb") if k not in init]
+        if missing:
+            raise ValueError(
+                f"rpm-aided-ins needs metadata.initial_nav with t_ns, pos, v_n, q_nb "
+                f"(missing: {', '.join(missing)})"
+            )
+        self.nav = strapdown.nav_vector(init["pos"], init["v_n"], init["q_nb"])
+        if not np.all(np.isfinite(self.nav)):
+            raise ValueError(f"rpm-aided-ins: metadata.initial_nav is not finite: {self.nav}")
+        self.t = (int(init["t_ns"]) - int(context.t0_ns)) * 1e-9
+        self.b_a = np.zeros(3)
+        self.b_g = np.zeros(3)
+        self.k_rpm = 0.0
+        self.m_rpm = np.zeros(2)
+        self.v_c = np.zeros(2)
+        self.state_names = STATE_NAMES
+
+        # P0, section 4.6
+        pos_scale = np.abs(ie.position_scale(self.nav[strapdown.POS], ie.Vertical.DEPTH))
+        sig = np.zeros(N_STATES)
+        pos_sigma = _sigma(None, init, "pos_ned", slice(0, 3))
+        if p.init_depth_sigma is not None:
+            pos_sigma[2] = p.init_depth_sigma
+        sig[POS] = np.maximum(pos_sigma, p.pos_sigma_floor) / pos_scale
+        sig[VEL] = _sigma(p.init_vel_sigma, init, "v_n", slice(0, 3))
+        sig[6:8] = _sigma(p.init_level_sigma, init, "phi", slice(0, 2))
+        sig[8:9] = _sigma(p.init_azimuth_sigma, init, "phi", slice(2, 3))
+        sig[BA] = p.accel_bias_sigma
+        sig[BG] = p.gyro_bias_sigma
+        sig[K_RPM] = p.rpm_scale_factor_sigma
+        sig[M_RPM] = p.rpm_misalignment_sigma
+        estimate_current = self.mode is Mode.RPM_CURRENT
+        sig[CURRENT] = p.current_sigma if estimate_current else 0.0
+        self.P = np.diag(sig**2)
+
+        # Qd = diag(q) T, eq. (22)
+        self._q = np.zeros(N_STATES)
+        self._q[VEL] = p.accel_noise**2
+        self._q[ATT] = p.gyro_noise**2
+        if estimate_current:
+            self._q[CURRENT] = p.current_noise**2
+        self._frozen = np.zeros(N_STATES, dtype=bool)
+        self._frozen[INERT] = True
+        if not estimate_current:
+            self._frozen[CURRENT] = True
+        self._R_rpm = np.full(3, p.rpm_sigma**2)
+        self._R_depth = np.array([p.depth_sigma**2])
+        for name, R in (("R_rpm", self._R_rpm), ("R_depth", self._R_depth)):
+            kalman.check_covariance(np.diag(R), name=name)
+        self._rpm_schedule = _Schedule(p.update_rate)
+        self._depth_schedule = _Schedule(p.update_rate)
+        # strapdown and covariance-step bookkeeping
+        self._prev = np.zeros(6)
+        self._open_nav = np.zeros(strapdown.NAV_SIZE)
+        self._open_sums = np.zeros(4)
+        self._step = float(p.cov_step)
+        self._curvature = bool(p.curvature_derivatives)
+        kalman.check_covariance(self.P, name="P0", t=self.t)
+
+    # -- the Filter interface ----------------------------------------------------------------
+
+    def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
+        t = np.asarray(t, dtype=np.float64)
+        first = int(np.searchsorted(t, self.t + 1e-9, side="right"))
+        if first == t.shape[0]:
+            return  # samples at or before the initial solution
+        omega = imu["omega_ib_b"]
+        f = imu["f_b"]
+        if first:
+            t, omega, f = t[first:], omega[first:], f[first:]
+        code, nav, P = _propagate_block(
+            self.nav, self.P, omega, f, t, self.t, self.b_a, self.b_g, self._prev,
+            self._open_nav, self._open_sums, self._step, self._q, self._curvature,
+        )
+        if code != -1:
+            if code == -2:
+                raise kalman.FilterDivergedError("navigation state is not finite", self.t)
+            t_before = t[code - 1] if code else self.t
+            raise ValueError(f"IMU sample at t = {t[code]:.6f} s (previous {t_before:.6f} s): "
+                             f"omega_ib_b = {omega[code]}, f_b = {f[code]}: not finite, or "
+                             f"the time does not increase")
+        self.nav = nav
+        self.P = P
+        self.t = float(t[-1])
+        kalman.check_covariance(P, t=self.t)
+
+    def update(
+        self, kind: StreamKind, t: float, sample: Mapping[str, Any]
+    ) -> list[Innovation] | None:
+        if self.mode is Mode.PURE:
+            return None
+        if kind is StreamKind.SPEED_LOG:
+            if not self._rpm_schedule.due(t):
+                return None
+            v_c = self.v_c if self.mode is Mode.RPM_CURRENT else np.zeros(2)
+            z, H = rpm_measurement(self.nav, self.speed_per_rpm * float(sample["rpm"]),
+                                   self.k_rpm, self.m_rpm, v_c)
+            R, name = self._R_rpm, "rpm"
+        elif kind is StreamKind.DEPTH and self.params.depth_aiding:
+            if not self._depth_schedule.due(t):
+                return None
+            z, H = depth_measurement(self.nav, float(sample["depth"]))
+            R, name = self._R_depth, "depth"
+        else:
+            return None
+        if not (np.isfinite(z).all() and np.isfinite(H).all()):
+            raise ValueError(f"{name} measurement at t = {t:.6f} s is not finite: z = {z}")
+        self._sync_covariance()
+        # shapes and R are fixed by construction (R checked once); P is checked below
+        c = kalman.correct(np.zeros(N_STATES), self.P, z, H, R, frozen=self._frozen, t=t,
+                           check=False)
+        kalman.check_covariance(c.P, name="corrected P", t=t)
+        self.P = c.P
+        self._feedback(c.x)
+        return [Innovation(name, t, c.nu, c.S)]
+
+    def estimate(self) -> Estimate:
+        self._sync_covariance()
+        x = np.zeros(N_STATES)
+        x[BA] = self.b_a
+        x[BG] = self.b_g
+        x[15] = self.k_rpm
+        x[M_RPM] = self.m_rpm
+        x[CURRENT] = self.v_c
+        nav = self.nav
+        return Estimate(
+            self.t, x, self.P,
+            NavSolution(pos=nav[strapdown.POS], v_n=nav[strapdown.VEL], q_nb=nav[strapdown.QUAT]),
+        )
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _sync_covariance(self) -> None:
+        """Close the open covariance step so that P belongs to the current time."""
+        if self._open_sums[0] > 0.0:
+            self.P = _close_step(self.P, self._open_nav, self._open_sums, self._q,
+                                 self.params.curvature_derivatives)
+            kalman.check_covariance(self.P, t=self.t)
+
+    def _feedback(self, dx: np.ndarray) -> None:
+        """Subtract the estimated errors (section 4.7, step 4); the error state is then 0."""
+        self.nav = ie.apply_correction(self.nav, dx, ie.Vertical.DEPTH)
+        self.b_a = self.b_a - dx[BA]
+        self.b_g = self.b_g - dx[BG]
+        self.k_rpm -= float(dx[15])
+        self.m_rpm = self.m_rpm - dx[M_RPM]
+        self.v_c = self.v_c - dx[CURRENT]

@@ -1,0 +1,452 @@
+"""Reproduction of shipboard transfer alignment by velocity + quaternion partial matching.
+
+Spec ``transfer-alignment.md``, section 6 (Song, Jeon and Lyou; Figs. 2 and 3). The campaign
+replays the ``transfer-alignment`` filter over ``runs`` seeded recordings of the
+``ship-transfer-alignment`` scenario in three conditions:
+
+============  ==============================  =========================================
+condition     scenario parameters             filter variants (``match``)
+============  ==============================  =========================================
+flexure       defaults (wn = 2 pi rad/s)      vel_quat_partial, vel_quat_full, vel_only
+no flexure    ``flexure_sigma = 0``           vel_quat_partial, vel_quat_full
+wn 1 rad/s    ``flexure_wn = 1``              vel_quat_partial, vel_quat_full
+============  ==============================  =========================================
+
+Run i of every condition simulates with seed ``seed + i`` (the convention of
+:func:`navreplay.replay.ensemble.monte_carlo_tasks`): the conditions share every random draw
+except the flexure, so they compare like with like, and
+``navreplay simulate ship-transfer-alignment --seed S+i`` reproduces any single run.
+
+The metric is the alignment error phi (:func:`navreplay.geo.attitude_error`,
+``C_nb_hat C_nb^T = I - [phi x]``) of the filter's navigation solution against the truth, at
+every GINS sample; the filter's predicted 1 sigma of phi (extras ``attitude_sigma_n``,
+``Sigma_phi = 4 R^T P_qq R``) is averaged as the root mean of the variances. Everything runs
+in memory over a process pool (:func:`navreplay.replay.ensemble.run_ensemble`).
+
+Examples
+--------
+>>> from navreplay.reproduce import get
+>>> report = get("transfer-alignment").run(runs=6)       # doctest: +SKIP
+>>> print(report.format())                               # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from navreplay.geo.rotations import attitude_error, quat_to_dcm
+from navreplay.metrics import rms, truth_at
+from navreplay.replay.ensemble import (
+    FilterSpec,
+    RunOutput,
+    RunTask,
+    make_executor,
+    monte_carlo_tasks,
+    run_ensemble,
+)
+from navreplay.replay.result import RunResult
+from navreplay.reproduce import Check, Report
+from navreplay.sim.scenarios.ship_transfer_alignment import ShipTransferAlignmentParams
+from navreplay.streams import Recording
+
+SCENARIO = "ship-transfer-alignment"
+FILTER = "transfer-alignment"
+PARTIAL, FULL, VEL_ONLY = "vel_quat_partial", "vel_quat_full", "vel_only"
+AXES = ("N", "E", "D")
+T_EVAL = (30.0, 100.0)
+"""Times of the table [s]."""
+MRAD = 1e-3
+
+
+@dataclasses.dataclass(frozen=True)
+class Condition:
+    """One scenario condition of the campaign and the filter variants replayed over it."""
+
+    name: str
+    key: str
+    values: Mapping[str, Any]
+    variants: tuple[str, ...]
+
+
+CONDITIONS = (
+    Condition("flexure", "flexure", {}, (PARTIAL, FULL, VEL_ONLY)),
+    Condition("no flexure", "no_flexure", {"flexure_sigma": 0.0}, (PARTIAL, FULL)),
+    Condition("wn 1 rad/s", "wn_1", {"flexure_wn": 1.0}, (PARTIAL, FULL)),
+)
+
+PAPER = {
+    (PARTIAL, "flexure", 100.0): "< 1 / < 1 / ~3",
+    (FULL, "flexure", 100.0): "D markedly worse",
+    (VEL_ONLY, "flexure", 100.0): "D unobservable",
+}
+"""The paper's statements (Figs. 2 and 3 are missing from the seed; spec section 6) [mrad]."""
+
+PROTOTYPE = {
+    (PARTIAL, "flexure", 30.0): "0.46 / 0.42 / 3.4 (max D 12)",
+    (PARTIAL, "flexure", 100.0): "0.43 / 0.41 / 2.36 (max 1.0 / 1.0 / 5.5)",
+    (FULL, "flexure", 30.0): "0.84 / 1.43 / 22.6",
+    (FULL, "flexure", 100.0): "0.94 / 1.45 / 14.2 (max 2.6 / 4.0 / 46)",
+    (VEL_ONLY, "flexure", 100.0): "~0.45 / ~0.45 / > 100 (12 runs)",
+    (FULL, "no flexure", 100.0): "0.45 / 0.46 / 1.66 (12 runs)",
+    (PARTIAL, "wn 1 rad/s", 100.0): "0.46 / 0.46 / 2.5 (12 runs)",
+    (FULL, "wn 1 rad/s", 100.0): "2.1 / 3.2 / 28.9 (12 runs)",
+}
+"""The spec author's independent prototype (36 runs, 50 Hz IMU unless noted) [mrad]."""
+PROTOTYPE_SIGMA = "0.08 / 0.11 / 0.47"
+"""Prototype's predicted 1 sigma of phi at 100 s, partial matching [mrad]."""
+
+
+# --------------------------------------------------------------------------------------------
+# per run (in the workers)
+
+
+@dataclasses.dataclass
+class RunErrors:
+    """Alignment errors of one run of one variant.
+
+    Attributes
+    ----------
+    t : ndarray, shape (K,)
+        Estimate times [s].
+    phi : ndarray, shape (K, 3)
+        Alignment error phi N, E, D [rad] against the truth.
+    sigma : ndarray, shape (K, 3)
+        The filter's predicted 1 sigma of phi [rad].
+    """
+
+    t: np.ndarray
+    phi: np.ndarray
+    sigma: np.ndarray
+
+
+def alignment_errors(result: RunResult, recording: Recording) -> RunErrors:
+    """phi of a run's navigation solution against the recording's truth, and its sigma."""
+    truth = truth_at(recording, result.t)
+    phi = attitude_error(quat_to_dcm(result.nav_q_nb), quat_to_dcm(truth["q_nb"]))
+    return RunErrors(result.t, phi, result.extras["attitude_sigma_n"])
+
+
+def extract(
+    recording: Recording, results: dict[str, RunResult], task: RunTask
+) -> dict[str, RunErrors]:
+    """Extractor of :func:`navreplay.replay.ensemble.run_ensemble`: errors per variant label."""
+    return {label: alignment_errors(res, recording) for label, res in results.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# statistics over runs
+
+
+@dataclasses.dataclass
+class VariantStats:
+    """Statistics over the runs of one variant in one condition.
+
+    Attributes
+    ----------
+    t : ndarray, shape (K,)
+        [s]
+    phi : ndarray, shape (runs, K, 3)
+        Errors of every run [rad].
+    sigma : ndarray, shape (runs, K, 3)
+        Predicted 1 sigma of every run [rad].
+    """
+
+    t: np.ndarray
+    phi: np.ndarray
+    sigma: np.ndarray
+
+    @property
+    def rms(self) -> np.ndarray:
+        """RMS over runs versus time, (K, 3) [rad]."""
+        return rms(self.phi, axis=0)
+
+    @property
+    def sigma_rms(self) -> np.ndarray:
+        """Root mean predicted variance over runs versus time, (K, 3) [rad]."""
+        return rms(self.sigma, axis=0)
+
+    def index(self, t: float) -> int:
+        """Row of the estimate nearest to t [s]."""
+        return int(np.argmin(np.abs(self.t - t)))
+
+    def rms_at(self, t: float) -> np.ndarray:
+        """RMS over runs at t, (3,) [rad]."""
+        return self.rms[self.index(t)]
+
+    def max_at(self, t: float) -> np.ndarray:
+        """Largest absolute error over runs at t, (3,) [rad]."""
+        return np.max(np.abs(self.phi[:, self.index(t)]), axis=0)
+
+
+class _Collector:
+    """Sink of :func:`run_ensemble`: keeps each run's errors per label, in run order."""
+
+    def __init__(self) -> None:
+        self.runs: dict[str, list[RunErrors]] = {}
+
+    def __call__(self, out: RunOutput) -> None:
+        for label, err in out.metrics.items():
+            self.runs.setdefault(label, []).append(err)
+
+    def stats(self) -> dict[str, VariantStats]:
+        out = {}
+        for label, errs in self.runs.items():
+            t = errs[0].t
+            if any(e.t.shape != t.shape or not np.allclose(e.t, t) for e in errs):
+                raise ValueError(f"{label}: runs have different estimate times")
+            out[label] = VariantStats(t, np.stack([e.phi for e in errs]),
+                                      np.stack([e.sigma for e in errs]))
+        return out
+
+
+def run_campaign(
+    runs: int,
+    seed: int = 0,
+    workers: int = 1,
+    conditions: tuple[Condition, ...] = CONDITIONS,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[dict[tuple[str, str], VariantStats], float]:
+    """Run every condition of the campaign in memory over one process pool.
+
+    Returns
+    -------
+    stats : dict (variant, condition name) -> VariantStats
+    seconds : float
+        Wall time [s].
+    """
+    _warm_up()  # compile the numba kernels once, before the workers fork
+    total = runs * len(conditions)
+    done = 0
+
+    def step(_d: int, _t: int) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    wall0 = time.perf_counter()
+    executor = make_executor(workers)
+    out: dict[tuple[str, str], VariantStats] = {}
+    try:
+        for cond in conditions:
+            tasks = monte_carlo_tasks(SCENARIO, runs, values=cond.values, seed=seed)
+            filters = [FilterSpec(FILTER, {"match": v}, label=v) for v in cond.variants]
+            sink = _Collector()
+            run_ensemble(tasks, filters, sink, extract=extract, workers=workers,
+                         executor=executor, progress=step)
+            for label, st in sink.stats().items():
+                out[(label, cond.name)] = st
+    finally:
+        executor.shutdown(wait=True)
+    return out, time.perf_counter() - wall0
+
+
+def _warm_up() -> None:
+    from navreplay.filters.registry import load_filter
+    from navreplay.replay.engine import replay
+    from navreplay.sim.scenario import simulate
+
+    replay(simulate(SCENARIO, {"duration": 0.3}, seed=0), load_filter(FILTER))
+
+
+# --------------------------------------------------------------------------------------------
+# acceptance (spec section 6)
+
+
+def _check(name: str, value: float, band: str, passed: bool) -> Check:
+    return Check(name, float(value), band, bool(passed))
+
+
+def acceptance(stats: Mapping[tuple[str, str], VariantStats]) -> list[Check]:
+    """Every acceptance band of spec section 6 at t = 100 s, as checks (values in mrad)."""
+    t = T_EVAL[-1]
+    part = stats[(PARTIAL, "flexure")]
+    full = stats[(FULL, "flexure")]
+    rp = part.rms_at(t) / MRAD
+    rf = full.rms_at(t) / MRAD
+    level = np.abs(part.phi[:, part.index(t), 0:2]) < 1.0 * MRAD
+    frac = float(np.mean(np.all(level, axis=1)))
+    checks = [
+        _check("partial: RMS phi_N at 100 s [mrad]", rp[0], "<= 1.0", rp[0] <= 1.0),
+        _check("partial: RMS phi_E at 100 s [mrad]", rp[1], "<= 1.0", rp[1] <= 1.0),
+        _check("partial: fraction of runs with |phi_N| and |phi_E| < 1 mrad at 100 s", frac,
+               ">= 0.9", frac >= 0.9),
+        _check("partial: RMS phi_D at 100 s [mrad]", rp[2], "1.5 .. 4.5",
+               1.5 <= rp[2] <= 4.5),
+        _check("full, flexure: RMS phi_D / partial RMS phi_D at 100 s", rf[2] / rp[2],
+               ">= 2.5", rf[2] >= 2.5 * rp[2]),
+        _check("full, flexure: RMS phi_D at 100 s [mrad]", rf[2], ">= 5", rf[2] >= 5.0),
+    ]
+    if (FULL, "no flexure") in stats and (PARTIAL, "no flexure") in stats:
+        f0 = stats[(FULL, "no flexure")].rms_at(t)[2] / MRAD
+        p0 = stats[(PARTIAL, "no flexure")].rms_at(t)[2] / MRAD
+        checks.append(_check("full, no flexure: RMS phi_D / partial (no flexure) RMS phi_D",
+                             f0 / p0, "<= 1.5", f0 <= 1.5 * p0))
+    if (VEL_ONLY, "flexure") in stats:
+        v = stats[(VEL_ONLY, "flexure")].rms_at(t)[2] / MRAD
+        checks.append(_check("vel_only: RMS phi_D at 100 s [mrad]", v, ">= 10", v >= 10.0))
+    return checks
+
+
+# --------------------------------------------------------------------------------------------
+# table
+
+
+def _fmt(v: np.ndarray) -> str:
+    return " / ".join(f"{x:.3g}" for x in v)
+
+
+def format_table(stats: Mapping[tuple[str, str], VariantStats], runs: int) -> str:
+    """The spec section 6 table: paper and prototype next to navreplay [mrad]."""
+    head = (f"{'variant':<17}{'condition':<12}{'t':>6}  {'paper':<17}"
+            f"{'prototype (36 runs, 50 Hz)':<42}navreplay ({runs} runs, 100 Hz)")
+    lines = [
+        "RMS over runs of phi_N / phi_E / phi_D [mrad] (max |phi| over runs in brackets)",
+        head,
+        "-" * len(head),
+    ]
+    for cond in CONDITIONS:
+        for variant in cond.variants:
+            st = stats.get((variant, cond.name))
+            if st is None:
+                continue
+            for t in T_EVAL:
+                ours = f"{_fmt(st.rms_at(t) / MRAD)} (max {_fmt(st.max_at(t) / MRAD)})"
+                paper = PAPER.get((variant, cond.name, t), "")
+                proto = PROTOTYPE.get((variant, cond.name, t), "")
+                lines.append(f"{variant:<17}{cond.name:<12}{t:>5.0f}s  {paper:<17}{proto:<42}"
+                             f"{ours}")
+    part = stats[(PARTIAL, "flexure")]
+    lines += [
+        "",
+        "Predicted 1 sigma of phi at 100 s, partial, flexure (not a consistency gate, spec 6):",
+        f"  prototype {PROTOTYPE_SIGMA}; navreplay "
+        f"{_fmt(part.sigma_rms[part.index(T_EVAL[-1])] / MRAD)} mrad",
+    ]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------------
+# Rerun view (Figs. 2 and 3)
+
+
+def figures(stats: Mapping[tuple[str, str], VariantStats]) -> dict[str, Any]:
+    """Ensemble series of the Figs. 2 and 3 equivalents [mrad], by plot then series name.
+
+    Fig. 2: RMS level errors phi_N, phi_E of every variant under flexure with the partial
+    filter's predicted sigma. Fig. 3: RMS azimuth error phi_D of partial and full matching with
+    their predicted sigma, one plot per condition. vel_only's azimuth (> 100 mrad) has its own.
+    """
+    part = stats[(PARTIAL, "flexure")]
+    plots: dict[str, dict[str, np.ndarray]] = {}
+    for k, axis in enumerate(AXES[:2]):
+        series = {f"{variant} RMS": st.rms[:, k] / MRAD
+                  for (variant, cond), st in stats.items() if cond == "flexure"}
+        series[f"{PARTIAL} sigma"] = part.sigma_rms[:, k] / MRAD
+        plots[f"fig2 level error phi_{axis}"] = series
+    for cond in CONDITIONS:
+        series = {}
+        for variant in cond.variants:
+            st = stats.get((variant, cond.name))
+            if st is not None and variant != VEL_ONLY:
+                series[f"{variant} RMS"] = st.rms[:, 2] / MRAD
+                series[f"{variant} sigma"] = st.sigma_rms[:, 2] / MRAD
+        if series:
+            suffix = "" if cond.key == "flexure" else f" {cond.key}"
+            plots[f"fig3 azimuth error phi_D{suffix}"] = series
+    if (VEL_ONLY, "flexure") in stats:
+        st = stats[(VEL_ONLY, "flexure")]
+        plots["azimuth error phi_D vel_only"] = {
+            f"{VEL_ONLY} RMS": st.rms[:, 2] / MRAD, f"{VEL_ONLY} sigma": st.sigma_rms[:, 2] / MRAD,
+        }
+    return {"t": part.t, "plots": plots}
+
+
+def log_transfer_alignment_view(sink: Any, figs: Mapping[str, Any]) -> None:
+    """Log the Figs. 2 and 3 equivalents into an open :class:`navreplay.viz.Sink`, as
+    ``/ensemble/<plot>/<series>`` in mrad versus time."""
+    for name, series in figs["plots"].items():
+        sink.log_ensemble(name, figs["t"], series, unit="mrad")
+
+
+def write_view(path: Path | str, figs: Mapping[str, Any]) -> Path:
+    """Save the Rerun view of :func:`log_transfer_alignment_view` to an .rrd file."""
+    from navreplay.viz import Save, open_sink
+
+    with open_sink(Save(Path(path), overwrite=True),
+                   recording_name="transfer-alignment reproduction") as sink:
+        log_transfer_alignment_view(sink, figs)
+    return Path(path)
+
+
+# --------------------------------------------------------------------------------------------
+# the reproduction
+
+
+class TransferAlignmentReproduction:
+    """``navreplay reproduce transfer-alignment``: the campaign of spec section 6."""
+
+    name = "transfer-alignment"
+    summary = ("Shipboard transfer alignment, velocity + quaternion partial matching "
+               "(Song, Jeon & Lyou; Figs. 2-3)")
+    default_runs = 36
+    """Runs per condition (the paper's Monte Carlo size)."""
+    quick_runs = 6
+    """Runs per condition for a quick look (``navreplay demo``)."""
+
+    def run(
+        self,
+        *,
+        runs: int | None = None,
+        seed: int = 0,
+        workers: int = 1,
+        rrd: Path | None = None,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> Report:
+        """Run the campaign, evaluate the bands, optionally save the Rerun view.
+
+        Parameters
+        ----------
+        runs : int, optional
+            Runs per condition (default 36).
+        seed : int
+            Base seed: run i uses ``seed + i``.
+        workers : int
+            Processes.
+        rrd : path, optional
+            Save the Figs. 2 and 3 view here.
+        progress : callable, optional
+            ``progress(done, total)`` in recordings.
+        """
+        runs = self.default_runs if runs is None else int(runs)
+        if runs < 1:
+            raise ValueError(f"runs must be at least 1, got {runs}")
+        stats, wall = run_campaign(runs, seed, workers, progress=progress)
+        n_filter = runs * sum(len(c.variants) for c in CONDITIONS)
+        p = ShipTransferAlignmentParams()
+        n_imu = n_filter * round(p.duration * p.imu_rate)
+        table = format_table(stats, runs) + (
+            f"\n\nCampaign: {runs * len(CONDITIONS)} recordings, {n_filter} filter runs "
+            f"({n_imu / 1e6:.2f} M IMU samples) in {wall:.1f} s wall, {workers} worker(s)"
+        )
+        figs = figures(stats)
+        figs["timing"] = {"wall_s": wall, "recordings": runs * len(CONDITIONS),
+                          "filter_runs": n_filter}
+        if rrd is not None:
+            write_view(rrd, figs)
+        return Report(
+            title=(f"Transfer alignment, velocity + quaternion partial matching (seed 000): "
+                   f"{runs} runs per condition, seed {seed}"),
+            table=table,
+            checks=acceptance(stats),
+            figures=figs,
+        )
+
+
+REPRODUCTION = TransferAlignmentReproduction()
