@@ -1,7 +1,7 @@
 """Run every benchmarks/bench_*.py module's main(), or those named on the command line.
 
-    python -m benchmarks            # all
-    python -m benchmarks io viz     # bench_io.py and bench_viz.py
+``python -m benchmarks`` runs them all; ``python -m benchmarks io viz`` runs bench_io.py and
+bench_viz.py. A new module only needs a ``main()`` that prints its figures.
 """
 
 from __future__ import annotations

@@ -72,16 +72,19 @@ def _null_filter() -> type:
 
 
 _RSS_CHILD = """
-import resource, sys, time
-from navreplay.filters.registry import load_filter
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+import sys
 if sys.argv[1] != "-":
+    from navreplay.filters.registry import load_filter
     from navreplay.io import read_recording
     from navreplay.replay import replay
     rec = read_recording(sys.argv[1])
     res = replay(rec, load_filter("gps-ins"), validate=False)
     assert res.t.shape[0] > 0
-print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+else:
+    import navreplay.filters.builtins, navreplay.io, navreplay.replay  # noqa: F401
+# VmHWM: this process's own peak (ru_maxrss would include the parent's, inherited at fork)
+hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")][0]
+print(int(hwm.split()[1]) * 1024)
 """
 
 
@@ -97,89 +100,100 @@ def _summary(result: Any, recording: Any) -> Any:
     return jobs.run_summary(result, recording)
 
 
-def main(duration: float = 3600.0) -> None:
+def _make_recording(path: Path, duration: float, imu_rate: float = 100.0, seed: int = 1) -> str:
+    from navreplay.io import write_recording
+    from navreplay.sim.scenario import simulate
+
+    t_sim, rec = _timed(lambda: simulate(SCENARIO, {"duration": duration, "imu_rate": imu_rate},
+                                         seed=seed))
+    t_write, _ = _timed(lambda: write_recording(path, rec))
+    span = (rec["imu"].t_ns[-1] - rec["imu"].t_ns[0]) * 1e-9
+    return (f"{SCENARIO}, {span / 3600:.2f} h, {len(rec['imu'])} IMU samples at {imu_rate:g} Hz, "
+            f"{path.stat().st_size / 1e6:.1f} MB (simulated in {t_sim:.1f} s, written in "
+            f"{t_write:.1f} s)")
+
+
+def _throughput(path: Path) -> tuple[Any, Any, float]:
+    """Print the replay timings; return the gps-ins result, the recording and the filter time."""
     from navreplay import strapdown
     from navreplay.filters.registry import load_filter
-    from navreplay.io import read_recording, write_recording
+    from navreplay.io import read_recording
     from navreplay.replay import replay
-    from navreplay.sim.scenario import simulate
-    from navreplay.viz import Save, open_sink
 
     gps_ins = load_filter("gps-ins")
     ins = load_filter("ins")
+    replay(read_recording(path), gps_ins)  # warm up (numba compilation, caches)
+
+    def end_to_end() -> tuple[Any, Any]:
+        r = read_recording(path)
+        res = replay(r, gps_ins, validate=False)
+        _summary(res, r)
+        return res, r
+
+    t_e2e, (result, recording) = _timed(end_to_end, repeat=2)
+    t_dec, _ = _timed(lambda: read_recording(path), repeat=2)
+    t_filt, _ = _timed(lambda: replay(recording, gps_ins, validate=False), repeat=2)
+    t_sum, _ = _timed(lambda: _summary(result, recording), repeat=2)
+    t_ins, _ = _timed(lambda: replay(recording, ins, validate=False), repeat=2)
+    null = _null_filter()
+    t_null, _ = _timed(lambda: replay(recording, null, validate=False), repeat=2)
+    imu = recording["imu"]
+    n_imu = len(imu)
+    span = (imu.t_ns[-1] - imu.t_ns[0]) * 1e-9
+    dt = np.diff(imu.t_ns, prepend=imu.t_ns[0] - (imu.t_ns[1] - imu.t_ns[0])) * 1e-9
+    init = recording.metadata.initial_nav
+    nav0 = strapdown.nav_vector(init["pos"], init["v_n"], init["q_nb"])
+    t_sd, _ = _timed(lambda: strapdown.propagate(nav0, imu["omega_ib_b"], imu["f_b"], dt),
+                     repeat=3)
+    events = len(result.t)
+
+    def rate(t: float) -> str:
+        return f"{n_imu / t / 1e3:7.0f}k IMU samples/s {span / t:7.0f}x real time"
+
+    updates = sum(len(s.t) for s in result.innovations.values())
+    print(f"gps-ins: {events} estimates (10 Hz outputs), {updates} measurement updates")
+    print(f"end to end (decode + gps-ins + summary)  {t_e2e:6.2f} s {rate(t_e2e)}")
+    print(f"  decode                                 {t_dec:6.2f} s {rate(t_dec)}")
+    print(f"  gps-ins replay (filter only)           {t_filt:6.2f} s {rate(t_filt)}")
+    print(f"  summary vs truth                       {t_sum:6.2f} s")
+    print("baselines (same run)")
+    print(f"  ins replay (free inertial)             {t_ins:6.2f} s {rate(t_ins)}")
+    print(f"  engine alone (filter doing nothing)    {t_null:6.2f} s {rate(t_null)}"
+          f" ({t_null / events * 1e6:.1f} us per output event)")
+    print(f"  strapdown, one call over the record    {t_sd:6.2f} s {rate(t_sd)}")
+    print(f"ratios: end to end / strapdown = {t_e2e / t_sd:.1f}; engine share of the gps-ins "
+          f"replay = {t_null / t_filt:.0%}")
+    return result, recording, t_filt
+
+
+def _rerun_cost(result: Any, recording: Any, t_filt: float, rrd: Path) -> None:
+    from navreplay.viz import Save, open_sink
+
+    def log() -> None:
+        with open_sink(Save(rrd), recording_name="drive.mcap") as sink:
+            sink.log_run(result, truth=recording)
+
+    t_viz, _ = _timed(log)
+    verdict = "ok" if t_viz <= t_filt else "EXCEEDS the filter time"
+    print(f"Rerun logging of the gps-ins run + truth {t_viz:6.2f} s = {t_viz / t_filt:.2f} x "
+          f"the filter time ({verdict}); .rrd {rrd.stat().st_size / 1e6:.1f} MB")
+
+
+def main(duration: float = 3600.0) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "drive.mcap"
-        t_sim, rec = _timed(lambda: simulate(SCENARIO, {"duration": duration}, seed=1))
-        t_write, _ = _timed(lambda: write_recording(path, rec))
-        n_imu = len(rec["imu"])
-        span = (rec["imu"].t_ns[-1] - rec["imu"].t_ns[0]) * 1e-9
-        print(f"recording: {SCENARIO}, {span / 3600:.2f} h, {n_imu} IMU samples, "
-              f"{path.stat().st_size / 1e6:.1f} MB (simulated in {t_sim:.1f} s, "
-              f"written in {t_write:.1f} s)")
-        del rec
-
-        replay(read_recording(path), gps_ins)  # warm up (numba compilation, caches)
-
-        def end_to_end() -> tuple[Any, Any]:
-            r = read_recording(path)
-            res = replay(r, gps_ins, validate=False)
-            _summary(res, r)
-            return res, r
-
-        t_e2e, (result, recording) = _timed(end_to_end, repeat=2)
-        t_dec, _ = _timed(lambda: read_recording(path), repeat=2)
-        t_filt, _ = _timed(lambda: replay(recording, gps_ins, validate=False), repeat=2)
-        t_sum, _ = _timed(lambda: _summary(result, recording), repeat=2)
-        t_ins, _ = _timed(lambda: replay(recording, ins, validate=False), repeat=2)
-        t_null, _ = _timed(lambda: replay(recording, _null_filter(), validate=False), repeat=2)
-        imu = recording["imu"]
-        dt = np.diff(imu.t_ns, prepend=imu.t_ns[0] - (imu.t_ns[1] - imu.t_ns[0])) * 1e-9
-        nav0 = strapdown.nav_vector(recording.metadata.initial_nav["pos"],
-                                    recording.metadata.initial_nav["v_n"],
-                                    recording.metadata.initial_nav["q_nb"])
-        t_sd, _ = _timed(
-            lambda: strapdown.propagate(nav0, imu["omega_ib_b"], imu["f_b"], dt), repeat=3
-        )
-        events = len(result.t)
-
-        def rate(t: float) -> str:
-            return f"{n_imu / t / 1e3:8.0f}k IMU/s {span / t:8.0f}x real time"
-
-        print(f"outputs: {events} estimates, "
-              f"{sum(len(s.t) for s in result.innovations.values())} updates")
-        print(f"end to end (decode + gps-ins + summary) {t_e2e:7.2f} s  {rate(t_e2e)}")
-        print(f"  decode                                {t_dec:7.2f} s  {rate(t_dec)}")
-        print(f"  gps-ins replay (filter only)          {t_filt:7.2f} s  {rate(t_filt)}")
-        print(f"  summary vs truth                      {t_sum:7.2f} s")
-        print("baselines")
-        print(f"  ins replay (free inertial)            {t_ins:7.2f} s  {rate(t_ins)}")
-        print(f"  engine alone (null filter)            {t_null:7.2f} s  {rate(t_null)}"
-              f"  ({t_null / events * 1e6:.1f} us per output event)")
-        print(f"  strapdown, one call over the record   {t_sd:7.2f} s  {rate(t_sd)}")
-        print(f"ratios: end to end / strapdown floor = {t_e2e / t_sd:.1f}, "
-              f"engine share of the gps-ins replay = {t_null / t_filt:.0%}")
-
-        rrd = Path(tmp) / "drive.rrd"
-
-        def log() -> None:
-            with open_sink(Save(rrd), recording_name=path.name) as sink:
-                sink.log_run(result, truth=recording)
-
-        t_viz, _ = _timed(log)
-        verdict = "ok" if t_viz <= t_filt else "EXCEEDS the filter time"
-        print(f"Rerun logging of the gps-ins run + truth {t_viz:7.2f} s = {t_viz / t_filt:.2f} x "
-              f"the filter time ({verdict}); .rrd {rrd.stat().st_size / 1e6:.1f} MB")
-        del result, recording
-
+        print("recording:", _make_recording(path, duration))
+        result, recording, t_filt = _throughput(path)
+        _rerun_cost(result, recording, t_filt, Path(tmp) / "drive.rrd")
+        result = recording = None  # free them before the memory measurement
+        path.unlink()
         path200 = Path(tmp) / "drive200.mcap"
-        write_recording(path200, simulate(SCENARIO, {"duration": duration, "imu_rate": 200.0},
-                                          seed=2))
+        print("recording:", _make_recording(path200, duration, imu_rate=200.0, seed=2))
         base = _peak_rss("-")
         peak = _peak_rss(str(path200))
         verdict = "ok" if peak < GIB else "EXCEEDS 1 GiB"
-        print(f"peak RSS, read + replay gps-ins of {duration / 3600:.2f} h at 200 Hz: "
-              f"{peak / 2**20:.0f} MiB ({verdict}); a process that only imports: "
-              f"{base / 2**20:.0f} MiB")
+        print(f"peak RSS of a process reading + replaying gps-ins over it: {peak / 2**20:.0f} MiB "
+              f"({verdict}); a process that only imports navreplay: {base / 2**20:.0f} MiB")
 
 
 if __name__ == "__main__":

@@ -124,12 +124,12 @@ def main(argv: list[str] | None = None) -> None:
     rows = [("engine only (baseline)", _Engine, {}), ("free INS (baseline)", _FreeIns, {})]
     rows += [(f"transfer-alignment {m}", ta.TransferAlignment, {"match": m})
              for m in ("vel_quat_partial", "vel_quat_full", "vel_only")]
-    print(f"  {'replay':<34}{'ms/run':>9}{'IMU samples/s':>15}{'x real time':>13}"
+    print(f"  {'replay':<38}{'ms/run':>9}{'IMU samples/s':>15}{'x real time':>13}"
           f"{'us/GINS':>10}")
     for label, cls, params in rows:
         replay(rec, cls, params)  # compile / warm up
         t = _best(lambda cls=cls, params=params: replay(rec, cls, params), args.repeat)
-        print(f"  {label:<34}{t * 1e3:>9.1f}{n_imu / t:>15,.0f}{duration / t:>13,.0f}"
+        print(f"  {label:<38}{t * 1e3:>9.1f}{n_imu / t:>15,.0f}{duration / t:>13,.0f}"
               f"{t / n_gins * 1e6:>10.1f}")
 
     t_numba, t_numpy = kf_step(args.repeat)

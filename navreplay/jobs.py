@@ -457,7 +457,8 @@ class RunReport:
 
     def format(self) -> str:
         parts = [self.title, "", self.table]
-        parts += [n for n in self.notes if n]
+        if self.notes:
+            parts += [""] + [n for n in self.notes if n]
         if self.viz:
             parts += ["", self.viz]
         return "\n".join(parts)
@@ -615,7 +616,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
                     progress(k * total + done, n_filters * total)
 
             observer = None
-            if sink is not None and job.viz.live:
+            if sink is not None and (job.viz.live or job.pacing is not None):
                 observer = sink.observer(recording if has_truth else None)
             result = replay(
                 recording, cls, spec.params, label=spec.label, source=str(path),
@@ -714,7 +715,6 @@ def _campaign(
         parts.append(f"Ensemble over {done.runs} runs:\n"
                      + format_summaries({label: e.summary() for label, e in ens.items()}))
     notes += [
-        "",
         f"{done.runs} runs in {done.seconds:.1f} s wall ({done.run_seconds:.1f} s of run time, "
         f"{workers} worker(s))",
     ]
@@ -865,6 +865,7 @@ def demo(
         stage("replay " + ", ".join(DEMO_FILTERS)),
     )
     sections = [
+        _heading("Land vehicle: free inertial (ins) vs loosely coupled GPS/INS (gps-ins)"),
         f"Recording: {rec_path} ({DEMO_SCENARIO}, seed {DEMO_SEED}); inspect it with "
         f"`navreplay info {rec_path}`",
         report.format(),
@@ -878,6 +879,7 @@ def demo(
                 rep = reproduce.get(name)
             except ImportError:
                 continue  # not built yet
+            sections.append(_heading(f"Paper reproduction (quick): {name}"))
             runs = getattr(rep, "quick_runs", None)
             result = rep.run(runs=runs, seed=0, workers=job.workers,
                              rrd=out / f"{name}.rrd", progress=stage(f"reproduce {name}"))
@@ -891,6 +893,10 @@ def demo(
     if viewer:
         sections.append(viewer)
     return DemoReport(sections, rrd, viewer, failed)
+
+
+def _heading(text: str) -> str:
+    return f"{'=' * len(text)}\n{text}\n{'=' * len(text)}"
 
 
 def _open_viewer(rrd: Path, *, required: bool) -> str:

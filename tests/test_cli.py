@@ -7,6 +7,7 @@ import json
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -171,6 +172,17 @@ def test_run_default_rrd_under_out(recs, in_tmp):
     assert "rerun out/drive.rrd" in res.output
 
 
+def test_paced_replay_logs_live_and_keeps_real_time_ratio(recs, in_tmp):
+    import time
+
+    t = time.perf_counter()
+    res = invoke("run", "gps-ins", recs / "drive.mcap", "--rate", "100", "--save", "p.rrd")
+    ok(res)
+    assert time.perf_counter() - t > 0.35  # 40 s of data at 100x real time
+    assert (in_tmp / "p.rrd").stat().st_size > 0
+    fails(invoke("run", "gps-ins", recs / "drive.mcap", "--rate", "0"), "--rate must be positive")
+
+
 def test_run_variants_of_one_filter(recs, in_tmp):
     res = invoke("run", "gps-ins[gps_pos_sigma_scale=1],gps-ins[gps_pos_sigma_scale=4]",
                  recs / "drive.mcap", "--no-viz", "--summary", "s.json")
@@ -234,6 +246,16 @@ def test_run_unreachable_viewer(recs, in_tmp):
     assert not (in_tmp / "t.json").exists() and not (in_tmp / "out").exists()
 
 
+def test_truncated_recording_is_salvaged_with_a_one_line_warning(recs, in_tmp):
+    data = (recs / "drive.mcap").read_bytes()
+    (in_tmp / "cut.mcap").write_bytes(data[: int(len(data) * 0.7)])
+    res = invoke("run", "gps-ins", "cut.mcap", "--no-viz")
+    ok(res)
+    warning = [line for line in res.stderr.splitlines() if line.startswith("warning: ")]
+    assert len(warning) == 1 and "cut.mcap" in warning[0] and "salvaged" in warning[0]
+    assert "gps-ins" in res.output
+
+
 def test_viewer_options_exclude_each_other(recs):
     res = invoke("run", "gps-ins", recs / "drive.mcap", "--spawn", "--no-viz")
     assert res.exit_code == 2 and "--spawn and --no-viz exclude each other" in res.stderr
@@ -282,3 +304,38 @@ def test_reproduce_lists_and_rejects_unknown_names():
     ok(res)
     assert "transfer-alignment" in res.output
     fails(invoke("reproduce", "nope"), "unknown reproduction 'nope'")
+
+
+# --------------------------------------------------------------------------------------------
+# the README
+
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def test_readme_opens_with_the_two_make_commands():
+    head = README.read_text().split("## Quick start")[0]
+    assert "make demo" in head and "make test" in head
+
+
+def test_readme_python_example_runs(in_tmp):
+    import re
+
+    code = re.findall(r"```python\n(.*?)```", README.read_text(), re.S)[0]
+    exec(compile(code, "README.md", "exec"), {})
+    assert (in_tmp / "recordings" / "drive.mcap").is_file()
+
+
+def test_readme_commands_exist_and_their_options_parse():
+    import re
+    import shlex
+
+    for line in README.read_text().splitlines():
+        m = re.match(r"\s+navreplay (\w+) ", line)
+        if m is None or "[" in line or "..." in line:
+            continue
+        command = re.split(r"\s{2,}", line.split("#")[0].strip())[0]  # drop descriptions
+        args = shlex.split(command)[1:]
+        cmd = cli.commands[args[0]]
+        ctx = cmd.make_context(args[0], args[1:], resilient_parsing=False)
+        assert ctx.params is not None, line

@@ -98,7 +98,7 @@ def test_custom_executor_is_used_and_left_running():
 
 def test_failed_run_names_run_seed_and_cause():
     tasks = monte_carlo_tasks("stationary", 2, values={"duration": 1.0}, seed=3)
-    with pytest.raises(RunFailedError, match=r"run 1 \(stationary#seed=3, seed 3\): .*needs "
+    with pytest.raises(RunFailedError, match=r"run 1 \(stationary#seed=3\): .*needs "
                                              r"stream\(s\) gps"):
         run_ensemble(tasks, SPECS, collect([]), extract=final_velocity_error)
 

@@ -95,7 +95,9 @@ def test_missing_kind_names_what_the_file_has(tmp_path: Path) -> None:
 
 def test_gyro_free_imu_and_optional_sigmas(tmp_path: Path) -> None:
     rng = np.random.default_rng(2)
-    rec = random_recording(rng, duration_s=2, kinds=["imu", "gps", "gps_vel", "truth"], gyro=False, aux=False)
+    rec = random_recording(
+        rng, duration_s=2, kinds=["imu", "gps", "gps_vel", "truth"], gyro=False, aux=False
+    )
     del rec["gps"].columns["pos_sigma"]
     del rec["gps_vel"].columns["vel_sigma"]
     path = write_recording(tmp_path / "a.mcap", rec)
@@ -115,7 +117,9 @@ def test_metadata_defaults_and_version_fill(tmp_path: Path) -> None:
     assert back.metadata.navreplay_version  # the writer's version when none is given
 
 
-def test_same_recording_gives_identical_bytes(recording: Recording, written: Path, tmp_path: Path) -> None:
+def test_same_recording_gives_identical_bytes(
+    recording: Recording, written: Path, tmp_path: Path
+) -> None:
     again = write_recording(tmp_path / "again.mcap", recording)
     assert again.read_bytes() == written.read_bytes()
     # and re-writing what was read gives the same file (lat/lon go through degrees and back)
@@ -164,7 +168,9 @@ def test_failure_mid_write_leaves_nothing(
     assert [p.name for p in tmp_path.iterdir()] == (["x.mcap"] if existing else [])
 
 
-def test_small_windows_give_the_same_file(recording: Recording, written: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_small_windows_give_the_same_file(
+    recording: Recording, written: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(writer_module, "WINDOW", 777)
     assert write_recording(tmp_path / "w.mcap", recording).read_bytes() == written.read_bytes()
 
@@ -178,7 +184,9 @@ def test_write_refuses_bad_samples(tmp_path: Path) -> None:
     imu = random_stream("imu", np.random.default_rng(4), duration_s=1)
     f_b = imu["f_b"].copy()
     f_b[7, 1] = np.nan
-    with pytest.raises(RecordingError, match=r"y\.mcap.*stream imu \(topic /imu\).*non-finite.*'f_b'.*t = 0\.04"):
+    with pytest.raises(
+        RecordingError, match=r"y\.mcap.*stream imu \(topic /imu\).*non-finite.*'f_b'.*t = 0\.04"
+    ):
         write_recording(tmp_path / "y.mcap", _with(imu, f_b=f_b))
     assert not (tmp_path / "y.mcap").exists()
     rec = _with(imu)
@@ -235,10 +243,14 @@ def test_read_reports_bad_time_with_file_topic_and_time(tmp_path: Path, how: str
 
 def test_gap_warning(tmp_path: Path) -> None:
     depth = random_stream("depth", np.random.default_rng(7), duration_s=20)
-    keep = np.r_[0:10, 30:len(depth)]
+    keep = np.r_[0:10, 30 : len(depth)]
     stream = Stream("depth", depth.t_ns[keep], {"depth": depth["depth"][keep]}, "depth")
-    path = write_recording(tmp_path / "gap.mcap", Recording({StreamKind.DEPTH: stream}, Metadata(), T0_NS))
-    with pytest.warns(RecordingWarning, match=r"gap\.mcap: topic /depth .*1 gap\(s\).*the longest, 10\.5"):
+    path = write_recording(
+        tmp_path / "gap.mcap", Recording({StreamKind.DEPTH: stream}, Metadata(), T0_NS)
+    )
+    with pytest.warns(
+        RecordingWarning, match=r"gap\.mcap: topic /depth .*1 gap\(s\).*the longest, 10\.5"
+    ):
         read_recording(path)
 
 
@@ -250,17 +262,20 @@ def _raw_file(
     *,
     log_times: np.ndarray | None = None,
     schema_name: str | None = None,
-    metadata: bool = False,
+    fields: dict[str, np.ndarray] | None = None,
 ) -> Path:
     """A file written with mcap's raw Writer and navreplay's encoder (a 'foreign' file)."""
     spec = SPECS[StreamKind(kind)]
     frame = stream.frame_id.encode()
     lay = layout(spec.message, len(frame) + 1, 0)
-    payload = encode(lay, stream.t_ns, frame, ENCODERS[spec.kind](stream, [])).tobytes()
+    values = {**ENCODERS[spec.kind](stream, []), **(fields or {})}
+    payload = encode(lay, stream.t_ns, frame, values).tobytes()
     with open(path, "wb") as f:
         w = Writer(f)
         w.start(profile="ros2", library="test")
-        sid = w.register_schema(schema_name or spec.message.name, "ros2msg", spec.message.schema_text.encode())
+        sid = w.register_schema(
+            schema_name or spec.message.name, "ros2msg", spec.message.schema_text.encode()
+        )
         cid = w.register_channel(topic, "cdr", sid)
         times = stream.t_ns if log_times is None else log_times
         for i, t in enumerate(times.tolist()):
@@ -273,7 +288,9 @@ def test_foreign_file_without_metadata_maps_by_schema(tmp_path: Path) -> None:
     rng = np.random.default_rng(8)
     imu = random_stream("imu", rng, duration_s=2)
     flu = Stream("imu", imu.t_ns, imu.columns, "imu_link")
-    path = _raw_file(tmp_path / "foreign.mcap", "/vectornav/imu", "imu", flu, schema_name="sensor_msgs/Imu")
+    path = _raw_file(
+        tmp_path / "foreign.mcap", "/vectornav/imu", "imu", flu, schema_name="sensor_msgs/Imu"
+    )
     with pytest.warns(RecordingWarning, match="'imu_link' taken as FLU"):
         back = read_recording(path)
     assert back.metadata == Metadata()
@@ -288,12 +305,45 @@ def test_foreign_file_without_metadata_maps_by_schema(tmp_path: Path) -> None:
     assert len(back["imu"]) == len(imu)
 
 
+def test_foreign_gps_no_fix_and_enu_velocity(tmp_path: Path) -> None:
+    rng = np.random.default_rng(11)
+    gps = random_stream("gps", rng, duration_s=10)
+    status = np.zeros(len(gps), dtype=np.int8)
+    status[[2, 5]] = -1
+    path = _raw_file(tmp_path / "fix.mcap", "/fix", "gps", gps, fields={"status": status})
+    with pytest.warns(RecordingWarning, match="2 fixes with status NO_FIX dropped"):
+        back = read_recording(path)
+    keep = status == 0
+    np.testing.assert_array_equal(back["gps"].t_ns, gps.t_ns[keep])
+    np.testing.assert_array_equal(back["gps"]["pos_sigma"], gps["pos_sigma"][keep])
+    vel = random_stream("gps_vel", rng, duration_s=5)
+    enu = Stream("gps_vel", vel.t_ns, {"v_n": vel["v_n"][:, [1, 0, 2]] * [1, 1, -1]}, "gps")
+    path = _raw_file(tmp_path / "vel.mcap", "/gps/vel", "gps_vel", enu)
+    with pytest.warns(RecordingWarning, match="'gps' taken as ENU"):
+        back = read_recording(path)
+    np.testing.assert_array_equal(back["gps_vel"]["v_n"], vel["v_n"])
+    assert back["gps_vel"].frame_id == "ned"
+
+
+def test_empty_streams_keep_their_columns(tmp_path: Path) -> None:
+    rec = random_recording(np.random.default_rng(12), duration_s=1, kinds=["imu", "gps", "truth"])
+    for kind, stream in list(rec.streams.items()):
+        rec.streams[kind] = stream.slice(0, 0)
+    back = read_recording(write_recording(tmp_path / "empty.mcap", rec))
+    for kind, stream in rec.streams.items():
+        assert len(back[kind]) == 0
+        assert {k: v.shape for k, v in back[kind].columns.items()} == {
+            k: v.shape for k, v in stream.columns.items()
+        }
+
+
 def test_canonical_topic_with_wrong_schema_is_an_error(tmp_path: Path) -> None:
     mag = random_stream("mag", np.random.default_rng(9), duration_s=2)
     path = _raw_file(tmp_path / "wrong.mcap", TOPICS[StreamKind.IMU], "mag", mag)
     with pytest.raises(
         RecordingError,
-        match=r"wrong\.mcap: topic /imu has schema 'sensor_msgs/msg/MagneticField'; stream imu needs sensor_msgs/msg/Imu",
+        match=r"wrong\.mcap: topic /imu has schema 'sensor_msgs/msg/MagneticField' in 'cdr' "
+        r"encoding; stream imu needs sensor_msgs/msg/Imu",
     ):
         read_recording(path)
 

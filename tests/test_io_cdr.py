@@ -116,7 +116,8 @@ def test_file_decodes_with_mcap_ros2(recorded: tuple[Recording, Path]) -> None:
     np.testing.assert_allclose([fix.latitude, fix.longitude], np.degrees(rec["gps"]["pos"][0, :2]))
     sigma = rec["gps"]["pos_sigma"][0]
     np.testing.assert_allclose(
-        np.array(fix.position_covariance).reshape(3, 3), np.diag([sigma[1], sigma[0], sigma[2]]) ** 2
+        np.array(fix.position_covariance).reshape(3, 3),
+        np.diag([sigma[1], sigma[0], sigma[2]]) ** 2,
     )
     assert fix.position_covariance_type == 2
     vel = got["/gps/vel"][0]
@@ -126,7 +127,9 @@ def test_file_decodes_with_mcap_ros2(recorded: tuple[Recording, Path]) -> None:
     np.testing.assert_array_equal(_vec(mag.magnetic_field), rec["mag"]["m_b"][0])
     ins = got["/master_ins"][0]
     np.testing.assert_array_equal(ins.euler, rec["master_ins"]["euler"][0])
-    np.testing.assert_array_equal([ins.latitude, ins.longitude, ins.height], rec["master_ins"]["pos"][0])
+    np.testing.assert_array_equal(
+        [ins.latitude, ins.longitude, ins.height], rec["master_ins"]["pos"][0]
+    )
     assert got["/speed_log"][2].rpm == rec["speed_log"]["rpm"][2]
     assert got["/depth"][1].depth == rec["depth"]["depth"][1]
     truth = got["/truth"][5]
@@ -181,7 +184,10 @@ def test_rosbags_typesys_from_msg_text(recorded: tuple[Recording, Path]) -> None
     seen = set()
     with open(path, "rb") as f:
         for schema, channel, message in make_reader(f).iter_messages():
-            if not schema.name.startswith("navreplay_msgs/") and schema.name != "sensor_msgs/msg/Imu":
+            if (
+                not schema.name.startswith("navreplay_msgs/")
+                and schema.name != "sensor_msgs/msg/Imu"
+            ):
                 continue
             msg = store.deserialize_cdr(message.data, schema.name)
             assert bytes(store.serialize_cdr(msg, schema.name)) == message.data

@@ -55,7 +55,9 @@ def _chunk_offsets(path: Path) -> list[int]:
     return sorted(c.chunk_start_offset for c in summary.chunk_indexes)
 
 
-def test_truncated_file_is_salvaged_with_a_warning(original: tuple[Recording, Path], tmp_path: Path) -> None:
+def test_truncated_file_is_salvaged_with_a_warning(
+    original: tuple[Recording, Path], tmp_path: Path
+) -> None:
     rec, path = original
     data = path.read_bytes()
     offsets = _chunk_offsets(path)
@@ -67,7 +69,9 @@ def test_truncated_file_is_salvaged_with_a_warning(original: tuple[Recording, Pa
     messages = [str(w.message) for w in caught if issubclass(w.category, RecordingWarning)]
     assert len(messages) == 1, messages
     msg = messages[0]
-    assert msg.startswith(f"{cut}: file is truncated or damaged at byte {offsets[len(offsets) // 2]}")
+    assert msg.startswith(
+        f"{cut}: file is truncated or damaged at byte {offsets[len(offsets) // 2]}"
+    )
     read = assert_prefix(back, rec)
     last = max(int(s.t_ns[-1]) for s in back.streams.values())
     assert f"the last good one at t = {(last - rec.t0_ns) * 1e-9:.9f} s ({last} ns)" in msg
@@ -75,17 +79,24 @@ def test_truncated_file_is_salvaged_with_a_warning(original: tuple[Recording, Pa
     assert 0 < read < sum(len(s) for s in rec.streams.values())
 
 
-def test_missing_summary_recovers_everything(original: tuple[Recording, Path], tmp_path: Path) -> None:
+def test_missing_summary_recovers_everything(
+    original: tuple[Recording, Path], tmp_path: Path
+) -> None:
     rec, path = original
     data = path.read_bytes()
     cut = tmp_path / "nosummary.mcap"
     cut.write_bytes(data[:-40])  # inside the footer
-    with pytest.warns(RecordingWarning, match=r"summary or footer missing or damaged.*all \d+ messages were recovered"):
+    with pytest.warns(
+        RecordingWarning,
+        match=r"summary or footer missing or damaged.*all \d+ messages were recovered",
+    ):
         back = read_recording(cut)
     assert assert_prefix(back, rec) == sum(len(s) for s in rec.streams.values())
 
 
-def test_unfinished_file(original: tuple[Recording, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_unfinished_file(
+    original: tuple[Recording, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A writer that died before finish(): complete chunks are salvaged."""
     rec, _ = original
     path = tmp_path / "unfinished.mcap"
@@ -98,7 +109,9 @@ def test_unfinished_file(original: tuple[Recording, Path], tmp_path: Path, monke
 
 
 @pytest.mark.parametrize("where", ["chunk", "metadata", "summary"])
-def test_flipped_byte_is_reported(original: tuple[Recording, Path], tmp_path: Path, where: str) -> None:
+def test_flipped_byte_is_reported(
+    original: tuple[Recording, Path], tmp_path: Path, where: str
+) -> None:
     _, path = original
     data = bytearray(path.read_bytes())
     offsets = _chunk_offsets(path)
@@ -116,7 +129,9 @@ def test_flipped_byte_is_reported(original: tuple[Recording, Path], tmp_path: Pa
         read_recording(bad)
 
 
-def test_flipped_byte_in_chunk_of_truncated_file(original: tuple[Recording, Path], tmp_path: Path) -> None:
+def test_flipped_byte_in_chunk_of_truncated_file(
+    original: tuple[Recording, Path], tmp_path: Path
+) -> None:
     """The salvage path checks chunk CRCs too."""
     _, path = original
     data = bytearray(path.read_bytes())
@@ -133,7 +148,9 @@ def scratch(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("truncate") / "t.mcap"
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(fraction=st.floats(min_value=0.0, max_value=1.0))
 def test_truncation_anywhere_gives_a_prefix_or_a_recording_error(
     original: tuple[Recording, Path], scratch: Path, fraction: float
@@ -149,7 +166,9 @@ def test_truncation_anywhere_gives_a_prefix_or_a_recording_error(
         except RecordingError as exc:
             assert str(scratch) in str(exc)
             return
-    assert all(issubclass(w.category, RecordingWarning) for w in caught), [str(w.message) for w in caught]
+    assert all(issubclass(w.category, RecordingWarning) for w in caught), [
+        str(w.message) for w in caught
+    ]
     read = assert_prefix(back, rec)
     if n < len(data):
         assert caught, "a truncated file must warn"

@@ -136,8 +136,8 @@ class InsParams(FilterParams):
     slowly changing bias (their gravity part is in the effective bias)."""
     gyro_sf_mis: float = 0.5e-3
     """Unmodelled gyro scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off)."""
-    sf_mis_time: float = 15.0
-    """Correlation time tau of eq. (5a) [s], about the length of a manoeuvre."""
+    sf_mis_time: float = 30.0
+    """Correlation time tau of eq. (5a) [s]: a manoeuvre and the time its error persists."""
     cov_step: float = 0.1
     """Covariance propagation step [s] (cut short at updates and outputs)."""
 

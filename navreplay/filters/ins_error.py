@@ -616,6 +616,16 @@ class ProcessNoise:
     k_acc: float = 0.0
     k_gyro: float = 0.0
 
+    def __post_init__(self) -> None:
+        q = np.ascontiguousarray(self.q, dtype=np.float64)
+        if q.ndim != 1 or not np.all(np.isfinite(q)) or np.any(q < 0.0):
+            raise ValueError(f"process noise q must be a vector of values >= 0, got {q}")
+        for name in ("k_acc", "k_gyro"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        object.__setattr__(self, "q", q)
+
     @staticmethod
     def motion_coefficient(sigma: float, correlation_time: float) -> float:
         """``k = sigma^2 tau`` of eq. (21) for scale-factor / misalignment errors of 1-sigma
@@ -657,10 +667,9 @@ class OpenStep:
 
 
 def _noise_args(noise: ProcessNoise, n: int) -> tuple[np.ndarray, float, float]:
-    q = np.ascontiguousarray(noise.q, dtype=np.float64)
-    if q.shape != (n,):
-        raise ValueError(f"process noise q must have shape ({n},), got {q.shape}")
-    return q, float(noise.k_acc), float(noise.k_gyro)
+    if noise.q.shape != (n,):
+        raise ValueError(f"process noise q must have shape ({n},), got {noise.q.shape}")
+    return noise.q, noise.k_acc, noise.k_gyro
 
 
 def propagate_covariance(

@@ -342,6 +342,61 @@ def predict(
     return x, P
 
 
+_NO_FROZEN = np.zeros(0, dtype=np.bool_)
+
+
+@numba.njit(cache=True)
+def _correct_kernel(
+    x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray,
+    frozen: np.ndarray,
+):
+    """Eqs. (7)-(13) compiled; returns (x, P, nu, S, L^-1 nu, S positive definite)."""
+    n = x.shape[0]
+    m = z.shape[0]
+    nu = z - H @ x  # (7)
+    HP = H @ P
+    S = HP @ H.T + R  # (8)
+    S = 0.5 * (S + S.T)
+    L = np.zeros((m, m))  # (8) S = L L^T
+    for j in range(m):
+        for i in range(j, m):
+            c = S[i, j]
+            for k in range(j):
+                c -= L[i, k] * L[j, k]
+            if i == j:
+                if not c > 0.0:
+                    return x, P, nu, S, nu, False
+                L[j, j] = np.sqrt(c)
+            else:
+                L[i, j] = c / L[j, j]
+    # (9), (13): W = L^-1 [nu, H P] by forward substitution
+    W = np.empty((m, n + 1))
+    W[:, 0] = nu
+    W[:, 1:] = HP
+    for i in range(m):
+        for k in range(i):
+            W[i, :] -= L[i, k] * W[k, :]
+        W[i, :] /= L[i, i]
+    nu_w = W[:, 0].copy()
+    # (9): K^T = L^-T W[:, 1:] by back substitution
+    Kt = W[:, 1:].copy()
+    for i in range(m - 1, -1, -1):
+        for k in range(i + 1, m):
+            Kt[i, :] -= L[k, i] * Kt[k, :]
+        Kt[i, :] /= L[i, i]
+    K = Kt.T.copy()
+    for i in range(frozen.shape[0]):
+        if frozen[i]:
+            K[i, :] = 0.0  # (10)
+    x = x + K @ nu  # (11)
+    IKH = -(K @ H)  # (12) Joseph form
+    for i in range(n):
+        IKH[i, i] += 1.0
+    P = IKH @ P @ IKH.T + K @ R @ K.T
+    P = 0.5 * (P + P.T)
+    return x, P, nu, S, nu_w, True
+
+
 def correct(
     x: np.ndarray,
     P: np.ndarray,
@@ -403,30 +458,22 @@ def correct(
         _finite(z, "z", t)
         _finite(H, "H", t)
         check_covariance(R, name="R", t=t)
-        if frozen is not None and frozen.shape != (n,):
+    if frozen is None:
+        frozen = _NO_FROZEN
+    else:
+        frozen = np.asarray(frozen, dtype=np.bool_)
+        if frozen.shape != (n,):
             raise ValueError(f"frozen must have shape ({n},), got {frozen.shape}")
-    nu = z - H @ x  # (7)
-    HP = H @ P
-    S = HP @ H.T + R  # (8)
-    S = 0.5 * (S + S.T)
-    try:
-        L = np.linalg.cholesky(S)  # (8)
-    except np.linalg.LinAlgError:
+    out = _correct_kernel(
+        np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(P, dtype=np.float64),
+        np.ascontiguousarray(z, dtype=np.float64), np.ascontiguousarray(H, dtype=np.float64),
+        np.ascontiguousarray(R, dtype=np.float64), frozen,
+    )
+    x, P, nu, S, nu_w, ok = out
+    if not ok:
         raise FilterDivergedError(
             f"innovation covariance S is not positive definite (diag {np.diagonal(S)})", t
-        ) from None
-    W = np.linalg.solve(L, np.column_stack((nu, HP)))  # (9), (13): L^-1 [nu, H P]
-    nu_w = W[:, 0]
-    K = np.linalg.solve(L.T, W[:, 1:]).T  # (9)
-    if frozen is not None:
-        K[frozen, :] = 0.0  # (10)
-    x = x + K @ nu  # (11)
-    IKH = -K @ H  # (12)
-    IKH[np.diag_indices(n)] += 1.0
-    KR = K @ R
-    P = IKH @ P @ IKH.T
-    P += KR @ K.T
-    P = 0.5 * (P + P.T)
+        )
     if check:
         _finite(x, "corrected x", t)
         check_covariance(P, name="corrected P", t=t)

@@ -163,6 +163,9 @@ N_NAV = 9
 """Rows of F that are not zero (position, velocity, attitude)."""
 N_DYN = 15
 """Columns of F that are not zero (navigation states and IMU biases)."""
+_CHECK_INTERVAL = 1.0
+"""Filter time between full symmetry / PSD checks of the propagated P [s] (every correction
+is checked, and every propagation step checks the variances)."""
 
 STATE_NAMES: tuple[str, ...] = (
     "dlat", "dlon", "dd", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
@@ -384,7 +387,7 @@ def _propagate_block(nav, P, omega, f, t, t_prev, b_a, b_g, prev, open_nav, open
     sample's dtheta, dv), ``open_nav`` (10,) and ``open_sums`` (4,: the open step's length and
     integral of f_hat) are updated in place. Returns (code, nav, P): code is -1 when every
     sample was valid, else strapdown's index of the first bad sample (-2: bad state); nav and
-    P are then unchanged.
+    P are then unchanged; -3: the propagated P has a negative or non-finite variance.
     """
     k = t.shape[0]
     n = P.shape[0]
@@ -420,6 +423,9 @@ def _propagate_block(nav, P, omega, f, t, t_prev, b_a, b_g, prev, open_nav, open
                 f_mean[j] = open_sums[1 + j] / open_sums[0]
             P = _covariance_step(P, open_nav, f_mean, open_sums[0], q, curvature, F, M, T)
             open_sums[:] = 0.0
+    for i in range(N_NAV):
+        if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
+            return -3, nav, P
     return code, hist[k].copy(), P
 
 
@@ -728,24 +734,30 @@ class RpmAidedIns(Filter):
         self._open_sums = np.zeros(4)
         self._step = float(p.cov_step)
         self._curvature = bool(p.curvature_derivatives)
+        self._next_check = self.t + _CHECK_INTERVAL
+        self._x = self._state_vector()
         kalman.check_covariance(self.P, name="P0", t=self.t)
 
     # -- the Filter interface ----------------------------------------------------------------
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
         t = np.asarray(t, dtype=np.float64)
-        first = int(np.searchsorted(t, self.t + 1e-9, side="right"))
-        if first == t.shape[0]:
-            return  # samples at or before the initial solution
         omega = imu["omega_ib_b"]
         f = imu["f_b"]
-        if first:
+        if t[0] <= self.t + 1e-9:  # samples at or before the initial solution
+            first = int(np.searchsorted(t, self.t + 1e-9, side="right"))
+            if first == t.shape[0]:
+                return
             t, omega, f = t[first:], omega[first:], f[first:]
         code, nav, P = _propagate_block(
             self.nav, self.P, omega, f, t, self.t, self.b_a, self.b_g, self._prev,
             self._open_nav, self._open_sums, self._step, self._q, self._curvature,
         )
         if code != -1:
+            if code == -3:
+                kalman.check_covariance(P, t=float(t[-1]))  # names what is wrong
+                raise kalman.FilterDivergedError("P has a negative or non-finite variance",
+                                                 float(t[-1]))
             if code == -2:
                 raise kalman.FilterDivergedError("navigation state is not finite", self.t)
             t_before = t[code - 1] if code else self.t
@@ -755,7 +767,9 @@ class RpmAidedIns(Filter):
         self.nav = nav
         self.P = P
         self.t = float(t[-1])
-        kalman.check_covariance(P, t=self.t)
+        if self.t >= self._next_check:  # full symmetry / PSD check once per second
+            kalman.check_covariance(P, t=self.t)
+            self._next_check = self.t + _CHECK_INTERVAL
 
     def update(
         self, kind: StreamKind, t: float, sample: Mapping[str, Any]
@@ -789,15 +803,9 @@ class RpmAidedIns(Filter):
 
     def estimate(self) -> Estimate:
         self._sync_covariance()
-        x = np.zeros(N_STATES)
-        x[BA] = self.b_a
-        x[BG] = self.b_g
-        x[15] = self.k_rpm
-        x[M_RPM] = self.m_rpm
-        x[CURRENT] = self.v_c
         nav = self.nav
         return Estimate(
-            self.t, x, self.P,
+            self.t, self._x, self.P,
             NavSolution(pos=nav[strapdown.POS], v_n=nav[strapdown.VEL], q_nb=nav[strapdown.QUAT]),
         )
 
@@ -818,3 +826,14 @@ class RpmAidedIns(Filter):
         self.k_rpm -= float(dx[15])
         self.m_rpm = self.m_rpm - dx[M_RPM]
         self.v_c = self.v_c - dx[CURRENT]
+        self._x = self._state_vector()
+
+    def _state_vector(self) -> np.ndarray:
+        """``Estimate.x``: error states 0 (after feedback), sensor errors as total estimates."""
+        x = np.zeros(N_STATES)
+        x[BA] = self.b_a
+        x[BG] = self.b_g
+        x[15] = self.k_rpm
+        x[M_RPM] = self.m_rpm
+        x[CURRENT] = self.v_c
+        return x

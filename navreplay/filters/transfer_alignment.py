@@ -87,23 +87,27 @@ samples (each a mean over its interval, half a sample old). R = diag(r_v I2, r_q
 
 Cycle (at every GINS sample)
 ----------------------------
-1. SDINS mechanization (:func:`navreplay.strapdown.propagate`) at the IMU rate, raw IMU.
+1. SDINS mechanization (:func:`navreplay.strapdown.propagate_kernel`) at the IMU rate, raw
+   IMU, with the coning and sculling terms carried across blocks.
 2. Q_m from the GINS Euler angles, its sign such that ``(Q_m* (x) Q_bn_hat)_0 >= 0``.
-3. Predict P with (Phi, Q_d); update with the shared Joseph-form correction.
+3. Predict P with (Phi, Q_d); update with the Cholesky / Joseph-form correction of
+   :func:`navreplay.filters.kalman.correct` (:func:`joseph_correct`).
 4. Feedback: V_ne -= dV; Q_bn -= dQ_bn, normalised; Q_br[s] -= dQ_br.
 5. Recover the unmatched components u of Q_br (q_br2 for partial matching, eq. 11, E8) as
    component u of ``Q_m* (x) Q_bn_hat``, then normalise Q_br (eq. 10, E10).
 6. Slave the SDINS vertical velocity and the position to the GINS (the vertical channel is not
-   a state): ``V_d = V_R,d + [lever-arm velocity]_d``, (lat, lon, h) = GINS.
+   a state): ``V_d = V_R,d + [lever-arm velocity]_d``, position = the GINS position displaced
+   by ``C(Q_m) L^r`` (:func:`lever_position`).
 7. x = 0; P keeps its value through the normalisations (as in the paper) and is checked to be
    symmetric and PSD.
 
 Initialisation, eqs. (16), (17)
 -------------------------------
 At the first GINS sample after an IMU sample: ``Q_bn_hat = Q_m``, ``Q_br_hat = [1, 0, 0, 0]``,
-``V_B_hat = V_R_meas + lever-arm velocity``. Because the SDINS starts from the GINS attitude,
+``V_B_hat = V_R_meas + lever-arm velocity``, the position as in step 6. Because the SDINS starts from the GINS attitude,
 ``dQ_bn = L(Q_m) dQ_br`` (eq. 16) and P0 is full (eq. 17, E16), with
-``P_hat = diag(p0, p1, p1, p1)``, ``p1 = sin(mounting_sigma / 2)^2``::
+``P_hat = diag(p0, p1, p1, p1)``, ``p0 = init_q0_sigma^2``,
+``p1 = sin(init_misalignment / 2)^2``, ``r_V = init_vel_sigma^2``::
 
     P0 = [[ r_V I2   0                   0               ],
           [ 0        L P_hat L^T         L P_hat[:, s]   ],
@@ -114,6 +118,13 @@ Lever arm
 ``lever_arm_r`` is the surveyed GINS-to-SDINS lever arm in the ship frame. When it is not set,
 the filter reads ``Metadata.params["lever_arm_r_nom"]`` (the ship-transfer-alignment scenario
 writes the nominal lever arm there, with its knowledge error) and fails if that is missing.
+
+Implementation
+--------------
+Steps 2-7 are one numba kernel, :func:`cycle` (about 10 us per GINS sample, against about
+50 us for the numpy prediction and correction alone), built from the model functions below,
+which the tests check against finite differences of the nonlinear equations, against
+:mod:`navreplay.geo` and against :func:`navreplay.filters.kalman.correct`.
 """
 
 from __future__ import annotations
@@ -496,6 +507,31 @@ def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
 
 
 @numba.njit(cache=True)
+def lever_position(pos, q_m, lever_arm_r):
+    """The GINS position displaced by the lever arm ``C(Q_m) L^r`` (NED, first order), (3,).
+
+    Parameters
+    ----------
+    pos : ndarray, shape (3,)
+        GINS latitude, longitude [rad] and height [m].
+    q_m : ndarray, shape (4,)
+        GINS attitude Q_m.
+    lever_arm_r : ndarray, shape (3,)
+        Lever arm GINS -> SDINS, ship frame [m].
+    """
+    d = _mv(dcm(q_m), lever_arm_r)
+    s = math.sin(pos[0])
+    w = 1.0 - _E2 * s * s
+    R_N = _A / math.sqrt(w)
+    R_M = R_N * (1.0 - _E2) / w
+    out = np.empty(3)
+    out[0] = pos[0] + d[0] / (R_M + pos[2])
+    out[1] = pos[1] + d[1] / ((R_N + pos[2]) * math.cos(pos[0]))
+    out[2] = pos[2] - d[2]
+    return out
+
+
+@numba.njit(cache=True)
 def _cholesky(A, L):
     """Lower Cholesky factor of symmetric A into L (zeroed by the caller); False unless PD."""
     n = A.shape[0]
@@ -740,8 +776,7 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
     _normalise(q_rb)  # (10), E10
     # the vertical channel and the position are slaved to the GINS (spec 4.1)
     nav[5] = v_r[2] + lever_velocity(q, q_m, w_now, w_in, lever_arm_r)[2]
-    for i in range(3):
-        nav[i] = pos[i]
+    nav[0:3] = lever_position(pos, q_m, lever_arm_r)
 
     # predicted covariance of phi = -2 R(q)^T dQ_bn: Sigma_phi = 4 R^T P_qq R
     Rq = rmat(q)
@@ -963,7 +998,7 @@ class TransferAlignment(Filter):
         _, w_in = earth_terms(pos[0], pos[2], v_r)
         w_now = 1.5 * self._w_last - 0.5 * self._w_prev  # as in cycle()
         v_b = v_r + lever_velocity(q_m, q_m, w_now, w_in, self.lever_arm_r)
-        self.nav = np.concatenate((pos, v_b, q_m))
+        self.nav = np.concatenate((lever_position(pos, q_m, self.lever_arm_r), v_b, q_m))
         self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])
         self.P = initial_covariance(
             q_m, self.s, p.init_vel_sigma**2, p.init_q0_sigma**2,

@@ -5,11 +5,20 @@ One topic per stream kind (:data:`TOPICS`), standard ROS 2 messages where the me
 parameters, seed and true error states. docs/recording-format.md describes every topic, field,
 unit and frame.
 
+>>> import tempfile
 >>> import numpy as np
->>> from navreplay.streams import Metadata, Recording, Stream
->>> imu = Stream("imu", np.arange(1, 4) * 5_000_000, {"f_b": np.zeros((3, 3))})
->>> TOPICS["imu"]
-'/imu'
+>>> from navreplay.io.synthetic import random_recording
+>>> rec = random_recording(np.random.default_rng(0), duration_s=1.0, kinds=["imu", "truth"])
+>>> with tempfile.TemporaryDirectory() as tmp:
+...     path = write_recording(f"{tmp}/demo.mcap", rec)
+...     back = read_recording(path)
+...     info = recording_info(path)
+>>> np.array_equal(back["imu"]["f_b"], rec["imu"]["f_b"]), back.metadata == rec.metadata
+(True, True)
+>>> [(t.topic, t.count) for t in info.topics]
+[('/imu', 200), ('/truth', 200)]
+>>> TOPICS["gps"]
+'/gps/fix'
 
 Writing is atomic and refuses to replace a file unless ``force=True``; reading is bulk (numpy) for
 the fixed-layout messages, salvages truncated files with a :class:`RecordingWarning`, and reports

@@ -75,7 +75,9 @@ class AuxColumn:
 def aux_columns(stream: Stream) -> list[AuxColumn]:
     """The extra (non-standard) columns of a truth stream, in the stream's order."""
     standard = FIELDS[StreamKind.TRUTH]
-    return [AuxColumn(k, tuple(v.shape[1:])) for k, v in stream.columns.items() if k not in standard]
+    return [
+        AuxColumn(k, tuple(v.shape[1:])) for k, v in stream.columns.items() if k not in standard
+    ]
 
 
 def check_columns(stream: Stream) -> None:
@@ -281,7 +283,7 @@ def _gps_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn
         d.keep = ~no_fix
         d.notes.append(f"{int(no_fix.sum())} fixes with status NO_FIX dropped")
     cov_type = np.asarray(f["position_covariance_type"])[~no_fix]
-    if cov_type.size and (cov_type != COVARIANCE_TYPE_UNKNOWN).all():
+    if (cov_type != COVARIANCE_TYPE_UNKNOWN).all():  # (also for no messages)
         var_enu = np.asarray(f["position_covariance"])
         var_ned = var_enu[:, [1, 0, 2]]
         d.columns["pos_sigma"] = _f64(np.sqrt(var_ned))
@@ -294,7 +296,7 @@ def _gps_vel_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxCo
     v = _f64(f["linear"])
     var = np.asarray(f["covariance"])
     d = Decoded({"v_n": v}, frame_id=frame_id)
-    if var.size and (var != 0.0).any():
+    if var.size == 0 or (var != 0.0).any():
         d.columns["vel_sigma"] = _f64(np.sqrt(var))
     if not _is_ned(frame_id):
         d.columns["v_n"] = np.stack([v[:, 1], v[:, 0], -v[:, 2]], axis=1)
@@ -318,9 +320,7 @@ def _master_ins_columns(
     return Decoded(cols, frame_id=frame_id)
 
 
-def _speed_log_columns(
-    f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]
-) -> Decoded:
+def _speed_log_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]) -> Decoded:
     return Decoded({"rpm": _f64(f["rpm"])}, frame_id=frame_id)
 
 
@@ -333,7 +333,9 @@ def _truth_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColu
     flat = np.asarray(f["aux"])
     n, width = flat.shape
     d = Decoded(cols, frame_id=frame_id)
-    if sum(c.width for c in aux) != width:
+    if n == 0:  # no message says how long aux is: trust the metadata
+        flat = np.zeros((0, sum(c.width for c in aux)))
+    elif sum(c.width for c in aux) != width:
         if width:
             cols["aux"] = _f64(flat)
             d.notes.append(
@@ -376,9 +378,7 @@ position covariance is reduced to its diagonal (E, N, U variances), the twist co
 linear diagonal, the gyro covariance to its "not provided" flag.
 """
 
-DECODERS: dict[
-    StreamKind, Callable[[Mapping[str, np.ndarray], str, list[AuxColumn]], Decoded]
-] = {
+DECODERS: dict[StreamKind, Callable[[Mapping[str, np.ndarray], str, list[AuxColumn]], Decoded]] = {
     StreamKind.IMU: _imu_columns,
     StreamKind.MASTER_INS: _master_ins_columns,
     StreamKind.GPS: _gps_columns,

@@ -280,8 +280,7 @@ def format_info(info: RecordingInfo) -> str:
         lines.append("no navreplay metadata (a recording from elsewhere)")
     if info.start_ns is not None:
         lines.append(
-            f"start: {_utc(info.t0_ns)} (t0 = {info.t0_ns} ns)   duration: "
-            f"{info.duration_s:.3f} s"
+            f"start: {_utc(info.t0_ns)} (t0 = {info.t0_ns} ns)   duration: {info.duration_s:.3f} s"
         )
     header = ("topic", "type", "stream", "count", "rate [Hz]", "start [s]", "end [s]")
     rows = [header]
@@ -300,7 +299,8 @@ def format_info(info: RecordingInfo) -> str:
     widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
     for r in rows:
         cells = [
-            c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths, strict=True))
+            c.ljust(w) if i < 3 else c.rjust(w)
+            for i, (c, w) in enumerate(zip(r, widths, strict=True))
         ]
         lines.append("  ".join(cells).rstrip())
     if info.truth_columns:

@@ -486,7 +486,9 @@ def _walk_sequential(
             break
         if isinstance(record, Chunk):
             offset = stream.record_start
-            block = scan_chunk(chunk_bytes(record, where, offset), contents.on_record, where, offset)
+            block = scan_chunk(
+                chunk_bytes(record, where, offset), contents.on_record, where, offset
+            )
             contents.saw(block)
             yield block
         elif isinstance(record, Message):

@@ -122,7 +122,9 @@ def decode_metadata(
         try:
             return int(text)
         except ValueError:
-            raise RecordingError(f"{where}: metadata {key!r} = {text!r} is not an integer") from None
+            raise RecordingError(
+                f"{where}: metadata {key!r} = {text!r} is not an integer"
+            ) from None
 
     meta = Metadata(
         scenario=pairs.get("scenario", ""),

@@ -26,12 +26,14 @@ from navreplay.io.mcapfile import FileContents, MessageBlock, walk
 from navreplay.io.metadata import decode_metadata
 from navreplay.io.schemas import (
     KIND_BY_TYPE,
+    MESSAGE_ENCODING,
     METADATA_NAME,
     SPECS,
     MessageType,
     normalize_type_name,
 )
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
+
 
 def _warn(message: str) -> None:
     warnings.warn(RecordingWarning(message), stacklevel=3)
@@ -48,13 +50,14 @@ class _Topic:
         self.reduce = REDUCE[KIND_BY_TYPE[message.name]]
         self.parts: list[dict[str, np.ndarray]] = []
         self.frame_ids: set[str] = set()
-        self.first_frame_id: str | None = None
+        self.first_frame_id: str | None = None  # of the earliest message in file order
+        self._first_ordinal = -1
         self._generic: cdr.GenericDecoder | None = None
         self.ordinals: list[int | np.ndarray] = []
         self.log_times: list[np.ndarray | None] = []
         self.in_order = True
         self._next = 0
-        self._ordinal = 0
+        self._count = 0
 
     @property
     def label(self) -> str:
@@ -62,8 +65,8 @@ class _Topic:
 
     def add(self, block: MessageBlock, index: np.ndarray) -> None:
         """Decode messages ``index`` of a block (all of this channel)."""
-        ordinal = self._ordinal + np.arange(len(index), dtype=np.int64)
-        self._ordinal += len(index)
+        ordinal = self._count + np.arange(len(index), dtype=np.int64)
+        self._count += len(index)
         lengths = block.length[index]
         for width in np.unique(lengths):
             sel = np.flatnonzero(lengths == width)
@@ -76,7 +79,9 @@ class _Topic:
             lay = cdr.peek_layout(rows[remaining[:1]], self.message)
             if lay is None:
                 payloads = [block.payload(int(i)) for i in index[remaining]]
-                self._keep(self._decode_generic(payloads), block, index[remaining], ordinal[remaining])
+                self._keep(
+                    self._decode_generic(payloads), block, index[remaining], ordinal[remaining]
+                )
                 return
             sub = rows if remaining.size == len(rows) else rows[remaining]
             ok = cdr.matches_layout(sub, lay)  # true for the first row, which defined `lay`
@@ -110,8 +115,8 @@ class _Topic:
     ) -> None:
         frames = fields["frame_id"]
         if len(frames):
-            if self.first_frame_id is None:
-                self.first_frame_id = str(frames[0])
+            if self.first_frame_id is None or ordinal[0] < self._first_ordinal:
+                self.first_frame_id, self._first_ordinal = str(frames[0]), int(ordinal[0])
             self.frame_ids.update(set(frames.tolist()))
         t_ns = np.asarray(fields["t_ns"], dtype=np.int64)
         part = {"t_ns": t_ns}
@@ -146,7 +151,10 @@ class _Topic:
         log_time = None
         if any(lt is not None for lt in self.log_times):
             log_time = np.concatenate(
-                [p["t_ns"] if lt is None else lt for p, lt in zip(self.parts, self.log_times, strict=True)]
+                [
+                    p["t_ns"] if lt is None else lt
+                    for p, lt in zip(self.parts, self.log_times, strict=True)
+                ]
             )
         ordinal = None
         if not self.in_order:
@@ -194,6 +202,7 @@ class _Candidate:
     kind: StreamKind
     canonical: bool
     type_name: str
+    encoding: str
 
 
 def _candidate(
@@ -204,11 +213,12 @@ def _candidate(
     schema = schemas.get(channel.schema_id)
     type_name = normalize_type_name(schema.name) if schema is not None else ""
     kind = topic_kinds.get(channel.topic)
+    encoding = channel.message_encoding
     if kind is not None:
-        return _Candidate(channel, schema, kind, True, type_name)
+        return _Candidate(channel, schema, kind, True, type_name, encoding)
     kind = KIND_BY_TYPE.get(type_name)
-    if kind is not None and SPECS[kind].by_schema:
-        return _Candidate(channel, schema, kind, False, type_name)
+    if kind is not None and SPECS[kind].by_schema and encoding == MESSAGE_ENCODING:
+        return _Candidate(channel, schema, kind, False, type_name, encoding)
     return None
 
 
@@ -223,17 +233,22 @@ class _Plan:
         self.topics: dict[int, _Topic] = {}
 
     def topic_of(self, contents: FileContents, channel_id: int) -> _Topic | None:
-        if channel_id not in self.candidates:
-            channel = contents.channels.get(channel_id)
-            cand = None
-            if channel is not None:
-                cand = _candidate(channel, contents.schemas, self.topic_kinds)
-                if cand is not None and cand.kind not in self.wanted:
-                    cand = None
+        channel = contents.channels.get(channel_id)
+        if channel_id not in self.candidates and channel is not None:
+            cand = _candidate(channel, contents.schemas, self.topic_kinds)
+            if cand is not None and cand.kind not in self.wanted:
+                cand = None
             self.candidates[channel_id] = cand
             spec = SPECS[cand.kind] if cand is not None else None
-            if cand is not None and spec is not None and cand.type_name == spec.message.name:
-                self.topics[channel_id] = _Topic(cand.channel, cand.schema, spec.message, self.where)
+            if (
+                cand is not None
+                and spec is not None
+                and cand.type_name == spec.message.name
+                and cand.encoding == MESSAGE_ENCODING
+            ):
+                self.topics[channel_id] = _Topic(
+                    cand.channel, cand.schema, spec.message, self.where
+                )
         return self.topics.get(channel_id)
 
     def wants_chunk(self, contents: FileContents, channel_ids: set[int]) -> bool:
@@ -260,11 +275,12 @@ class _Plan:
             canonical = [c for c in cands if c.canonical]
             spec = SPECS[kind]
             for c in canonical:
-                if c.type_name != spec.message.name:
+                if c.type_name != spec.message.name or c.encoding != MESSAGE_ENCODING:
                     raise RecordingError(
                         f"{self.where}: topic {c.channel.topic} has schema "
-                        f"{c.schema.name if c.schema else None!r}; stream {kind.value} needs "
-                        f"{spec.message.name}"
+                        f"{c.schema.name if c.schema else None!r} in {c.encoding!r} encoding; "
+                        f"stream {kind.value} needs {spec.message.name} in "
+                        f"{MESSAGE_ENCODING!r} encoding"
                     )
             pick = canonical or cands
             if len(pick) == 1:

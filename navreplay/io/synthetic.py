@@ -114,7 +114,11 @@ def random_stream(
     elif kind is StreamKind.DEPTH:
         cols = {"depth": rng.uniform(0.0, 200.0, n)}
     else:
-        cols = {"pos": _pos(rng, n), "v_n": rng.normal(0.0, 5.0, (n, 3)), "q_nb": _quaternions(rng, n)}
+        cols = {
+            "pos": _pos(rng, n),
+            "v_n": rng.normal(0.0, 5.0, (n, 3)),
+            "q_nb": _quaternions(rng, n),
+        }
         if aux:
             cols["gyro_bias"] = rng.normal(0.0, 1e-5, (n, 3))
             cols["accel_bias"] = rng.normal(0.0, 1e-3, (n, 3))
@@ -128,7 +132,10 @@ def random_metadata(rng: np.random.Generator) -> Metadata:
     return Metadata(
         scenario="synthetic",
         seed=int(rng.integers(0, 2**31)),
-        params={"duration_s": 10.0, "imu": {"rate_hz": 200.0, "gyro_bias_sigma": 4.84813681109536e-6}},
+        params={
+            "duration_s": 10.0,
+            "imu": {"rate_hz": 200.0, "gyro_bias_sigma": 4.84813681109536e-6},
+        },
         true_errors={
             "gyro_bias": rng.normal(0.0, 1e-5, 3).tolist(),
             "lever_arm_b": [1.5, -0.25, 0.1],

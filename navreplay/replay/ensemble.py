@@ -319,7 +319,9 @@ class RunFailedError(RuntimeError):
 
     def __init__(self, task: RunTask, cause: BaseException) -> None:
         self.task = task
-        seed = f", seed {task.seed}" if task.seed is not None and task.path is None else ""
+        seed = ""
+        if task.seed is not None and task.path is None and task.keep is not None:
+            seed = f", seed {task.seed}"
         super().__init__(f"run {task.index + 1} ({task.source}{seed}): {cause}")
 
 
