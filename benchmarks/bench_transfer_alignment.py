@@ -84,7 +84,8 @@ def kf_step(repeat: int) -> tuple[float, float]:
     w, f = np.array([0.01, 0.02, 0.0]), np.array([0.1, 0.2, -9.8])
     args = (nav, np.array([1.0, 0, 0, 0]), P0, s, u, q_m, np.array([4.46, 2.57, 0.0]),
             nav[0:3].copy(), np.r_[w, f] * 10, 10, w, w, np.array([45.7, 15.2, 12.2]), 0.1,
-            np.r_[[5e-4**2] * 3, [3e-5**2] * 3], 1e-12, np.r_[[0.09144**2] * 2, [2.06e-4**2] * 3])
+            np.r_[[5e-4**2] * 3, [3e-5**2] * 3], 1e-12, np.r_[[0.09144**2] * 2, [2.06e-4**2] * 3],
+            ta.RTOL)
     ta.cycle(*args)
     t_numba = _best(lambda: ta.cycle(*args), repeat, 2000)
     R, w_in = ta.earth_terms(nav[0], nav[2], nav[3:6])

@@ -192,3 +192,25 @@ def test_params_validated():
         GpsInsFilter.Params(lever_arm_b=(0.0, 1.0))
     with pytest.raises(ValueError, match="gps_pos_sigma_scale"):
         GpsInsFilter.Params(gps_pos_sigma_scale=0.0)
+
+
+@pytest.mark.slow
+def test_consistency_over_a_larger_ensemble():
+    # 30 runs of 10 minutes: the run-averaged 15-state NEES stays near its dof; the share of
+    # epochs inside the (tight, 30-run) band is below the nominal 95 % because the tilt /
+    # horizontal accelerometer-bias pair is slightly over-confident (see the bias test)
+    runs = 30
+    stats = metrics.EnsembleStats()
+    for seed in range(100, 100 + runs):
+        rec = _add_effective_biases(simulate("vehicle-drive", {"duration": 600.0}, seed=seed))
+        res = replay(rec, GpsInsFilter, output_rate=1.0)
+        stats.add(metrics.run_metrics(res, rec, truth_keys=EFFECTIVE_KEYS,
+                                      nees_states=NAV_STATE_NAMES))
+    res = stats.result()
+    s = res.summary()
+    lo, hi = metrics.chi2_bounds(15, runs)
+    later = res.t >= 10.0
+    assert lo < res.nees_mean[later].mean() < hi
+    assert s["nees_in_bounds"] >= 0.75
+    assert s["nis_in_bounds_gps_pos"] >= 0.9 and s["nis_in_bounds_gps_vel"] >= 0.9
+    assert s["cep50_final"] < 1.0

@@ -406,7 +406,7 @@ def test_registered_and_parameters():
     assert p.mode is rai.Mode.RPM
     for values, match in (({"mode": "gps"}, "mode"), ({"rpm_sigma": 0}, "rpm_sigma"),
                           ({"cov_step": 20}, "cov_step"),
-                          ({"rpm_scale_factor_sigma": 0.7}, "rpm_scale_factor_sigma")):
+                          ({"update_rate": 0}, "update_rate")):
         with pytest.raises(ParamError, match=match):
             build(rai.RpmAidedInsParams, values)
     assert len(rai.STATE_NAMES) == rai.N_STATES == 24
@@ -454,7 +454,9 @@ def test_modes_share_one_path_and_freeze_what_they_should():
         inn = res.innovations["rpm"]
         np.testing.assert_allclose(np.diff(inn.t), 1.0)
         assert inn.nu.shape == (101, 3)
-    assert 1.0 < cur.innovations["rpm"].nis[20:].mean() < 6.0
+    # only the along-axis row carries sensor noise (the lateral and vertical rows are the
+    # no-sideslip / no-heave constraint), while R_rpm is isotropic (spec 4.4): NIS near 1, not 3
+    assert 0.5 < cur.innovations["rpm"].nis[20:].mean() < 3.0
     # covariance symmetric PSD throughout
     for res in out.values():
         for P in res.P[::50]:

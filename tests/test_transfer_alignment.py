@@ -20,6 +20,7 @@ from navreplay.geo.rotations import (
     quat_to_dcm,
     quat_to_euler,
 )
+from navreplay.metrics import position_error_ned, truth_at
 from navreplay.replay.engine import replay
 from navreplay.reproduce import get as get_reproduction
 from navreplay.reproduce import transfer_alignment as rep
@@ -354,6 +355,9 @@ def test_error_free_sensors_align_to_the_truth():
         e = attitude_error(quat_to_dcm(res.extras["q_rb"][-1]), quat_to_dcm(truth_q_rb))
         assert np.abs(e).max() < 0.3e-3
         assert np.all(np.abs(np.linalg.norm(res.extras["q_rb"], axis=1) - 1.0) < 1e-12)
+    # the position is the GINS's displaced by the lever arm: the SDINS's own
+    pos_err = position_error_ned(res.nav_pos, truth_at(rec, res.t)["pos"])
+    assert np.abs(pos_err).max() < 0.01
 
 
 def test_vel_only_recovers_q_rb_from_the_attitudes():

@@ -33,7 +33,8 @@ Process (continuous, :mod:`navreplay.filters.ins_error`)::
 
     dx' = F dx + G w,   w = [n_a, n_g, n_ba, n_bg]                                      (1)
     F: the 15x15 NED error model, eqs. (6)-(19) there; lever arm: F = 0, Q = 0          (2)
-    Phi = I + F T + (F T)^2 / 2,  Qd = G Qc G^T T,  T = cov_step (10 Hz), cut at updates  (3)
+    Phi = I + F T + (F T)^2 / 2,  Qd = G Qc G^T T (+ the motion terms of ins eq. 5a),
+    T = cov_step (0.1 s), cut short at updates and outputs                                (3)
 
 GPS position (antenna at ``l_b`` from the IMU, body frame), residual in NED metres::
 

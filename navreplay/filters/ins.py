@@ -57,6 +57,11 @@ g-sensitivity times gravity, act as constant biases: the bias states estimate th
 IMU grade of :func:`navreplay.sensors.imu_grade` (0.3 mg bias + 0.5 mrad x g; 1 deg/h bias +
 1 deg/h/g x g). Under motion, the scale-factor and misalignment errors (s_a, s_g, 1-sigma)
 enter as the motion-dependent noise (5a) (ins_error eq. 21), white over a correlation time tau.
+
+Scoring (:mod:`navreplay.metrics`): the navigation error states are scored by the errors of the
+navigation solution (``nav:`` truth keys), the biases by the truth stream's total bias columns,
+which lack the gravity-dependent parts above; the default NEES block (``nees_states``) is
+therefore the nine navigation errors.
 """
 
 from __future__ import annotations

@@ -99,6 +99,7 @@ import math
 import numba
 import numpy as np
 
+from navreplay import strapdown
 from navreplay.geo import earth
 from navreplay.geo.rotations import (
     attitude_error,
@@ -137,8 +138,13 @@ W_BG = slice(9, 12)
 """Gyro bias random walk [(rad/s)/sqrt(s)]."""
 N_NOISE = 12
 
-# -- the navigation vector of navreplay.strapdown ---------------------------------------------
+# -- blocks of the navigation vector of navreplay.strapdown -----------------------------------
 
+NAV_POS = strapdown.POS
+NAV_VEL = strapdown.VEL
+NAV_Q = strapdown.QUAT
+
+# earth-model constants, read once so that numba folds them into the machine code
 _A = earth.A
 _E2 = earth.E2
 _FLAT = earth.F
@@ -146,10 +152,6 @@ _OMEGA_IE = earth.OMEGA_IE
 _GAMMA_E = earth.GAMMA_E
 _K_SOM = earth.K_SOMIGLIANA
 _M_GRAV = earth.M_GRAV
-
-NAV_POS = slice(0, 3)
-NAV_VEL = slice(3, 6)
-NAV_Q = slice(6, 10)
 
 
 class Vertical(enum.StrEnum):

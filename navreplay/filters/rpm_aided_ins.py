@@ -58,6 +58,8 @@ with the navigation blocks of :mod:`navreplay.filters.ins_error` in their depth 
 ``F_phibg = +C_nb_hat``, ...). Discretisation and noise (eqs. 21-23)::
 
     Phi = I + F T + (F T)^2 / 2,  T = cov_step                                        (23)
+    G w:  w = [n_a, n_g, n_c],  G[v, n_a] = -C_nb_hat, G[phi, n_g] = C_nb_hat,
+          G[v_c, n_c] = I2,  Qc = diag(q_a I3, q_g I3, q_c I2)
     Qd  = G Qc G^T T = diag(0, q_a I3, q_g I3, 0, 0, 0, 0, q_c I2, 0) T               (22)
     P   = Phi P Phi^T + Qd                                                            (21)
 
@@ -83,7 +85,7 @@ the exact first derivatives (J is the left Jacobian of SO(3)), equal to first or
 
 Depth (spec section 4.5)::
 
-    z_d = d_hat - d_meas,  H_d = e_2^T,  R_d = depth_sigma^2                            (28)
+    z_d = d_hat - d_meas,  H_d = e_2^T,  R_d = depth_sigma^2                        (spec 4.5)
 
 Updates use the shared :func:`navreplay.filters.kalman.correct` (Cholesky, Joseph form) on the
 error state 0, sequentially (RPM first, then depth, at the same update time), with the gain rows
@@ -131,6 +133,7 @@ from navreplay.filters.base import (
     NavSolution,
 )
 from navreplay.filters.registry import register_filter
+from navreplay.geo import earth
 from navreplay.streams import StreamKind
 from navreplay.units import DEG, DEG_PER_HOUR, MICRO_G
 
@@ -163,6 +166,8 @@ N_NAV = 9
 """Rows of F that are not zero (position, velocity, attitude)."""
 N_DYN = 15
 """Columns of F that are not zero (navigation states and IMU biases)."""
+_A = earth.A
+_E2 = earth.E2
 _CHECK_INTERVAL = 1.0
 """Filter time between full symmetry / PSD checks of the propagated P [s] (every correction
 is checked, and every propagation step checks the variances)."""
@@ -291,9 +296,6 @@ class RpmAidedInsParams(FilterParams):
             _check(self, name, positive=True)
         _check(self, "update_rate", positive=True, upper=100.0)
         _check(self, "cov_step", positive=True, upper=10.0)
-        if self.rpm_scale_factor_sigma >= 0.5:
-            raise ValueError(
-                f"rpm_scale_factor_sigma must be < 0.5, got {self.rpm_scale_factor_sigma!r}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -301,19 +303,36 @@ class RpmAidedInsParams(FilterParams):
 
 
 @numba.njit(cache=True)
+def _quat_dcm(q: np.ndarray) -> np.ndarray:
+    """C_nb of a unit quaternion q_nb (scalar first), shape (3, 3)."""
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+    C = np.empty((3, 3))
+    C[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
+    C[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
+    C[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
+    C[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
+    C[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
+    C[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
+    C[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
+    C[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
+    C[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+    return C
+
+
+@numba.njit(cache=True)
 def _fill_nav_rows(F: np.ndarray, nav: np.ndarray, f_b: np.ndarray, curvature: bool) -> None:
     """F[:15, :15] (zeroed here) from the shared NED blocks in depth form, eqs. (14)-(19)."""
     F[:, :] = 0.0
-    C = ie._quat_to_dcm(nav[6:10])
+    C = _quat_dcm(nav[6:10])
     lat, h, vN, vE, vD = nav[0], nav[2], nav[3], nav[4], nav[5]
     ie._fill_system_matrix(lat, h, vN, vE, vD, C, f_b, True, F)
     if not curvature:  # drop the dR_M/dL, dR_N/dL terms (column 0 only)
         s, c = math.sin(lat), math.cos(lat)
-        w = 1.0 - ie._E2 * s * s
-        R_Mh = ie._A * (1.0 - ie._E2) / w**1.5 + h
-        R_Nh = ie._A / math.sqrt(w) + h
-        dR_M = 3.0 * ie._A * (1.0 - ie._E2) * ie._E2 * s * c / w**2.5
-        dR_N = ie._A * ie._E2 * s * c / w**1.5
+        w = 1.0 - _E2 * s * s
+        R_Mh = _A * (1.0 - _E2) / w**1.5 + h
+        R_Nh = _A / math.sqrt(w) + h
+        dR_M = 3.0 * _A * (1.0 - _E2) * _E2 * s * c / w**2.5
+        dR_N = _A * _E2 * s * c / w**1.5
         F[0, 0] += vN * dR_M / R_Mh**2  # (17)
         F[1, 0] += vE * dR_N / (R_Nh**2 * c)  # (18)
         e0 = -vE * dR_N / R_Nh**2  # the dR terms of Ep[:, 0]
@@ -510,19 +529,6 @@ def _skew(x: float, y: float, z: float) -> np.ndarray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
-def _quat_dcm(q: np.ndarray) -> np.ndarray:
-    """C_nb of a unit quaternion (scalar first), shape (3, 3)."""
-    q0, q1, q2, q3 = float(q[0]), float(q[1]), float(q[2]), float(q[3])
-    return np.array([
-        [q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2.0 * (q1 * q2 - q0 * q3),
-         2.0 * (q1 * q3 + q0 * q2)],
-        [2.0 * (q1 * q2 + q0 * q3), q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3,
-         2.0 * (q2 * q3 - q0 * q1)],
-        [2.0 * (q1 * q3 - q0 * q2), 2.0 * (q2 * q3 + q0 * q1),
-         q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3],
-    ])
-
-
 def rpm_axis(m_y: float, m_z: float) -> tuple[np.ndarray, np.ndarray]:
     """RPM axis in the body frame and its derivative by (m_y, m_z).
 
@@ -582,7 +588,7 @@ def rpm_measurement(
     H : ndarray, shape (3, 24)
         ``z ~ H dx`` to first order.
     """
-    C_bn = _quat_dcm(nav[6:10]).T
+    C_bn = _quat_dcm(np.ascontiguousarray(nav[6:10])).T
     a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
     u = v_rpm / (1.0 + k_hat)
     w = nav[3:6].copy()
@@ -599,7 +605,7 @@ def rpm_measurement(
 
 
 def depth_measurement(nav: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
-    """Depth residual ``d_hat - d_meas`` [m], shape (1,), and H (1, 24), eq. (28)."""
+    """Depth residual ``d_hat - d_meas`` [m], shape (1,), and H (1, 24) (spec section 4.5)."""
     H = np.zeros((1, N_STATES))
     H[0, 2] = 1.0
     return np.array([-nav[2] - depth]), H
@@ -779,6 +785,9 @@ class RpmAidedIns(Filter):
         if kind is StreamKind.SPEED_LOG:
             if not self._rpm_schedule.due(t):
                 return None
+            if not -0.5 < self.k_rpm < 0.5:
+                raise kalman.FilterDivergedError(
+                    f"RPM scale-factor estimate {self.k_rpm:.3f} is beyond +-0.5", t)
             v_c = self.v_c if self.mode is Mode.RPM_CURRENT else np.zeros(2)
             z, H = rpm_measurement(self.nav, self.speed_per_rpm * float(sample["rpm"]),
                                    self.k_rpm, self.m_rpm, v_c)

@@ -650,7 +650,7 @@ def joseph_correct(P, nu, H, r):
 
 @numba.njit(cache=True)
 def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_arm_r, dt, qc,
-          q_br, r):
+          q_br, r, rtol):
     """One filter cycle at a GINS sample (module docstring, steps 2-7), in place on nav, q_rb.
 
     Parameters
@@ -684,6 +684,8 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
         Density squared of the dQ_br states [1/s].
     r : ndarray, shape (2 + len(s),)
         Diagonal of R.
+    rtol : float
+        Tolerance of the symmetry and PSD check of P (on its correlation form).
 
     Returns
     -------
@@ -786,56 +788,44 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
             for j in range(4):
                 v += Rq[k, i] * P[2 + k, 2 + j] * Rq[j, i]
         sigma_phi[i] = math.sqrt(max(4.0 * v, 0.0))
-    if not _is_psd(P, RTOL):
+    if not _is_psd(P, rtol):
         return P, z, S, sigma_phi, _P_NOT_PSD
     return P, z, S, sigma_phi, _OK
 
 
 @numba.njit(cache=True)
-def propagate_block(nav, omega_ib_b, f_b, t, t_prev, prev, sums):
-    """Step 1: the SDINS mechanization over a block of raw IMU samples.
+def block_intervals(t, t_prev, omega_ib_b, f_b, sums):
+    """Sample intervals of an IMU block, and the running sums for the means of eq. (14).
+
+    (The mechanization itself is called from Python: numba's cache does not see changes in
+    jitted functions of other modules that a cached function calls.)
 
     Parameters
     ----------
-    nav : ndarray, shape (10,)
-        SDINS state at ``t_prev``.
-    omega_ib_b, f_b : ndarray, shape (k, 3)
-        Raw IMU samples [rad/s], [m/s^2], each the mean over its interval.
     t : ndarray, shape (k,)
         Sample times [s].
     t_prev : float
         Time of the sample before the block [s].
-    prev : ndarray, shape (6,)
-        Increments [dtheta, dv] of the sample before the block (coning and sculling terms of
-        :func:`navreplay.strapdown.propagate_kernel`); replaced by the block's last.
+    omega_ib_b, f_b : ndarray, shape (k, 3)
+        Raw IMU samples [rad/s], [m/s^2].
     sums : ndarray, shape (6,)
-        Running sums of the samples [omega, f] for the interval means of eq. (14); updated.
+        Running sums [omega, f]; the block is added.
 
     Returns
     -------
-    nav : ndarray, shape (10,)
-        State at ``t[-1]``.
-    bad : int
-        -1, or what :func:`navreplay.strapdown.propagate_kernel` reports for invalid input
-        (then nothing was updated).
+    dt : ndarray, shape (k,)
+        [s]
     """
     k = t.shape[0]
     dt = np.empty(k)
     dt[0] = t[0] - t_prev
     for i in range(1, k):
         dt[i] = t[i] - t[i - 1]
-    out = np.empty(10)
-    bad = strapdown.propagate_kernel(nav, omega_ib_b, f_b, dt, prev, out)
-    if bad != -1:
-        return nav, bad
     for i in range(k):
         for j in range(3):
             sums[j] += omega_ib_b[i, j]
             sums[3 + j] += f_b[i, j]
-    for j in range(3):
-        prev[j] = omega_ib_b[k - 1, j] * dt[k - 1]
-        prev[3 + j] = f_b[k - 1, j] * dt[k - 1]
-    return out, -1
+    return dt
 
 
 def initial_covariance(
@@ -939,12 +929,15 @@ class TransferAlignment(Filter):
             )
         if self.nav is not None:
             # step 1: SDINS mechanization with the raw IMU
-            nav, bad = propagate_block(self.nav, w, f, t, self._t_imu, self._prev, self._sums)
+            dt = block_intervals(t, self._t_imu, w, f, self._sums)
+            nav = np.empty(strapdown.NAV_SIZE)
+            bad = strapdown.propagate_kernel(self.nav, w, f, dt, self._prev, nav)
             if bad != -1:  # let the checked wrapper name the bad sample
-                dt = np.diff(t, prepend=self._t_imu)
                 strapdown.propagate(self.nav, w, f, dt)
                 raise ValueError(f"IMU block at t = {t[0]:.6f} s: invalid sample {bad}")
             self.nav = nav
+            self._prev[0:3] = w[-1] * dt[-1]  # coning and sculling terms of the next block
+            self._prev[3:6] = f[-1] * dt[-1]
             self._count += k
         elif k > 1 or self._t_imu is not None:
             dt_last = t[-1] - (t[-2] if k > 1 else self._t_imu)
@@ -1023,6 +1016,7 @@ class TransferAlignment(Filter):
         P, nu, S, sigma_phi, status = cycle(
             self.nav, self.q_rb, self.P, self.s, self.u, q_m, v_r, pos, self._sums, self._count,
             self._w_last, self._w_prev, self.lever_arm_r, dt, self._qc, self._q_br, self._r,
+            RTOL,
         )
         if status == _S_NOT_PD:
             raise kalman.FilterDivergedError(
