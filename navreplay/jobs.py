@@ -4,11 +4,13 @@
 else — reading recordings, replaying filters, metrics, Rerun output, summaries — happens here,
 so the same jobs run from Python::
 
-    from navreplay.jobs import RunJob, VizOptions, run
+    from pathlib import Path
+    from navreplay.jobs import RunJob, VizMode, VizOptions, run
     from navreplay.replay.ensemble import FilterSpec
 
-    report = run(RunJob(filters=(FilterSpec("gps-ins"),), recordings=(Path("x.mcap"),)))
-    print(report.format())
+    job = RunJob(filters=(FilterSpec("gps-ins"),), recordings=(Path("x.mcap"),),
+                 viz=VizOptions(VizMode.SAVE, Path("out/x.rrd")))
+    print(run(job).format())
 
 Jobs never print; they return reports with a ``format()`` method and report progress through
 a ``progress(done, total)`` callback.
@@ -784,6 +786,8 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
             )
     tasks = monte_carlo_tasks(job.scenario, job.runs, values=job.values, seed=job.seed,
                               keep_dir=job.keep_dir, force=job.force)
+    if job.keep_dir is not None:
+        Path(job.keep_dir).mkdir(parents=True, exist_ok=True)
     if job.keep_dir is not None and not job.force:
         existing = [t.keep for t in tasks if t.keep and Path(t.keep).exists()]
         if existing:

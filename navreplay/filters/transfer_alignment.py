@@ -794,8 +794,9 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
 
 
 @numba.njit(cache=True)
-def block_intervals(t, t_prev, omega_ib_b, f_b, sums):
-    """Sample intervals of an IMU block, and the running sums for the means of eq. (14).
+def block_intervals(t, t_prev, omega_ib_b, f_b, sums, last):
+    """Sample intervals of an IMU block, the running sums for the means of eq. (14) and the
+    increments of the block's last sample.
 
     (The mechanization itself is called from Python: numba's cache does not see changes in
     jitted functions of other modules that a cached function calls.)
@@ -810,6 +811,9 @@ def block_intervals(t, t_prev, omega_ib_b, f_b, sums):
         Raw IMU samples [rad/s], [m/s^2].
     sums : ndarray, shape (6,)
         Running sums [omega, f]; the block is added.
+    last : ndarray, shape (6,)
+        Receives the increments [dtheta, dv] of the last sample (the coning and sculling terms
+        of the next block).
 
     Returns
     -------
@@ -825,6 +829,9 @@ def block_intervals(t, t_prev, omega_ib_b, f_b, sums):
         for j in range(3):
             sums[j] += omega_ib_b[i, j]
             sums[3 + j] += f_b[i, j]
+    for j in range(3):
+        last[j] = omega_ib_b[k - 1, j] * dt[k - 1]
+        last[3 + j] = f_b[k - 1, j] * dt[k - 1]
     return dt
 
 
@@ -912,6 +919,7 @@ class TransferAlignment(Filter):
         self._w_last: np.ndarray | None = None
         self._w_prev: np.ndarray | None = None
         self._prev = np.zeros(6)
+        self._last = np.zeros(6)
         self._sums = np.zeros(6)
         self._count = 0
 
@@ -929,15 +937,14 @@ class TransferAlignment(Filter):
             )
         if self.nav is not None:
             # step 1: SDINS mechanization with the raw IMU
-            dt = block_intervals(t, self._t_imu, w, f, self._sums)
+            dt = block_intervals(t, self._t_imu, w, f, self._sums, self._last)
             nav = np.empty(strapdown.NAV_SIZE)
             bad = strapdown.propagate_kernel(self.nav, w, f, dt, self._prev, nav)
             if bad != -1:  # let the checked wrapper name the bad sample
                 strapdown.propagate(self.nav, w, f, dt)
                 raise ValueError(f"IMU block at t = {t[0]:.6f} s: invalid sample {bad}")
             self.nav = nav
-            self._prev[0:3] = w[-1] * dt[-1]  # coning and sculling terms of the next block
-            self._prev[3:6] = f[-1] * dt[-1]
+            self._prev, self._last = self._last, self._prev
             self._count += k
         elif k > 1 or self._t_imu is not None:
             dt_last = t[-1] - (t[-2] if k > 1 else self._t_imu)

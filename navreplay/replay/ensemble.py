@@ -36,6 +36,7 @@ import collections
 import concurrent.futures as cf
 import dataclasses
 import os
+import signal
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
@@ -307,7 +308,12 @@ def make_executor(workers: int) -> Executor:
         raise ValueError(f"workers must be at least 1, got {workers}")
     if workers == 1:
         return InlineExecutor()
-    return cf.ProcessPoolExecutor(max_workers=workers)
+    return cf.ProcessPoolExecutor(max_workers=workers, initializer=_ignore_sigint)
+
+
+def _ignore_sigint() -> None:
+    """Workers leave Ctrl-C to the parent, which cancels the campaign and shuts the pool down."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 # --------------------------------------------------------------------------------------------
