@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np

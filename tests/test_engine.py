@@ -129,17 +129,24 @@ def test_merge_order_by_time_then_priority_and_truth_never_delivered():
     assert depth == rec["depth"]["depth"].tolist()
 
 
-def test_one_estimate_per_event_and_columns():
+def test_one_estimate_per_event_time_and_columns():
     rec = make_recording()
     res = replay(rec, Recorder, output_rate=None)
     n_upd = len(rec["gps"]) + len(rec["mag"]) + len(rec["depth"])
-    assert len(res.t) == n_upd + 1  # + the estimate after the trailing IMU samples
-    assert res.x.shape == (n_upd + 1, 2) and res.P.shape == (n_upd + 1, 2, 2)
-    assert res.nav_q_nb.shape == (n_upd + 1, 4)
-    assert res.extras["k"].shape == (n_upd + 1, 1)
+    t_ev = np.concatenate([rec["gps"].t_ns, rec["mag"].t_ns, rec["depth"].t_ns])
+    times = np.unique(t_ev)
+    m = len(times) + 1  # one estimate per distinct event time, + one after the trailing IMU
+    assert len(times) < n_upd  # the GPS shares its times with the magnetometer
+    assert len(res.t) == m
+    assert np.all(np.diff(res.t) > 0)
+    assert res.x.shape == (m, 2) and res.P.shape == (m, 2, 2)
+    assert res.nav_q_nb.shape == (m, 4)
+    assert res.extras["k"].shape == (m, 1)
     assert res.state_names == ("n_imu", "n_updates")
     assert res.recording == "synthetic#seed=7" and res.label == "recorder"
-    np.testing.assert_array_equal(res.x[:, 1], np.r_[np.arange(1, n_upd + 1), n_upd])
+    # the update count at each estimate: every sample up to and including that time
+    counts = np.searchsorted(np.sort(t_ev), times, side="right")
+    np.testing.assert_array_equal(res.x[:, 1], np.r_[counts, n_upd])
 
 
 def test_innovations_collected_with_nis():

@@ -29,7 +29,7 @@ def _load_entry_points() -> dict[str, type[Filter]]:
         try:
             cls = ep.load()
         except Exception as e:  # a broken plug-in must not hide the others
-            raise FilterLoadError(f"filter plug-in {ep.name!r} ({ep.value}) failed to load: {e}")
+            raise FilterLoadError(f"filter plug-in {ep.name!r} ({ep.value}) failed to load: {e}") from e
         if not (isinstance(cls, type) and issubclass(cls, Filter)):
             raise FilterLoadError(f"filter plug-in {ep.name!r} ({ep.value}) is not a Filter class")
         found[ep.name] = cls

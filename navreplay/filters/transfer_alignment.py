@@ -90,8 +90,8 @@ Cycle (at every GINS sample)
 1. SDINS mechanization (:func:`navreplay.strapdown.propagate_kernel`) at the IMU rate, raw
    IMU, with the coning and sculling terms carried across blocks.
 2. Q_m from the GINS Euler angles, its sign such that ``(Q_m* (x) Q_bn_hat)_0 >= 0``.
-3. Predict P with (Phi, Q_d); update with the Cholesky / Joseph-form correction of
-   :func:`navreplay.filters.kalman.correct` (:func:`joseph_correct`).
+3. Predict P with (Phi, Q_d) (:func:`predict_and_measure`); update with the shared Cholesky /
+   Joseph-form correction, :func:`navreplay.filters.kalman.correct`.
 4. Feedback: V_ne -= dV; Q_bn -= dQ_bn, normalised; Q_br[s] -= dQ_br.
 5. Recover the unmatched components u of Q_br (q_br2 for partial matching, eq. 11, E8) as
    component u of ``Q_m* (x) Q_bn_hat``, then normalise Q_br (eq. 10, E10).
@@ -121,10 +121,11 @@ writes the nominal lever arm there, with its knowledge error) and fails if that 
 
 Implementation
 --------------
-Steps 2-7 are one numba kernel, :func:`cycle` (about 10 us per GINS sample, against about
-50 us for the numpy prediction and correction alone), built from the model functions below,
-which the tests check against finite differences of the nonlinear equations, against
-:mod:`navreplay.geo` and against :func:`navreplay.filters.kalman.correct`.
+The model, the prediction and the feedback (steps 2, 3 and 4-6) are numba kernels,
+:func:`predict_and_measure` and :func:`feedback`, around the shared correction and covariance
+check of :mod:`navreplay.filters.kalman`. The tests check the model functions against finite
+differences of the nonlinear equations and against :mod:`navreplay.geo`, and the prediction
+against :func:`navreplay.filters.kalman.predict`.
 """
 
 from __future__ import annotations
@@ -240,15 +241,10 @@ class TransferAlignmentParams(FilterParams):
 
 
 # --------------------------------------------------------------------------------------------
-# Model and cycle as numba kernels: the per-GINS-sample step is ~40 small matrix operations,
-# which numpy pays for in call overhead. The quaternion helpers are single-quaternion forms of
-# navreplay.geo (tests check them against it); the Joseph correction mirrors
-# navreplay.filters.kalman.correct (tests check it against that function).
-
-RTOL = kalman.DEFAULT_RTOL
-"""Relative tolerance of the symmetry and PSD checks of P (on its correlation form)."""
-
-_OK, _S_NOT_PD, _P_NOT_PSD = 0, 1, 2
+# The model as numba kernels: the per-GINS-sample model and feedback are ~40 small matrix
+# operations, which numpy pays for in call overhead. The quaternion helpers are
+# single-quaternion forms of navreplay.geo (the tests check them against it). The correction and
+# the covariance check are the shared ones of navreplay.filters.kalman.
 
 
 @numba.njit(cache=True)
@@ -532,141 +528,24 @@ def lever_position(pos, q_m, lever_arm_r):
 
 
 @numba.njit(cache=True)
-def _cholesky(A, L):
-    """Lower Cholesky factor of symmetric A into L (zeroed by the caller); False unless PD."""
-    n = A.shape[0]
-    for j in range(n):
-        d = A[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return False
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, n):
-            v = A[i, j]
-            for k in range(j):
-                v -= L[i, k] * L[j, k]
-            L[i, j] = v / L[j, j]
-    return True
-
-
-@numba.njit(cache=True)
-def _is_psd(P, rtol):
-    """The test of :func:`navreplay.filters.kalman.check_covariance`: finite, symmetric and
-    PSD on the correlation form, to ``rtol``."""
-    n = P.shape[0]
-    s = np.empty(n)
-    for i in range(n):
-        d = P[i, i]
-        if not (math.isfinite(d) and d >= 0.0):
-            return False
-        s[i] = math.sqrt(d) if d > 0.0 else 1.0
-    C = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            C[i, j] = P[i, j] / (s[i] * s[j])
-            if not math.isfinite(C[i, j]):
-                return False
-    for i in range(n):
-        for j in range(i):
-            if abs(C[i, j] - C[j, i]) > rtol:
-                return False
-        C[i, i] += rtol
-    return _cholesky(C, np.zeros((n, n)))
-
-
-@numba.njit(cache=True)
-def joseph_correct(P, nu, H, r):
-    """Kalman correction of a zero prior state, the kernel of
-    :func:`navreplay.filters.kalman.correct` (its eqs. 7-13) for a diagonal R.
-
-    Parameters
-    ----------
-    P : ndarray, shape (n, n)
-        Prior covariance.
-    nu : ndarray, shape (m,)
-        Innovation (the measurement, as the prior state is 0).
-    H : ndarray, shape (m, n)
-    r : ndarray, shape (m,)
-        Diagonal of R.
-
-    Returns
-    -------
-    dx : ndarray, shape (n,)
-        Corrected state.
-    P : ndarray, shape (n, n)
-        Corrected covariance (Joseph form, symmetrised).
-    S : ndarray, shape (m, m)
-        Innovation covariance.
-    ok : bool
-        False when S is not positive definite (then dx and P are not meaningful).
-    """
-    m, n = H.shape
-    HP = _mm(H, P)
-    S = _mmt(HP, H)  # (8)
-    for i in range(m):
-        S[i, i] += r[i]
-    _symmetrise(S)
-    L = np.zeros((m, m))
-    if not _cholesky(S, L):
-        return np.zeros(n), P, S, False
-    # (9), (13): W = L^-1 [nu, H P] by forward substitution
-    W = np.empty((m, n + 1))
-    for i in range(m):
-        W[i, 0] = nu[i]
-        for j in range(n):
-            W[i, j + 1] = HP[i, j]
-    for i in range(m):
-        for k in range(i):
-            for j in range(n + 1):
-                W[i, j] -= L[i, k] * W[k, j]
-        for j in range(n + 1):
-            W[i, j] /= L[i, i]
-    # (9): K^T = L^-T W[:, 1:] by back substitution
-    K = np.empty((n, m))
-    for i in range(m - 1, -1, -1):
-        for j in range(n):
-            v = W[i, j + 1]
-            for k in range(i + 1, m):
-                v -= L[k, i] * K[j, k]
-            K[j, i] = v / L[i, i]
-    dx = _mv(K, nu)  # (11)
-    IKH = _mm(K, H)  # (12): P = (I - K H) P (I - K H)^T + K R K^T
-    KR = np.empty((n, m))
-    for i in range(n):
-        for j in range(n):
-            IKH[i, j] = -IKH[i, j]
-        IKH[i, i] += 1.0
-        for j in range(m):
-            KR[i, j] = K[i, j] * r[j]
-    P = _mmt(_mm(IKH, P), IKH)
-    KRK = _mmt(KR, K)
-    for i in range(n):
-        for j in range(n):
-            P[i, j] += KRK[i, j]
-    _symmetrise(P)
-    return dx, P, S, True
-
-
-@numba.njit(cache=True)
-def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_arm_r, dt, qc,
-          q_br, r, rtol):
-    """One filter cycle at a GINS sample (module docstring, steps 2-7), in place on nav, q_rb.
+def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, lever_arm_r,
+                        dt, qc, q_br):
+    """Steps 2-3 of a cycle up to the correction: the predicted P, z and H.
 
     Parameters
     ----------
     nav : ndarray, shape (10,)
-        SDINS state [lat, lon, h, v_n, q_nb] at the GINS time; corrected in place.
+        SDINS state [lat, lon, h, v_n, q_nb] at the GINS time.
     q_rb : ndarray, shape (4,)
-        Q_br estimate; corrected in place.
+        Q_br estimate.
     P : ndarray, shape (n, n)
         Covariance after the previous cycle.
-    s, u : ndarray of int
-        Matched and unmatched components of Q_br.
+    s : ndarray of int
+        Matched components of Q_br.
     q_m : ndarray, shape (4,)
         GINS attitude Q_m from its Euler angles (either sign).
-    v_r, pos : ndarray, shape (3,)
-        GINS velocity NED [m/s] and position [rad, rad, m].
+    v_r : ndarray, shape (3,)
+        GINS velocity NED [m/s].
     sums : ndarray, shape (6,)
         Sums of the raw IMU samples [omega_ib_b, f_b] over the filter interval.
     count : int
@@ -682,23 +561,21 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
         Noise densities squared [q_a x3, q_g x3].
     q_br : float
         Density squared of the dQ_br states [1/s].
-    r : ndarray, shape (2 + len(s),)
-        Diagonal of R.
-    rtol : float
-        Tolerance of the symmetry and PSD check of P (on its correlation form).
 
     Returns
     -------
     P : ndarray, shape (n, n)
-        Corrected covariance.
-    nu : ndarray, shape (m,)
-        Innovation.
-    S : ndarray, shape (m, m)
-        Innovation covariance.
-    sigma_phi : ndarray, shape (3,)
-        Predicted 1 sigma of phi N, E, D [rad] after the update.
-    status : int
-        0, or 1 when S is not positive definite, or 2 when P is not symmetric PSD.
+        Predicted covariance.
+    z : ndarray, shape (2 + len(s),)
+        Measurement (3), (5).
+    H : ndarray, shape (2 + len(s), n)
+        Measurement matrix (15).
+    q_m : ndarray, shape (4,)
+        Q_m with the sign of spec 2.2.
+    w_now : ndarray, shape (3,)
+        Body rate at the GINS time [rad/s].
+    w_in : ndarray, shape (3,)
+        w_in^n [rad/s].
     """
     n = P.shape[0]
     ns = s.shape[0]
@@ -742,10 +619,9 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
     _symmetrise(P)
 
     # measurement: (3), (6) velocity; (5) quaternion rows s; H of (15)
-    m = 2 + ns
     lever_v = lever_velocity(q_bn, q_m, w_now, w_in, lever_arm_r)
-    z = np.empty(m)
-    H = np.zeros((m, n))
+    z = np.empty(2 + ns)
+    H = np.zeros((2 + ns, n))
     z[0] = nav[3] - v_r[0] - lever_v[0]
     z[1] = nav[4] - v_r[1] - lever_v[1]
     H[0, 0] = 1.0
@@ -755,42 +631,63 @@ def cycle(nav, q_rb, P, s, u, q_m, v_r, pos, sums, count, w_last, w_prev, lever_
         for j in range(4):
             H[2 + i, 2 + j] = Lc[s[i], j]
         H[2 + i, 6 + i] = -1.0
-    dx, P, S, ok = joseph_correct(P, z, H, r)
-    sigma_phi = np.zeros(3)
-    if not ok:
-        return P, z, S, sigma_phi, _S_NOT_PD
+    return P, z, H, q_m, w_now, w_in
 
-    # feedback: x_hat <- x_hat - dx
+
+@numba.njit(cache=True)
+def feedback(nav, q_rb, dx, P, s, u, q_m, v_r, pos, w_now, w_in, lever_arm_r):
+    """Steps 4-6 of a cycle, in place on nav and q_rb; returns the predicted sigma of phi.
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+        SDINS state; corrected in place.
+    q_rb : ndarray, shape (4,)
+        Q_br estimate; corrected in place.
+    dx : ndarray, shape (n,)
+        Estimated errors of the correction.
+    P : ndarray, shape (n, n)
+        Corrected covariance.
+    s, u : ndarray of int
+        Matched and unmatched components of Q_br.
+    q_m, v_r, pos, w_now, w_in, lever_arm_r
+        As returned by / passed to :func:`predict_and_measure`; ``pos`` is the GINS position.
+
+    Returns
+    -------
+    sigma_phi : ndarray, shape (3,)
+        Predicted 1 sigma of phi N, E, D [rad]: ``Sigma_phi = 4 R^T P_qq R``.
+    """
+    ns = s.shape[0]
+    # x_hat <- x_hat - dx
     nav[3] -= dx[0]
     nav[4] -= dx[1]
     q = np.empty(4)
     for i in range(4):
-        q[i] = q_bn[i] - dx[2 + i]
+        q[i] = nav[6 + i] - dx[2 + i]
     _normalise(q)
     for i in range(4):
         nav[6 + i] = q[i]
     for i in range(ns):
         q_rb[s[i]] -= dx[6 + i]
     # (11), E8: unmatched components (q_br2 for partial matching) of Q_m* (x) Q_bn_hat
-    q_br_new = _mv(Lc, q)
+    q_br_new = _mv(left(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]])), q)
     for i in u:
         q_rb[i] = q_br_new[i]
     _normalise(q_rb)  # (10), E10
     # the vertical channel and the position are slaved to the GINS (spec 4.1)
     nav[5] = v_r[2] + lever_velocity(q, q_m, w_now, w_in, lever_arm_r)[2]
     nav[0:3] = lever_position(pos, q_m, lever_arm_r)
-
-    # predicted covariance of phi = -2 R(q)^T dQ_bn: Sigma_phi = 4 R^T P_qq R
+    # phi = -2 R(q)^T dQ_bn, so Sigma_phi = 4 R^T P_qq R
     Rq = rmat(q)
+    sigma_phi = np.empty(3)
     for i in range(3):
         v = 0.0
         for k in range(4):
             for j in range(4):
                 v += Rq[k, i] * P[2 + k, 2 + j] * Rq[j, i]
         sigma_phi[i] = math.sqrt(max(4.0 * v, 0.0))
-    if not _is_psd(P, rtol):
-        return P, z, S, sigma_phi, _P_NOT_PSD
-    return P, z, S, sigma_phi, _OK
+    return sigma_phi
 
 
 @numba.njit(cache=True)
@@ -907,6 +804,7 @@ class TransferAlignment(Filter):
         self._qc = np.array([p.accel_noise**2] * 3 + [p.gyro_noise**2] * 3)
         self._q_br = p.misalignment_noise**2
         self._r = np.array([p.vel_sigma**2] * 2 + [p.quat_sigma**2] * len(self.s))
+        self._x0 = np.zeros(self.n)
 
         self.t = 0.0
         self.nav: np.ndarray | None = None  # [lat, lon, h, v_n, q_nb], strapdown layout
@@ -1020,23 +918,20 @@ class TransferAlignment(Filter):
         dt = t - self.t
         if not dt > 0.0:
             raise ValueError(f"master_ins time does not increase: {t} s after {self.t} s")
-        P, nu, S, sigma_phi, status = cycle(
-            self.nav, self.q_rb, self.P, self.s, self.u, q_m, v_r, pos, self._sums, self._count,
-            self._w_last, self._w_prev, self.lever_arm_r, dt, self._qc, self._q_br, self._r,
-            RTOL,
+        P, z, H, q_m, w_now, w_in = predict_and_measure(
+            self.nav, self.q_rb, self.P, self.s, q_m, v_r, self._sums, self._count,
+            self._w_last, self._w_prev, self.lever_arm_r, dt, self._qc, self._q_br,
         )
-        if status == _S_NOT_PD:
-            raise kalman.FilterDivergedError(
-                f"innovation covariance S is not positive definite (diag {np.diagonal(S)})", t
-            )
-        if status == _P_NOT_PSD:
-            kalman.check_covariance(P, name="corrected P", t=t)  # raises with the details
-            raise kalman.FilterDivergedError("corrected P is not symmetric PSD", t)
+        c = kalman.correct(self._x0, P, z, H, self._r, t=t, check=False)
+        sigma_phi = feedback(self.nav, self.q_rb, c.x, c.P, self.s, self.u, q_m, v_r, pos,
+                             w_now, w_in, self.lever_arm_r)
+        kalman.check_covariance(c.P, name="corrected P", t=t)  # step 7
+        P = c.P
         self.P = P
         self.sigma_phi = sigma_phi
         self.t = t
         self._reset_sums()
-        out = [Innovation("velocity", t, nu[ZV], S[ZV, ZV])]
+        out = [Innovation("velocity", t, c.nu[ZV], c.S[ZV, ZV])]
         if len(self.s):
-            out.append(Innovation("quaternion", t, nu[ZQ], S[ZQ, ZQ]))
+            out.append(Innovation("quaternion", t, c.nu[ZQ], c.S[ZQ, ZQ]))
         return out

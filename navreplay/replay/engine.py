@@ -10,7 +10,8 @@ priority, :data:`STREAM_PRIORITY` (master INS, GNSS position, GNSS velocity, mag
 log, depth, then any other kind by name), then by row. When the recording has an IMU stream, an
 output tick at ``output_rate`` [Hz] (on the grid ``t = k / output_rate`` since the recording
 start) is added in every tick interval ``(t_k-1, t_k]`` that holds no aiding sample, so that a
-free-inertial run still has outputs; ticks at a time equal to an event's come after it.
+free-inertial run still has outputs; ticks at a time equal to an event's come after it. The
+estimate is recorded once per distinct event time, after every sample of that time is applied.
 
 For each event at time ``t_e`` the engine
 
@@ -502,6 +503,8 @@ def replay(
     ev_code = plan.code.tolist()
     ev_row = plan.row.tolist()
     ev_end = plan.imu_end.tolist()
+    # one estimate per distinct time: samples sharing a timestamp are all applied first
+    ev_record = np.append(plan.t_ns[1:] != plan.t_ns[:-1], True).tolist()
     kinds = plan.kinds
 
     propagate = filt.propagate
@@ -549,7 +552,7 @@ def replay(
                 if inn:
                     for it in inn:
                         innovations.setdefault(it.name, []).append((it.t, it.nu, it.S))
-            est = estimate()
+            est = estimate() if i == n_events or ev_record[i] else None
             if est is not None:
                 if columns is None:
                     columns = _Columns(est, upper)
