@@ -7,10 +7,9 @@ Measured in one run on the ``ship-transfer-alignment`` scenario (100 s, 100 Hz I
   samples per second and as a multiple of real time, against two baselines replayed over the
   same recording: the engine alone (a filter that does nothing) and a free strapdown INS
   (:func:`navreplay.strapdown.propagate` only);
-* Kalman step: the filter's numba cycle (model, prediction, Joseph correction, feedback, PSD
-  check) against the shared numpy kernels :func:`navreplay.filters.kalman.predict` and
-  :func:`~navreplay.filters.kalman.correct` for the same 9-state, 5-measurement problem (the
-  numpy side does only the prediction and the correction);
+* step at a GINS sample: each part (numba model and prediction, the shared correction with its
+  checks, numba feedback), and the numpy discretisation and prediction of
+  :mod:`navreplay.filters.kalman` as a baseline for the first;
 * campaign: ``REPRODUCTION.run`` wall time (36 runs x 3 conditions, 252 filter runs).
 
 Times are the minimum over repeats (the machine is shared).
@@ -75,35 +74,45 @@ def _best(fn, repeat: int, number: int = 1) -> float:
     return min(timeit.repeat(fn, number=number, repeat=repeat)) / number
 
 
-def kf_step(repeat: int) -> tuple[float, float]:
-    """Seconds per step: the filter's numba cycle and the shared numpy predict + correct."""
+def kf_step(repeat: int) -> dict[str, float]:
+    """Seconds per call of each part of the filter's step at a GINS sample (9 states, 5
+    measurements), and of the numpy model + prediction that the first part replaces."""
     q_m = ta.euler_quat(np.array([0.05, -0.03, 0.52]))
     s, u = np.array([0, 1, 3]), np.array([2])
     P0 = ta.initial_covariance(q_m, s, 0.0625, 2.25e-6, np.sin(np.radians(1.5)) ** 2)
     nav = np.concatenate(([0.61, 2.25, 0.0], [4.46, 2.57, 0.1], q_m))
     w, f = np.array([0.01, 0.02, 0.0]), np.array([0.1, 0.2, -9.8])
-    args = (nav, np.array([1.0, 0, 0, 0]), P0, s, u, q_m, np.array([4.46, 2.57, 0.0]),
-            nav[0:3].copy(), np.r_[w, f] * 10, 10, w, w, np.array([45.7, 15.2, 12.2]), 0.1,
-            np.r_[[5e-4**2] * 3, [3e-5**2] * 3], 1e-12, np.r_[[0.09144**2] * 2, [2.06e-4**2] * 3],
-            ta.RTOL)
-    ta.cycle(*args)
-    t_numba = _best(lambda: ta.cycle(*args), repeat, 2000)
-    R, w_in = ta.earth_terms(nav[0], nav[2], nav[3:6])
-    A, G = ta.system_matrix(q_m, nav[3:6], nav[0], R, w, w_in, f, 9)
-    Phi = kalman.discretize(A, 0.1)
-    Qd = kalman.discrete_noise(G, args[14], 0.1)
-    H = np.zeros((5, 9))
-    H[0, 0] = H[1, 1] = 1.0
-    H[2:, 2:6] = ta.left(q_m * [1, -1, -1, -1])[s]
-    H[2:, 6:] = -np.eye(3)
-    z, r, x0 = np.full(5, 1e-4), args[16], np.zeros(9)
+    v_r, lever = np.array([4.46, 2.57, 0.0]), np.array([45.7, 15.2, 12.2])
+    qc = np.r_[[5e-4**2] * 3, [3e-5**2] * 3]
+    r = np.r_[[0.09144**2] * 2, [2.06e-4**2] * 3]
+    q_rb = np.array([1.0, 0.0, 0.0, 0.0])
+    sums = np.r_[w, f] * 10
 
-    def numpy_step():
-        x, P = kalman.predict(x0, P0, Phi, Qd, check=False)
-        kalman.correct(x, P, z, H, r)
+    def model():
+        return ta.predict_and_measure(nav, q_rb, P0, s, q_m, v_r, sums, 10, w, w, lever, 0.1,
+                                      qc, 1e-12)
 
-    t_numpy = _best(numpy_step, repeat, 500)
-    return t_numba, t_numpy
+    P, z, H, qm, w_now, w_in = model()
+    c = kalman.correct(np.zeros(9), P, z, H, r, check=False)
+
+    def feedback():
+        ta.feedback(nav.copy(), q_rb.copy(), c.x, c.P, s, u, qm, v_r, nav[0:3], w_now, w_in,
+                    lever)
+
+    def numpy_model():
+        R, w_in = ta.earth_terms(nav[0], nav[2], nav[3:6])
+        A, G = ta.system_matrix(q_m, nav[3:6], nav[0], R, w, w_in, f, 9)
+        kalman.predict(np.zeros(9), P0, kalman.discretize(A, 0.1),
+                       kalman.discrete_noise(G, qc, 0.1), check=False)
+
+    feedback()
+    return {
+        "model + prediction + z, H (numba)": _best(model, repeat, 2000),
+        "correction + checks (kalman.correct)": _best(
+            lambda: kalman.correct(np.zeros(9), P, z, H, r), repeat, 2000),
+        "feedback + recovery (numba)": _best(feedback, repeat, 2000),
+        "baseline: numpy discretize + predict": _best(numpy_model, repeat, 1000),
+    }
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -133,10 +142,9 @@ def main(argv: list[str] | None = None) -> None:
         print(f"  {label:<38}{t * 1e3:>9.1f}{n_imu / t:>15,.0f}{duration / t:>13,.0f}"
               f"{t / n_gins * 1e6:>10.1f}")
 
-    t_numba, t_numpy = kf_step(args.repeat)
-    print(f"Kalman step (9 states, 5 measurements): numba cycle {t_numba * 1e6:.1f} us "
-          f"(model + predict + correct + feedback + PSD check); shared numpy predict + correct "
-          f"{t_numpy * 1e6:.1f} us; ratio {t_numpy / t_numba:.1f}x")
+    print("step at a GINS sample (9 states, 5 measurements):")
+    for label, t in kf_step(args.repeat).items():
+        print(f"  {label:<40}{t * 1e6:>8.1f} us")
 
     if args.campaign_runs > 0:
         t0 = time.perf_counter()

@@ -211,30 +211,35 @@ def test_lever_velocity_is_c_nb_omega_nb_cross_lever_b():
 # Kalman pieces
 
 
-def test_joseph_kernel_equals_the_shared_correction():
+def test_prediction_and_measurement_match_the_shared_kalman_math():
     rng = np.random.default_rng(7)
-    M = rng.standard_normal((9, 9))
-    P = M @ M.T + 0.1 * np.eye(9)
-    H = rng.standard_normal((5, 9))
-    r = rng.uniform(0.1, 1.0, 5)
-    z = rng.standard_normal(5)
-    dx, P1, S, ok = ta.joseph_correct(P, z, H, r)
-    ref = kalman.correct(np.zeros(9), P, z, H, r)
-    assert ok
-    np.testing.assert_allclose(dx, ref.x, rtol=1e-10, atol=1e-12)
-    np.testing.assert_allclose(P1, ref.P, rtol=1e-10, atol=1e-12)
-    np.testing.assert_allclose(S, ref.S, rtol=1e-12)
-    assert not ta.joseph_correct(P, z, H, -10.0 * np.ones(5))[3]  # S not PD
-
-
-def test_psd_check_agrees_with_the_shared_check():
-    P = np.diag([1.0, 2.0, 0.0])
-    assert ta._is_psd(P, ta.RTOL)
-    bad = P.copy()
-    bad[0, 1] = bad[1, 0] = 2.0
-    assert not ta._is_psd(bad, ta.RTOL)
-    with pytest.raises(kalman.FilterDivergedError):
-        kalman.check_covariance(bad)
+    q_m = unit(rng)
+    s, n = np.array([0, 1, 3]), 9
+    P0 = ta.initial_covariance(q_m, s, 0.0625, 2.25e-6, 6.9e-4)
+    q_bn = quat_mult(q_m, [0.9996, 0.02, 0.01, -0.015])
+    nav = np.r_[LAT, 2.2, H, 4.4, 2.6, 0.3, q_bn / np.linalg.norm(q_bn)]
+    q_rb = np.array([0.9998, 0.01, 0.012, -0.008])
+    sums = np.r_[0.01, -0.02, 0.03, 0.2, -0.1, -9.8] * 10
+    w_last, w_prev = np.array([0.01, -0.02, 0.03]), np.array([0.012, -0.021, 0.028])
+    lever, dt = np.array([45.7, 15.2, 12.2]), 0.1
+    qc = np.r_[[5e-4**2] * 3, [3e-5**2] * 3]
+    v_r = np.array([4.3, 2.5, 0.0])
+    P, z, H_, q_m2, w_now, w_in = ta.predict_and_measure(
+        nav, q_rb, P0, s, -q_m, v_r, sums, 10, w_last, w_prev, lever, dt, qc, 1e-12)
+    np.testing.assert_allclose(q_m2, q_m, atol=0)  # the sign of spec 2.2
+    R, w_in_ref = ta.earth_terms(LAT, H, nav[3:6])
+    A, G = ta.system_matrix(nav[6:], nav[3:6], LAT, R, sums[:3] / 10, w_in_ref, sums[3:] / 10, n)
+    Qd = kalman.discrete_noise(G, qc, dt)
+    Qd[np.arange(6, n), np.arange(6, n)] += 1e-12 * dt
+    _, P_ref = kalman.predict(np.zeros(n), P0, kalman.discretize(A, dt), Qd)
+    np.testing.assert_allclose(P, P_ref, rtol=1e-10, atol=1e-22)
+    np.testing.assert_allclose(w_now, 1.5 * w_last - 0.5 * w_prev)
+    Lc = quat_left_matrix(quat_conj(q_m))
+    np.testing.assert_allclose(H_[2:, 2:6], Lc[s], atol=0)
+    np.testing.assert_allclose(H_[2:, 6:], -np.eye(3), atol=0)
+    np.testing.assert_allclose(z[2:], (Lc @ nav[6:])[s] - q_rb[s], atol=1e-16)
+    lever_v = ta.lever_velocity(nav[6:], q_m, w_now, w_in, lever)
+    np.testing.assert_allclose(z[:2], (nav[3:6] - v_r - lever_v)[:2], atol=1e-14)
 
 
 @pytest.mark.parametrize(

@@ -404,9 +404,10 @@ def _propagate_block(nav, P, omega, f, t, t_prev, b_a, b_g, prev, open_nav, open
 
     ``t`` (k,) are the sample times [s], ``t_prev`` the time of ``nav``. ``prev`` (6,: the last
     sample's dtheta, dv), ``open_nav`` (10,) and ``open_sums`` (4,: the open step's length and
-    integral of f_hat) are updated in place. Returns (code, nav, P): code is -1 when every
-    sample was valid, else strapdown's index of the first bad sample (-2: bad state); nav and
-    P are then unchanged; -3: the propagated P has a negative or non-finite variance.
+    integral of f_hat) are updated in place. Returns (code, nav, P) with code -1 when all went
+    well; strapdown's codes (the index of the first invalid sample, or -2 for a non-finite
+    state) with nav and P unchanged; or -3 when the propagated P (returned for the message) has
+    a negative or non-finite variance.
     """
     k = t.shape[0]
     n = P.shape[0]

@@ -894,7 +894,7 @@ class TransferAlignment(Filter):
         """(16), (17): start from the GINS attitude, lever-arm compensated GINS velocity."""
         p = self.params
         _, w_in = earth_terms(pos[0], pos[2], v_r)
-        w_now = 1.5 * self._w_last - 0.5 * self._w_prev  # as in cycle()
+        w_now = 1.5 * self._w_last - 0.5 * self._w_prev  # as in predict_and_measure()
         v_b = v_r + lever_velocity(q_m, q_m, w_now, w_in, self.lever_arm_r)
         self.nav = np.concatenate((lever_position(pos, q_m, self.lever_arm_r), v_b, q_m))
         self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])
@@ -922,12 +922,10 @@ class TransferAlignment(Filter):
             self.nav, self.q_rb, self.P, self.s, q_m, v_r, self._sums, self._count,
             self._w_last, self._w_prev, self.lever_arm_r, dt, self._qc, self._q_br,
         )
-        c = kalman.correct(self._x0, P, z, H, self._r, t=t, check=False)
+        c = kalman.correct(self._x0, P, z, H, self._r, t=t)  # also step 7's check of P
         sigma_phi = feedback(self.nav, self.q_rb, c.x, c.P, self.s, self.u, q_m, v_r, pos,
                              w_now, w_in, self.lever_arm_r)
-        kalman.check_covariance(c.P, name="corrected P", t=t)  # step 7
-        P = c.P
-        self.P = P
+        self.P = c.P
         self.sigma_phi = sigma_phi
         self.t = t
         self._reset_sums()
