@@ -729,10 +729,10 @@ class RpmAidedIns(Filter):
         self._frozen[INERT] = True
         if not estimate_current:
             self._frozen[CURRENT] = True
-        self._R_rpm = np.full(3, p.rpm_sigma**2)
-        self._R_depth = np.array([p.depth_sigma**2])
+        self._R_rpm = np.eye(3) * p.rpm_sigma**2
+        self._R_depth = np.array([[p.depth_sigma**2]])
         for name, R in (("R_rpm", self._R_rpm), ("R_depth", self._R_depth)):
-            kalman.check_covariance(np.diag(R), name=name)
+            kalman.check_covariance(R, name=name)
         self._rpm_schedule = _Schedule(p.update_rate)
         self._depth_schedule = _Schedule(p.update_rate)
         # strapdown and covariance-step bookkeeping
