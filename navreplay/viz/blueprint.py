@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import rerun as rr
 import rerun.blueprint as rrb
 
 TABS: tuple[tuple[str, str], ...] = (
@@ -114,13 +115,28 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
                 contents=[f"+ {p}" for p in paths],
                 name=title,
                 plot_legend=rrb.Corner2D.LeftTop,
+                axis_x=_WHOLE_RUN,
             )
             for _, (title, paths) in ordered
         ]
         tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)), name=name))
     if not tabs:
-        return rrb.Blueprint(rrb.TimeSeriesView(origin="/", name="all"), collapse_panels=False)
-    return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), collapse_panels=False)
+        return rrb.Blueprint(
+            rrb.TimeSeriesView(origin="/", name="all", axis_x=_WHOLE_RUN),
+            rrb.TimePanel(timeline="time"),
+            collapse_panels=False,
+        )
+    return rrb.Blueprint(
+        rrb.Tabs(*tabs, active_tab=0), rrb.TimePanel(timeline="time"), collapse_panels=False
+    )
+
+
+# Plots show the whole run (the viewer's default is a window around the time cursor).
+_WHOLE_RUN = rrb.TimeAxis(
+    view_range=rr.TimeRange(
+        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
+)
 
 
 _RANK = {"nav": 0, "error": 3, "state": 2, "sigma": 4, "extra": 5, "truth": 6}

@@ -609,7 +609,10 @@ class Sink:
             p_state = entity_path(L, "state", n)
             self._style(p_state, [legend], [shade], [1.5])
             self._scalars(p_state, idx, result.x[a:b, i] * u.scale)
-            self.catalog.add(tab, f"state:{g}", title(g, u), p_state)
+            # an error state that feedback keeps at zero is logged but gets no plot of its own
+            # (its error against the truth and its sigma are what is worth looking at)
+            if np.any(result.x[a:b, i] != 0.0):
+                self.catalog.add(tab, f"state:{g}", title(g, u), p_state)
             p_sig = entity_path(L, "sigma", n)
             self._style(p_sig, [f"σ {legend}"], [shade], [1.5])
             self._scalars(p_sig, idx, sigma[:, i] * u.scale)
