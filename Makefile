@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(BIN)/navreplay demo
 
 test: $(STAMP)
-	$(BIN)/ruff check navreplay tests benchmarks
+	$(BIN)/ruff check navreplay tests benchmarks docs
 	$(BIN)/python -m pytest -q
 
 reproduce-tests: $(STAMP)
