@@ -133,3 +133,35 @@ def test_monte_carlo_with_the_plugin_in_worker_processes(plugin, tmp_path):
     assert res.exit_code == 0, res.output + res.stderr
     data = json.loads((tmp_path / "mc.json").read_text())
     assert [r["seed"] for r in data["runs"]] == [0, 1]
+
+
+def test_a_broken_plugin_does_not_hide_the_others(tmp_path):
+    """A plug-in whose module is missing is reported by name; the rest still load."""
+    import importlib
+    import warnings
+
+    from navreplay.filters.registry import FilterLoadError, FilterPluginWarning
+
+    info = tmp_path / "navreplay_broken_plugin-0.1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: navreplay-broken-plugin\nVersion: 0.1.0\n"
+    )
+    (info / "entry_points.txt").write_text(
+        f"[{ENTRY_POINT_GROUP}]\nbroken-kf = navreplay_no_such_module:Missing\n"
+    )
+    sys.path.insert(0, str(tmp_path))
+    importlib.invalidate_caches()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            table = filters()
+        assert "gps-ins" in table and "broken-kf" not in table
+        messages = [str(w.message) for w in caught if issubclass(w.category, FilterPluginWarning)]
+        assert any("broken-kf" in m and "navreplay_no_such_module" in m for m in messages)
+        with pytest.raises(FilterLoadError, match="broken-kf.*failed to load"):
+            load_filter("broken-kf")
+        assert load_filter("gps-ins").name == "gps-ins"
+    finally:
+        sys.path.remove(str(tmp_path))
+        importlib.invalidate_caches()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import warnings
 from importlib import metadata as _md
 
 from navreplay.filters.base import Filter
@@ -23,25 +24,39 @@ class FilterLoadError(LookupError):
     """A filter name or ``module:Class`` reference that cannot be resolved."""
 
 
-def _load_entry_points() -> dict[str, type[Filter]]:
+class FilterPluginWarning(UserWarning):
+    """A plug-in of the ``navreplay.filters`` group that cannot be loaded (the others still are)."""
+
+
+def _load_entry_points() -> tuple[dict[str, type[Filter]], dict[str, str]]:
+    """Plug-in filters by name, and the reason each broken plug-in could not be loaded."""
     found: dict[str, type[Filter]] = {}
+    broken: dict[str, str] = {}
     for ep in _md.entry_points(group=ENTRY_POINT_GROUP):
         try:
             cls = ep.load()
         except Exception as e:  # a broken plug-in must not hide the others
-            raise FilterLoadError(f"filter plug-in {ep.name!r} ({ep.value}) failed to load: {e}") from e
+            broken[ep.name] = f"filter plug-in {ep.name!r} ({ep.value}) failed to load: {e}"
+            continue
         if not (isinstance(cls, type) and issubclass(cls, Filter)):
-            raise FilterLoadError(f"filter plug-in {ep.name!r} ({ep.value}) is not a Filter class")
+            broken[ep.name] = f"filter plug-in {ep.name!r} ({ep.value}) is not a Filter class"
+            continue
         found[ep.name] = cls
-    return found
+    return found, broken
 
 
 def filters() -> dict[str, type[Filter]]:
-    """Built-in and plug-in filters by name."""
+    """Built-in and plug-in filters by name.
+
+    A plug-in that fails to load is left out with a :class:`FilterPluginWarning`.
+    """
     import navreplay.filters.builtins  # noqa: F401  (registers the built-ins)
 
     table = dict(_REGISTRY)
-    for name, cls in _load_entry_points().items():
+    plugins, broken = _load_entry_points()
+    for message in broken.values():
+        warnings.warn(message, FilterPluginWarning, stacklevel=2)
+    for name, cls in plugins.items():
         table.setdefault(name, cls)
     return dict(sorted(table.items()))
 
@@ -58,7 +73,12 @@ def load_filter(ref: str) -> type[Filter]:
         if not (isinstance(cls, type) and issubclass(cls, Filter)):
             raise FilterLoadError(f"{ref!r} is not a navreplay Filter class")
         return cls
-    table = filters()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FilterPluginWarning)
+        table = filters()
     if ref not in table:
+        _, broken = _load_entry_points()
+        if ref in broken:
+            raise FilterLoadError(broken[ref])
         raise FilterLoadError(f"unknown filter {ref!r}; available: {', '.join(table)}")
     return table[ref]
