@@ -99,9 +99,9 @@ def _peak_rss(path: str) -> int:
 
 
 def _summary(result: Any, recording: Any) -> Any:
-    from navreplay import jobs
+    from navreplay import metrics
 
-    return jobs.run_summary(result, recording)
+    return metrics.run_metrics(result, recording).summary()
 
 
 def _make_recording(path: Path, duration: float, imu_rate: float = 100.0, seed: int = 1) -> str:

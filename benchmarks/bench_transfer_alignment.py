@@ -29,6 +29,7 @@ from navreplay import strapdown
 from navreplay.filters import kalman
 from navreplay.filters import transfer_alignment as ta
 from navreplay.filters.base import Estimate, Filter
+from navreplay.geo import kernels
 from navreplay.replay.engine import replay
 from navreplay.reproduce.transfer_alignment import REPRODUCTION
 from navreplay.sim.scenario import simulate
@@ -77,7 +78,7 @@ def _best(fn, repeat: int, number: int = 1) -> float:
 def kf_step(repeat: int) -> dict[str, float]:
     """Seconds per call of each part of the filter's step at a GINS sample (9 states, 5
     measurements), and of the numpy model + prediction that the first part replaces."""
-    q_m = ta.euler_quat(np.array([0.05, -0.03, 0.52]))
+    q_m = kernels.euler_to_quat(np.array([0.05, -0.03, 0.52]))
     s, u = np.array([0, 1, 3]), np.array([2])
     P0 = ta.initial_covariance(q_m, s, 0.0625, 2.25e-6, np.sin(np.radians(1.5)) ** 2)
     nav = np.concatenate(([0.61, 2.25, 0.0], [4.46, 2.57, 0.1], q_m))

@@ -24,8 +24,9 @@ from navreplay.filters.vector_matching import (
     reference,
     run_batch,
 )
+from navreplay.metrics import rms
 from navreplay.replay.engine import replay
-from navreplay.reproduce.vector_matching import ACCEL_G, MODELS, REPRODUCTION, euler_errors, rms
+from navreplay.reproduce.vector_matching import ACCEL_G, MODELS, REPRODUCTION, euler_errors
 from navreplay.sim.scenario import get_scenario, simulate
 
 CASES = {

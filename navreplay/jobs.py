@@ -33,19 +33,24 @@ import numpy as np
 
 from navreplay import params as _params
 from navreplay.filters.registry import load_filter
-from navreplay.replay.engine import MissingStreamError, build_params, check_streams, replay
+from navreplay.replay.engine import (
+    MissingStreamError,
+    Progress,
+    build_params,
+    check_streams,
+    replay,
+)
 from navreplay.replay.ensemble import (
     FilterSpec,
     RunOutput,
     RunTask,
+    default_extract,
     file_tasks,
     monte_carlo_tasks,
     run_ensemble,
 )
 from navreplay.replay.result import RunResult
-from navreplay.streams import Recording, StreamKind
-
-Progress = Callable[[int, int], None]
+from navreplay.streams import Recording, StreamKind, jsonable
 
 DEFAULT_OUT = Path("out")
 """Where derived outputs (.rrd, summaries, demo recordings) go by default."""
@@ -219,25 +224,7 @@ def _atomic_path(path: Path) -> Iterator[Path]:
 def write_json(path: Path, data: Any) -> None:
     """Write JSON atomically (NaN and infinities as null)."""
     with _atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, Mapping):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.generic):
-        return _jsonable(x.item())
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, enum.Enum):
-        return x.value
-    if isinstance(x, Path):
-        return str(x)
-    return x
+        tmp.write_text(json.dumps(jsonable(data, strict=True), indent=2) + "\n")
 
 
 # --------------------------------------------------------------------------------------------
@@ -318,13 +305,6 @@ def _close_sink(sink: Any, viz_options: VizOptions) -> str:
 # metrics (per run and over runs)
 
 
-def run_summary(result: RunResult, recording: Recording) -> dict[str, Any]:
-    """Scalar figures of one run against the recording's truth (:mod:`navreplay.metrics`)."""
-    from navreplay import metrics
-
-    return metrics.run_metrics(result, recording).summary()
-
-
 def state_errors(m: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Estimation errors and predicted sigmas of the scored states, for the Rerun view."""
     return {
@@ -345,9 +325,7 @@ def campaign_extract(
     recording: Recording, results: dict[str, RunResult], task: RunTask
 ) -> PerRun:
     """Extractor of ``navreplay run`` over several recordings and ``navreplay montecarlo``."""
-    from navreplay import metrics
-
-    scored = {label: metrics.run_metrics(res, recording) for label, res in results.items()}
+    scored = default_extract(recording, results, task)
     return PerRun(scored, {label: m.summary() for label, m in scored.items()})
 
 
@@ -415,14 +393,10 @@ def log_ensemble(sink: Any, label: str, ens: Any) -> None:
     if ens.nees_dof and np.isfinite(ens.nees_mean).any():
         sink.log_ensemble(f"{label} NEES (dof {ens.nees_dof}, {ens.runs} runs)", t,
                           {f"{label} NEES": ens.nees_mean}, unit="-", bounds=ens.nees_bounds)
-    from navreplay.metrics import chi2_bounds
+    from navreplay.metrics import chi2_bounds_per_count
 
     for meas, (t_k, mean, count, dof) in ens.nis_mean.items():
-        ok = count > 0
-        lo = np.full(mean.shape, np.nan)
-        hi = np.full(mean.shape, np.nan)
-        for c in np.unique(count[ok]):
-            lo[count == c], hi[count == c] = chi2_bounds(dof, int(c))
+        lo, hi = chi2_bounds_per_count(dof, count)
         sink.log_ensemble(f"{label} NIS {meas} (dof {dof})", t_k[: mean.shape[0]],
                           {f"{label} NIS": mean}, unit="-", bounds=(lo, hi))
 
@@ -879,13 +853,9 @@ def demo(
         from navreplay import reproduce
 
         for name in reproduce.available():
-            try:
-                rep = reproduce.get(name)
-            except ImportError:
-                continue  # not built yet
+            rep = reproduce.get(name)
             sections.append(_heading(f"Paper reproduction (quick): {name}"))
-            runs = getattr(rep, "quick_runs", None)
-            result = rep.run(runs=runs, seed=0, workers=job.workers,
+            result = rep.run(runs=rep.quick_runs, seed=0, workers=job.workers,
                              rrd=out / f"{name}.rrd", progress=stage(f"reproduce {name}"))
             failed += sum(not c.passed for c in result.checks)
             sections.append(

@@ -485,43 +485,47 @@ class RunMetrics:
             out["att_rms_heading"] = float(rms(self.nav.phi[:, 2], None))
             if out["distance"] > 0.0:
                 out["pos_err_final_dt"] = 100.0 * out["pos_err_final_h"] / out["distance"]
-        _nees_summary(out, self.nees, len(self.nees_states), np.isfinite(self.nees).astype(int),
-                      probability)
+        _chi2_summary(out, "nees", "", self.nees, np.isfinite(self.nees).astype(int),
+                      len(self.nees_states), probability)
         for name, (_, v, dof) in self.nis.items():
-            _nis_summary(out, name, v, np.ones(v.shape, int), dof, probability)
+            _chi2_summary(out, "nis", f"_{name}", v, np.ones(v.shape, int), dof, probability)
         return out
 
 
-def _nees_summary(out: dict, values: np.ndarray, dof: int, count: np.ndarray,
-                  probability: float) -> None:
-    if dof == 0:
-        return
+def _chi2_summary(out: dict, kind: str, suffix: str, values: np.ndarray, count: np.ndarray,
+                  dof: int, probability: float) -> None:
+    """Add ``<kind>_dof<suffix>``, ``<kind>_mean<suffix>`` and ``<kind>_in_bounds<suffix>``
+    (the fraction of indexes inside the chi-square bounds of their run count) of a NEES or NIS
+    series to ``out``."""
     ok = count > 0
-    if not ok.any():
+    if dof == 0 or not ok.any():
         return
     v = values[ok]
-    out["nees_dof"] = dof
-    out["nees_mean"] = float(np.mean(v))
-    lo, hi = _bounds_per_count(dof, count[ok], probability)
-    out["nees_in_bounds"] = float(np.mean((v >= lo) & (v <= hi)))
+    out[f"{kind}_dof{suffix}"] = dof
+    out[f"{kind}_mean{suffix}"] = float(np.mean(v))
+    lo, hi = chi2_bounds_per_count(dof, count[ok], probability)
+    out[f"{kind}_in_bounds{suffix}"] = float(np.mean((v >= lo) & (v <= hi)))
 
 
-def _nis_summary(out: dict, name: str, values: np.ndarray, count: np.ndarray, dof: int,
-                 probability: float) -> None:
-    ok = count > 0
-    v = values[ok]
-    if v.size == 0:
-        return
-    out[f"nis_dof_{name}"] = dof
-    out[f"nis_mean_{name}"] = float(np.mean(v))
-    lo, hi = _bounds_per_count(dof, count[ok], probability)
-    out[f"nis_in_bounds_{name}"] = float(np.mean((v >= lo) & (v <= hi)))
+def chi2_bounds_per_count(
+    dof: int, count: np.ndarray, probability: float = 0.95
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`chi2_bounds` elementwise for means over ``count`` runs (NaN where the count is 0).
 
+    Parameters
+    ----------
+    dof : int
+    count : ndarray of int, shape (M,)
+        Runs averaged at each index.
+    probability : float
 
-def _bounds_per_count(dof: int, count: np.ndarray, probability: float):
-    lo = np.empty(count.shape)
-    hi = np.empty(count.shape)
-    for c in np.unique(count):
+    Returns
+    -------
+    lo, hi : ndarray, shape (M,)
+    """
+    lo = np.full(count.shape, np.nan)
+    hi = np.full(count.shape, np.nan)
+    for c in np.unique(count[count > 0]):
         lo[count == c], hi[count == c] = chi2_bounds(dof, int(c), probability)
     return lo, hi
 
@@ -713,12 +717,10 @@ class EnsembleResult:
                                                                  axis=1))))
             out["att_rms_level"] = float(rms(self.rms["phi"][:, :2], None))
             out["att_rms_heading"] = float(rms(self.rms["phi"][:, 2], None))
-        if self.nees_dof:
-            ok = self.nees_count > 0
-            _nees_summary(out, self.nees_mean[ok], self.nees_dof, self.nees_count[ok],
-                          probability)
+        _chi2_summary(out, "nees", "", self.nees_mean, self.nees_count, self.nees_dof,
+                      probability)
         for name, (_, m, c, dof) in self.nis_mean.items():
-            _nis_summary(out, name, m, c, dof, probability)
+            _chi2_summary(out, "nis", f"_{name}", m, c, dof, probability)
         return out
 
 
@@ -801,11 +803,10 @@ class EnsembleStats:
         empty = np.zeros((M, k_states))
         nees_count = self._nees.n if self._nees.n is not None else np.zeros(M, int)
         dof = len(self._nees_states or ())
-        lo = np.full(M, np.nan)
-        hi = np.full(M, np.nan)
         if dof:
-            ok = nees_count > 0
-            lo[ok], hi[ok] = _bounds_per_count(dof, nees_count[ok], 0.95)
+            lo, hi = chi2_bounds_per_count(dof, nees_count)
+        else:
+            lo, hi = np.full(M, np.nan), np.full(M, np.nan)
         if "pos_ned" in rms_:
             c50 = CEP50_FACTOR * (rms_["pos_ned"][:, 0] + rms_["pos_ned"][:, 1])
         else:

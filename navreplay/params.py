@@ -2,6 +2,8 @@
 
 Scenarios and filters declare their parameters as frozen, keyword-only dataclasses with SI units
 in the field docstrings; this module turns user text into such an instance with clear errors.
+The ``check_*`` functions are the range checks those dataclasses (and the sensor error models)
+run in ``__post_init__``; each raises ``ValueError`` naming the class and the field.
 """
 
 from __future__ import annotations
@@ -16,9 +18,56 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from navreplay.streams import jsonable
+
 
 class ParamError(ValueError):
     """A parameter that does not exist or has a value of the wrong type or range."""
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and math.isfinite(v)
+
+
+def check_nonnegative(owner: object, *names: str) -> None:
+    """Raise ``ValueError`` naming the first field that is not a finite number >= 0.
+
+    Scalars and sequences (tuples, lists) of numbers are both accepted.
+    """
+    for name in names:
+        value = getattr(owner, name)
+        values = value if isinstance(value, tuple | list) else (value,)
+        if not all(_is_number(v) and v >= 0.0 for v in values):
+            raise ValueError(
+                f"{type(owner).__name__}.{name} must be finite and >= 0, got {value!r}"
+            )
+
+
+def check_positive(owner: object, *names: str) -> None:
+    """Raise ``ValueError`` naming the first field that is not a finite number > 0."""
+    for name in names:
+        v = getattr(owner, name)
+        if not (_is_number(v) and v > 0.0):
+            raise ValueError(f"{type(owner).__name__}.{name} must be finite and > 0, got {v!r}")
+
+
+def check_divides(owner: object, fast: str, slow: str) -> None:
+    """Raise ``ValueError`` unless rate field ``slow`` [Hz] divides rate field ``fast`` [Hz] a
+    whole number of times (a sensor sampled at every k-th truth sample)."""
+    a, b = getattr(owner, fast), getattr(owner, slow)
+    k = a / b
+    if round(k) < 1 or abs(k - round(k)) > 1e-9 * k:
+        raise ValueError(f"{slow} ({b:g} Hz) must divide {fast} ({a:g} Hz) a whole number of times")
+
+
+def check_whole_intervals(owner: object, duration: str, rate: str) -> None:
+    """Raise ``ValueError`` unless field ``duration`` [s] is a whole number of sample intervals
+    of rate field ``rate`` [Hz]."""
+    d, r = getattr(owner, duration), getattr(owner, rate)
+    n = d * r
+    if abs(n - round(n)) > 1e-6:
+        raise ValueError(f"{duration} ({d:g} s) must be a whole number of {rate} intervals "
+                         f"(1/{r:g} s)")
 
 
 def parse_assignments(items: Iterable[str]) -> dict[str, str]:
@@ -132,15 +181,7 @@ def build(cls: type, values: Mapping[str, Any] | None = None, *, where: str = ""
 
 def as_dict(params: Any) -> dict[str, Any]:
     """JSON-friendly dict of a parameter dataclass (enums by value, tuples as lists)."""
-    out = {}
-    for f in dataclasses.fields(params):
-        v = getattr(params, f.name)
-        if isinstance(v, enum.Enum):
-            v = v.value
-        elif isinstance(v, tuple):
-            v = list(v)
-        out[f.name] = v
-    return out
+    return {f.name: jsonable(getattr(params, f.name)) for f in dataclasses.fields(params)}
 
 
 def describe(cls: type) -> list[tuple[str, str, Any, str]]:
@@ -150,16 +191,19 @@ def describe(cls: type) -> list[tuple[str, str, Any, str]]:
     import textwrap
 
     docs: dict[str, str] = {}
-    try:
-        tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    for klass in reversed(cls.__mro__):  # inherited fields keep their base class's docstring
+        if not dataclasses.is_dataclass(klass):
+            continue
+        try:
+            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
+        except (OSError, TypeError, SyntaxError):
+            continue
         body = tree.body[0].body  # type: ignore[attr-defined]
         for a, b in zip(body, body[1:], strict=False):
             if (isinstance(a, ast.AnnAssign) and isinstance(a.target, ast.Name)
                     and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)
                     and isinstance(b.value.value, str)):
                 docs[a.target.id] = " ".join(b.value.value.split())
-    except (OSError, TypeError, SyntaxError):
-        pass
     hints = typing.get_type_hints(cls)
     rows = []
     for f in dataclasses.fields(cls):

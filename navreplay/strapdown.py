@@ -85,7 +85,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from navreplay.geo import earth, rotations
+from navreplay.geo import earth, kernels, rotations
 
 __all__ = [
     "NAV_SIZE",
@@ -109,15 +109,6 @@ VEL = slice(3, 6)
 QUAT = slice(6, 10)
 """Attitude quaternion q_nb, scalar first."""
 NAV_SIZE = 10
-
-# Earth-model constants, read once so numba folds them into the machine code.
-_A = earth.A
-_E2 = earth.E2
-_F = earth.F
-_W = earth.OMEGA_IE
-_GAMMA_E = earth.GAMMA_E
-_K_SOM = earth.K_SOMIGLIANA
-_M_GRAV = earth.M_GRAV
 
 
 def nav_vector(pos: ArrayLike, v_n: ArrayLike, q_nb: ArrayLike) -> np.ndarray:
@@ -145,73 +136,15 @@ def nav_vector(pos: ArrayLike, v_n: ArrayLike, q_nb: ArrayLike) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------------
-# numba kernels (scalar code: no temporaries in the inner loop)
+# numba kernels (scalar code: no temporaries in the inner loop; the earth model and rotation
+# helpers are those of navreplay.geo.kernels)
 # --------------------------------------------------------------------------------------------
-
-
-@numba.njit(cache=True)
-def _rotvec_quat(x, y, z):
-    """q{x}: quaternion of a rotation vector, eq. (3)."""
-    a = math.sqrt(x * x + y * y + z * z)
-    k = 0.5 if a == 0.0 else math.sin(0.5 * a) / a  # no cancellation: exact down to a -> 0
-    return math.cos(0.5 * a), k * x, k * y, k * z
-
-
-@numba.njit(cache=True)
-def _quat_log(q0, q1, q2, q3):
-    """Rotation vector of a unit quaternion (principal value, angle <= pi)."""
-    if q0 < 0.0:
-        q0, q1, q2, q3 = -q0, -q1, -q2, -q3
-    s = math.sqrt(q1 * q1 + q2 * q2 + q3 * q3)
-    k = 2.0 / q0 if s == 0.0 else 2.0 * math.atan2(s, q0) / s
-    return k * q1, k * q2, k * q3
-
-
-@numba.njit(cache=True)
-def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
-    """Hamilton product a (x) b."""
-    return (
-        a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
-        a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
-        a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
-        a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
-    )
-
-
-@numba.njit(cache=True)
-def _cross(ax, ay, az, bx, by, bz):
-    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-
-
-@numba.njit(cache=True)
-def _rot(q0, q1, q2, q3, x, y, z, transpose):
-    """C(q) @ v, or C(q)^T @ v when ``transpose``."""
-    c00 = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
-    c01 = 2.0 * (q1 * q2 - q0 * q3)
-    c02 = 2.0 * (q1 * q3 + q0 * q2)
-    c10 = 2.0 * (q1 * q2 + q0 * q3)
-    c11 = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
-    c12 = 2.0 * (q2 * q3 - q0 * q1)
-    c20 = 2.0 * (q1 * q3 - q0 * q2)
-    c21 = 2.0 * (q2 * q3 + q0 * q1)
-    c22 = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
-    if transpose:
-        return (
-            c00 * x + c10 * y + c20 * z,
-            c01 * x + c11 * y + c21 * z,
-            c02 * x + c12 * y + c22 * z,
-        )
-    return (
-        c00 * x + c01 * y + c02 * z,
-        c10 * x + c11 * y + c12 * z,
-        c20 * x + c21 * y + c22 * z,
-    )
 
 
 @numba.njit(cache=True)
 def _solve_skew(ax, ay, az, bx, by, bz):
     """x with (I + [a x]) x = b: x = (b - a x b + (a.b) a) / (1 + |a|^2)."""
-    cx, cy, cz = _cross(ax, ay, az, bx, by, bz)
+    cx, cy, cz = kernels.cross(ax, ay, az, bx, by, bz)
     d = ax * bx + ay * by + az * bz
     s = 1.0 / (1.0 + ax * ax + ay * ay + az * az)
     return (bx - cx + d * ax) * s, (by - cy + d * ay) * s, (bz - cz + d * az) * s
@@ -222,17 +155,12 @@ def _position_step(lat0, lon0, h0, vn, ve, vd, dt):
     """Eqs. (7)-(9) with the interval-mean velocity (vn, ve, vd); returns lat, lon, h."""
     h1 = h0 - vd * dt  # (7)
     h_m = 0.5 * (h0 + h1)
-    s = math.sin(lat0)
-    w = 1.0 - _E2 * s * s
-    r_m = _A * (1.0 - _E2) / (w * math.sqrt(w))
+    r_m, _ = kernels.radii(lat0)
     lat_p = lat0 + 0.5 * vn * dt / (r_m + h_m)  # (8) predictor of the mid latitude
-    s = math.sin(lat_p)
-    w = 1.0 - _E2 * s * s
-    r_m = _A * (1.0 - _E2) / (w * math.sqrt(w))
+    r_m, _ = kernels.radii(lat_p)
     lat1 = lat0 + vn * dt / (r_m + h_m)  # (8)
     lat_m = 0.5 * (lat0 + lat1)
-    s = math.sin(lat_m)
-    r_n = _A / math.sqrt(1.0 - _E2 * s * s)
+    _, r_n = kernels.radii(lat_m)
     lon1 = lon0 + ve * dt / ((r_n + h_m) * math.cos(lat_m))  # (9)
     if lon1 > math.pi:
         lon1 -= 2.0 * math.pi
@@ -248,32 +176,11 @@ def _mid_terms(lat_m, h_m, vn, ve, vd, dt):
     Returns zeta (3 values, [rad]) and the acceleration g_n - (2 w_ie + w_en) x v_m (3 values,
     [m/s^2]).
     """
-    s = math.sin(lat_m)
-    c = math.cos(lat_m)
-    s2 = s * s
-    w = 1.0 - _E2 * s2
-    sw = math.sqrt(w)
-    r_n = _A / sw
-    r_m = r_n * (1.0 - _E2) / w
-    # (1) earth rate and transport rate
-    ie_n = _W * c
-    ie_d = -_W * s
-    en_n = ve / (r_n + h_m)
-    en_e = -vn / (r_m + h_m)
-    en_d = -ve * (s / c) / (r_n + h_m)
-    # normal gravity: Somigliana + second-order height term (geo.earth.gravity)
-    g = (
-        _GAMMA_E
-        * (1.0 + _K_SOM * s2)
-        / sw
-        * (
-            1.0
-            - 2.0 / _A * (1.0 + _F + _M_GRAV - 2.0 * _F * s2) * h_m
-            + 3.0 / (_A * _A) * h_m * h_m
-        )
-    )
+    ie_n, _, ie_d = kernels.earth_rate(lat_m)  # (1) earth rate and transport rate
+    en_n, en_e, en_d = kernels.transport_rate(lat_m, h_m, vn, ve)
+    g = kernels.gravity(lat_m, h_m)  # normal gravity (geo.earth.gravity)
     # (6) Coriolis: (2 w_ie + w_en) x v
-    cx, cy, cz = _cross(2.0 * ie_n + en_n, en_e, 2.0 * ie_d + en_d, vn, ve, vd)
+    cx, cy, cz = kernels.cross(2.0 * ie_n + en_n, en_e, 2.0 * ie_d + en_d, vn, ve, vd)
     return (ie_n + en_n) * dt, en_e * dt, (ie_d + en_d) * dt, -cx, -cy, g - cz
 
 
@@ -295,14 +202,14 @@ def _step(nav, out, tx, ty, tz, ax, ay, az, ptx, pty, ptz, pax, pay, paz, dt):
     q2 = nav[8]
     q3 = nav[9]
     # (4) rotation and sculling compensation, in b(k-1)
-    rx, ry, rz = _cross(tx, ty, tz, ax, ay, az)
-    sx, sy, sz = _cross(ptx, pty, ptz, ax, ay, az)
-    ux, uy, uz = _cross(pax, pay, paz, tx, ty, tz)
+    rx, ry, rz = kernels.cross(tx, ty, tz, ax, ay, az)
+    sx, sy, sz = kernels.cross(ptx, pty, ptz, ax, ay, az)
+    ux, uy, uz = kernels.cross(pax, pay, paz, tx, ty, tz)
     bx = ax + 0.5 * rx + (sx + ux) / 12.0
     by = ay + 0.5 * ry + (sy + uy) / 12.0
     bz = az + 0.5 * rz + (sz + uz) / 12.0
     # (5), first factor: C(q_{k-1}) dv_b
-    un, ue, ud = _rot(q0, q1, q2, q3, bx, by, bz, False)
+    un, ue, ud = kernels.rotate(q0, q1, q2, q3, bx, by, bz)
     # (5)-(9) by a predictor (mid-point = start) and one corrector pass
     lat1 = lat0
     lon1 = lon0
@@ -322,7 +229,7 @@ def _step(nav, out, tx, ty, tz, ax, ay, az, ptx, pty, ptz, pax, pay, paz, dt):
             0.5 * (vd0 + vd1),
             dt,
         )
-        cn, ce, cd = _cross(zn, ze, zd, un, ue, ud)
+        cn, ce, cd = kernels.cross(zn, ze, zd, un, ue, ud)
         vn1 = vn0 + un - 0.5 * cn + an * dt  # (5), (6)
         ve1 = ve0 + ue - 0.5 * ce + ae * dt
         vd1 = vd0 + ud - 0.5 * cd + ad * dt
@@ -330,11 +237,11 @@ def _step(nav, out, tx, ty, tz, ax, ay, az, ptx, pty, ptz, pax, pay, paz, dt):
             lat0, lon0, h0, 0.5 * (vn0 + vn1), 0.5 * (ve0 + ve1), 0.5 * (vd0 + vd1), dt
         )
     # (2) coning, (3) attitude
-    cx, cy, cz = _cross(ptx, pty, ptz, tx, ty, tz)
-    b0, b1, b2, b3 = _rotvec_quat(tx + cx / 12.0, ty + cy / 12.0, tz + cz / 12.0)
-    n0, n1, n2, n3 = _rotvec_quat(-zn, -ze, -zd)
-    p0, p1, p2, p3 = _qmul(q0, q1, q2, q3, b0, b1, b2, b3)
-    p0, p1, p2, p3 = _qmul(n0, n1, n2, n3, p0, p1, p2, p3)
+    cx, cy, cz = kernels.cross(ptx, pty, ptz, tx, ty, tz)
+    b0, b1, b2, b3 = kernels.rotvec_to_quat(tx + cx / 12.0, ty + cy / 12.0, tz + cz / 12.0)
+    n0, n1, n2, n3 = kernels.rotvec_to_quat(-zn, -ze, -zd)
+    p0, p1, p2, p3 = kernels.quat_mult(q0, q1, q2, q3, b0, b1, b2, b3)
+    p0, p1, p2, p3 = kernels.quat_mult(n0, n1, n2, n3, p0, p1, p2, p3)
     norm = 1.0 / math.sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
     out[0] = lat1
     out[1] = lon1
@@ -456,11 +363,11 @@ def inverse_kernel(t, pos, v_n, q_nb, omega_out, f_out):
         q0, q1, q2, q3 = q_nb[k - 1, 0], q_nb[k - 1, 1], q_nb[k - 1, 2], q_nb[k - 1, 3]
         # (3): q{alpha} = q_{k-1}^* (x) q{zeta} (x) q_k = q{C_bn(k-1) zeta} (x) q_{k-1}^* (x) q_k
         # (the second form keeps full relative precision of slow body motion)
-        zx, zy, zz = _rot(q0, q1, q2, q3, zn, ze, zd, True)
-        n0, n1, n2, n3 = _rotvec_quat(zx, zy, zz)
-        p0, p1, p2, p3 = _qmul(q0, -q1, -q2, -q3, q_nb[k, 0], q_nb[k, 1], q_nb[k, 2], q_nb[k, 3])
-        p0, p1, p2, p3 = _qmul(n0, n1, n2, n3, p0, p1, p2, p3)
-        alx, aly, alz = _quat_log(p0, p1, p2, p3)
+        zx, zy, zz = kernels.rotate_inverse(q0, q1, q2, q3, zn, ze, zd)
+        n0, n1, n2, n3 = kernels.rotvec_to_quat(zx, zy, zz)
+        p0, p1, p2, p3 = kernels.quat_mult(q0, -q1, -q2, -q3, q_nb[k, 0], q_nb[k, 1], q_nb[k, 2], q_nb[k, 3])
+        p0, p1, p2, p3 = kernels.quat_mult(n0, n1, n2, n3, p0, p1, p2, p3)
+        alx, aly, alz = kernels.quat_to_rotvec(p0, p1, p2, p3)
         # (2): (I + [dtheta_{k-1}/12 x]) dtheta_k = alpha_k
         tx, ty, tz = _solve_skew(ptx / 12.0, pty / 12.0, ptz / 12.0, alx, aly, alz)
         # (6) -> dv_n, (5) -> dv_b: C^T (I - [zeta/2 x])^-1 dv_n
@@ -468,9 +375,9 @@ def inverse_kernel(t, pos, v_n, q_nb, omega_out, f_out):
         we = v_n[k, 1] - v_n[k - 1, 1] - ae * dt
         wd = v_n[k, 2] - v_n[k - 1, 2] - ad * dt
         wn, we, wd = _solve_skew(-0.5 * zn, -0.5 * ze, -0.5 * zd, wn, we, wd)
-        bx, by, bz = _rot(q0, q1, q2, q3, wn, we, wd, True)
+        bx, by, bz = kernels.rotate_inverse(q0, q1, q2, q3, wn, we, wd)
         # (4): (I + [(dtheta_k/2 + dtheta_{k-1}/12) x]) dv_k = dv_b - dv_{k-1} x dtheta_k / 12
-        cx, cy, cz = _cross(pax, pay, paz, tx, ty, tz)
+        cx, cy, cz = kernels.cross(pax, pay, paz, tx, ty, tz)
         ax, ay, az = _solve_skew(
             0.5 * tx + ptx / 12.0,
             0.5 * ty + pty / 12.0,

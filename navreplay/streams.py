@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import math
+import os
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -139,6 +142,10 @@ class Stream:
 class Metadata:
     """What a recording says about itself (stored as an MCAP metadata record).
 
+    ``params``, ``true_errors``, ``initial_nav`` and ``extra`` are made plain JSON values on
+    construction (:func:`jsonable`: numpy arrays and tuples become lists), so an in-memory
+    recording carries the same metadata as the file it is written to.
+
     Attributes
     ----------
     scenario : str
@@ -146,10 +153,10 @@ class Metadata:
     seed : int | None
         Seed of the numpy Generator the recording was simulated with.
     params : dict
-        All scenario parameters, SI units, JSON-serialisable.
+        All scenario parameters, SI units.
     true_errors : dict
         True values of the simulated error states (biases, scale factors, misalignments, lever
-        arm, current, ...), SI, JSON-serialisable (lists for vectors).
+        arm, current, ...), SI, lists for vectors.
     initial_nav : dict
         Initial navigation solution handed to a filter that cannot self-initialise, as an
         external alignment would: ``{"t_ns", "pos", "v_n", "q_nb", "sigma": {...}}``. It carries
@@ -166,6 +173,10 @@ class Metadata:
     initial_nav: dict[str, Any] = dataclasses.field(default_factory=dict)
     navreplay_version: str = ""
     extra: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("params", "true_errors", "initial_nav", "extra"):
+            setattr(self, name, jsonable(getattr(self, name)))
 
 
 @dataclasses.dataclass
@@ -190,6 +201,41 @@ class Recording:
 
     def kinds(self) -> list[StreamKind]:
         return list(self.streams)
+
+
+def jsonable(value: Any, *, strict: bool = False) -> Any:
+    """Plain JSON values of nested data (what :class:`Metadata` and JSON summaries hold).
+
+    Mappings become dicts with string keys, lists and tuples lists, numpy arrays nested lists,
+    numpy scalars Python numbers, enums their value and paths strings; anything else is
+    returned as it is.
+
+    Parameters
+    ----------
+    value : Any
+    strict : bool
+        Also turn NaN and infinities, which JSON cannot represent, into None.
+
+    Examples
+    --------
+    >>> jsonable({"b": np.array([1.0, np.nan]), "k": (StreamKind.IMU, np.int64(2))})
+    {'b': [1.0, nan], 'k': ['imu', 2]}
+    >>> jsonable([np.inf], strict=True)
+    [None]
+    """
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v, strict=strict) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v, strict=strict) for v in value]
+    if isinstance(value, np.ndarray | np.generic):
+        return jsonable(value.tolist(), strict=strict)
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if strict and isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def seconds(t_ns: np.ndarray | int, t0_ns: int) -> np.ndarray:

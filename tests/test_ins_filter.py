@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from ins_reference import error_rate
 from scipy.linalg import expm
 
 from navreplay import metrics, strapdown
@@ -13,33 +14,8 @@ from navreplay.replay.engine import replay
 from navreplay.sim.scenario import simulate
 
 # --------------------------------------------------------------------------------------------
-# F against finite differences of the continuous nonlinear mechanization, written here
-# independently of the code under test
-
-
-def _rates(lat, lon, h, v, C, f_b, w_ib_b):
-    """Time derivatives of (lat, lon, h), v_n and C_nb: NED mechanization."""
-    R_M, R_N = earth.radii(lat)
-    pos_dot = np.array([v[0] / (R_M + h), v[1] / ((R_N + h) * np.cos(lat)), -v[2]])
-    w_ie = earth.omega_ie_n(lat)
-    w_en = earth.omega_en_n(lat, h, v)
-    g = np.array([0.0, 0.0, float(earth.gravity(lat, h))])
-    v_dot = C @ f_b - np.cross(2 * w_ie + w_en, v) + g
-    C_dot = C @ rotations.skew(w_ib_b) - rotations.skew(w_ie + w_en) @ C
-    return pos_dot, v_dot, C_dot
-
-
-def _error_rate(truth, dx, f_b, w_ib_b):
-    """d(dx)/dt of an estimate carrying the 15 errors dx against the truth."""
-    lat, lon, h, v, C = truth
-    dp, dv, phi, dba, dbg = dx[0:3], dx[3:6], dx[6:9], dx[9:12], dx[12:15]
-    C_hat = rotations.rotvec_to_dcm(-phi) @ C
-    p_t, v_t, C_t = _rates(lat, lon, h, v, C, f_b, w_ib_b)
-    # the estimate runs on the compensated IMU: f_hat = f - db_a, w_hat = w - db_g
-    p_e, v_e, C_e = _rates(lat + dp[0], lon + dp[1], h + dp[2], v + dv, C_hat,
-                           f_b - dba, w_ib_b - dbg)
-    phi_dot = -rotations.vee(C_e @ C.T + C_hat @ C_t.T)
-    return np.concatenate([p_e - p_t, v_e - v_t, phi_dot, np.zeros(6)])
+# F against finite differences of the continuous nonlinear mechanization (tests/ins_reference.py,
+# written independently of the code under test)
 
 
 STEPS = np.array([1e-6, 1e-6, 1.0, 1e-2, 1e-2, 1e-2, 1e-5, 1e-5, 1e-5,
@@ -51,7 +27,7 @@ def _numeric_F(truth, f_b, w_ib_b):
     for j in range(15):
         e = np.zeros(15)
         e[j] = STEPS[j]
-        F[:, j] = (_error_rate(truth, e, f_b, w_ib_b) - _error_rate(truth, -e, f_b, w_ib_b)) / (
+        F[:, j] = (error_rate(truth, e, f_b, w_ib_b) - error_rate(truth, -e, f_b, w_ib_b)) / (
             2 * STEPS[j])
     return F
 

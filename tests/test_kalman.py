@@ -195,3 +195,32 @@ def test_nees_of_a_simulated_linear_system_inside_chi2_bounds():
     nees = np.array([_run_cv2d(rng, 30)[1] for _ in range(runs)])
     lo, hi = stats.chi2.ppf([0.025, 0.975], 4 * runs) / runs
     assert lo < nees.mean() < hi
+
+
+@pytest.mark.parametrize("prior", ["zero", "nonzero"])
+@pytest.mark.parametrize("full_R", [False, True])
+def test_batched_correction_equals_the_shared_kalman_correction(prior, full_R):
+    rng = np.random.default_rng(7)
+    B = 5
+    A = rng.normal(size=(B, 3, 3))
+    P = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(3)
+    H = rng.normal(size=(B, 6, 3))
+    z = rng.normal(size=(B, 6))
+    R = rng.uniform(0.1, 2.0, size=(B, 6))
+    if full_R:
+        G = 0.3 * rng.normal(size=(B, 6, 6))
+        R = G @ np.swapaxes(G, -1, -2) + R[..., None] * np.eye(6)
+    x = np.zeros((B, 3)) if prior == "zero" else rng.normal(size=(B, 3))
+    c = kalman.correct_batch(x, P, z, H, R)
+    for i in range(B):
+        k = kalman.correct(x[i], P[i], z[i], H[i], R[i])
+        np.testing.assert_allclose(c.x[i], k.x, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(c.P[i], k.P, rtol=1e-12, atol=1e-14)
+        assert c.nis[i] == pytest.approx(k.nis, rel=1e-12)
+        np.testing.assert_allclose(c.nu[i], k.nu, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(c.S[i], k.S, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(c.nu_normalised[i], k.nu_normalised, rtol=1e-12, atol=1e-14)
+    bad = P.copy()
+    bad[2] = -np.eye(3)
+    with pytest.raises(FilterDivergedError):
+        kalman.correct_batch(x, bad, z, H, np.full((B, 6), -10.0))

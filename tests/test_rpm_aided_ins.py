@@ -5,12 +5,13 @@ import math
 
 import numpy as np
 import pytest
+from ins_reference import error_rate
 
 from navreplay.filters import ins_error as ie
 from navreplay.filters import kalman
 from navreplay.filters import rpm_aided_ins as rai
 from navreplay.filters.registry import load_filter
-from navreplay.geo import earth, rotations
+from navreplay.geo import earth, kernels, rotations
 from navreplay.metrics import position_error_ned
 from navreplay.params import ParamError, build
 from navreplay.replay.engine import replay
@@ -20,34 +21,8 @@ from navreplay.streams import FIELDS, StreamKind
 from navreplay.units import DEG, MIL
 
 # --------------------------------------------------------------------------------------------
-# F against finite differences of the nonlinear NED mechanization with depth, written here
-# independently of the code under test
-
-
-def _rates(lat, lon, d, v, C, f_b, w_ib_b):
-    """Time derivatives of (lat, lon, depth), v_n and C_nb: NED mechanization, d = -h."""
-    R_M, R_N = earth.radii(lat)
-    pos_dot = np.array([v[0] / (R_M - d), v[1] / ((R_N - d) * np.cos(lat)), v[2]])
-    w_ie = earth.omega_ie_n(lat)
-    w_en = np.array([v[1] / (R_N - d), -v[0] / (R_M - d), -v[1] * np.tan(lat) / (R_N - d)])
-    g = np.array([0.0, 0.0, float(earth.gravity(lat, -d))])
-    v_dot = C @ f_b - np.cross(2 * w_ie + w_en, v) + g
-    C_dot = C @ rotations.skew(w_ib_b) - rotations.skew(w_ie + w_en) @ C
-    return pos_dot, v_dot, C_dot
-
-
-def _error_rate(truth, dx, f_b, w_ib_b):
-    """d(dx)/dt of an estimate carrying the 24 errors dx against the truth."""
-    lat, lon, d, v, C = truth
-    dp, dv, phi, dba, dbg = dx[0:3], dx[3:6], dx[6:9], dx[9:12], dx[12:15]
-    C_hat = rotations.rotvec_to_dcm(-phi) @ C  # C_hat = (I - [phi x]) C to first order
-    p_t, v_t, C_t = _rates(lat, lon, d, v, C, f_b, w_ib_b)
-    # the estimate runs on the compensated IMU: f_hat = f - db_a, w_hat = w - db_g
-    p_e, v_e, C_e = _rates(lat + dp[0], lon + dp[1], d + dp[2], v + dv, C_hat,
-                           f_b - dba, w_ib_b - dbg)
-    phi_dot = -rotations.vee(C_e @ C.T + C_hat @ C_t.T)
-    # biases, RPM parameters, current and the inert states are constants: zero rate
-    return np.concatenate([p_e - p_t, v_e - v_t, phi_dot, np.zeros(15)])
+# F against finite differences of the nonlinear NED mechanization with depth
+# (tests/ins_reference.py, written independently of the code under test)
 
 
 STEPS = np.r_[1e-6, 1e-6, 1.0, np.full(3, 1e-2), np.full(3, 1e-5), np.full(3, 1e-4),
@@ -72,8 +47,8 @@ def test_every_F_block_matches_finite_differences_of_the_mechanization(lat_deg):
     for j in range(24):
         e = np.zeros(24)
         e[j] = STEPS[j]
-        F_num[:, j] = (_error_rate(truth, e, f_b, w_ib_b)
-                       - _error_rate(truth, -e, f_b, w_ib_b)) / (2 * STEPS[j])
+        F_num[:, j] = (error_rate(truth, e, f_b, w_ib_b, depth=True)
+                       - error_rate(truth, -e, f_b, w_ib_b, depth=True)) / (2 * STEPS[j])
     F = rai.system_matrix(nav, f_b)
     for rname, rows in BLOCKS.items():
         for cname, cols in BLOCKS.items():
@@ -124,7 +99,8 @@ def test_structured_covariance_step_equals_the_dense_prediction():
     dt = 0.1
     _, P_ref = kalman.predict(np.zeros(24), P, kalman.discretize(rai.system_matrix(nav, f_b), dt),
                               np.diag(q * dt))
-    P_new = rai.covariance_step(P, nav, f_b, dt, q)
+    P_new = ie.propagate_covariance(P, nav[None], f_b[None], np.zeros((1, 3)), np.array([dt]),
+                                    ie.ProcessNoise(q), vertical=ie.Vertical.DEPTH)
     np.testing.assert_allclose(P_new, P_ref, rtol=1e-11, atol=1e-13 * np.abs(P_ref).max())
     kalman.check_covariance(P_new)
     np.testing.assert_array_equal(P_new[20:], 0.0)  # inert states stay inert
@@ -158,7 +134,7 @@ def _paper_F_enu(lat, h, V, C_enu, f_b):
                    [-VE * dR_N / Rn**2, 0, -VE / Rn**2],
                    [VE / (Rn * c * c) - VE * t * dR_N / Rn**2, 0, -VE * t / Rn**2]])
     Ev = np.array([[0, -1 / Rm, 0], [1 / Rn, 0, 0], [t / Rn, 0, 0]])
-    dg_dlat, dg_dh = ie.gravity_derivatives(lat, h)
+    dg_dlat, dg_dh = kernels.gravity_derivatives(lat, h)
     Gp = np.zeros((3, 3))  # g^n = [0, 0, -g]
     Gp[2, 0], Gp[2, 2] = -dg_dlat, -dg_dh
     F = np.zeros((15, 15))

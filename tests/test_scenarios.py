@@ -12,7 +12,7 @@ import pytest
 from navreplay import strapdown
 from navreplay.geo.earth import gravity, lla_to_ned_offset, radii
 from navreplay.geo.rotations import dcm_to_rotvec, quat_conj, quat_rotate, quat_to_dcm
-from navreplay.params import ParamError
+from navreplay.params import ParamError, describe
 from navreplay.sim.scenario import get_scenario, scenarios, simulate
 from navreplay.streams import FIELDS, Recording, StreamKind, seconds
 
@@ -145,6 +145,46 @@ def test_stationary_initial_tilt():
 def test_bad_parameters(name, values, match):
     with pytest.raises(ParamError, match=match):
         simulate(name, values, seed=0)
+
+
+SHORT = {
+    "vehicle-drive": {"duration": 10.0},
+    "stationary": {"duration": 5.0, "init_tilt_sigma": 1e-3},
+    "underwater-rpm": {"duration": 5.0},
+    "ship-transfer-alignment": {"duration": 2.0},
+    "gimpo-accel-sweep": {},
+    "gimpo-accel-yaw": {},
+}
+
+
+def test_every_scenario_is_covered_below():
+    assert set(SHORT) == set(scenarios())
+
+
+@pytest.mark.parametrize("name", sorted(SHORT))
+def test_metadata_contract(name):
+    """Every parameter recorded; metadata plain JSON in memory as on file; every truth column
+    described; true errors present; a handed-over initial solution is not the truth."""
+    rec = simulate(name, SHORT[name], seed=3)
+    meta = rec.metadata
+    assert {f.name for f in dataclasses.fields(get_scenario(name).Params)} <= set(meta.params)
+    for field in ("params", "true_errors", "initial_nav", "extra"):
+        value = getattr(meta, field)
+        assert json.loads(json.dumps(value, allow_nan=False)) == value, field
+    assert meta.true_errors
+    assert set(rec["truth"].columns) == set(meta.extra["truth_columns"])
+    nav = meta.initial_nav
+    if "q_nb" in nav:
+        truth = rec["truth"]
+        assert nav["t_ns"] == truth.t_ns[0]
+        assert any(np.any(s) for s in nav["sigma"].values())
+        assert not np.array_equal(nav["q_nb"], truth["q_nb"][0])
+
+
+@pytest.mark.parametrize("name", sorted(SHORT))
+def test_every_parameter_is_documented(name):
+    rows = describe(get_scenario(name).Params)
+    assert [row[0] for row in rows if not row[3]] == []
 
 
 def test_stationary_free_inertial_shows_the_schuler_oscillation():

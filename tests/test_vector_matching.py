@@ -17,7 +17,6 @@ from navreplay.filters.vector_matching import (
     Reference,
     VectorMatchingFilter,
     VectorMatchingParams,
-    correct_batch,
     euler_sigma,
     feedback,
     measurement,
@@ -479,26 +478,6 @@ def test_fast_path_reproduces_the_reference_path(scenario, values, model):
             np.testing.assert_allclose(fast.model_induced_phi[i, 1:],
                                        res.extras["model_induced_phi"][k][1:], rtol=1e-3,
                                        atol=1e-9)
-
-
-def test_batched_correction_equals_the_shared_kalman_correction():
-    rng = np.random.default_rng(7)
-    B = 5
-    A = rng.normal(size=(B, 3, 3))
-    P = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(3)
-    H = rng.normal(size=(B, 6, 3))
-    z = rng.normal(size=(B, 6))
-    R = rng.uniform(0.1, 2.0, size=(B, 6))
-    c = correct_batch(P, z, H, R)
-    for i in range(B):
-        k = kalman.correct(np.zeros(3), P[i], z[i], H[i], R[i])
-        np.testing.assert_allclose(c.dx[i], k.x, rtol=1e-12, atol=1e-14)
-        np.testing.assert_allclose(c.P[i], k.P, rtol=1e-12, atol=1e-14)
-        assert c.nis[i] == pytest.approx(k.nis, rel=1e-12)
-    bad = P.copy()
-    bad[2] = -np.eye(3)
-    with pytest.raises(kalman.FilterDivergedError):
-        correct_batch(bad, z, H, np.full((B, 6), -10.0))
 
 
 def test_fast_path_accepts_only_consistent_shapes():

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -28,8 +29,39 @@ class FilterParams:
     """Base of every filter's parameters: a frozen, keyword-only dataclass in SI units.
 
     Subclasses document the unit of each field in its docstring and validate in
-    ``__post_init__`` (raise ``ValueError`` naming the field and the accepted range).
+    ``__post_init__`` (raise ``ValueError`` naming the field and the accepted range, e.g. with
+    :func:`check_number`).
     """
+
+
+def check_number(
+    params: object, name: str, *, positive: bool = False, upper: float | None = None
+) -> None:
+    """Raise ``ValueError`` unless the field ``name`` of ``params`` is None or a finite number
+    ``>= 0`` (``> 0`` with ``positive``) and ``<= upper`` when given.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> @dataclasses.dataclass
+    ... class P:
+    ...     dt: float = 0.0
+    >>> check_number(P(), "dt", positive=True)
+    Traceback (most recent call last):
+    ...
+    ValueError: dt must be finite and > 0, got 0.0
+    """
+    v = getattr(params, name)
+    if v is None:
+        return
+    ok = isinstance(v, int | float) and math.isfinite(v) and (v > 0.0 if positive else v >= 0.0)
+    if ok and upper is not None:
+        ok = v <= upper
+    if not ok:
+        band = "> 0" if positive else ">= 0"
+        if upper is not None:
+            band += f" and <= {upper:g}"
+        raise ValueError(f"{name} must be finite and {band}, got {v!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,6 +94,12 @@ class NavSolution:
     pos: np.ndarray
     v_n: np.ndarray
     q_nb: np.ndarray
+
+    @classmethod
+    def from_vector(cls, nav: np.ndarray) -> NavSolution:
+        """From a navigation vector ``[lat, lon, h, v_N, v_E, v_D, q0, q1, q2, q3]`` (10,), the
+        layout of :mod:`navreplay.strapdown`; the fields are views of ``nav``."""
+        return cls(pos=nav[0:3], v_n=nav[3:6], q_nb=nav[6:10])
 
 
 @dataclasses.dataclass(frozen=True)

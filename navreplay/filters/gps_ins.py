@@ -74,10 +74,11 @@ import numpy as np
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
 from navreplay.filters import kalman
-from navreplay.filters.base import FilterContext, FilterParams, Innovation
+from navreplay.filters.base import FilterContext, FilterParams, Innovation, check_number
 from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.registry import register_filter
-from navreplay.geo import earth
+from navreplay.geo import kernels
+from navreplay.geo.rotations import skew, wrap_angle
 from navreplay.streams import StreamKind
 
 LEVER = slice(15, 18)
@@ -109,19 +110,9 @@ class GpsInsParams(InsParams):
         if max(abs(v) for v in lever) > 100.0:
             raise ValueError(f"lever_arm_b must be within 100 m per axis, got {lever!r}")
         object.__setattr__(self, "lever_arm_b", lever)
-        for name in ("lever_arm_sigma",):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        check_number(self, "lever_arm_sigma")
         for name in ("gps_pos_sigma_scale", "gps_vel_sigma_scale"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    x, y, z = float(v[0]), float(v[1]), float(v[2])
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+            check_number(self, name, positive=True)
 
 
 def gps_position_model(
@@ -166,11 +157,11 @@ def gps_position_model(
     C = ie.nav_dcm(nav)
     l_n = C @ lever_arm_b
     d = pos - pos_gps
-    d[1] = (d[1] + math.pi) % (2.0 * math.pi) - math.pi
+    d[1] = wrap_angle(d[1])
     z = D * d + l_n + nav[strapdown.VEL] * lag  # (4), (5)
     H = np.zeros((3, n_states))  # (6)
     H[:, ie.POS] = np.diag(D)
-    H[:, ie.ATT] = _skew(l_n)
+    H[:, ie.ATT] = skew(l_n)
     if lever_states:
         H[:, LEVER] = C
     return z, H, np.asarray(pos_sigma, dtype=float) ** 2  # (7)
@@ -213,23 +204,18 @@ def gps_velocity_model(
     lat, h = float(nav[0]), float(nav[2])
     v = nav[strapdown.VEL]
     C = ie.nav_dcm(nav)
-    R_M, R_N = earth.radii(lat)
-    w_in = np.array([  # w_ie + w_en
-        earth.OMEGA_IE * math.cos(lat) + v[1] / (R_N + h),
-        -v[0] / (R_M + h),
-        -earth.OMEGA_IE * math.sin(lat) - v[1] * math.tan(lat) / (R_N + h),
-    ])
-    W_in = _skew(w_in)
-    L_b = _skew(lever_arm_b)
+    w_in = np.add(kernels.earth_rate(lat), kernels.transport_rate(lat, h, v[0], v[1]))
+    W_in = skew(w_in)
+    L_b = skew(lever_arm_b)
     l_n = C @ lever_arm_b
     rot_n = C @ (-L_b @ omega_ib_b)  # C (w x l)
     z = v + rot_n - W_in @ l_n - v_gps  # (8), (9)
     H = np.zeros((3, n_states))  # (10)
     H[:, ie.VEL] = np.eye(3)
-    H[:, ie.ATT] = _skew(rot_n) - W_in @ _skew(l_n)
+    H[:, ie.ATT] = skew(rot_n) - W_in @ skew(l_n)
     H[:, ie.BG] = C @ L_b
     if lever_states:
-        H[:, LEVER] = C @ _skew(omega_ib_b) - W_in @ C
+        H[:, LEVER] = C @ skew(omega_ib_b) - W_in @ C
     return z, H, np.asarray(vel_sigma, dtype=float) ** 2  # (11)
 
 

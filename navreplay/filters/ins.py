@@ -83,6 +83,7 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     NavSolution,
+    check_number,
 )
 from navreplay.filters.registry import register_filter
 from navreplay.streams import StreamKind
@@ -92,23 +93,6 @@ from navreplay.units import (
     MICRO_G,
     MICRO_G_PER_SQRT_HZ,
 )
-
-_TIME_TOL = 1e-9
-"""Slack [s] when comparing sample times with step ends."""
-
-
-def _check(owner: object, name: str, *, positive: bool = False, upper: float | None = None):
-    v = getattr(owner, name)
-    if v is None:
-        return
-    ok = isinstance(v, int | float) and math.isfinite(v) and (v > 0.0 if positive else v >= 0.0)
-    if ok and upper is not None:
-        ok = v <= upper
-    if not ok:
-        rng = "> 0" if positive else ">= 0"
-        if upper is not None:
-            rng += f" and <= {upper:g}"
-        raise ValueError(f"{name} must be finite and {rng}, got {v!r}")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -150,8 +134,8 @@ class InsParams(FilterParams):
         for name in ("accel_vrw", "gyro_arw", "accel_bias_sigma", "gyro_bias_sigma",
                      "accel_bias_rw", "gyro_bias_rw", "init_pos_sigma", "init_vel_sigma",
                      "init_att_sigma", "accel_sf_mis", "gyro_sf_mis", "sf_mis_time"):
-            _check(self, name)
-        _check(self, "cov_step", positive=True, upper=10.0)
+            check_number(self, name)
+        check_number(self, "cov_step", positive=True, upper=10.0)
 
     def process_noise(self, n_states: int = ie.N_STATES) -> ie.ProcessNoise:
         """The process noise of eqs. (5), (5a) for a filter of ``n_states`` (extra states 0)."""
@@ -200,15 +184,40 @@ def initial_covariance(
     return np.diag(d**2)
 
 
-def _sigma3(params: InsParams, name: str, init: Mapping[str, Any], key: str) -> np.ndarray:
-    value = getattr(params, name)
+def initial_solution(context: FilterContext, filter_name: str) -> tuple[np.ndarray, float]:
+    """The navigation vector (10,) and time [s] of ``metadata.initial_nav``.
+
+    Raises ``ValueError`` naming the filter when a key (t_ns, pos, v_n, q_nb) is missing or a
+    value is not finite.
+    """
+    init = context.metadata.initial_nav
+    missing = [k for k in ("t_ns", "pos", "v_n", "q_nb") if k not in init]
+    if missing:
+        raise ValueError(
+            f"filter {filter_name!r} needs metadata.initial_nav with t_ns, pos, v_n, q_nb "
+            f"(missing: {', '.join(missing)})"
+        )
+    nav = strapdown.nav_vector(init["pos"], init["v_n"], init["q_nb"])
+    if not np.all(np.isfinite(nav)):
+        raise ValueError(f"filter {filter_name!r}: metadata.initial_nav is not finite: {nav}")
+    return nav, (int(init["t_ns"]) - int(context.t0_ns)) * 1e-9
+
+
+def initial_sigma(
+    initial_nav: Mapping[str, Any], key: str, value: float | None = None, *,
+    param: str | None = None,
+) -> np.ndarray:
+    """Initial 1-sigma per axis, shape (3,): ``value`` when set (a filter parameter, named
+    ``param``), else ``initial_nav["sigma"][key]`` (``pos_ned`` [m], ``v_n`` [m/s], ``phi``
+    [rad])."""
     if value is not None:
         return np.full(3, float(value))
-    sigma = init.get("sigma", {})
+    sigma = initial_nav.get("sigma", {})
     if key not in sigma:
+        hint = f"; set the filter parameter {param}" if param else ""
         raise ValueError(
-            f"metadata.initial_nav has no sigma[{key!r}] (has: {', '.join(sigma) or 'none'}); "
-            f"set the filter parameter {name}"
+            f"metadata.initial_nav has no sigma[{key!r}] (has: {', '.join(sigma) or 'none'})"
+            + hint
         )
     out = np.asarray(sigma[key], dtype=float).reshape(-1)
     if out.shape != (3,) or not np.all(np.isfinite(out)) or np.any(out < 0):
@@ -252,37 +261,24 @@ class InsFilter(Filter):
 
     def __init__(self, params: InsParams, context: FilterContext) -> None:
         super().__init__(params, context)
-        init = context.metadata.initial_nav
-        missing = [k for k in ("t_ns", "pos", "v_n", "q_nb") if k not in init]
-        if missing:
-            raise ValueError(
-                f"filter {self.name!r} needs metadata.initial_nav with t_ns, pos, v_n, q_nb "
-                f"(missing: {', '.join(missing)})"
-            )
-        self.nav = strapdown.nav_vector(init["pos"], init["v_n"], init["q_nb"])
-        if not np.all(np.isfinite(self.nav)):
-            raise ValueError(f"metadata.initial_nav is not finite: {self.nav}")
-        self.t = (int(init["t_ns"]) - int(context.t0_ns)) * 1e-9
+        self.nav, self.t = initial_solution(context, self.name)
         self.b_a = np.zeros(3)
         self.b_g = np.zeros(3)
         p = params
+        init = context.metadata.initial_nav
         P0 = initial_covariance(
             self.nav[strapdown.POS],
-            _sigma3(p, "init_pos_sigma", init, "pos_ned"),
-            _sigma3(p, "init_vel_sigma", init, "v_n"),
-            _sigma3(p, "init_att_sigma", init, "phi"),
+            initial_sigma(init, "pos_ned", p.init_pos_sigma, param="init_pos_sigma"),
+            initial_sigma(init, "v_n", p.init_vel_sigma, param="init_vel_sigma"),
+            initial_sigma(init, "phi", p.init_att_sigma, param="init_att_sigma"),
             p.accel_bias_sigma,
             p.gyro_bias_sigma,
         )
         n = ie.N_STATES + self._extra_states()
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
-        self._noise = p.process_noise(n)
-        self._open = ie.OpenStep()  # the covariance step in progress
-        # increments of the last IMU sample (coning / sculling across blocks) and its
-        # compensated body rate (lever-arm terms)
-        self._prev = np.zeros(6)
-        self.omega_ib_b = np.zeros(3)
+        self._time_update = ie.TimeUpdate(p.process_noise(n), p.cov_step)
+        self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
         self.state_names = NAV_STATE_NAMES + self._extra_names()
         self._init_extra()
         kalman.check_covariance(self.P, name="P0", t=self.t)
@@ -305,32 +301,14 @@ class InsFilter(Filter):
     # -- the Filter interface --------------------------------------------------------------
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
-        t = np.asarray(t, dtype=np.float64)
-        first = 0
-        if t[0] <= self.t + _TIME_TOL:  # samples before the initial solution are skipped
-            first = int(np.searchsorted(t, self.t + _TIME_TOL, side="right"))
-            if first == t.shape[0]:
-                return
-            t = t[first:]
-        omega = imu["omega_ib_b"][first:] - self.b_g  # (1)
-        f = imu["f_b"][first:] - self.b_a
-        k = t.shape[0]
-        dt = np.empty(k)
-        dt[0] = t[0] - self.t
-        np.subtract(t[1:], t[:-1], out=dt[1:])
-        hist = np.empty((k + 1, strapdown.NAV_SIZE))
-        bad = strapdown.integrate_kernel(self.nav, omega, f, dt, self._prev, hist)  # (2)
-        if bad != -1:
-            i = max(bad, 0)
-            raise ValueError(
-                f"IMU sample at t = {t[i]:.6f} s is not finite or not after the previous one "
-                f"(omega_ib_b = {omega[i] + self.b_g}, f_b = {f[i] + self.b_a})"
-            )
-        self._prev = np.concatenate((omega[-1] * dt[-1], f[-1] * dt[-1]))
-        self.omega_ib_b = omega[-1]
-        self._covariance_steps(hist, f, omega, dt)
-        self.nav = hist[-1]
-        self.t = float(t[-1])
+        omega = imu["omega_ib_b"]
+        step = self._time_update.propagate(self.nav, self.P, self.t, t, omega, imu["f_b"],
+                                           self.b_a, self.b_g)  # (1)-(5a)
+        if step is None:
+            return
+        self.nav, self.P, self.t = step
+        self.omega_ib_b = omega[-1] - self.b_g
+        kalman.check_covariance(self.P, t=self.t)
 
     def update(
         self, kind: StreamKind, t: float, sample: Mapping[str, Any]
@@ -343,29 +321,16 @@ class InsFilter(Filter):
         x[ie.BA] = self.b_a
         x[ie.BG] = self.b_g
         x[ie.N_STATES:] = self._extra_values()
-        nav = self.nav
         return Estimate(
             self.t, x, self.P,
-            NavSolution(pos=nav[strapdown.POS], v_n=nav[strapdown.VEL], q_nb=nav[strapdown.QUAT]),
+            NavSolution.from_vector(self.nav),
         )
 
     # -- covariance propagation ------------------------------------------------------------
 
-    def _covariance_steps(
-        self, hist: np.ndarray, f: np.ndarray, omega: np.ndarray, dt: np.ndarray
-    ) -> None:
-        """Propagate P over the steps of cov_step that end in this block, eqs. (3)-(5a)."""
-        P = ie.accumulate_covariance(self.P, hist, f, omega, dt, self.params.cov_step,
-                                     self._noise, self._open)  # (4)
-        kalman.check_covariance(P, t=float(self.t + dt.sum()))
-        self.P = P
-
     def _sync_covariance(self) -> None:
         """Close the open covariance step so that P belongs to the current time."""
-        if self._open.dt > 0.0:
-            P = ie.close_step(self.P, self._noise, self._open)
-            kalman.check_covariance(P, t=self.t)
-            self.P = P
+        self.P = self._time_update.close(self.P, self.t)
 
     # -- feedback --------------------------------------------------------------------------
 

@@ -100,7 +100,8 @@ import numba
 import numpy as np
 
 from navreplay import strapdown
-from navreplay.geo import earth
+from navreplay.filters.kalman import FilterDivergedError, check_covariance
+from navreplay.geo import earth, kernels
 from navreplay.geo.rotations import (
     attitude_error,
     quat_mult,
@@ -144,16 +145,6 @@ NAV_POS = strapdown.POS
 NAV_VEL = strapdown.VEL
 NAV_Q = strapdown.QUAT
 
-# earth-model constants, read once so that numba folds them into the machine code
-_A = earth.A
-_E2 = earth.E2
-_FLAT = earth.F
-_OMEGA_IE = earth.OMEGA_IE
-_GAMMA_E = earth.GAMMA_E
-_K_SOM = earth.K_SOMIGLIANA
-_M_GRAV = earth.M_GRAV
-
-
 class Vertical(enum.StrEnum):
     """Vertical coordinate of the position error state."""
 
@@ -171,42 +162,6 @@ STATE_NAMES: tuple[str, ...] = (
 
 
 @numba.njit(cache=True)
-def _gravity_derivatives(lat: float, h: float) -> tuple[float, float]:
-    s, c = math.sin(lat), math.cos(lat)
-    s2 = s * s
-    w = 1.0 - _E2 * s2
-    g0 = _GAMMA_E * (1.0 + _K_SOM * s2) / math.sqrt(w)
-    dg0 = _GAMMA_E * (
-        2.0 * _K_SOM * s * c / math.sqrt(w) + (1.0 + _K_SOM * s2) * _E2 * s * c / w**1.5
-    )
-    k = 1.0 + _FLAT + _M_GRAV - 2.0 * _FLAT * s2
-    hfac = 1.0 - 2.0 / _A * k * h + 3.0 / _A**2 * h * h
-    dhfac_dlat = 8.0 * _FLAT * s * c * h / _A
-    dhfac_dh = -2.0 / _A * k + 6.0 * h / _A**2
-    return dg0 * hfac + g0 * dhfac_dlat, g0 * dhfac_dh
-
-
-def gravity_derivatives(lat: float, h: float) -> tuple[float, float]:
-    """Derivatives of the normal gravity :func:`navreplay.geo.gravity`.
-
-    Parameters
-    ----------
-    lat : float
-        Latitude [rad].
-    h : float
-        Height [m].
-
-    Returns
-    -------
-    dg_dlat : float
-        [m/s^2 per rad].
-    dg_dh : float
-        [m/s^2 per m], about -2 g / R.
-    """
-    return _gravity_derivatives(float(lat), float(h))
-
-
-@numba.njit(cache=True)
 def _set_skew(M: np.ndarray, r: int, c: int, x: float, y: float, z: float, k: float) -> None:
     """M[r:r+3, c:c+3] += k [v x] with v = (x, y, z)."""
     M[r, c + 1] -= k * z
@@ -218,23 +173,22 @@ def _set_skew(M: np.ndarray, r: int, c: int, x: float, y: float, z: float, k: fl
 
 
 @numba.njit(cache=True)
-def _fill_system_matrix(
+def fill_system_matrix(
     lat: float, h: float, vN: float, vE: float, vD: float,
-    C: np.ndarray, f_b: np.ndarray, depth: bool, F: np.ndarray,
+    C: np.ndarray, f_b: np.ndarray, depth: bool, curvature: bool, F: np.ndarray,
 ) -> None:
-    """Write eqs. (6)-(19) into F[:15, :15] (F zeroed by the caller)."""
+    """Write eqs. (6)-(19) into ``F[:15, :15]`` (zeroed by the caller); callable from compiled
+    code. Without ``curvature`` the dR_M/dlat, dR_N/dlat terms (column 0 only) are left out.
+    Arguments as :func:`system_matrix` (C is C_nb, depth selects eq. 19)."""
     s, c = math.sin(lat), math.cos(lat)
     t = s / c
-    w = 1.0 - _E2 * s * s
-    R_N = _A / math.sqrt(w)
-    R_M = _A * (1.0 - _E2) / w**1.5
-    dR_M = 3.0 * _A * (1.0 - _E2) * _E2 * s * c / w**2.5
-    dR_N = _A * _E2 * s * c / w**1.5
+    R_M, R_N = kernels.radii(lat)
+    dR_M, dR_N = kernels.radii_derivatives(lat) if curvature else (0.0, 0.0)
     R_Mh = R_M + h
     R_Nh = R_N + h
-    W = _OMEGA_IE
-    w_ie = np.array([W * c, 0.0, -W * s])
-    w_en = np.array([vE / R_Nh, -vN / R_Mh, -vE * t / R_Nh])
+    W = earth.OMEGA_IE
+    w_ie = kernels.earth_rate(lat)
+    w_en = kernels.transport_rate(lat, h, vN, vE)
     Wp = np.zeros((3, 3))  # (6)
     Wp[0, 0] = -W * s
     Wp[2, 0] = -W * c
@@ -276,7 +230,7 @@ def _fill_system_matrix(
             F[6 + i, j] = Wp[i, j] + Ep[i, j]  # (15)
             F[6 + i, 3 + j] = Ev[i, j]
             F[6 + i, 12 + j] = C[i, j]  # (16)
-    dg_dlat, dg_dh = _gravity_derivatives(lat, h)  # (11) Gp
+    dg_dlat, dg_dh = kernels.gravity_derivatives(lat, h)  # (11) Gp
     F[5, 0] += dg_dlat
     F[5, 2] += dg_dh
     _set_skew(F, 3, 3, 2.0 * w_ie[0] + w_en[0], 2.0 * w_ie[1] + w_en[1],
@@ -290,11 +244,6 @@ def _fill_system_matrix(
             F[i, 2] = -F[i, 2]
 
 
-fill_system_matrix = _fill_system_matrix
-"""numba kernel ``fill_system_matrix(lat, h, v_N, v_E, v_D, C_nb, f_b, depth, F)``: writes
-eqs. (6)-(19) into ``F[:15, :15]`` (zeroed by the caller); callable from compiled code."""
-
-
 def system_matrix(
     pos: np.ndarray,
     v_n: np.ndarray,
@@ -302,6 +251,7 @@ def system_matrix(
     f_b: np.ndarray,
     *,
     vertical: Vertical = Vertical.HEIGHT,
+    curvature_derivatives: bool = True,
     out: np.ndarray | None = None,
 ) -> np.ndarray:
     """The system matrix F of the 15 navigation error states, eqs. (6)-(19).
@@ -318,6 +268,8 @@ def system_matrix(
         Bias-compensated specific force, body [m/s^2] (mean over the step).
     vertical : Vertical
         Height or depth as the third position error state.
+    curvature_derivatives : bool
+        Keep the dR_M/dlat, dR_N/dlat terms of (7) and (9) (column 0; their effect is small).
     out : ndarray, shape (n, n) with n >= 15, optional
         A larger filter's F: its top-left 15x15 block is overwritten, the rest left as it is.
 
@@ -330,28 +282,12 @@ def system_matrix(
     else:
         F = out
         F[:N_STATES, :N_STATES] = 0.0
-    _fill_system_matrix(
+    fill_system_matrix(
         float(pos[0]), float(pos[2]), float(v_n[0]), float(v_n[1]), float(v_n[2]),
         np.ascontiguousarray(C_nb, dtype=np.float64), np.ascontiguousarray(f_b, dtype=np.float64),
-        vertical is Vertical.DEPTH, F,
+        vertical is Vertical.DEPTH, bool(curvature_derivatives), F,
     )
     return F
-
-
-@numba.njit(cache=True)
-def _quat_to_dcm(q: np.ndarray) -> np.ndarray:
-    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    C = np.empty((3, 3))
-    C[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
-    C[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
-    C[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
-    C[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
-    C[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
-    C[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
-    C[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
-    C[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
-    C[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
-    return C
 
 
 def noise_matrix(C_nb: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:
@@ -495,13 +431,10 @@ def apply_correction(
     out[1] -= dx[1]
     out[2] -= dx[2] if vertical is Vertical.HEIGHT else -dx[2]
     out[NAV_VEL] -= dx[VEL]
-    a, b, c = 0.5 * float(dx[6]), 0.5 * float(dx[7]), 0.5 * float(dx[8])
-    q0, q1, q2, q3 = (float(v) for v in nav[NAV_Q])
-    # [1, a, b, c] (x) q, Hamilton product
-    r0 = q0 - a * q1 - b * q2 - c * q3
-    r1 = q1 + a * q0 + b * q3 - c * q2
-    r2 = q2 - a * q3 + b * q0 + c * q1
-    r3 = q3 + a * q2 - b * q1 + c * q0
+    r0, r1, r2, r3 = kernels.quat_mult(
+        1.0, 0.5 * float(dx[6]), 0.5 * float(dx[7]), 0.5 * float(dx[8]),
+        *(float(v) for v in nav[NAV_Q]),
+    )
     k = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
     if r0 < 0.0:
         k = -k
@@ -514,34 +447,63 @@ def apply_correction(
 
 def nav_dcm(nav: np.ndarray) -> np.ndarray:
     """Attitude DCM C_nb of a navigation vector (10,), shape (3, 3)."""
-    return _quat_to_dcm(np.ascontiguousarray(nav[NAV_Q], dtype=np.float64))
+    return kernels.quat_to_dcm(np.ascontiguousarray(nav[NAV_Q], dtype=np.float64))
 
 
 # -- covariance propagation (compiled) --------------------------------------------------------
 
 
-quat_to_dcm_kernel = _quat_to_dcm
-"""numba kernel ``quat_to_dcm_kernel(q) -> C`` (3, 3) for one quaternion (4,)."""
+N_NAV = 9
+"""Rows of F that are not zero: position, velocity and attitude."""
 
 
 @numba.njit(cache=True)
 def _covariance_step(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, F: np.ndarray, eye: np.ndarray,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
+    F: np.ndarray, M: np.ndarray, T: np.ndarray,
 ) -> np.ndarray:
-    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19) and Q from (20), (21)."""
+    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19) and Qd from (20), (21);
+    returns a new P.
+
+    F has non-zero rows only for position, velocity and attitude and non-zero columns only for
+    the 15 navigation states, so ``Phi = [[M], [0 I]]`` with M (9 x 15) its first 9 rows, and
+    only the first 9 rows and columns of P change: ``T = M P[:15, :]`` gives the new rows and
+    ``T[:, :15] M^T`` the new 9 x 9 block. F (15, 15), M (9, 15) and T (9, n) are scratch.
+    """
     n = P.shape[0]
     F[:, :] = 0.0
-    C = _quat_to_dcm(nav[6:10])
-    _fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], C, f_b, depth, F)
-    Fdt = F * dt
-    Phi = eye + Fdt + 0.5 * (Fdt @ Fdt)  # kalman (3)
-    P = Phi @ P @ Phi.T  # kalman (6)
+    C = kernels.quat_to_dcm(nav[6:10])
+    fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], C, f_b, depth, curvature, F)
+    h = 0.5 * dt * dt
+    for i in range(N_NAV):  # kalman (3): (F dt)^2 [0:9, :] = F[0:9, 0:9] F[0:9, :] dt^2
+        for j in range(N_STATES):
+            s = 0.0
+            for k in range(N_NAV):
+                s += F[i, k] * F[k, j]
+            M[i, j] = F[i, j] * dt + h * s
+        M[i, i] += 1.0
+    for i in range(N_NAV):  # kalman (6)
+        for j in range(n):
+            s = 0.0
+            for k in range(N_STATES):
+                s += M[i, k] * P[k, j]
+            T[i, j] = s
+    out = P.copy()
+    for i in range(N_NAV):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(N_STATES):
+                s += T[i, k] * M[j, k]
+            out[i, j] = s
+            out[j, i] = s
+        for j in range(N_NAV, n):
+            out[i, j] = T[i, j]
+            out[j, i] = T[i, j]
     for i in range(n):
-        P[i, i] += q[i] * dt  # kalman (4), diagonal
-    if k_acc > 0.0:  # (21): |a_n|^2 = |C f_b + g_n|^2
-        s = math.sin(nav[0])
-        g = _GAMMA_E * (1.0 + _K_SOM * s * s) / math.sqrt(1.0 - _E2 * s * s)
+        out[i, i] += q[i] * dt  # kalman (4), diagonal (20)
+    if k_acc > 0.0:  # (21): |a_n|^2 = |C f_b + g_n|^2, g on the ellipsoid
+        g = kernels.gravity(nav[0], 0.0)
         a2 = 0.0
         for i in range(3):
             a = C[i, 0] * f_b[0] + C[i, 1] * f_b[1] + C[i, 2] * f_b[2]
@@ -549,39 +511,55 @@ def _covariance_step(
                 a += g
             a2 += a * a
         for i in range(3, 6):
-            P[i, i] += k_acc * a2 * dt
+            out[i, i] += k_acc * a2 * dt
     if k_gyro > 0.0:  # (21): |omega_ib_b|^2
         w2 = omega_b[0] ** 2 + omega_b[1] ** 2 + omega_b[2] ** 2
         for i in range(6, 9):
-            P[i, i] += k_gyro * w2 * dt
-    return 0.5 * (P + P.T)
+            out[i, i] += k_gyro * w2 * dt
+    return out
+
+
+@numba.njit(cache=True)
+def _scratch(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """F, M, T of :func:`_covariance_step` for n states."""
+    return np.zeros((N_STATES, N_STATES)), np.zeros((N_NAV, N_STATES)), np.zeros((N_NAV, n))
 
 
 @numba.njit(cache=True)
 def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
 ) -> np.ndarray:
-    n = P.shape[0]
-    F = np.zeros((n, n))
-    eye = np.eye(n)
+    F, M, T = _scratch(P.shape[0])
     for k in range(dt.shape[0]):
         P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
-                             F, eye)
+                             curvature, F, M, T)
+    return P
+
+
+@numba.njit(cache=True)
+def _close_step(
+    P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
+    open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray, T: np.ndarray,
+) -> np.ndarray:
+    """P propagated over the open step, with F at its start and the mean specific force and
+    body rate over it; the step is then cleared (P itself when none is open)."""
+    dt = open_sums[0]
+    if dt <= 0.0:
+        return P
+    P = _covariance_step(P, open_nav, open_sums[1:4] / dt, open_sums[4:7] / dt, dt, q, k_acc,
+                         k_gyro, depth, curvature, F, M, T)
+    open_sums[:] = 0.0
     return P
 
 
 @numba.njit(cache=True)
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
-    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool,
+    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
     open_nav: np.ndarray, open_sums: np.ndarray,
 ) -> np.ndarray:
-    n = P.shape[0]
-    F = np.zeros((n, n))
-    eye = np.eye(n)
-    f_mean = np.empty(3)
-    w_mean = np.empty(3)
+    F, M, T = _scratch(P.shape[0])
     for k in range(dt.shape[0]):
         if open_sums[0] == 0.0:
             open_nav[:] = hist[k]
@@ -590,13 +568,47 @@ def _accumulate_covariance(
             open_sums[1 + j] += f_b[k, j] * dt[k]
             open_sums[4 + j] += omega_b[k, j] * dt[k]
         if open_sums[0] >= step - 1e-9:
-            for j in range(3):
-                f_mean[j] = open_sums[1 + j] / open_sums[0]
-                w_mean[j] = open_sums[4 + j] / open_sums[0]
-            P = _covariance_step(P, open_nav, f_mean, w_mean, open_sums[0], q, k_acc, k_gyro,
-                                 depth, F, eye)
-            open_sums[:] = 0.0
+            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, open_nav, open_sums, F, M, T)
     return P
+
+
+@numba.njit(cache=True)
+def _propagate_block(
+    nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_prev: float, omega: np.ndarray,
+    f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, prev: np.ndarray, step: float,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
+    open_nav: np.ndarray, open_sums: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """Bias compensation, strapdown and the covariance steps over a block of IMU samples.
+
+    Returns (code, nav, P): code -1 when all went well; the strapdown's codes (the index of the
+    first invalid sample, -2 for a non-finite state) with nav and P unchanged; -3 when the
+    propagated P (returned for the message) has a negative or non-finite variance.
+    """
+    k = t.shape[0]
+    dt = np.empty(k)
+    dt[0] = t[0] - t_prev
+    for i in range(1, k):
+        dt[i] = t[i] - t[i - 1]
+    w = np.empty((k, 3))
+    fc = np.empty((k, 3))
+    for i in range(k):
+        for j in range(3):
+            w[i, j] = omega[i, j] - b_g[j]
+            fc[i, j] = f[i, j] - b_a[j]
+    hist = np.empty((k + 1, strapdown.NAV_SIZE))
+    code = strapdown.integrate_kernel(nav, w, fc, dt, prev, hist)
+    if code != -1:
+        return code, nav, P
+    for j in range(3):  # the last sample's increments: coning and sculling of the next block
+        prev[j] = w[k - 1, j] * dt[k - 1]
+        prev[3 + j] = fc[k - 1, j] * dt[k - 1]
+    P = _accumulate_covariance(P, hist, fc, w, dt, step, q, k_acc, k_gyro, depth, curvature,
+                               open_nav, open_sums)
+    for i in range(P.shape[0]):
+        if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
+            return -3, nav, P
+    return code, hist[k].copy(), P
 
 
 @dataclasses.dataclass(frozen=True)
@@ -656,22 +668,22 @@ class OpenStep:
         """Length of the open step [s] (0: none open)."""
         return float(self.sums[0])
 
-    def f_mean(self) -> np.ndarray:
-        """Mean specific force over the open step, body [m/s^2], shape (3,)."""
-        return self.sums[1:4] / self.sums[0]
 
-    def omega_mean(self) -> np.ndarray:
-        """Mean body rate over the open step [rad/s], shape (3,)."""
-        return self.sums[4:7] / self.sums[0]
+def _model_args(
+    shape: tuple[int, ...], noise: ProcessNoise, vertical: Vertical, curvature_derivatives: bool
+) -> tuple[np.ndarray, float, float, bool, bool]:
+    """Check the shape of P against the model; the arguments the compiled kernels take."""
+    n = noise.q.shape[0]
+    if shape != (n, n) or n < N_STATES:
+        raise ValueError(
+            f"P must be (n, n) with n >= 15 the length of the process noise ({n}), got {shape}"
+        )
+    return (noise.q, noise.k_acc, noise.k_gyro, vertical is Vertical.DEPTH,
+            bool(curvature_derivatives))
 
-    def clear(self) -> None:
-        self.sums[:] = 0.0
 
-
-def _noise_args(noise: ProcessNoise, n: int) -> tuple[np.ndarray, float, float]:
-    if noise.q.shape != (n,):
-        raise ValueError(f"process noise q must have shape ({n},), got {noise.q.shape}")
-    return noise.q, noise.k_acc, noise.k_gyro
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def propagate_covariance(
@@ -683,13 +695,15 @@ def propagate_covariance(
     noise: ProcessNoise,
     *,
     vertical: Vertical = Vertical.HEIGHT,
+    curvature_derivatives: bool = True,
 ) -> np.ndarray:
     """Covariance propagation over k steps of a filter whose first 15 states are these.
 
     The same as k calls of ``kalman.predict`` with ``Phi = kalman.discretize(F, dt)``
     (``F = system_matrix(...)`` in the top-left block, 0 elsewhere: extra states are random
-    constants or random walks) and ``Qd`` of eqs. (20)-(21), compiled into one loop. The result
-    is symmetrised but not checked: check it with ``kalman.check_covariance``.
+    constants or random walks) and ``Qd`` of eqs. (20)-(21), compiled into one loop that
+    exploits the structure of F (only the rows and columns of the 9 navigation errors change).
+    The result is symmetric but not checked: check it with ``kalman.check_covariance``.
 
     Parameters
     ----------
@@ -705,27 +719,21 @@ def propagate_covariance(
         Step lengths [s].
     noise : ProcessNoise
     vertical : Vertical
+    curvature_derivatives : bool
+        As :func:`system_matrix`.
 
     Returns
     -------
     P : ndarray, shape (n, n)
     """
-    n = P.shape[0]
-    if P.shape != (n, n) or n < N_STATES:
-        raise ValueError(f"P must be (n, n) with n >= 15, got {P.shape}")
+    args = _model_args(P.shape, noise, vertical, curvature_derivatives)
     k = dt.shape[0]
     if nav.shape != (k, 10) or f_b.shape != (k, 3) or omega_b.shape != (k, 3):
         raise ValueError(
             f"nav must be ({k}, 10), f_b and omega_b ({k}, 3) for {k} steps; got {nav.shape}, "
             f"{f_b.shape}, {omega_b.shape}"
         )
-    q, k_acc, k_gyro = _noise_args(noise, n)
-    f64 = np.ascontiguousarray
-    return _propagate_covariance(
-        f64(P, dtype=np.float64), f64(nav, dtype=np.float64), f64(f_b, dtype=np.float64),
-        f64(omega_b, dtype=np.float64), f64(dt, dtype=np.float64), q, k_acc, k_gyro,
-        vertical is Vertical.DEPTH,
-    )
+    return _propagate_covariance(_f64(P), _f64(nav), _f64(f_b), _f64(omega_b), _f64(dt), *args)
 
 
 def accumulate_covariance(
@@ -739,6 +747,7 @@ def accumulate_covariance(
     open_step: OpenStep,
     *,
     vertical: Vertical = Vertical.HEIGHT,
+    curvature_derivatives: bool = True,
 ) -> np.ndarray:
     """Propagate P over IMU samples in steps of length ``step`` (compiled loop).
 
@@ -766,38 +775,140 @@ def accumulate_covariance(
     open_step : OpenStep
         The step carried over from the previous call; updated in place.
     vertical : Vertical
+    curvature_derivatives : bool
 
     Returns
     -------
     P : ndarray, shape (n, n)
-        Symmetrised, not checked.
+        Symmetric, not checked.
     """
-    n = P.shape[0]
+    q, k_acc, k_gyro, depth, curvature = _model_args(P.shape, noise, vertical,
+                                                     curvature_derivatives)
     k = dt.shape[0]
     if hist.shape != (k + 1, 10) or f_b.shape != (k, 3) or omega_b.shape != (k, 3):
         raise ValueError(
             f"hist must be ({k + 1}, 10), f_b and omega_b ({k}, 3); got {hist.shape}, "
             f"{f_b.shape}, {omega_b.shape}"
         )
-    q, k_acc, k_gyro = _noise_args(noise, n)
-    f64 = np.ascontiguousarray
     return _accumulate_covariance(
-        f64(P, dtype=np.float64), f64(hist, dtype=np.float64), f64(f_b, dtype=np.float64),
-        f64(omega_b, dtype=np.float64), f64(dt, dtype=np.float64), float(step), q, k_acc,
-        k_gyro, vertical is Vertical.DEPTH, open_step.nav, open_step.sums,
+        _f64(P), _f64(hist), _f64(f_b), _f64(omega_b), _f64(dt), float(step), q, k_acc, k_gyro,
+        depth, curvature, open_step.nav, open_step.sums,
     )
 
 
 def close_step(
     P: np.ndarray, noise: ProcessNoise, open_step: OpenStep, *,
-    vertical: Vertical = Vertical.HEIGHT,
+    vertical: Vertical = Vertical.HEIGHT, curvature_derivatives: bool = True,
 ) -> np.ndarray:
     """Propagate P over the open step (if any) and clear it; P at the last sample's time."""
-    if open_step.dt <= 0.0:
+    model = _model_args(P.shape, noise, vertical, curvature_derivatives)
+    return _close_step(_f64(P), *model, open_step.nav, open_step.sums, *_scratch(P.shape[0]))
+
+
+_TIME_TOL = 1e-9
+"""Slack [s] when comparing sample times with the time of the navigation solution."""
+
+
+class TimeUpdate:
+    """The time update of an INS filter: strapdown and covariance over blocks of IMU samples.
+
+    Each :meth:`propagate` compensates the IMU with the bias estimates (``f_hat = f_b - b_a``,
+    ``omega_hat = omega_ib_b - b_g``), integrates it with
+    :func:`navreplay.strapdown.integrate_kernel` and propagates P as
+    :func:`accumulate_covariance` does, in one compiled call. What carries over from one block
+    to the next is kept here: the increments of the last sample (the coning and sculling terms
+    of the next) and the open covariance step.
+
+    Parameters
+    ----------
+    noise : ProcessNoise
+        Its length fixes the number of states n (>= 15).
+    step : float
+        Covariance step [s].
+    vertical : Vertical
+    curvature_derivatives : bool
+        As :func:`system_matrix`.
+    """
+
+    def __init__(
+        self, noise: ProcessNoise, step: float, *, vertical: Vertical = Vertical.HEIGHT,
+        curvature_derivatives: bool = True,
+    ) -> None:
+        n = noise.q.shape[0]
+        self._shape = (n, n)
+        self._model = _model_args(self._shape, noise, vertical, curvature_derivatives)
+        self._work = _scratch(n)  # of the compiled close
+        self.step = float(step)
+        self.prev = np.zeros(6)
+        """Increments [dtheta, dv] of the last sample [rad, m/s]."""
+        self.open_step = OpenStep()
+
+    def propagate(
+        self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
+        omega_ib_b: np.ndarray, f_b: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """Propagate over a block of IMU samples; samples at or before ``t_nav`` are skipped.
+
+        Parameters
+        ----------
+        nav : ndarray, shape (10,)
+            Navigation vector at ``t_nav`` [s].
+        P : ndarray, shape (n, n)
+        t_nav : float
+        t : ndarray, shape (k,)
+            Sample times [s], increasing.
+        omega_ib_b, f_b : ndarray, shape (k, 3)
+            Raw IMU samples [rad/s], [m/s^2].
+        b_a, b_g : ndarray, shape (3,)
+            Bias estimates [m/s^2], [rad/s].
+
+        Returns
+        -------
+        (nav, P, t) or None
+            The navigation vector (10,), P (n, n) (symmetric, variances checked, not yet
+            checked for PSD) and the time [s] of the last sample; None when no sample is after
+            ``t_nav``.
+
+        Raises
+        ------
+        ValueError
+            A sample that is not finite or not after the previous one.
+        FilterDivergedError
+            A non-finite navigation state or a negative or non-finite variance.
+        """
+        if P.shape != self._shape:
+            raise ValueError(f"P must be {self._shape} as the process noise, got {P.shape}")
+        if t[0] <= t_nav + _TIME_TOL:  # samples at or before the navigation solution
+            first = int(np.searchsorted(t, t_nav + _TIME_TOL, side="right"))
+            if first == t.shape[0]:
+                return None
+            t, omega_ib_b, f_b = t[first:], omega_ib_b[first:], f_b[first:]
+        code, nav, P = _propagate_block(
+            nav, P, t, t_nav, omega_ib_b, f_b, b_a, b_g, self.prev, self.step, *self._model,
+            self.open_step.nav, self.open_step.sums,
+        )
+        if code == -3:
+            check_covariance(P, t=float(t[-1]))  # names what is wrong
+            raise FilterDivergedError("P has a negative or non-finite variance", float(t[-1]))
+        if code == -2:
+            raise FilterDivergedError("navigation state is not finite", t_nav)
+        if code != -1:
+            t_before = t[code - 1] if code else t_nav
+            raise ValueError(
+                f"IMU sample at t = {t[code]:.6f} s (previous {t_before:.6f} s): omega_ib_b = "
+                f"{omega_ib_b[code]}, f_b = {f_b[code]}: not finite, or the time does not "
+                "increase"
+            )
+        return nav, P, float(t[-1])
+
+    def close(self, P: np.ndarray, t: float) -> np.ndarray:
+        """P at the time t [s] of the last sample: propagated over the open covariance step,
+        which is then cleared, and checked (:func:`navreplay.filters.kalman.check_covariance`);
+        P itself when no step is open."""
+        if self.open_step.sums[0] <= 0.0:
+            return P
+        if P.shape != self._shape:
+            raise ValueError(f"P must be {self._shape} as the process noise, got {P.shape}")
+        P = _close_step(P, *self._model, self.open_step.nav, self.open_step.sums, *self._work)
+        check_covariance(P, t=t)
         return P
-    P = propagate_covariance(
-        P, open_step.nav[None, :], open_step.f_mean()[None, :],
-        open_step.omega_mean()[None, :], np.array([open_step.dt]), noise, vertical=vertical,
-    )
-    open_step.clear()
-    return P

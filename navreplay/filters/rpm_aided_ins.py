@@ -65,7 +65,8 @@ with the navigation blocks of :mod:`navreplay.filters.ins_error` in their depth 
 
 F has non-zero rows only for position, velocity and attitude, and non-zero columns only for
 those and the biases, so ``Phi = [[M], [0 I]]`` with M the 9 x 15 top block: the product
-touches 9 rows of P (:func:`covariance_step`).
+touches 9 rows of P (:func:`navreplay.filters.ins_error.propagate_covariance`, shared with the
+other INS filters).
 
 RPM water-velocity measurement (eq. 25, re-derived in spec section 4.4), with the corrected
 speed ``u_hat = c_rpm rpm / (1 + k_hat)``, ``w = v_hat - v_c_hat`` (``v_c_hat = [vc_N, vc_E, 0]``;
@@ -118,7 +119,6 @@ import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-import numba
 import numpy as np
 
 from navreplay import strapdown
@@ -131,9 +131,11 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     NavSolution,
+    check_number,
 )
+from navreplay.filters.ins import initial_covariance, initial_sigma, initial_solution
 from navreplay.filters.registry import register_filter
-from navreplay.geo import earth
+from navreplay.geo.rotations import skew
 from navreplay.streams import StreamKind
 from navreplay.units import DEG, DEG_PER_HOUR, MICRO_G
 
@@ -162,12 +164,6 @@ DELAY = slice(23, 24)
 INERT = slice(20, 24)
 """States without dynamics, noise or measurement in navigation mode."""
 N_STATES = 24
-N_NAV = 9
-"""Rows of F that are not zero (position, velocity, attitude)."""
-N_DYN = 15
-"""Columns of F that are not zero (navigation states and IMU biases)."""
-_A = earth.A
-_E2 = earth.E2
 _CHECK_INTERVAL = 1.0
 """Filter time between full symmetry / PSD checks of the propagated P [s] (every correction
 is checked, and every propagation step checks the variances)."""
@@ -215,20 +211,6 @@ class Mode(enum.StrEnum):
     """RPM (and depth) aiding with the current frozen at 0 ("Aided Navi.")."""
     RPM_CURRENT = "rpm_current"
     """RPM aiding with sea-current estimation ("Aided Navi. est Current")."""
-
-
-def _check(owner: object, name: str, *, positive: bool = False, upper: float | None = None):
-    v = getattr(owner, name)
-    if v is None:
-        return
-    ok = isinstance(v, int | float) and math.isfinite(v) and (v > 0.0 if positive else v >= 0.0)
-    if ok and upper is not None:
-        ok = v <= upper
-    if not ok:
-        band = "> 0" if positive else ">= 0"
-        if upper is not None:
-            band += f" and <= {upper:g}"
-        raise ValueError(f"{name} must be finite and {band}, got {v!r}")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -291,176 +273,15 @@ class RpmAidedInsParams(FilterParams):
                      "gyro_bias_sigma", "rpm_scale_factor_sigma", "rpm_misalignment_sigma",
                      "current_sigma", "init_vel_sigma", "init_level_sigma",
                      "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor"):
-            _check(self, name)
+            check_number(self, name)
         for name in ("rpm_sigma", "depth_sigma", "speed_per_rpm"):
-            _check(self, name, positive=True)
-        _check(self, "update_rate", positive=True, upper=100.0)
-        _check(self, "cov_step", positive=True, upper=10.0)
+            check_number(self, name, positive=True)
+        check_number(self, "update_rate", positive=True, upper=100.0)
+        check_number(self, "cov_step", positive=True, upper=10.0)
 
 
 # --------------------------------------------------------------------------------------------
-# system matrix and covariance propagation (compiled)
-
-
-@numba.njit(cache=True)
-def _quat_dcm(q: np.ndarray) -> np.ndarray:
-    """C_nb of a unit quaternion q_nb (scalar first), shape (3, 3)."""
-    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    C = np.empty((3, 3))
-    C[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
-    C[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
-    C[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
-    C[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
-    C[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
-    C[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
-    C[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
-    C[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
-    C[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
-    return C
-
-
-@numba.njit(cache=True)
-def _fill_nav_rows(F: np.ndarray, nav: np.ndarray, f_b: np.ndarray, curvature: bool) -> None:
-    """F[:15, :15] (zeroed here) from the shared NED blocks in depth form, eqs. (14)-(19)."""
-    F[:, :] = 0.0
-    C = _quat_dcm(nav[6:10])
-    lat, h, vN, vE, vD = nav[0], nav[2], nav[3], nav[4], nav[5]
-    ie._fill_system_matrix(lat, h, vN, vE, vD, C, f_b, True, F)
-    if not curvature:  # drop the dR_M/dL, dR_N/dL terms (column 0 only)
-        s, c = math.sin(lat), math.cos(lat)
-        w = 1.0 - _E2 * s * s
-        R_Mh = _A * (1.0 - _E2) / w**1.5 + h
-        R_Nh = _A / math.sqrt(w) + h
-        dR_M = 3.0 * _A * (1.0 - _E2) * _E2 * s * c / w**2.5
-        dR_N = _A * _E2 * s * c / w**1.5
-        F[0, 0] += vN * dR_M / R_Mh**2  # (17)
-        F[1, 0] += vE * dR_N / (R_Nh**2 * c)  # (18)
-        e0 = -vE * dR_N / R_Nh**2  # the dR terms of Ep[:, 0]
-        e1 = vN * dR_M / R_Mh**2
-        e2 = vE * (s / c) * dR_N / R_Nh**2
-        F[6, 0] -= e0  # F_phip = Wp + Ep
-        F[7, 0] -= e1
-        F[8, 0] -= e2
-        F[3, 0] -= vE * e2 - vD * e1  # F_vp = [V x] (2 Wp + Ep)
-        F[4, 0] -= vD * e0 - vN * e2
-        F[5, 0] -= vN * e1 - vE * e0
-
-
-@numba.njit(cache=True)
-def _transition_rows(F: np.ndarray, dt: float, M: np.ndarray) -> None:
-    """M = rows 0..8, columns 0..14 of Phi = I + F dt + (F dt)^2 / 2, eq. (23).
-
-    Rows 9.. of F are 0, so (F dt)^2 [0:9, :] = F[0:9, 0:9] F[0:9, :] dt^2.
-    """
-    h = 0.5 * dt * dt
-    for i in range(N_NAV):
-        for j in range(N_DYN):
-            s = 0.0
-            for k in range(N_NAV):
-                s += F[i, k] * F[k, j]
-            M[i, j] = F[i, j] * dt + h * s
-        M[i, i] += 1.0
-
-
-@numba.njit(cache=True)
-def _covariance_step(P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, dt: float,
-                     q: np.ndarray, curvature: bool, F: np.ndarray, M: np.ndarray,
-                     T: np.ndarray) -> np.ndarray:
-    """P <- Phi P Phi^T + diag(q) dt, eqs. (21)-(23), with Phi = [[M], [0 I]] (new array).
-
-    Only the first 9 rows (and columns) of P change: T = M P[0:15, :] gives the new rows,
-    T[:, 0:15] M^T the new navigation block.
-    """
-    n = P.shape[0]
-    _fill_nav_rows(F, nav, f_b, curvature)
-    _transition_rows(F, dt, M)
-    for i in range(N_NAV):
-        for j in range(n):
-            s = 0.0
-            for k in range(N_DYN):
-                s += M[i, k] * P[k, j]
-            T[i, j] = s
-    out = P.copy()
-    for i in range(N_NAV):
-        for j in range(n):
-            out[i, j] = T[i, j]
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(N_DYN):
-                s += T[i, k] * M[j, k]
-            out[i, j] = s
-            out[j, i] = s
-        for j in range(N_NAV, n):
-            out[j, i] = T[i, j]
-    for i in range(n):
-        out[i, i] += q[i] * dt
-    return out
-
-
-@numba.njit(cache=True)
-def _propagate_block(nav, P, omega, f, t, t_prev, b_a, b_g, prev, open_nav, open_sums, step,
-                     q, curvature):
-    """Strapdown (1)-(2) at the IMU rate and covariance steps (21)-(23) over a block.
-
-    ``t`` (k,) are the sample times [s], ``t_prev`` the time of ``nav``. ``prev`` (6,: the last
-    sample's dtheta, dv), ``open_nav`` (10,) and ``open_sums`` (4,: the open step's length and
-    integral of f_hat) are updated in place. Returns (code, nav, P) with code -1 when all went
-    well; strapdown's codes (the index of the first invalid sample, or -2 for a non-finite
-    state) with nav and P unchanged; or -3 when the propagated P (returned for the message) has
-    a negative or non-finite variance.
-    """
-    k = t.shape[0]
-    n = P.shape[0]
-    dt = np.empty(k)
-    dt[0] = t[0] - t_prev
-    for i in range(1, k):
-        dt[i] = t[i] - t[i - 1]
-    w = np.empty((k, 3))
-    fc = np.empty((k, 3))
-    for i in range(k):
-        for j in range(3):
-            w[i, j] = omega[i, j] - b_g[j]  # (1)
-            fc[i, j] = f[i, j] - b_a[j]
-    hist = np.empty((k + 1, strapdown.NAV_SIZE))
-    code = strapdown.integrate_kernel(nav, w, fc, dt, prev, hist)  # (2)
-    if code != -1:
-        return code, nav, P
-    for j in range(3):
-        prev[j] = w[k - 1, j] * dt[k - 1]
-        prev[3 + j] = fc[k - 1, j] * dt[k - 1]
-    F = np.zeros((N_DYN, N_DYN))
-    M = np.zeros((N_NAV, N_DYN))
-    T = np.zeros((N_NAV, n))
-    f_mean = np.empty(3)
-    for i in range(k):
-        if open_sums[0] == 0.0:
-            open_nav[:] = hist[i]
-        open_sums[0] += dt[i]
-        for j in range(3):
-            open_sums[1 + j] += fc[i, j] * dt[i]
-        if open_sums[0] >= step - 1e-9:
-            for j in range(3):
-                f_mean[j] = open_sums[1 + j] / open_sums[0]
-            P = _covariance_step(P, open_nav, f_mean, open_sums[0], q, curvature, F, M, T)
-            open_sums[:] = 0.0
-    for i in range(N_NAV):
-        if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
-            return -3, nav, P
-    return code, hist[k].copy(), P
-
-
-@numba.njit(cache=True)
-def _close_step(P, open_nav, open_sums, q, curvature):
-    """Propagate P over the open (partial) step and clear it."""
-    if open_sums[0] <= 0.0:
-        return P
-    n = P.shape[0]
-    f_mean = open_sums[1:4] / open_sums[0]
-    P = _covariance_step(P, open_nav, f_mean, open_sums[0], q, curvature,
-                         np.zeros((N_DYN, N_DYN)), np.zeros((N_NAV, N_DYN)),
-                         np.zeros((N_NAV, n)))
-    open_sums[:] = 0.0
-    return P
+# system matrix
 
 
 def system_matrix(nav: np.ndarray, f_b: np.ndarray, *,
@@ -482,52 +303,14 @@ def system_matrix(nav: np.ndarray, f_b: np.ndarray, *,
     F : ndarray, shape (24, 24)
         Rows 9-23 and columns 15-23 are 0.
     """
-    F15 = np.zeros((N_DYN, N_DYN))
-    _fill_nav_rows(F15, np.ascontiguousarray(nav, dtype=np.float64),
-                   np.ascontiguousarray(f_b, dtype=np.float64), bool(curvature_derivatives))
     F = np.zeros((N_STATES, N_STATES))
-    F[:N_DYN, :N_DYN] = F15
-    return F
-
-
-def covariance_step(P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, dt: float,
-                    q: np.ndarray, *, curvature_derivatives: bool = True) -> np.ndarray:
-    """One covariance step ``Phi P Phi^T + diag(q) dt``, eqs. (21)-(23), exploiting the
-    structure of F (equal to ``kalman.predict`` with ``kalman.discretize(system_matrix(...))``).
-
-    Parameters
-    ----------
-    P : ndarray, shape (24, 24)
-    nav : ndarray, shape (10,)
-        Navigation vector at the start of the step.
-    f_b : ndarray, shape (3,)
-        Mean bias-compensated specific force over the step, body [m/s^2].
-    dt : float
-        Step [s].
-    q : ndarray, shape (24,)
-        Diagonal of ``G Qc G^T`` [state^2/s].
-    curvature_derivatives : bool
-
-    Returns
-    -------
-    ndarray, shape (24, 24)
-        Not checked (see :func:`navreplay.filters.kalman.check_covariance`).
-    """
-    n = P.shape[0]
-    return _covariance_step(
-        np.ascontiguousarray(P, dtype=np.float64), np.ascontiguousarray(nav, dtype=np.float64),
-        np.ascontiguousarray(f_b, dtype=np.float64), float(dt),
-        np.ascontiguousarray(q, dtype=np.float64), bool(curvature_derivatives),
-        np.zeros((N_DYN, N_DYN)), np.zeros((N_NAV, N_DYN)), np.zeros((N_NAV, n)),
-    )
+    return ie.system_matrix(nav[strapdown.POS], nav[strapdown.VEL], ie.nav_dcm(nav), f_b,
+                            vertical=ie.Vertical.DEPTH,
+                            curvature_derivatives=curvature_derivatives, out=F)
 
 
 # --------------------------------------------------------------------------------------------
 # measurement models
-
-
-def _skew(x: float, y: float, z: float) -> np.ndarray:
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def rpm_axis(m_y: float, m_z: float) -> tuple[np.ndarray, np.ndarray]:
@@ -552,11 +335,11 @@ def rpm_axis(m_y: float, m_z: float) -> tuple[np.ndarray, np.ndarray]:
         a1, b1, c1 = 0.5 - th2 / 24.0, 1.0 - th2 / 6.0, 1.0 / 6.0 - th2 / 120.0
     else:
         a1, b1, c1 = (1.0 - math.cos(th)) / th2, math.sin(th) / th, (th - math.sin(th)) / th**3
-    K = _skew(0.0, m_y, m_z)
+    K = skew((0.0, m_y, m_z))
     KK = K @ K
     a = np.array([1.0 + a1 * KK[0, 0], b1 * m_z + a1 * KK[1, 0], -b1 * m_y + a1 * KK[2, 0]])
     J = np.eye(3) + a1 * K + c1 * KK
-    da = -_skew(a[0], a[1], a[2]) @ J[:, 1:3]
+    da = -skew(a) @ J[:, 1:3]
     return a, da
 
 
@@ -589,7 +372,7 @@ def rpm_measurement(
     H : ndarray, shape (3, 24)
         ``z ~ H dx`` to first order.
     """
-    C_bn = _quat_dcm(np.ascontiguousarray(nav[6:10])).T
+    C_bn = ie.nav_dcm(nav).T
     a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
     u = v_rpm / (1.0 + k_hat)
     w = nav[3:6].copy()
@@ -598,7 +381,7 @@ def rpm_measurement(
     z = C_bn @ w - a * u  # (25)
     H = np.zeros((3, N_STATES))  # (27)
     H[:, VEL] = C_bn
-    H[:, ATT] = -C_bn @ _skew(w[0], w[1], w[2])
+    H[:, ATT] = -C_bn @ skew(w)
     H[:, 15] = a * (u / (1.0 + k_hat))
     H[:, M_RPM] = -u * da
     H[:, CURRENT] = -C_bn[:, 0:2]
@@ -614,23 +397,6 @@ def depth_measurement(nav: np.ndarray, depth: float) -> tuple[np.ndarray, np.nda
 
 # --------------------------------------------------------------------------------------------
 # the filter
-
-
-def _sigma(value: float | None, init: Mapping[str, Any], key: str, index: slice) -> np.ndarray:
-    """1-sigma from a parameter or ``initial_nav["sigma"][key][index]``."""
-    if value is not None:
-        return np.full(index.stop - index.start, float(value))
-    sigma = init.get("sigma", {})
-    if key not in sigma:
-        raise ValueError(
-            f"rpm-aided-ins: metadata.initial_nav has no sigma[{key!r}] (has: "
-            f"{', '.join(sigma) or 'none'}); set the filter parameter for it"
-        )
-    out = np.asarray(sigma[key], dtype=float).reshape(-1)
-    if out.shape != (3,) or not np.all(np.isfinite(out)) or np.any(out < 0.0):
-        raise ValueError(f"rpm-aided-ins: initial_nav sigma[{key!r}] must be 3 values >= 0, "
-                         f"got {sigma[key]!r}")
-    return out[index]
 
 
 class _Schedule:
@@ -683,17 +449,7 @@ class RpmAidedIns(Filter):
                 raise ValueError("rpm-aided-ins: set speed_per_rpm (the recording's metadata "
                                  "has no params.speed_per_rpm)")
         self.speed_per_rpm = float(c_rpm) if c_rpm is not None else 0.0
-        init = context.metadata.initial_nav
-        missing = [k for k in ("t_ns", "pos", "v_n", "q_nb") if k not in init]
-        if missing:
-            raise ValueError(
-                f"rpm-aided-ins needs metadata.initial_nav with t_ns, pos, v_n, q_nb "
-                f"(missing: {', '.join(missing)})"
-            )
-        self.nav = strapdown.nav_vector(init["pos"], init["v_n"], init["q_nb"])
-        if not np.all(np.isfinite(self.nav)):
-            raise ValueError(f"rpm-aided-ins: metadata.initial_nav is not finite: {self.nav}")
-        self.t = (int(init["t_ns"]) - int(context.t0_ns)) * 1e-9
+        self.nav, self.t = initial_solution(context, self.name)
         self.b_a = np.zeros(3)
         self.b_g = np.zeros(3)
         self.k_rpm = 0.0
@@ -702,29 +458,34 @@ class RpmAidedIns(Filter):
         self.state_names = STATE_NAMES
 
         # P0, section 4.6
-        pos_scale = np.abs(ie.position_scale(self.nav[strapdown.POS], ie.Vertical.DEPTH))
-        sig = np.zeros(N_STATES)
-        pos_sigma = _sigma(None, init, "pos_ned", slice(0, 3))
+        init = context.metadata.initial_nav
+        pos_sigma = initial_sigma(init, "pos_ned")
         if p.init_depth_sigma is not None:
             pos_sigma[2] = p.init_depth_sigma
-        sig[POS] = np.maximum(pos_sigma, p.pos_sigma_floor) / pos_scale
-        sig[VEL] = _sigma(p.init_vel_sigma, init, "v_n", slice(0, 3))
-        sig[6:8] = _sigma(p.init_level_sigma, init, "phi", slice(0, 2))
-        sig[8:9] = _sigma(p.init_azimuth_sigma, init, "phi", slice(2, 3))
-        sig[BA] = p.accel_bias_sigma
-        sig[BG] = p.gyro_bias_sigma
+        phi = initial_sigma(init, "phi", p.init_level_sigma, param="init_level_sigma")
+        phi[2] = initial_sigma(init, "phi", p.init_azimuth_sigma, param="init_azimuth_sigma")[2]
+        estimate_current = self.mode is Mode.RPM_CURRENT
+        sig = np.zeros(N_STATES)
         sig[K_RPM] = p.rpm_scale_factor_sigma
         sig[M_RPM] = p.rpm_misalignment_sigma
-        estimate_current = self.mode is Mode.RPM_CURRENT
         sig[CURRENT] = p.current_sigma if estimate_current else 0.0
         self.P = np.diag(sig**2)
+        self.P[: ie.N_STATES, : ie.N_STATES] = initial_covariance(
+            self.nav[strapdown.POS], np.maximum(pos_sigma, p.pos_sigma_floor),
+            initial_sigma(init, "v_n", p.init_vel_sigma, param="init_vel_sigma"), phi,
+            p.accel_bias_sigma, p.gyro_bias_sigma,
+        )
 
         # Qd = diag(q) T, eq. (22)
-        self._q = np.zeros(N_STATES)
-        self._q[VEL] = p.accel_noise**2
-        self._q[ATT] = p.gyro_noise**2
+        q = np.zeros(N_STATES)
+        q[VEL] = p.accel_noise**2
+        q[ATT] = p.gyro_noise**2
         if estimate_current:
-            self._q[CURRENT] = p.current_noise**2
+            q[CURRENT] = p.current_noise**2
+        self._time_update = ie.TimeUpdate(
+            ie.ProcessNoise(q), p.cov_step, vertical=ie.Vertical.DEPTH,
+            curvature_derivatives=p.curvature_derivatives,
+        )
         self._frozen = np.zeros(N_STATES, dtype=bool)
         self._frozen[INERT] = True
         if not estimate_current:
@@ -735,12 +496,6 @@ class RpmAidedIns(Filter):
             kalman.check_covariance(R, name=name)
         self._rpm_schedule = _Schedule(p.update_rate)
         self._depth_schedule = _Schedule(p.update_rate)
-        # strapdown and covariance-step bookkeeping
-        self._prev = np.zeros(6)
-        self._open_nav = np.zeros(strapdown.NAV_SIZE)
-        self._open_sums = np.zeros(4)
-        self._step = float(p.cov_step)
-        self._curvature = bool(p.curvature_derivatives)
         self._next_check = self.t + _CHECK_INTERVAL
         self._x = self._state_vector()
         kalman.check_covariance(self.P, name="P0", t=self.t)
@@ -748,34 +503,13 @@ class RpmAidedIns(Filter):
     # -- the Filter interface ----------------------------------------------------------------
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
-        t = np.asarray(t, dtype=np.float64)
-        omega = imu["omega_ib_b"]
-        f = imu["f_b"]
-        if t[0] <= self.t + 1e-9:  # samples at or before the initial solution
-            first = int(np.searchsorted(t, self.t + 1e-9, side="right"))
-            if first == t.shape[0]:
-                return
-            t, omega, f = t[first:], omega[first:], f[first:]
-        code, nav, P = _propagate_block(
-            self.nav, self.P, omega, f, t, self.t, self.b_a, self.b_g, self._prev,
-            self._open_nav, self._open_sums, self._step, self._q, self._curvature,
-        )
-        if code != -1:
-            if code == -3:
-                kalman.check_covariance(P, t=float(t[-1]))  # names what is wrong
-                raise kalman.FilterDivergedError("P has a negative or non-finite variance",
-                                                 float(t[-1]))
-            if code == -2:
-                raise kalman.FilterDivergedError("navigation state is not finite", self.t)
-            t_before = t[code - 1] if code else self.t
-            raise ValueError(f"IMU sample at t = {t[code]:.6f} s (previous {t_before:.6f} s): "
-                             f"omega_ib_b = {omega[code]}, f_b = {f[code]}: not finite, or "
-                             f"the time does not increase")
-        self.nav = nav
-        self.P = P
-        self.t = float(t[-1])
+        step = self._time_update.propagate(self.nav, self.P, self.t, t, imu["omega_ib_b"],
+                                           imu["f_b"], self.b_a, self.b_g)  # (1), (2), (21)-(23)
+        if step is None:
+            return
+        self.nav, self.P, self.t = step
         if self.t >= self._next_check:  # full symmetry / PSD check once per second
-            kalman.check_covariance(P, t=self.t)
+            kalman.check_covariance(self.P, t=self.t)
             self._next_check = self.t + _CHECK_INTERVAL
 
     def update(
@@ -813,20 +547,16 @@ class RpmAidedIns(Filter):
 
     def estimate(self) -> Estimate:
         self._sync_covariance()
-        nav = self.nav
         return Estimate(
             self.t, self._x, self.P,
-            NavSolution(pos=nav[strapdown.POS], v_n=nav[strapdown.VEL], q_nb=nav[strapdown.QUAT]),
+            NavSolution.from_vector(self.nav),
         )
 
     # -- internals ---------------------------------------------------------------------------
 
     def _sync_covariance(self) -> None:
         """Close the open covariance step so that P belongs to the current time."""
-        if self._open_sums[0] > 0.0:
-            self.P = _close_step(self.P, self._open_nav, self._open_sums, self._q,
-                                 self.params.curvature_derivatives)
-            kalman.check_covariance(self.P, t=self.t)
+        self.P = self._time_update.close(self.P, self.t)
 
     def _feedback(self, dx: np.ndarray) -> None:
         """Subtract the estimated errors (section 4.7, step 4); the error state is then 0."""

@@ -148,9 +148,10 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     NavSolution,
+    check_number,
 )
 from navreplay.filters.registry import register_filter
-from navreplay.geo import earth
+from navreplay.geo import earth, kernels
 from navreplay.streams import StreamKind
 from navreplay.units import ARCMIN, DEG, FOOT
 
@@ -176,10 +177,6 @@ _COMPONENTS = {
     Match.VEL_QUAT_FULL: (0, 1, 2, 3),
     Match.VEL_ONLY: (),
 }
-
-_A = earth.A
-_E2 = earth.E2
-_OMEGA = earth.OMEGA_IE
 
 # state layout, eq. (13): the dQ_br block holds the matched components s, in order
 DV = slice(0, 2)
@@ -228,9 +225,7 @@ class TransferAlignmentParams(FilterParams):
         object.__setattr__(self, "match", Match(self.match))
         for name in ("accel_noise", "gyro_noise", "misalignment_noise", "vel_sigma",
                      "quat_sigma", "init_vel_sigma", "init_misalignment", "init_q0_sigma"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+            check_number(self, name, positive=True)
         if self.init_misalignment >= math.pi:
             raise ValueError(f"init_misalignment must be < pi rad, got {self.init_misalignment}")
         if self.lever_arm_r is not None:
@@ -242,9 +237,9 @@ class TransferAlignmentParams(FilterParams):
 
 # --------------------------------------------------------------------------------------------
 # The model as numba kernels: the per-GINS-sample model and feedback are ~40 small matrix
-# operations, which numpy pays for in call overhead. The quaternion helpers are
-# single-quaternion forms of navreplay.geo (the tests check them against it). The correction and
-# the covariance check are the shared ones of navreplay.filters.kalman.
+# operations, which numpy pays for in call overhead. The quaternion and earth-model helpers are
+# the single-value kernels of navreplay.geo.kernels. The correction and the covariance check are
+# the shared ones of navreplay.filters.kalman.
 
 
 @numba.njit(cache=True)
@@ -316,93 +311,24 @@ def _normalise(q):
 
 
 @numba.njit(cache=True)
-def left(p):
-    """``L(p)`` with ``p (x) q = L(p) q``, (4, 4) (= :func:`navreplay.geo.quat_left_matrix`)."""
-    L = np.empty((4, 4))
-    L[0, 0], L[0, 1], L[0, 2], L[0, 3] = p[0], -p[1], -p[2], -p[3]
-    L[1, 0], L[1, 1], L[1, 2], L[1, 3] = p[1], p[0], -p[3], p[2]
-    L[2, 0], L[2, 1], L[2, 2], L[2, 3] = p[2], p[3], p[0], -p[1]
-    L[3, 0], L[3, 1], L[3, 2], L[3, 3] = p[3], -p[2], p[1], p[0]
-    return L
-
-
-@numba.njit(cache=True)
 def rmat(q):
-    """The paper's R(q), (4, 3): ``[0, w] (x) q = R(q) w``."""
-    R = np.empty((4, 3))
-    R[0, 0], R[0, 1], R[0, 2] = -q[1], -q[2], -q[3]
-    R[1, 0], R[1, 1], R[1, 2] = q[0], q[3], -q[2]
-    R[2, 0], R[2, 1], R[2, 2] = -q[3], q[0], q[1]
-    R[3, 0], R[3, 1], R[3, 2] = q[2], -q[1], q[0]
-    return R
+    """The paper's R(q), (4, 3): ``[0, w] (x) q = R(q) w``, columns 1-3 of the right-product
+    matrix M(q) (:func:`navreplay.geo.kernels.quat_right_matrix`)."""
+    return kernels.quat_right_matrix(q)[:, 1:]
 
 
 @numba.njit(cache=True)
 def tmat(q):
-    """The paper's T(q), (4, 3): ``q (x) [0, w] = T(q) w``."""
-    T = np.empty((4, 3))
-    T[0, 0], T[0, 1], T[0, 2] = -q[1], -q[2], -q[3]
-    T[1, 0], T[1, 1], T[1, 2] = q[0], -q[3], q[2]
-    T[2, 0], T[2, 1], T[2, 2] = q[3], q[0], -q[1]
-    T[3, 0], T[3, 1], T[3, 2] = -q[2], q[1], q[0]
-    return T
+    """The paper's T(q), (4, 3): ``q (x) [0, w] = T(q) w``, columns 1-3 of the left-product
+    matrix L(q) (:func:`navreplay.geo.kernels.quat_left_matrix`)."""
+    return kernels.quat_left_matrix(q)[:, 1:]
 
 
 @numba.njit(cache=True)
 def rate_matrix(w_ib, w_in):
-    """The 4x4 ``[w_ib^b - w_in^n]`` of eq. (2), = right(w_ib) - left(w_in), (4, 4)."""
-    wx, wy, wz = w_ib[0], w_ib[1], w_ib[2]
-    wn, we, wd = w_in[0], w_in[1], w_in[2]
-    W = np.empty((4, 4))
-    W[0, 0], W[0, 1], W[0, 2], W[0, 3] = 0.0, -(wx - wn), -(wy - we), -(wz - wd)
-    W[1, 0], W[1, 1], W[1, 2], W[1, 3] = wx - wn, 0.0, wz + wd, -(wy + we)
-    W[2, 0], W[2, 1], W[2, 2], W[2, 3] = wy - we, -(wz + wd), 0.0, wx + wn
-    W[3, 0], W[3, 1], W[3, 2], W[3, 3] = wz - wd, wy + we, -(wx + wn), 0.0
-    return W
-
-
-@numba.njit(cache=True)
-def dcm(q):
-    """``C(q)``, (3, 3) (= :func:`navreplay.geo.quat_to_dcm` for one quaternion)."""
-    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    C = np.empty((3, 3))
-    C[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
-    C[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
-    C[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
-    C[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
-    C[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
-    C[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
-    C[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
-    C[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
-    C[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
-    return C
-
-
-@numba.njit(cache=True)
-def euler_quat(euler):
-    """Quaternion of ZYX ``[roll, pitch, yaw]``, (4,) (= :func:`navreplay.geo.euler_to_quat`
-    up to sign)."""
-    r, p, y = 0.5 * euler[0], 0.5 * euler[1], 0.5 * euler[2]
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), \
-        math.cos(y), math.sin(y)
-    q = np.empty(4)
-    q[0] = cr * cp * cy + sr * sp * sy
-    q[1] = sr * cp * cy - cr * sp * sy
-    q[2] = cr * sp * cy + sr * cp * sy
-    q[3] = cr * cp * sy - sr * sp * cy
-    return q
-
-
-@numba.njit(cache=True)
-def quat_euler(q):
-    """ZYX ``[roll, pitch, yaw]`` of a unit quaternion away from gimbal lock, (3,)
-    (= :func:`navreplay.geo.quat_to_euler`)."""
-    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    e = np.empty(3)
-    e[0] = math.atan2(2.0 * (q2 * q3 + q0 * q1), q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
-    e[1] = math.asin(max(-1.0, min(1.0, -2.0 * (q1 * q3 - q0 * q2))))
-    e[2] = math.atan2(2.0 * (q1 * q2 + q0 * q3), q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3)
-    return e
+    """The 4x4 ``[w_ib^b - w_in^n]`` of eq. (2): ``M([0, w_ib]) - L([0, w_in])``, (4, 4)."""
+    return (kernels.quat_right_matrix(np.array([0.0, w_ib[0], w_ib[1], w_ib[2]]))
+            - kernels.quat_left_matrix(np.array([0.0, w_in[0], w_in[1], w_in[2]])))
 
 
 @numba.njit(cache=True)
@@ -416,14 +342,13 @@ def earth_terms(lat, h, v_n):
     w_in : ndarray, shape (3,)
         ``w_ie^n + w_en^n`` with the WGS84 radii [rad/s].
     """
-    s, c = math.sin(lat), math.cos(lat)
-    w = 1.0 - _E2 * s * s
-    R_N = _A / math.sqrt(w)
-    R_M = R_N * (1.0 - _E2) / w
+    R_M, R_N = kernels.radii(lat)
+    ie_n, _, ie_d = kernels.earth_rate(lat)
+    en_n, en_e, en_d = kernels.transport_rate(lat, h, v_n[0], v_n[1])
     w_in = np.empty(3)
-    w_in[0] = _OMEGA * c + v_n[1] / (R_N + h)
-    w_in[1] = -v_n[0] / (R_M + h)
-    w_in[2] = -_OMEGA * s - v_n[1] * s / c / (R_N + h)
+    w_in[0] = ie_n + en_n
+    w_in[1] = en_e
+    w_in[2] = ie_d + en_d
     return math.sqrt(R_M * R_N) + h, w_in
 
 
@@ -457,9 +382,9 @@ def system_matrix(q_bn, v_n, lat, R, w_ib_b, w_in_n, f_b, n):
         Input of the noise [n_a (3), n_g (3)].
     """
     vn, ve, vd = v_n[0], v_n[1], v_n[2]
-    ws = 2.0 * _OMEGA * math.sin(lat)
+    ws = 2.0 * earth.OMEGA_IE * math.sin(lat)
     tl = math.tan(lat)
-    C = dcm(q_bn)
+    C = kernels.quat_to_dcm(q_bn)
     f_n = _mv(C, f_b)
     Rq = rmat(q_bn)
     A = np.zeros((n, n))
@@ -491,10 +416,10 @@ def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
 
     Equal to ``(C_nb w_ib^b - w_in^n) x (C(Q_m) L^r)`` (a rotation preserves cross products).
     """
-    a = _mv(dcm(q_bn), w_ib_b)
+    a = _mv(kernels.quat_to_dcm(q_bn), w_ib_b)
     for i in range(3):
         a[i] -= w_in_n[i]
-    b = _mv(dcm(q_m), lever_arm_r)
+    b = _mv(kernels.quat_to_dcm(q_m), lever_arm_r)
     out = np.empty(3)
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
@@ -515,11 +440,8 @@ def lever_position(pos, q_m, lever_arm_r):
     lever_arm_r : ndarray, shape (3,)
         Lever arm GINS -> SDINS, ship frame [m].
     """
-    d = _mv(dcm(q_m), lever_arm_r)
-    s = math.sin(pos[0])
-    w = 1.0 - _E2 * s * s
-    R_N = _A / math.sqrt(w)
-    R_M = R_N * (1.0 - _E2) / w
+    d = _mv(kernels.quat_to_dcm(q_m), lever_arm_r)
+    R_M, R_N = kernels.radii(pos[0])
     out = np.empty(3)
     out[0] = pos[0] + d[0] / (R_M + pos[2])
     out[1] = pos[1] + d[1] / ((R_N + pos[2]) * math.cos(pos[0]))
@@ -595,7 +517,7 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     if q_m[0] * q_bn[0] + q_m[1] * q_bn[1] + q_m[2] * q_bn[2] + q_m[3] * q_bn[3] < 0.0:
         sign = -1.0  # (Q_m* (x) Q_bn)_0 is the dot product of Q_m and Q_bn
     q_m = np.array([sign * q_m[0], sign * q_m[1], sign * q_m[2], sign * q_m[3]])
-    Lc = left(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]]))  # L(Q_m*)
+    Lc = kernels.quat_left_matrix(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]]))  # L(Q_m*)
     q_br_meas = _mv(Lc, q_bn)
 
     # prediction: (14), then Phi = I + A dt + (A dt)^2/2 and Qd = G Qc G^T dt (kalman (3), (4))
@@ -671,15 +593,21 @@ def feedback(nav, q_rb, dx, P, s, u, q_m, v_r, pos, w_now, w_in, lever_arm_r):
     for i in range(ns):
         q_rb[s[i]] -= dx[6 + i]
     # (11), E8: unmatched components (q_br2 for partial matching) of Q_m* (x) Q_bn_hat
-    q_br_new = _mv(left(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]])), q)
+    q_br_new = _mv(kernels.quat_left_matrix(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]])), q)
     for i in u:
         q_rb[i] = q_br_new[i]
     _normalise(q_rb)  # (10), E10
     # the vertical channel and the position are slaved to the GINS (spec 4.1)
     nav[5] = v_r[2] + lever_velocity(q, q_m, w_now, w_in, lever_arm_r)[2]
     nav[0:3] = lever_position(pos, q_m, lever_arm_r)
-    # phi = -2 R(q)^T dQ_bn, so Sigma_phi = 4 R^T P_qq R
-    Rq = rmat(q)
+    return attitude_sigma(q, P)
+
+
+@numba.njit(cache=True)
+def attitude_sigma(q_bn, P):
+    """Predicted 1 sigma of phi N, E, D [rad], (3,): phi = -2 R(Q_bn)^T dQ_bn, so
+    ``Sigma_phi = 4 R^T P_qq R`` with P_qq the dQ_bn block of P (n, n)."""
+    Rq = rmat(q_bn)
     sigma_phi = np.empty(3)
     for i in range(3):
         v = 0.0
@@ -695,8 +623,9 @@ def block_intervals(t, t_prev, omega_ib_b, f_b, sums, last):
     """Sample intervals of an IMU block, the running sums for the means of eq. (14) and the
     increments of the block's last sample.
 
-    (The mechanization itself is called from Python: numba's cache does not see changes in
-    jitted functions of other modules that a cached function calls.)
+    (The mechanization itself, :func:`navreplay.strapdown.propagate_kernel`, is called from
+    Python, which reports an invalid sample through the checked
+    :func:`navreplay.strapdown.propagate`.)
 
     Parameters
     ----------
@@ -754,7 +683,7 @@ def initial_covariance(
     """
     n = N_NAV + len(s)
     P_hat = np.diag([p0, p1, p1, p1])
-    Lm = left(q_m)
+    Lm = kernels.quat_left_matrix(q_m)
     P = np.zeros((n, n))
     P[DV, DV] = vel_var * np.eye(2)
     P[DQ_BN, DQ_BN] = Lm @ P_hat @ Lm.T  # (16): dQ_bn = L(Q_m) dQ_br
@@ -862,7 +791,7 @@ class TransferAlignment(Filter):
         pos = sample["pos"]
         if euler.shape != (3,) or v_r.shape != (3,) or pos.shape != (3,):
             raise ValueError("master_ins sample: euler, v_n and pos must have shape (3,)")
-        q_m = euler_quat(euler)
+        q_m = kernels.euler_to_quat(euler)
         if self.nav is None:
             if self._w_last is not None:  # the lever-arm velocity needs a body rate
                 self._initialise(t, q_m, v_r, pos)
@@ -877,10 +806,10 @@ class TransferAlignment(Filter):
             t=self.t,
             x=np.concatenate((nav[3:5], nav[6:10], self.q_rb[self.s])),
             P=self.P.copy(),
-            nav=NavSolution(pos=nav[0:3].copy(), v_n=nav[3:6].copy(), q_nb=nav[6:10].copy()),
+            nav=NavSolution.from_vector(nav.copy()),  # nav is corrected in place
             extras={
                 "q_rb": self.q_rb.copy(),
-                "misalignment_euler": quat_euler(self.q_rb),
+                "misalignment_euler": kernels.quat_to_euler(self.q_rb),
                 "attitude_sigma_n": self.sigma_phi.copy(),
             },
         )
@@ -903,8 +832,7 @@ class TransferAlignment(Filter):
             math.sin(0.5 * p.init_misalignment) ** 2,
         )
         kalman.check_covariance(self.P, name="P0", t=t)
-        Rq = rmat(q_m)
-        self.sigma_phi = np.sqrt(np.diagonal(4.0 * Rq.T @ self.P[DQ_BN, DQ_BN] @ Rq))
+        self.sigma_phi = attitude_sigma(q_m, self.P)
         self.t = t
         self._reset_sums()
 

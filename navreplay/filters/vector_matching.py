@@ -94,8 +94,8 @@ a time, with the shared :func:`navreplay.filters.kalman.correct`. :func:`run_bat
 same epochs for many synchronous runs at once (arrays with a leading run axis) for Monte Carlo
 campaigns; it calls the same model functions (:func:`process_noise`, :func:`gps_acceleration`,
 :func:`measurement`, :func:`triad`, :func:`feedback`) and differs only in doing the Kalman
-correction for a stack of runs (:func:`correct_batch`, the same equations as
-:func:`navreplay.filters.kalman.correct`).
+correction for a stack of runs (:func:`navreplay.filters.kalman.correct_batch`, the same
+equations as :func:`navreplay.filters.kalman.correct`).
 
 Outputs (:meth:`VectorMatchingFilter.estimate`)
 -----------------------------------------------
@@ -127,7 +127,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -139,8 +139,8 @@ from navreplay.filters.base import (
     FilterContext,
     FilterParams,
     Innovation,
+    check_number,
 )
-from navreplay.filters.kalman import FilterDivergedError
 from navreplay.filters.registry import register_filter
 from navreplay.geo.earth import gravity as normal_gravity
 from navreplay.geo.rotations import (
@@ -231,11 +231,8 @@ class VectorMatchingParams(FilterParams):
         object.__setattr__(self, "model", MatchModel(self.model))
         for name in ("tau", "accel_noise_sigma", "mag_noise_sigma", "p0_sigma",
                      "sync_tolerance"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
-        if not (math.isfinite(self.q_w) and self.q_w >= 0.0):
-            raise ValueError(f"q_w must be finite and >= 0, got {self.q_w!r}")
+            check_number(self, name, positive=True)
+        check_number(self, "q_w")
         if self.earth_field_n is not None:
             h = np.asarray(self.earth_field_n, dtype=float)
             if h.shape != (3,) or not np.all(np.isfinite(h)) or not np.any(h):
@@ -244,8 +241,7 @@ class VectorMatchingParams(FilterParams):
                     f"{self.earth_field_n!r}"
                 )
             object.__setattr__(self, "earth_field_n", tuple(float(v) for v in h))
-        if self.gravity is not None and not (math.isfinite(self.gravity) and self.gravity > 0):
-            raise ValueError(f"gravity must be finite and > 0 [m/s^2], got {self.gravity!r}")
+        check_number(self, "gravity", positive=True)
 
 
 class Reference(NamedTuple):
@@ -721,116 +717,6 @@ def reference(
 # the batched path
 
 
-class Correction(NamedTuple):
-    """Result of :func:`correct_batch` (leading run axes B).
-
-    dx : (B..., 3); P : (B..., 3, 3); nu : (B..., 6); S : (B..., 6, 6); nis : (B...,).
-    """
-
-    dx: np.ndarray
-    P: np.ndarray
-    nu: np.ndarray
-    S: np.ndarray
-    nis: np.ndarray
-
-
-def _mT(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
-
-
-def _solve_lower(L: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Forward substitution ``L X = B`` over a stack: L (..., n, n) lower, B (..., n, k).
-
-    Vectorised across the stack, looping over the n rows (LAPACK's per-matrix call costs more
-    than the arithmetic for n = 6).
-    """
-    X = np.empty(np.broadcast_shapes(L.shape[:-2], B.shape[:-2]) + B.shape[-2:])
-    for i in range(L.shape[-1]):
-        acc = B[..., i, :] - np.einsum("...j,...jk->...k", L[..., i, :i], X[..., :i, :])
-        X[..., i, :] = acc / L[..., i, i, None]
-    return X
-
-
-def _solve_lower_T(L: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Back substitution ``L^T X = B`` over a stack: L (..., n, n) lower, B (..., n, k)."""
-    n = L.shape[-1]
-    X = np.empty(np.broadcast_shapes(L.shape[:-2], B.shape[:-2]) + B.shape[-2:])
-    for i in range(n - 1, -1, -1):
-        acc = B[..., i, :] - np.einsum("...j,...jk->...k", L[..., i + 1:, i], X[..., i + 1:, :])
-        X[..., i, :] = acc / L[..., i, i, None]
-    return X
-
-
-def _cholesky(A: np.ndarray, name: str, t: float | None) -> np.ndarray:
-    """Lower Cholesky factor of a stack of SPD matrices (..., n, n), column by column.
-
-    Raises :class:`FilterDivergedError` if any matrix is not positive definite.
-    """
-    n = A.shape[-1]
-    L = np.zeros_like(A)
-    for j in range(n):
-        Lj = L[..., j, :j]
-        d = A[..., j, j] - np.einsum("...k,...k->...", Lj, Lj)
-        if not np.all(d > 0.0):
-            raise FilterDivergedError(f"{name} is not positive definite", t)
-        L[..., j, j] = np.sqrt(d)
-        if j + 1 < n:
-            L[..., j + 1:, j] = (
-                A[..., j + 1:, j] - np.einsum("...ik,...k->...i", L[..., j + 1:, :j], Lj)
-            ) / L[..., j, j, None]
-    return L
-
-
-def correct_batch(
-    P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray, *, t: float | None = None
-) -> Correction:
-    """Kalman correction of a stack of independent filters with prior state zero.
-
-    The equations are those of :func:`navreplay.filters.kalman.correct`:
-    ``S = H P H^T + R = L L^T`` (Cholesky), ``K^T = L^-T L^-1 H P``, Joseph form; the
-    triangular factor and solves are vectorised across the stack.
-
-    Parameters
-    ----------
-    P : ndarray, shape (..., n, n)
-    z : ndarray, shape (..., m)
-    H : ndarray, shape (..., m, n)
-    R : ndarray, shape (..., m)
-        Diagonal of the measurement noise covariance.
-    t : float, optional
-        Filter time [s], for error messages.
-
-    Returns
-    -------
-    Correction
-
-    Raises
-    ------
-    FilterDivergedError
-        Some S or corrected P is not positive definite, or a result is not finite.
-    """
-    n = P.shape[-1]
-    m = H.shape[-2]
-    HP = H @ P
-    S = HP @ _mT(H)  # (8)
-    S = 0.5 * (S + _mT(S))
-    S[..., np.arange(m), np.arange(m)] += R
-    L = _cholesky(S, "innovation covariance S", t)  # (8)
-    W = _solve_lower(L, np.concatenate([z[..., None], HP], axis=-1))  # (9), (13)
-    nu_w = W[..., 0]
-    K = _mT(_solve_lower_T(L, W[..., 1:]))  # (9)
-    dx = _mv(K, z)  # (11)
-    IKH = -K @ H  # (12)
-    IKH[..., np.arange(n), np.arange(n)] += 1.0
-    P = IKH @ P @ _mT(IKH)
-    P += (K * R[..., None, :]) @ _mT(K)
-    P = 0.5 * (P + _mT(P))
-    if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P))):
-        raise FilterDivergedError("non-finite corrected state or covariance", t)
-    _cholesky(P, "corrected P", t)
-    return Correction(dx, P, z, S, np.einsum("...i,...i->...", nu_w, nu_w))
-
-
 @dataclasses.dataclass
 class BatchEstimates:
     """Estimates of :func:`run_batch` at every epoch; leading axes (B, K) = (runs, epochs).
@@ -870,7 +756,6 @@ def run_batch(
     v_n: np.ndarray,
     vel_sigma: np.ndarray,
     *,
-    correct: Callable[..., Correction] = correct_batch,
     diagnostic: bool = False,
 ) -> BatchEstimates:
     """Run the filter over B synchronous recordings at once (the Monte Carlo fast path).
@@ -886,8 +771,6 @@ def run_batch(
         Epoch times [s], common to all runs, increasing.
     f_b, m_b, v_n, vel_sigma : ndarray, shape (B, K, 3)
         Accelerometer [m/s^2], magnetometer [T], GNSS velocity and its reported 1-sigma [m/s].
-    correct : callable
-        The stacked Kalman correction (default :func:`correct_batch`).
     diagnostic : bool
         Also compute the model-induced error of the gravity model (a pseudo-inverse per run
         and epoch: it triples the cost).
@@ -912,11 +795,12 @@ def run_batch(
     P = np.broadcast_to(params.p0_sigma**2 * np.eye(N_STATES), (B, N_STATES, N_STATES)).copy()
     q_out[:, 0], P_out[:, 0] = q, P
     eye = np.eye(N_STATES)
+    x0 = np.zeros((B, N_STATES))  # the error state after feedback
     for k in range(1, K):
         dt = t[k] - t[k - 1]
         phi, qd = process_noise(dt, params.tau, params.q_w)  # (16)-(18)
         P = (float(phi) * eye) @ P @ (float(phi) * eye).T + float(qd) * eye
-        P = 0.5 * (P + _mT(P))
+        P = 0.5 * (P + np.swapaxes(P, -1, -2))
         a_n = gps_acceleration(v_n[:, k], v_n[:, k - 1], dt)  # (13)
         z, H = measurement(params.model, quat_to_dcm(q), f_b[:, k], m_b[:, k], a_n,
                            ref.g_n, ref.h_n)
@@ -924,8 +808,8 @@ def run_batch(
             vel_sigma[:, k], vel_sigma[:, k - 1], dt, params.accel_noise_sigma,
             params.mag_noise_sigma,
         )
-        c = correct(P, z, H, R, t=float(t[k]))
-        q = feedback(q, c.dx[..., QE])  # x_hat <- 0
+        c = kalman.correct_batch(x0, P, z, H, R, t=float(t[k]))
+        q = feedback(q, c.x[..., QE])  # x_hat <- 0
         P = c.P
         q_out[:, k], P_out[:, k] = q, P
         if diag is not None:

@@ -23,6 +23,9 @@ _SMALL = 1e-7
 def skew(v):
     """Skew-symmetric cross-product matrix ``[v x]``, shape (..., 3, 3)."""
     v = np.asarray(v, dtype=float)
+    if v.shape == (3,):  # one vector: a third of the time of the general path
+        x, y, z = v.tolist()
+        return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
     out = np.zeros(v.shape[:-1] + (3, 3))
     out[..., 0, 1] = -v[..., 2]
     out[..., 0, 2] = v[..., 1]

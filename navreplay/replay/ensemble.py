@@ -35,7 +35,6 @@ from __future__ import annotations
 import collections
 import concurrent.futures as cf
 import dataclasses
-import os
 import signal
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -292,14 +291,6 @@ class InlineExecutor:
 
     def shutdown(self, wait: bool = True) -> None:
         return None
-
-
-def default_workers() -> int:
-    """CPUs available to this process."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def make_executor(workers: int) -> Executor:

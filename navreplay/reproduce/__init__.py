@@ -1,16 +1,28 @@
 """Reproductions of the published methods: Monte Carlo campaigns that print paper-vs-navreplay.
 
-Each module registers one :class:`Reproduction` with :func:`register_reproduction`;
-``navreplay reproduce NAME`` runs it.
+Each module defines one :class:`Reproduction` as ``REPRODUCTION``; ``navreplay reproduce NAME``
+runs it. A reproduction implements :meth:`Reproduction.campaign` (simulate, replay, evaluate
+the spec's acceptance bands, tabulate) and :meth:`Reproduction.log_view` (its figures as
+Rerun ensemble plots); :meth:`Reproduction.run` adds the common parts: the number of runs and
+the optional .rrd file.
 """
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import importlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from navreplay.replay.engine import Progress
+
+if TYPE_CHECKING:
+    from navreplay.replay.ensemble import FilterSpec
+
+__all__ = ["Check", "Progress", "Report", "Reproduction", "available", "get", "save_view",
+           "slashed", "warm_up"]
 
 _MODULES = {
     "transfer-alignment": "navreplay.reproduce.transfer_alignment",
@@ -27,6 +39,11 @@ class Check:
     value: float
     band: str
     passed: bool
+
+    def __post_init__(self) -> None:
+        # numpy scalars from the statistics become plain numbers
+        object.__setattr__(self, "value", float(self.value))
+        object.__setattr__(self, "passed", bool(self.passed))
 
 
 @dataclasses.dataclass
@@ -50,16 +67,15 @@ class Report:
         return "\n".join(lines)
 
 
-class Progress(Protocol):
-    def __call__(self, done: int, total: int) -> None: ...
+class Reproduction(abc.ABC):
+    """A paper's Monte Carlo campaign with its acceptance bands (spec section 6)."""
 
-
-class Reproduction(Protocol):
-    """What a reproduction module exposes as ``REPRODUCTION``."""
-
-    name: str
-    summary: str
-    default_runs: int
+    name: ClassVar[str]
+    summary: ClassVar[str]
+    default_runs: ClassVar[int]
+    """Runs of the full campaign (the paper's Monte Carlo size)."""
+    quick_runs: ClassVar[int]
+    """Runs for a quick look (``navreplay demo``, ``navreplay reproduce --quick``)."""
 
     def run(
         self,
@@ -68,8 +84,45 @@ class Reproduction(Protocol):
         seed: int = 0,
         workers: int = 1,
         rrd: Path | None = None,
-        progress: Callable[[int, int], None] | None = None,
-    ) -> Report: ...
+        progress: Progress | None = None,
+        **options: Any,
+    ) -> Report:
+        """Run the campaign, evaluate the bands, optionally save the Rerun view.
+
+        Parameters
+        ----------
+        runs : int, optional
+            Campaign size (default :attr:`default_runs`; what a run is, the module says).
+        seed : int
+            Base seed: run i uses ``seed + i``.
+        workers : int
+            Processes.
+        rrd : path, optional
+            Save the Rerun view of the figures here.
+        progress : callable, optional
+            ``progress(done, total)``.
+        **options
+            Reproduction-specific options of :meth:`campaign`.
+        """
+        runs = self.default_runs if runs is None else int(runs)
+        if runs < 1:
+            raise ValueError(f"runs must be at least 1, got {runs}")
+        report = self.campaign(runs, seed=seed, workers=workers, progress=progress, **options)
+        if rrd is not None:
+            save_view(rrd, f"{self.name} reproduction", self.log_view, report.figures)
+        return report
+
+    @abc.abstractmethod
+    def campaign(
+        self, runs: int, *, seed: int, workers: int, progress: Progress | None, **options: Any
+    ) -> Report:
+        """Simulate, replay and evaluate ``runs`` runs; the report's figures feed
+        :meth:`log_view`."""
+
+    @staticmethod
+    @abc.abstractmethod
+    def log_view(sink: Any, figures: Mapping[str, Any]) -> None:
+        """Log the figures into an open :class:`navreplay.viz.Sink` (``/ensemble/...``)."""
 
 
 def available() -> list[str]:
@@ -80,3 +133,37 @@ def get(name: str) -> Reproduction:
     if name not in _MODULES:
         raise KeyError(f"unknown reproduction {name!r}; available: {', '.join(_MODULES)}")
     return importlib.import_module(_MODULES[name]).REPRODUCTION
+
+
+# --------------------------------------------------------------------------------------------
+# helpers of the campaigns
+
+
+def save_view(
+    path: Path | str,
+    recording_name: str,
+    log: Callable[[Any, Mapping[str, Any]], None],
+    figures: Mapping[str, Any],
+) -> Path:
+    """Save ``log(sink, figures)`` as an .rrd file (overwriting it); returns the path."""
+    from navreplay.viz import Save, open_sink
+
+    with open_sink(Save(Path(path), overwrite=True), recording_name=recording_name) as sink:
+        log(sink, figures)
+    return Path(path)
+
+
+def warm_up(scenario: str, duration: float, filters: Iterable[FilterSpec]) -> None:
+    """Replay the filters over a short recording once, so that the numba kernels are compiled
+    before a process pool forks its workers."""
+    from navreplay.replay.engine import replay
+    from navreplay.sim.scenario import simulate
+
+    recording = simulate(scenario, {"duration": duration}, seed=0)
+    for spec in filters:
+        replay(recording, spec.load(), spec.params)
+
+
+def slashed(values: Sequence[float] | Any) -> str:
+    """``"a / b / c"`` with three significant digits each (a row of per-axis values)."""
+    return " / ".join(f"{x:.3g}" for x in values)

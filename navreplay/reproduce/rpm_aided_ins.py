@@ -35,8 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Mapping
-from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -48,12 +47,11 @@ from navreplay.replay.ensemble import (
     FilterSpec,
     RunOutput,
     RunTask,
-    make_executor,
     monte_carlo_tasks,
     run_ensemble,
 )
 from navreplay.replay.result import RunResult
-from navreplay.reproduce import Check, Report
+from navreplay.reproduce import Check, Progress, Report, Reproduction, warm_up
 from navreplay.sim.scenarios.underwater import UnderwaterRpmParams
 from navreplay.streams import Recording
 
@@ -147,23 +145,12 @@ class _Collector:
         self.seconds += out.seconds
 
 
-def _warm_up() -> None:
-    """Compile the numba kernels once, before the workers fork."""
-    from navreplay.filters.rpm_aided_ins import RpmAidedIns
-    from navreplay.replay.engine import replay
-    from navreplay.sim.scenario import simulate
-
-    rec = simulate(SCENARIO, {"duration": 2.0}, seed=0)
-    for mode in Mode:
-        replay(rec, RpmAidedIns, {"mode": mode})
-
-
 def run_campaign(
     runs: int,
     seed: int = 0,
     workers: int = 1,
     values: Mapping[str, Any] | None = None,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Progress | None = None,
 ) -> tuple[dict[str, EnsembleResult], tuple | None, float, float]:
     """Simulate ``runs`` recordings and replay the three modes over each.
 
@@ -176,18 +163,13 @@ def run_campaign(
     worker_seconds : float
         Sum of the runs' own wall times [s].
     """
-    _warm_up()
-    wall0 = time.perf_counter()
-    tasks = monte_carlo_tasks(SCENARIO, runs, values=dict(values or {}), seed=seed)
     filters = [FilterSpec(FILTER, {"mode": mode.value}, label=label)
                for label, mode in MODES.items()]
+    warm_up(SCENARIO, 2.0, filters)
+    wall0 = time.perf_counter()
+    tasks = monte_carlo_tasks(SCENARIO, runs, values=dict(values or {}), seed=seed)
     sink = _Collector()
-    executor = make_executor(workers)
-    try:
-        run_ensemble(tasks, filters, sink, extract=extract, workers=workers,
-                     executor=executor, progress=progress)
-    finally:
-        executor.shutdown(wait=True)
+    run_ensemble(tasks, filters, sink, extract=extract, workers=workers, progress=progress)
     wall = time.perf_counter() - wall0
     return ({label: st.result() for label, st in sink.stats.items()}, sink.current, wall,
             sink.seconds)
@@ -237,10 +219,6 @@ def nees_inside(r: EnsembleResult, t_from: float = T_NEES) -> tuple[float, float
     return float(np.mean(inside)), float(np.mean(v))
 
 
-def _check(name: str, value: float, band: str, passed: bool) -> Check:
-    return Check(name, float(value), band, bool(passed))
-
-
 def acceptance(stats: Mapping[str, EnsembleResult], per_axis: bool = False) -> list[Check]:
     """Every acceptance band of spec section 6 as checks.
 
@@ -256,23 +234,23 @@ def acceptance(stats: Mapping[str, EnsembleResult], per_axis: bool = False) -> l
     lo, hi = (15.0, 24.0) if per_axis else (9.0, 18.0)
     improvement = 100.0 * (rpm - cur) / rpm
     checks = [
-        _check("pure DT CEP50 [%]", pure, f"{lo:g} to {hi:g}", lo <= pure <= hi),
-        _check("rpm DT CEP50 [%]", rpm, "0.9 to 2.5", 0.9 <= rpm <= 2.5),
-        _check("rpm-current DT CEP50 [%]", cur, "0.5 to 1.3", 0.5 <= cur <= 1.3),
-        _check("pure / rpm DT CEP50", pure / rpm, ">= 5", pure >= 5.0 * rpm),
-        _check("rpm-current < rpm: improvement [%]", improvement, ">= 25 (paper 39.4)",
+        Check("pure DT CEP50 [%]", pure, f"{lo:g} to {hi:g}", lo <= pure <= hi),
+        Check("rpm DT CEP50 [%]", rpm, "0.9 to 2.5", 0.9 <= rpm <= 2.5),
+        Check("rpm-current DT CEP50 [%]", cur, "0.5 to 1.3", 0.5 <= cur <= 1.3),
+        Check("pure / rpm DT CEP50", pure / rpm, ">= 5", pure >= 5.0 * rpm),
+        Check("rpm-current < rpm: improvement [%]", improvement, ">= 25 (paper 39.4)",
                cur < rpm and improvement >= 25.0),
     ]
     r = stats["rpm-current"]
     late = r.t >= T_CURRENT - 1e-9
     c = current_rms(r)
     for j, axis in enumerate("NE"):
-        v = float(np.max(c[late, j]))
-        checks.append(_check(f"rpm-current: max RMS current error {axis} for t >= 90 s [m/s]",
+        v = float(np.max(c[late, j])) if late.any() else np.nan  # fails: run too short
+        checks.append(Check(f"rpm-current: max RMS current error {axis} for t >= 90 s [m/s]",
                              v, "<= 0.15", v <= 0.15))
     frac, mean = nees_inside(r)
     lo_b, hi_b = r.nees_bounds
-    checks.append(_check(
+    checks.append(Check(
         f"rpm-current: run-averaged 2-dof position NEES, mean over t >= {T_NEES:g} s "
         f"(95 % band {np.nanmedian(lo_b):.2f}-{np.nanmedian(hi_b):.2f}, {frac:.0%} of epochs "
         "inside)",
@@ -343,59 +321,17 @@ def figures(stats: Mapping[str, EnsembleResult], current: tuple | None) -> dict[
     return figs
 
 
-def log_rpm_aided_ins_view(sink: Any, figs: Mapping[str, Any]) -> None:
-    """Log the Figs. 3-5 equivalents into an open :class:`navreplay.viz.Sink`.
-
-    ``/ensemble/fig3 current ...`` (current estimate of run 1 against the truth, and the
-    RMS of the current error with the filter's sigma), ``/ensemble/fig4 longitude error RMS``
-    and ``/ensemble/fig5 latitude error RMS`` (the three modes overlaid, each with its mean
-    predicted sigma), the run-averaged position NEES with its 95 % band, and DT CEP50 over time.
-    """
-    t = np.asarray(figs["t"], dtype=float)
-    if "current_run1" in figs:
-        c = figs["current_run1"]
-        ct = np.asarray(c["t"], dtype=float)
-        for j, axis in enumerate("NE"):
-            sink.log_ensemble(
-                f"fig3 current {axis} (run 1)", ct,
-                {"estimate": c["estimate"][:, j], "truth": np.full(ct.shape, c["truth"][j])},
-                unit="m/s",
-            )
-    for j, axis in enumerate("NE"):
-        sink.log_ensemble(
-            f"fig3 current error {axis} RMS", t,
-            {"RMS": figs["current_rms"][:, j], "filter sigma": figs["current_sigma"][:, j]},
-            unit="m/s",
-        )
-    for fig, key, what in (("fig4", "long", "longitude (east)"), ("fig5", "lat", "latitude "
-                                                                              "(north)")):
-        series: dict[str, np.ndarray] = {}
-        for label in MODES:
-            series[f"{label} RMS"] = figs[f"{key}_rms"][label]
-            series[f"{label} sigma"] = figs[f"{key}_sigma"][label]
-        sink.log_ensemble(f"{fig} {what} error RMS", t, series, unit="m")
-    lo, hi = figs["nees_bounds"]
-    sink.log_ensemble("position NEES (2 dof, run average)", t, dict(figs["nees"]), unit="-",
-                      bounds=(lo, hi))
-    sink.log_ensemble("DT CEP50", t, dict(figs["dt_cep50"]), unit="%")
-
-
-def write_view(path: Path | str, figs: Mapping[str, Any]) -> Path:
-    """Save the Rerun view of :func:`log_rpm_aided_ins_view` to an .rrd file."""
-    from navreplay.viz import Save, open_sink
-
-    with open_sink(Save(Path(path), overwrite=True),
-                   recording_name="rpm-aided-ins reproduction") as sink:
-        log_rpm_aided_ins_view(sink, figs)
-    return Path(path)
-
-
 # --------------------------------------------------------------------------------------------
 # the reproduction
 
 
-class RpmAidedInsReproduction:
-    """``navreplay reproduce rpm-aided-ins``: the campaign of spec section 6."""
+class RpmAidedInsReproduction(Reproduction):
+    """``navreplay reproduce rpm-aided-ins``: the campaign of spec section 6.
+
+    ``runs`` counts recordings (each replayed in the three modes), and so does ``progress``.
+    The option ``values`` holds scenario parameter overrides (e.g.
+    ``{"level_mil_per_axis": True}``, which also selects the spec's other pure-navigation band).
+    """
 
     name = "rpm-aided-ins"
     summary = ("Underwater INS aided by propeller RPM with sea-current estimation "
@@ -405,37 +341,10 @@ class RpmAidedInsReproduction:
     quick_runs = 10
     """Runs for a quick look (``navreplay demo``); the bands are meant for 100."""
 
-    def run(
-        self,
-        *,
-        runs: int | None = None,
-        seed: int = 0,
-        workers: int = 1,
-        rrd: Path | None = None,
-        progress: Callable[[int, int], None] | None = None,
+    def campaign(
+        self, runs: int, *, seed: int, workers: int, progress: Progress | None,
         values: Mapping[str, Any] | None = None,
     ) -> Report:
-        """Run the campaign, evaluate the bands, optionally save the Rerun view.
-
-        Parameters
-        ----------
-        runs : int, optional
-            Recordings (default 100); each is replayed in the three modes.
-        seed : int
-            Base seed: run i uses ``seed + i``.
-        workers : int
-            Processes.
-        rrd : path, optional
-            Save the Figs. 3-5 view here.
-        progress : callable, optional
-            ``progress(done, total)`` in recordings.
-        values : mapping, optional
-            Scenario parameter overrides (e.g. ``{"level_mil_per_axis": True}``, which also
-            selects the spec's other pure-navigation band).
-        """
-        runs = self.default_runs if runs is None else int(runs)
-        if runs < 1:
-            raise ValueError(f"runs must be at least 1, got {runs}")
         values = dict(values or {})
         p = build(UnderwaterRpmParams, values, where=f"scenario {SCENARIO}")
         stats, current, wall, worker_s = run_campaign(runs, seed, workers, values, progress)
@@ -448,8 +357,6 @@ class RpmAidedInsReproduction:
         figs = figures(stats, current)
         figs["timing"] = {"wall_s": wall, "worker_s": worker_s, "recordings": runs,
                           "filter_runs": 3 * runs}
-        if rrd is not None:
-            write_view(rrd, figs)
         return Report(
             title=(f"RPM velocity-aided underwater INS with sea-current estimation (seed 003): "
                    f"{runs} runs, seed {seed}"),
@@ -457,6 +364,43 @@ class RpmAidedInsReproduction:
             checks=acceptance(stats, p.level_mil_per_axis),
             figures=figs,
         )
+
+    @staticmethod
+    def log_view(sink: Any, figs: Mapping[str, Any]) -> None:
+        """Log the Figs. 3-5 equivalents into an open :class:`navreplay.viz.Sink`.
+
+        ``/ensemble/fig3 current ...`` (current estimate of run 1 against the truth, and the
+        RMS of the current error with the filter's sigma), ``/ensemble/fig4 longitude error RMS``
+        and ``/ensemble/fig5 latitude error RMS`` (the three modes overlaid, each with its mean
+        predicted sigma), the run-averaged position NEES with its 95 % band, and DT CEP50 over time.
+        """
+        t = np.asarray(figs["t"], dtype=float)
+        if "current_run1" in figs:
+            c = figs["current_run1"]
+            ct = np.asarray(c["t"], dtype=float)
+            for j, axis in enumerate("NE"):
+                sink.log_ensemble(
+                    f"fig3 current {axis} (run 1)", ct,
+                    {"estimate": c["estimate"][:, j], "truth": np.full(ct.shape, c["truth"][j])},
+                    unit="m/s",
+                )
+        for j, axis in enumerate("NE"):
+            sink.log_ensemble(
+                f"fig3 current error {axis} RMS", t,
+                {"RMS": figs["current_rms"][:, j], "filter sigma": figs["current_sigma"][:, j]},
+                unit="m/s",
+            )
+        for fig, key, what in (("fig4", "long", "longitude (east)"), ("fig5", "lat", "latitude "
+                                                                                  "(north)")):
+            series: dict[str, np.ndarray] = {}
+            for label in MODES:
+                series[f"{label} RMS"] = figs[f"{key}_rms"][label]
+                series[f"{label} sigma"] = figs[f"{key}_sigma"][label]
+            sink.log_ensemble(f"{fig} {what} error RMS", t, series, unit="m")
+        lo, hi = figs["nees_bounds"]
+        sink.log_ensemble("position NEES (2 dof, run average)", t, dict(figs["nees"]), unit="-",
+                          bounds=(lo, hi))
+        sink.log_ensemble("DT CEP50", t, dict(figs["dt_cep50"]), unit="%")
 
 
 REPRODUCTION = RpmAidedInsReproduction()

@@ -34,8 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Mapping
-from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -51,7 +50,7 @@ from navreplay.replay.ensemble import (
     run_ensemble,
 )
 from navreplay.replay.result import RunResult
-from navreplay.reproduce import Check, Report
+from navreplay.reproduce import Check, Progress, Report, Reproduction, slashed, warm_up
 from navreplay.sim.scenarios.ship_transfer_alignment import ShipTransferAlignmentParams
 from navreplay.streams import Recording
 
@@ -210,7 +209,7 @@ def run_campaign(
     seed: int = 0,
     workers: int = 1,
     conditions: tuple[Condition, ...] = CONDITIONS,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Progress | None = None,
 ) -> tuple[dict[tuple[str, str], VariantStats], float]:
     """Run every condition of the campaign in memory over one process pool.
 
@@ -220,7 +219,7 @@ def run_campaign(
     seconds : float
         Wall time [s].
     """
-    _warm_up()  # compile the numba kernels once, before the workers fork
+    warm_up(SCENARIO, 0.3, [FilterSpec(FILTER)])
     total = runs * len(conditions)
     done = 0
 
@@ -247,20 +246,8 @@ def run_campaign(
     return out, time.perf_counter() - wall0
 
 
-def _warm_up() -> None:
-    from navreplay.filters.registry import load_filter
-    from navreplay.replay.engine import replay
-    from navreplay.sim.scenario import simulate
-
-    replay(simulate(SCENARIO, {"duration": 0.3}, seed=0), load_filter(FILTER))
-
-
 # --------------------------------------------------------------------------------------------
 # acceptance (spec section 6)
-
-
-def _check(name: str, value: float, band: str, passed: bool) -> Check:
-    return Check(name, float(value), band, bool(passed))
 
 
 def acceptance(stats: Mapping[tuple[str, str], VariantStats]) -> list[Check]:
@@ -273,33 +260,29 @@ def acceptance(stats: Mapping[tuple[str, str], VariantStats]) -> list[Check]:
     level = np.abs(part.phi[:, part.index(t), 0:2]) < 1.0 * MRAD
     frac = float(np.mean(np.all(level, axis=1)))
     checks = [
-        _check("partial: RMS phi_N at 100 s [mrad]", rp[0], "<= 1.0", rp[0] <= 1.0),
-        _check("partial: RMS phi_E at 100 s [mrad]", rp[1], "<= 1.0", rp[1] <= 1.0),
-        _check("partial: fraction of runs with |phi_N| and |phi_E| < 1 mrad at 100 s", frac,
+        Check("partial: RMS phi_N at 100 s [mrad]", rp[0], "<= 1.0", rp[0] <= 1.0),
+        Check("partial: RMS phi_E at 100 s [mrad]", rp[1], "<= 1.0", rp[1] <= 1.0),
+        Check("partial: fraction of runs with |phi_N| and |phi_E| < 1 mrad at 100 s", frac,
                ">= 0.9", frac >= 0.9),
-        _check("partial: RMS phi_D at 100 s [mrad]", rp[2], "1.5 .. 4.5",
+        Check("partial: RMS phi_D at 100 s [mrad]", rp[2], "1.5 .. 4.5",
                1.5 <= rp[2] <= 4.5),
-        _check("full, flexure: RMS phi_D / partial RMS phi_D at 100 s", rf[2] / rp[2],
+        Check("full, flexure: RMS phi_D / partial RMS phi_D at 100 s", rf[2] / rp[2],
                ">= 2.5", rf[2] >= 2.5 * rp[2]),
-        _check("full, flexure: RMS phi_D at 100 s [mrad]", rf[2], ">= 5", rf[2] >= 5.0),
+        Check("full, flexure: RMS phi_D at 100 s [mrad]", rf[2], ">= 5", rf[2] >= 5.0),
     ]
     if (FULL, "no flexure") in stats and (PARTIAL, "no flexure") in stats:
         f0 = stats[(FULL, "no flexure")].rms_at(t)[2] / MRAD
         p0 = stats[(PARTIAL, "no flexure")].rms_at(t)[2] / MRAD
-        checks.append(_check("full, no flexure: RMS phi_D / partial (no flexure) RMS phi_D",
+        checks.append(Check("full, no flexure: RMS phi_D / partial (no flexure) RMS phi_D",
                              f0 / p0, "<= 1.5", f0 <= 1.5 * p0))
     if (VEL_ONLY, "flexure") in stats:
         v = stats[(VEL_ONLY, "flexure")].rms_at(t)[2] / MRAD
-        checks.append(_check("vel_only: RMS phi_D at 100 s [mrad]", v, ">= 10", v >= 10.0))
+        checks.append(Check("vel_only: RMS phi_D at 100 s [mrad]", v, ">= 10", v >= 10.0))
     return checks
 
 
 # --------------------------------------------------------------------------------------------
 # table
-
-
-def _fmt(v: np.ndarray) -> str:
-    return " / ".join(f"{x:.3g}" for x in v)
 
 
 def format_table(stats: Mapping[tuple[str, str], VariantStats], runs: int) -> str:
@@ -317,7 +300,7 @@ def format_table(stats: Mapping[tuple[str, str], VariantStats], runs: int) -> st
             if st is None:
                 continue
             for t in T_EVAL:
-                ours = f"{_fmt(st.rms_at(t) / MRAD)} (max {_fmt(st.max_at(t) / MRAD)})"
+                ours = f"{slashed(st.rms_at(t) / MRAD)} (max {slashed(st.max_at(t) / MRAD)})"
                 paper = PAPER.get((variant, cond.name, t), "")
                 proto = PROTOTYPE.get((variant, cond.name, t), "")
                 lines.append(f"{variant:<17}{cond.name:<12}{t:>5.0f}s  {paper:<17}{proto:<42}"
@@ -327,13 +310,13 @@ def format_table(stats: Mapping[tuple[str, str], VariantStats], runs: int) -> st
         "",
         "Predicted 1 sigma of phi at 100 s, partial, flexure (not a consistency gate, spec 6):",
         f"  prototype {PROTOTYPE_SIGMA}; navreplay "
-        f"{_fmt(part.sigma_rms[part.index(T_EVAL[-1])] / MRAD)} mrad",
+        f"{slashed(part.sigma_rms[part.index(T_EVAL[-1])] / MRAD)} mrad",
     ]
     return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------------------------
-# Rerun view (Figs. 2 and 3)
+# figures (Figs. 2 and 3)
 
 
 def figures(stats: Mapping[tuple[str, str], VariantStats]) -> dict[str, Any]:
@@ -368,29 +351,15 @@ def figures(stats: Mapping[tuple[str, str], VariantStats]) -> dict[str, Any]:
     return {"t": part.t, "plots": plots}
 
 
-def log_transfer_alignment_view(sink: Any, figs: Mapping[str, Any]) -> None:
-    """Log the Figs. 2 and 3 equivalents into an open :class:`navreplay.viz.Sink`, as
-    ``/ensemble/<plot>/<series>`` in mrad versus time."""
-    for name, series in figs["plots"].items():
-        sink.log_ensemble(name, figs["t"], series, unit="mrad")
-
-
-def write_view(path: Path | str, figs: Mapping[str, Any]) -> Path:
-    """Save the Rerun view of :func:`log_transfer_alignment_view` to an .rrd file."""
-    from navreplay.viz import Save, open_sink
-
-    with open_sink(Save(Path(path), overwrite=True),
-                   recording_name="transfer-alignment reproduction") as sink:
-        log_transfer_alignment_view(sink, figs)
-    return Path(path)
-
-
 # --------------------------------------------------------------------------------------------
 # the reproduction
 
 
-class TransferAlignmentReproduction:
-    """``navreplay reproduce transfer-alignment``: the campaign of spec section 6."""
+class TransferAlignmentReproduction(Reproduction):
+    """``navreplay reproduce transfer-alignment``: the campaign of spec section 6.
+
+    ``runs`` counts runs per condition; ``progress`` counts recordings.
+    """
 
     name = "transfer-alignment"
     summary = ("Shipboard transfer alignment, velocity + quaternion partial matching "
@@ -401,33 +370,9 @@ class TransferAlignmentReproduction:
     """Runs per condition for a quick look (``navreplay demo``, ``--quick``); fewer runs leave
     the RMS azimuth too uncertain (about +-30 % at 6 runs) for the bands."""
 
-    def run(
-        self,
-        *,
-        runs: int | None = None,
-        seed: int = 0,
-        workers: int = 1,
-        rrd: Path | None = None,
-        progress: Callable[[int, int], None] | None = None,
+    def campaign(
+        self, runs: int, *, seed: int, workers: int, progress: Progress | None
     ) -> Report:
-        """Run the campaign, evaluate the bands, optionally save the Rerun view.
-
-        Parameters
-        ----------
-        runs : int, optional
-            Runs per condition (default 36).
-        seed : int
-            Base seed: run i uses ``seed + i``.
-        workers : int
-            Processes.
-        rrd : path, optional
-            Save the Figs. 2 and 3 view here.
-        progress : callable, optional
-            ``progress(done, total)`` in recordings.
-        """
-        runs = self.default_runs if runs is None else int(runs)
-        if runs < 1:
-            raise ValueError(f"runs must be at least 1, got {runs}")
         stats, wall = run_campaign(runs, seed, workers, progress=progress)
         n_filter = runs * sum(len(c.variants) for c in CONDITIONS)
         p = ShipTransferAlignmentParams()
@@ -439,8 +384,6 @@ class TransferAlignmentReproduction:
         figs = figures(stats)
         figs["timing"] = {"wall_s": wall, "recordings": runs * len(CONDITIONS),
                           "filter_runs": n_filter}
-        if rrd is not None:
-            write_view(rrd, figs)
         return Report(
             title=(f"Transfer alignment, velocity + quaternion partial matching (seed 000): "
                    f"{runs} runs per condition, seed {seed}"),
@@ -448,6 +391,13 @@ class TransferAlignmentReproduction:
             checks=acceptance(stats),
             figures=figs,
         )
+
+    @staticmethod
+    def log_view(sink: Any, figures: Mapping[str, Any]) -> None:
+        """The Figs. 2 and 3 equivalents as ``/ensemble/<plot>/<series>`` in mrad versus
+        time."""
+        for name, series in figures["plots"].items():
+            sink.log_ensemble(name, figures["t"], series, unit="mrad")
 
 
 REPRODUCTION = TransferAlignmentReproduction()

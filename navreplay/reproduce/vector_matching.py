@@ -37,8 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
-from pathlib import Path
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -51,7 +50,9 @@ from navreplay.filters.vector_matching import (
 )
 from navreplay.geo.earth import gravity
 from navreplay.geo.rotations import quat_to_euler, wrap_angle
-from navreplay.reproduce import Check, Report
+from navreplay.metrics import rms
+from navreplay.replay.ensemble import make_executor
+from navreplay.reproduce import Check, Progress, Report, Reproduction, slashed
 from navreplay.sim.scenarios.gimpo import (
     Axis,
     BodyAxis,
@@ -122,11 +123,6 @@ def euler_errors(q_est: np.ndarray, q_true: np.ndarray) -> np.ndarray:
     d[..., 0] = wrap_angle(d[..., 0])
     d[..., 2] = wrap_angle(d[..., 2])
     return d
-
-
-def rms(x: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Root mean square along ``axis``."""
-    return np.sqrt(np.mean(np.square(x), axis=axis))
 
 
 # --------------------------------------------------------------------------------------------
@@ -211,10 +207,6 @@ def run_yaw_case(case: str, runs: int, seed: int) -> YawCaseResult:
 # acceptance (spec section 6)
 
 
-def _check(name: str, value: float, band: str, passed: bool) -> Check:
-    return Check(name, float(value), band, bool(passed))
-
-
 def acceptance(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray],
                yaw_t: np.ndarray) -> list[Check]:
     """Every acceptance band of spec section 6 (plus paper claim 1) as checks.
@@ -239,75 +231,71 @@ def acceptance(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray],
     zero = at("N", 0.0)
     for j, m in enumerate(MODELS):
         for k, (angle, lim) in enumerate(zip(ANGLES, (2.0, 1.0, 3.0), strict=True)):
-            checks.append(_check(f"a = 0, {m}: RMS {angle} at 10 s [deg]", zero[j, k],
+            checks.append(Check(f"a = 0, {m}: RMS {angle} at 10 s [deg]", zero[j, k],
                                  f"<= {lim}", zero[j, k] <= lim))
     rel = np.max(np.abs(zero[g] - zero[s]) / np.minimum(zero[g], zero[s]))
-    checks.append(_check("a = 0: models' relative difference, max over r/p/y", rel,
+    checks.append(Check("a = 0: models' relative difference, max over r/p/y", rel,
                          "<= 0.15", rel <= 0.15))
     # D sweep
     dmax = lambda a, j=g: float(np.max(at("D", a)[j]))  # noqa: E731
     checks += [
-        _check("D sweep, gravity: max(r,p,y) RMS at +1.2 g [deg]", dmax(1.2), ">= 10",
+        Check("D sweep, gravity: max(r,p,y) RMS at +1.2 g [deg]", dmax(1.2), ">= 10",
                dmax(1.2) >= 10.0),
-        _check("D sweep, gravity: max(r,p,y) RMS at +1.5 g [deg]", dmax(1.5), ">= 20",
+        Check("D sweep, gravity: max(r,p,y) RMS at +1.5 g [deg]", dmax(1.5), ">= 20",
                dmax(1.5) >= 20.0),
-        _check("D sweep, gravity: max(r,p,y) RMS at +1.5 g / at +1.0 g", dmax(1.5) / dmax(1.0),
+        Check("D sweep, gravity: max(r,p,y) RMS at +1.5 g / at +1.0 g", dmax(1.5) / dmax(1.0),
                ">= 5", dmax(1.5) >= 5.0 * dmax(1.0)),
     ]
     v = float(np.max(sweep["D"][:, s]))
-    checks.append(_check("D sweep, specific-force: max RMS over r/p/y and all a [deg]", v,
+    checks.append(Check("D sweep, specific-force: max RMS over r/p/y and all a [deg]", v,
                          "<= 5", v <= 5.0))
     # N sweep
     n0 = float(np.max(sweep["N"][i0, g]))
     for a in (-1.0, 1.2):
         v = float(np.max(at("N", a)[g]))
-        checks.append(_check(f"N sweep, gravity: max(r,p,y) RMS at {a:+.1f} g / at 0 g",
+        checks.append(Check(f"N sweep, gravity: max(r,p,y) RMS at {a:+.1f} g / at 0 g",
                              v / n0, ">= 3", v >= 3.0 * n0))
     v = float(np.max(at("N", -0.8)[g]))
-    checks.append(_check("N sweep, gravity: max(r,p,y) RMS at -0.8 g [deg]", v, ">= 10",
+    checks.append(Check("N sweep, gravity: max(r,p,y) RMS at -0.8 g [deg]", v, ">= 10",
                          v >= 10.0))
     v = float(np.max(sweep["N"][:, s]))
-    checks.append(_check("N sweep, specific-force: max RMS over r/p/y and all a [deg]", v,
+    checks.append(Check("N sweep, specific-force: max RMS over r/p/y and all a [deg]", v,
                          "<= 6", v <= 6.0))
     # E sweep
     for j, m in enumerate(MODELS):
         v = float(np.max(sweep["E"][:, j]))
-        checks.append(_check(f"E sweep, {m}: max RMS over r/p/y and all a [deg]", v, "<= 3",
+        checks.append(Check(f"E sweep, {m}: max RMS over r/p/y and all a [deg]", v, "<= 3",
                              v <= 3.0))
     v = float(np.max(np.abs(sweep["E"][:, g] - sweep["E"][:, s])))
-    checks.append(_check("E sweep: max |gravity - specific-force| per point [deg]", v,
+    checks.append(Check("E sweep: max |gravity - specific-force| per point [deg]", v,
                          "<= 1.5", v <= 1.5))
     # |a| <= 0.5 g
     small = [i for i, a in enumerate(ACCEL_G) if abs(a) <= 0.5]
     v = max(float(np.max(np.abs(sweep[ax][small, g] - sweep[ax][small, s]))) for ax in sweep)
-    checks.append(_check("|a| <= 0.5 g, all axes: max |gravity - specific-force| [deg]", v,
+    checks.append(Check("|a| <= 0.5 g, all axes: max |gravity - specific-force| [deg]", v,
                          "<= 1.5", v <= 1.5))
     # yaw cases
     k30 = int(np.argmin(np.abs(yaw_t - 30.0)))
     for case, r in yaw.items():
         peak_g, peak_s = float(np.max(r[g, :, 2])), float(np.max(r[s, :, 2]))
         checks += [
-            _check(f"yaw case {case}: peak RMS yaw gravity / specific-force", peak_g / peak_s,
+            Check(f"yaw case {case}: peak RMS yaw gravity / specific-force", peak_g / peak_s,
                    ">= 1.5", peak_g >= 1.5 * peak_s),
-            _check(f"yaw case {case}: specific-force peak RMS yaw [deg]", peak_s, "<= 6",
+            Check(f"yaw case {case}: specific-force peak RMS yaw [deg]", peak_s, "<= 6",
                    peak_s <= 6.0),
-            _check(f"yaw case {case}: max over models of RMS yaw at 30 s [deg]",
+            Check(f"yaw case {case}: max over models of RMS yaw at 30 s [deg]",
                    float(np.max(r[:, k30, 2])), "<= 3", float(np.max(r[:, k30, 2])) <= 3.0),
         ]
     # paper claim 1 (not a band of the spec; robust by a wide margin)
     e_max = float(np.max(sweep["E"][:, g]))
     v = min(float(np.max(sweep["N"][:, g])), float(np.max(sweep["D"][:, g]))) / e_max
-    checks.append(_check("claim 1, gravity: min(N, D) / E of the max RMS over the sweep", v,
+    checks.append(Check("claim 1, gravity: min(N, D) / E of the max RMS over the sweep", v,
                          "> 1", v > 1.0))
     return checks
 
 
 # --------------------------------------------------------------------------------------------
 # table
-
-
-def _rpy(v: Sequence[float]) -> str:
-    return " / ".join(f"{x:.3g}" for x in v)
 
 
 def _range(v: np.ndarray) -> str:
@@ -334,8 +322,8 @@ def format_table(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray], yaw_t
     for (axis, a), (proto_g, proto_s) in PROTOTYPE_SWEEP.items():
         ours = sweep["N" if axis == "0" else axis][ACCEL_G.index(a)]
         label = "any, 0 g" if axis == "0" else f"{axis} {a:+.1f} g"
-        lines.append(f"{label:<12}| {_rpy(proto_g):<{w}}{_rpy(ours[0]):<{w}}"
-                     f"| {_rpy(proto_s):<{w}}{_rpy(ours[1]):<{w}}")
+        lines.append(f"{label:<12}| {slashed(proto_g):<{w}}{slashed(ours[0]):<{w}}"
+                     f"| {slashed(proto_s):<{w}}{slashed(ours[1]):<{w}}")
     lines.append(f"{'E, sweep':<12}| {PROTOTYPE_E_SWEEP[0]:<{w}}{_range(sweep['E'][:, 0]):<{w}}"
                  f"| {PROTOTYPE_E_SWEEP[1]:<{w}}{_range(sweep['E'][:, 1]):<{w}}")
     k30 = int(np.argmin(np.abs(yaw_t - 30.0)))
@@ -348,140 +336,28 @@ def format_table(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray], yaw_t
     ]
     for case, r in yaw.items():
         proto_g, proto_s = PROTOTYPE_YAW_PEAK[case]
-        lines.append(f"{case:<12}| {_rpy(proto_g):<{w}}{_rpy(r[0].max(axis=0)):<{w}}"
-                     f"| {_rpy(proto_s):<{w}}{_rpy(r[1].max(axis=0)):<{w}}")
+        lines.append(f"{case:<12}| {slashed(proto_g):<{w}}{slashed(r[0].max(axis=0)):<{w}}"
+                     f"| {slashed(proto_s):<{w}}{slashed(r[1].max(axis=0)):<{w}}")
     for case, r in yaw.items():
-        lines.append(f"{case + ' at 30 s':<12}| {_rpy(PROTOTYPE_YAW_END):<{w}}"
-                     f"{_rpy(r[0, k30]):<{w}}| {_rpy(PROTOTYPE_YAW_END):<{w}}"
-                     f"{_rpy(r[1, k30]):<{w}}")
+        lines.append(f"{case + ' at 30 s':<12}| {slashed(PROTOTYPE_YAW_END):<{w}}"
+                     f"{slashed(r[0, k30]):<{w}}| {slashed(PROTOTYPE_YAW_END):<{w}}"
+                     f"{slashed(r[1, k30]):<{w}}")
     lines += ["", "Paper claims (the figures are not in the seed; checked by the bands below):"]
     lines += [f"  {c}" for c in PAPER_CLAIMS]
     return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------------------------
-# Rerun view
-
-
-def log_vector_matching_view(sink: Any, figures: dict[str, Any]) -> None:
-    """Log the Figs. 1-5 equivalents into an open :class:`navreplay.viz.Sink`.
-
-    Sweeps: one plot per axis and angle, ``/ensemble/fig<1..3> <axis> sweep: RMS <angle> at
-    10 s/<model>``, with the acceleration [g] on the ``time`` timeline (a sweep has no time).
-    Yaw cases: ``/ensemble/fig<4..5> case <x|y>: RMS <angle>/<model>`` versus time [s].
-    """
-    a = np.asarray(figures["sweep"]["accel_g"], dtype=float)
-    for fig, axis in enumerate(AXES, start=1):
-        r = np.asarray(figures["sweep"]["rms_deg"][axis])
-        for k, angle in enumerate(ANGLES):
-            sink.log_ensemble(
-                f"fig{fig} {axis} sweep: RMS {angle} at 10 s vs a (time axis = a in g)", a,
-                {str(m): r[:, j, k] for j, m in enumerate(MODELS)}, unit="deg",
-            )
-    t = np.asarray(figures["yaw"]["t"], dtype=float)
-    for fig, case in enumerate(CASES, start=4):
-        r = np.asarray(figures["yaw"]["rms_deg"][case])
-        for k, angle in enumerate(ANGLES):
-            sink.log_ensemble(
-                f"fig{fig} case {case}: RMS {angle}", t,
-                {str(m): r[j, :, k] for j, m in enumerate(MODELS)}, unit="deg",
-            )
-
-
-def write_view(path: Path | str, figures: dict[str, Any]) -> Path:
-    """Save the Rerun view of :func:`log_vector_matching_view` to an .rrd file."""
-    from navreplay.viz import Save, open_sink
-
-    with open_sink(Save(Path(path), overwrite=True),
-                   recording_name="vector-matching reproduction") as sink:
-        log_vector_matching_view(sink, figures)
-    return Path(path)
-
-
-# --------------------------------------------------------------------------------------------
-# static figure for the docs (no plotting dependency: a small rasteriser and PNG encoder)
-
-_RED, _BLUE, _GRID, _AXIS = (214, 39, 40), (31, 119, 180), (225, 225, 225), (150, 150, 150)
-
-
-def _png(img: np.ndarray) -> bytes:
-    """Encode an (h, w, 3) uint8 RGB image as PNG."""
-    import struct
-    import zlib
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return (struct.pack(">I", len(data)) + kind + data
-                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
-
-    h, w, _ = img.shape
-    raw = np.concatenate([np.zeros((h, 1), np.uint8), img.reshape(h, 3 * w)], axis=1)
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(raw.tobytes(), 9)) + chunk(b"IEND", b""))
-
-
-def _polyline(img: np.ndarray, x: np.ndarray, y: np.ndarray, color: tuple[int, ...],
-              width: int = 2) -> None:
-    """Draw a polyline in pixel coordinates (y down), clipped to the image."""
-    h, w, _ = img.shape
-    for x0, y0, x1, y1 in zip(x[:-1], y[:-1], x[1:], y[1:], strict=True):
-        n = int(max(abs(x1 - x0), abs(y1 - y0)) * 2) + 2
-        xs = np.rint(np.linspace(x0, x1, n)).astype(int)
-        ys = np.rint(np.linspace(y0, y1, n)).astype(int)
-        for dx in range(width):
-            for dy in range(width):
-                ok = (xs + dx >= 0) & (xs + dx < w) & (ys + dy >= 0) & (ys + dy < h)
-                img[ys[ok] + dy, xs[ok] + dx] = color
-
-
-def sweep_figure_png(figures: dict[str, Any]) -> bytes:
-    """PNG of the sweeps and the yaw cases, both models (for docs/img).
-
-    Four panels, left to right: N, E, D sweeps (x: acceleration -1.5 .. +1.5 g, grid every
-    0.5 g, darker at 0; y: the largest of the roll, pitch and yaw RMS errors at 10 s, log scale
-    0.2 .. 200 deg, grid at 0.3, 1, 3, 10, 30, 100 deg, darker at 1, 10, 100), then the yaw
-    cases (x: 0 .. 30 s, grid every 5 s; y: RMS yaw error, same scale; case x solid, case y
-    thin). Red: gravity model; blue: specific-force model. No text: the caption says it.
-    """
-    pw, ph, pad = 300, 240, 20
-    img = np.full((ph + 2 * pad, 4 * (pw + pad) + pad, 3), 255, np.uint8)
-    lo, hi = np.log10(0.2), np.log10(200.0)
-
-    def ypix(v: np.ndarray) -> np.ndarray:
-        return pad + (hi - np.log10(np.clip(v, 0.2, 200.0))) / (hi - lo) * ph
-
-    def frame(x0: int, xgrid: np.ndarray, xdark: float) -> None:
-        for g in (0.3, 1.0, 3.0, 10.0, 30.0, 100.0):
-            yy = int(round(float(ypix(np.array(g)))))
-            img[yy, x0:x0 + pw] = _AXIS if g in (1.0, 10.0, 100.0) else _GRID
-        for gx in xgrid:
-            img[pad:pad + ph, int(round(gx))] = _AXIS if gx == xdark else _GRID
-        img[pad, x0:x0 + pw] = img[pad + ph, x0:x0 + pw] = _AXIS
-        img[pad:pad + ph + 1, x0] = img[pad:pad + ph + 1, x0 + pw] = _AXIS
-
-    a = np.asarray(figures["sweep"]["accel_g"], dtype=float)
-    for i, axis in enumerate(AXES):
-        x0 = pad + i * (pw + pad)
-        xp = x0 + (a + 1.5) / 3.0 * pw
-        frame(x0, x0 + np.arange(7) * pw / 6.0, x0 + pw / 2.0)
-        r = np.asarray(figures["sweep"]["rms_deg"][axis])
-        for j, color in enumerate((_RED, _BLUE)):
-            _polyline(img, xp, ypix(r[:, j].max(axis=1)), color)
-    x0 = pad + 3 * (pw + pad)
-    t = np.asarray(figures["yaw"]["t"], dtype=float)
-    frame(x0, x0 + np.arange(7) * pw / 6.0, -1.0)
-    for case, width in zip(CASES, (2, 1), strict=True):
-        r = np.asarray(figures["yaw"]["rms_deg"][case])
-        for j, color in enumerate((_RED, _BLUE)):
-            _polyline(img, x0 + t / 30.0 * pw, ypix(r[j, :, 2]), color, width)
-    return _png(img)
-
-
-# --------------------------------------------------------------------------------------------
 # the reproduction
 
 
-class VectorMatchingReproduction:
-    """``navreplay reproduce vector-matching``: the campaign of spec section 6."""
+class VectorMatchingReproduction(Reproduction):
+    """``navreplay reproduce vector-matching``: the campaign of spec section 6.
+
+    ``runs`` counts runs per sweep point; the yaw cases get ``10 runs`` each. ``progress``
+    counts runs (one run = one recording, both models); the five tasks (three sweep axes, two
+    yaw cases) are spread over the ``workers`` processes.
+    """
 
     name = "vector-matching"
     summary = ("Gyro-free attitude: specific-force vs gravity vector matching "
@@ -491,35 +367,9 @@ class VectorMatchingReproduction:
     quick_runs = 20
     """Runs per sweep point for a quick look (``navreplay demo``)."""
 
-    def run(
-        self,
-        *,
-        runs: int | None = None,
-        seed: int = 0,
-        workers: int = 1,
-        rrd: Path | None = None,
-        progress: Callable[[int, int], None] | None = None,
+    def campaign(
+        self, runs: int, *, seed: int, workers: int, progress: Progress | None
     ) -> Report:
-        """Run the campaign, evaluate the bands, optionally save the Rerun view.
-
-        Parameters
-        ----------
-        runs : int, optional
-            Runs per sweep point (default 100); the yaw cases get ``10 runs`` each.
-        seed : int
-            Base seed: run i uses ``seed + i``.
-        workers : int
-            Processes; the five tasks (three sweep axes, two yaw cases) are spread over them.
-        rrd : path, optional
-            Save the Figs. 1-5 view here.
-        progress : callable, optional
-            ``progress(done, total)`` in runs (one run = one recording, both models).
-        """
-        from navreplay.replay.ensemble import make_executor
-
-        runs = self.default_runs if runs is None else int(runs)
-        if runs < 1:
-            raise ValueError(f"runs must be at least 1, got {runs}")
         yaw_runs = YAW_RUNS_PER_SWEEP_RUN * runs
         tasks: list[tuple[Callable[..., Any], str, int]] = (
             [(run_sweep_axis, str(a), runs) for a in AXES]
@@ -546,6 +396,7 @@ class VectorMatchingReproduction:
         yaw = {r.case: r.rms / DEG for r in yaw_res}
         yaw_t = yaw_res[0].t
         checks = acceptance(sweep, yaw, yaw_t)
+        site = GimpoAccelSweepParams()
         sim_s = sum(r.sim_seconds for r in results)
         filt_s = sum(r.filter_seconds for r in results)
         table = format_table(sweep, yaw, yaw_t, runs, yaw_runs)
@@ -559,7 +410,7 @@ class VectorMatchingReproduction:
                 "accel_g": list(ACCEL_G),
                 "models": [str(m) for m in MODELS],
                 "angles": list(ANGLES),
-                "rms_deg": {a: sweep[a] for a in sweep},
+                "rms_deg": sweep,
             },
             "yaw": {
                 "t": yaw_t,
@@ -569,11 +420,8 @@ class VectorMatchingReproduction:
             },
             "timing": {"wall_s": wall, "simulation_s": sim_s, "filter_s": filt_s,
                        "recordings": total, "filter_runs": total * len(MODELS)},
-            "site_gravity": float(gravity(GimpoAccelSweepParams().lat,
-                                          GimpoAccelSweepParams().height)),
+            "site_gravity": float(gravity(site.lat, site.height)),
         }
-        if rrd is not None:
-            write_view(rrd, figures)
         return Report(
             title=(f"Gyro-free attitude by vector matching (seed 001): {runs} runs per sweep "
                    f"point, {yaw_runs} per yaw case, seed {seed}"),
@@ -581,6 +429,31 @@ class VectorMatchingReproduction:
             checks=checks,
             figures=figures,
         )
+
+    @staticmethod
+    def log_view(sink: Any, figures: Mapping[str, Any]) -> None:
+        """Log the Figs. 1-5 equivalents into an open :class:`navreplay.viz.Sink`.
+
+        Sweeps: one plot per axis and angle, ``/ensemble/fig<1..3> <axis> sweep: RMS <angle> at
+        10 s/<model>``, with the acceleration [g] on the ``time`` timeline (a sweep has no time).
+        Yaw cases: ``/ensemble/fig<4..5> case <x|y>: RMS <angle>/<model>`` versus time [s].
+        """
+        a = np.asarray(figures["sweep"]["accel_g"], dtype=float)
+        for fig, axis in enumerate(AXES, start=1):
+            r = np.asarray(figures["sweep"]["rms_deg"][axis])
+            for k, angle in enumerate(ANGLES):
+                sink.log_ensemble(
+                    f"fig{fig} {axis} sweep: RMS {angle} at 10 s vs a (time axis = a in g)", a,
+                    {str(m): r[:, j, k] for j, m in enumerate(MODELS)}, unit="deg",
+                )
+        t = np.asarray(figures["yaw"]["t"], dtype=float)
+        for fig, case in enumerate(CASES, start=4):
+            r = np.asarray(figures["yaw"]["rms_deg"][case])
+            for k, angle in enumerate(ANGLES):
+                sink.log_ensemble(
+                    f"fig{fig} case {case}: RMS {angle}", t,
+                    {str(m): r[j, :, k] for j, m in enumerate(MODELS)}, unit="deg",
+                )
 
 
 REPRODUCTION = VectorMatchingReproduction()

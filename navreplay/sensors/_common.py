@@ -1,38 +1,17 @@
-"""Helpers shared by the sensor models: field validation and JSON-friendly realised errors."""
+"""Helpers shared by the sensor models: per-axis fields, random-constant draws and realised
+errors as plain JSON values."""
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Any
 
 import numpy as np
 
+from navreplay.streams import jsonable
+
 Vec3 = tuple[float, float, float]
 """Three per-axis values (N, E, D or x, y, z)."""
-
-
-def check_nonnegative(owner: object, *names: str) -> None:
-    """Raise ``ValueError`` naming the first field that is not a finite number >= 0.
-
-    Scalars and 3-tuples are both accepted.
-    """
-    for name in names:
-        value = getattr(owner, name)
-        values = value if isinstance(value, tuple) else (value,)
-        for v in values:
-            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0.0):
-                raise ValueError(
-                    f"{type(owner).__name__}.{name} must be finite and >= 0, got {value!r}"
-                )
-
-
-def check_positive(owner: object, *names: str) -> None:
-    """Raise ``ValueError`` naming the first field that is not a finite number > 0."""
-    for name in names:
-        v = getattr(owner, name)
-        if not (isinstance(v, int | float) and math.isfinite(v) and v > 0.0):
-            raise ValueError(f"{type(owner).__name__}.{name} must be finite and > 0, got {v!r}")
 
 
 def as_vec3(owner: object, name: str) -> None:
@@ -57,17 +36,17 @@ def as_vec3(owner: object, name: str) -> None:
     object.__setattr__(owner, name, vec)
 
 
-def jsonable(value: Any) -> Any:
-    """Convert arrays, numpy scalars and tuples (recursively) to plain lists and floats."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, tuple | list):
-        return [jsonable(v) for v in value]
-    if isinstance(value, dict):
-        return {k: jsonable(v) for k, v in value.items()}
-    return value
+def draw_misalignment(rng: np.random.Generator, sigma: float) -> np.ndarray:
+    """Random-constant misalignment M of a sensor triad: six off-diagonal N(0, sigma^2) terms,
+    zero diagonal, shape (3, 3) [rad] (draws a full 3x3 block)."""
+    m = rng.standard_normal((3, 3)) * sigma
+    np.fill_diagonal(m, 0.0)
+    return m
+
+
+def triad_matrix(scale_factor: np.ndarray, misalignment: np.ndarray) -> np.ndarray:
+    """``I + S + M`` of a sensor triad: S = diag(scale_factor), M the misalignment; (3, 3)."""
+    return np.eye(3) + np.diag(scale_factor) + misalignment
 
 
 class RealisedErrors:

@@ -15,7 +15,8 @@ import dataclasses
 
 import numpy as np
 
-from navreplay.sensors._common import RealisedErrors, check_nonnegative, check_positive
+from navreplay.params import check_nonnegative, check_positive
+from navreplay.sensors._common import RealisedErrors
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

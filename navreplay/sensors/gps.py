@@ -26,13 +26,8 @@ import dataclasses
 import numpy as np
 
 from navreplay.geo.earth import radii
-from navreplay.sensors._common import (
-    RealisedErrors,
-    Vec3,
-    as_vec3,
-    check_nonnegative,
-    check_positive,
-)
+from navreplay.params import check_nonnegative, check_positive
+from navreplay.sensors._common import RealisedErrors, Vec3, as_vec3
 from navreplay.sensors.noise import gauss_markov
 
 

@@ -42,7 +42,8 @@ import enum
 import numpy as np
 
 from navreplay import units
-from navreplay.sensors._common import RealisedErrors, check_nonnegative, check_positive
+from navreplay.params import check_nonnegative, check_positive
+from navreplay.sensors._common import RealisedErrors, draw_misalignment, triad_matrix
 from navreplay.sensors.noise import gauss_markov, random_walk, sample_sigma
 
 
@@ -105,19 +106,14 @@ class ImuModel:
         -------
         ImuErrors
         """
-        def offdiag(sigma: float) -> np.ndarray:
-            m = rng.standard_normal((3, 3)) * sigma
-            np.fill_diagonal(m, 0.0)
-            return m
-
         return ImuErrors(
             gyro_bias=rng.standard_normal(3) * self.gyro_bias,
             gyro_scale_factor=rng.standard_normal(3) * self.gyro_scale_factor,
-            gyro_misalignment=offdiag(self.gyro_misalignment),
+            gyro_misalignment=draw_misalignment(rng, self.gyro_misalignment),
             gyro_g_sensitivity=rng.standard_normal((3, 3)) * self.gyro_g_sensitivity,
             accel_bias=rng.standard_normal(3) * self.accel_bias,
             accel_scale_factor=rng.standard_normal(3) * self.accel_scale_factor,
-            accel_misalignment=offdiag(self.accel_misalignment),
+            accel_misalignment=draw_misalignment(rng, self.accel_misalignment),
         )
 
     def measure(
@@ -157,29 +153,70 @@ class ImuModel:
             )
         if not dt > 0.0:
             raise ValueError(f"dt must be > 0, got {dt!r}")
-        m = omega_ib_b.shape[0]
-
-        gyro_bias = gauss_markov(m + 1, dt, self.gyro_bias_instability, self.gyro_bias_tau, rng)
-        gyro_bias += random_walk(m + 1, dt, self.gyro_rrw, rng)
-        gyro_bias += errors.gyro_bias
-        omega = omega_ib_b @ errors.gyro_matrix().T
-        omega += gyro_bias[1:]
-        if np.any(errors.gyro_g_sensitivity):
-            omega += f_b @ errors.gyro_g_sensitivity.T
-        if self.gyro_arw > 0.0:
-            omega += rng.standard_normal((m, 3)) * sample_sigma(self.gyro_arw, dt)
-
-        accel_bias = gauss_markov(
-            m + 1, dt, self.accel_bias_instability, self.accel_bias_tau, rng
+        g_sens = f_b @ errors.gyro_g_sensitivity.T if np.any(errors.gyro_g_sensitivity) else None
+        omega, gyro_bias = _measure_triad(
+            omega_ib_b, errors.gyro_matrix(), errors.gyro_bias, self.gyro_bias_instability,
+            self.gyro_bias_tau, self.gyro_rrw, self.gyro_arw, dt, rng, coupling=g_sens,
         )
-        accel_bias += random_walk(m + 1, dt, self.accel_rw, rng)
-        accel_bias += errors.accel_bias
-        f = f_b @ errors.accel_matrix().T
-        f += accel_bias[1:]
-        if self.accel_vrw > 0.0:
-            f += rng.standard_normal((m, 3)) * sample_sigma(self.accel_vrw, dt)
-
+        f, accel_bias = _measure_triad(
+            f_b, errors.accel_matrix(), errors.accel_bias, self.accel_bias_instability,
+            self.accel_bias_tau, self.accel_rw, self.accel_vrw, dt, rng,
+        )
         return ImuMeasurement(omega_ib_b=omega, f_b=f, gyro_bias=gyro_bias, accel_bias=accel_bias)
+
+
+def _measure_triad(
+    ideal: np.ndarray,
+    matrix: np.ndarray,
+    bias: np.ndarray,
+    instability: float,
+    tau: float,
+    walk: float,
+    white: float,
+    dt: float,
+    rng: np.random.Generator,
+    coupling: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One triad of the module's model: ``(I + S + M) x + b(t) [+ coupling] + n``.
+
+    Parameters
+    ----------
+    ideal : ndarray, shape (M, 3)
+        Ideal interval means x.
+    matrix : ndarray, shape (3, 3)
+        ``I + S + M``.
+    bias : ndarray, shape (3,)
+        Random-constant bias b0.
+    instability, tau : float
+        Gauss-Markov steady-state sigma and correlation time [s] of the bias instability.
+    walk : float
+        Bias random-walk density.
+    white : float
+        White-noise density N; per-sample sigma N / sqrt(dt).
+    dt : float
+        Sample interval [s].
+    rng : numpy.random.Generator
+        Draws, in order: the Gauss-Markov bias, the random walk, the white noise.
+    coupling : ndarray, shape (M, 3), optional
+        A further error term (the gyro's g-sensitivity K_g f_b).
+
+    Returns
+    -------
+    measured : ndarray, shape (M, 3)
+    total_bias : ndarray, shape (M + 1, 3)
+        b0 + b_GM + b_RW at the truth samples (row k applies to sample k, k = 1..M).
+    """
+    m = ideal.shape[0]
+    total_bias = gauss_markov(m + 1, dt, instability, tau, rng)
+    total_bias += random_walk(m + 1, dt, walk, rng)
+    total_bias += bias
+    out = ideal @ matrix.T
+    out += total_bias[1:]
+    if coupling is not None:
+        out += coupling
+    if white > 0.0:
+        out += rng.standard_normal((m, 3)) * sample_sigma(white, dt)
+    return out, total_bias
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -214,11 +251,11 @@ class ImuErrors(RealisedErrors):
 
     def gyro_matrix(self) -> np.ndarray:
         """``I + S_g + M_g``, shape (3, 3)."""
-        return np.eye(3) + np.diag(self.gyro_scale_factor) + self.gyro_misalignment
+        return triad_matrix(self.gyro_scale_factor, self.gyro_misalignment)
 
     def accel_matrix(self) -> np.ndarray:
         """``I + S_a + M_a``, shape (3, 3)."""
-        return np.eye(3) + np.diag(self.accel_scale_factor) + self.accel_misalignment
+        return triad_matrix(self.accel_scale_factor, self.accel_misalignment)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -279,54 +316,54 @@ def imu_grade(grade: ImuGrade | str) -> ImuModel:
     >>> round(imu_grade("tactical").gyro_bias / DEG_PER_HOUR, 6)
     1.0
     """
-    grade = ImuGrade(grade)
-    u = units
-    if grade is ImuGrade.IDEAL:
-        return ImuModel()
-    if grade is ImuGrade.NAVIGATION:
-        return ImuModel(
-            gyro_bias=0.01 * u.DEG_PER_HOUR,
-            gyro_bias_instability=0.003 * u.DEG_PER_HOUR,
-            gyro_bias_tau=3600.0,
-            gyro_scale_factor=10 * u.PPM,
-            gyro_misalignment=5 * u.ARCSEC,
-            gyro_g_sensitivity=0.0,
-            gyro_arw=0.002 * u.DEG_PER_SQRT_HOUR,
-            accel_bias=25 * u.MICRO_G,
-            accel_bias_instability=5 * u.MICRO_G,
-            accel_bias_tau=3600.0,
-            accel_scale_factor=50 * u.PPM,
-            accel_misalignment=5 * u.ARCSEC,
-            accel_vrw=5 * u.MICRO_G_PER_SQRT_HZ,
-        )
-    if grade is ImuGrade.TACTICAL:
-        return ImuModel(
-            gyro_bias=1.0 * u.DEG_PER_HOUR,
-            gyro_bias_instability=0.3 * u.DEG_PER_HOUR,
-            gyro_bias_tau=600.0,
-            gyro_scale_factor=100 * u.PPM,
-            gyro_misalignment=0.5e-3,
-            gyro_g_sensitivity=1.0 * u.DEG_PER_HOUR_PER_G,
-            gyro_arw=0.1 * u.DEG_PER_SQRT_HOUR,
-            accel_bias=0.3 * u.MILLI_G,
-            accel_bias_instability=0.05 * u.MILLI_G,
-            accel_bias_tau=600.0,
-            accel_scale_factor=300 * u.PPM,
-            accel_misalignment=0.5e-3,
-            accel_vrw=50 * u.MICRO_G_PER_SQRT_HZ,
-        )
-    return ImuModel(
-        gyro_bias=10.0 * u.DEG_PER_HOUR,
-        gyro_bias_instability=3.0 * u.DEG_PER_HOUR,
+    return _GRADES[ImuGrade(grade)]
+
+
+_GRADES: dict[ImuGrade, ImuModel] = {
+    ImuGrade.IDEAL: ImuModel(),
+    ImuGrade.NAVIGATION: ImuModel(
+        gyro_bias=0.01 * units.DEG_PER_HOUR,
+        gyro_bias_instability=0.003 * units.DEG_PER_HOUR,
+        gyro_bias_tau=3600.0,
+        gyro_scale_factor=10 * units.PPM,
+        gyro_misalignment=5 * units.ARCSEC,
+        gyro_g_sensitivity=0.0,
+        gyro_arw=0.002 * units.DEG_PER_SQRT_HOUR,
+        accel_bias=25 * units.MICRO_G,
+        accel_bias_instability=5 * units.MICRO_G,
+        accel_bias_tau=3600.0,
+        accel_scale_factor=50 * units.PPM,
+        accel_misalignment=5 * units.ARCSEC,
+        accel_vrw=5 * units.MICRO_G_PER_SQRT_HZ,
+    ),
+    ImuGrade.TACTICAL: ImuModel(
+        gyro_bias=1.0 * units.DEG_PER_HOUR,
+        gyro_bias_instability=0.3 * units.DEG_PER_HOUR,
+        gyro_bias_tau=600.0,
+        gyro_scale_factor=100 * units.PPM,
+        gyro_misalignment=0.5e-3,
+        gyro_g_sensitivity=1.0 * units.DEG_PER_HOUR_PER_G,
+        gyro_arw=0.1 * units.DEG_PER_SQRT_HOUR,
+        accel_bias=0.3 * units.MILLI_G,
+        accel_bias_instability=0.05 * units.MILLI_G,
+        accel_bias_tau=600.0,
+        accel_scale_factor=300 * units.PPM,
+        accel_misalignment=0.5e-3,
+        accel_vrw=50 * units.MICRO_G_PER_SQRT_HZ,
+    ),
+    ImuGrade.MEMS: ImuModel(
+        gyro_bias=10.0 * units.DEG_PER_HOUR,
+        gyro_bias_instability=3.0 * units.DEG_PER_HOUR,
         gyro_bias_tau=300.0,
-        gyro_scale_factor=1000 * u.PPM,
+        gyro_scale_factor=1000 * units.PPM,
         gyro_misalignment=1e-3,
-        gyro_g_sensitivity=10.0 * u.DEG_PER_HOUR_PER_G,
-        gyro_arw=0.3 * u.DEG_PER_SQRT_HOUR,
-        accel_bias=3.0 * u.MILLI_G,
-        accel_bias_instability=0.1 * u.MILLI_G,
+        gyro_g_sensitivity=10.0 * units.DEG_PER_HOUR_PER_G,
+        gyro_arw=0.3 * units.DEG_PER_SQRT_HOUR,
+        accel_bias=3.0 * units.MILLI_G,
+        accel_bias_instability=0.1 * units.MILLI_G,
         accel_bias_tau=300.0,
-        accel_scale_factor=1000 * u.PPM,
+        accel_scale_factor=1000 * units.PPM,
         accel_misalignment=1e-3,
-        accel_vrw=100 * u.MICRO_G_PER_SQRT_HZ,
-    )
+        accel_vrw=100 * units.MICRO_G_PER_SQRT_HZ,
+    ),
+}

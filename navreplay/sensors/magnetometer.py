@@ -32,7 +32,8 @@ import numpy as np
 from pygeomag import GeoMag
 
 from navreplay.geo.rotations import quat_conj, quat_rotate
-from navreplay.sensors._common import RealisedErrors, check_nonnegative, check_positive
+from navreplay.params import check_nonnegative, check_positive
+from navreplay.sensors._common import RealisedErrors, draw_misalignment, triad_matrix
 from navreplay.units import NANOTESLA
 
 
@@ -153,8 +154,7 @@ class MagnetometerModel:
     def draw(self, rng: np.random.Generator) -> MagnetometerErrors:
         """Draw the random constants of one run."""
         scale = rng.standard_normal(3) * self.scale_factor
-        mis = rng.standard_normal((3, 3)) * self.misalignment
-        np.fill_diagonal(mis, 0.0)
+        mis = draw_misalignment(rng, self.misalignment)
         bias = rng.standard_normal(3) * self.bias
         return MagnetometerErrors(scale_factor=scale, misalignment=mis, bias=bias)
 
@@ -211,4 +211,4 @@ class MagnetometerErrors(RealisedErrors):
 
     def matrix(self) -> np.ndarray:
         """``I + S + M``, shape (3, 3)."""
-        return np.eye(3) + np.diag(self.scale_factor) + self.misalignment
+        return triad_matrix(self.scale_factor, self.misalignment)

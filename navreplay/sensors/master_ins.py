@@ -32,13 +32,8 @@ import dataclasses
 import numpy as np
 
 from navreplay.geo.rotations import dcm_to_euler, quat_to_dcm, rotvec_to_dcm, wrap_angle
-from navreplay.sensors._common import (
-    RealisedErrors,
-    Vec3,
-    as_vec3,
-    check_nonnegative,
-    check_positive,
-)
+from navreplay.params import check_nonnegative, check_positive
+from navreplay.sensors._common import RealisedErrors, Vec3, as_vec3
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

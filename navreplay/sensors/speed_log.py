@@ -28,7 +28,8 @@ import dataclasses
 import numpy as np
 
 from navreplay.geo.rotations import quat_rotate, rotvec_to_dcm
-from navreplay.sensors._common import RealisedErrors, check_nonnegative, check_positive
+from navreplay.params import check_nonnegative, check_positive
+from navreplay.sensors._common import RealisedErrors
 from navreplay.units import DEG
 
 
@@ -98,10 +99,6 @@ class SpeedLogErrors(RealisedErrors):
 
     scale_factor: float
     misalignment: np.ndarray
-
-    def axis_b(self) -> np.ndarray:
-        """Unit vector of the RPM axis in the body frame, ``C_bv [1, 0, 0]``, shape (3,)."""
-        return rpm_axis_b(self.misalignment)
 
 
 def rpm_axis_b(misalignment: np.ndarray) -> np.ndarray:

@@ -1,19 +1,33 @@
-"""Scenario interface and registry.
+"""Scenario interface and registry, and the pieces every scenario builds its recording from.
 
 A scenario turns (parameters, seed) into a :class:`~navreplay.streams.Recording`: truth
 trajectory, sensor streams and metadata. It is a pure function of its inputs: the same
 parameters and seed give byte-identical recordings.
+
+Metadata (:meth:`Scenario.metadata`)
+    ``params`` holds every field of the scenario's ``Params`` in SI (plus derived values a
+    filter may use, such as a surveyed lever arm); ``true_errors`` the true value of every
+    random constant drawn for the run (time-varying errors such as Gauss-Markov biases and
+    flexure are truth-stream columns); ``initial_nav``, for filters that do not initialise
+    themselves, what an external alignment hands over: the truth plus drawn errors with their
+    sigmas (:func:`navreplay.sim.trajectory.initial_nav`), or a surveyed site that the
+    scenario's filter is meant to know; ``extra`` the site, date, rates and a description of
+    every truth column.
 """
 
 from __future__ import annotations
 
 import abc
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
 
+import navreplay
 from navreplay import params as _params
-from navreplay.streams import Recording, StreamKind
+from navreplay.sensors.imu import ImuMeasurement
+from navreplay.sim.trajectory import Trajectory
+from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
 
 _REGISTRY: dict[str, type[Scenario]] = {}
 
@@ -34,6 +48,39 @@ class Scenario(abc.ABC):
     @abc.abstractmethod
     def simulate(self, params: Any, rng: np.random.Generator, seed: int) -> Recording:
         """Simulate one run. ``seed`` is recorded in the metadata; draw only from ``rng``."""
+
+    def metadata(
+        self,
+        params: Any,
+        seed: int,
+        *,
+        true_errors: Mapping[str, Any],
+        extra: Mapping[str, Any],
+        initial_nav: Mapping[str, Any] | None = None,
+        derived: Mapping[str, Any] | None = None,
+    ) -> Metadata:
+        """The metadata of one run (see the module docstring).
+
+        Parameters
+        ----------
+        params : Params
+            The run's parameters, recorded field by field.
+        seed : int
+        true_errors, extra : mapping
+        initial_nav : mapping, optional
+            For scenarios whose filters do not initialise themselves.
+        derived : mapping, optional
+            Values computed from the parameters and the draws, appended to ``params``.
+        """
+        return Metadata(
+            scenario=self.name,
+            seed=seed,
+            params={**_params.as_dict(params), **(derived or {})},
+            true_errors=dict(true_errors),
+            initial_nav=dict(initial_nav or {}),
+            navreplay_version=navreplay.__version__,
+            extra=dict(extra),
+        )
 
 
 def register_scenario(cls: type[Scenario]) -> type[Scenario]:
@@ -66,3 +113,34 @@ def simulate(
     p = _params.build(cls.Params, values, where=f"scenario {name}")
     rng = np.random.default_rng(seed)
     return cls().simulate(p, rng, seed)
+
+
+# --------------------------------------------------------------------------------------------
+# streams shared by the scenarios
+
+
+def imu_stream(
+    t: np.ndarray, meas: ImuMeasurement, t0_ns: int, frame_id: str = "imu_frd"
+) -> Stream:
+    """The IMU stream of truth times ``t`` (N,) [s]: samples k = 1..N-1, each the mean over
+    ``(t[k-1], t[k]]`` and stamped at ``t[k]``."""
+    return Stream(StreamKind.IMU, nanoseconds(t[1:], t0_ns), meas.columns(), frame_id)
+
+
+def truth_stream(
+    traj: Trajectory,
+    meas: ImuMeasurement,
+    t0_ns: int,
+    index: np.ndarray | None = None,
+    **columns: np.ndarray,
+) -> Stream:
+    """The truth stream of a route: ``pos``, ``v_n``, ``q_nb``, ``euler``, the scenario's own
+    ``columns`` (truth-rate arrays, N rows), then the true total IMU biases ``gyro_bias`` and
+    ``accel_bias``; at the truth samples ``index`` (default: all)."""
+    cols = {"pos": traj.pos, "v_n": traj.v_n, "q_nb": traj.q_nb, "euler": traj.euler,
+            **columns, "gyro_bias": meas.gyro_bias, "accel_bias": meas.accel_bias}
+    t = traj.t
+    if index is not None:
+        t = t[index]
+        cols = {k: v[index] for k, v in cols.items()}
+    return Stream(StreamKind.TRUTH, nanoseconds(t, t0_ns), cols, "ned")

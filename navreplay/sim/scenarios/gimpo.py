@@ -75,11 +75,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from navreplay import __version__
-from navreplay import params as _params
 from navreplay.geo.earth import gravity, gravity_n, ned_offset_to_lla, omega_en_n, omega_ie_n
 from navreplay.geo.rotations import euler_to_quat
-from navreplay.sensors._common import jsonable
+from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors.gps import GpsModel
 from navreplay.sensors.imu import ImuErrors, ImuModel
 from navreplay.sensors.magnetometer import (
@@ -92,7 +90,7 @@ from navreplay.sensors.magnetometer import (
 from navreplay.sensors.noise import nyquist_sample_sigma
 from navreplay.sim.scenario import Scenario, register_scenario
 from navreplay.sim.trajectory import parse_utc, utc_ns
-from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
+from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.units import DEG, G0, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 
 SITE_NAME = "Gimpo airport (RKSS), near runway 32R"
@@ -173,16 +171,10 @@ class GimpoParams:
     """GPS velocity white noise, 1-sigma per NED axis [m/s]."""
 
     def __post_init__(self) -> None:
-        for name in ("rate", "accel_bias_tau"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
-        for name in ("accel_scale_factor", "accel_bias", "accel_bias_instability",
-                     "accel_noise_density", "mag_scale_factor", "mag_bias",
-                     "mag_noise_density", "gps_vel_sigma"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        check_positive(self, "rate", "accel_bias_tau")
+        check_nonnegative(self, "accel_scale_factor", "accel_bias", "accel_bias_instability",
+                          "accel_noise_density", "mag_scale_factor", "mag_bias",
+                          "mag_noise_density", "gps_vel_sigma")
         if not abs(self.lat) < 89.0 * DEG:
             raise ValueError(f"lat must be within +-89 deg, got {self.lat!r} rad")
         WmmEpoch.for_year(self.decimal_year)  # raises outside the field models' years
@@ -237,6 +229,11 @@ def _check_window(p: GimpoParams, name: str, value: float) -> None:
         raise ValueError(f"{name} = {value!r} s must be a positive whole number of samples")
 
 
+def _check_accel_g(p: GimpoAccelSweepParams | GimpoAccelYawParams) -> None:
+    if not (math.isfinite(p.accel_g) and abs(p.accel_g) <= 10.0):
+        raise ValueError(f"accel_g must be within +-10 g, got {p.accel_g!r}")
+
+
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GimpoAccelSweepParams(GimpoParams):
     """Parameters of ``gimpo-accel-sweep`` (SI; spec section 3.2)."""
@@ -253,8 +250,7 @@ class GimpoAccelSweepParams(GimpoParams):
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "axis", Axis(self.axis))
-        if not (math.isfinite(self.accel_g) and abs(self.accel_g) <= 10.0):
-            raise ValueError(f"accel_g must be within +-10 g, got {self.accel_g!r}")
+        _check_accel_g(self)
         _check_window(self, "rest", self.rest)
         _check_window(self, "duration", self.duration)
         if not self.duration > self.rest:
@@ -275,8 +271,7 @@ class GimpoAccelYawParams(GimpoParams):
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "case", BodyAxis(self.case))
-        if not (math.isfinite(self.accel_g) and abs(self.accel_g) <= 10.0):
-            raise ValueError(f"accel_g must be within +-10 g, got {self.accel_g!r}")
+        _check_accel_g(self)
         _check_window(self, "duration", self.duration)
         if self.duration < 25.0:
             raise ValueError(f"duration must be at least 25 s, got {self.duration!r}")
@@ -501,7 +496,7 @@ def true_errors(imu_errors: ImuErrors, mag_errors: MagnetometerErrors) -> dict:
         "accel_misalignment": imu_errors.accel_misalignment,
     }
     out.update({f"mag_{k}": v for k, v in mag_errors.as_dict().items()})
-    return jsonable(out)
+    return out
 
 
 def measure(
@@ -614,24 +609,21 @@ class GimpoScenario(Scenario):
             ),
         }
         g_site = float(gravity(p.lat, p.height))
-        metadata = Metadata(
-            scenario=self.name,
-            seed=seed,
-            params=_params.as_dict(p),
+        metadata = self.metadata(
+            p, seed,
             true_errors=true_errors(*data.errors),
             initial_nav={
                 "t_ns": int(t0_ns),
                 "pos": [p.lat, p.lon, p.height],
                 "v_n": [0.0, 0.0, 0.0],
             },
-            navreplay_version=__version__,
             extra={
                 "site": {"name": SITE_NAME, "lat_deg": p.lat / DEG, "lon_deg": p.lon / DEG,
                          "height": p.height},
                 "date": p.date,
                 "decimal_year": p.decimal_year,
                 "earth_field_model": str(WmmEpoch.for_year(p.decimal_year)),
-                "earth_field_n": truth.h_n.tolist(),
+                "earth_field_n": truth.h_n,
                 "gravity": g_site,
                 "truth_columns": {
                     "pos": "position [rad, rad, m]",

@@ -51,18 +51,16 @@ import math
 import numpy as np
 from scipy.signal import lfilter, lfiltic
 
-from navreplay import __version__
-from navreplay import params as _params
 from navreplay.filters.kalman import van_loan
 from navreplay.geo.earth import ned_offset_to_lla
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_to_dcm, quat_to_euler
-from navreplay.sensors._common import jsonable
+from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.master_ins import MasterInsModel
 from navreplay.sensors.noise import density_from_average_sigma
 from navreplay.sim.kinematics import imu_from_truth, integrate_position
-from navreplay.sim.scenario import Scenario, register_scenario
-from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
+from navreplay.sim.scenario import Scenario, imu_stream, register_scenario
+from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.units import (
     ARCMIN,
     DEG,
@@ -161,14 +159,10 @@ class ShipTransferAlignmentParams:
     """SDINS accelerometer white noise density [(m/s)/sqrt(s)]: Table 2's 20 ug, 1-s average."""
 
     def __post_init__(self) -> None:
-        for name in ("duration", "imu_rate", "gins_rate", "flexure_zeta", "flexure_wn"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{name} must be finite and > 0, got {v!r}")
+        check_positive(self, "duration", "imu_rate", "gins_rate", "flexure_zeta", "flexure_wn")
         if not abs(self.lat) < 89.0 * DEG:
             raise ValueError(f"lat must be within +-89 deg, got {self.lat!r} rad")
-        if not self.speed >= 0.0:
-            raise ValueError(f"speed must be >= 0, got {self.speed!r}")
+        check_nonnegative(self, "speed")
         for axis in ("roll", "pitch"):
             f, a = getattr(self, f"{axis}_freq"), getattr(self, f"{axis}_amp")
             if len(f) != len(a):
@@ -176,24 +170,17 @@ class ShipTransferAlignmentParams:
                     f"{axis}_freq and {axis}_amp must have equal lengths, got {len(f)} and"
                     f" {len(a)}"
                 )
-            if any(not (math.isfinite(x) and x >= 0.0) for x in (*f, *a)):
-                raise ValueError(f"{axis}_freq and {axis}_amp must be finite and >= 0")
+            check_nonnegative(self, f"{axis}_freq", f"{axis}_amp")
             if sum(a) >= 80.0 * DEG:
                 raise ValueError(f"{axis}_amp sums to {sum(a) / DEG:.1f} deg; must be < 80 deg")
         if len(self.lever_arm_r) != 3 or len(self.gins_tilt) != 3:
             raise ValueError("lever_arm_r and gins_tilt need three values each")
-        nonneg = (
-            "lever_arm_sigma", "flexure_sigma", "mounting_sigma", "gins_synchro_bias",
-            "gins_synchro_noise", "gins_vel_bias", "gins_vel_noise", "gyro_bias",
-            "gyro_scale_factor", "gyro_misalignment", "gyro_g_sensitivity", "gyro_arw",
-            "accel_bias", "accel_scale_factor", "accel_misalignment", "accel_vrw",
+        check_nonnegative(
+            self, "lever_arm_sigma", "flexure_sigma", "mounting_sigma", "gins_tilt",
+            "gins_synchro_bias", "gins_synchro_noise", "gins_vel_bias", "gins_vel_noise",
+            "gyro_bias", "gyro_scale_factor", "gyro_misalignment", "gyro_g_sensitivity",
+            "gyro_arw", "accel_bias", "accel_scale_factor", "accel_misalignment", "accel_vrw",
         )
-        for name in nonneg:
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
-        if any(not (math.isfinite(v) and v >= 0.0) for v in self.gins_tilt):
-            raise ValueError(f"gins_tilt must be finite and >= 0, got {self.gins_tilt!r}")
         if self.duration * self.imu_rate < 2.0 or self.duration * self.gins_rate < 1.0:
             raise ValueError("duration must hold at least two IMU and two GINS samples")
 
@@ -392,8 +379,7 @@ class ShipTransferAlignment(Scenario):
             frame_id="ned",
         )
         streams = {
-            StreamKind.IMU: Stream(StreamKind.IMU, nanoseconds(t[1:], T0_NS), meas.columns(),
-                                   frame_id="sdins_frd"),
+            StreamKind.IMU: imu_stream(t, meas, T0_NS, "sdins_frd"),
             StreamKind.MASTER_INS: Stream(StreamKind.MASTER_INS, nanoseconds(t_gins, T0_NS),
                                           gins_cols, frame_id="ned"),
             StreamKind.TRUTH: truth,
@@ -411,14 +397,10 @@ class ShipTransferAlignment(Scenario):
             "gins_vel_bias": gins_errors.vel_bias,
             **imu_errors.as_dict(),
         }
-        values = _params.as_dict(p)
-        values["lever_arm_r_nom"] = lever_arm_nom.tolist()
-        metadata = Metadata(
-            scenario=self.name,
-            seed=seed,
-            params=values,
-            true_errors=jsonable(true_errors),
-            navreplay_version=__version__,
+        metadata = self.metadata(
+            p, seed,
+            derived={"lever_arm_r_nom": lever_arm_nom},
+            true_errors=true_errors,
             extra={
                 "params_derived": {
                     "lever_arm_r_nom": "surveyed lever arm GINS -> SDINS in the ship frame [m]"

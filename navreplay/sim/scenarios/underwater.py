@@ -72,12 +72,11 @@ from typing import ClassVar
 
 import numpy as np
 
-import navreplay
-from navreplay import params as _params
+from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
 from navreplay.sensors.depth import DepthModel
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.speed_log import SpeedLogModel
-from navreplay.sim.scenario import Scenario, register_scenario
+from navreplay.sim.scenario import Scenario, imu_stream, register_scenario, truth_stream
 from navreplay.sim.trajectory import (
     Channel,
     Manoeuvre,
@@ -89,7 +88,7 @@ from navreplay.sim.trajectory import (
     sample_indices,
     utc_ns,
 )
-from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
+from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.units import (
     ARCSEC,
     DEG,
@@ -138,21 +137,6 @@ class DepthErrorSource(enum.StrEnum):
     """The initial depth error of the INS (default; the 24 states hold no sensor bias)."""
     SENSOR = "sensor"
     """A constant depth-sensor bias; the INS starts with the true depth."""
-
-
-def _finite(owner: object, *names: str, positive: bool = False) -> None:
-    for name in names:
-        v = getattr(owner, name)
-        ok = isinstance(v, int | float) and math.isfinite(v) and (v > 0.0 if positive else v >= 0.0)
-        if not ok:
-            raise ValueError(f"{name} must be finite and {'> 0' if positive else '>= 0'}, got {v!r}")
-
-
-def _divides(owner: object, fast: str, slow: str) -> None:
-    a, b = getattr(owner, fast), getattr(owner, slow)
-    k = a / b
-    if round(k) < 1 or abs(k - round(k)) > 1e-9 * k:
-        raise ValueError(f"{slow} ({b:g} Hz) must divide {fast} ({a:g} Hz) a whole number of times")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -232,19 +216,17 @@ class UnderwaterRpmParams:
     """Depth-sensor white noise per sample [m]."""
 
     def __post_init__(self) -> None:
-        _finite(self, "duration", "imu_rate", "speed_log_rate", "depth_rate", "truth_rate",
-                "speed_per_rpm", positive=True)
-        _finite(self, "depth", "accel_bias", "accel_scale_factor", "accel_vrw",
-                "accel_misalignment", "gyro_bias", "gyro_scale_factor", "gyro_arw",
-                "gyro_misalignment", "init_level_error", "init_azimuth_error", "init_vel_error",
-                "init_depth_error", "init_horizontal_error", "rpm_scale_factor",
-                "rpm_misalignment", "rpm_noise", "current_speed", "depth_noise")
-        n = self.duration * self.imu_rate
-        if abs(n - round(n)) > 1e-6:
-            raise ValueError(f"duration ({self.duration:g} s) must be a whole number of IMU "
-                             f"intervals (1/{self.imu_rate:g} s)")
+        check_positive(self, "duration", "imu_rate", "speed_log_rate", "depth_rate",
+                       "truth_rate", "speed_per_rpm")
+        check_nonnegative(self, "depth", "accel_bias", "accel_scale_factor", "accel_vrw",
+                          "accel_misalignment", "gyro_bias", "gyro_scale_factor", "gyro_arw",
+                          "gyro_misalignment", "init_level_error", "init_azimuth_error",
+                          "init_vel_error", "init_depth_error", "init_horizontal_error",
+                          "rpm_scale_factor", "rpm_misalignment", "rpm_noise", "current_speed",
+                          "depth_noise")
+        check_whole_intervals(self, "duration", "imu_rate")
         for slow in ("speed_log_rate", "depth_rate", "truth_rate"):
-            _divides(self, "imu_rate", slow)
+            check_divides(self, "imu_rate", slow)
         if not -80.0 <= self.lat_deg <= 80.0:
             raise ValueError(f"lat_deg must be within [-80, 80], got {self.lat_deg!r}")
         for name in ("lon_deg", "heading_deg"):
@@ -360,50 +342,34 @@ class UnderwaterRpm(Scenario):
             phi_sigma=(level, level, p.init_azimuth_error),
         )
         streams = {
-            StreamKind.IMU: Stream(StreamKind.IMU, nanoseconds(traj.t[1:], t0_ns),
-                                   imu_meas.columns(), "imu_frd"),
+            StreamKind.IMU: imu_stream(traj.t, imu_meas, t0_ns),
             StreamKind.SPEED_LOG: Stream(StreamKind.SPEED_LOG, nanoseconds(traj.t[li], t0_ns),
                                          rpm_cols, "rpm_log"),
             StreamKind.DEPTH: Stream(StreamKind.DEPTH, nanoseconds(traj.t[di], t0_ns),
                                      depth_cols, "depth"),
-            StreamKind.TRUTH: Stream(
-                StreamKind.TRUTH, nanoseconds(traj.t[ti], t0_ns),
-                {
-                    "pos": traj.pos[ti],
-                    "v_n": traj.v_n[ti],
-                    "q_nb": traj.q_nb[ti],
-                    "euler": traj.euler[ti],
-                    "speed": traj.speed[ti],
-                    "current_n": np.broadcast_to(v_c, (ti.shape[0], 3)),
-                    "gyro_bias": imu_meas.gyro_bias[ti],
-                    "accel_bias": imu_meas.accel_bias[ti],
-                },
-                "ned",
-            ),
+            StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, ti, speed=traj.speed,
+                                           current_n=np.broadcast_to(v_c, (n, 3))),
         }
-        meta = Metadata(
-            scenario=self.name,
-            seed=seed,
-            params=_params.as_dict(p),
+        meta = self.metadata(
+            p, seed,
             true_errors={
                 "imu": imu_errors.as_dict(),
                 "speed_log": log_errors.as_dict(),
                 "depth": depth_errors.as_dict(),
                 "rpm_scale_factor": log_errors.scale_factor,
-                "rpm_misalignment": log_errors.misalignment.tolist(),
-                "current_n": v_c.tolist(),
+                "rpm_misalignment": log_errors.misalignment,
+                "current_n": v_c,
                 "current_speed": p.current_speed,
                 "current_direction": direction,
                 "initial_nav": init_errors,
             },
             initial_nav=nav0,
-            navreplay_version=navreplay.__version__,
             extra={
                 "site": {"lat_deg": p.lat_deg, "lon_deg": p.lon_deg, "depth": p.depth},
                 "date": start.isoformat(),
                 "rates": {"imu": p.imu_rate, "speed_log": p.speed_log_rate,
                           "depth": p.depth_rate, "truth": p.truth_rate},
-                "truth_columns": dict(_TRUTH_COLUMNS),
+                "truth_columns": _TRUTH_COLUMNS,
                 "path_length": path_length(traj.t, traj.v_n),
             },
         )

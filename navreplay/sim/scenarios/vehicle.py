@@ -36,17 +36,16 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-import navreplay
-from navreplay import params as _params
+from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
 from navreplay.sensors.gps import GpsModel
-from navreplay.sensors.imu import ImuGrade, ImuMeasurement, imu_grade
+from navreplay.sensors.imu import ImuErrors, ImuGrade, ImuMeasurement, imu_grade
 from navreplay.sensors.magnetometer import (
     MagnetometerModel,
     WmmEpoch,
     decimal_year,
     earth_field_n,
 )
-from navreplay.sim.scenario import Scenario, register_scenario
+from navreplay.sim.scenario import Scenario, imu_stream, register_scenario, truth_stream
 from navreplay.sim.trajectory import (
     Channel,
     Manoeuvre,
@@ -60,7 +59,7 @@ from navreplay.sim.trajectory import (
     sample_indices,
     utc_ns,
 )
-from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
+from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.units import DEG
 
 _TRUTH_COLUMNS = {
@@ -73,31 +72,15 @@ _TRUTH_COLUMNS = {
 }
 
 
-def _check_rate_ratio(owner: object, fast: str, slow: str) -> None:
-    a, b = getattr(owner, fast), getattr(owner, slow)
-    k = a / b
-    if abs(k - round(k)) > 1e-9 * k or round(k) < 1:
-        raise ValueError(f"{slow} ({b:g} Hz) must divide {fast} ({a:g} Hz) a whole number of times")
-
-
 def _check_common(p: Any) -> None:
     """Validation shared by both scenarios' parameters."""
-    for name in ("duration", "imu_rate"):
-        v = getattr(p, name)
-        if not (math.isfinite(v) and v > 0.0):
-            raise ValueError(f"{name} must be > 0, got {v!r}")
-    n = p.duration * p.imu_rate
-    if abs(n - round(n)) > 1e-6:
-        raise ValueError(
-            f"duration ({p.duration:g} s) must be a whole number of IMU intervals (1/{p.imu_rate:g} s)"
-        )
+    check_positive(p, "duration", "imu_rate")
+    check_whole_intervals(p, "duration", "imu_rate")
     if not -90.0 <= p.lat_deg <= 90.0:
         raise ValueError(f"lat_deg must be within [-90, 90], got {p.lat_deg!r}")
     parse_utc(p.date)
-    for name in ("init_pos_sigma", "init_vel_sigma", "init_tilt_sigma", "init_heading_sigma"):
-        v = getattr(p, name)
-        if not (math.isfinite(v) and v >= 0.0):
-            raise ValueError(f"{name} must be >= 0, got {v!r}")
+    check_nonnegative(p, "init_pos_sigma", "init_vel_sigma", "init_tilt_sigma",
+                      "init_heading_sigma")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -155,17 +138,11 @@ class VehicleDriveParams:
 
     def __post_init__(self) -> None:
         _check_common(self)
-        for name in ("cruise_speed", "gps_rate", "mag_rate", "gps_pos_gm_tau"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{name} must be > 0, got {v!r}")
-        for name in ("gps_pos_sigma_h", "gps_pos_sigma_v", "gps_pos_gm_sigma", "gps_vel_sigma",
-                     "mag_noise", "mag_bias", "mag_scale_factor"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"{name} must be >= 0, got {v!r}")
-        _check_rate_ratio(self, "imu_rate", "gps_rate")
-        _check_rate_ratio(self, "imu_rate", "mag_rate")
+        check_positive(self, "cruise_speed", "gps_rate", "mag_rate", "gps_pos_gm_tau")
+        check_nonnegative(self, "gps_pos_sigma_h", "gps_pos_sigma_v", "gps_pos_gm_sigma",
+                          "gps_vel_sigma", "mag_noise", "mag_bias", "mag_scale_factor")
+        check_divides(self, "imu_rate", "gps_rate")
+        check_divides(self, "imu_rate", "mag_rate")
         try:
             WmmEpoch.for_year(decimal_year(parse_utc(self.date)))
         except ValueError as e:
@@ -214,25 +191,28 @@ def drive_manoeuvres(duration: float, cruise_speed: float) -> tuple[Manoeuvre, .
     return tuple(out)
 
 
-def _imu_streams(
-    traj: Trajectory, meas: ImuMeasurement, t0_ns: int
-) -> tuple[Stream, Stream]:
-    """IMU stream (samples k = 1..N-1) and the truth stream with the extra columns."""
-    imu = Stream(StreamKind.IMU, nanoseconds(traj.t[1:], t0_ns), meas.columns(), "imu_frd")
-    truth = Stream(
-        StreamKind.TRUTH,
-        nanoseconds(traj.t, t0_ns),
-        {
-            "pos": traj.pos,
-            "v_n": traj.v_n,
-            "q_nb": traj.q_nb,
-            "euler": traj.euler,
-            "gyro_bias": meas.gyro_bias,
-            "accel_bias": meas.accel_bias,
-        },
-        "ned",
+def _imu(
+    p: VehicleDriveParams | StationaryParams, route: Route, rng: np.random.Generator
+) -> tuple[Trajectory, ImuErrors, ImuMeasurement]:
+    """Truth at the IMU rate and the IMU of grade ``p.imu_grade`` on it."""
+    traj = generate(route, p.duration, p.imu_rate)
+    model = imu_grade(p.imu_grade)
+    errors = model.draw(rng)
+    return traj, errors, model.measure(errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate, rng)
+
+
+def _initial_nav(
+    p: VehicleDriveParams | StationaryParams, traj: Trajectory, t0_ns: int,
+    rng: np.random.Generator, phi_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> tuple[dict, dict]:
+    """Initial solution and its realised errors from the ``init_*`` sigmas."""
+    return initial_nav(
+        traj, t0_ns, rng,
+        pos_sigma_ned=(p.init_pos_sigma,) * 3,
+        vel_sigma_n=(p.init_vel_sigma,) * 3,
+        phi_sigma=(p.init_tilt_sigma, p.init_tilt_sigma, p.init_heading_sigma),
+        phi_offset=phi_offset,
     )
-    return imu, truth
 
 
 def _site(p: Any) -> dict[str, float]:
@@ -264,14 +244,8 @@ class VehicleDrive(Scenario):
             speed=0.0, manoeuvres=drive_manoeuvres(p.duration, p.cruise_speed),
             turn_mode=p.turn_mode,
         )
-        traj = generate(route, p.duration, p.imu_rate)
+        traj, imu_errors, imu_meas = _imu(p, route, rng_imu)
         n = traj.t.shape[0]
-
-        imu_model = imu_grade(p.imu_grade)
-        imu_errors = imu_model.draw(rng_imu)
-        imu_meas = imu_model.measure(imu_errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate,
-                                     rng_imu)
-        imu, truth = _imu_streams(traj, imu_meas, t0_ns)
 
         gps_model = GpsModel(
             pos_sigma=(p.gps_pos_sigma_h, p.gps_pos_sigma_h, p.gps_pos_sigma_v),
@@ -291,25 +265,18 @@ class VehicleDrive(Scenario):
         mag_errors = mag_model.draw(rng_mag)
         mag_cols = mag_model.measure(mag_errors, traj.q_nb[mi], h_n, rng_mag)
 
-        nav0, init_errors = initial_nav(
-            traj, t0_ns, rng_init,
-            pos_sigma_ned=(p.init_pos_sigma,) * 3,
-            vel_sigma_n=(p.init_vel_sigma,) * 3,
-            phi_sigma=(p.init_tilt_sigma, p.init_tilt_sigma, p.init_heading_sigma),
-        )
+        nav0, init_errors = _initial_nav(p, traj, t0_ns, rng_init)
         streams = {
-            StreamKind.IMU: imu,
+            StreamKind.IMU: imu_stream(traj.t, imu_meas, t0_ns),
             StreamKind.GPS: Stream(StreamKind.GPS, t_gps, gps_meas.fix_columns(), "wgs84"),
             StreamKind.GPS_VEL: Stream(StreamKind.GPS_VEL, t_gps, gps_meas.velocity_columns(),
                                        "ned"),
             StreamKind.MAG: Stream(StreamKind.MAG, nanoseconds(traj.t[mi], t0_ns), mag_cols,
                                    "mag_frd"),
-            StreamKind.TRUTH: truth,
+            StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns),
         }
-        meta = Metadata(
-            scenario=self.name,
-            seed=seed,
-            params=_params.as_dict(p),
+        meta = self.metadata(
+            p, seed,
             true_errors={
                 "imu": imu_errors.as_dict(),
                 "gps": gps_errors.as_dict(),
@@ -317,16 +284,15 @@ class VehicleDrive(Scenario):
                 "initial_nav": init_errors,
             },
             initial_nav=nav0,
-            navreplay_version=navreplay.__version__,
             extra={
                 "site": _site(p),
                 "date": start.isoformat(),
                 "decimal_year": year,
                 "wmm": WmmEpoch.for_year(year).value,
-                "mag_field_n": h_n.tolist(),
+                "mag_field_n": h_n,
                 "rates": {"imu": p.imu_rate, "gps": p.gps_rate, "gps_vel": p.gps_rate,
                           "mag": p.mag_rate, "truth": p.imu_rate},
-                "truth_columns": dict(_TRUTH_COLUMNS),
+                "truth_columns": _TRUTH_COLUMNS,
             },
         )
         return Recording(streams=streams, metadata=meta, t0_ns=t0_ns)
@@ -389,34 +355,20 @@ class Stationary(Scenario):
         start = parse_utc(p.date)
         t0_ns = utc_ns(start)
         route = Route(lat=p.lat_deg * DEG, lon=p.lon_deg * DEG, h=p.h, heading=p.heading_deg * DEG)
-        traj = generate(route, p.duration, p.imu_rate)
-        imu_model = imu_grade(p.imu_grade)
-        imu_errors = imu_model.draw(rng_imu)
-        imu_meas = imu_model.measure(imu_errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate,
-                                     rng_imu)
-        imu, truth = _imu_streams(traj, imu_meas, t0_ns)
-        nav0, init_errors = initial_nav(
-            traj, t0_ns, rng_init,
-            pos_sigma_ned=(p.init_pos_sigma,) * 3,
-            vel_sigma_n=(p.init_vel_sigma,) * 3,
-            phi_sigma=(p.init_tilt_sigma, p.init_tilt_sigma, p.init_heading_sigma),
-            phi_offset=p.init_attitude_error,
-        )
-        meta = Metadata(
-            scenario=self.name,
-            seed=seed,
-            params=_params.as_dict(p),
+        traj, imu_errors, imu_meas = _imu(p, route, rng_imu)
+        nav0, init_errors = _initial_nav(p, traj, t0_ns, rng_init, p.init_attitude_error)
+        meta = self.metadata(
+            p, seed,
             true_errors={"imu": imu_errors.as_dict(), "initial_nav": init_errors},
             initial_nav=nav0,
-            navreplay_version=navreplay.__version__,
             extra={
                 "site": _site(p),
                 "date": start.isoformat(),
                 "decimal_year": decimal_year(start),
                 "rates": {"imu": p.imu_rate, "truth": p.imu_rate},
-                "truth_columns": dict(_TRUTH_COLUMNS),
+                "truth_columns": _TRUTH_COLUMNS,
             },
         )
-        return Recording(
-            streams={StreamKind.IMU: imu, StreamKind.TRUTH: truth}, metadata=meta, t0_ns=t0_ns
-        )
+        streams = {StreamKind.IMU: imu_stream(traj.t, imu_meas, t0_ns),
+                   StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns)}
+        return Recording(streams=streams, metadata=meta, t0_ns=t0_ns)

@@ -1,0 +1,286 @@
+"""numba kernels of :mod:`navreplay.geo` for compiled code: one position, quaternion or DCM.
+
+The formulas of :mod:`navreplay.geo.earth` and :mod:`navreplay.geo.rotations`, written once
+for a single value so that compiled code (the strapdown integrator, the filters' error models
+and covariance steps) calls them without array temporaries. Conventions are those of
+:mod:`navreplay.geo`: NED, Hamilton quaternions scalar first, ``C(q_nb) = C_nb``, ZYX Euler
+angles ``[roll, pitch, yaw]``.
+
+Two kinds of kernels:
+
+- scalar forms take and return floats (tuples), for inner loops: :func:`cross`,
+  :func:`quat_mult`, :func:`rotate`, :func:`rotate_inverse`, :func:`rotvec_to_quat`,
+  :func:`quat_to_rotvec` and the earth model (:func:`radii`, :func:`radii_derivatives`,
+  :func:`gravity`, :func:`gravity_derivatives`, :func:`earth_rate`, :func:`transport_rate`);
+- array forms return a new small array: :func:`quat_to_dcm` (3, 3),
+  :func:`quat_left_matrix` and :func:`quat_right_matrix` (4, 4), :func:`euler_to_quat` (4,),
+  :func:`quat_to_euler` (3,).
+
+They are also callable from Python (numba dispatchers); tests/test_geo.py checks each against
+its numpy counterpart. Differences from the numpy functions, all deliberate:
+:func:`euler_to_quat` does not flip the sign to ``q0 >= 0``, :func:`quat_to_euler` takes the
+pitch from ``asin`` (valid away from gimbal lock), and :func:`rotvec_to_quat` has no series
+branch (``sin(a/2)/a`` has no cancellation down to 0).
+
+Caching
+-------
+The kernels are compiled with ``cache=True``. numba keys a cached function on its own source
+file only: a cached function in another module that calls one of these kernels is *not*
+recompiled when this file changes and keeps the old machine code. After editing this module,
+delete the numba cache files of the package (``__pycache__/*.nbi``, ``*.nbc``) or point
+``NUMBA_CACHE_DIR`` to a new directory.
+
+Examples
+--------
+>>> import numpy as np
+>>> from navreplay.geo import rotations
+>>> q = rotations.euler_to_quat([0.1, -0.2, 0.3])
+>>> bool(np.allclose(quat_to_dcm(q), rotations.quat_to_dcm(q)))
+True
+>>> R_M, R_N = radii(0.0)
+>>> round(R_N, 3), round(R_M, 3)
+(6378137.0, 6335439.327)
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from navreplay.geo import earth
+
+__all__ = [
+    "cross",
+    "earth_rate",
+    "euler_to_quat",
+    "gravity",
+    "gravity_derivatives",
+    "quat_left_matrix",
+    "quat_mult",
+    "quat_right_matrix",
+    "quat_to_dcm",
+    "quat_to_euler",
+    "quat_to_rotvec",
+    "radii",
+    "radii_derivatives",
+    "rotate",
+    "rotate_inverse",
+    "rotvec_to_quat",
+    "transport_rate",
+]
+
+# WGS84 constants, read once so that numba folds them into the machine code
+_A = earth.A
+_E2 = earth.E2
+_F = earth.F
+_W = earth.OMEGA_IE
+_GAMMA_E = earth.GAMMA_E
+_K_SOM = earth.K_SOMIGLIANA
+_M_GRAV = earth.M_GRAV
+
+# --------------------------------------------------------------------------------------------
+# earth model (geo.earth)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def radii(lat):
+    """Meridian and transverse radii ``(R_M, R_N)`` [m] at latitude ``lat`` [rad]."""
+    s = math.sin(lat)
+    w = 1.0 - _E2 * s * s
+    sw = math.sqrt(w)
+    return _A * (1.0 - _E2) / (w * sw), _A / sw  # independent: a short dependency chain
+
+
+@numba.njit(cache=True, error_model="numpy")
+def radii_derivatives(lat):
+    """``(dR_M/dlat, dR_N/dlat)`` [m/rad]."""
+    s, c = math.sin(lat), math.cos(lat)
+    w = 1.0 - _E2 * s * s
+    return 3.0 * _A * (1.0 - _E2) * _E2 * s * c / w**2.5, _A * _E2 * s * c / w**1.5
+
+
+@numba.njit(cache=True, error_model="numpy")
+def gravity(lat, h):
+    """Normal gravity [m/s^2]: Somigliana with the second-order height term (h [m])."""
+    s = math.sin(lat)
+    s2 = s * s
+    return (
+        _GAMMA_E
+        * (1.0 + _K_SOM * s2)
+        / math.sqrt(1.0 - _E2 * s2)
+        * (1.0 - 2.0 / _A * (1.0 + _F + _M_GRAV - 2.0 * _F * s2) * h + 3.0 / (_A * _A) * h * h)
+    )
+
+
+@numba.njit(cache=True, error_model="numpy")
+def gravity_derivatives(lat, h):
+    """Derivatives of :func:`gravity`: ``(dg/dlat [m/s^2 per rad], dg/dh [m/s^2 per m])``."""
+    s, c = math.sin(lat), math.cos(lat)
+    s2 = s * s
+    w = 1.0 - _E2 * s2
+    g0 = _GAMMA_E * (1.0 + _K_SOM * s2) / math.sqrt(w)
+    dg0 = _GAMMA_E * (
+        2.0 * _K_SOM * s * c / math.sqrt(w) + (1.0 + _K_SOM * s2) * _E2 * s * c / w**1.5
+    )
+    k = 1.0 + _F + _M_GRAV - 2.0 * _F * s2
+    hfac = 1.0 - 2.0 / _A * k * h + 3.0 / _A**2 * h * h
+    dhfac_dlat = 8.0 * _F * s * c * h / _A
+    dhfac_dh = -2.0 / _A * k + 6.0 * h / _A**2
+    return dg0 * hfac + g0 * dhfac_dlat, g0 * dhfac_dh
+
+
+@numba.njit(cache=True, error_model="numpy")
+def earth_rate(lat):
+    """Earth rate in NED ``(w_N, w_E, w_D)`` [rad/s]; w_E is 0."""
+    return _W * math.cos(lat), 0.0, -_W * math.sin(lat)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def transport_rate(lat, h, v_N, v_E):
+    """Transport rate w_en in NED ``(w_N, w_E, w_D)`` [rad/s] at height h [m], velocity [m/s]."""
+    R_M, R_N = radii(lat)
+    return (
+        v_E / (R_N + h),
+        -v_N / (R_M + h),
+        -v_E * (math.sin(lat) / math.cos(lat)) / (R_N + h),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# rotations, scalar forms (geo.rotations)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def cross(ax, ay, az, bx, by, bz):
+    """``a x b``."""
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@numba.njit(cache=True, error_model="numpy")
+def quat_mult(p0, p1, p2, p3, q0, q1, q2, q3):
+    """Hamilton product ``p (x) q``."""
+    return (
+        p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
+        p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+        p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
+        p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0,
+    )
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _dcm(q0, q1, q2, q3):
+    """The nine entries of C(q), row by row."""
+    return (
+        q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3,
+        2.0 * (q1 * q2 - q0 * q3),
+        2.0 * (q1 * q3 + q0 * q2),
+        2.0 * (q1 * q2 + q0 * q3),
+        q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3,
+        2.0 * (q2 * q3 - q0 * q1),
+        2.0 * (q1 * q3 - q0 * q2),
+        2.0 * (q2 * q3 + q0 * q1),
+        q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3,
+    )
+
+
+@numba.njit(cache=True, error_model="numpy")
+def rotate(q0, q1, q2, q3, x, y, z):
+    """``C(q) v`` for v = (x, y, z)."""
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _dcm(q0, q1, q2, q3)
+    return (
+        c00 * x + c01 * y + c02 * z,
+        c10 * x + c11 * y + c12 * z,
+        c20 * x + c21 * y + c22 * z,
+    )
+
+
+@numba.njit(cache=True, error_model="numpy")
+def rotate_inverse(q0, q1, q2, q3, x, y, z):
+    """``C(q)^T v`` for v = (x, y, z)."""
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _dcm(q0, q1, q2, q3)
+    return (
+        c00 * x + c10 * y + c20 * z,
+        c01 * x + c11 * y + c21 * z,
+        c02 * x + c12 * y + c22 * z,
+    )
+
+
+@numba.njit(cache=True, error_model="numpy")
+def rotvec_to_quat(x, y, z):
+    """Quaternion of the rotation vector (x, y, z) [rad]."""
+    a = math.sqrt(x * x + y * y + z * z)
+    k = 0.5 if a == 0.0 else math.sin(0.5 * a) / a  # no cancellation: exact down to a -> 0
+    return math.cos(0.5 * a), k * x, k * y, k * z
+
+
+@numba.njit(cache=True, error_model="numpy")
+def quat_to_rotvec(q0, q1, q2, q3):
+    """Rotation vector [rad] of a unit quaternion (principal value, angle <= pi)."""
+    if q0 < 0.0:
+        q0, q1, q2, q3 = -q0, -q1, -q2, -q3
+    s = math.sqrt(q1 * q1 + q2 * q2 + q3 * q3)
+    k = 2.0 / q0 if s == 0.0 else 2.0 * math.atan2(s, q0) / s
+    return k * q1, k * q2, k * q3
+
+
+# --------------------------------------------------------------------------------------------
+# rotations, array forms
+
+
+@numba.njit(cache=True, error_model="numpy")
+def quat_to_dcm(q):
+    """DCM ``C(q)``, shape (3, 3), of a unit quaternion q (4,)."""
+    C = np.empty((3, 3))
+    (C[0, 0], C[0, 1], C[0, 2], C[1, 0], C[1, 1], C[1, 2],
+     C[2, 0], C[2, 1], C[2, 2]) = _dcm(q[0], q[1], q[2], q[3])  # fmt: skip
+    return C
+
+
+@numba.njit(cache=True, error_model="numpy")
+def quat_left_matrix(p):
+    """``L(p)`` with ``p (x) q = L(p) q``, shape (4, 4)."""
+    L = np.empty((4, 4))
+    L[0, 0], L[0, 1], L[0, 2], L[0, 3] = p[0], -p[1], -p[2], -p[3]
+    L[1, 0], L[1, 1], L[1, 2], L[1, 3] = p[1], p[0], -p[3], p[2]
+    L[2, 0], L[2, 1], L[2, 2], L[2, 3] = p[2], p[3], p[0], -p[1]
+    L[3, 0], L[3, 1], L[3, 2], L[3, 3] = p[3], -p[2], p[1], p[0]
+    return L
+
+
+@numba.njit(cache=True, error_model="numpy")
+def quat_right_matrix(q):
+    """``M(q)`` with ``p (x) q = M(q) p``, shape (4, 4)."""
+    M = np.empty((4, 4))
+    M[0, 0], M[0, 1], M[0, 2], M[0, 3] = q[0], -q[1], -q[2], -q[3]
+    M[1, 0], M[1, 1], M[1, 2], M[1, 3] = q[1], q[0], q[3], -q[2]
+    M[2, 0], M[2, 1], M[2, 2], M[2, 3] = q[2], -q[3], q[0], q[1]
+    M[3, 0], M[3, 1], M[3, 2], M[3, 3] = q[3], q[2], -q[1], q[0]
+    return M
+
+
+@numba.njit(cache=True, error_model="numpy")
+def euler_to_quat(euler):
+    """Quaternion of ZYX ``[roll, pitch, yaw]`` [rad], shape (4,) (q0 of either sign)."""
+    r, p, y = 0.5 * euler[0], 0.5 * euler[1], 0.5 * euler[2]
+    cr, sr = math.cos(r), math.sin(r)
+    cp, sp = math.cos(p), math.sin(p)
+    cy, sy = math.cos(y), math.sin(y)
+    q = np.empty(4)
+    q[0] = cr * cp * cy + sr * sp * sy
+    q[1] = sr * cp * cy - cr * sp * sy
+    q[2] = cr * sp * cy + sr * cp * sy
+    q[3] = cr * cp * sy - sr * sp * cy
+    return q
+
+
+@numba.njit(cache=True, error_model="numpy")
+def quat_to_euler(q):
+    """ZYX ``[roll, pitch, yaw]`` [rad] of a unit quaternion away from gimbal lock, (3,)."""
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+    e = np.empty(3)
+    e[0] = math.atan2(2.0 * (q2 * q3 + q0 * q1), q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
+    e[1] = math.asin(max(-1.0, min(1.0, -2.0 * (q1 * q3 - q0 * q2))))
+    e[2] = math.atan2(2.0 * (q1 * q2 + q0 * q3), q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3)
+    return e
