@@ -20,25 +20,12 @@ Throughput is in IMU samples per second, with the ratio to real time and to the 
 from __future__ import annotations
 
 import sys
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-
-def _best(fn: Callable[[], Any], repeat: int = 3) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
-
-
-def _per_call(fn: Callable[[], Any], n: int = 2000) -> float:
-    """Best mean time of one call [s] over three batches of n."""
-    return _best(lambda: [fn() for _ in range(n)]) / n
+from benchmarks import best
 
 
 def _driver(recording: Any, filter_cls: type, block_period: float) -> Callable[[], Any]:
@@ -111,14 +98,14 @@ def main(duration: float = 3600.0) -> None:
           f"{len(rec[StreamKind.GPS])} GPS fixes + velocities")
 
     strapdown.integrate(nav0, omega[:10], f[:10], dt[:10])  # compile
-    t_floor = _best(lambda: strapdown.integrate(nav0, omega, f, dt))
+    t_floor = best(lambda: strapdown.integrate(nav0, omega, f, dt))
 
     def blocks10() -> None:
         nav = nav0
         for i in range(0, n, 10):
             nav = strapdown.propagate(nav, omega[i:i + 10], f[i:i + 10], dt[i:i + 10])
 
-    t_blocks = _best(blocks10)
+    t_blocks = best(blocks10)
 
     rows: list[tuple[str, float]] = [
         ("strapdown.integrate, one call (baseline)", t_floor),
@@ -131,7 +118,7 @@ def main(duration: float = 3600.0) -> None:
     ):
         run = _driver(rec, cls, period)
         _driver(simulate("vehicle-drive", {"duration": 10.0}, seed=0), cls, period)()  # compile
-        rows.append((label, _best(run, repeat=2)))
+        rows.append((label, best(run, repeat=2)))
 
     print(f"{'':46s} {'samples/s':>11s} {'x real time':>12s} {'x baseline':>11s}")
     for label, t in rows:
@@ -163,7 +150,7 @@ def main(duration: float = 3600.0) -> None:
     ]
     print(f"\n{'per call (15 states, m = 3)':46s} {'us':>11s}")
     for label, fn in calls:
-        print(f"{label:46s} {_per_call(fn) * 1e6:11.1f}")
+        print(f"{label:46s} {best(fn, number=2000) * 1e6:11.1f}")
 
 
 if __name__ == "__main__":

@@ -16,11 +16,9 @@ Run with ``python -m benchmarks strapdown``.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-
 import numpy as np
 
+from benchmarks import best
 from navreplay import strapdown
 from navreplay.geo.rotations import euler_to_quat
 from navreplay.sim import kinematics
@@ -30,16 +28,6 @@ N_REFERENCE = 3_000
 BLOCK = 10
 N_CALLS = 20_000
 RATE = 100.0
-
-
-def _best(fn: Callable[[], object], repeats: int) -> float:
-    """Shortest wall time of ``repeats`` runs [s]."""
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def _imu(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -58,10 +46,10 @@ def main() -> None:
     )
     strapdown.integrate(nav0, omega[:BLOCK], f[:BLOCK], dt[:BLOCK])  # compile or load cache
 
-    t_int = _best(lambda: strapdown.integrate(nav0, omega, f, dt), 3)
+    t_int = best(lambda: strapdown.integrate(nav0, omega, f, dt), 3)
     rate_int = N_SAMPLES / t_int
 
-    t_ref = _best(
+    t_ref = best(
         lambda: strapdown.propagate_reference(
             nav0, omega[:N_REFERENCE], f[:N_REFERENCE], dt[:N_REFERENCE]
         ),
@@ -88,8 +76,8 @@ def main() -> None:
             w, a, d = blocks[i % 100]
             strapdown.propagate_kernel(nav0, w, a, d, prev, out)
 
-    t_call = _best(calls, 3) / N_CALLS
-    t_kernel_call = _best(kernel_calls, 3) / N_CALLS
+    t_call = best(calls, 3) / N_CALLS
+    t_kernel_call = best(kernel_calls, 3) / N_CALLS
     overhead = t_call - BLOCK / rate_int
 
     # imu_from_truth on a smooth 1M-sample trajectory
@@ -100,7 +88,7 @@ def main() -> None:
     v = 20.0 * np.stack([np.cos(yaw), np.sin(yaw), 0.0 * t], axis=-1)
     pos = kinematics.integrate_position(t, v, [0.65, 2.2, 100.0])
     kinematics.imu_from_truth(t[:3], pos[:3], v[:3], q[:3])
-    t_gen = _best(lambda: kinematics.imu_from_truth(t, pos, v, q), 2)
+    t_gen = best(lambda: kinematics.imu_from_truth(t, pos, v, q), 2)
 
     print(
         f"integrate, {N_SAMPLES:,} samples         {rate_int / 1e3:10.0f} k samples/s"

@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import argparse
 import time
-import timeit
 
 import numpy as np
 
+from benchmarks import best
 from navreplay import strapdown
 from navreplay.filters import kalman
 from navreplay.filters import transfer_alignment as ta
@@ -71,10 +71,6 @@ class _FreeIns(_Engine):
         self.t_prev = float(t[-1])
 
 
-def _best(fn, repeat: int, number: int = 1) -> float:
-    return min(timeit.repeat(fn, number=number, repeat=repeat)) / number
-
-
 def kf_step(repeat: int) -> dict[str, float]:
     """Seconds per call of each part of the filter's step at a GINS sample (9 states, 5
     measurements), and of the numpy model + prediction that the first part replaces."""
@@ -108,11 +104,11 @@ def kf_step(repeat: int) -> dict[str, float]:
 
     feedback()
     return {
-        "model + prediction + z, H (numba)": _best(model, repeat, 2000),
-        "correction + checks (kalman.correct)": _best(
+        "model + prediction + z, H (numba)": best(model, repeat, 2000),
+        "correction + checks (kalman.correct)": best(
             lambda: kalman.correct(np.zeros(9), P, z, H, r), repeat, 2000),
-        "feedback + recovery (numba)": _best(feedback, repeat, 2000),
-        "baseline: numpy discretize + predict": _best(numpy_model, repeat, 1000),
+        "feedback + recovery (numba)": best(feedback, repeat, 2000),
+        "baseline: numpy discretize + predict": best(numpy_model, repeat, 1000),
     }
 
 
@@ -128,7 +124,7 @@ def main(argv: list[str] | None = None) -> None:
     n_imu = len(rec[StreamKind.IMU])
     n_gins = len(rec[StreamKind.MASTER_INS])
     duration = n_imu / 100.0
-    t_sim = _best(lambda: simulate(SCENARIO, {}, seed=1), args.repeat)
+    t_sim = best(lambda: simulate(SCENARIO, {}, seed=1), args.repeat)
     print(f"recording: {n_imu} IMU samples, {n_gins} GINS samples, {duration:.0f} s; "
           f"simulate {t_sim * 1e3:.1f} ms")
 
@@ -139,7 +135,7 @@ def main(argv: list[str] | None = None) -> None:
           f"{'us/GINS':>10}")
     for label, cls, params in rows:
         replay(rec, cls, params)  # compile / warm up
-        t = _best(lambda cls=cls, params=params: replay(rec, cls, params), args.repeat)
+        t = best(lambda cls=cls, params=params: replay(rec, cls, params), args.repeat)
         print(f"  {label:<38}{t * 1e3:>9.1f}{n_imu / t:>15,.0f}{duration / t:>13,.0f}"
               f"{t / n_gins * 1e6:>10.1f}")
 

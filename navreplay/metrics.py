@@ -12,13 +12,15 @@ Definitions
 
     x_N = (lat_hat - lat)(R_M + h),  x_E = (lon_hat - lon)(R_N + h) cos lat,  x_D = -(h_hat - h)
     RMS over runs i = 1..N:  LatRMS = sqrt(mean_i x_N,i^2),  LongRMS = sqrt(mean_i x_E,i^2)
-    CEP50  = 0.5887 (LatRMS + LongRMS)                       [m]    (rpm-aided-ins spec, eq. 29)
+    CEP50  = 0.5887 (LatRMS + LongRMS)                       [m]    (eq. 29)
     DT     = integral |v_n| dt of the truth (mean over runs)   [m]
     DT CEP50 = CEP50 / DT x 100                               [%]    (eq. 30)
     NEES   = e^T P^-1 e over the scored states (e = estimation error, P its covariance)
     NIS    = nu^T S^-1 nu per measurement update
     95 % bounds of a mean over N runs of a chi-square quantity with d dof:
              chi2.ppf([0.025, 0.975], N d) / N                          (single run: N = 1)
+
+Eqs. 29 and 30 are those of the RPM-aided INS paper (docs/methods/rpm-aided-ins.md §6).
 
 Scoring error states: ``Filter.truth_keys``
 -------------------------------------------

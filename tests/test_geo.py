@@ -1,8 +1,9 @@
 """navreplay.geo: WGS84 earth model and rotation algebra.
 
 Analytic values, identities (round trips, composition, finite differences of the earth model),
-edge cases (poles, antimeridian, gimbal lock) and an independent implementation
-(scipy.spatial.transform.Rotation, converted to scalar-last only at the boundary).
+edge cases (poles, antimeridian, gimbal lock), an independent implementation
+(scipy.spatial.transform.Rotation, converted to scalar-last only at the boundary), and the
+single-value numba kernels of navreplay.geo.kernels against the numpy functions.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from hypothesis import strategies as st
 from scipy.integrate import quad
 from scipy.spatial.transform import Rotation
 
-from navreplay.geo import earth
+from navreplay.geo import earth, kernels
 from navreplay.geo import rotations as rot
 
 PI = np.pi
@@ -397,3 +398,65 @@ def test_against_scipy_euler(roll, pitch, yaw):
         rot.euler_to_quat([roll, pitch, yaw]), rot.quat_xyzw_to_wxyz(R.as_quat())
     )
     np.testing.assert_allclose(rot.dcm_to_euler(R.as_matrix())[::-1], R.as_euler("ZYX"), atol=1e-11)
+
+
+# --------------------------------------------------------------------------------------------
+# kernels: each single-value numba kernel against its numpy counterpart
+# --------------------------------------------------------------------------------------------
+
+lat_inner = st.floats(-1.5, 1.5, **finite)  # the transport rate is singular at the poles
+
+
+@given(lat_inner, h_st, vec3)
+def test_earth_kernels_equal_geo_earth(lat, h, v):
+    v = 100.0 * v
+    np.testing.assert_allclose(kernels.radii(lat), earth.radii(lat), rtol=1e-15)
+    np.testing.assert_allclose(kernels.radii_derivatives(lat), earth.radii_derivatives(lat),
+                               rtol=1e-14, atol=1e-9)
+    assert kernels.gravity(lat, h) == pytest.approx(float(earth.gravity(lat, h)), rel=1e-15)
+    np.testing.assert_allclose(kernels.earth_rate(lat), earth.omega_ie_n(lat), rtol=1e-15,
+                               atol=1e-20)
+    np.testing.assert_allclose(kernels.transport_rate(lat, h, v[0], v[1]),
+                               earth.omega_en_n(lat, h, v), rtol=1e-14, atol=1e-20)
+
+
+@pytest.mark.parametrize("lat_deg", [-70.0, -20.0, 0.0, 35.0, 80.0])
+@pytest.mark.parametrize("h", [-200.0, 0.0, 3000.0])
+def test_gravity_derivatives_match_finite_differences(lat_deg, h):
+    lat = np.deg2rad(lat_deg)
+    dlat, dh = 1e-6, 1e-2
+    num_lat = (earth.gravity(lat + dlat, h) - earth.gravity(lat - dlat, h)) / (2 * dlat)
+    num_h = (earth.gravity(lat, h + dh) - earth.gravity(lat, h - dh)) / (2 * dh)
+    dg_dlat, dg_dh = kernels.gravity_derivatives(lat, h)
+    assert dg_dlat == pytest.approx(num_lat, rel=1e-6, abs=1e-9)
+    assert dg_dh == pytest.approx(num_h, rel=1e-6)
+
+
+@given(quat, quat, vec3, vec3)
+def test_scalar_rotation_kernels_equal_geo_rotations(p, q, a, b):
+    np.testing.assert_allclose(kernels.quat_mult(*p, *q), rot.quat_mult(p, q), atol=1e-15)
+    np.testing.assert_allclose(kernels.cross(*a, *b), np.cross(a, b), atol=1e-15)
+    C = rot.quat_to_dcm(q)
+    np.testing.assert_allclose(kernels.rotate(*q, *a), C @ a, atol=1e-15)
+    np.testing.assert_allclose(kernels.rotate_inverse(*q, *a), C.T @ a, atol=1e-15)
+    rv = 3.0 * a
+    np.testing.assert_allclose(kernels.rotvec_to_quat(*rv), rot.rotvec_to_quat(rv), atol=1e-15)
+    np.testing.assert_allclose(kernels.quat_to_rotvec(*q), rot.quat_to_rotvec(q), atol=1e-12)
+
+
+@given(quat, quat)
+def test_array_rotation_kernels_equal_geo_rotations(p, q):
+    np.testing.assert_allclose(kernels.quat_to_dcm(q), rot.quat_to_dcm(q), atol=1e-15)
+    np.testing.assert_allclose(kernels.quat_left_matrix(p), rot.quat_left_matrix(p), atol=0)
+    np.testing.assert_allclose(kernels.quat_right_matrix(q), rot.quat_right_matrix(q), atol=0)
+    np.testing.assert_allclose(kernels.quat_left_matrix(p) @ q, rot.quat_mult(p, q), atol=1e-15)
+    np.testing.assert_allclose(kernels.quat_right_matrix(q) @ p, rot.quat_mult(p, q),
+                               atol=1e-15)
+
+
+@given(st.floats(-PI, PI, **finite), st.floats(-1.5, 1.5, **finite), st.floats(-PI, PI, **finite))
+def test_euler_kernels_equal_geo_rotations_away_from_gimbal_lock(roll, pitch, yaw):
+    e = np.array([roll, pitch, yaw])
+    q = kernels.euler_to_quat(e)
+    np.testing.assert_allclose(q * np.sign(q[0]), rot.euler_to_quat(e), atol=1e-15)  # up to sign
+    np.testing.assert_allclose(kernels.quat_to_euler(q), rot.quat_to_euler(q), atol=1e-12)

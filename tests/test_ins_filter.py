@@ -64,7 +64,7 @@ def test_depth_form_is_T_F_T():
     F_h = ie.system_matrix(pos, v, C, f_b)
     F_d = ie.system_matrix(pos, v, C, f_b, vertical=ie.Vertical.DEPTH)
     np.testing.assert_allclose(F_d, T @ F_h @ T)
-    # the spec's gravity entry in depth form: +2 g / sqrt(R_M R_N)
+    # the gravity entry of docs/methods/rpm-aided-ins.md §4.2 in depth form: +2 g / sqrt(R_M R_N)
     R_M, R_N = earth.radii(pos[0])
     assert F_d[5, 2] == pytest.approx(2 * earth.gravity(pos[0], pos[2]) / np.sqrt(R_M * R_N),
                                       rel=1e-2)

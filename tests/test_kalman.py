@@ -224,3 +224,20 @@ def test_batched_correction_equals_the_shared_kalman_correction(prior, full_R):
     bad[2] = -np.eye(3)
     with pytest.raises(FilterDivergedError):
         kalman.correct_batch(x, bad, z, H, np.full((B, 6), -10.0))
+
+
+def test_batched_prediction_equals_the_shared_kalman_prediction():
+    rng = np.random.default_rng(8)
+    B, n = 4, 5
+    A = rng.normal(size=(B, n, n))
+    P = A @ np.swapaxes(A, -1, -2)
+    x = rng.normal(size=(B, n))
+    Phi = np.eye(n) + 0.1 * rng.normal(size=(B, n, n))
+    Qd = np.diag(rng.uniform(0.01, 0.1, n))
+    xb, Pb = kalman.predict_batch(x, P, Phi, Qd)
+    for i in range(B):
+        xi, Pi = kalman.predict(x[i], P[i], Phi[i], Qd)
+        np.testing.assert_allclose(xb[i], xi, rtol=1e-14, atol=1e-15)
+        np.testing.assert_allclose(Pb[i], Pi, rtol=1e-14, atol=1e-15)
+    with pytest.raises(FilterDivergedError, match="t = 2.000000 s"):
+        kalman.predict_batch(x, np.full((B, n, n), np.nan), Phi, Qd, t=2.0)

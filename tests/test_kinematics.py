@@ -1,9 +1,9 @@
 """navreplay.sim.kinematics: ideal IMU from truth and truth position from velocity.
 
 The generator is compared with closed-form mean rates and specific forces (earth rate,
-transport rate, Coriolis and centripetal terms included), with the first-order formula of the
-transfer-alignment spec (section 3.2.3), and its position integration with meridian-arc and
-parallel-circle geometry.
+transport rate, Coriolis and centripetal terms included), with the first-order formula of
+docs/methods/transfer-alignment.md §3.2, step 3, and its position integration with
+meridian-arc and parallel-circle geometry.
 """
 
 from __future__ import annotations
@@ -98,9 +98,10 @@ def test_constant_acceleration_north_gives_expected_specific_force():
     np.testing.assert_allclose(omega, w_expected, rtol=0, atol=1e-13)
 
 
-def test_agrees_with_spec_first_order_formula():
-    # TA spec 3.2.3: dtheta = log(C_nb(k-1)^T C_nb(k)) + C_bn(mid) w_in^n dt,
-    #                dv = C_bn(mid) [v(k) - v(k-1) - (g^n - (2 w_ie^n + w_en^n) x v) dt]
+def test_agrees_with_the_first_order_formula_of_transfer_alignment():
+    # docs/methods/transfer-alignment.md §3.2, step 3:
+    #   dtheta = log(C_nb(k-1)^T C_nb(k)) + C_bn(mid) w_in^n dt,
+    #   dv = C_bn(mid) [v(k) - v(k-1) - (g^n - (2 w_ie^n + w_en^n) x v) dt]
     dt = 0.01
     t = np.arange(0.0, 30.0 + dt / 2, dt)
     euler = np.stack([0.2 * np.sin(1.3 * t), 0.1 * np.sin(0.7 * t + 1), 0.5 + 0.1 * t], axis=-1)

@@ -1,5 +1,8 @@
 """RPM velocity-aided underwater INS: error model, measurement model, scenario, filter and the
-reproduction of spec rpm-aided-ins.md (the full 100-run bands are marked slow)."""
+reproduction of docs/methods/rpm-aided-ins.md (the full 100-run bands are marked slow).
+
+Section numbers (§) and errata (E1-E13) are those of docs/methods/rpm-aided-ins.md.
+"""
 
 import math
 
@@ -56,9 +59,9 @@ def test_every_F_block_matches_finite_differences_of_the_mechanization(lat_deg):
             scale = np.abs(b).max()
             np.testing.assert_allclose(a, b, rtol=2e-5, atol=1e-6 * scale + 1e-30,
                                        err_msg=f"block {rname}/{cname}")
-    # the structure of section 4.2: 15 rows of random constants, 9 columns without dynamics
+    # the structure of §4.2: 15 rows of random constants, 9 columns without dynamics
     assert not F[9:, :].any() and not F[:, 15:].any()
-    # the spec's depth-form entries
+    # the depth-form entries of §4.2
     R_M, R_N = earth.radii(truth[0])
     assert F[2, 5] == 1.0
     assert F[5, 2] == pytest.approx(2 * earth.gravity(truth[0], -105.0) / np.sqrt(R_M * R_N),
@@ -75,7 +78,7 @@ def test_dropping_the_curvature_derivatives_touches_column_0_only_and_changes_li
     np.testing.assert_array_equal(np.delete(F, 0, axis=1), np.delete(F0, 0, axis=1))
     assert F0[0, 0] == 0.0 and F[0, 0] != 0.0  # F_pp[0, 0] is all dR_M/dL
     assert np.count_nonzero(F[:, 0] - F0[:, 0]) >= 5
-    # the effect on the filter: well below 1 % (spec section 4.2)
+    # the effect on the filter: well below 1 % (§4.2)
     short = simulate("underwater-rpm", {"duration": 120.0}, seed=4)
     a = replay(short, rai.RpmAidedIns, {"mode": "rpm_current"}, output_rate=None)
     b = replay(short, rai.RpmAidedIns, {"mode": "rpm_current", "curvature_derivatives": False},
@@ -110,7 +113,7 @@ def test_structured_covariance_step_equals_the_dense_prediction():
 # the paper's ENU equations, converted: a worked example
 
 T = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-"""ENU -> NED (spec section 2.1): proper rotation, T = T^T = T^-1."""
+"""ENU -> NED (§2.1): proper rotation, T = T^T = T^-1."""
 
 
 def _skew(x):
@@ -183,7 +186,7 @@ def test_enu_to_ned_conversion_of_the_papers_equations_worked_example():
     nav = np.r_[lat, 130 * DEG, h, v_ned, rotations.dcm_to_quat(C_ned)]
     F_ned = rai.system_matrix(nav, f_b)[:15, :15]
     np.testing.assert_allclose(F_ned, F_expected, rtol=1e-11, atol=1e-18)
-    # a few entries by hand (spec section 4.2)
+    # a few entries by hand (§4.2)
     assert F_ned[0, 3] == pytest.approx(1 / (R_M + h))  # F_pv = diag(1/R_Mh, ...)
     assert F_ned[1, 4] == pytest.approx(1 / ((R_N + h) * np.cos(lat)))
     assert F_ned[2, 5] == 1.0  # d' = V_D
@@ -233,7 +236,7 @@ def test_H_rpm_matches_finite_differences_of_eq25():
     assert not H[:, 0:3].any() and not H[:, 9:15].any() and not H[:, 20:].any()
 
 
-def test_H_rpm_is_the_specs_printed_form_at_zero_rpm_errors():
+def test_H_rpm_is_the_printed_form_at_zero_rpm_errors():
     _, nav = _state(36.0, 70.0, [8.0, 11.0, -0.4], [0.01, 0.06, 0.95])
     C = rotations.quat_to_dcm(nav[6:10])
     u = 13.7
@@ -431,7 +434,7 @@ def test_modes_share_one_path_and_freeze_what_they_should():
         np.testing.assert_allclose(np.diff(inn.t), 1.0)
         assert inn.nu.shape == (101, 3)
     # only the along-axis row carries sensor noise (the lateral and vertical rows are the
-    # no-sideslip / no-heave constraint), while R_rpm is isotropic (spec 4.4): NIS near 1, not 3
+    # no-sideslip / no-heave constraint), while R_rpm is isotropic (§4.4): NIS near 1, not 3
     assert 0.5 < cur.innovations["rpm"].nis[20:].mean() < 3.0
     # covariance symmetric PSD throughout
     for res in out.values():
@@ -453,7 +456,7 @@ def test_estimates_converge_to_the_true_sensor_errors(rec):
 
 
 def test_few_seeded_runs_order_pure_rpm_and_rpm_current():
-    """The fast version of the section 6 bands: pure >> rpm > rpm_current on four runs."""
+    """The fast version of the §6 bands: pure >> rpm > rpm_current on four runs."""
     err = {m: [] for m in rai.Mode}
     for seed in range(4):
         recording = simulate("underwater-rpm", {}, seed=seed)
@@ -504,6 +507,13 @@ def test_quick_reproduction_report_and_rerun_view(tmp_path):
     rrd = tmp_path / "rpm.rrd"
     report = get("rpm-aided-ins").run(runs=2, seed=5, rrd=rrd)
     assert "Table 3" in report.table and "Aided Navi. est Current" in report.table
+    assert "reference prediction (Lat / Long RMS, DT CEP50)" in report.table
+    assert "m/s (reference about 0.09)" in report.table
+    text = report.format()
+    assert "Acceptance bands (docs/methods/rpm-aided-ins.md §6):" in text
+    assert "(Choi 2019): 2 runs, seed 5" in text.splitlines()[0]
+    for word in ("spec ", "spec'", "prototype", "(seed 00", "the seed"):  # no outside documents
+        assert word not in text
     assert len(report.checks) == 8
     assert report.figures["lat_rms"]["pure"].shape == (481,)
     series = _rrd_series(rrd)

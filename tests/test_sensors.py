@@ -48,13 +48,14 @@ def rng(seed: int = 0) -> np.random.Generator:
 def test_noise_conversions():
     assert sample_sigma(1e-3, 0.01) == pytest.approx(1e-2)
     assert density_from_sample_sigma(sample_sigma(2e-4, 0.005), 0.005) == pytest.approx(2e-4)
-    # "80 ug/sqrt(Hz)" read at Nyquist for 4 Hz instantaneous samples: 113.1 ug (vector-matching spec)
+    # "80 ug/sqrt(Hz)" read at Nyquist for 4 Hz instantaneous samples: 113.1 ug
+    # (docs/methods/vector-matching.md §3.1)
     assert nyquist_sample_sigma(80 * MICRO_G, 0.25) / MICRO_G == pytest.approx(113.137, abs=1e-3)
     # transfer-alignment reading: 20 ug as the 1-sigma of a 1-s average, at 100 Hz
     assert sample_sigma(density_from_average_sigma(20 * MICRO_G), 0.01) / MICRO_G == pytest.approx(200.0)
 
 
-def test_one_second_average_reading_reproduces_the_spec_value():
+def test_one_second_average_reading_reproduces_the_specified_value():
     """White noise specified as the 1-sigma of a 1-s average really has that 1-s average."""
     dt = 0.01
     model = ImuModel(gyro_arw=density_from_average_sigma(0.1 * DEG_PER_HOUR),
@@ -95,7 +96,8 @@ def test_random_walk_variance_grows_linearly():
 
 
 def ta_imu() -> ImuModel:
-    """The transfer-alignment spec's Table 2 (1 sigma)."""
+    """Table 2 of the transfer-alignment paper (1 sigma; docs/methods/transfer-alignment.md
+    §3.1)."""
     return ImuModel(
         gyro_bias=0.6 * DEG_PER_HOUR, gyro_scale_factor=300 * PPM, gyro_misalignment=ARCMIN,
         gyro_g_sensitivity=0.3 * DEG_PER_HOUR_PER_G,
@@ -311,7 +313,8 @@ def test_master_ins_without_errors_is_the_truth():
 
 
 def paper_eqs_20_22(euler: np.ndarray, eps: np.ndarray) -> np.ndarray:
-    """Transfer-alignment paper eqs. (20)-(22), with psi_tilde = psi - eps_d (erratum E14)."""
+    """Transfer-alignment paper eqs. (20)-(22), with psi_tilde = psi - eps_d (erratum E14 in
+    docs/methods/transfer-alignment.md)."""
     phi, theta, psi = euler.T
     en, ee, ed = eps
     pt = psi - ed
@@ -327,7 +330,7 @@ def test_master_ins_tilt_sign_matches_paper_to_first_order():
     g = rng(19)
     euler = np.column_stack([g.uniform(-0.2, 0.2, 200), g.uniform(-0.3, 0.3, 200),
                              g.uniform(-3.0, 3.0, 200)])
-    eps = np.array([3.0, -3.0, 5.0]) * ARCMIN  # the spec's 1-sigma sizes
+    eps = np.array([3.0, -3.0, 5.0]) * ARCMIN  # the paper's 1-sigma sizes
     model = MasterInsModel(tilt=1.0)  # draws are replaced below
     errors = model.draw(rng(0))
     errors = type(errors)(tilt=eps, synchro_bias=np.zeros(3), vel_bias=np.zeros(3))

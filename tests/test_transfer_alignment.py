@@ -1,4 +1,7 @@
-"""Transfer alignment (spec transfer-alignment.md): scenario, filter model, reproduction."""
+"""Transfer alignment (docs/methods/transfer-alignment.md): scenario, filter model, reproduction.
+
+Section numbers (§) and errata (E1-E17) are those of docs/methods/transfer-alignment.md.
+"""
 
 import dataclasses
 import math
@@ -226,7 +229,7 @@ def test_prediction_and_measurement_match_the_shared_kalman_math():
     v_r = np.array([4.3, 2.5, 0.0])
     P, z, H_, q_m2, w_now, w_in = ta.predict_and_measure(
         nav, q_rb, P0, s, -q_m, v_r, sums, 10, w_last, w_prev, lever, dt, qc, 1e-12)
-    np.testing.assert_allclose(q_m2, q_m, atol=0)  # the sign of spec 2.2
+    np.testing.assert_allclose(q_m2, q_m, atol=0)  # the sign of §2.2
     R, w_in_ref = ta.earth_terms(LAT, H, nav[3:6])
     A, G = ta.system_matrix(nav[6:], nav[3:6], LAT, R, sums[:3] / 10, w_in_ref, sums[3:] / 10, n)
     Qd = kalman.discrete_noise(G, qc, dt)
@@ -423,7 +426,7 @@ def test_short_campaign_partial_beats_full_under_flexure():
     rp, rf = part.rms_at(100.0), full.rms_at(100.0)
     assert rp[2] < rf[2]  # azimuth: partial matching is not biased by the Y flexure
     assert np.all(rp[:2] < 1e-3)  # level within 1 mrad (Fig. 2)
-    # the predicted sigma is of the prototype's size (spec 6: optimistic, not a gate)
+    # the predicted sigma is of the reference's size (§6: optimistic, not a gate)
     assert 0.3e-3 < part.sigma_rms[-1, 2] < 0.7e-3
 
 
@@ -435,7 +438,11 @@ def test_quick_report_and_rerun_view(tmp_path):
     out = tmp_path / "ta.rrd"
     report = repro.run(runs=2, seed=1, workers=1, rrd=out)
     text = report.format()
-    assert "vel_quat_partial" in text and "prototype" in text and "Acceptance" in text
+    assert "vel_quat_partial" in text and "reference (36 runs, 50 Hz)" in text
+    assert "Acceptance bands (docs/methods/transfer-alignment.md §6):" in text
+    assert "(Song, Jeon & Lyou): 2 runs per condition, seed 1" in text.splitlines()[0]
+    for word in ("spec ", "spec'", "prototype", "(seed 00", "the seed"):  # no outside documents
+        assert word not in text
     assert len(report.checks) == 8
     paths = {c.entity_path for c in RrdReader(str(out)).stream().collect().stream().to_chunks()}
     assert any(p.startswith("/ensemble/fig2") and "partial" in p for p in paths)
@@ -444,7 +451,7 @@ def test_quick_report_and_rerun_view(tmp_path):
 
 
 @pytest.mark.slow
-def test_full_campaign_meets_every_band_of_spec_section_6():
+def test_full_campaign_meets_every_acceptance_band():
     report = rep.REPRODUCTION.run(runs=36, seed=0, workers=2)
     assert report.figures["timing"]["filter_runs"] == 36 * 7
     names = [c.name for c in report.checks]

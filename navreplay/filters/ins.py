@@ -1,12 +1,13 @@
 """Free-inertial navigation ("ins"): the strapdown solution and its predicted error covariance.
 
 The baseline every aided filter is compared to. It integrates the IMU with
-:func:`navreplay.strapdown.integrate` from the initial solution in ``metadata.initial_nav``
-and propagates the covariance of the 15 navigation error states of
-:mod:`navreplay.filters.ins_error` with the IMU error model. It makes no measurement update.
-The class also carries the machinery that the aided INS filters build on
-(:class:`navreplay.filters.gps_ins.GpsInsFilter`): IMU compensation, the covariance step
-schedule, feedback of estimated errors.
+:mod:`navreplay.strapdown` from the initial solution in ``metadata.initial_nav`` and
+propagates the covariance of the 15 navigation error states of
+:mod:`navreplay.filters.ins_error` with the IMU error model, both by
+:class:`navreplay.filters.ins_error.TimeUpdate`. It makes no measurement update. The class is
+the base of :class:`navreplay.filters.gps_ins.GpsInsFilter` (feedback of estimated errors,
+extra states); the module's :func:`initial_solution`, :func:`initial_sigma` and
+:func:`initial_covariance` also serve ``rpm-aided-ins``.
 
 States (``Estimate.x``)
 -----------------------

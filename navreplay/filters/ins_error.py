@@ -72,8 +72,8 @@ For isotropic triad noise ``C q I C^T = q I``, so ``G Qc G^T`` is diagonal and d
 on the attitude (:func:`process_noise_diagonal`).
 
 With depth as the vertical coordinate the model is transformed by T = diag(1, 1, -1, 1, ...):
-``F_d = T F T`` (row 2 and column 2 change sign, eq. 19). This is the form of the RPM-aided INS
-spec, section 4.2 (its eqs. 14-19 in NED).
+``F_d = T F T`` (row 2 and column 2 change sign, eq. 19). This is the form of the RPM-aided INS,
+docs/methods/rpm-aided-ins.md §4.2 (its eqs. 14-19 in NED).
 
 Discrete process noise over a step T (diagonal, attitude independent)::
 
@@ -88,6 +88,17 @@ a turn of that length collects the variance ``(sigma |omega| tau)^2`` of the con
 
 Every block was checked against central finite differences of (2)-(4) and of
 :func:`navreplay.strapdown.propagate` (tests/test_ins_filter.py).
+
+Covariance propagation
+----------------------
+``P <- Phi P Phi^T + Qd`` with ``Phi = I + F T + (F T)^2 / 2`` (kalman eqs. 3, 6) in compiled
+loops that use the structure of F: it has non-zero rows only for position, velocity and
+attitude and non-zero columns only for the 15 states here (the states a larger filter adds are
+random constants or random walks), so only 9 rows and columns of P change.
+:func:`propagate_covariance` steps over given points, :func:`accumulate_covariance` collects
+IMU samples into steps of a given length, and :class:`TimeUpdate` is the whole time update of
+an INS filter over an IMU block (bias compensation, :mod:`navreplay.strapdown`, covariance) in
+one compiled call; ``ins``, ``gps-ins`` and ``rpm-aided-ins`` use it.
 """
 
 from __future__ import annotations
@@ -431,10 +442,8 @@ def apply_correction(
     out[1] -= dx[1]
     out[2] -= dx[2] if vertical is Vertical.HEIGHT else -dx[2]
     out[NAV_VEL] -= dx[VEL]
-    r0, r1, r2, r3 = kernels.quat_mult(
-        1.0, 0.5 * float(dx[6]), 0.5 * float(dx[7]), 0.5 * float(dx[8]),
-        *(float(v) for v in nav[NAV_Q]),
-    )
+    a, b, c = (0.5 * dx[ATT]).tolist()
+    r0, r1, r2, r3 = kernels.quat_mult(1.0, a, b, c, *out[NAV_Q].tolist())  # [1, phi/2] (x) q
     k = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
     if r0 < 0.0:
         k = -k
@@ -447,7 +456,7 @@ def apply_correction(
 
 def nav_dcm(nav: np.ndarray) -> np.ndarray:
     """Attitude DCM C_nb of a navigation vector (10,), shape (3, 3)."""
-    return kernels.quat_to_dcm(np.ascontiguousarray(nav[NAV_Q], dtype=np.float64))
+    return kernels.quat_to_dcm(nav[NAV_Q])
 
 
 # -- covariance propagation (compiled) --------------------------------------------------------
@@ -455,6 +464,8 @@ def nav_dcm(nav: np.ndarray) -> np.ndarray:
 
 N_NAV = 9
 """Rows of F that are not zero: position, velocity and attitude."""
+_TIME_TOL = 1e-9
+"""Slack [s] when comparing sample times with the time of the navigation solution."""
 
 
 @numba.njit(cache=True)
@@ -520,9 +531,10 @@ def _covariance_step(
 
 
 @numba.njit(cache=True)
-def _scratch(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """F, M, T of :func:`_covariance_step` for n states."""
-    return np.zeros((N_STATES, N_STATES)), np.zeros((N_NAV, N_STATES)), np.zeros((N_NAV, n))
+def _scratch(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """F, M, T of :func:`_covariance_step` for n states and the means of :func:`_close_step`."""
+    return (np.zeros((N_STATES, N_STATES)), np.zeros((N_NAV, N_STATES)), np.zeros((N_NAV, n)),
+            np.zeros((2, 3)))
 
 
 @numba.njit(cache=True)
@@ -530,7 +542,7 @@ def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
 ) -> np.ndarray:
-    F, M, T = _scratch(P.shape[0])
+    F, M, T, _ = _scratch(P.shape[0])
     for k in range(dt.shape[0]):
         P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
                              curvature, F, M, T)
@@ -541,14 +553,18 @@ def _propagate_covariance(
 def _close_step(
     P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
     open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray, T: np.ndarray,
+    mean: np.ndarray,
 ) -> np.ndarray:
     """P propagated over the open step, with F at its start and the mean specific force and
     body rate over it; the step is then cleared (P itself when none is open)."""
     dt = open_sums[0]
     if dt <= 0.0:
         return P
-    P = _covariance_step(P, open_nav, open_sums[1:4] / dt, open_sums[4:7] / dt, dt, q, k_acc,
-                         k_gyro, depth, curvature, F, M, T)
+    for j in range(3):
+        mean[0, j] = open_sums[1 + j] / dt
+        mean[1, j] = open_sums[4 + j] / dt
+    P = _covariance_step(P, open_nav, mean[0], mean[1], dt, q, k_acc, k_gyro, depth, curvature,
+                         F, M, T)
     open_sums[:] = 0.0
     return P
 
@@ -559,7 +575,7 @@ def _accumulate_covariance(
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
     open_nav: np.ndarray, open_sums: np.ndarray,
 ) -> np.ndarray:
-    F, M, T = _scratch(P.shape[0])
+    F, M, T, mean = _scratch(P.shape[0])
     for k in range(dt.shape[0]):
         if open_sums[0] == 0.0:
             open_nav[:] = hist[k]
@@ -568,38 +584,49 @@ def _accumulate_covariance(
             open_sums[1 + j] += f_b[k, j] * dt[k]
             open_sums[4 + j] += omega_b[k, j] * dt[k]
         if open_sums[0] >= step - 1e-9:
-            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, open_nav, open_sums, F, M, T)
+            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, open_nav, open_sums, F, M, T,
+                            mean)
     return P
 
 
 @numba.njit(cache=True)
 def _propagate_block(
-    nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_prev: float, omega: np.ndarray,
+    nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
     f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, prev: np.ndarray, step: float,
     q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
     open_nav: np.ndarray, open_sums: np.ndarray,
-) -> tuple[int, np.ndarray, np.ndarray]:
-    """Bias compensation, strapdown and the covariance steps over a block of IMU samples.
+) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """Bias compensation, strapdown and the covariance steps over the samples of a block after
+    ``t_nav`` (the time of ``nav``).
 
-    Returns (code, nav, P): code -1 when all went well; the strapdown's codes (the index of the
-    first invalid sample, -2 for a non-finite state) with nav and P unchanged; -3 when the
-    propagated P (returned for the message) has a negative or non-finite variance.
+    Returns (code, first, nav, P) with ``first`` the index of the first sample used and code -1
+    when all went well; -4 when no sample is after ``t_nav``; -5 when P is not (n, n) with n
+    the length of q; the strapdown's codes (the index of the first invalid sample from
+    ``first`` on, -2 for a non-finite state) with nav and P unchanged; -3 when the propagated P
+    (returned for the message) has a negative or non-finite variance.
     """
-    k = t.shape[0]
+    if P.shape[0] != q.shape[0] or P.shape[1] != q.shape[0]:
+        return -5, 0, nav, P
+    first = 0
+    while first < t.shape[0] and t[first] <= t_nav + _TIME_TOL:
+        first += 1
+    k = t.shape[0] - first
+    if k == 0:
+        return -4, first, nav, P
     dt = np.empty(k)
-    dt[0] = t[0] - t_prev
-    for i in range(1, k):
-        dt[i] = t[i] - t[i - 1]
     w = np.empty((k, 3))
     fc = np.empty((k, 3))
+    t_prev = t_nav
     for i in range(k):
+        dt[i] = t[first + i] - t_prev
+        t_prev = t[first + i]
         for j in range(3):
-            w[i, j] = omega[i, j] - b_g[j]
-            fc[i, j] = f[i, j] - b_a[j]
+            w[i, j] = omega[first + i, j] - b_g[j]
+            fc[i, j] = f[first + i, j] - b_a[j]
     hist = np.empty((k + 1, strapdown.NAV_SIZE))
     code = strapdown.integrate_kernel(nav, w, fc, dt, prev, hist)
     if code != -1:
-        return code, nav, P
+        return code, first, nav, P
     for j in range(3):  # the last sample's increments: coning and sculling of the next block
         prev[j] = w[k - 1, j] * dt[k - 1]
         prev[3 + j] = fc[k - 1, j] * dt[k - 1]
@@ -607,8 +634,8 @@ def _propagate_block(
                                open_nav, open_sums)
     for i in range(P.shape[0]):
         if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
-            return -3, nav, P
-    return code, hist[k].copy(), P
+            return -3, first, nav, P
+    return code, first, hist[k].copy(), P
 
 
 @dataclasses.dataclass(frozen=True)
@@ -805,10 +832,6 @@ def close_step(
     return _close_step(_f64(P), *model, open_step.nav, open_step.sums, *_scratch(P.shape[0]))
 
 
-_TIME_TOL = 1e-9
-"""Slack [s] when comparing sample times with the time of the navigation solution."""
-
-
 class TimeUpdate:
     """The time update of an INS filter: strapdown and covariance over blocks of IMU samples.
 
@@ -876,30 +899,27 @@ class TimeUpdate:
         FilterDivergedError
             A non-finite navigation state or a negative or non-finite variance.
         """
-        if P.shape != self._shape:
-            raise ValueError(f"P must be {self._shape} as the process noise, got {P.shape}")
-        if t[0] <= t_nav + _TIME_TOL:  # samples at or before the navigation solution
-            first = int(np.searchsorted(t, t_nav + _TIME_TOL, side="right"))
-            if first == t.shape[0]:
-                return None
-            t, omega_ib_b, f_b = t[first:], omega_ib_b[first:], f_b[first:]
-        code, nav, P = _propagate_block(
+        code, first, nav, P = _propagate_block(
             nav, P, t, t_nav, omega_ib_b, f_b, b_a, b_g, self.prev, self.step, *self._model,
             self.open_step.nav, self.open_step.sums,
         )
+        if code == -1:
+            return nav, P, float(t[-1])
+        if code == -4:
+            return None
+        if code == -5:
+            raise ValueError(f"P must be {self._shape} as the process noise, got {P.shape}")
         if code == -3:
             check_covariance(P, t=float(t[-1]))  # names what is wrong
             raise FilterDivergedError("P has a negative or non-finite variance", float(t[-1]))
         if code == -2:
             raise FilterDivergedError("navigation state is not finite", t_nav)
-        if code != -1:
-            t_before = t[code - 1] if code else t_nav
-            raise ValueError(
-                f"IMU sample at t = {t[code]:.6f} s (previous {t_before:.6f} s): omega_ib_b = "
-                f"{omega_ib_b[code]}, f_b = {f_b[code]}: not finite, or the time does not "
-                "increase"
-            )
-        return nav, P, float(t[-1])
+        i = first + code
+        raise ValueError(
+            f"IMU sample at t = {t[i]:.6f} s (previous {t[i - 1] if code else t_nav:.6f} s): "
+            f"omega_ib_b = {omega_ib_b[i]}, f_b = {f_b[i]}: not finite, or the time does not "
+            "increase"
+        )
 
     def close(self, P: np.ndarray, t: float) -> np.ndarray:
         """P at the time t [s] of the last sample: propagated over the open covariance step,

@@ -35,6 +35,13 @@ different units (radians of latitude next to metres per second). States with zer
 (inert or frozen states) are allowed: P must be PSD, not PD. Outputs of (6) and (12) are
 symmetrised to remove rounding-level asymmetry of the matrix products, then checked.
 
+Stacks of filters
+-----------------
+:func:`predict_batch` and :func:`correct_batch` apply (6) and (7)-(13) to many independent
+filters at once (leading axes, e.g. the runs of a Monte Carlo campaign), vectorised across the
+stack; their checks are lighter (finiteness, and positive definiteness through the Cholesky
+factors of S and of the corrected P).
+
 Examples
 --------
 Scalar random constant, measured once with unit noise:
@@ -482,7 +489,7 @@ def correct(
 
 
 # --------------------------------------------------------------------------------------------
-# correction of a stack of independent filters (Monte Carlo fast paths)
+# prediction and correction of a stack of independent filters (Monte Carlo fast paths)
 
 
 def _mT(a: np.ndarray) -> np.ndarray:
@@ -532,6 +539,34 @@ def _solve_lower_T_batch(L: np.ndarray, B: np.ndarray) -> np.ndarray:
     return X
 
 
+def predict_batch(
+    x: np.ndarray, P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray, *, t: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`predict` for a stack of independent filters (leading axes B...), eq. (6).
+
+    Parameters
+    ----------
+    x : ndarray, shape (B..., n)
+    P : ndarray, shape (B..., n, n)
+    Phi, Qd : ndarray, shape (n, n) or (B..., n, n)
+    t : float, optional
+        Filter time [s] after the step, for error messages.
+
+    Returns
+    -------
+    x, P : ndarray
+        Predicted states and covariances (symmetrised). Only finiteness is checked here; the
+        Cholesky factorisations of :func:`correct_batch` catch a covariance that lost its
+        meaning.
+    """
+    x = (Phi @ x[..., None])[..., 0] if x.any() else np.zeros_like(x)  # error states: often 0
+    P = Phi @ P @ _mT(Phi) + Qd
+    P = 0.5 * (P + _mT(P))
+    if not np.all(np.isfinite(P)):
+        raise FilterDivergedError("non-finite predicted covariance", t)
+    return x, P
+
+
 def correct_batch(
     x: np.ndarray,
     P: np.ndarray,
@@ -573,7 +608,8 @@ def correct_batch(
     n = P.shape[-1]
     m = H.shape[-2]
     diagonal_R = R.ndim == H.ndim - 1
-    nu = z - (H @ x[..., None])[..., 0]  # (7)
+    prior = bool(x.any())  # an error state after feedback is 0: skip its products
+    nu = z - (H @ x[..., None])[..., 0] if prior else z.copy()  # (7)
     HP = H @ P
     S = HP @ _mT(H)  # (8)
     if diagonal_R:
@@ -585,7 +621,8 @@ def correct_batch(
     W = _solve_lower_batch(L, np.concatenate([nu[..., None], HP], axis=-1))  # (9), (13)
     nu_w = W[..., 0]
     K = _mT(_solve_lower_T_batch(L, W[..., 1:]))  # (9)
-    x = x + (K @ nu[..., None])[..., 0]  # (11)
+    dx = (K @ nu[..., None])[..., 0]  # (11)
+    x = x + dx if prior else dx
     IKH = -K @ H  # (12)
     IKH[..., np.arange(n), np.arange(n)] += 1.0
     P = IKH @ P @ _mT(IKH)

@@ -1,7 +1,7 @@
 """RPM velocity-aided underwater INS with sea-current estimation ("rpm-aided-ins").
 
-An indirect feedback Kalman filter with 24 error states (Choi, JANT 23(3), 2019; spec
-rpm-aided-ins.md, section 4). The NED strapdown mechanization of :mod:`navreplay.strapdown`
+An indirect feedback Kalman filter with 24 error states (Choi, JANT 23(3), 2019; method
+docs/methods/rpm-aided-ins.md §4). The NED strapdown mechanization of :mod:`navreplay.strapdown`
 runs on the bias-compensated IMU at the IMU rate; every ``cov_step`` (0.1 s) the error
 covariance is propagated with the 24-state error model; at ``update_rate`` (1 Hz) the
 propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
@@ -37,14 +37,14 @@ Estimate minus truth, ``dx = x_hat - x``, for every state but the attitude, whic
 angle of eqs. (14)-(15): ``C_nb_hat = (I - [phi x]) C_nb`` (a positive phi_D is an estimated
 heading smaller than the true one). Depth d = -h, so ``dd = d_hat - d = -dh``. The RPM speed
 log reads ``V_rpm = (1 + k) u`` for the true water speed u along the RPM axis, which is body x
-rotated by ``C_bv = exp([m x])``, ``m = [0, m_y, m_z]``. Feedback subtracts (section 4.7)::
+rotated by ``C_bv = exp([m x])``, ``m = [0, m_y, m_z]``. Feedback subtracts (§4.7)::
 
     lat, lon, d, v_n, b_a, b_g, k, m, v_c  -=  dx,
     q_nb_hat <- normalize([1, phi/2] (x) q_nb_hat),   then dx = 0.
 
 Models
 ------
-Strapdown and error dynamics (eqs. 1, 8-19, converted from ENU to NED, spec section 4.2)::
+Strapdown and error dynamics (eqs. 1, 8-19, converted from ENU to NED, §4.2)::
 
     f_hat = f_meas - b_a_hat,  w_hat = w_meas - b_g_hat                                (1)
     nav_k = strapdown(nav_k-1, w_hat, f_hat)                     IMU rate              (2)
@@ -68,7 +68,7 @@ those and the biases, so ``Phi = [[M], [0 I]]`` with M the 9 x 15 top block: the
 touches 9 rows of P (:func:`navreplay.filters.ins_error.propagate_covariance`, shared with the
 other INS filters).
 
-RPM water-velocity measurement (eq. 25, re-derived in spec section 4.4), with the corrected
+RPM water-velocity measurement (eq. 25, re-derived in §4.4), with the corrected
 speed ``u_hat = c_rpm rpm / (1 + k_hat)``, ``w = v_hat - v_c_hat`` (``v_c_hat = [vc_N, vc_E, 0]``;
 0 in the ``rpm`` mode)::
 
@@ -81,23 +81,23 @@ speed ``u_hat = c_rpm rpm / (1 + k_hat)``, ``w = v_hat - v_c_hat`` (``v_c_hat = 
     H_rpm[:, v_c]   = -C_nb_hat^T[:, 0:2]
     R_rpm = rpm_sigma^2 I3
 
-(*) the printed forms of the spec are the values at k_hat = m_hat = 0; the ones used here are
+(*) the printed forms of §4.4 are the values at k_hat = m_hat = 0; the ones used here are
 the exact first derivatives (J is the left Jacobian of SO(3)), equal to first order.
 
-Depth (spec section 4.5)::
+Depth (§4.5)::
 
-    z_d = d_hat - d_meas,  H_d = e_2^T,  R_d = depth_sigma^2                        (spec 4.5)
+    z_d = d_hat - d_meas,  H_d = e_2^T,  R_d = depth_sigma^2                            (§4.5)
 
 Updates use the shared :func:`navreplay.filters.kalman.correct` (Cholesky, Joseph form) on the
 error state 0, sequentially (RPM first, then depth, at the same update time), with the gain rows
 of frozen states forced to 0: the inert states always, the current in the ``rpm`` mode.
 
-Variants (spec section 5, parameter ``mode``): ``pure`` (free inertial, no updates, P still
+Variants (§5, parameter ``mode``): ``pure`` (free inertial, no updates, P still
 propagated for the sigma plots), ``rpm`` (current frozen at 0: P0 = 0, Q = 0, K rows 0) and
 ``rpm_current`` (all 24 states). One code path: the mode only sets P0, Q, the frozen mask and
 whether updates run.
 
-Initial covariance (spec section 4.6): position, velocity and attitude sigmas from
+Initial covariance (§4.6): position, velocity and attitude sigmas from
 ``metadata.initial_nav["sigma"]`` (or the ``init_*`` parameters), position floored at
 ``pos_sigma_floor``; the sensor-error sigmas from the parameters.
 
@@ -203,7 +203,7 @@ solution's error, biases and current by the truth stream, the RPM parameters by
 
 
 class Mode(enum.StrEnum):
-    """Filter variant (spec section 5)."""
+    """Filter variant (docs/methods/rpm-aided-ins.md §5)."""
 
     PURE = "pure"
     """Free inertial: no updates; P is still propagated (the paper's "Pure navigation")."""
@@ -215,10 +215,11 @@ class Mode(enum.StrEnum):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class RpmAidedInsParams(FilterParams):
-    """Parameters of ``rpm-aided-ins`` (SI; defaults from spec sections 4.3-4.6)."""
+    """Parameters of ``rpm-aided-ins`` (SI; defaults from docs/methods/rpm-aided-ins.md
+    §4.3-4.6)."""
 
     mode: Mode = Mode.RPM_CURRENT
-    """Variant: pure | rpm | rpm_current (spec section 5)."""
+    """Variant: pure | rpm | rpm_current (docs/methods/rpm-aided-ins.md §5)."""
     accel_noise: float = 2e-5
     """sqrt(q_a): velocity process noise density [(m/s)/sqrt(s)] (about 2 x the VRW, covering
     the unmodelled accelerometer scale factor and misalignment)."""
@@ -389,7 +390,8 @@ def rpm_measurement(
 
 
 def depth_measurement(nav: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
-    """Depth residual ``d_hat - d_meas`` [m], shape (1,), and H (1, 24) (spec section 4.5)."""
+    """Depth residual ``d_hat - d_meas`` [m], shape (1,), and H (1, 24)
+    (docs/methods/rpm-aided-ins.md §4.5)."""
     H = np.zeros((1, N_STATES))
     H[0, 2] = 1.0
     return np.array([-nav[2] - depth]), H
@@ -430,7 +432,8 @@ class RpmAidedIns(Filter):
     Params: ClassVar[type[FilterParams]] = RpmAidedInsParams
     truth_keys: ClassVar[dict[str, str]] = TRUTH_KEYS
     nees_states: ClassVar[tuple[str, ...]] = ("dlat", "dlon")
-    """The NEES of the spec's consistency check: horizontal position, 2 dof."""
+    """The NEES of the consistency band of docs/methods/rpm-aided-ins.md §6: horizontal
+    position, 2 dof."""
 
     params: RpmAidedInsParams
 
@@ -457,7 +460,7 @@ class RpmAidedIns(Filter):
         self.v_c = np.zeros(2)
         self.state_names = STATE_NAMES
 
-        # P0, section 4.6
+        # P0, §4.6 of the method
         init = context.metadata.initial_nav
         pos_sigma = initial_sigma(init, "pos_ned")
         if p.init_depth_sigma is not None:
@@ -559,7 +562,8 @@ class RpmAidedIns(Filter):
         self.P = self._time_update.close(self.P, self.t)
 
     def _feedback(self, dx: np.ndarray) -> None:
-        """Subtract the estimated errors (section 4.7, step 4); the error state is then 0."""
+        """Subtract the estimated errors (docs/methods/rpm-aided-ins.md §4.7, step 4); the error
+        state is then 0."""
         self.nav = ie.apply_correction(self.nav, dx, ie.Vertical.DEPTH)
         self.b_a = self.b_a - dx[BA]
         self.b_g = self.b_g - dx[BG]

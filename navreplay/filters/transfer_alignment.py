@@ -3,7 +3,8 @@
 Aligns a strapdown slave INS (SDINS, frame b) to a ship's master gimballed INS (GINS, frame r)
 while the ship rolls, pitches and bends, after Song, Jeon and Lyou, "A Transfer Alignment
 Algorithm Using Velocity and Quaternion Partial Matching Methods" (equation numbers below are
-the paper's, with the errata of the transfer-alignment spec, section 7, applied).
+the paper's, with the errata E1-E17 of docs/methods/transfer-alignment.md §7 applied; that
+document is the method as navreplay implements it).
 
 The filter matches the lever-arm compensated north and east velocity and three of the four
 components of the misalignment quaternion Q_br. The component q_br2, which the ship's Y-axis
@@ -157,7 +158,7 @@ from navreplay.units import ARCMIN, DEG, FOOT
 
 
 class Match(enum.StrEnum):
-    """What the filter matches (spec section 5)."""
+    """What the filter matches (docs/methods/transfer-alignment.md §5)."""
 
     VEL_QUAT_PARTIAL = "vel_quat_partial"
     """Velocity + quaternion components {0, 1, 3} (the paper's proposal)."""
@@ -197,7 +198,8 @@ ZQ = slice(2, None)
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class TransferAlignmentParams(FilterParams):
-    """Parameters of the transfer-alignment filter (SI). Tuning defaults: spec sections 4.3-4.5."""
+    """Parameters of the transfer-alignment filter (SI). Tuning defaults:
+    docs/methods/transfer-alignment.md §4.3-4.5."""
 
     match: Match = Match.VEL_QUAT_PARTIAL
     """Matched quantities: vel_quat_partial, vel_quat_full or vel_only."""
@@ -327,8 +329,9 @@ def tmat(q):
 @numba.njit(cache=True)
 def rate_matrix(w_ib, w_in):
     """The 4x4 ``[w_ib^b - w_in^n]`` of eq. (2): ``M([0, w_ib]) - L([0, w_in])``, (4, 4)."""
-    return (kernels.quat_right_matrix(np.array([0.0, w_ib[0], w_ib[1], w_ib[2]]))
-            - kernels.quat_left_matrix(np.array([0.0, w_in[0], w_in[1], w_in[2]])))
+    W = kernels.quat_right_matrix(np.array([0.0, w_ib[0], w_ib[1], w_ib[2]]))
+    W -= kernels.quat_left_matrix(np.array([0.0, w_in[0], w_in[1], w_in[2]]))
+    return W
 
 
 @numba.njit(cache=True)
@@ -493,7 +496,7 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     H : ndarray, shape (2 + len(s), n)
         Measurement matrix (15).
     q_m : ndarray, shape (4,)
-        Q_m with the sign of spec 2.2.
+        Q_m with the sign of docs/methods/transfer-alignment.md §2.2.
     w_now : ndarray, shape (3,)
         Body rate at the GINS time [rad/s].
     w_in : ndarray, shape (3,)
@@ -597,7 +600,7 @@ def feedback(nav, q_rb, dx, P, s, u, q_m, v_r, pos, w_now, w_in, lever_arm_r):
     for i in u:
         q_rb[i] = q_br_new[i]
     _normalise(q_rb)  # (10), E10
-    # the vertical channel and the position are slaved to the GINS (spec 4.1)
+    # the vertical channel and the position are slaved to the GINS (method §4.1)
     nav[5] = v_r[2] + lever_velocity(q, q_m, w_now, w_in, lever_arm_r)[2]
     nav[0:3] = lever_position(pos, q_m, lever_arm_r)
     return attitude_sigma(q, P)

@@ -4,8 +4,8 @@ Estimates the attitude of a vehicle without gyros from an accelerometer, a magne
 velocity sampled together at a few hertz, with a 3-state error-quaternion EKF that matches two
 vectors per epoch: the acceleration-compensated specific force and the geomagnetic field
 (Choe & Park, "Improvement of Attitude Determination Based on Specific Force Vector Matching",
-JKSAS 45(2), 2017; specification ``spec/vector-matching.md``). Equation numbers are the
-paper's; E1-E11 are the errata of the specification, section 7.
+JKSAS 45(2), 2017; the method as navreplay implements it: docs/methods/vector-matching.md).
+Equation numbers are the paper's; E1-E11 are the errata in docs/methods/vector-matching.md §7.
 
 State
 -----
@@ -67,8 +67,8 @@ s_v is the GNSS velocity 1-sigma per NED axis as reported in the stream (``vel_s
 s_h the per-sample white noise of the accelerometer and magnetometer (parameters). Sensor biases
 are not modelled, so R_h is optimistic by design (the paper's).
 
-Update and feedback (4.4 of the specification)
-----------------------------------------------
+Update and feedback (docs/methods/vector-matching.md §4.4)
+----------------------------------------------------------
 ::
 
     S = H P H^T + R;  K = P H^T S^-1 (Cholesky);  dq = K z;  P = (I-KH) P (I-KH)^T + K R K^T
@@ -76,8 +76,8 @@ Update and feedback (4.4 of the specification)
 
 C_nb_hat is the one from before the correction; no iterations (plain EKF).
 
-Initialisation (our choice): TRIAD at the first complete epoch, which must be at rest: primary
-pair (-g_n/|g_n|, f_b/|f_b|), secondary pair (h_n, m_b); P0 = p0_sigma^2 I3.
+Initialisation (navreplay's choice): TRIAD at the first complete epoch, which must be at rest:
+primary pair (-g_n/|g_n|, f_b/|f_b|), secondary pair (h_n, m_b); P0 = p0_sigma^2 I3.
 
 Model-induced error diagnostic, eqs. (23)-(25) with E7 (gravity model only)::
 
@@ -94,8 +94,9 @@ a time, with the shared :func:`navreplay.filters.kalman.correct`. :func:`run_bat
 same epochs for many synchronous runs at once (arrays with a leading run axis) for Monte Carlo
 campaigns; it calls the same model functions (:func:`process_noise`, :func:`gps_acceleration`,
 :func:`measurement`, :func:`triad`, :func:`feedback`) and differs only in doing the Kalman
-correction for a stack of runs (:func:`navreplay.filters.kalman.correct_batch`, the same
-equations as :func:`navreplay.filters.kalman.correct`).
+prediction and correction for a stack of runs (:func:`navreplay.filters.kalman.predict_batch`
+and :func:`navreplay.filters.kalman.correct_batch`, the same equations as
+:func:`navreplay.filters.kalman.predict` and :func:`navreplay.filters.kalman.correct`).
 
 Outputs (:meth:`VectorMatchingFilter.estimate`)
 -----------------------------------------------
@@ -170,7 +171,7 @@ N_MEAS = 6
 STATE_NAMES = ("q_e1", "q_e2", "q_e3")
 
 # --------------------------------------------------------------------------------------------
-# datasheet values of the specification (section 3.1, paper Table 1), converted once
+# datasheet values of the paper's Table 1 (docs/methods/vector-matching.md §3.1), converted once
 
 SENSOR_RATE = 4.0
 """Accelerometer, magnetometer and GNSS rate of the paper's simulation [Hz]."""
@@ -185,7 +186,7 @@ MAG_NOISE_SIGMA = MAG_NOISE_DENSITY * math.sqrt(0.5 * SENSOR_RATE)
 
 
 class MatchModel(enum.StrEnum):
-    """Measurement model of the acceleration vector (specification section 5)."""
+    """Measurement model of the acceleration vector (docs/methods/vector-matching.md §5)."""
 
     GRAVITY = "gravity"
     """Conventional acceleration-compensated gravity matching, H_g = -2[g_n x], eq. (14)."""
@@ -194,7 +195,7 @@ class MatchModel(enum.StrEnum):
 
     @classmethod
     def _missing_(cls, value: object) -> MatchModel | None:
-        # the specification spells it specific_force
+        # also accept specific_force (underscore)
         if isinstance(value, str):
             key = value.strip().lower().replace("_", "-")
             for member in cls:
@@ -210,9 +211,11 @@ class VectorMatchingParams(FilterParams):
     model: MatchModel = MatchModel.SPECIFIC_FORCE
     """Acceleration measurement model: ``gravity`` (conventional) or ``specific-force``."""
     tau: float = 10.0
-    """Correlation time of the attitude-error Gauss-Markov process [s] (our choice)."""
+    """Correlation time of the attitude-error Gauss-Markov process [s] (navreplay's choice; the
+    paper gives none)."""
     q_w: float = 0.01
-    """Power spectral density of the Gauss-Markov driving noise [1/s] (our choice)."""
+    """Power spectral density of the Gauss-Markov driving noise [1/s] (navreplay's choice; the
+    paper gives none)."""
     accel_noise_sigma: float = ACCEL_NOISE_SIGMA
     """Accelerometer white noise, 1-sigma per sample and axis [m/s^2] (s_f of eq. 15)."""
     mag_noise_sigma: float = MAG_NOISE_SIGMA
@@ -799,8 +802,7 @@ def run_batch(
     for k in range(1, K):
         dt = t[k] - t[k - 1]
         phi, qd = process_noise(dt, params.tau, params.q_w)  # (16)-(18)
-        P = (float(phi) * eye) @ P @ (float(phi) * eye).T + float(qd) * eye
-        P = 0.5 * (P + np.swapaxes(P, -1, -2))
+        _, P = kalman.predict_batch(x0, P, float(phi) * eye, float(qd) * eye, t=float(t[k]))
         a_n = gps_acceleration(v_n[:, k], v_n[:, k - 1], dt)  # (13)
         z, H = measurement(params.model, quat_to_dcm(q), f_b[:, k], m_b[:, k], a_n,
                            ref.g_n, ref.h_n)

@@ -16,15 +16,20 @@ Two kinds of kernels:
   :func:`quat_left_matrix` and :func:`quat_right_matrix` (4, 4), :func:`euler_to_quat` (4,),
   :func:`quat_to_euler` (3,).
 
-They are also callable from Python (numba dispatchers); tests/test_geo.py checks each against
-its numpy counterpart. Differences from the numpy functions, all deliberate:
+They are also callable from Python (numba dispatchers); tests/test_geo.py checks each
+against its numpy counterpart. Differences from the numpy functions, all deliberate:
 :func:`euler_to_quat` does not flip the sign to ``q0 >= 0``, :func:`quat_to_euler` takes the
 pitch from ``asin`` (valid away from gimbal lock), and :func:`rotvec_to_quat` has no series
 branch (``sin(a/2)/a`` has no cancellation down to 0).
 
-Caching
--------
-The kernels are compiled with ``cache=True``. numba keys a cached function on its own source
+Compilation
+-----------
+The kernels are compiled with ``error_model="numpy"``: a division by zero gives inf or nan as
+in numpy instead of raising ``ZeroDivisionError``, which also keeps the checks out of the
+inner loops and lets LLVM inline the kernels into their callers. Callers check their results
+for finiteness.
+
+They are compiled with ``cache=True``. numba keys a cached function on its own source
 file only: a cached function in another module that calls one of these kernels is *not*
 recompiled when this file changes and keeps the old machine code. After editing this module,
 delete the numba cache files of the package (``__pycache__/*.nbi``, ``*.nbc``) or point
@@ -198,13 +203,8 @@ def rotate(q0, q1, q2, q3, x, y, z):
 
 @numba.njit(cache=True, error_model="numpy")
 def rotate_inverse(q0, q1, q2, q3, x, y, z):
-    """``C(q)^T v`` for v = (x, y, z)."""
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _dcm(q0, q1, q2, q3)
-    return (
-        c00 * x + c10 * y + c20 * z,
-        c01 * x + c11 * y + c21 * z,
-        c02 * x + c12 * y + c22 * z,
-    )
+    """``C(q)^T v = C(q*) v`` for v = (x, y, z)."""
+    return rotate(q0, -q1, -q2, -q3, x, y, z)
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -2,9 +2,14 @@
 
 Each module defines one :class:`Reproduction` as ``REPRODUCTION``; ``navreplay reproduce NAME``
 runs it. A reproduction implements :meth:`Reproduction.campaign` (simulate, replay, evaluate
-the spec's acceptance bands, tabulate) and :meth:`Reproduction.log_view` (its figures as
-Rerun ensemble plots); :meth:`Reproduction.run` adds the common parts: the number of runs and
-the optional .rrd file.
+the acceptance bands of its method document, tabulate) and :meth:`Reproduction.log_view` (its
+figures as Rerun ensemble plots); :meth:`Reproduction.run` adds the common parts: the number
+of runs and the optional .rrd file.
+
+Each method is described in ``docs/methods/<name>.md`` (:attr:`Reproduction.method_doc`): the
+paper's equations in navreplay's frames, the scenario, navreplay's choices, the errata of the
+printed paper (E1, E2, ... in its section 7) and, in its section 6, the published results, the
+reference values and the acceptance bands that the campaign checks.
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ _MODULES = {
 
 @dataclasses.dataclass(frozen=True)
 class Check:
-    """One acceptance band of a spec: the measured value and whether it lies in the band."""
+    """One acceptance band of a method: the measured value and whether it lies in the band."""
 
     name: str
     value: float
@@ -54,13 +59,16 @@ class Report:
     table: str
     checks: list[Check]
     figures: dict[str, Any] = dataclasses.field(default_factory=dict)
+    bands: str = ""
+    """Where the bands are defined, e.g. ``docs/methods/rpm-aided-ins.md §6`` (for the heading)."""
 
     @property
     def passed(self) -> bool:
         return all(c.passed for c in self.checks)
 
     def format(self) -> str:
-        lines = [self.title, "", self.table, "", "Acceptance (spec section 6):"]
+        heading = f"Acceptance bands ({self.bands}):" if self.bands else "Acceptance bands:"
+        lines = [self.title, "", self.table, "", heading]
         for c in self.checks:
             mark = "pass" if c.passed else "FAIL"
             lines.append(f"  [{mark}] {c.name}: {c.value:.4g}  (band {c.band})")
@@ -68,10 +76,13 @@ class Report:
 
 
 class Reproduction(abc.ABC):
-    """A paper's Monte Carlo campaign with its acceptance bands (spec section 6)."""
+    """A paper's Monte Carlo campaign with its acceptance bands (section 6 of
+    :attr:`method_doc`)."""
 
     name: ClassVar[str]
     summary: ClassVar[str]
+    method_doc: ClassVar[str]
+    """The method document in the repository, e.g. ``docs/methods/rpm-aided-ins.md``."""
     default_runs: ClassVar[int]
     """Runs of the full campaign (the paper's Monte Carlo size)."""
     quick_runs: ClassVar[int]

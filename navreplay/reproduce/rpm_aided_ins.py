@@ -1,10 +1,11 @@
 """Reproduction of the RPM velocity-aided underwater INS with sea-current estimation.
 
-Spec ``rpm-aided-ins.md``, section 6 (Choi, JANT 23(3), 2019; Table 3, Figs. 3-5). The campaign
-simulates ``runs`` recordings of the ``underwater-rpm`` scenario (run i with seed ``seed + i``,
-the convention of :func:`navreplay.replay.ensemble.monte_carlo_tasks`, so
-``navreplay simulate underwater-rpm --seed S+i`` reproduces any single run) and replays the
-``rpm-aided-ins`` filter over each in its three modes:
+The published results and acceptance bands of docs/methods/rpm-aided-ins.md §6 (Choi, JANT
+23(3), 2019; Table 3, Figs. 3-5). The campaign simulates ``runs`` recordings of the
+``underwater-rpm`` scenario (run i with seed ``seed + i``, the convention of
+:func:`navreplay.replay.ensemble.monte_carlo_tasks`, so ``navreplay simulate underwater-rpm
+--seed S+i`` reproduces any single run) and replays the ``rpm-aided-ins`` filter over each in
+its three modes:
 
 ==============  ======================  ==============================================
 label           filter ``mode``         paper
@@ -73,7 +74,8 @@ PREDICTION = {
     "rpm": "83 / 85 m, 1.44 %",
     "rpm-current": "44-48 / 43-48 m, 0.75-0.78 %",
 }
-"""The spec's indicative linear error-state Monte Carlo (LatRMS / LongRMS, DT CEP50)."""
+"""Reference prediction: a linear error-state Monte Carlo of the same scenario, by an independent
+reference implementation (LatRMS / LongRMS, DT CEP50; docs/methods/rpm-aided-ins.md §6)."""
 PREDICTION_PER_AXIS = "1143 / 1135 m, 19.6 %"
 """The same for pure navigation with ``level_mil_per_axis``."""
 T_CURRENT = 90.0
@@ -220,7 +222,7 @@ def nees_inside(r: EnsembleResult, t_from: float = T_NEES) -> tuple[float, float
 
 
 def acceptance(stats: Mapping[str, EnsembleResult], per_axis: bool = False) -> list[Check]:
-    """Every acceptance band of spec section 6 as checks.
+    """Every acceptance band of docs/methods/rpm-aided-ins.md §6 as checks.
 
     Parameters
     ----------
@@ -261,10 +263,11 @@ def acceptance(stats: Mapping[str, EnsembleResult], per_axis: bool = False) -> l
 
 
 def format_table(stats: Mapping[str, EnsembleResult], runs: int, per_axis: bool = False) -> str:
-    """Table 3 (DT CEP50, paper vs navreplay) with LatRMS / LongRMS and the spec's prediction."""
+    """Table 3 (DT CEP50, paper vs navreplay) with LatRMS / LongRMS and the reference
+    prediction (:data:`PREDICTION`)."""
     t3 = table3(stats)
     head = (f"{'mode':<26}{'paper':>9}{'navreplay':>11}{'LatRMS':>9}{'LongRMS':>9}"
-            f"{'CEP50':>8}   spec prediction (Lat / Long RMS, DT CEP50)")
+            f"{'CEP50':>8}   reference prediction (Lat / Long RMS, DT CEP50)")
     lines = [
         f"Table 3: DT CEP50 (1 sigma) at t = {stats['pure'].t[-1]:.0f} s; paper 100 runs, "
         f"navreplay {runs}",
@@ -289,8 +292,8 @@ def format_table(stats: Mapping[str, EnsembleResult], runs: int, per_axis: bool 
     k = [_state(r, n) for n in ("k_rpm", "m_y", "m_z")]
     lines.append(
         f"rpm-current at {r.t[-1]:.0f} s: current error RMS N / E {c[-1, 0]:.3f} / "
-        f"{c[-1, 1]:.3f} m/s (spec about 0.09); RPM scale-factor residual RMS "
-        f"{100 * r.state_rms[-1, k[0]]:.3f} % (spec about 0.05 %); misalignment residual RMS "
+        f"{c[-1, 1]:.3f} m/s (reference about 0.09); RPM scale-factor residual RMS "
+        f"{100 * r.state_rms[-1, k[0]]:.3f} % (reference about 0.05 %); misalignment residual RMS "
         f"y / z {np.degrees(r.state_rms[-1, k[1]]):.4f} / {np.degrees(r.state_rms[-1, k[2]]):.4f}"
         " deg"
     )
@@ -326,14 +329,15 @@ def figures(stats: Mapping[str, EnsembleResult], current: tuple | None) -> dict[
 
 
 class RpmAidedInsReproduction(Reproduction):
-    """``navreplay reproduce rpm-aided-ins``: the campaign of spec section 6.
+    """``navreplay reproduce rpm-aided-ins``: the campaign of docs/methods/rpm-aided-ins.md §6.
 
     ``runs`` counts recordings (each replayed in the three modes), and so does ``progress``.
     The option ``values`` holds scenario parameter overrides (e.g.
-    ``{"level_mil_per_axis": True}``, which also selects the spec's other pure-navigation band).
+    ``{"level_mil_per_axis": True}``, which also selects the other pure-navigation band).
     """
 
     name = "rpm-aided-ins"
+    method_doc = "docs/methods/rpm-aided-ins.md"
     summary = ("Underwater INS aided by propeller RPM with sea-current estimation "
                "(Choi 2019; Table 3, Figs. 3-5)")
     default_runs = 100
@@ -358,11 +362,12 @@ class RpmAidedInsReproduction(Reproduction):
         figs["timing"] = {"wall_s": wall, "worker_s": worker_s, "recordings": runs,
                           "filter_runs": 3 * runs}
         return Report(
-            title=(f"RPM velocity-aided underwater INS with sea-current estimation (seed 003): "
+            title=(f"RPM velocity-aided underwater INS with sea-current estimation (Choi 2019): "
                    f"{runs} runs, seed {seed}"),
             table=table,
             checks=acceptance(stats, p.level_mil_per_axis),
             figures=figs,
+            bands=f"{self.method_doc} §6",
         )
 
     @staticmethod

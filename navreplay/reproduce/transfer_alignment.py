@@ -1,8 +1,8 @@
 """Reproduction of shipboard transfer alignment by velocity + quaternion partial matching.
 
-Spec ``transfer-alignment.md``, section 6 (Song, Jeon and Lyou; Figs. 2 and 3). The campaign
-replays the ``transfer-alignment`` filter over ``runs`` seeded recordings of the
-``ship-transfer-alignment`` scenario in three conditions:
+The published results and acceptance bands of docs/methods/transfer-alignment.md §6 (Song,
+Jeon and Lyou; Figs. 2 and 3). The campaign replays the ``transfer-alignment`` filter over
+``runs`` seeded recordings of the ``ship-transfer-alignment`` scenario in three conditions:
 
 ============  ==============================  =========================================
 condition     scenario parameters             filter variants (``match``)
@@ -84,9 +84,10 @@ PAPER = {
     (FULL, "flexure", 100.0): "D markedly worse",
     (VEL_ONLY, "flexure", 100.0): "D unobservable",
 }
-"""The paper's statements (Figs. 2 and 3 are missing from the seed; spec section 6) [mrad]."""
+"""The paper's statements about its Figs. 2 and 3 (docs/methods/transfer-alignment.md §6)
+[mrad]."""
 
-PROTOTYPE = {
+REFERENCE = {
     (PARTIAL, "flexure", 30.0): "0.46 / 0.42 / 3.4 (max D 12)",
     (PARTIAL, "flexure", 100.0): "0.43 / 0.41 / 2.36 (max 1.0 / 1.0 / 5.5)",
     (FULL, "flexure", 30.0): "0.84 / 1.43 / 22.6",
@@ -96,9 +97,10 @@ PROTOTYPE = {
     (PARTIAL, "wn 1 rad/s", 100.0): "0.46 / 0.46 / 2.5 (12 runs)",
     (FULL, "wn 1 rad/s", 100.0): "2.1 / 3.2 / 28.9 (12 runs)",
 }
-"""The spec author's independent prototype (36 runs, 50 Hz IMU unless noted) [mrad]."""
-PROTOTYPE_SIGMA = "0.08 / 0.11 / 0.47"
-"""Prototype's predicted 1 sigma of phi at 100 s, partial matching [mrad]."""
+"""An independent reference implementation (36 runs, 50 Hz IMU unless noted) [mrad]
+(docs/methods/transfer-alignment.md §6)."""
+REFERENCE_SIGMA = "0.08 / 0.11 / 0.47"
+"""The reference's predicted 1 sigma of phi at 100 s, partial matching [mrad]."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -247,11 +249,12 @@ def run_campaign(
 
 
 # --------------------------------------------------------------------------------------------
-# acceptance (spec section 6)
+# acceptance (docs/methods/transfer-alignment.md §6)
 
 
 def acceptance(stats: Mapping[tuple[str, str], VariantStats]) -> list[Check]:
-    """Every acceptance band of spec section 6 at t = 100 s, as checks (values in mrad)."""
+    """Every acceptance band of docs/methods/transfer-alignment.md §6 at t = 100 s, as checks
+    (values in mrad)."""
     t = T_EVAL[-1]
     part = stats[(PARTIAL, "flexure")]
     full = stats[(FULL, "flexure")]
@@ -286,9 +289,10 @@ def acceptance(stats: Mapping[tuple[str, str], VariantStats]) -> list[Check]:
 
 
 def format_table(stats: Mapping[tuple[str, str], VariantStats], runs: int) -> str:
-    """The spec section 6 table: paper and prototype next to navreplay [mrad]."""
+    """The table of docs/methods/transfer-alignment.md §6: paper and reference next to
+    navreplay [mrad]."""
     head = (f"{'variant':<17}{'condition':<12}{'t':>6}  {'paper':<17}"
-            f"{'prototype (36 runs, 50 Hz)':<42}navreplay ({runs} runs, 100 Hz)")
+            f"{'reference (36 runs, 50 Hz)':<42}navreplay ({runs} runs, 100 Hz)")
     lines = [
         "RMS over runs of phi_N / phi_E / phi_D [mrad] (max |phi| over runs in brackets)",
         head,
@@ -302,14 +306,15 @@ def format_table(stats: Mapping[tuple[str, str], VariantStats], runs: int) -> st
             for t in T_EVAL:
                 ours = f"{slashed(st.rms_at(t) / MRAD)} (max {slashed(st.max_at(t) / MRAD)})"
                 paper = PAPER.get((variant, cond.name, t), "")
-                proto = PROTOTYPE.get((variant, cond.name, t), "")
-                lines.append(f"{variant:<17}{cond.name:<12}{t:>5.0f}s  {paper:<17}{proto:<42}"
+                ref = REFERENCE.get((variant, cond.name, t), "")
+                lines.append(f"{variant:<17}{cond.name:<12}{t:>5.0f}s  {paper:<17}{ref:<42}"
                              f"{ours}")
     part = stats[(PARTIAL, "flexure")]
     lines += [
         "",
-        "Predicted 1 sigma of phi at 100 s, partial, flexure (not a consistency gate, spec 6):",
-        f"  prototype {PROTOTYPE_SIGMA}; navreplay "
+        "Predicted 1 sigma of phi at 100 s, partial, flexure (optimistic by design, not a "
+        "consistency gate):",
+        f"  reference {REFERENCE_SIGMA}; navreplay "
         f"{slashed(part.sigma_rms[part.index(T_EVAL[-1])] / MRAD)} mrad",
     ]
     return "\n".join(lines)
@@ -356,12 +361,14 @@ def figures(stats: Mapping[tuple[str, str], VariantStats]) -> dict[str, Any]:
 
 
 class TransferAlignmentReproduction(Reproduction):
-    """``navreplay reproduce transfer-alignment``: the campaign of spec section 6.
+    """``navreplay reproduce transfer-alignment``: the campaign of
+    docs/methods/transfer-alignment.md §6.
 
     ``runs`` counts runs per condition; ``progress`` counts recordings.
     """
 
     name = "transfer-alignment"
+    method_doc = "docs/methods/transfer-alignment.md"
     summary = ("Shipboard transfer alignment, velocity + quaternion partial matching "
                "(Song, Jeon & Lyou; Figs. 2-3)")
     default_runs = 36
@@ -385,11 +392,12 @@ class TransferAlignmentReproduction(Reproduction):
         figs["timing"] = {"wall_s": wall, "recordings": runs * len(CONDITIONS),
                           "filter_runs": n_filter}
         return Report(
-            title=(f"Transfer alignment, velocity + quaternion partial matching (seed 000): "
-                   f"{runs} runs per condition, seed {seed}"),
+            title=(f"Transfer alignment, velocity + quaternion partial matching (Song, Jeon & "
+                   f"Lyou): {runs} runs per condition, seed {seed}"),
             table=table,
             checks=acceptance(stats),
             figures=figs,
+            bands=f"{self.method_doc} §6",
         )
 
     @staticmethod

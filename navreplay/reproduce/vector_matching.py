@@ -1,13 +1,13 @@
 """Reproduction of gyro-free attitude by specific-force vs gravity vector matching.
 
-Spec ``vector-matching.md``, section 6 (Choe & Park, JKSAS 45(2), 2017, Figs. 1-5). The
-campaign:
+The published results and acceptance bands of docs/methods/vector-matching.md §6 (Choe &
+Park, JKSAS 45(2), 2017, Figs. 1-5). The campaign:
 
 - sweeps (``gimpo-accel-sweep``): axes N, E, D x 31 accelerations -1.5 g .. +1.5 g x ``runs``
   runs (100 in the paper: 9300 runs), metric the RMS over runs of the roll, pitch and yaw
   errors at t = 10 s (the last sample);
-- yaw cases (``gimpo-accel-yaw``): cases x and y x ``10 runs`` runs (1000 in the spec), metric
-  the RMS over runs versus time;
+- yaw cases (``gimpo-accel-yaw``): cases x and y x ``10 runs`` runs (1000 in the full
+  campaign), metric the RMS over runs versus time;
 
 each replayed with both filter models (``gravity`` and ``specific-force``) on the same
 recordings. Attitude errors are ZYX Euler-angle differences, estimate minus truth, with roll
@@ -70,12 +70,12 @@ ACCEL_G: tuple[float, ...] = tuple(round(k / 10.0, 1) for k in range(-15, 16))
 MODELS: tuple[MatchModel, ...] = (MatchModel.GRAVITY, MatchModel.SPECIFIC_FORCE)
 CASES: tuple[BodyAxis, ...] = (BodyAxis.X, BodyAxis.Y)
 YAW_RUNS_PER_SWEEP_RUN = 10
-"""Yaw-case runs per sweep-point run (1000 vs 100 in the spec)."""
+"""Yaw-case runs per sweep-point run (1000 vs 100 in the full campaign)."""
 ANGLES = ("roll", "pitch", "yaw")
 
-# The spec author's prototype (30 runs per point), roll / pitch / yaw RMS [deg] at t = 10 s,
-# (gravity, specific-force); section 6 of the specification.
-PROTOTYPE_SWEEP: dict[tuple[str, float], tuple[tuple[float, ...], tuple[float, ...]]] = {
+# An independent reference implementation (30 runs per point), roll / pitch / yaw RMS [deg] at
+# t = 10 s, (gravity, specific-force); docs/methods/vector-matching.md §6.
+REFERENCE_SWEEP: dict[tuple[str, float], tuple[tuple[float, ...], tuple[float, ...]]] = {
     ("0", 0.0): ((1.24, 0.40, 1.73), (1.19, 0.40, 1.68)),
     ("N", -1.0): ((36.7, 47.6, 90.7), (2.3, 0.44, 3.1)),
     ("N", -0.8): ((18.3, 9.2, 28.8), (3.0, 0.44, 4.1)),
@@ -87,12 +87,12 @@ PROTOTYPE_SWEEP: dict[tuple[str, float], tuple[tuple[float, ...], tuple[float, .
     ("D", 1.5): ((30.2, 63.2, 146.0), (1.8, 0.46, 2.6)),
     ("D", -1.5): ((7.5, 1.5, 10.6), (0.6, 0.36, 0.9)),
 }
-PROTOTYPE_E_SWEEP = ("1.1-1.4 / 0.4 / 1.7-1.9", "0.6-1.3 / 0.3-0.4 / 0.8-1.8")
-PROTOTYPE_YAW_PEAK: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
+REFERENCE_E_SWEEP = ("1.1-1.4 / 0.4 / 1.7-1.9", "0.6-1.3 / 0.3-0.4 / 0.8-1.8")
+REFERENCE_YAW_PEAK: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
     "x": ((4.1, 1.8, 6.0), (1.8, 1.5, 2.9)),
     "y": ((1.8, 4.9, 7.1), (1.6, 2.4, 3.7)),
 }
-PROTOTYPE_YAW_END = (1.3, 0.4, 1.9)
+REFERENCE_YAW_END = (1.3, 0.4, 1.9)
 PAPER_CLAIMS = (
     "1. conventional errors larger for N- and D-axis acceleration than for E",
     "2. N axis: conventional error grows sharply beyond +-0.8 g (f near the field direction)",
@@ -204,12 +204,13 @@ def run_yaw_case(case: str, runs: int, seed: int) -> YawCaseResult:
 
 
 # --------------------------------------------------------------------------------------------
-# acceptance (spec section 6)
+# acceptance (docs/methods/vector-matching.md §6)
 
 
 def acceptance(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray],
                yaw_t: np.ndarray) -> list[Check]:
-    """Every acceptance band of spec section 6 (plus paper claim 1) as checks.
+    """Every acceptance band of docs/methods/vector-matching.md §6 (plus paper claim 1) as
+    checks.
 
     Parameters
     ----------
@@ -286,7 +287,7 @@ def acceptance(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray],
             Check(f"yaw case {case}: max over models of RMS yaw at 30 s [deg]",
                    float(np.max(r[:, k30, 2])), "<= 3", float(np.max(r[:, k30, 2])) <= 3.0),
         ]
-    # paper claim 1 (not a band of the spec; robust by a wide margin)
+    # paper claim 1 (not one of the method's bands; robust by a wide margin)
     e_max = float(np.max(sweep["E"][:, g]))
     v = min(float(np.max(sweep["N"][:, g])), float(np.max(sweep["D"][:, g]))) / e_max
     checks.append(Check("claim 1, gravity: min(N, D) / E of the max RMS over the sweep", v,
@@ -309,40 +310,41 @@ def _range(v: np.ndarray) -> str:
 
 def format_table(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray], yaw_t: np.ndarray,
                  runs: int, yaw_runs: int) -> str:
-    """The spec section 6 table: prototype (30 runs) next to navreplay."""
+    """The table of docs/methods/vector-matching.md §6: reference (30 runs) next to
+    navreplay."""
     w = 32
-    head = (f"{'axis, a':<12}| {'gravity: prototype':<{w}}{'navreplay':<{w}}"
-            f"| {'specific-force: prototype':<{w}}{'navreplay':<{w}}")
+    head = (f"{'axis, a':<12}| {'gravity: reference':<{w}}{'navreplay':<{w}}"
+            f"| {'specific-force: reference':<{w}}{'navreplay':<{w}}")
     lines = [
-        f"Sweeps: RMS roll / pitch / yaw [deg] at t = 10 s; prototype 30 runs per point, "
+        f"Sweeps: RMS roll / pitch / yaw [deg] at t = 10 s; reference 30 runs per point, "
         f"navreplay {runs}",
         head,
         "-" * len(head),
     ]
-    for (axis, a), (proto_g, proto_s) in PROTOTYPE_SWEEP.items():
+    for (axis, a), (ref_g, ref_s) in REFERENCE_SWEEP.items():
         ours = sweep["N" if axis == "0" else axis][ACCEL_G.index(a)]
         label = "any, 0 g" if axis == "0" else f"{axis} {a:+.1f} g"
-        lines.append(f"{label:<12}| {slashed(proto_g):<{w}}{slashed(ours[0]):<{w}}"
-                     f"| {slashed(proto_s):<{w}}{slashed(ours[1]):<{w}}")
-    lines.append(f"{'E, sweep':<12}| {PROTOTYPE_E_SWEEP[0]:<{w}}{_range(sweep['E'][:, 0]):<{w}}"
-                 f"| {PROTOTYPE_E_SWEEP[1]:<{w}}{_range(sweep['E'][:, 1]):<{w}}")
+        lines.append(f"{label:<12}| {slashed(ref_g):<{w}}{slashed(ours[0]):<{w}}"
+                     f"| {slashed(ref_s):<{w}}{slashed(ours[1]):<{w}}")
+    lines.append(f"{'E, sweep':<12}| {REFERENCE_E_SWEEP[0]:<{w}}{_range(sweep['E'][:, 0]):<{w}}"
+                 f"| {REFERENCE_E_SWEEP[1]:<{w}}{_range(sweep['E'][:, 1]):<{w}}")
     k30 = int(np.argmin(np.abs(yaw_t - 30.0)))
     lines += [
         "",
-        f"Yaw cases: peak over time of the RMS roll / pitch / yaw [deg]; prototype 30 runs, "
+        f"Yaw cases: peak over time of the RMS roll / pitch / yaw [deg]; reference 30 runs, "
         f"navreplay {yaw_runs}",
-        f"{'case':<12}| {'gravity: prototype':<{w}}{'navreplay':<{w}}"
-        f"| {'specific-force: prototype':<{w}}{'navreplay':<{w}}",
+        f"{'case':<12}| {'gravity: reference':<{w}}{'navreplay':<{w}}"
+        f"| {'specific-force: reference':<{w}}{'navreplay':<{w}}",
     ]
     for case, r in yaw.items():
-        proto_g, proto_s = PROTOTYPE_YAW_PEAK[case]
-        lines.append(f"{case:<12}| {slashed(proto_g):<{w}}{slashed(r[0].max(axis=0)):<{w}}"
-                     f"| {slashed(proto_s):<{w}}{slashed(r[1].max(axis=0)):<{w}}")
+        ref_g, ref_s = REFERENCE_YAW_PEAK[case]
+        lines.append(f"{case:<12}| {slashed(ref_g):<{w}}{slashed(r[0].max(axis=0)):<{w}}"
+                     f"| {slashed(ref_s):<{w}}{slashed(r[1].max(axis=0)):<{w}}")
     for case, r in yaw.items():
-        lines.append(f"{case + ' at 30 s':<12}| {slashed(PROTOTYPE_YAW_END):<{w}}"
-                     f"{slashed(r[0, k30]):<{w}}| {slashed(PROTOTYPE_YAW_END):<{w}}"
+        lines.append(f"{case + ' at 30 s':<12}| {slashed(REFERENCE_YAW_END):<{w}}"
+                     f"{slashed(r[0, k30]):<{w}}| {slashed(REFERENCE_YAW_END):<{w}}"
                      f"{slashed(r[1, k30]):<{w}}")
-    lines += ["", "Paper claims (the figures are not in the seed; checked by the bands below):"]
+    lines += ["", "Paper claims (checked by the bands below):"]
     lines += [f"  {c}" for c in PAPER_CLAIMS]
     return "\n".join(lines)
 
@@ -352,7 +354,8 @@ def format_table(sweep: dict[str, np.ndarray], yaw: dict[str, np.ndarray], yaw_t
 
 
 class VectorMatchingReproduction(Reproduction):
-    """``navreplay reproduce vector-matching``: the campaign of spec section 6.
+    """``navreplay reproduce vector-matching``: the campaign of docs/methods/vector-matching.md
+    §6.
 
     ``runs`` counts runs per sweep point; the yaw cases get ``10 runs`` each. ``progress``
     counts runs (one run = one recording, both models); the five tasks (three sweep axes, two
@@ -360,6 +363,7 @@ class VectorMatchingReproduction(Reproduction):
     """
 
     name = "vector-matching"
+    method_doc = "docs/methods/vector-matching.md"
     summary = ("Gyro-free attitude: specific-force vs gravity vector matching "
                "(Choe & Park 2017, Figs. 1-5)")
     default_runs = 100
@@ -423,11 +427,12 @@ class VectorMatchingReproduction(Reproduction):
             "site_gravity": float(gravity(site.lat, site.height)),
         }
         return Report(
-            title=(f"Gyro-free attitude by vector matching (seed 001): {runs} runs per sweep "
-                   f"point, {yaw_runs} per yaw case, seed {seed}"),
+            title=(f"Gyro-free attitude by vector matching (Choe & Park 2017): {runs} runs per "
+                   f"sweep point, {yaw_runs} per yaw case, seed {seed}"),
             table=table,
             checks=checks,
             figures=figures,
+            bands=f"{self.method_doc} §6",
         )
 
     @staticmethod

@@ -1,13 +1,14 @@
 """Master (gimballed) INS output model: Euler attitude, NED velocity and position.
 
-Attitude (transfer-alignment spec, section 3.2, step 4). The stabilised platform p is tilted
+Attitude (docs/methods/transfer-alignment.md §3.2, step 4). The stabilised platform p is tilted
 from the navigation frame by the small random-constant angles eps = [eps_N, eps_E, eps_D]:
 
     C_np = exp(-[eps x])            (exact rotation, not the small-angle I - [eps x])
     C_pr = C_np C_nr                (indicated attitude of the master's body frame r)
     euler_meas = euler(C_pr) + synchro_bias + synchro_noise   (per roll, pitch, yaw)
 
-To first order this is the paper's eqs. (20)-(22) with psi_tilde = psi - eps_D (erratum E14):
+To first order this is the paper's eqs. (20)-(22) with psi_tilde = psi - eps_D (erratum E14 in
+docs/methods/transfer-alignment.md):
 roll gains -(eps_N cos psi + eps_E sin psi) / cos theta, pitch gains
 eps_N sin psi - eps_E cos psi, and yaw gains -eps_D - tan theta (eps_N cos psi + eps_E sin psi).
 

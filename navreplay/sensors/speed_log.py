@@ -1,4 +1,6 @@
-"""Propeller-RPM speed log and the sea-current kinematics it needs (RPM-aided INS spec, section 3).
+"""Propeller-RPM speed log and the sea-current kinematics it needs.
+
+The sensor of docs/methods/rpm-aided-ins.md §3.
 
 The RPM axis v is the body x axis rotated by the small misalignment m = [0, m_y, m_z]:
 ``C_bv = exp([m x])``. The vehicle moves through the water along that axis with the

@@ -6,15 +6,15 @@ derives the ideal IMU with :func:`imu_from_truth`. Both are the exact counterpar
 :mod:`navreplay.strapdown`: integrating the ideal IMU reproduces the truth to rounding error,
 so any difference a filter sees comes from the sensor models.
 
-:func:`imu_from_truth` refines the increment formula of the transfer-alignment spec
-(section 3.2.3)::
+:func:`imu_from_truth` refines the increment formula of docs/methods/transfer-alignment.md
+§3.2, step 3::
 
     dtheta = log(C_nb(k-1)^T C_nb(k)) + C_bn(mid) w_in^n dt
     dv     = C_bn(mid) [v(k) - v(k-1) - (g^n - (2 w_ie^n + w_en^n) x v) dt]
 
 into the exact inverse of the mechanization (strapdown eqs. (1)-(6)): the n-frame rotation is
 taken out as a quaternion, ``q{alpha} = q_{k-1}^* (x) q{zeta} (x) q_k``, and the coning,
-rotation and sculling terms are inverted sample by sample. Both agree with the spec formula to
+rotation and sculling terms are inverted sample by sample. Both agree with that formula to
 second order in dt; the refinement makes the round trip exact.
 
 For the round trip to be exact, ``pos`` must come from :func:`integrate_position` at the same

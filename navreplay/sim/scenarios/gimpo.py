@@ -1,8 +1,8 @@
 """Gyro-free attitude scenarios near runway 32R of Gimpo airport (RKSS).
 
-Scenarios of the vector-matching specification, section 3 (Choe & Park, "Improvement of
-Attitude Determination Based on Specific Force Vector Matching", JKSAS 45(2), 2017, section
-III): an accelerometer, a magnetometer and a GPS receiver, all at 4 Hz and synchronous.
+The scenarios of docs/methods/vector-matching.md §3 (Choe & Park, "Improvement of Attitude
+Determination Based on Specific Force Vector Matching", JKSAS 45(2), 2017, section III): an
+accelerometer, a magnetometer and a GPS receiver, all at 4 Hz and synchronous.
 
 ``gimpo-accel-sweep`` (Figs. 1-3)
     At rest for 0 <= t <= rest, then a constant navigation-frame acceleration ``accel_g`` along
@@ -27,20 +27,21 @@ Truth
 
     with normal gravity at the current position. The Coriolis and transport terms (below
     1 mg here) and the gravity change with height are ignored by the filter, as in the paper.
-    All sensors sample the instantaneous truth at t_k = k / rate (spec, "sample meaning"), so
+    All sensors sample the instantaneous truth at t_k = k / rate (§3.1, "sample meaning"), so
     f_b is evaluated analytically at the sample times rather than as interval means.
 
-Sensors (spec section 3.1, paper Table 1; 1-sigma Gaussian draws per run)
+Sensors (§3.1, paper Table 1; 1-sigma Gaussian draws per run)
     Accelerometer: :class:`navreplay.sensors.imu.ImuModel` (scale factor and initial bias as
     random constants per axis, Gauss-Markov bias instability, white noise). The model's noise is
-    specified as a density N of interval means (per-sample sigma N / sqrt(dt)); the spec's
-    instantaneous samples with Nyquist bandwidth have sigma ``N_spec sqrt(rate / 2)``, so the
-    model gets the equivalent density ``N_spec / sqrt(2)`` (:meth:`GimpoParams.imu_model`).
+    specified as a density N of interval means (per-sample sigma N / sqrt(dt)); the method's
+    instantaneous samples with Nyquist bandwidth have sigma ``N_table sqrt(rate / 2)``, so the
+    model gets the equivalent density ``N_table / sqrt(2)`` (:meth:`GimpoParams.imu_model`).
     Only the accelerometer is written (the IMU stream has no ``omega_ib_b`` column).
     Magnetometer: :class:`navreplay.sensors.magnetometer.MagnetometerModel` (scale factor, hard
     iron bias, white noise of sigma ``N sqrt(rate / 2)``) on the earth field of the World
     Magnetic Model at the site and date (:func:`navreplay.sensors.magnetometer.earth_field_n`;
-    WMM2015 at 2017.0 by default, within 50 nT of the spec's IGRF 2017.0 cross-check value).
+    WMM2015 at 2017.0 by default, within 50 nT of the IGRF 2017.0 value of §3.1,
+    :data:`IGRF_FIELD_N`).
     The field is a constant vector over the few hundred metres travelled.
     GPS velocity: :class:`navreplay.sensors.gps.GpsModel`, white noise per NED axis, no latency.
 
@@ -94,8 +95,9 @@ from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.units import DEG, G0, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 
 SITE_NAME = "Gimpo airport (RKSS), near runway 32R"
-SPEC_FIELD_N = (29467e-9, -4330e-9, 41593e-9)
-"""The specification's hand value of the field (IGRF 2017.0) [T]: a cross-check only."""
+IGRF_FIELD_N = (29467e-9, -4330e-9, 41593e-9)
+"""The field at the site from IGRF 2017.0 (docs/methods/vector-matching.md §3.1) [T]: a
+cross-check only."""
 YAW_WINDOW = 5.0
 """Length of each yaw window of the yaw scenario [s]."""
 YAW_RATE = (math.pi / 2) / YAW_WINDOW
@@ -139,7 +141,8 @@ class BodyAxis(enum.StrEnum):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GimpoParams:
-    """Site, timing and sensor errors shared by the Gimpo scenarios (SI; spec defaults)."""
+    """Site, timing and sensor errors shared by the Gimpo scenarios (SI; defaults of
+    docs/methods/vector-matching.md §3.1)."""
 
     rate: float = 4.0
     """Rate of the accelerometer, magnetometer and GPS [Hz] (synchronous)."""
@@ -236,12 +239,13 @@ def _check_accel_g(p: GimpoAccelSweepParams | GimpoAccelYawParams) -> None:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GimpoAccelSweepParams(GimpoParams):
-    """Parameters of ``gimpo-accel-sweep`` (SI; spec section 3.2)."""
+    """Parameters of ``gimpo-accel-sweep`` (SI; docs/methods/vector-matching.md §3.2)."""
 
     axis: Axis = Axis.N
     """Navigation axis of the acceleration: N, E or D."""
     accel_g: float = 0.5
-    """Acceleration along the axis, in units of 1 g = 9.80665 m/s^2 (spec: -1.5 .. +1.5)."""
+    """Acceleration along the axis, in units of 1 g = 9.80665 m/s^2 (the paper's sweep:
+    -1.5 .. +1.5)."""
     rest: float = 5.0
     """Time at rest before the acceleration starts [s]."""
     duration: float = 10.0
@@ -259,7 +263,7 @@ class GimpoAccelSweepParams(GimpoParams):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GimpoAccelYawParams(GimpoParams):
-    """Parameters of ``gimpo-accel-yaw`` (SI; spec section 3.3)."""
+    """Parameters of ``gimpo-accel-yaw`` (SI; docs/methods/vector-matching.md §3.3)."""
 
     case: BodyAxis = BodyAxis.X
     """Body axis of the acceleration: x or y."""

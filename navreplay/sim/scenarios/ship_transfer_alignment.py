@@ -1,7 +1,8 @@
 """Shipboard transfer alignment: a slave SDINS on a rolling, pitching, flexing ship and its GINS.
 
-Scenario of the transfer-alignment specification, section 3 (Song, Jeon and Lyou, "A Transfer
+The scenario of docs/methods/transfer-alignment.md §3 (Song, Jeon and Lyou, "A Transfer
 Alignment Algorithm Using Velocity and Quaternion Partial Matching Methods", section IV).
+Errata E11 and E17 are those of docs/methods/transfer-alignment.md §7.
 
 Motion
     The ship (frame r: X bow, Y starboard, Z down) cruises at constant ground velocity along a

@@ -1,8 +1,11 @@
-"""Underwater vehicle with a propeller-RPM speed log in a sea current (RPM-aided INS spec, section 3).
+"""Underwater vehicle with a propeller-RPM speed log in a sea current.
+
+The scenario of the RPM-aided INS, docs/methods/rpm-aided-ins.md §3 (section numbers below are
+that document's; erratum E11 is in its §7).
 
 ``underwater-rpm``
     A deep-running vehicle (start 36.0 N, 130.0 E, 50 m deep, heading 000) runs the 480-s course
-    of spec section 3.2 (:data:`ROUTE`, linear ramps): a speed-up 12 -> 14 m/s, a 5 deg dive
+    of §3.2 (:data:`ROUTE`, linear ramps): a speed-up 12 -> 14 m/s, a 5 deg dive
     (depth 50 -> about 105 m), four 90 deg turns at 3 deg/s and four speed changes; about
     6.83 km through the water. The water moves with a constant horizontal current (speed
     ``current_speed``, direction ``current_direction_deg``, uniform on [0, 360) per run by
@@ -10,7 +13,7 @@
 
 Models
 ------
-Truth (spec section 3.2), with ``C_bv = exp([m x])`` and ``m = [0, m_y, m_z]``::
+Truth (§3.2), with ``C_bv = exp([m x])`` and ``m = [0, m_y, m_z]``::
 
     C_nb = Rz(psi) Ry(theta)                       roll 0, no sideslip / heave through the water
     v_n  = C_nb C_bv [u, 0, 0] + v_c_n             ground velocity (sim.trajectory.Route)
@@ -101,7 +104,7 @@ from navreplay.units import (
 )
 
 ROUTE: tuple[tuple[float, float, Channel, float], ...] = (
-    # (start [s], duration [s], channel, change [m/s or rad]), spec section 3.2
+    # (start [s], duration [s], channel, change [m/s or rad]), docs/methods/rpm-aided-ins.md §3.2
     (0.0, 10.0, Channel.SPEED, 2.0),             # u 12 -> 14 m/s
     (15.0, 5.0, Channel.PITCH, -5.0 * DEG),      # nose down: the dive
     (60.0, 5.0, Channel.PITCH, 5.0 * DEG),       # level again (depth about 105 m)
@@ -113,7 +116,7 @@ ROUTE: tuple[tuple[float, float, Channel, float], ...] = (
     (360.0, 10.0, Channel.SPEED, 1.0),           # u 13 -> 14 m/s
     (420.0, 30.0, Channel.HEADING, -90.0 * DEG),  # psi 090 -> 000
 )
-"""The course of spec section 3.2; every change is a linear ramp."""
+"""The course of docs/methods/rpm-aided-ins.md §3.2; every change is a linear ramp."""
 
 START_SPEED = 12.0
 """Water-relative speed at t = 0 [m/s]."""
@@ -131,7 +134,8 @@ _TRUTH_COLUMNS = {
 
 
 class DepthErrorSource(enum.StrEnum):
-    """What the paper's "depth bias 2 m" (Table 2) is drawn into (spec section 3.2)."""
+    """What the paper's "depth bias 2 m" (Table 2) is drawn into (docs/methods/rpm-aided-ins.md
+    §3.2)."""
 
     INS = "ins"
     """The initial depth error of the INS (default; the 24 states hold no sensor bias)."""
@@ -141,7 +145,8 @@ class DepthErrorSource(enum.StrEnum):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class UnderwaterRpmParams:
-    """Parameters of ``underwater-rpm`` (SI unless the name says otherwise; spec section 3)."""
+    """Parameters of ``underwater-rpm`` (SI unless the name says otherwise;
+    docs/methods/rpm-aided-ins.md §3)."""
 
     duration: float = 480.0
     """Length of the recording [s] (the course of :data:`ROUTE` ends at 480 s)."""
@@ -169,7 +174,8 @@ class UnderwaterRpmParams:
     accel_scale_factor: float = 100.0 * PPM
     """Accelerometer scale-factor error [-] (100 ppm)."""
     accel_vrw: float = 1.0 * MICRO_G_PER_SQRT_HZ
-    """Accelerometer velocity random walk [(m/s)/sqrt(s)] (1 ug/sqrt(Hz), erratum E11)."""
+    """Accelerometer velocity random walk [(m/s)/sqrt(s)] (1 ug/sqrt(Hz); Table 1 prints
+    "1 ug/sqrt(hr)": erratum E11 in docs/methods/rpm-aided-ins.md)."""
     accel_misalignment: float = 5.0 * ARCSEC
     """Accelerometer misalignment, each of six off-diagonal terms [rad] (5 arcsec)."""
     gyro_bias: float = 0.1 * DEG_PER_HOUR
@@ -185,7 +191,8 @@ class UnderwaterRpmParams:
     """Level attitude error [rad] (1 mil): the RSS of phi_N and phi_E, or per axis with
     ``level_mil_per_axis``."""
     level_mil_per_axis: bool = False
-    """Read ``init_level_error`` per axis instead of as the RSS of both (spec section 3.2)."""
+    """Read ``init_level_error`` per axis instead of as the RSS of both
+    (docs/methods/rpm-aided-ins.md §3.2)."""
     init_azimuth_error: float = 3.0 * MIL
     """Azimuth error phi_D [rad] (3 mil)."""
     init_vel_error: float = 0.1
