@@ -52,9 +52,9 @@ import math
 import numpy as np
 from scipy.signal import lfilter, lfiltic
 
-from navreplay.filters.kalman import van_loan
 from navreplay.geo.earth import ned_offset_to_lla
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_to_dcm, quat_to_euler
+from navreplay.lti import van_loan
 from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.master_ins import MasterInsModel

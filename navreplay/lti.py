@@ -1,0 +1,95 @@
+"""Linear time-invariant stochastic systems: discretisation of ``dx/dt = F x + G w``.
+
+Shared by the simulators (exact discretisation of Markov noise processes, e.g. hull flexure)
+and the filters (transition and process-noise matrices). Equation numbers refer to the model
+block of :mod:`navreplay.filters.kalman`::
+
+    Phi = I + F dt + (F dt)^2 / 2                         (3)
+    Qd  = G Qc G^T dt                                     (4)
+    Qd  = Phi B12,  [[B11, B12], [0, B22]] = expm([[-F, G Qc G^T], [0, F^T]] dt)   (5)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def discretize(F: np.ndarray, dt: float) -> np.ndarray:
+    """Transition matrix by the second-order series, eq. (3).
+
+    Parameters
+    ----------
+    F : ndarray, shape (n, n)
+        Continuous system matrix.
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    Phi : ndarray, shape (n, n)
+    """
+    Fdt = F * dt
+    Phi = Fdt @ Fdt
+    Phi *= 0.5
+    Phi += Fdt
+    Phi[np.diag_indices_from(Phi)] += 1.0
+    return Phi
+
+
+def discrete_noise(G: np.ndarray, Qc: np.ndarray, dt: float) -> np.ndarray:
+    """Discrete process noise ``Qd = G Qc G^T dt``, eq. (4).
+
+    Parameters
+    ----------
+    G : ndarray, shape (n, p)
+        Noise input matrix.
+    Qc : ndarray, shape (p,) or (p, p)
+        Continuous noise power spectral densities (a diagonal as a vector), units of
+        ``w^2 s``.
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    Qd : ndarray, shape (n, n)
+    """
+    if Qc.ndim == 1:
+        GQ = G * Qc[None, :]
+    else:
+        GQ = G @ Qc
+    Qd = GQ @ G.T
+    Qd *= dt
+    return Qd
+
+
+def van_loan(
+    F: np.ndarray, G: np.ndarray, Qc: np.ndarray, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact discretisation for constant F and white noise (Van Loan's method), eq. (5).
+
+    Parameters
+    ----------
+    F : ndarray, shape (n, n)
+    G : ndarray, shape (n, p)
+    Qc : ndarray, shape (p,) or (p, p)
+    dt : float
+
+    Returns
+    -------
+    Phi : ndarray, shape (n, n)
+        ``expm(F dt)``.
+    Qd : ndarray, shape (n, n)
+        ``integral_0^dt expm(F s) G Qc G^T expm(F s)^T ds``.
+    """
+    from scipy.linalg import expm
+
+    n = F.shape[0]
+    GQG = discrete_noise(G, Qc, 1.0)
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n] = -F
+    M[:n, n:] = GQG
+    M[n:, n:] = F.T
+    E = expm(M * dt)
+    Phi = E[n:, n:].T
+    Qd = Phi @ E[:n, n:]
+    return Phi, 0.5 * (Qd + Qd.T)
