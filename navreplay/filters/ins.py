@@ -55,9 +55,12 @@ The model has no scale-factor, misalignment or g-sensitivity states. At a roughl
 attitude the accelerometer scale factor and misalignment times gravity, and the gyro
 g-sensitivity times gravity, act as constant biases: the bias states estimate these
 *effective* biases, and the default bias sigmas are the effective values for the ``tactical``
-IMU grade of :func:`navreplay.sensors.imu_grade` (0.3 mg bias + 0.5 mrad x g; 1 deg/h bias +
-1 deg/h/g x g). Under motion, the scale-factor and misalignment errors (s_a, s_g, 1-sigma)
-enter as the motion-dependent noise (5a) (ins_error eq. 21), white over a correlation time tau.
+IMU grade of :func:`navreplay.sensors.imu_grade`: level accelerometer axes 0.3 mg bias + 0.5 mrad
+misalignment x g + 0.05 mg instability (0.58 mg); the z axis sees gravity through its 300 ppm
+scale factor instead (0.42 mg, ``accel_bias_sigma_z``; it drives the free-inertial vertical
+channel); gyros 1 deg/h bias + 1 deg/h/g x g + 0.3 deg/h instability. Under motion, the
+scale-factor and misalignment errors (s_a, s_g, 1-sigma) enter as the motion-dependent noise
+(5a) (ins_error eq. 21), white over a correlation time tau.
 
 Scoring (:mod:`navreplay.metrics`): the navigation error states are scored by the errors of the
 navigation solution (``nav:`` truth keys), the biases by the truth stream's total bias columns,
@@ -104,8 +107,16 @@ class InsParams(FilterParams):
     """Accelerometer white noise, velocity random walk [(m/s)/sqrt(s)]."""
     gyro_arw: float = 0.1 * DEG_PER_SQRT_HOUR
     """Gyro white noise, angle random walk [rad/sqrt(s)]."""
-    accel_bias_sigma: float = 600.0 * MICRO_G
-    """Initial 1-sigma of the (effective) accelerometer bias, per axis [m/s^2]."""
+    accel_bias_sigma: float = 580.0 * MICRO_G
+    """Initial 1-sigma of the (effective) accelerometer bias, x and y axes (and z unless
+    ``accel_bias_sigma_z`` is set) [m/s^2]. Default: the ``tactical`` grade's effective level
+    bias, sqrt(0.3 mg^2 + (0.5 mrad g)^2 + 0.05 mg^2) = 0.577 mg (constant bias, the
+    misalignment that couples gravity into a level axis, the Gauss-Markov instability)."""
+    accel_bias_sigma_z: float | None = 420.0 * MICRO_G
+    """Initial 1-sigma of the (effective) z (down) accelerometer bias [m/s^2]; None: as
+    ``accel_bias_sigma``. Gravity acts on the z axis through its scale factor, not a
+    misalignment: for the ``tactical`` grade sqrt(0.3 mg^2 + (300 ppm g)^2 + 0.05 mg^2) =
+    0.423 mg. This sigma sets the growth of the free-inertial vertical channel."""
     gyro_bias_sigma: float = 1.5 * DEG_PER_HOUR
     """Initial 1-sigma of the (effective) gyro bias, per axis [rad/s]."""
     accel_bias_rw: float = 50.0 * MICRO_G * math.sqrt(2.0 / 600.0)
@@ -132,11 +143,17 @@ class InsParams(FilterParams):
     """Covariance propagation step [s] (cut short at updates and outputs)."""
 
     def __post_init__(self) -> None:
-        for name in ("accel_vrw", "gyro_arw", "accel_bias_sigma", "gyro_bias_sigma",
+        for name in ("accel_vrw", "gyro_arw", "accel_bias_sigma", "accel_bias_sigma_z",
+                     "gyro_bias_sigma",
                      "accel_bias_rw", "gyro_bias_rw", "init_pos_sigma", "init_vel_sigma",
                      "init_att_sigma", "accel_sf_mis", "gyro_sf_mis", "sf_mis_time"):
             check_number(self, name)
         check_number(self, "cov_step", positive=True, upper=10.0)
+
+    def accel_bias_sigmas(self) -> np.ndarray:
+        """Initial 1-sigma of the effective accelerometer bias per axis x, y, z [m/s^2]."""
+        z = self.accel_bias_sigma if self.accel_bias_sigma_z is None else self.accel_bias_sigma_z
+        return np.array([self.accel_bias_sigma, self.accel_bias_sigma, z])
 
     def process_noise(self, n_states: int = ie.N_STATES) -> ie.ProcessNoise:
         """The process noise of eqs. (5), (5a) for a filter of ``n_states`` (extra states 0)."""
@@ -154,8 +171,8 @@ def initial_covariance(
     pos_sigma_ned: np.ndarray,
     vel_sigma: np.ndarray,
     att_sigma: np.ndarray,
-    accel_bias_sigma: float,
-    gyro_bias_sigma: float,
+    accel_bias_sigma: float | np.ndarray,
+    gyro_bias_sigma: float | np.ndarray,
 ) -> np.ndarray:
     """P0 of the 15 states, eq. (6).
 
@@ -169,8 +186,8 @@ def initial_covariance(
         [m/s].
     att_sigma : ndarray, shape (3,)
         phi 1-sigma [rad].
-    accel_bias_sigma, gyro_bias_sigma : float
-        [m/s^2], [rad/s].
+    accel_bias_sigma, gyro_bias_sigma : float or ndarray, shape (3,)
+        [m/s^2], [rad/s], the same for each axis or per axis x, y, z.
 
     Returns
     -------
@@ -272,7 +289,7 @@ class InsFilter(Filter):
             initial_sigma(init, "pos_ned", p.init_pos_sigma, param="init_pos_sigma"),
             initial_sigma(init, "v_n", p.init_vel_sigma, param="init_vel_sigma"),
             initial_sigma(init, "phi", p.init_att_sigma, param="init_att_sigma"),
-            p.accel_bias_sigma,
+            p.accel_bias_sigmas(),
             p.gyro_bias_sigma,
         )
         n = ie.N_STATES + self._extra_states()
