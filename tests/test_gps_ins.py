@@ -141,14 +141,17 @@ def test_biases_converge_to_the_true_values(drive_ensemble):
     sig = np.array([f[1] for f in finals])[:, 9:15]
     sig0 = np.array([f[2] for f in finals])[:, 9:15]
     z = err / sig
-    # within 3 sigma: all but a Gaussian share (0.3 %) plus the slight over-confidence of the
-    # 15-state model in the tilt / horizontal accelerometer-bias pair (unmodelled gyro
-    # misalignment during turns; the normalised error RMS of that pair is about 1.4 after
-    # 300 s over 40 runs), and no axis off on average
+    # within 3 sigma: all but a Gaussian share (0.3 %) plus some slight over-confidence of the
+    # tilt / horizontal accelerometer-bias pair (the accelerometer scale factor and
+    # misalignment under the drive's accelerations are white noise in the model, constants
+    # in the IMU), and no axis off on average
     assert np.mean(np.abs(z) < 3.0) >= 0.95, np.round(z, 2)
     assert np.all(np.sqrt(np.mean(z**2, axis=0)) < 2.0), np.round(z, 2)
-    # observable in 5 minutes of driving: accelerometer biases and level gyro biases
-    assert np.all(sig[:, :5] < 0.5 * sig0[:, :5])
+    # observable in 5 minutes of driving: accelerometer biases and level gyro biases (the
+    # horizontal accelerometer biases only to about 0.55 sigma0 under the motion noise of the
+    # accelerometer scale factor / misalignment)
+    assert np.all(sig[:, :2] < 0.65 * sig0[:, :2])
+    assert np.all(sig[:, 2:5] < 0.5 * sig0[:, 2:5])
     assert np.all(sig[:, 5] <= sig0[:, 5])
 
 
@@ -168,8 +171,9 @@ def test_lever_arm_estimated():
         gps.columns["pos"][k] += l_n[k] / ie.position_scale(tr["pos"][i])
     params = {"estimate_lever_arm": "true", "lever_arm_sigma": "2.0", "use_gps_vel": "false"}
     res = replay(rec, GpsInsFilter, params, output_rate=1.0)
-    assert res.state_names[15:] == ("l_x", "l_y", "l_z")
-    est, sig = res.x[-1, 15:], res.sigma[-1, 15:]
+    assert res.state_names[15:18] == ("l_x", "l_y", "l_z")
+    assert res.state_names[18:] == ("m_g_xz", "m_g_yz", "s_g_z")
+    est, sig = res.x[-1, 15:18], res.sigma[-1, 15:18]
     assert np.all(np.abs(est - lever) < 3.0 * sig), (est, sig)
     # horizontal offsets become observable through the turns; the vertical one needs roll or
     # pitch changes, which a flat drive barely has
@@ -197,8 +201,9 @@ def test_params_validated():
 @pytest.mark.slow
 def test_consistency_over_a_larger_ensemble():
     # 30 runs of 10 minutes: the run-averaged 15-state NEES stays near its dof; the share of
-    # epochs inside the (tight, 30-run) band is below the nominal 95 % because the tilt /
-    # horizontal accelerometer-bias pair is slightly over-confident (see the bias test)
+    # epochs inside the (tight, 30-run) band is below the nominal 95 % because the
+    # accelerometer scale factor / misalignment under motion is white noise in the model
+    # (about 83 % with the gyro z-rate states)
     runs = 30
     stats = metrics.EnsembleStats()
     for seed in range(100, 100 + runs):
@@ -214,3 +219,70 @@ def test_consistency_over_a_larger_ensemble():
     assert s["nees_in_bounds"] >= 0.75
     assert s["nis_in_bounds_gps_pos"] >= 0.9 and s["nis_in_bounds_gps_vel"] >= 0.9
     assert s["cep50_final"] < 1.0
+
+
+# --------------------------------------------------------------------------------------------
+# gyro z-rate states (misalignments m_xz, m_yz and scale factor s_z)
+
+
+def test_gyro_z_rate_states_improve_consistency():
+    # 10 seeded runs of 10 minutes (about 5 s): with the z-rate states (and the accelerometer
+    # motion noise) the run-averaged 9-dof NEES stays inside its 95 % band at most epochs; the
+    # previous model (gyro scale factor / misalignment as white noise) was over-confident
+    # in tilt and under-confident in heading and left the band at about a third of the epochs
+    runs, seeds = 10, range(10)
+    recs = [simulate("vehicle-drive", {"duration": 600.0}, seed=s) for s in seeds]
+    old = {"gyro_misalignment_states": "false", "accel_sf_mis": "0"}
+    summary = {}
+    for label, params in (("states", None), ("old", old)):
+        stats = metrics.EnsembleStats()
+        for rec in recs:
+            res = replay(rec, GpsInsFilter, params, output_rate=1.0)
+            m = metrics.run_metrics(res, rec)
+            stats.add(m)
+        summary[label] = stats.result().summary()
+        if label == "states":
+            ens = stats.result()
+            # the new states are scored against metadata.true_errors["imu"]
+            assert m.state_names[15:] == ("m_g_xz", "m_g_yz", "s_g_z")
+            imu = rec.metadata.true_errors["imu"]
+            truth = [imu["gyro_misalignment"][0][2], imu["gyro_misalignment"][1][2],
+                     imu["gyro_scale_factor"][2]]
+            np.testing.assert_allclose(m.state_error[-1, 15:], res.x[-1, 15:] - truth)
+    s, s_old = summary["states"], summary["old"]
+    lo, hi = metrics.chi2_bounds(9, runs)
+    assert lo < ens.nees_mean[ens.t >= 10.0].mean() < hi
+    assert s["nees_in_bounds"] >= 0.85, s["nees_in_bounds"]
+    assert s["nees_in_bounds"] > s_old["nees_in_bounds"] + 0.1, (s, s_old)
+    assert s["nis_in_bounds_gps_pos"] >= 0.9 and s["nis_in_bounds_gps_vel"] >= 0.9
+    assert s["att_rms_level"] <= s_old["att_rms_level"]
+
+
+def test_gyro_z_rate_states_estimated():
+    rec = simulate("vehicle-drive", {"duration": 600.0}, seed=3)
+    res = replay(rec, GpsInsFilter, output_rate=1.0)
+    imu = rec.metadata.true_errors["imu"]
+    truth = np.array([imu["gyro_misalignment"][0][2], imu["gyro_misalignment"][1][2],
+                      imu["gyro_scale_factor"][2]])
+    est, sig, sig0 = res.x[-1, 15:], res.sigma[-1, 15:], res.sigma[0, 15:]
+    np.testing.assert_allclose(sig0, [0.5e-3, 0.5e-3, 100e-6])
+    assert np.all(np.abs(est - truth) < 3.0 * sig), (est, truth, sig)
+    assert np.all(sig < sig0)  # the turns make them observable
+    # off: the 15 states of ins and the gyro motion noise
+    off = GpsInsFilter.Params(gyro_misalignment_states=False)
+    assert off.gyro_sf_mis > 0.0
+    res = replay(rec, GpsInsFilter, {"gyro_misalignment_states": "false"}, output_rate=1.0)
+    assert res.state_names == NAV_STATE_NAMES
+
+
+def test_velocity_H_of_the_gyro_z_rate_states_matches_finite_differences():
+    # omega_hat = omega - db_g - dk omega_z (first order): the lever-arm velocity term
+    _, H, _ = gps_velocity_model(NAV, LEVER_B, OMEGA_B, NAV[3:6], np.ones(3), 21,
+                                 lever_states=True, gyro_z_states=18)
+
+    def z(dk):
+        return gps_velocity_model(NAV, LEVER_B, OMEGA_B - dk * OMEGA_B[2], NAV[3:6],
+                                  np.ones(3), 21)[0]
+
+    H_num = np.array([(z(e) - z(-e)) / 2e-4 for e in np.eye(3) * 1e-4]).T
+    np.testing.assert_allclose(H[:, 18:21], H_num, rtol=1e-6, atol=1e-12)

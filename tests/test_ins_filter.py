@@ -116,6 +116,70 @@ def test_propagate_covariance_equals_the_reference_loop():
                                rtol=1e-10, atol=1e-24)
 
 
+@pytest.mark.parametrize(("gz", "vertical"), [(15, ie.Vertical.HEIGHT), (18, ie.Vertical.DEPTH)])
+def test_propagate_covariance_with_gyro_z_states_equals_the_dense_prediction(gz, vertical):
+    # eq. (22): three more non-zero columns of F in the attitude rows, at gz (after a lever arm
+    # at 15-17 for gz = 18)
+    rng = np.random.default_rng(3)
+    n, k = 21, 5
+    A = rng.normal(size=(n, n)) * 1e-3
+    P = A @ A.T + np.diag(np.r_[np.full(3, 1e-12), np.full(12, 1e-4), np.full(6, 1e-6)])
+    nav = np.zeros((k, 10))
+    nav[:, 0] = 0.7
+    nav[:, 2] = 100.0
+    nav[:, 3:6] = [10.0, -5.0, 0.2]
+    nav[:, 6:10] = rotations.euler_to_quat(np.c_[np.full(k, 0.02), np.full(k, -0.01),
+                                                 0.3 * np.arange(k)])
+    f_b = np.tile([0.2, 1.5, -9.8], (k, 1))
+    w_b = np.tile([0.01, -0.02, 0.25], (k, 1))
+    dt = np.full(k, 0.1)
+    q = np.r_[np.zeros(3), np.full(3, 1e-6), np.full(3, 1e-10), np.full(6, 1e-14), np.zeros(6)]
+    noise = ie.ProcessNoise(q, k_acc=3e-6, gyro_z_states=gz)
+    P_ref = P.copy()
+    for i in range(k):
+        F = np.zeros((n, n))
+        C = rotations.quat_to_dcm(nav[i, 6:])
+        ie.system_matrix(nav[i, :3], nav[i, 3:6], C, f_b[i], vertical=vertical, out=F)
+        F[ie.ATT, gz:gz + 3] = ie.gyro_z_rate_matrix(C, w_b[i, 2])
+        a_n = C @ f_b[i] + earth.gravity_n(nav[i, 0], 0.0)
+        Qd = q.copy()
+        Qd[3:6] += noise.k_acc * a_n @ a_n
+        _, P_ref = kalman.predict(np.zeros(n), P_ref, kalman.discretize(F, dt[i]),
+                                  np.diag(Qd * dt[i]))
+    P_new = ie.propagate_covariance(P, nav, f_b, w_b, dt, noise, vertical=vertical)
+    np.testing.assert_allclose(P_new, P_ref, rtol=1e-10, atol=1e-24)
+    # the accumulating kernel (the time update's) steps the same way
+    open_step = ie.OpenStep()
+    hist = np.repeat(nav, [10, 10, 10, 10, 11], axis=0)
+    P_acc = ie.accumulate_covariance(P, hist, np.repeat(f_b, 10, axis=0),
+                                     np.repeat(w_b, 10, axis=0), np.full(50, 0.01), 0.1, noise,
+                                     open_step, vertical=vertical)
+    np.testing.assert_allclose(P_acc, P_ref, rtol=1e-9, atol=1e-24)
+    with pytest.raises(ValueError, match="gyro_z_states"):
+        ie.ProcessNoise(q, gyro_z_states=19)
+
+
+def test_gyro_z_rate_block_matches_the_strapdown():
+    # eq. (22): compensating omega with k_hat = k + dk leaves domega = -dk omega_z; the phi
+    # error it causes over a short interval, against F[phi, gz:] T
+    nav0 = strapdown.nav_vector([np.deg2rad(40.0), 0.5, 120.0], [18.0, -9.0, 0.4],
+                                rotations.euler_to_quat([0.05, -0.03, 2.4]))
+    k, dt = 10, 0.01
+    f_b = np.tile([0.9, -0.6, -9.7], (k, 1))
+    w_b = np.tile([0.004, -0.003, 0.3], (k, 1))
+    nav_T = strapdown.propagate(nav0, w_b, f_b, dt)
+
+    def phi_after(dk):
+        est_T = strapdown.propagate(nav0, w_b - np.outer(w_b[:, 2], dk), f_b, dt)
+        return ie.nav_error(est_T, nav_T)[6:9]
+
+    num = np.array([(phi_after(e) - phi_after(-e)) / 2e-4 for e in np.eye(3) * 1e-4]).T
+    F = ie.gyro_z_rate_matrix(ie.nav_dcm(nav0), 0.3)
+    # F at the start of the step; the body turns by 0.03 rad over it
+    np.testing.assert_allclose(num / (k * dt), F, atol=0.03 * 0.3)
+    assert np.all(np.sign(np.diag(num)) == np.sign(np.diag(F)))
+
+
 def test_accumulate_covariance_steps_and_carries_the_open_step():
     k = 25
     hist = np.zeros((k + 1, 10))

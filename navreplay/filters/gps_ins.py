@@ -3,8 +3,10 @@
 The strapdown INS of :class:`navreplay.filters.ins.InsFilter` (initial solution from
 ``metadata.initial_nav``, IMU compensated with the bias estimates) is corrected by GPS position
 fixes and, when the recording has them, GPS NED velocities. The filter estimates the errors of
-the navigation solution and of the IMU biases (and optionally of the GPS antenna lever arm),
-feeds them back into the solution after every update, and so keeps its error state at 0.
+the navigation solution, of the IMU biases, of the gyro errors driven by the yaw rate (two
+misalignments and the z scale factor; ``gyro_misalignment_states``, on by default) and
+optionally of the GPS antenna lever arm, feeds them back into the solution and the IMU
+compensation after every update, and so keeps its error state at 0.
 
 States
 ------
@@ -18,14 +20,27 @@ index name (Estimate.x)    frame     unit         state (error, estimate minus t
 12-14 b_g_x, b_g_y, b_g_z  b (FRD)   rad/s        gyro bias error; x holds the estimate
 15-17 l_x, l_y, l_z        b (FRD)   m            lever-arm error (``estimate_lever_arm``);
                                                   x holds the lever-arm estimate
+g     m_g_xz               b (FRD)   rad          gyro misalignment M[0, 2] error (z rate into
+                                                  x); x holds the estimate
+g+1   m_g_yz               b (FRD)   rad          gyro misalignment M[1, 2] error (z rate into
+                                                  y); x holds the estimate
+g+2   s_g_z                b (FRD)   -            gyro z scale-factor error; x holds the estimate
 ===== ==================== ========= ============ =============================================
+
+The gyro z-rate states (``gyro_misalignment_states``) follow the lever arm when it is
+estimated: g = 18 with ``estimate_lever_arm``, else 15. Scoring (``truth_keys``): the
+navigation states and biases as ``ins``; m_g_xz, m_g_yz, s_g_z against the constants
+``metadata.true_errors["imu"]["gyro_misalignment"][0][2]``, ``[1][2]`` and
+``["gyro_scale_factor"][2]`` (the M and S of :mod:`navreplay.sensors.imu`,
+``omega_meas = (I + S + M) omega + b``).
 
 Errors (signs)
 --------------
-Position, velocity, biases and lever arm: estimate minus truth, ``dx = x_hat - x``. Attitude:
-``C_nb_hat = (I - [phi x]) C_nb`` (a positive phi_D is an estimated heading smaller than the
-truth). Feedback subtracts: ``lat, lon, h, v_n, b_a, b_g, l -= dx`` and
-``q_nb_hat <- normalize([1, phi/2] (x) q_nb_hat)``, then ``dx = 0``.
+Position, velocity, biases, gyro z-rate coefficients and lever arm: estimate minus truth,
+``dx = x_hat - x``. Attitude: ``C_nb_hat = (I - [phi x]) C_nb`` (a positive phi_D is an
+estimated heading smaller than the truth). Feedback subtracts:
+``lat, lon, h, v_n, b_a, b_g, k, l -= dx`` and ``q_nb_hat <- normalize([1, phi/2] (x)
+q_nb_hat)``, then ``dx = 0``.
 
 Models
 ------
@@ -33,7 +48,12 @@ Process (continuous, :mod:`navreplay.filters.ins_error`)::
 
     dx' = F dx + G w,   w = [n_a, n_g, n_ba, n_bg]                                      (1)
     F: the 15x15 NED error model, eqs. (6)-(19) there; lever arm: F = 0, Q = 0          (2)
-    Phi = I + F T + (F T)^2 / 2,  Qd = G Qc G^T T (+ the motion terms of ins eq. 5a),
+    gyro z-rate states k = (m_xz, m_yz, s_z), random constants (F = 0, Q = 0 for them):
+      omega_hat = omega_meas - b_g_hat - k_hat (omega_meas_z - b_g_hat_z)
+      F[phi, k_j] = +C_nb_hat[:, j] omega_hat_z     (ins_error eq. 22)                 (2a)
+      P0 = diag(gyro_misalignment_sigma^2 (2), gyro_scale_factor_sigma^2)
+    Phi = I + F T + (F T)^2 / 2,  Qd = G Qc G^T T (+ the motion terms of ins eq. 5a;
+    with (2a) the gyro term s_g is off, the accelerometer term s_a = accel_sf_mis on),
     T = cov_step (0.1 s), cut short at updates and outputs                                (3)
 
 GPS position (antenna at ``l_b`` from the IMU, body frame), residual in NED metres::
@@ -50,6 +70,7 @@ GPS velocity, with ``w = omega_ib_b_hat`` (last compensated gyro sample) and
     v_ant_hat = v_hat + C_nb_hat (w x l_hat) - w_in x (C_nb_hat l_hat)                    (8)
     z = v_ant_hat - v_gps                                       (3,) [m/s]                (9)
     H = [ 0 | I | [(C (w x l)) x] - [w_in x][(C l) x] | 0 | C [l x] | C [w x] - [w_in x] C ] (10)
+    H[:, k] = C [l x] w_z                                       (gyro z-rate states)
     R = diag(vel_sigma^2) * gps_vel_sigma_scale^2                                          (11)
 
 Update (shared :func:`navreplay.filters.kalman.correct`, Cholesky + Joseph form) of the error
@@ -80,9 +101,19 @@ from navreplay.filters.registry import register_filter
 from navreplay.geo import kernels
 from navreplay.geo.rotations import skew, wrap_angle
 from navreplay.streams import StreamKind
+from navreplay.units import PPM
 
 LEVER = slice(15, 18)
 """Lever-arm error states (present with ``estimate_lever_arm``)."""
+GYRO_Z_NAMES: tuple[str, ...] = ("m_g_xz", "m_g_yz", "s_g_z")
+"""Names of the gyro z-rate states (``gyro_misalignment_states``): misalignments M[0, 2],
+M[1, 2] and scale factor S[2, 2] of :mod:`navreplay.sensors.imu`."""
+GYRO_Z_TRUTH_KEYS: dict[str, str] = {
+    "m_g_xz": "imu.gyro_misalignment[0][2]",
+    "m_g_yz": "imu.gyro_misalignment[1][2]",
+    "s_g_z": "imu.gyro_scale_factor[2]",
+}
+"""Scoring keys of the gyro z-rate states: the constants in ``metadata.true_errors["imu"]``."""
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -101,6 +132,21 @@ class GpsInsParams(InsParams):
     """Factor on the velocity's ``vel_sigma`` in R [-]."""
     use_gps_vel: bool = True
     """Use the ``gps_vel`` stream when the recording has it."""
+    accel_sf_mis: float = 0.4e-3
+    """Accelerometer scale-factor / misalignment under motion, 1-sigma [-] (ins eq. 5a). On in
+    ``gps-ins`` (``ins``: off): once the gyro's motion errors are states, the accelerometer's
+    ``(S_a + M_a) a`` is the largest unmodelled error left under the turns and speed changes
+    of a drive. For the ``tactical`` grade (300 ppm, 0.5 mrad) its per-axis RMS is
+    sqrt((300 ppm)^2 + 2 (0.5 mrad)^2) / sqrt(3) = 0.46e-3 |a|; 0.4e-3 is the value that keeps
+    the vehicle-drive ensembles consistent (the white-noise form with tau = ``sf_mis_time``
+    slightly overstates a constant error)."""
+    gyro_misalignment_states: bool = True
+    """Estimate the gyro errors driven by the z (yaw) rate, misalignments m_xz, m_yz and scale
+    factor s_z, as random constants (eq. 2a); the motion noise of ``gyro_sf_mis`` is then off."""
+    gyro_misalignment_sigma: float = 0.5e-3
+    """Initial 1-sigma of m_xz and m_yz [rad] (``tactical`` grade: 0.5 mrad)."""
+    gyro_scale_factor_sigma: float = 100.0 * PPM
+    """Initial 1-sigma of s_z [-] (``tactical`` grade: 100 ppm)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -111,6 +157,8 @@ class GpsInsParams(InsParams):
             raise ValueError(f"lever_arm_b must be within 100 m per axis, got {lever!r}")
         object.__setattr__(self, "lever_arm_b", lever)
         check_number(self, "lever_arm_sigma")
+        check_number(self, "gyro_misalignment_sigma")
+        check_number(self, "gyro_scale_factor_sigma")
         for name in ("gps_pos_sigma_scale", "gps_vel_sigma_scale"):
             check_number(self, name, positive=True)
 
@@ -176,6 +224,7 @@ def gps_velocity_model(
     n_states: int,
     *,
     lever_states: bool = False,
+    gyro_z_states: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """GPS velocity measurement, eqs. (8)-(11).
 
@@ -192,6 +241,8 @@ def gps_velocity_model(
         [m/s].
     n_states : int
     lever_states : bool
+    gyro_z_states : int, optional
+        Index of the gyro z-rate states (m_xz, m_yz, s_z), if any.
 
     Returns
     -------
@@ -214,6 +265,8 @@ def gps_velocity_model(
     H[:, ie.VEL] = np.eye(3)
     H[:, ie.ATT] = skew(rot_n) - W_in @ skew(l_n)
     H[:, ie.BG] = C @ L_b
+    if gyro_z_states is not None:  # domega = -db_g - dk omega_z
+        H[:, gyro_z_states:gyro_z_states + ie.N_GYRO_Z] = C @ L_b * omega_ib_b[2]
     if lever_states:
         H[:, LEVER] = C @ skew(omega_ib_b) - W_in @ C
     return z, H, np.asarray(vel_sigma, dtype=float) ** 2  # (11)
@@ -231,28 +284,53 @@ class GpsInsFilter(InsFilter):
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU, StreamKind.GPS)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.GPS_VEL,)
     Params: ClassVar[type[FilterParams]] = GpsInsParams
-    truth_keys: ClassVar[dict[str, str]] = InsFilter.truth_keys
+    truth_keys: ClassVar[dict[str, str]] = {**InsFilter.truth_keys, **GYRO_Z_TRUTH_KEYS}
 
     params: GpsInsParams
 
     def __init__(self, params: GpsInsParams, context: FilterContext) -> None:
         self.lever_arm_b = np.array(params.lever_arm_b, dtype=float)
+        self.gyro_z = np.zeros(3)  # estimates of m_xz, m_yz, s_z
+        gz = ie.N_STATES + (3 if params.estimate_lever_arm else 0)
+        self._gz = slice(gz, gz + ie.N_GYRO_Z) if params.gyro_misalignment_states else None
         super().__init__(params, context)
 
     # -- extra states ----------------------------------------------------------------------
 
     def _extra_states(self) -> int:
-        return 3 if self.params.estimate_lever_arm else 0
+        return ((3 if self.params.estimate_lever_arm else 0)
+                + (ie.N_GYRO_Z if self._gz is not None else 0))
 
     def _extra_names(self) -> tuple[str, ...]:
-        return ("l_x", "l_y", "l_z") if self.params.estimate_lever_arm else ()
+        return (("l_x", "l_y", "l_z") if self.params.estimate_lever_arm else ()) + (
+            GYRO_Z_NAMES if self._gz is not None else ())
 
     def _init_extra(self) -> None:
-        if self.params.estimate_lever_arm:
-            self.P[LEVER, LEVER] = np.eye(3) * self.params.lever_arm_sigma**2
+        p = self.params
+        if p.estimate_lever_arm:
+            self.P[LEVER, LEVER] = np.eye(3) * p.lever_arm_sigma**2
+        if self._gz is not None:
+            self.P[self._gz, self._gz] = np.diag(np.array(
+                [p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
+                 p.gyro_scale_factor_sigma]) ** 2)
 
     def _extra_values(self) -> np.ndarray:
-        return self.lever_arm_b.copy() if self.params.estimate_lever_arm else np.zeros(0)
+        return np.r_[self.lever_arm_b if self.params.estimate_lever_arm else np.zeros(0),
+                     self.gyro_z if self._gz is not None else np.zeros(0)]
+
+    def _process_noise(self, n: int) -> ie.ProcessNoise:
+        noise = super()._process_noise(n)
+        if self._gz is None:
+            return noise
+        # (2a): the z-rate errors are states; the motion noise of the gyro is off
+        return dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start)
+
+    def _compensate_gyro(self, omega_ib_b: np.ndarray) -> np.ndarray:
+        if self._gz is None or not np.any(self.gyro_z):
+            return omega_ib_b
+        # (2a): omega - k_hat (omega_z - b_z); the time update subtracts b_g
+        w_z = omega_ib_b[:, 2] - self.b_g[2]
+        return omega_ib_b - w_z[:, None] * self.gyro_z[None, :]
 
     # -- updates ---------------------------------------------------------------------------
 
@@ -276,6 +354,7 @@ class GpsInsFilter(InsFilter):
                 self.nav, self.lever_arm_b, self.omega_ib_b, np.asarray(sample["v_n"]),
                 np.asarray(sample["vel_sigma"]) * self.params.gps_vel_sigma_scale, n,
                 lever_states=lever_states,
+                gyro_z_states=None if self._gz is None else self._gz.start,
             )
             name = "gps_vel"
         else:
@@ -290,4 +369,6 @@ class GpsInsFilter(InsFilter):
         super()._feedback(dx)
         if self.params.estimate_lever_arm:
             self.lever_arm_b = self.lever_arm_b - dx[LEVER]
+        if self._gz is not None:
+            self.gyro_z = self.gyro_z - dx[self._gz]
 

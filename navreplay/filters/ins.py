@@ -60,7 +60,8 @@ misalignment x g + 0.05 mg instability (0.58 mg); the z axis sees gravity throug
 scale factor instead (0.42 mg, ``accel_bias_sigma_z``; it drives the free-inertial vertical
 channel); gyros 1 deg/h bias + 1 deg/h/g x g + 0.3 deg/h instability. Under motion, the
 scale-factor and misalignment errors (s_a, s_g, 1-sigma) enter as the motion-dependent noise
-(5a) (ins_error eq. 21), white over a correlation time tau.
+(5a) (ins_error eq. 21), white over a correlation time tau. ``gps-ins`` replaces the gyro part
+of (5a) by states for the errors the yaw rate drives (ins_error eq. 22).
 
 Scoring (:mod:`navreplay.metrics`): the navigation error states are scored by the errors of the
 navigation solution (``nav:`` truth keys), the biases by the truth stream's total bias columns,
@@ -295,7 +296,7 @@ class InsFilter(Filter):
         n = ie.N_STATES + self._extra_states()
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
-        self._time_update = ie.TimeUpdate(p.process_noise(n), p.cov_step)
+        self._time_update = ie.TimeUpdate(self._process_noise(n), p.cov_step)
         self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
         self.state_names = NAV_STATE_NAMES + self._extra_names()
         self._init_extra()
@@ -316,10 +317,19 @@ class InsFilter(Filter):
     def _extra_values(self) -> np.ndarray:
         return np.zeros(0)
 
+    def _process_noise(self, n: int) -> ie.ProcessNoise:
+        """The process noise (and model options) of the time update for n states."""
+        return self.params.process_noise(n)
+
+    def _compensate_gyro(self, omega_ib_b: np.ndarray) -> np.ndarray:
+        """Raw gyro samples (k, 3) with the compensations other than the bias applied (the
+        time update subtracts the bias estimate); none here."""
+        return omega_ib_b
+
     # -- the Filter interface --------------------------------------------------------------
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
-        omega = imu["omega_ib_b"]
+        omega = self._compensate_gyro(imu["omega_ib_b"])
         step = self._time_update.propagate(self.nav, self.P, self.t, t, omega, imu["f_b"],
                                            self.b_a, self.b_g)  # (1)-(5a)
         if step is None:

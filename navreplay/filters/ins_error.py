@@ -86,6 +86,21 @@ under motion (an error ``(S + M) omega`` of 1-sigma ``sigma |omega|`` per axis).
 white over a correlation time tau (about the length of a turn) gives ``k = sigma^2 tau``, so
 a turn of that length collects the variance ``(sigma |omega| tau)^2`` of the constant error.
 
+Gyro z-rate errors (optional, ``ProcessNoise.gyro_z_states``). The gyro measures
+``omega_meas = (I + S + M) omega + b + n`` (:mod:`navreplay.sensors.imu`), so the yaw rate of a
+land vehicle leaks into the measured x and y rates through the misalignments ``m_xz = M[0, 2]``,
+``m_yz = M[1, 2]`` and into z through the scale factor ``s_z``: a tilt and heading error of
+constant sign per turn, which white noise (21) cannot represent. A filter may estimate
+``k = (m_xz, m_yz, s_z)`` as random constants (three states from index ``gz``) and compensate
+``omega_hat = omega_meas - b_g_hat - k_hat (omega_meas_z - b_g_hat_z)`` per axis. With
+``dk = k_hat - k`` (estimate minus truth, as the biases) ``domega_ib_b = -db_g - dk omega_z``
+(first order), and since ``phi' = -C_nb_hat domega_ib_b + ...`` (the sign of eq. 16)::
+
+    F[phi, gz + j] = +C_nb_hat[:, j] omega_z,   j = 0, 1, 2 (m_xz, m_yz, s_z)             (22)
+
+with omega_z the mean compensated z rate of the step. The other six terms (scale factors of x
+and y, misalignments on the x and y rates) act only under roll and pitch rates.
+
 Every block was checked against central finite differences of (2)-(4) and of
 :func:`navreplay.strapdown.propagate` (tests/test_ins_filter.py).
 
@@ -93,8 +108,9 @@ Covariance propagation
 ----------------------
 ``P <- Phi P Phi^T + Qd`` with ``Phi = I + F T + (F T)^2 / 2`` (kalman eqs. 3, 6) in compiled
 loops that use the structure of F: it has non-zero rows only for position, velocity and
-attitude and non-zero columns only for the 15 states here (the states a larger filter adds are
-random constants or random walks), so only 9 rows and columns of P change.
+attitude and non-zero columns only for the 15 states here and the optional three of eq. (22)
+(the states a larger filter adds are random constants or random walks), so only 9 rows and
+columns of P change.
 :func:`propagate_covariance` steps over given points, :func:`accumulate_covariance` collects
 IMU samples into steps of a given length, and :class:`TimeUpdate` is the whole time update of
 an INS filter over an IMU block (bias compensation, :mod:`navreplay.strapdown`, covariance) in
@@ -137,6 +153,8 @@ BG = slice(12, 15)
 NAV = slice(0, 9)
 """Position, velocity and attitude errors."""
 N_STATES = 15
+N_GYRO_Z = 3
+"""Gyro z-rate error states of eq. (22): misalignments m_xz, m_yz and scale factor s_z."""
 
 # -- noise layout (columns of G) --------------------------------------------------------------
 
@@ -299,6 +317,15 @@ def system_matrix(
         vertical is Vertical.DEPTH, bool(curvature_derivatives), F,
     )
     return F
+
+
+def gyro_z_rate_matrix(C_nb: np.ndarray, omega_z: float) -> np.ndarray:
+    """``F[phi, (dm_xz, dm_yz, ds_z)] = C_nb_hat omega_z``, eq. (22), shape (3, 3).
+
+    Column j is the attitude-error rate per unit error of the gyro z-rate coefficient of body
+    axis j (m_xz, m_yz, s_z) at the body rate ``omega_z`` [rad/s].
+    """
+    return np.asarray(C_nb, dtype=float) * float(omega_z)
 
 
 def noise_matrix(C_nb: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:
@@ -471,24 +498,31 @@ _TIME_TOL = 1e-9
 @numba.njit(cache=True)
 def _covariance_step(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int,
     F: np.ndarray, M: np.ndarray, T: np.ndarray,
 ) -> np.ndarray:
-    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19) and Qd from (20), (21);
-    returns a new P.
+    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19), (22) and Qd from (20),
+    (21); returns a new P.
 
     F has non-zero rows only for position, velocity and attitude and non-zero columns only for
-    the 15 navigation states, so ``Phi = [[M], [0 I]]`` with M (9 x 15) its first 9 rows, and
-    only the first 9 rows and columns of P change: ``T = M P[:15, :]`` gives the new rows and
-    ``T[:, :15] M^T`` the new 9 x 9 block. F (15, 15), M (9, 15) and T (9, n) are scratch.
+    the 15 navigation states and, with ``gz >= 0``, the three gyro z-rate states at
+    ``gz, gz + 1, gz + 2`` (eq. 22), so ``Phi = [[M], [0 I]]`` with M (9 x nc) its first 9 rows
+    over those nc columns, and only the first 9 rows and columns of P change:
+    ``T = M P[cols, :]`` gives the new rows and ``T[:, cols] M^T`` the new 9 x 9 block.
+    F (15, nc), M (9, nc) and T (9, n) are scratch (nc = 15, or 18 with ``gz >= 0``).
     """
     n = P.shape[0]
+    nc = F.shape[1]
     F[:, :] = 0.0
     C = kernels.quat_to_dcm(nav[6:10])
     fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], C, f_b, depth, curvature, F)
+    if gz >= 0:  # (22): F[phi, (dm_xz, dm_yz, ds_z)] = C_nb_hat[:, j] omega_z
+        for i in range(3):
+            for j in range(3):
+                F[6 + i, N_STATES + j] = C[i, j] * omega_b[2]
     h = 0.5 * dt * dt
     for i in range(N_NAV):  # kalman (3): (F dt)^2 [0:9, :] = F[0:9, 0:9] F[0:9, :] dt^2
-        for j in range(N_STATES):
+        for j in range(nc):
             s = 0.0
             for k in range(N_NAV):
                 s += F[i, k] * F[k, j]
@@ -497,15 +531,15 @@ def _covariance_step(
     for i in range(N_NAV):  # kalman (6)
         for j in range(n):
             s = 0.0
-            for k in range(N_STATES):
-                s += M[i, k] * P[k, j]
+            for k in range(nc):
+                s += M[i, k] * P[k if k < N_STATES else gz + k - N_STATES, j]
             T[i, j] = s
     out = P.copy()
     for i in range(N_NAV):
         for j in range(i + 1):
             s = 0.0
-            for k in range(N_STATES):
-                s += T[i, k] * M[j, k]
+            for k in range(nc):
+                s += T[i, k if k < N_STATES else gz + k - N_STATES] * M[j, k]
             out[i, j] = s
             out[j, i] = s
         for j in range(N_NAV, n):
@@ -531,29 +565,31 @@ def _covariance_step(
 
 
 @numba.njit(cache=True)
-def _scratch(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """F, M, T of :func:`_covariance_step` for n states and the means of :func:`_close_step`."""
-    return (np.zeros((N_STATES, N_STATES)), np.zeros((N_NAV, N_STATES)), np.zeros((N_NAV, n)),
+def _scratch(n: int, gz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """F, M, T of :func:`_covariance_step` for n states (gyro z-rate states at ``gz``, or
+    none for -1) and the means of :func:`_close_step`."""
+    nc = N_STATES + (N_GYRO_Z if gz >= 0 else 0)
+    return (np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
             np.zeros((2, 3)))
 
 
 @numba.njit(cache=True)
 def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int,
 ) -> np.ndarray:
-    F, M, T, _ = _scratch(P.shape[0])
+    F, M, T, _ = _scratch(P.shape[0], gz)
     for k in range(dt.shape[0]):
         P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
-                             curvature, F, M, T)
+                             curvature, gz, F, M, T)
     return P
 
 
 @numba.njit(cache=True)
 def _close_step(
     P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray, T: np.ndarray,
-    mean: np.ndarray,
+    gz: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
+    T: np.ndarray, mean: np.ndarray,
 ) -> np.ndarray:
     """P propagated over the open step, with F at its start and the mean specific force and
     body rate over it; the step is then cleared (P itself when none is open)."""
@@ -564,7 +600,7 @@ def _close_step(
         mean[0, j] = open_sums[1 + j] / dt
         mean[1, j] = open_sums[4 + j] / dt
     P = _covariance_step(P, open_nav, mean[0], mean[1], dt, q, k_acc, k_gyro, depth, curvature,
-                         F, M, T)
+                         gz, F, M, T)
     open_sums[:] = 0.0
     return P
 
@@ -573,9 +609,9 @@ def _close_step(
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    open_nav: np.ndarray, open_sums: np.ndarray,
+    gz: int, open_nav: np.ndarray, open_sums: np.ndarray,
 ) -> np.ndarray:
-    F, M, T, mean = _scratch(P.shape[0])
+    F, M, T, mean = _scratch(P.shape[0], gz)
     for k in range(dt.shape[0]):
         if open_sums[0] == 0.0:
             open_nav[:] = hist[k]
@@ -584,8 +620,8 @@ def _accumulate_covariance(
             open_sums[1 + j] += f_b[k, j] * dt[k]
             open_sums[4 + j] += omega_b[k, j] * dt[k]
         if open_sums[0] >= step - 1e-9:
-            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, open_nav, open_sums, F, M, T,
-                            mean)
+            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, open_nav, open_sums, F, M,
+                            T, mean)
     return P
 
 
@@ -593,7 +629,7 @@ def _accumulate_covariance(
 def _propagate_block(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
     f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, prev: np.ndarray, step: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int,
     open_nav: np.ndarray, open_sums: np.ndarray,
 ) -> tuple[int, int, np.ndarray, np.ndarray]:
     """Bias compensation, strapdown and the covariance steps over the samples of a block after
@@ -631,7 +667,7 @@ def _propagate_block(
         prev[j] = w[k - 1, j] * dt[k - 1]
         prev[3 + j] = fc[k - 1, j] * dt[k - 1]
     P = _accumulate_covariance(P, hist, fc, w, dt, step, q, k_acc, k_gyro, depth, curvature,
-                               open_nav, open_sums)
+                               gz, open_nav, open_sums)
     for i in range(P.shape[0]):
         if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
             return -3, first, nav, P
@@ -656,11 +692,21 @@ class ProcessNoise:
     q: np.ndarray
     k_acc: float = 0.0
     k_gyro: float = 0.0
+    gyro_z_states: int = -1
+    """Index of the first of the three gyro z-rate error states (dm_xz, dm_yz, ds_z) of
+    eq. (22), which a larger filter places after the 15; -1: none."""
 
     def __post_init__(self) -> None:
         q = np.ascontiguousarray(self.q, dtype=np.float64)
         if q.ndim != 1 or not np.all(np.isfinite(q)) or np.any(q < 0.0):
             raise ValueError(f"process noise q must be a vector of values >= 0, got {q}")
+        gz = self.gyro_z_states
+        if not (gz == -1 or N_STATES <= gz <= q.shape[0] - N_GYRO_Z):
+            raise ValueError(
+                f"gyro_z_states must be -1 or an index in 15..{q.shape[0] - N_GYRO_Z} (three "
+                f"states within the {q.shape[0]}), got {gz!r}"
+            )
+        object.__setattr__(self, "gyro_z_states", int(gz))
         for name in ("k_acc", "k_gyro"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
@@ -698,7 +744,7 @@ class OpenStep:
 
 def _model_args(
     shape: tuple[int, ...], noise: ProcessNoise, vertical: Vertical, curvature_derivatives: bool
-) -> tuple[np.ndarray, float, float, bool, bool]:
+) -> tuple[np.ndarray, float, float, bool, bool, int]:
     """Check the shape of P against the model; the arguments the compiled kernels take."""
     n = noise.q.shape[0]
     if shape != (n, n) or n < N_STATES:
@@ -706,7 +752,7 @@ def _model_args(
             f"P must be (n, n) with n >= 15 the length of the process noise ({n}), got {shape}"
         )
     return (noise.q, noise.k_acc, noise.k_gyro, vertical is Vertical.DEPTH,
-            bool(curvature_derivatives))
+            bool(curvature_derivatives), noise.gyro_z_states)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
@@ -727,8 +773,10 @@ def propagate_covariance(
     """Covariance propagation over k steps of a filter whose first 15 states are these.
 
     The same as k calls of ``kalman.predict`` with ``Phi = kalman.discretize(F, dt)``
-    (``F = system_matrix(...)`` in the top-left block, 0 elsewhere: extra states are random
-    constants or random walks) and ``Qd`` of eqs. (20)-(21), compiled into one loop that
+    (``F = system_matrix(...)`` in the top-left block, ``gyro_z_rate_matrix(C_nb, omega_z)``
+    in the attitude rows of the gyro z-rate states when ``noise.gyro_z_states`` is set, 0
+    elsewhere: extra states are random constants or random walks) and ``Qd`` of eqs.
+    (20)-(21), compiled into one loop that
     exploits the structure of F (only the rows and columns of the 9 navigation errors change).
     The result is symmetric but not checked: check it with ``kalman.check_covariance``.
 
@@ -809,8 +857,8 @@ def accumulate_covariance(
     P : ndarray, shape (n, n)
         Symmetric, not checked.
     """
-    q, k_acc, k_gyro, depth, curvature = _model_args(P.shape, noise, vertical,
-                                                     curvature_derivatives)
+    q, k_acc, k_gyro, depth, curvature, gz = _model_args(P.shape, noise, vertical,
+                                                         curvature_derivatives)
     k = dt.shape[0]
     if hist.shape != (k + 1, 10) or f_b.shape != (k, 3) or omega_b.shape != (k, 3):
         raise ValueError(
@@ -819,7 +867,7 @@ def accumulate_covariance(
         )
     return _accumulate_covariance(
         _f64(P), _f64(hist), _f64(f_b), _f64(omega_b), _f64(dt), float(step), q, k_acc, k_gyro,
-        depth, curvature, open_step.nav, open_step.sums,
+        depth, curvature, gz, open_step.nav, open_step.sums,
     )
 
 
@@ -829,7 +877,8 @@ def close_step(
 ) -> np.ndarray:
     """Propagate P over the open step (if any) and clear it; P at the last sample's time."""
     model = _model_args(P.shape, noise, vertical, curvature_derivatives)
-    return _close_step(_f64(P), *model, open_step.nav, open_step.sums, *_scratch(P.shape[0]))
+    return _close_step(_f64(P), *model, open_step.nav, open_step.sums,
+                       *_scratch(P.shape[0], noise.gyro_z_states))
 
 
 class TimeUpdate:
@@ -860,7 +909,7 @@ class TimeUpdate:
         n = noise.q.shape[0]
         self._shape = (n, n)
         self._model = _model_args(self._shape, noise, vertical, curvature_derivatives)
-        self._work = _scratch(n)  # of the compiled close
+        self._work = _scratch(n, noise.gyro_z_states)  # of the compiled close
         self.step = float(step)
         self.prev = np.zeros(6)
         """Increments [dtheta, dv] of the last sample [rad, m/s]."""
