@@ -223,6 +223,29 @@ def test_missing_column_named():
         replay(rec, Recorder)
 
 
+class AccelerometerOnly(Recorder):
+    name = "accel-only"
+    required_columns = {StreamKind.IMU: ("f_b",)}
+
+    def propagate(self, t, imu):
+        assert "omega_ib_b" not in imu and imu["f_b"].shape == (len(t), 3)
+        self.n_imu += len(t)
+        self.t = float(t[-1])
+
+
+def test_required_columns_replace_the_standard_ones():
+    """A gyro-free filter runs on an IMU stream without omega_ib_b, and still needs f_b."""
+    rec = make_recording()
+    del rec["imu"].columns["omega_ib_b"]
+    with pytest.raises(MissingStreamError, match="imu lacks column.*omega_ib_b"):
+        replay(rec, Recorder)
+    res = replay(rec, AccelerometerOnly, output_rate=None)
+    assert len(res.t) > 0 and res.x[-1, 0] == len(rec["imu"])  # every IMU sample delivered
+    del rec["imu"].columns["f_b"]
+    with pytest.raises(MissingStreamError, match="imu lacks column.*f_b.*'accel-only'"):
+        replay(rec, AccelerometerOnly)
+
+
 def test_nan_sample_named_with_stream_and_time():
     rec = make_recording()
     rec["gps"]["pos"][3, 1] = np.nan

@@ -389,8 +389,13 @@ def test_registered_and_fails_fast_on_missing_inputs():
     rec = simulate("gimpo-accel-sweep", {}, seed=0)
     no_imu = dataclasses.replace(rec, streams={k: v for k, v in rec.streams.items()
                                                if k is not StreamKind.IMU})
-    with pytest.raises(ValueError, match="accelerometer"):
+    with pytest.raises(MissingStreamError, match=r"'vector-matching' needs stream\(s\) imu"):
         replay(no_imu, cls)
+    no_f = dataclasses.replace(rec, streams=dict(rec.streams))
+    no_f.streams[StreamKind.IMU] = rec[StreamKind.IMU].slice(0, len(rec[StreamKind.IMU]))
+    del no_f.streams[StreamKind.IMU].columns["f_b"]
+    with pytest.raises(MissingStreamError, match="imu lacks column.*f_b"):
+        replay(no_f, cls)
     no_mag = dataclasses.replace(rec, streams={k: v for k, v in rec.streams.items()
                                                if k is not StreamKind.MAG})
     with pytest.raises(MissingStreamError, match="mag"):

@@ -156,6 +156,10 @@ class Filter(abc.ABC):
         Streams that must be present; ``run`` fails before starting otherwise.
     optional : tuple[StreamKind, ...]
         Streams used when present.
+    required_columns : dict[StreamKind, tuple[str, ...]]
+        For a required stream, the columns the filter needs when not all the standard ones of
+        :data:`navreplay.streams.FIELDS` (e.g. ``{StreamKind.IMU: ("f_b",)}`` for an
+        accelerometer-only filter); the engine checks them before running.
     Params : type[FilterParams]
         Parameter dataclass.
     truth_keys : dict[str, str]
@@ -173,6 +177,7 @@ class Filter(abc.ABC):
     summary: ClassVar[str] = ""
     requires: ClassVar[tuple[StreamKind, ...]] = ()
     optional: ClassVar[tuple[StreamKind, ...]] = ()
+    required_columns: ClassVar[Mapping[StreamKind, tuple[str, ...]]] = {}
     Params: ClassVar[type[FilterParams]] = FilterParams
     truth_keys: ClassVar[dict[str, str]] = {}
 

@@ -554,20 +554,13 @@ class VectorMatchingFilter(Filter):
         "Gyro-free attitude from accelerometer, magnetometer and GPS velocity "
         "(specific-force or gravity vector matching, Choe & Park 2017)"
     )
-    # The IMU stream is required too, but only its f_b column: it is checked in __init__,
-    # because the engine's check would also demand the gyro column.
-    requires = (StreamKind.MAG, StreamKind.GPS_VEL)
-    optional = (StreamKind.IMU,)
+    requires = (StreamKind.IMU, StreamKind.MAG, StreamKind.GPS_VEL)
+    required_columns = {StreamKind.IMU: ("f_b",)}  # an accelerometer: no gyro column needed
     Params = VectorMatchingParams
     truth_keys: dict[str, str] = {}
 
     def __init__(self, params: VectorMatchingParams, context: FilterContext) -> None:
         super().__init__(params, context)
-        if StreamKind.IMU not in context.streams:
-            raise ValueError(
-                "filter 'vector-matching' needs an accelerometer (stream imu, column f_b); "
-                f"the recording has: {', '.join(sorted(context.streams))}"
-            )
         self.params: VectorMatchingParams = params
         self.ref = reference(params, context.metadata.extra, context.metadata.initial_nav)
         self.state_names = STATE_NAMES
@@ -587,8 +580,6 @@ class VectorMatchingFilter(Filter):
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
         # Gyro-free: the attitude is not propagated; keep the accelerometer samples for the
         # epoch they belong to.
-        if "f_b" not in imu:
-            raise ValueError("filter 'vector-matching': the imu stream has no f_b column")
         self._f = (np.asarray(t, dtype=float), np.asarray(imu["f_b"], dtype=float))
         self._pending += self._try_epoch()
 

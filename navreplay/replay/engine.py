@@ -128,7 +128,13 @@ def check_streams(recording: Recording, filter_cls: type[Filter], source: str = 
             f"{source} does not have (it has: {', '.join(have) or 'no streams'})"
         )
     for kind in filter_cls.requires:
-        lacking = recording[kind].missing_fields()
+        stream = recording[kind]
+        needed = filter_cls.required_columns.get(kind)
+        lacking = (
+            stream.missing_fields()
+            if needed is None
+            else [c for c in needed if c not in stream.columns]
+        )
         if lacking:
             raise MissingStreamError(
                 f"{source}: stream {kind} lacks column(s) {', '.join(lacking)} that filter "
