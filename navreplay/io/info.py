@@ -28,6 +28,13 @@ from navreplay.streams import Metadata, StreamKind
 _INDEX_HEAD = struct.Struct("<BQHI")
 
 
+def _span_s(start_ns: int | None, end_ns: int | None) -> float:
+    """Seconds from ``start_ns`` to ``end_ns`` (0 when either is unknown)."""
+    if start_ns is None or end_ns is None:
+        return 0.0
+    return (end_ns - start_ns) * 1e-9
+
+
 @dataclasses.dataclass(frozen=True)
 class TopicInfo:
     """One topic of a recording.
@@ -55,9 +62,7 @@ class TopicInfo:
     @property
     def duration_s(self) -> float:
         """Time from first to last message [s]."""
-        if self.start_ns is None or self.end_ns is None:
-            return 0.0
-        return (self.end_ns - self.start_ns) * 1e-9
+        return _span_s(self.start_ns, self.end_ns)
 
     @property
     def rate_hz(self) -> float:
@@ -107,9 +112,7 @@ class RecordingInfo:
     @property
     def duration_s(self) -> float:
         """Time from the first to the last message [s]."""
-        if self.start_ns is None or self.end_ns is None:
-            return 0.0
-        return (self.end_ns - self.start_ns) * 1e-9
+        return _span_s(self.start_ns, self.end_ns)
 
     @property
     def message_count(self) -> int:
