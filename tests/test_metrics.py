@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from navreplay import metrics
+from navreplay import metrics, tables
 from navreplay.geo import earth, rotations
 from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
@@ -224,7 +224,7 @@ def test_truth_keys_from_metadata_and_nav():
 
 
 def test_format_table():
-    table = metrics.format_table({
+    table = tables.format_table({
         "ins": {"pos_rms_h": 812.0, "att_rms_level": 1.23e-3, "nees_in_bounds": 0.5},
         "gps-ins": {"pos_rms_h": 0.91, "nis_mean_gps_pos": 3.02},
     })

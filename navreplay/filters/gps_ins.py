@@ -94,6 +94,7 @@ import numpy as np
 
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
+from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.base import FilterContext, FilterParams, Innovation, check_number
 from navreplay.filters.ins import InsFilter, InsParams
@@ -318,7 +319,7 @@ class GpsInsFilter(InsFilter):
         return np.r_[self.lever_arm_b if self.params.estimate_lever_arm else np.zeros(0),
                      self.gyro_z if self._gz is not None else np.zeros(0)]
 
-    def _process_noise(self, n: int) -> ie.ProcessNoise:
+    def _process_noise(self, n: int) -> itu.ProcessNoise:
         noise = super()._process_noise(n)
         if self._gz is None:
             return noise

@@ -4,7 +4,7 @@ The baseline every aided filter is compared to. It integrates the IMU with
 :mod:`navreplay.strapdown` from the initial solution in ``metadata.initial_nav`` and
 propagates the covariance of the 15 navigation error states of
 :mod:`navreplay.filters.ins_error` with the IMU error model, both by
-:class:`navreplay.filters.ins_error.TimeUpdate`. It makes no measurement update. The class is
+:class:`navreplay.filters.ins_time_update.TimeUpdate`. It makes no measurement update. The class is
 the base of :class:`navreplay.filters.gps_ins.GpsInsFilter` (feedback of estimated errors,
 extra states); the module's :func:`initial_solution`, :func:`initial_sigma` and
 :func:`initial_covariance` also serve ``rpm-aided-ins``.
@@ -80,6 +80,7 @@ import numpy as np
 
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
+from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
@@ -156,14 +157,14 @@ class InsParams(FilterParams):
         z = self.accel_bias_sigma if self.accel_bias_sigma_z is None else self.accel_bias_sigma_z
         return np.array([self.accel_bias_sigma, self.accel_bias_sigma, z])
 
-    def process_noise(self, n_states: int = ie.N_STATES) -> ie.ProcessNoise:
+    def process_noise(self, n_states: int = ie.N_STATES) -> itu.ProcessNoise:
         """The process noise of eqs. (5), (5a) for a filter of ``n_states`` (extra states 0)."""
         q = np.zeros(n_states)
         q[: ie.N_STATES] = ie.process_noise_diagonal(
             ie.noise_densities(self.accel_vrw, self.gyro_arw, self.accel_bias_rw,
                                self.gyro_bias_rw), 1.0)
-        k = ie.ProcessNoise.motion_coefficient
-        return ie.ProcessNoise(q, k(self.accel_sf_mis, self.sf_mis_time),
+        k = itu.ProcessNoise.motion_coefficient
+        return itu.ProcessNoise(q, k(self.accel_sf_mis, self.sf_mis_time),
                                k(self.gyro_sf_mis, self.sf_mis_time))
 
 
@@ -296,7 +297,7 @@ class InsFilter(Filter):
         n = ie.N_STATES + self._extra_states()
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
-        self._time_update = ie.TimeUpdate(self._process_noise(n), p.cov_step)
+        self._time_update = itu.TimeUpdate(self._process_noise(n), p.cov_step)
         self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
         self.state_names = NAV_STATE_NAMES + self._extra_names()
         self._init_extra()
@@ -317,7 +318,7 @@ class InsFilter(Filter):
     def _extra_values(self) -> np.ndarray:
         return np.zeros(0)
 
-    def _process_noise(self, n: int) -> ie.ProcessNoise:
+    def _process_noise(self, n: int) -> itu.ProcessNoise:
         """The process noise (and model options) of the time update for n states."""
         return self.params.process_noise(n)
 

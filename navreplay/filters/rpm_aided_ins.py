@@ -65,7 +65,7 @@ with the navigation blocks of :mod:`navreplay.filters.ins_error` in their depth 
 
 F has non-zero rows only for position, velocity and attitude, and non-zero columns only for
 those and the biases, so ``Phi = [[M], [0 I]]`` with M the 9 x 15 top block: the product
-touches 9 rows of P (:func:`navreplay.filters.ins_error.propagate_covariance`, shared with the
+touches 9 rows of P (:func:`navreplay.filters.ins_time_update.propagate_covariance`, shared with the
 other INS filters).
 
 RPM water-velocity measurement (eq. 25, re-derived in §4.4), with the corrected
@@ -123,6 +123,7 @@ import numpy as np
 
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
+from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
@@ -485,8 +486,8 @@ class RpmAidedIns(Filter):
         q[ATT] = p.gyro_noise**2
         if estimate_current:
             q[CURRENT] = p.current_noise**2
-        self._time_update = ie.TimeUpdate(
-            ie.ProcessNoise(q), p.cov_step, vertical=ie.Vertical.DEPTH,
+        self._time_update = itu.TimeUpdate(
+            itu.ProcessNoise(q), p.cov_step, vertical=ie.Vertical.DEPTH,
             curvature_derivatives=p.curvature_derivatives,
         )
         self._frozen = np.zeros(N_STATES, dtype=bool)
