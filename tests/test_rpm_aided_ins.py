@@ -390,7 +390,8 @@ def test_registered_and_parameters():
         with pytest.raises(ParamError, match=match):
             build(rai.RpmAidedInsParams, values)
     assert len(rai.STATE_NAMES) == rai.N_STATES == 24
-    assert set(rai.STATE_UNITS) == set(rai.STATE_NAMES)
+    assert [s.name for s in rai.STATES] == list(rai.STATE_NAMES)
+    assert [s.name for s in rai.STATES if s.nees] == ["dlat", "dlon"]
 
 
 def test_aided_modes_need_the_speed_log():

@@ -89,7 +89,9 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     NavSolution,
+    State,
     check_number,
+    state_names,
 )
 from navreplay.filters.registry import register_filter
 from navreplay.streams import StreamKind
@@ -245,21 +247,9 @@ def initial_sigma(
     return out
 
 
-NAV_STATE_NAMES: tuple[str, ...] = (
-    "dlat", "dlon", "dh", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
-    "b_a_x", "b_a_y", "b_a_z", "b_g_x", "b_g_y", "b_g_z",
-)
-"""Names of the 15 entries of ``Estimate.x`` (biases as total estimates)."""
-
-NAV_TRUTH_KEYS: dict[str, str] = {
-    "dlat": "nav:lat", "dlon": "nav:lon", "dh": "nav:h",
-    "dv_N": "nav:v_N", "dv_E": "nav:v_E", "dv_D": "nav:v_D",
-    "phi_N": "nav:phi_N", "phi_E": "nav:phi_E", "phi_D": "nav:phi_D",
-    **{f"b_a_{a}": f"truth:accel_bias[{i}]" for i, a in enumerate("xyz")},
-    **{f"b_g_{a}": f"truth:gyro_bias[{i}]" for i, a in enumerate("xyz")},
-}
-"""Scoring keys (see :mod:`navreplay.metrics`): the navigation error states are scored by the
-navigation solution's error, the biases by the truth stream's total bias columns."""
+NAV_STATES: tuple[State, ...] = ie.nav_states(ie.Vertical.HEIGHT)
+"""Declarations of the 15 entries of ``Estimate.x`` (biases as total estimates)."""
+NAV_STATE_NAMES: tuple[str, ...] = state_names(NAV_STATES)
 
 
 @register_filter
@@ -272,10 +262,6 @@ class InsFilter(Filter):
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     Params: ClassVar[type[FilterParams]] = InsParams
-    truth_keys: ClassVar[dict[str, str]] = NAV_TRUTH_KEYS
-    nees_states: ClassVar[tuple[str, ...]] = NAV_STATE_NAMES[:9]
-    """Default NEES block of :func:`navreplay.metrics.run_metrics`: the navigation errors (the
-    bias states estimate effective biases, which the truth's bias columns do not hold)."""
 
     params: InsParams
 
@@ -294,22 +280,19 @@ class InsFilter(Filter):
             p.accel_bias_sigmas(),
             p.gyro_bias_sigma,
         )
-        n = ie.N_STATES + self._extra_states()
+        self.states = NAV_STATES + self._extra_declarations()
+        n = len(self.states)
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
         self._time_update = itu.TimeUpdate(self._process_noise(n), p.cov_step)
         self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
-        self.state_names = NAV_STATE_NAMES + self._extra_names()
         self._init_extra()
         kalman.check_covariance(self.P, name="P0", t=self.t)
 
     # -- hooks for filters with more states ----------------------------------------------
 
-    def _extra_states(self) -> int:
-        """Number of states after the 15 (random constants; F = 0, Q = 0 for them)."""
-        return 0
-
-    def _extra_names(self) -> tuple[str, ...]:
+    def _extra_declarations(self) -> tuple[State, ...]:
+        """Declarations of the states after the 15 (random constants; F = 0, Q = 0 for them)."""
         return ()
 
     def _init_extra(self) -> None:

@@ -116,6 +116,7 @@ import numba
 import numpy as np
 
 from navreplay import strapdown
+from navreplay.filters.base import Nav, NavError, Quantity, State, TruthColumn
 from navreplay.geo import earth, kernels
 from navreplay.geo.rotations import (
     attitude_error,
@@ -171,11 +172,27 @@ class Vertical(enum.StrEnum):
     """dd = -dh, depth error [m], positive down."""
 
 
-STATE_NAMES: tuple[str, ...] = (
-    "dlat", "dlon", "dh", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
-    "db_a_x", "db_a_y", "db_a_z", "db_g_x", "db_g_y", "db_g_z",
-)
-"""Names of the 15 error states (height form; the depth form names index 2 ``dd``)."""
+def nav_states(vertical: Vertical = Vertical.HEIGHT) -> tuple[State, ...]:
+    """Declarations of the 15 states of a filter's ``Estimate.x`` that uses this model: the
+    9 navigation errors (scored against the navigation solution's error, in the NEES) and the
+    accelerometer and gyro biases as total estimates ``b_a_*``, ``b_g_*`` (scored against the
+    truth stream's ``accel_bias`` and ``gyro_bias`` columns; not in the NEES, since they
+    estimate effective biases that also hold scale-factor and misalignment effects)."""
+    depth = vertical is Vertical.DEPTH
+    return (
+        State("dlat", "rad", Quantity.POSITION, NavError(Nav.LAT), nees=True),
+        State("dlon", "rad", Quantity.POSITION, NavError(Nav.LON), nees=True),
+        State("dd" if depth else "dh", "m", Quantity.POSITION,
+              NavError(Nav.DEPTH if depth else Nav.H), nees=True),
+        *(State(f"dv_{a}", "m/s", Quantity.VELOCITY, NavError(Nav(f"v_{a}")), nees=True)
+          for a in "NED"),
+        *(State(f"phi_{a}", "rad", Quantity.ATTITUDE, NavError(Nav(f"phi_{a}")), nees=True)
+          for a in "NED"),
+        *(State(f"b_a_{a}", "m/s^2", Quantity.ACCEL_BIAS, TruthColumn("accel_bias", (i,)))
+          for i, a in enumerate("xyz")),
+        *(State(f"b_g_{a}", "rad/s", Quantity.GYRO_BIAS, TruthColumn("gyro_bias", (i,)))
+          for i, a in enumerate("xyz")),
+    )
 
 
 @numba.njit(cache=True)

@@ -30,11 +30,11 @@ Examples
 --------
 >>> import numpy as np
 >>> from navreplay.streams import Metadata, Recording, Stream, StreamKind
->>> from navreplay.filters.base import Estimate, Filter
+>>> from navreplay.filters.base import Estimate, Filter, Quantity, State
 >>> class Count(Filter):
 ...     name = "count"
 ...     requires = (StreamKind.IMU,)
-...     state_names = ("n",)
+...     states = (State("n", "-", Quantity.OTHER),)
 ...     def __init__(self, params, context):
 ...         super().__init__(params, context)
 ...         self.n, self.t = 0, 0.0
@@ -64,7 +64,14 @@ from typing import Any
 import numpy as np
 
 from navreplay import params as _params
-from navreplay.filters.base import Estimate, Filter, FilterContext, FilterParams
+from navreplay.filters.base import (
+    Estimate,
+    Filter,
+    FilterContext,
+    FilterParams,
+    State,
+    check_states,
+)
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.io.errors import RecordingError
 from navreplay.replay.result import InnovationSeries, RunResult
@@ -490,6 +497,8 @@ def replay(
         streams=frozenset(recording.kinds()),
     )
     filt = filter_cls(p, context)
+    states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
+    scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
     plan = plan_events(recording, output_rate, consumed_streams(filter_cls))
     t0_ns = recording.t0_ns
 
@@ -526,7 +535,8 @@ def replay(
         label=label,
         recording=source,
         t0_ns=t0_ns,
-        state_names=(),
+        states=states,
+        scored_extras=scored_extras,
     )
 
     wall0 = time.perf_counter()
@@ -562,7 +572,6 @@ def replay(
             if est is not None:
                 if columns is None:
                     columns = _Columns(est, upper)
-                    meta["state_names"] = tuple(getattr(filt, "state_names", ()))
                 columns.add(est)
                 if columns.m - checked >= _CHECK_EVERY:
                     _check_finite(columns, checked, label, source)
@@ -596,7 +605,7 @@ def replay(
 
     inn_series = {name: _innovation_series(items) for name, items in innovations.items()}
     if columns is None:
-        n = len(getattr(filt, "state_names", ()))
+        n = len(states)
         return RunResult(
             t=np.zeros(0), x=np.zeros((0, n)), P=np.zeros((0, n, n)),
             innovations=inn_series, **meta,

@@ -31,7 +31,9 @@ Examples
 >>> import tempfile, pathlib, numpy as np
 >>> from navreplay.replay.result import RunResult
 >>> t = np.arange(5) * 0.1
->>> r = RunResult("f", "f", "demo", 0, t, ("db_g_x",), np.zeros((5, 1)), np.ones((5, 1, 1)))
+>>> from navreplay.filters.base import Quantity, State
+>>> b_g = (State("b_g_x", "rad/s", Quantity.GYRO_BIAS),)
+>>> r = RunResult("f", "f", "demo", 0, t, b_g, np.zeros((5, 1)), np.ones((5, 1, 1)))
 >>> out = pathlib.Path(tempfile.mkdtemp()) / "demo.rrd"
 >>> from navreplay.viz import Save, open_sink
 >>> with open_sink(Save(out)) as sink:
