@@ -122,3 +122,25 @@ def test_debug_shows_the_traceback(plugins, drive):
     assert res.exit_code != 0
     assert isinstance(res.exception, Exception)
     assert isinstance(res.exception.__cause__, RuntimeError)
+
+
+def test_the_summary_and_the_rrd_carry_the_same_navigation_errors(drive, tmp_path):
+    import numpy as np
+    from test_viz import read_rrd
+
+    rrd, summary = tmp_path / "v.rrd", tmp_path / "s.json"
+    res = CliRunner().invoke(cli, ["run", "gps-ins", str(drive), "--save", str(rrd),
+                                   "--summary", str(summary)])
+    assert res.exit_code == 0, res.output
+    s = json.loads(summary.read_text())["filters"]["gps-ins"]
+    data = read_rrd(rrd)
+
+    def error(name):
+        cols = data[f"/gps-ins/error/{name}"]
+        (key,) = [k for k in cols if k not in ("time", "timestamp")]
+        return cols[key][:, 0]
+
+    p_n, p_e, p_d = error("p_N"), error("p_E"), error("p_D")  # m
+    assert np.sqrt(np.mean(p_d**2)) == pytest.approx(s["pos_rms_v"], rel=1e-6)
+    assert np.hypot(p_n, p_e)[-1] == pytest.approx(s["pos_err_final_h"], rel=1e-6)
+    assert np.sqrt(np.mean(p_n**2 + p_e**2)) == pytest.approx(s["pos_rms_h"], rel=1e-6)

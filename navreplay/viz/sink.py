@@ -58,6 +58,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from navreplay.geo import quat_wxyz_to_xyzw
+from navreplay.metrics import nav_errors
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, Stream, StreamKind
 from navreplay.viz import convert
@@ -512,8 +513,12 @@ class Sink:
         nav_sigma = _nav_sigma(result, a, b)
         errors: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
         if self._truth is not None:
-            truth_at = self._truth.at(t)
-            for n, e in convert.nav_errors(nav, truth_at).items():
+            tr = self._truth.at(t)
+            ne = nav_errors(nav.pos, nav.v_n, nav.q_nb,
+                            {"pos": tr.pos, "v_n": tr.v_n, "q_nb": tr.q_nb})
+            cols = {n: c for n, c in ne.columns().items() if not n.startswith("phi")}
+            cols.update(roll=ne.euler[:, 0], pitch=ne.euler[:, 1], yaw=ne.euler[:, 2])
+            for n, e in cols.items():
                 errors[n] = (e, nav_sigma.get(n))
         for n, (e, s, _) in nav_override.items():
             errors[n] = (e[a:b], nav_sigma.get(n) if s is None else s[a:b])
