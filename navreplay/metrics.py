@@ -229,8 +229,13 @@ def distance_travelled(recording: Recording, t: np.ndarray | None = None) -> np.
     """
     truth = recording[StreamKind.TRUTH]
     ts = seconds(truth.t_ns, recording.t0_ns)
-    speed = np.linalg.norm(truth["v_n"], axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(ts))])
+    if "v_n" in truth.columns:
+        speed = np.linalg.norm(truth["v_n"], axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(ts))])
+    else:  # a reference without velocity: the length of its polyline
+        step = np.linalg.norm(np.diff(position_error_ned(truth["pos"], truth["pos"][:1]),
+                                      axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(step)])
     if t is None:
         return float(cum[-1])
     return np.interp(t, ts, cum)
@@ -287,15 +292,13 @@ def nav_errors(
     -------
     NavErrors
     """
-    C_hat = quat_to_dcm(q_nb)
-    C = quat_to_dcm(truth["q_nb"])
-    e_hat = quat_to_euler(q_nb)
-    e = quat_to_euler(truth["q_nb"])
+    nan = np.full(np.shape(pos), np.nan)  # a reference without this quantity
+    has_q = "q_nb" in truth
     return NavErrors(
-        pos_ned=position_error_ned(pos, truth["pos"]),
-        v_n=np.asarray(v_n) - truth["v_n"],
-        phi=attitude_error(C_hat, C),
-        euler=wrap_angle(e_hat - e),
+        pos_ned=position_error_ned(pos, truth["pos"]) if "pos" in truth else nan,
+        v_n=np.asarray(v_n) - truth["v_n"] if "v_n" in truth else nan,
+        phi=attitude_error(quat_to_dcm(q_nb), quat_to_dcm(truth["q_nb"])) if has_q else nan,
+        euler=wrap_angle(quat_to_euler(q_nb) - quat_to_euler(truth["q_nb"])) if has_q else nan,
     )
 
 
@@ -373,6 +376,8 @@ def state_errors(
         if key is None:
             continue
         x = result.x[:, i]
+        if not _has_truth(key, truth):
+            continue
         if key.startswith("nav:"):
             if phi is None and key.startswith("nav:phi"):
                 phi = attitude_error(quat_to_dcm(result.nav_q_nb), quat_to_dcm(truth["q_nb"]))
@@ -395,6 +400,18 @@ def state_errors(
         return (), np.zeros((M, 0)), np.zeros((M, 0, 0))
     ix = np.array(idx)
     return tuple(names), np.stack(cols, axis=1), result.P[:, ix[:, None], ix[None, :]]
+
+
+def _has_truth(key: str, truth: Mapping[str, np.ndarray]) -> bool:
+    """Whether a reference (truth-like stream) holds what the truth key needs; a simulated
+    truth stream holds pos, v_n and q_nb."""
+    if key.startswith("nav:"):
+        q = key[4:]
+        need = "q_nb" if q.startswith("phi") else "v_n" if q.startswith("v_") else "pos"
+        return need in truth and bool(np.isfinite(truth[need]).all())
+    if key.startswith("truth:"):
+        return _INDEX.match(key[6:]).group(1) in truth  # type: ignore[union-attr]
+    return True
 
 
 def _nav_sigma(result: RunResult, truth_keys: Mapping[str, str]) -> dict[str, np.ndarray]:
@@ -487,6 +504,7 @@ class RunMetrics:
             out["att_rms_heading"] = float(rms(self.nav.phi[:, 2], None))
             if out["distance"] > 0.0:
                 out["pos_err_final_dt"] = 100.0 * out["pos_err_final_h"] / out["distance"]
+            out = {k: v for k, v in out.items() if not math.isnan(v)}  # what the reference has
         _chi2_summary(out, "nees", "", self.nees, np.isfinite(self.nees).astype(int),
                       len(self.nees_states), probability)
         for name, (_, v, dof) in self.nis.items():
@@ -557,12 +575,19 @@ def run_metrics(
     -------
     RunMetrics
     """
+    if StreamKind.TRUTH not in recording:  # no reference: innovation statistics only
+        M = result.t.shape[0]
+        return RunMetrics(result.label, result.t.copy(), None, {}, (), np.zeros((M, 0)),
+                          np.zeros((M, 0)), np.full(M, np.nan), (),
+                          {n: (s.t.copy(), s.nis.copy(), int(s.nu.shape[1]))
+                           for n, s in result.innovations.items()}, np.zeros(M))
+    truth = truth_at(recording, result.t)
     if truth_keys is None or nees_states is None:
         keys, default_nees = _registered_scoring(result.filter_name)
         truth_keys = keys if truth_keys is None else truth_keys
         if nees_states is None and default_nees is not None:
-            nees_states = [s for s in default_nees if s in result.state_names]
-    truth = truth_at(recording, result.t)
+            nees_states = [s for s in default_nees if s in result.state_names
+                           and _has_truth(truth_keys.get(s, ""), truth)]
     nav = None
     if result.nav_pos is not None:
         nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth)
