@@ -47,6 +47,7 @@ GYROCOMPASS_MAX_SIGMA = math.radians(5.0)
 MAG_HEADING_SIGMA = math.radians(3.0)
 COG_MIN_SPEED = 2.0
 COG_SIDESLIP = math.radians(2.0)
+CHORD_LENGTH = 30.0
 GNSS_POS_SIGMA = 5.0
 STILL_VEL_SIGMA = 0.02
 MIN_STILL_S = 2.0
@@ -223,14 +224,7 @@ def _course_over_ground(recording: Recording, stop: int, C_lb: np.ndarray
         s_v = s["vel_sigma"][:, :2].max(axis=1) if "vel_sigma" in s.columns else np.full(
             len(s), 0.1)
     elif StreamKind.GPS in recording and len(recording[StreamKind.GPS]) > 2:
-        s = recording[StreamKind.GPS]
-        ned = earth.lla_to_ned_offset(*s["pos"][0], *s["pos"].T)
-        dt = np.diff(s.t_ns) * 1e-9
-        v = np.diff(ned[:, :2], axis=0) / dt[:, None]
-        t_v = s.t_ns[1:]
-        sig = s["pos_sigma"][1:, :2].max(axis=1) if "pos_sigma" in s.columns else np.full(
-            len(v), GNSS_POS_SIGMA)
-        s_v = np.sqrt(2.0) * sig / dt
+        return _chord(recording, stop, C_lb)
     else:
         return None
     speed = np.hypot(v[:, 0], v[:, 1])
@@ -240,13 +234,42 @@ def _course_over_ground(recording: Recording, stop: int, C_lb: np.ndarray
     k = int(np.argmax(after))
     cog = math.atan2(v[k, 1], v[k, 0])
     j = int(np.clip(np.searchsorted(imu.t_ns, t_v[k]), stop, len(imu) - 1))
-    if "omega_ib_b" in imu.columns:
-        dts = np.diff(imu.t_ns[stop - 1: j + 1]) * 1e-9
-        turned = float(np.sum((imu["omega_ib_b"][stop:j + 1] @ C_lb.T)[:, 2] * dts))
-    else:
-        turned = 0.0
+    turned = _turned(imu, stop, j, C_lb)
     sigma = math.hypot(float(s_v[k]) / speed[k], COG_SIDESLIP)
     return "GNSS course over ground", float(wrap_angle(cog - turned)), sigma
+
+
+def _turned(imu: Stream, stop: int, j: int, C_lb: np.ndarray) -> float:
+    """Yaw turned between the end of the still window and IMU row j [rad] (levelled z rate)."""
+    if "omega_ib_b" not in imu.columns or j < stop:
+        return 0.0
+    dts = np.diff(imu.t_ns[stop - 1: j + 1]) * 1e-9
+    return float(np.sum((imu["omega_ib_b"][stop:j + 1] @ C_lb.T)[:, 2] * dts))
+
+
+def _chord(recording: Recording, stop: int, C_lb: np.ndarray
+           ) -> tuple[str, float, float] | None:
+    """Heading from the chord between the mean still position and the first fix
+    :data:`CHORD_LENGTH` away, carried back by the yaw turned meanwhile (half of it: the chord
+    of a steady turn points along the mean heading)."""
+    imu, gps = recording[StreamKind.IMU], recording[StreamKind.GPS]
+    still = gps.t_ns <= imu.t_ns[stop - 1]
+    if not still.any():
+        return None
+    ned = earth.lla_to_ned_offset(*gps["pos"][still][-1], *gps["pos"].T)
+    home = ned[still].mean(axis=0)
+    dist = np.hypot(*(ned[:, :2] - home[:2]).T)
+    away = ~still & (dist > CHORD_LENGTH)
+    if not away.any():
+        return None
+    k = int(np.argmax(away))
+    sig = float(gps["pos_sigma"][k, :2].max()) if "pos_sigma" in gps.columns else GNSS_POS_SIGMA
+    j = int(np.clip(np.searchsorted(imu.t_ns, gps.t_ns[k]), stop, len(imu) - 1))
+    turned = _turned(imu, stop, j, C_lb)
+    d = ned[k, :2] - home[:2]
+    sigma = math.hypot(sig * math.sqrt(1.0 + 1.0 / still.sum()) / dist[k], COG_SIDESLIP,
+                       0.5 * turned)
+    return ("GNSS track", float(wrap_angle(math.atan2(d[1], d[0]) - 0.5 * turned)), sigma)
 
 
 def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[str, Any]
