@@ -25,6 +25,7 @@ EXPECTED_ERRORS: tuple[type[BaseException], ...] = ()
 def _expected_errors() -> tuple[type[BaseException], ...]:
     global EXPECTED_ERRORS
     if not EXPECTED_ERRORS:
+        from navreplay.filters.ins import InitialNavError
         from navreplay.filters.kalman import FilterDivergedError
         from navreplay.filters.registry import FilterLoadError
         from navreplay.io import RecordingError
@@ -35,7 +36,7 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
 
         EXPECTED_ERRORS = (
             RecordingError, ParamError, FilterLoadError, FilterDivergedError, ReplayError,
-            RunFailedError, VizUnavailableError, KeyError, FileExistsError, FileNotFoundError,
+            RunFailedError, VizUnavailableError, InitialNavError, KeyError, FileExistsError, FileNotFoundError,
             IsADirectoryError, PermissionError,
         )
     return EXPECTED_ERRORS
@@ -240,13 +241,33 @@ def simulate(scenario: str, output: str, seed: int, duration: float | None,
         click.echo(f"wrote {len(paths)} recordings: {paths[0]} ... {paths[-1]}")
 
 
-@cli.command()
-@click.argument("recording", type=click.Path(dir_okay=False))
-def info(recording: str) -> None:
-    """Topics, rates, durations and scenario metadata of a RECORDING."""
-    from navreplay.io import format_info, recording_info
+def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
+    opts = [
+        click.option("--topic", "topics", multiple=True, metavar="KIND=/TOPIC",
+                     help="Topic that feeds a stream (imu, gps, gps_vel, mag, ...); repeatable."),
+        click.option("--frame", "frames", multiple=True, metavar="KIND=flu|frd|enu|ned",
+                     help="Axis convention of a stream's topic, or reference=enu|ned; "
+                          "repeatable."),
+    ]
+    for opt in reversed(opts):
+        fn = opt(fn)
+    return fn
 
-    click.echo(format_info(recording_info(recording)))
+
+@cli.command()
+@click.argument("recording", type=click.Path())
+@_log_flags
+@click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
+              help="TOML file with [topics] and [frames] tables.")
+def info(recording: str, topics: Sequence[str], frames: Sequence[str],
+         config: str | None) -> None:
+    """Topics, types, frames, rates, gaps and metadata of a RECORDING (MCAP file, rosbag2
+    folder or .db3), and which stream each topic feeds."""
+    from navreplay.logs.describe import describe_log
+    from navreplay.logs.options import log_options
+
+    click.echo(describe_log(recording, log_options(topics, frames,
+                                                   config=_load_config(config))))
 
 
 # --------------------------------------------------------------------------------------------
@@ -302,7 +323,7 @@ def filters(name: str | None) -> None:
 
 
 def _looks_like_recording(arg: str) -> bool:
-    return arg.endswith(".mcap") or Path(arg).is_file()
+    return arg.endswith((".mcap", ".db3")) or Path(arg).is_file() or Path(arg).is_dir()
 
 
 @cli.command()
@@ -322,9 +343,20 @@ def _looks_like_recording(arg: str) -> bool:
               help="Replay at X times real time (1.0 = real time), for live viewing.")
 @click.option("--output-rate", type=float, default=10.0, show_default=True, metavar="HZ",
               help="Estimate output rate between aiding samples [Hz].")
+@_log_flags
+@click.option("--init", "init", type=click.Choice(["metadata", "reference", "align", "table"]),
+              help="Initial solution: the recording's metadata (default when present), the "
+                   "reference's first sample, self-alignment, or the [initial] table.")
+@click.option("--reference", "reference", metavar="TOPIC|FILE",
+              help="Score against a topic (Odometry, PoseStamped, PoseWithCovarianceStamped, "
+                   "NavSatFix, navreplay truth) or a TUM / CSV file.")
+@click.option("--no-frame-check", is_flag=True,
+              help="Skip the gravity and magnetic-dip checks of the frames.")
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
-        summary: str | None, workers: int, rate: float | None, output_rate: float) -> None:
+        summary: str | None, workers: int, rate: float | None, output_rate: float,
+        topics: Sequence[str], frames: Sequence[str], init: str | None,
+        reference: str | None, no_frame_check: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b
@@ -343,12 +375,16 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         names = args.pop(0)
     if not args:
         raise click.UsageError("no RECORDING given")
+    from navreplay.logs.options import log_options
+
+    cfg = _load_config(config)
     job = jobs.RunJob(
-        filters=jobs.filter_specs(names, refs, params, _load_config(config)),
+        filters=jobs.filter_specs(names, refs, params, cfg),
         recordings=tuple(Path(a) for a in args),
         viz=_viz_options(save, spawn, connect, serve, no_viz),
         summary_path=Path(summary) if summary else None,
         workers=workers, pacing=rate, output_rate=output_rate,
+        log=log_options(topics, frames, init, reference, cfg, not no_frame_check),
     )
     label = "replay" if len(args) == 1 else f"replay {len(args)} recordings"
     with _Progress(label) as progress:

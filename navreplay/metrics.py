@@ -610,19 +610,20 @@ def chi2_bounds_per_count(
 
 def run_metrics(
     result: RunResult,
-    reference: Recording | Reference,
+    reference: Recording | Reference | None,
     *,
     states: tuple[State, ...] | None = None,
 ) -> RunMetrics:
     """Score one filter run against a reference (the recording's truth, or any
-    :class:`Reference`); what the reference lacks is left unscored.
+    :class:`Reference`); what the reference lacks is left unscored. Without a reference (None,
+    or a recording without a truth stream) only the innovation statistics are kept.
 
     Parameters
     ----------
     result : RunResult
-    reference : Recording or Reference
+    reference : Recording or Reference or None
         The recording the filter ran over (truth stream and ``metadata.true_errors``), or a
-        reference built from elsewhere.
+        reference built from elsewhere, or None.
     states : tuple of State, optional
         Score with these declarations instead of ``result.states`` (same names and order),
         e.g. against other truth columns.
@@ -631,6 +632,16 @@ def run_metrics(
     -------
     RunMetrics
     """
+    nis = {name: (s.t.copy(), s.nis.copy(), int(s.nu.shape[1]))
+           for name, s in result.innovations.items()}
+    M = result.t.shape[0]
+    if reference is None or (isinstance(reference, Recording)
+                             and StreamKind.TRUTH not in reference):
+        return RunMetrics(
+            label=result.label, t=result.t.copy(), nav=None, nav_sigma=nav_sigma(result),
+            state_names=(), state_error=np.zeros((M, 0)), state_var=np.zeros((M, 0)),
+            nees=np.full(M, np.nan), nees_states=(), nis=nis, distance=np.full(M, np.nan),
+        )
     ref = Reference.of(reference)
     states = result.states if states is None else states
     if tuple(s.name for s in states) != result.state_names:
@@ -640,7 +651,6 @@ def run_metrics(
     nav = None
     if result.nav_pos is not None:
         nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth)
-    M = result.t.shape[0]
     nav_for_states = nav if nav is not None else NavErrors(*(np.full((M, 3), np.nan),) * 4)
     names, e, P = state_errors(result, truth, ref.true_errors, states, nav_for_states)
     var = np.diagonal(P, axis1=1, axis2=2).copy()
@@ -648,8 +658,6 @@ def run_metrics(
     sel = [i for i, n in enumerate(names) if n in in_nees]
     ix = np.array(sel, dtype=int)
     nees_v = nees(e[:, ix], P[:, ix[:, None], ix[None, :]])
-    nis = {name: (s.t.copy(), s.nis.copy(), int(s.nu.shape[1]))
-           for name, s in result.innovations.items()}
     return RunMetrics(
         label=result.label,
         t=result.t.copy(),

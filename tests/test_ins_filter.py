@@ -313,7 +313,7 @@ def test_ins_runs_from_the_initial_solution_without_updates():
 def test_ins_needs_an_initial_solution():
     rec = simulate("stationary", {"duration": 1}, seed=0)
     rec.metadata.initial_nav = {}
-    with pytest.raises(ValueError, match="initial_nav"):
+    with pytest.raises(ValueError, match="cannot start: no initial solution"):
         replay(rec, InsFilter)
     rec = simulate("stationary", {"duration": 1}, seed=0)
     del rec.metadata.initial_nav["sigma"]["phi"]

@@ -206,6 +206,10 @@ def initial_covariance(
     return np.diag(d**2)
 
 
+class InitialNavError(ValueError):
+    """A filter has no initial solution to start from."""
+
+
 def initial_solution(context: FilterContext, filter_name: str) -> tuple[np.ndarray, float]:
     """The navigation vector (10,) and time [s] of ``metadata.initial_nav``.
 
@@ -215,9 +219,10 @@ def initial_solution(context: FilterContext, filter_name: str) -> tuple[np.ndarr
     init = context.metadata.initial_nav
     missing = [k for k in ("t_ns", "pos", "v_n", "q_nb") if k not in init]
     if missing:
-        raise ValueError(
-            f"filter {filter_name!r} needs metadata.initial_nav with t_ns, pos, v_n, q_nb "
-            f"(missing: {', '.join(missing)})"
+        raise InitialNavError(
+            f"filter {filter_name!r} cannot start: no initial solution (missing "
+            f"{', '.join(missing)}); give one with --init align, --init reference "
+            "(with --reference) or an [initial] table"
         )
     nav = strapdown.nav_vector(init["pos"], init["v_n"], init["q_nb"])
     if not np.all(np.isfinite(nav)):
@@ -268,10 +273,10 @@ class InsFilter(Filter):
     def __init__(self, params: InsParams, context: FilterContext) -> None:
         super().__init__(params, context)
         self.nav, self.t = initial_solution(context, self.name)
-        self.b_a = np.zeros(3)
-        self.b_g = np.zeros(3)
-        p = params
         init = context.metadata.initial_nav
+        self.b_a = np.asarray(init.get("accel_bias", np.zeros(3)), dtype=float).reshape(3)
+        self.b_g = np.asarray(init.get("gyro_bias", np.zeros(3)), dtype=float).reshape(3)
+        p = params
         P0 = initial_covariance(
             self.nav[strapdown.POS],
             initial_sigma(init, "pos_ned", p.init_pos_sigma, param="init_pos_sigma"),

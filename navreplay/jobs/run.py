@@ -78,12 +78,17 @@ class RunJob:
     workers: int = 1
     pacing: float | None = None
     output_rate: float = 10.0
+    log: Any = None
+    """:class:`navreplay.logs.options.LogOptions` (topics, frames, --init, --reference)."""
 
 
 def _check_files(paths: Sequence[Path]) -> None:
+    from navreplay.io.reader import is_rosbag
+
     for p in paths:
-        if not Path(p).is_file():
-            what = "is a directory, not a recording" if Path(p).is_dir() else "no such recording"
+        if not (Path(p).is_file() or (Path(p).is_dir() and is_rosbag(Path(p)))):
+            what = ("is a directory, not a recording or rosbag2 folder" if Path(p).is_dir()
+                    else "no such recording")
             raise FileNotFoundError(f"{p}: {what}")
 
 
@@ -99,6 +104,9 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
         return _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
+    if job.log is not None and job.log != type(job.log)():
+        raise _params.ParamError("--topic, --frame, --init, --reference and the [topics], "
+                                 "[frames], [initial] tables need a single recording")
     tasks = file_tasks(job.recordings)
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
@@ -108,11 +116,12 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     from navreplay import metrics
-    from navreplay.io import read_recording
+    from navreplay.logs.prepare import open_log
 
     path = Path(job.recordings[0])
     classes = [spec.load() for spec in job.filters]
-    recording = read_recording(path)
+    prepared = open_log(path, job.log)
+    recording = prepared.recording
     for cls in classes:
         check_streams(recording, cls, str(path))
     has_truth = StreamKind.TRUTH in recording
@@ -136,9 +145,9 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
                 progress=prog, observer=observer,
             )
             errors = None
+            scored = metrics.run_metrics(result, recording)  # NIS only without a reference
+            summaries[spec.label] = scored.summary()
             if has_truth:
-                scored = metrics.run_metrics(result, recording)
-                summaries[spec.label] = scored.summary()
                 errors = state_errors(scored)
             if sink is not None:
                 sink.log_run(result, truth=recording if has_truth else None, metrics=errors)
@@ -148,14 +157,13 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             sink.abort()
         raise
     summary = {"recording": str(path), "filters": summaries}
-    notes = []
+    notes = list(prepared.notes)
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
         notes.append(f"Summary written to {job.summary_path}")
-    if has_truth:
-        table = tables.format_summaries(summaries)
-    else:
-        table = "(the recording has no truth stream: no errors to show)"
+    table = tables.format_summaries(summaries)
+    if not has_truth:
+        table = "(no truth or reference: innovation statistics only)\n\n" + table
     return RunReport(
         title=f"{', '.join(s.label for s in job.filters)} over {path}",
         table=table, summary=summary, viz=hint, notes=notes,
