@@ -116,6 +116,8 @@ class FilterOutput:
         Errors against the reference (None without one).
     nis : dict[str, tuple[ndarray (K,), ndarray (K,), int]]
         Per measurement: update times [s], NIS, dof.
+    nav_states : tuple of str
+        The states that are errors of the navigation solution (they make ``nav_cov``).
     """
 
     label: str
@@ -131,6 +133,7 @@ class FilterOutput:
     nav_cov: np.ndarray | None
     metrics: Any
     nis: dict[str, tuple[np.ndarray, np.ndarray, int]]
+    nav_states: tuple[str, ...] = ()
 
     @property
     def has_nav(self) -> bool:
@@ -174,7 +177,14 @@ def filter_output(result: RunResult, recording: Recording | None = None,
         nav_cov=_nav_covariance(result, truth_keys) if result.nav_pos is not None else None,
         metrics=metrics,
         nis={name: (s.t, s.nis, int(s.nu.shape[1])) for name, s in result.innovations.items()},
+        nav_states=nav_state_names(result.filter_name, result.state_names),
     )
+
+
+def nav_state_names(filter_name: str, state_names: Sequence[str]) -> tuple[str, ...]:
+    """The states of a filter that are errors of its navigation solution."""
+    keys = _truth_keys(filter_name)
+    return tuple(n for n in state_names if keys.get(n) in _NAV_KEY_ROWS)
 
 
 def _truth_keys(filter_name: str) -> Mapping[str, str]:

@@ -533,6 +533,10 @@ class RunJob:
         Replay at this multiple of real time (live viewing of one recording).
     output_rate : float
         Output rate where no aiding sample falls [Hz].
+    export_dir, report_path : Path, optional
+        ``--export DIR`` and ``--report FILE.html`` (:mod:`navreplay.outputs`).
+    force : bool
+        Overwrite existing export and report files.
     """
 
     filters: tuple[FilterSpec, ...]
@@ -542,6 +546,9 @@ class RunJob:
     workers: int = 1
     pacing: float | None = None
     output_rate: float = 10.0
+    export_dir: Path | None = None
+    report_path: Path | None = None
+    force: bool = False
 
 
 def _check_files(paths: Sequence[Path]) -> None:
@@ -567,7 +574,8 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
     return _campaign(tasks, job.filters, job.viz, default, job.summary_path, job.workers,
-                     progress, title, job.output_rate, per_run_table=True)
+                     progress, title, job.output_rate, per_run_table=True,
+                     outputs=_outputs(job))
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
@@ -580,6 +588,8 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     for cls in classes:
         check_streams(recording, cls, str(path))
     has_truth = StreamKind.TRUTH in recording
+    outputs = _outputs(job)
+    outputs.check([s.label for s in job.filters], ensemble=False, has_reference=has_truth)
     n_filters = len(classes)
     summaries: dict[str, dict[str, Any]] = {}
     sink = _open_sink(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
@@ -604,6 +614,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
                 scored = metrics.run_metrics(result, recording)
                 summaries[spec.label] = scored.summary()
                 errors = state_errors(scored)
+            outputs.collect(result, recording, scored if has_truth else None)
             if sink is not None:
                 sink.log_run(result, truth=recording if has_truth else None, metrics=errors)
         hint = _close_sink(sink, job.viz)
@@ -612,7 +623,8 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             sink.abort()
         raise
     summary = {"recording": str(path), "filters": summaries}
-    notes = []
+    notes = outputs.write_run(recording, summaries, source=str(path),
+                              title=f"{', '.join(s.label for s in job.filters)} over {path.name}")
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
         notes.append(f"Summary written to {job.summary_path}")
@@ -638,8 +650,11 @@ def _campaign(
     title: str,
     output_rate: float,
     per_run_table: bool,
+    outputs: Any,
 ) -> RunReport:
     from navreplay import metrics
+
+    outputs.check([spec.label for spec in filters], ensemble=True)
 
     stats: dict[str, Any] = {spec.label: metrics.EnsembleStats(spec.label) for spec in filters}
     rows: list[dict[str, Any]] = []
@@ -675,6 +690,8 @@ def _campaign(
         "ensemble": {label: e.summary() for label, e in ens.items()},
         "wall_seconds": done.seconds,
     }
+    notes += outputs.write_ensemble(ens, summary["ensemble"], title=title,
+                                    filter_names={s.label: s.load().name for s in filters})
     if summary_path is not None:
         write_json(summary_path, summary)
     parts = []
@@ -726,6 +743,8 @@ class MonteCarloJob:
         Default: save ``out/montecarlo-<scenario>.rrd`` (ensemble statistics).
     summary_path : Path, optional
     output_rate : float
+    export_dir, report_path : Path, optional
+        ``--export DIR`` (ensemble statistics as CSV) and ``--report FILE.html``.
     """
 
     scenario: str
@@ -739,6 +758,14 @@ class MonteCarloJob:
     viz: VizOptions = VizOptions()
     summary_path: Path | None = None
     output_rate: float = 10.0
+    export_dir: Path | None = None
+    report_path: Path | None = None
+
+
+def _outputs(job: RunJob | MonteCarloJob) -> Any:
+    from navreplay.outputs import Outputs
+
+    return Outputs(job.export_dir, job.report_path, job.force)
 
 
 def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunReport:
@@ -770,7 +797,7 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
              f"{job.runs} runs, seeds {job.seed}..{job.seed + job.runs - 1}")
     return _campaign(tasks, job.filters, job.viz, DEFAULT_OUT / f"montecarlo-{job.scenario}.rrd",
                      job.summary_path, job.workers, progress, title, job.output_rate,
-                     per_run_table=False)
+                     per_run_table=False, outputs=_outputs(job))
 
 
 # --------------------------------------------------------------------------------------------
