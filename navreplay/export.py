@@ -168,7 +168,7 @@ def filter_output(result: RunResult, recording: Recording | None = None,
         t0_ns=int(result.t0_ns),
         t=np.asarray(result.t, dtype=float),
         state_names=tuple(result.state_names),
-        state_units=tuple(_state_unit(n) for n in result.state_names),
+        state_units=tuple(state_unit(n) for n in result.state_names),
         x=np.asarray(result.x, dtype=float),
         sigma=result.sigma,
         nav_pos=result.nav_pos,
@@ -196,7 +196,8 @@ def _truth_keys(filter_name: str) -> Mapping[str, str]:
         return {}
 
 
-def _state_unit(name: str) -> str:
+def state_unit(name: str) -> str:
+    """The SI unit of a state, from the project's naming conventions ("-" if unknown)."""
     from navreplay.viz.naming import guess_si_unit
 
     return guess_si_unit(name) or "-"
@@ -536,7 +537,7 @@ def ensemble_columns(ens: Any) -> list[Column]:
     if "pos_ned" in ens.rms:
         cols.append(Column("cep50", "m", "0.5887 (LatRMS + LongRMS)", ens.cep50))
     for j, name in enumerate(ens.state_names):
-        unit = _state_unit(name)
+        unit = state_unit(name)
         cols.append(Column(f"rms.{name}", unit, f"RMS {runs} of the error of state {name}",
                            ens.state_rms[:, j]))
         cols.append(Column(f"sigma.{name}", unit, f"sqrt(mean predicted variance) of state "

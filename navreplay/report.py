@@ -194,7 +194,7 @@ def ensemble_figures(ens: Any, color: str, filter_name: str = "") -> list[str]:
     """The HTML figures of one filter's ensemble statistics (an EnsembleResult of the
     registered filter ``filter_name``)."""
     from navreplay import figures
-    from navreplay.export import _state_unit, nav_state_names
+    from navreplay.export import nav_state_names, state_unit
 
     nav_states = nav_state_names(filter_name, ens.state_names) if filter_name else ()
     parts = []
@@ -203,7 +203,7 @@ def ensemble_figures(ens: Any, color: str, filter_name: str = "") -> list[str]:
                             ens.sigma[key][:, i] * scale)
               for key, title, axes, unit, scale, _ in _NAV if key in ens.rms
               for i, a in enumerate(axes)]
-    panels += [_state_panel(name, _state_unit(name), ens.t, ens.state_rms[:, j],
+    panels += [_state_panel(name, state_unit(name), ens.t, ens.state_rms[:, j],
                             ens.state_sigma[:, j])
                for j, name in enumerate(ens.state_names) if name not in nav_states]
     if panels:
