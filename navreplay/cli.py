@@ -161,6 +161,15 @@ def _viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
 _PARAM_HELP = "Parameter as key=value (repeatable)."
 
 
+def _result_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--export DIR and --report FILE.html (navreplay.jobs.results)."""
+    fn = click.option("--report", "report", type=click.Path(dir_okay=False),
+                      metavar="OUT.html", help="Write a self-contained HTML report.")(fn)
+    return click.option("--export", "export", type=click.Path(file_okay=False), metavar="DIR",
+                        help="Write CSV, TUM and Odometry MCAP (run) or ensemble CSV "
+                             "(several recordings, montecarlo) into DIR.")(fn)
+
+
 # --------------------------------------------------------------------------------------------
 # the group
 
@@ -352,11 +361,14 @@ def _looks_like_recording(arg: str) -> bool:
                    "NavSatFix, navreplay truth) or a TUM / CSV file.")
 @click.option("--no-frame-check", is_flag=True,
               help="Skip the gravity and magnetic-dip checks of the frames.")
+@_result_flags
+@click.option("--force", is_flag=True, help="Overwrite existing export and report files.")
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
         summary: str | None, workers: int, rate: float | None, output_rate: float,
         topics: Sequence[str], frames: Sequence[str], init: str | None,
-        reference: str | None, no_frame_check: bool) -> None:
+        reference: str | None, no_frame_check: bool,
+        export: str | None, report: str | None, force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b
@@ -366,6 +378,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
       navreplay run 'gps-ins[gps_pos_sigma_scale=1],gps-ins[gps_pos_sigma_scale=3]' drive.mcap
       navreplay run --filter mypkg.myfilter:MyFilter drive.mcap
       navreplay run gps-ins runs/*.mcap --workers 2      # ensemble statistics
+      navreplay run ins,gps-ins drive.mcap --export out/drive --report out/drive.html
     """
     from navreplay import jobs
 
@@ -385,6 +398,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         summary_path=Path(summary) if summary else None,
         workers=workers, pacing=rate, output_rate=output_rate,
         log=log_options(topics, frames, init, reference, cfg, not no_frame_check),
+        export_dir=Path(export) if export else None,
+        report_path=Path(report) if report else None, force=force,
     )
     label = "replay" if len(args) == 1 else f"replay {len(args)} recordings"
     with _Progress(label) as progress:
@@ -416,15 +431,17 @@ def _finish(report: Any) -> None:
               help="TOML file with [scenario] and [filter.NAME] tables (-p wins).")
 @click.option("--keep", "keep", type=click.Path(file_okay=False), metavar="DIR",
               help="Also write every run's recording into DIR.")
-@click.option("--force", is_flag=True, help="Overwrite kept recordings.")
+@click.option("--force", is_flag=True,
+              help="Overwrite existing files (kept recordings, exports, report).")
 @_viz_flags
 @click.option("--summary", "summary", type=click.Path(dir_okay=False), metavar="OUT.json",
               help="Write per-run and ensemble figures as JSON.")
+@_result_flags
 def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, workers: int,
                refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
                spawn: bool, connect: str | None, serve: bool, no_viz: bool,
-               summary: str | None) -> None:
+               summary: str | None, export: str | None, report: str | None) -> None:
     """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
 
     Prints per-filter ensemble statistics (RMS error vs mean filter sigma, NEES with its
@@ -448,6 +465,8 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         keep_dir=Path(keep) if keep else None, force=force,
         viz=_viz_options(save, spawn, connect, serve, no_viz),
         summary_path=Path(summary) if summary else None,
+        export_dir=Path(export) if export else None,
+        report_path=Path(report) if report else None,
     )
     with _Progress(f"montecarlo {scenario}") as progress:
         report = jobs.montecarlo(job, progress)

@@ -527,6 +527,9 @@ class RunMetrics:
         True distance travelled up to each estimate [m].
     extra_error : dict[str, ndarray (M, ...)]
         Errors of the scored extras (``RunResult.scored_extras``).
+    states : tuple of State
+        The declarations of the scored states (``state_names``, same order): units and
+        quantities for tables, exports and plots.
     """
 
     label: str
@@ -541,6 +544,7 @@ class RunMetrics:
     nis: dict[str, tuple[np.ndarray, np.ndarray, int]]
     distance: np.ndarray
     extra_error: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    states: tuple[State, ...] = ()
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
         """Scalar scores (SI; see :data:`SUMMARY_UNITS`) for tables and JSON."""
@@ -653,6 +657,7 @@ def run_metrics(
         nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth)
     nav_for_states = nav if nav is not None else NavErrors(*(np.full((M, 3), np.nan),) * 4)
     names, e, P = state_errors(result, truth, ref.true_errors, states, nav_for_states)
+    by_name = {st.name: st for st in states}
     var = np.diagonal(P, axis1=1, axis2=2).copy()
     in_nees = {s.name for s in states if s.nees}
     sel = [i for i, n in enumerate(names) if n in in_nees]
@@ -670,6 +675,7 @@ def run_metrics(
         nees_states=tuple(names[i] for i in sel),
         nis=nis,
         distance=np.asarray(ref.distance(result.t)),
+        states=tuple(by_name[n] for n in names),
         extra_error=extra_errors(result, truth, ref.true_errors),
     )
 
@@ -731,6 +737,8 @@ class EnsembleResult:
     sigma : dict[str, ndarray (M, 3)]
         ``sqrt(mean predicted variance)`` of ``pos_ned``, ``v_n``, ``phi``.
     state_names : tuple of str
+    states : tuple of State
+        Their declarations (units, quantities).
     state_rms, state_mean, state_sigma : ndarray, shape (M, k)
     nees_mean : ndarray, shape (M,)
     nees_count : ndarray, shape (M,)
@@ -751,6 +759,7 @@ class EnsembleResult:
     mean: dict[str, np.ndarray]
     sigma: dict[str, np.ndarray]
     state_names: tuple[str, ...]
+    states: tuple[State, ...]
     state_rms: np.ndarray
     state_mean: np.ndarray
     state_sigma: np.ndarray
@@ -824,6 +833,7 @@ class EnsembleStats:
         self._nis: dict[str, tuple[_Acc, list, int]] = {}
         self._state_names: tuple[str, ...] | None = None
         self._nees_states: tuple[str, ...] | None = None
+        self._states: tuple[State, ...] = ()
 
     def add(self, m: RunMetrics) -> None:
         """Add one run's metrics."""
@@ -836,6 +846,7 @@ class EnsembleStats:
             raise ValueError(f"run {self.runs + 1} ({m.label}) has other output times")
         if self._state_names is None:
             self._state_names, self._nees_states = m.state_names, m.nees_states
+            self._states = m.states
             self.label = self.label or m.label
         elif m.state_names != self._state_names or m.nees_states != self._nees_states:
             raise ValueError(f"run {self.runs + 1} ({m.label}) scores other states")
@@ -889,6 +900,7 @@ class EnsembleStats:
             mean=mean,
             sigma=sigma,
             state_names=self._state_names or (),
+            states=self._states,
             state_rms=self._state.rms() if self._state.sum is not None else empty,
             state_mean=self._state.mean() if self._state.sum is not None else empty,
             state_sigma=(np.sqrt(self._state_var.mean()) if self._state_var.sum is not None

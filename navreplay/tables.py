@@ -33,7 +33,8 @@ SUMMARY_UNITS: dict[str, tuple[str, float]] = {
 """Display unit and factor from SI for each summary key (``nis_*`` keys like ``nees_*``)."""
 
 
-def _unit(key: str) -> tuple[str, float]:
+def summary_unit(key: str) -> tuple[str, float]:
+    """Display unit and factor from SI of a summary key."""
     if key in SUMMARY_UNITS:
         return SUMMARY_UNITS[key]
     for prefix in ("nis_mean_", "nis_dof_", "nis_in_bounds_"):
@@ -74,7 +75,7 @@ def format_table(
                 if k not in keys and isinstance(v, int | float) and not isinstance(v, bool):
                     keys.append(k)
     header = ["label", *keys]
-    units = ["", *(f"[{_unit(k)[0]}]" if _unit(k)[0] else "" for k in keys)]
+    units = ["", *(f"[{summary_unit(k)[0]}]" if summary_unit(k)[0] else "" for k in keys)]
     rows = []
     for label, s in summaries.items():
         row = [label]
@@ -83,7 +84,7 @@ def format_table(
             if v is None or (isinstance(v, float) and not math.isfinite(v)):
                 row.append("-")
             else:
-                row.append(f"{float(v) * _unit(k)[1]:.3g}")
+                row.append(f"{float(v) * summary_unit(k)[1]:.3g}")
         rows.append(row)
     return _align([header, units, *rows])
 

@@ -10,7 +10,7 @@ from typing import Any
 from navreplay import params as _params
 from navreplay.jobs.config import check_scenario
 from navreplay.jobs.report import DEFAULT_OUT, RunReport
-from navreplay.jobs.run import campaign
+from navreplay.jobs.run import campaign, outputs_of
 from navreplay.replay.engine import MissingStreamError, Progress
 from navreplay.replay.ensemble import FilterSpec, monte_carlo_tasks
 from navreplay.viz.options import VizOptions
@@ -38,6 +38,8 @@ class MonteCarloJob:
         Default: save ``out/montecarlo-<scenario>.rrd`` (ensemble statistics).
     summary_path : Path, optional
     output_rate : float
+    export_dir, report_path : Path, optional
+        ``--export DIR`` (ensemble statistics as CSV) and ``--report FILE.html``.
     """
 
     scenario: str
@@ -51,6 +53,8 @@ class MonteCarloJob:
     viz: VizOptions = VizOptions()
     summary_path: Path | None = None
     output_rate: float = 10.0
+    export_dir: Path | None = None
+    report_path: Path | None = None
 
 
 def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunReport:
@@ -82,4 +86,4 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
              f"{job.runs} runs, seeds {job.seed}..{job.seed + job.runs - 1}")
     return campaign(tasks, job.filters, job.viz, DEFAULT_OUT / f"montecarlo-{job.scenario}.rrd",
                      job.summary_path, job.workers, progress, title, job.output_rate,
-                     per_run_table=False)
+                     per_run_table=False, outputs=outputs_of(job))

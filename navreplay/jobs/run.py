@@ -13,6 +13,7 @@ import numpy as np
 from navreplay import params as _params
 from navreplay import tables
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
+from navreplay.jobs.results import Outputs
 from navreplay.replay.engine import Progress, check_streams, replay
 from navreplay.replay.ensemble import (
     FilterSpec,
@@ -69,6 +70,12 @@ class RunJob:
         Replay at this multiple of real time (live viewing of one recording).
     output_rate : float
         Output rate where no aiding sample falls [Hz].
+    log : LogOptions, optional
+        Topics, frames, ``--init`` and ``--reference`` (:mod:`navreplay.logs.options`).
+    export_dir, report_path : Path, optional
+        ``--export DIR`` and ``--report FILE.html`` (:mod:`navreplay.jobs.results`).
+    force : bool
+        Overwrite existing export and report files.
     """
 
     filters: tuple[FilterSpec, ...]
@@ -79,7 +86,14 @@ class RunJob:
     pacing: float | None = None
     output_rate: float = 10.0
     log: Any = None
-    """:class:`navreplay.logs.options.LogOptions` (topics, frames, --init, --reference)."""
+    export_dir: Path | None = None
+    report_path: Path | None = None
+    force: bool = False
+
+
+def outputs_of(job: Any) -> Outputs:
+    """The ``--export`` / ``--report`` outputs of a run or Monte Carlo job."""
+    return Outputs(job.export_dir, job.report_path, job.force)
 
 
 def _check_files(paths: Sequence[Path]) -> None:
@@ -111,7 +125,8 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
     return campaign(tasks, job.filters, job.viz, default, job.summary_path, job.workers,
-                     progress, title, job.output_rate, per_run_table=True)
+                     progress, title, job.output_rate, per_run_table=True,
+                     outputs=outputs_of(job))
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
@@ -125,6 +140,8 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     for cls in classes:
         check_streams(recording, cls, str(path))
     has_truth = StreamKind.TRUTH in recording
+    outputs = outputs_of(job)
+    outputs.check([s.label for s in job.filters], ensemble=False, has_reference=has_truth)
     n_filters = len(classes)
     summaries: dict[str, dict[str, Any]] = {}
     sink = open_output(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
@@ -149,6 +166,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             summaries[spec.label] = scored.summary()
             if has_truth:
                 errors = state_errors(scored)
+            outputs.collect(result, recording, scored if has_truth else None)
             if sink is not None:
                 sink.log_run(result, truth=recording if has_truth else None, metrics=errors)
         hint = close_output(sink, job.viz)
@@ -158,6 +176,8 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
         raise
     summary = {"recording": str(path), "filters": summaries}
     notes = list(prepared.notes)
+    notes += outputs.write_run(recording, summaries, source=str(path),
+                               title=f"{', '.join(s.label for s in job.filters)} over {path.name}")
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
         notes.append(f"Summary written to {job.summary_path}")
@@ -182,8 +202,12 @@ def campaign(
     title: str,
     output_rate: float,
     per_run_table: bool,
+    outputs: Outputs | None = None,
 ) -> RunReport:
     from navreplay import metrics
+
+    outputs = outputs or Outputs()
+    outputs.check([spec.label for spec in filters], ensemble=True)
 
     stats: dict[str, Any] = {spec.label: metrics.EnsembleStats(spec.label) for spec in filters}
     rows: list[dict[str, Any]] = []
@@ -221,6 +245,7 @@ def campaign(
         "ensemble": {label: e.summary() for label, e in ens.items()},
         "wall_seconds": done.seconds,
     }
+    notes += outputs.write_ensemble(ens, summary["ensemble"], title=title)
     if summary_path is not None:
         write_json(summary_path, summary)
     parts = []
