@@ -23,9 +23,7 @@ import enum
 import json
 import math
 import os
-import uuid
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +31,7 @@ import numpy as np
 
 from navreplay import params as _params
 from navreplay.filters.registry import load_filter
+from navreplay.outputs import atomic_path
 from navreplay.replay.engine import (
     MissingStreamError,
     Progress,
@@ -209,21 +208,9 @@ def _check_scenario(scenario: str, values: Mapping[str, Any]) -> None:
     _params.build(cls.Params, values, where=f"scenario {scenario}")
 
 
-@contextmanager
-def _atomic_path(path: Path) -> Iterator[Path]:
-    """A temporary path beside ``path``, renamed onto it when the block succeeds."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.part")
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 def write_json(path: Path, data: Any) -> None:
     """Write JSON atomically (NaN and infinities as null)."""
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(jsonable(data, strict=True), indent=2) + "\n")
 
 
@@ -542,6 +529,7 @@ class RunJob:
     workers: int = 1
     pacing: float | None = None
     output_rate: float = 10.0
+    max_imu_gap: float | None = None
 
 
 def _check_files(paths: Sequence[Path]) -> None:
@@ -557,8 +545,10 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     if not job.recordings:
         raise _params.ParamError("no recording given")
     _check_files(job.recordings)
-    if job.pacing is not None and not (job.pacing > 0):
+    if job.pacing is not None and not (0 < job.pacing < math.inf):
         raise _params.ParamError(f"--rate must be positive, got {job.pacing}")
+    if not (0 < job.output_rate < math.inf):
+        raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
     if len(job.recordings) == 1:
         return _run_one(job, progress)
     if job.pacing is not None:
@@ -572,11 +562,11 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     from navreplay import metrics
-    from navreplay.io import read_recording
+    from navreplay.io.integrity import coverage, read_salvaged
 
     path = Path(job.recordings[0])
     classes = [spec.load() for spec in job.filters]
-    recording = read_recording(path)
+    recording, salvaged = read_salvaged(path)
     for cls in classes:
         check_streams(recording, cls, str(path))
     has_truth = StreamKind.TRUTH in recording
@@ -597,7 +587,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             result = replay(
                 recording, cls, spec.params, label=spec.label, source=str(path),
                 output_rate=job.output_rate, pacing=job.pacing, validate=False,
-                progress=prog, observer=observer,
+                progress=prog, observer=observer, max_imu_gap=job.max_imu_gap,
             )
             errors = None
             if has_truth:
@@ -611,8 +601,12 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
         if sink is not None:
             sink.abort()
         raise
-    summary = {"recording": str(path), "filters": summaries}
-    notes = []
+    covered = coverage(recording, salvaged)
+    summary = {"recording": str(path), "coverage": covered, "salvaged": salvaged,
+               "filters": summaries}
+    notes = [f"SALVAGED: {path} is damaged; replayed "
+             f"{'an unknown part' if covered is None else f'{100 * covered:.1f} %'} of it"
+             ] if salvaged else []
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
         notes.append(f"Summary written to {job.summary_path}")

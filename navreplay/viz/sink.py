@@ -66,6 +66,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from navreplay.geo import quat_wxyz_to_xyzw
+from navreplay.outputs import release, temporary_path
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, Stream, StreamKind
 from navreplay.viz import convert, targets
@@ -243,8 +244,7 @@ def _open_save(target: Save, name: str | None, rid: str | None) -> Sink:
         raise IsADirectoryError(f"{path} is a directory, not an .rrd file")
     if path.exists() and not target.overwrite:
         raise FileExistsError(f"{path} exists (overwrite it explicitly)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.part")
+    tmp = temporary_path(path)
     rec = _new_stream(rid, name)
     try:
         rec.save(tmp)
@@ -256,7 +256,7 @@ def _open_save(target: Save, name: str | None, rid: str | None) -> Sink:
 
 
 def _remove(path: Path) -> None:
-    path.unlink(missing_ok=True)
+    release(path)
 
 
 # ------------------------------------------------------------------------------------------
