@@ -387,7 +387,7 @@ def _looks_like_recording(arg: str) -> bool:
               help="Estimate output rate between aiding samples [Hz].")
 @click.option("--max-imu-gap", type=float, metavar="S",
               help="Longest IMU gap [s] a filter bridges; a longer one stops the run "
-                   "(default: 5 s).")
+                   "(default: 6 s).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,

@@ -19,8 +19,10 @@ import numpy as np
 
 from navreplay.io.checks import GAP_FACTOR
 
-MAX_IMU_GAP = 5.0
-"""Default longest IMU gap a replay bridges [s] (``--max-imu-gap``)."""
+MAX_IMU_GAP = 6.0
+"""Default longest IMU gap a replay bridges [s] (``--max-imu-gap``): about the longest over
+which a turning land vehicle's heading change stays within the small-angle error model of the
+filters (heading 1-sigma 0.6 rad at the INS filters' default ``gap_rate_sigma``)."""
 MIN_IMU_SAMPLES = 10
 """Fewer IMU samples give no usable rate or motion: the recording is refused."""
 
