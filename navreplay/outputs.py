@@ -26,7 +26,7 @@ import re
 import secrets
 import threading
 import warnings
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 
@@ -225,8 +225,3 @@ def clean_stale(directory: str | os.PathLike[str]) -> list[Path]:
         warnings.warn(f"removed {p}, the temporary file of an interrupted run", stacklevel=2)
     return removed
 
-
-def outputs_of(pairs: Sequence[tuple[str, str | os.PathLike[str] | None]],
-               explicit: bool = True) -> list[Output]:
-    """``[(option, path or None), ...]`` -> the :class:`Output` list (None entries dropped)."""
-    return [Output(Path(p), opt, explicit) for opt, p in pairs if p is not None]

@@ -152,8 +152,6 @@ def _line(text: str, dotted: str, top: bool = False) -> int:
             names = [p.strip().strip("\"'") for p in inner.split(".")]
             if not top and names[: len(parts)] == parts:
                 return no
-            if not top and table and len(parts) > 1 and names[:1] == parts[:1]:
-                continue
         elif top and not table:
             key = line.split("=", 1)[0].strip().strip("\"'").split(".")[0].strip()
             if "=" in line and key == parts[0]:

@@ -99,6 +99,10 @@ class MissingStreamError(ReplayError):
     """The recording lacks a stream (or a stream lacks a column) that the filter requires."""
 
 
+class FilterStartError(ReplayError, ValueError):
+    """The recording cannot start the filter (no initial solution, no sigma for it, ...)."""
+
+
 class InvalidRecordingError(ReplayError, RecordingError):
     """An in-memory recording with non-finite samples or timestamps that do not increase."""
 
@@ -497,7 +501,7 @@ def replay(
     try:
         filt = filter_cls(p, context)
     except ValueError as e:  # the recording cannot start this filter (e.g. no initial_nav)
-        raise ReplayError(f"{source}: {e}") from None
+        raise FilterStartError(f"{source}: {e}") from None
     plan = plan_events(recording, output_rate, consumed_streams(filter_cls))
     t0_ns = recording.t0_ns
 
