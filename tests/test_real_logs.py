@@ -26,7 +26,7 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def _run(*args: str, tmp: Path, ok: bool = True) -> tuple[dict, str]:
     out = tmp / "s.json"
-    res = CliRunner().invoke(cli, ["run", *args, "--no-viz", "--summary", str(out)])
+    res = CliRunner().invoke(cli, ["run", *args, "--no-viz", "--force", "--summary", str(out)])
     if ok:
         assert res.exit_code == 0, res.output
         return json.loads(out.read_text())["filters"], res.output

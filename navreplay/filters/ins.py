@@ -79,9 +79,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from navreplay import strapdown
+from navreplay.filters import imu_gap, kalman
 from navreplay.filters import ins_error as ie
 from navreplay.filters import ins_time_update as itu
-from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
     Filter,
@@ -145,12 +145,18 @@ class InsParams(FilterParams):
     """Correlation time tau of eq. (5a) [s]: a manoeuvre and the time its error persists."""
     cov_step: float = 0.1
     """Covariance propagation step [s] (cut short at updates and outputs)."""
+    gap_accel_sigma: float = 2.0
+    """Unknown acceleration during an IMU gap, 1-sigma per NED axis, held over the gap
+    [m/s^2] (:mod:`navreplay.filters.imu_gap`)."""
+    gap_rate_sigma: float = 0.1
+    """Unknown body rate during an IMU gap, 1-sigma per axis, held over the gap [rad/s]."""
 
     def __post_init__(self) -> None:
         for name in ("accel_vrw", "gyro_arw", "accel_bias_sigma", "accel_bias_sigma_z",
                      "gyro_bias_sigma",
                      "accel_bias_rw", "gyro_bias_rw", "init_pos_sigma", "init_vel_sigma",
-                     "init_att_sigma", "accel_sf_mis", "gyro_sf_mis", "sf_mis_time"):
+                     "init_att_sigma", "accel_sf_mis", "gyro_sf_mis", "sf_mis_time",
+                     "gap_accel_sigma", "gap_rate_sigma"):
             check_number(self, name)
         check_number(self, "cov_step", positive=True, upper=10.0)
 
@@ -289,7 +295,8 @@ class InsFilter(Filter):
         n = len(self.states)
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
-        self._time_update = itu.TimeUpdate(self._process_noise(n), p.cov_step)
+        self._noise = self._process_noise(n)
+        self._time_update = itu.TimeUpdate(self._noise, p.cov_step)
         self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
         self._init_extra()
         kalman.check_covariance(self.P, name="P0", t=self.t)
@@ -331,6 +338,19 @@ class InsFilter(Filter):
         self, kind: StreamKind, t: float, sample: Mapping[str, Any]
     ) -> list[Innovation] | None:
         return None
+
+    def bridge_imu_gap(self, t: float, since: float) -> None:
+        """No IMU samples from ``since`` until after ``t`` [s]: dead-reckon to t with the
+        covariance of the unknown motion (:func:`navreplay.filters.imu_gap.bridge`)."""
+        if t <= self.t:
+            return
+        self._sync_covariance()
+        p = self.params
+        self.nav, self.P = imu_gap.bridge(self.nav, self.P, (self.t - since, t - since),
+                                          p.gap_accel_sigma, p.gap_rate_sigma, self._noise.q)
+        self.t = t
+        self._time_update.prev[:] = 0.0  # no coning/sculling across the gap
+        kalman.check_covariance(self.P, t=self.t)
 
     def estimate(self) -> Estimate:
         self._sync_covariance()

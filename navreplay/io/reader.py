@@ -21,7 +21,7 @@ from mcap.records import Channel, Schema
 from navreplay.io import cdr
 from navreplay.io.checks import first_problem, gap_report, when
 from navreplay.io.convert import DECODERS, REDUCE, AuxColumn, Convention
-from navreplay.io.errors import RecordingError, RecordingWarning
+from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.mcapfile import FileContents, MessageBlock, walk
 from navreplay.io.metadata import decode_metadata
 from navreplay.io.schemas import (
@@ -37,6 +37,10 @@ from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 def _warn(message: str) -> None:
     warnings.warn(RecordingWarning(message), stacklevel=3)
+
+
+def _salvaged(data_complete: bool, message: str) -> None:
+    warnings.warn(SalvagedWarning(message, data_complete=data_complete), stacklevel=3)
 
 
 class _Topic:
@@ -438,14 +442,14 @@ def read_streams(
     if damage is not None:
         last = contents.last_log_time
         if damage.data_complete:
-            _warn(
-                f"{where}: summary or footer missing or damaged at byte {damage.offset} of "
+            _salvaged(
+                True, f"{where}: summary or footer missing or damaged at byte {damage.offset} of "
                 f"{contents.size} ({damage.reason}); all {contents.message_count} messages "
                 f"were recovered, the last at {when(last, t0_ns)}"
             )
         else:
-            _warn(
-                f"{where}: file is truncated or damaged at byte {damage.offset} of "
+            _salvaged(
+                False, f"{where}: file is truncated or damaged at byte {damage.offset} of "
                 f"{contents.size} ({damage.reason}); salvaged {contents.message_count} messages, "
                 f"the last good one at {when(last, t0_ns)}; anything after is lost"
             )

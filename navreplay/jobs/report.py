@@ -4,34 +4,19 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import uuid
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from navreplay.outputs import atomic_path
 from navreplay.streams import jsonable
 
 DEFAULT_OUT = Path("out")
 """Where derived outputs (.rrd, summaries, demo recordings) go by default."""
 
 
-@contextmanager
-def _atomic_path(path: Path) -> Iterator[Path]:
-    """A temporary path beside ``path``, renamed onto it when the block succeeds."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.part")
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 def write_json(path: Path, data: Any) -> None:
     """Write JSON atomically (NaN and infinities as null)."""
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(jsonable(data, strict=True), indent=2) + "\n")
 
 

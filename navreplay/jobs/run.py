@@ -4,6 +4,7 @@ several (in parallel: per-recording summaries and ensemble statistics)."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -76,6 +77,8 @@ class RunJob:
         ``--export DIR`` and ``--report FILE.html`` (:mod:`navreplay.jobs.results`).
     force : bool
         Overwrite existing export and report files.
+    max_imu_gap : float, optional
+        Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
     """
 
     filters: tuple[FilterSpec, ...]
@@ -89,6 +92,7 @@ class RunJob:
     export_dir: Path | None = None
     report_path: Path | None = None
     force: bool = False
+    max_imu_gap: float | None = None
 
 
 def outputs_of(job: Any) -> Outputs:
@@ -112,8 +116,10 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     if not job.recordings:
         raise _params.ParamError("no recording given")
     _check_files(job.recordings)
-    if job.pacing is not None and not (job.pacing > 0):
+    if job.pacing is not None and not (0 < job.pacing < math.inf):
         raise _params.ParamError(f"--rate must be positive, got {job.pacing}")
+    if not (0 < job.output_rate < math.inf):
+        raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
     if len(job.recordings) == 1:
         return _run_one(job, progress)
     if job.pacing is not None:
@@ -131,6 +137,7 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     from navreplay import metrics
+    from navreplay.io.integrity import coverage
     from navreplay.logs.prepare import open_log
 
     path = Path(job.recordings[0])
@@ -159,7 +166,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             result = replay(
                 recording, cls, spec.params, label=spec.label, source=str(path),
                 output_rate=job.output_rate, pacing=job.pacing, validate=False,
-                progress=prog, observer=observer,
+                progress=prog, observer=observer, max_imu_gap=job.max_imu_gap,
             )
             errors = None
             scored = metrics.run_metrics(result, recording)  # NIS only without a reference
@@ -174,8 +181,13 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
         if sink is not None:
             sink.abort()
         raise
-    summary = {"recording": str(path), "filters": summaries}
+    covered = coverage(recording, prepared.salvaged)
+    summary = {"recording": str(path), "coverage": covered, "salvaged": prepared.salvaged,
+               "filters": summaries}
     notes = list(prepared.notes)
+    if prepared.salvaged:
+        notes.append(f"SALVAGED: {path} is damaged; replayed "
+                     f"{'an unknown part' if covered is None else f'{100 * covered:.1f} %'} of it")
     notes += outputs.write_run(recording, summaries, source=str(path),
                                title=f"{', '.join(s.label for s in job.filters)} over {path.name}")
     if job.summary_path is not None:

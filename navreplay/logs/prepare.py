@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from navreplay.io.integrity import salvage_watch
 from navreplay.io.reader import TopicSource, read_streams
 from navreplay.logs.framecheck import check_frames
 from navreplay.logs.initial import initial_nav
@@ -26,19 +27,23 @@ class PreparedLog:
     sources : dict[StreamKind, TopicSource]
     notes : list[str]
         One line per check, reference and initialisation, for the report.
+    salvaged : bool
+        Messages were lost to damage (the file was salvaged).
     """
 
     recording: Recording
     sources: dict[StreamKind, TopicSource]
     notes: list[str]
+    salvaged: bool = False
 
 
 def open_log(path: str | Path, options: LogOptions | None = None) -> PreparedLog:
     """Read a log and make it ready to replay; every problem is raised before any replay."""
     options = options or LogOptions()
     path = Path(path)
-    recording, sources = read_streams(path, topics=options.topics,
-                                      frames=options.stream_frames)
+    with salvage_watch() as lost:
+        recording, sources = read_streams(path, topics=options.topics,
+                                          frames=options.stream_frames)
     recording.metadata.extra.setdefault("source", str(path))
     notes: list[str] = []
     if options.reference is not None:
@@ -54,7 +59,7 @@ def open_log(path: str | Path, options: LogOptions | None = None) -> PreparedLog
         recording.metadata.initial_nav = nav
     if note:
         notes.append(note)
-    return PreparedLog(recording, sources, notes)
+    return PreparedLog(recording, sources, notes, salvaged=lost[0])
 
 
 def _position(recording: Recording, options: LogOptions) -> np.ndarray | None:

@@ -74,6 +74,7 @@ from navreplay.filters.base import (
 )
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.io.errors import RecordingError
+from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.streams import Recording, Stream, StreamKind
 
@@ -117,6 +118,10 @@ class _BadOutput(Exception):
 
 class MissingStreamError(ReplayError):
     """The recording lacks a stream (or a stream lacks a column) that the filter requires."""
+
+
+class FilterStartError(ReplayError, ValueError):
+    """The recording cannot start the filter (no initial solution, no sigma for it, ...)."""
 
 
 class InvalidRecordingError(ReplayError, RecordingError):
@@ -480,6 +485,7 @@ def replay(
     progress: Progress | None = None,
     observer: Observer | None = None,
     observe_interval: float = 0.25,
+    max_imu_gap: float | None = None,
 ) -> RunResult:
     """Replay one filter over one recording.
 
@@ -513,6 +519,9 @@ def replay(
         the end (for live sinks; the arrays are views valid during the call only).
     observe_interval : float
         Wall time between observer calls [s].
+    max_imu_gap : float, optional
+        Longest IMU gap [s] the filter may bridge (:mod:`navreplay.replay.gaps`); default
+        :data:`navreplay.replay.gaps.MAX_IMU_GAP`.
 
     Returns
     -------
@@ -543,7 +552,10 @@ def replay(
         t0_ns=recording.t0_ns,
         streams=frozenset(recording.kinds()),
     )
-    filt = filter_cls(p, context)
+    try:
+        filt = filter_cls(p, context)
+    except ValueError as e:  # the recording cannot start this filter (e.g. no initial_nav)
+        raise FilterStartError(f"{source}: {e}") from None
     states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
     names = tuple(st.name for st in states)
     scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
@@ -560,6 +572,8 @@ def replay(
         imu_t = np.zeros(0)
         imu_cols = []
         n_imu = 0
+    feeder = _imu_feeder(filt, imu_t, imu_cols, max_imu_gap, source,
+                         StreamKind.IMU in filter_cls.requires)
     aiding: list[Stream] = [recording[k] for k in plan.kinds]
     sample_cols = [list(s.columns.items()) for s in aiding]
     ev_t = ((plan.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9).tolist()
@@ -570,7 +584,6 @@ def replay(
     ev_record = np.append(plan.t_ns[1:] != plan.t_ns[:-1], True).tolist()
     kinds = plan.kinds
 
-    propagate = filt.propagate
     update = filt.update
     estimate = filt.estimate
     innovations: dict[str, list[tuple[float, np.ndarray, np.ndarray]]] = {}
@@ -592,7 +605,6 @@ def replay(
     next_observe = wall0 + observe_interval
     slow = pacing is not None or observer is not None or progress is not None
 
-    start = 0
     i = -1
     t_now = 0.0
     try:
@@ -604,12 +616,10 @@ def replay(
             else:  # the IMU samples after the last event, then a last estimate
                 end = n_imu
                 c = TICK
-                if end == start:
+                if end == feeder.start:
                     break
                 t_now = float(imu_t[end - 1])
-            if end > start:
-                propagate(imu_t[start:end], {k: v[start:end] for k, v in imu_cols})
-                start = end
+            feeder.advance(end, t_now)
             if c != TICK:
                 r = ev_row[i]
                 inn = update(kinds[c], t_now, {k: v[r] for k, v in sample_cols[c]})
@@ -676,6 +686,20 @@ def replay(
             innovations=inn_series, **meta,
         )
     return columns.result(innovations=inn_series, **meta)
+
+
+def _imu_feeder(filt: Filter, imu_t: np.ndarray, imu_cols: list[tuple[str, np.ndarray]],
+                max_gap: float | None, source: str, required: bool) -> ImuFeeder:
+    """The IMU block feeder of a replay; refuses IMU streams too short or with too long gaps."""
+    where = f"{source}: stream {StreamKind.IMU}"
+    gaps, nominal = np.zeros(0, np.int64), 0.0
+    if required or len(imu_t) >= MIN_IMU_SAMPLES:
+        try:
+            gaps, nominal = find_gaps(imu_t, max_gap, where)
+        except ValueError as e:
+            raise ReplayError(str(e)) from None
+    return ImuFeeder(filt.propagate, getattr(filt, "bridge_imu_gap", None), imu_t, imu_cols,
+                     gaps, nominal)
 
 
 PSD_TOLERANCE = 1e-6

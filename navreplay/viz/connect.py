@@ -21,6 +21,7 @@ from pathlib import Path
 
 import rerun as rr
 
+from navreplay.outputs import temporary_path
 from navreplay.viz import targets
 from navreplay.viz.sink import APPLICATION_ID, Sink
 from navreplay.viz.targets import (
@@ -162,8 +163,7 @@ def _open_save(target: Save, name: str | None, rid: str | None) -> Sink:
         raise IsADirectoryError(f"{path} is a directory, not an .rrd file")
     if path.exists() and not target.overwrite:
         raise FileExistsError(f"{path} exists (overwrite it explicitly)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.part")
+    tmp = temporary_path(path)
     rec = _new_stream(rid, name)
     try:
         rec.save(tmp)

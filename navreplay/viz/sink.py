@@ -59,6 +59,7 @@ import rerun.blueprint as rrb
 
 from navreplay.geo import quat_wxyz_to_xyzw
 from navreplay.metrics import nav_errors
+from navreplay.outputs import release
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, Stream, StreamKind
 from navreplay.viz import convert
@@ -105,7 +106,7 @@ AXIS_COLORS = ((230, 60, 60), (60, 200, 60), (70, 110, 240))
 
 
 def _remove(path: Path) -> None:
-    path.unlink(missing_ok=True)
+    release(path)
 
 
 # ------------------------------------------------------------------------------------------
