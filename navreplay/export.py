@@ -51,9 +51,7 @@ import json
 import math
 import os
 import re
-import secrets
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +60,7 @@ import numpy as np
 from navreplay.filters.base import Nav, NavError, State
 from navreplay.geo import earth
 from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, quat_to_euler, skew
+from navreplay.outputs import Output, atomic_path, check_outputs
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, StreamKind
 
@@ -217,27 +216,11 @@ def _nav_covariance(result: RunResult) -> np.ndarray:
 # output files: refuse to overwrite, write atomically
 
 
-def check_targets(paths: Iterable[Path], force: bool) -> None:
-    """Raise FileExistsError naming the first existing target unless ``force``."""
-    if force:
-        return
-    existing = [p for p in paths if Path(p).exists()]
-    if existing:
-        more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
-        raise FileExistsError(f"{existing[0]} exists{more}; use --force to overwrite")
-
-
-@contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
-    """A temporary path beside ``path``, renamed onto it when the block succeeds."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.part")
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+def check_targets(paths: Iterable[Path], force: bool, option: str = "--export") -> None:
+    """Refuse targets that exist (unless ``force``), are directories or cannot be written
+    (:func:`navreplay.outputs.check_outputs`), before anything is written."""
+    unique = dict.fromkeys(Path(p) for p in paths)
+    check_outputs([Output(p, option) for p in unique], force=force)
 
 
 def write_text(path: Path, text: str) -> None:

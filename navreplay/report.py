@@ -104,7 +104,7 @@ def _page(title: str, subtitle: str, body: Sequence[str]) -> str:
 
 def _write(path: Path, text: str, force: bool) -> Path:
     path = Path(path)
-    check_targets([path], force)
+    check_targets([path], force, "--report")
     write_text(path, text)
     return path
 
@@ -165,7 +165,7 @@ def write_run_report(path: Path, outputs: Sequence[FilterOutput],
     """Write the HTML report of filters replayed over one recording."""
     from navreplay import figures
 
-    check_targets([Path(path)], force)
+    check_targets([Path(path)], force, "--report")
     body = ["<h2>Summary</h2>"]
     if summaries:
         body.append(summary_table(summaries))
@@ -225,7 +225,7 @@ def write_ensemble_report(path: Path, ensembles: Mapping[str, Any],
     """Write the HTML report of a Monte Carlo campaign (EnsembleResult per filter label)."""
     from navreplay import figures
 
-    check_targets([Path(path)], force)
+    check_targets([Path(path)], force, "--report")
     body = ["<h2>Ensemble summary</h2>", summary_table(summaries)]
     for i, (label, ens) in enumerate(ensembles.items()):
         body.append(f"<h2>{html.escape(label)}</h2>")

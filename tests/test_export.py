@@ -20,6 +20,7 @@ from navreplay.geo import earth
 from navreplay.geo.rotations import quat_to_dcm
 from navreplay.io import read_recording, write_recording
 from navreplay.metrics import EnsembleStats, run_metrics
+from navreplay.outputs import OutputError
 from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 
@@ -231,7 +232,7 @@ def test_csv_columns_units_and_values(runs) -> None:
 def test_refuses_to_overwrite(runs) -> None:
     out, rec, _, outputs, _ = runs
     before = (out / "ins.csv").read_bytes()
-    with pytest.raises(FileExistsError, match="exists.*--force"):
+    with pytest.raises(OutputError, match="exists.*--force"):
         export.export_run(out, outputs[:1], rec)
     assert (out / "ins.csv").read_bytes() == before
     export.export_run(out, outputs[:1], rec, force=True)
@@ -255,5 +256,5 @@ def test_ensemble_export(runs, tmp_path) -> None:
                                atol=1e-12)
     assert {"nees_mean [-]", "nees_lo [-]", "nees_hi [-]", "sigma_v_N [m/s]"} <= set(col)
     assert np.all(col["nees_lo [-]"] < col["nees_hi [-]"])
-    with pytest.raises(FileExistsError):
+    with pytest.raises(OutputError):
         export.export_ensemble(tmp_path, {"gps-ins": ens})

@@ -17,6 +17,7 @@ from navreplay.cli import cli
 from navreplay.filters.registry import load_filter
 from navreplay.io import read_recording, write_recording
 from navreplay.metrics import EnsembleStats, run_metrics
+from navreplay.outputs import OutputError
 from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 
@@ -63,7 +64,7 @@ def test_run_report(drive, tmp_path) -> None:
     # the summary table: one row per filter, units under the names
     table = text.split("<table>")[1].split("</table>")[0]
     assert "<td>ins</td>" in table and "<td>gps-ins</td>" in table and "[m]" in table
-    with pytest.raises(FileExistsError):
+    with pytest.raises(OutputError):
         report.write_run_report(tmp_path / "r.html", outs, summaries, title="drive")
 
 
