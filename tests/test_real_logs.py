@@ -322,3 +322,17 @@ def test_init_table_lands_in_the_filter(short_bags: dict[str, Path], tmp_path: P
                   ok=False)
     err = [ln for ln in out.splitlines() if ln.startswith("Error")]
     assert len(err) == 1 and "missing an attitude (roll_deg, pitch_deg, yaw_deg)" in err[0]
+
+
+def test_time_header_or_log(short_bags: dict[str, Path], tmp_path: Path) -> None:
+    """IMU messages logged 50 ms after their stamps: the header stamps (default) replay
+    exactly, the log times lag the motion (errors of decimetres); stamps that are all zero fall
+    back to the log times with a warning."""
+    ref = ["--reference", "/ground_truth/odom"]
+    header = _ins(short_bags["lag"], *ref, tmp=tmp_path)
+    log = _ins(short_bags["lag"], *ref, "--time", "log", tmp=tmp_path)
+    assert header["pos_rms_h"] < 0.01
+    assert 0.1 < log["pos_rms_h"] < 0.5  # 50 ms late at up to 10 m/s
+    s, out = _run("ins", str(short_bags["zero"]), "--init", "reference", *ref, tmp=tmp_path)
+    assert "header stamps are zero; the log times are used" in out
+    assert s["ins"]["pos_err_final_h"] < 0.01

@@ -30,7 +30,8 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> str:
         warnings.simplefilter("always")
         try:
             recording, sources = read_streams(path, topics=options.topics,
-                                              frames=options.stream_frames, validate=False)
+                                              frames=options.stream_frames, validate=False,
+                                              time=options.time)
         except RecordingError as exc:
             return "\n".join([*lines, "", f"streams: cannot be read: {exc}"])
     lines += ["", "streams (what `navreplay run` replays):"]

@@ -47,7 +47,7 @@ from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.reader import is_rosbag
+from navreplay.io.reader import is_rosbag, sample_times
 from navreplay.io.schemas import normalize_type_name
 from navreplay.streams import Recording, Stream, StreamKind, seconds
 
@@ -142,19 +142,18 @@ def _xyz(v: Any) -> list[float]:
     return [v.x, v.y, v.z]
 
 
-def _stamp(m: Any, t: int) -> int:
-    s = m.header.stamp
-    ns = int(s.sec) * 1_000_000_000 + int(s.nanosec)
-    return ns if ns else t
-
-
 def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
-                  declared: Convention | None) -> Reference:
-    """A reference from decoded messages (log time, message) of one topic."""
+                  declared: Convention | None, time: str = "header") -> Reference:
+    """A reference from decoded messages (log time, message) of one topic, in log-time order;
+    times as ``--time`` says (:func:`navreplay.io.reader.sample_times`)."""
     if not items:
         raise ReferenceError(f"reference {source}: the topic has no messages")
+    items = sorted(items, key=lambda item: item[0])
     msgs = [m for _, m in items]
-    t_ns = np.array([_stamp(m, t) for t, m in items], dtype=np.int64)
+    stamps = np.array([int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
+                       for m in msgs], dtype=np.int64)
+    t_ns = sample_times(stamps, np.array([t for t, _ in items], dtype=np.int64), time,
+                        f"reference {source}")
     if type_name == NAV_SAT_FIX:
         keep = np.array([m.status.status >= 0 for m in msgs])
         pos = np.array([[math.radians(m.latitude), math.radians(m.longitude), m.altitude]
@@ -328,7 +327,7 @@ def _from_columns(where: str, c: Mapping[str, np.ndarray], t0_ns: int,
 
 
 def read_reference(spec: str, log: Path, recording: Recording,
-                   declared: Convention | None) -> Reference:
+                   declared: Convention | None, time: str = "header") -> Reference:
     """Read ``spec`` (a file when one exists by that name, else a topic of ``log``)."""
     path = Path(spec)
     if path.is_file() and path.suffix.lower() in (".csv", ".tum", ".txt"):
@@ -337,7 +336,7 @@ def read_reference(spec: str, log: Path, recording: Recording,
         raise ReferenceError(f"reference {spec}: no such file, and not a topic (topics start "
                              "with '/')")
     type_name, items = _iter_topic(log, spec)
-    return from_messages(spec, type_name, items, declared)
+    return from_messages(spec, type_name, items, declared, time)
 
 
 def origin_from_gnss(ref: Reference, recording: Recording) -> np.ndarray:
