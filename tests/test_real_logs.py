@@ -336,3 +336,24 @@ def test_time_header_or_log(short_bags: dict[str, Path], tmp_path: Path) -> None
     s, out = _run("ins", str(short_bags["zero"]), "--init", "reference", *ref, tmp=tmp_path)
     assert "header stamps are zero; the log times are used" in out
     assert s["ins"]["pos_err_final_h"] < 0.01
+
+
+def test_campaign_applies_log_options_per_recording(short_bags: dict[str, Path],
+                                                    tmp_path: Path) -> None:
+    """`run ins a b --init reference --reference TOPIC`: each recording gets its own start and
+    reference (per-run scores at the millimetre level); a recording the options do not fit
+    stops the campaign with one line naming it."""
+    out = tmp_path / "c.json"
+    bags = [str(short_bags["mag"]), str(short_bags["lag"])]
+    args = ["run", "ins", *bags, "--init", "reference", "--reference", "/ground_truth/odom",
+            "--no-viz", "--summary", str(out)]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    runs = json.loads(out.read_text())["runs"]
+    assert [r["recording"] for r in runs] == bags
+    for r in runs:
+        assert r["filters"]["ins"]["pos_rms_h"] < 0.01 and r["filters"]["ins"]["distance"] > 150
+    bad = str(short_bags["mag_flipped"])
+    res = CliRunner().invoke(cli, [*args[:3], bad, *args[4:]])
+    err = [ln for ln in res.output.splitlines() if ln.startswith("Error")]
+    assert res.exit_code != 0 and len(err) == 1 and bad in err[0] and "--frame mag=flu" in err[0]
