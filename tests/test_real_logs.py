@@ -96,11 +96,26 @@ def test_position_only_reference_and_no_start(bags: dict[str, Path], tmp_path: P
     assert "cannot start" in out and "--init align" in out and "Traceback" not in out
 
 
-def test_info_shows_frames_and_choice(bags: dict[str, Path]) -> None:
+def test_info_shows_frames_and_choice(bags: dict[str, Path], tmp_path: Path) -> None:
+    """One table, one row per topic: the stream it feeds, frame id, axes, rate; reference
+    topics marked; the reasons below it. The same for a navreplay MCAP file."""
     res = CliRunner().invoke(cli, ["info", str(bags["enu"]), "--frame", "imu=frd"])
     assert res.exit_code == 0, res.output
-    assert "imu_link" in res.output and "declared frd" in res.output
-    assert "/ground_truth/odom" in res.output and "50.000 Hz" in res.output
+    rows = {ln.split()[0]: ln.split() for ln in res.output.splitlines()
+            if ln.startswith("/") and len(ln.split()) > 4}
+    assert rows["/imu/data"][2:5] == ["imu", "imu_link", "FRD"] and "50.000" in rows["/imu/data"]
+    assert rows["/ground_truth/odom"][2] == "(reference)"
+    assert "declared frd" in res.output
+    assert sum(ln.startswith("/imu/data") for ln in res.output.splitlines()) == 1
+    mcap = tmp_path / "sim.mcap"
+    assert CliRunner().invoke(cli, ["simulate", "stationary", "-o", str(mcap), "--duration",
+                                    "5"]).exit_code == 0
+    res = CliRunner().invoke(cli, ["info", str(mcap)])
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    assert sum(ln.startswith("topic ") for ln in lines) == 1
+    assert sum(ln.startswith("/imu ") for ln in lines) == 1
+    assert "imu_frd" in next(ln for ln in lines if ln.startswith("/imu "))
 
 
 # --------------------------------------------------------------------------------------------
