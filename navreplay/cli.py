@@ -313,6 +313,10 @@ def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--frame", "frames", multiple=True, metavar="KIND=flu|frd|enu|ned",
                      help="Axis convention of a stream's topic, or reference=enu|ned; "
                           "repeatable."),
+        click.option("--time", "time", type=click.Choice(["header", "log"]), default="header",
+                     show_default=True,
+                     help="Sample times: header stamps (log times where the stamps are zero "
+                          "or do not increase, with a warning), or the log (receive) times."),
     ]
     for opt in reversed(opts):
         fn = opt(fn)
@@ -324,7 +328,7 @@ def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
 @_log_flags
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
               help="TOML file with [topics] and [frames] tables.")
-def info(recording: str, topics: Sequence[str], frames: Sequence[str],
+def info(recording: str, topics: Sequence[str], frames: Sequence[str], time: str,
          config: str | None) -> None:
     """Topics, types, frames, rates, gaps and metadata of a RECORDING (MCAP file, rosbag2
     folder or .db3), and which stream each topic feeds.
@@ -337,7 +341,7 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str],
     from navreplay.logs.options import log_options
 
     click.echo(describe_log(recording, log_options(
-        topics, frames, config=_load_config(config, "topics", "frames"))))
+        topics, frames, config=_load_config(config, "topics", "frames"), time=time)))
     report = None if is_rosbag(Path(recording)) else recording_info(recording)
     if report is not None and report.damage:
         raise click.ClickException(f"{recording}: DAMAGED ({report.message_count} messages "
@@ -436,7 +440,7 @@ def _looks_like_recording(arg: str) -> bool:
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
         summary: str | None, workers: int, rate: float | None, output_rate: float,
-        topics: Sequence[str], frames: Sequence[str], init: str | None,
+        topics: Sequence[str], frames: Sequence[str], time: str, init: str | None,
         reference: str | None, no_frame_check: bool,
         export: str | None, report: str | None, max_imu_gap: float | None,
         force: bool) -> None:
@@ -472,7 +476,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         viz=_viz_options(save, spawn, connect, serve, no_viz),
         summary_path=Path(summary) if summary else None,
         workers=workers, pacing=rate, output_rate=output_rate, max_imu_gap=max_imu_gap,
-        log=log_options(topics, frames, init, reference, cfg, not no_frame_check),
+        log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time),
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None, force=force,
     )

@@ -1,8 +1,10 @@
 """Independent ROS 2 bags for the real-log tests, written with rosbags (not navreplay's writer).
 
-The motion comes from navreplay.sim (a still start, then a drive with turns); the bag holds a
-sensor_msgs/Imu, a NavSatFix, and the truth as nav_msgs/Odometry (local positions from the
-first truth point), in ENU/FLU or NED/FRD conventions.
+The motion comes from navreplay.sim (a still start of 60 s, then a drive with turns); the bag
+holds a sensor_msgs/Imu, a NavSatFix, and the truth as nav_msgs/Odometry (local positions from
+the first truth point), in ENU/FLU or NED/FRD conventions; optionally a MagneticField (the WMM
+field at the site, rotated into the body), the truth as PoseStamped and
+PoseWithCovarianceStamped, and IMU log times that lag the header stamps.
 """
 
 from __future__ import annotations
@@ -38,6 +40,15 @@ def trajectory(duration: float, rate: float):
     return generate(route, duration, rate)
 
 
+def wmm_ned(lat: float, lon: float, h: float) -> np.ndarray:
+    """The World Magnetic Model 2025 field NED [T] at the bags' date (pygeomag)."""
+    from pygeomag import GeoMag
+
+    r = GeoMag(coefficients_file="wmm/WMM_2025.COF").calculate(
+        glat=math.degrees(lat), glon=math.degrees(lon), alt=h / 1000.0, time=2025.45)
+    return np.array([r.x, r.y, r.z]) * 1e-9
+
+
 def _stamp(t_ns: int):
     return T["builtin_interfaces/msg/Time"](sec=int(t_ns // 1_000_000_000),
                                            nanosec=int(t_ns % 1_000_000_000))
@@ -56,21 +67,39 @@ def _q(q_wxyz):
                                              z=float(q_wxyz[3]), w=float(q_wxyz[0]))
 
 
+TACTICAL = (0.5, 0.1, 3e-4 * 9.81, 50e-6 * 9.81)
+"""IMU grade of ``noisy=True``: gyro bias [deg/h], ARW [deg/sqrt(h)], accelerometer bias
+[m/s^2], velocity random walk [m/s^2/sqrt(Hz)] (1-sigma; biases drawn per axis)."""
+
+
 def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: str = "mcap",
               imu_frame: str | None = None, duration: float = 300.0, rate: float = 50.0,
-              seed: int = 0) -> Path:
-    """Write a rosbag2 folder at ``path``; ``imu_frame`` overrides the IMU frame id (a
-    mislabelled FRD IMU: ``ned=True, imu_frame="imu_link"``)."""
+              seed: int = 0, imu_grade: tuple[float, float, float, float] | None = None,
+              gyro_bias_dph: tuple[float, float, float] | None = None, mag: bool = False,
+              mag_frame: str | None = None, mag_bias_nT: float = 0.0, poses: bool = False,
+              imu_lag: float = 0.0, imu_zero_stamps: bool = False) -> Path:
+    """Write a rosbag2 folder at ``path``.
+
+    ``imu_frame`` overrides the IMU frame id (a mislabelled FRD IMU: ``ned=True,
+    imu_frame="imu_link"``), ``mag_frame`` the magnetometer's (data in the bag's body
+    convention). ``imu_grade`` (as :data:`TACTICAL`) replaces the noise of ``noisy`` (which still
+    sets the GNSS noise); ``gyro_bias_dph`` fixes the gyro bias instead of drawing it.
+    ``mag_bias_nT`` adds a hard-iron bias along body x. ``imu_lag`` [s]: the IMU messages are
+    logged that long after their header stamps; ``imu_zero_stamps``: their stamps are zero.
+    """
     rng = np.random.default_rng(seed)
     tr = trajectory(duration, rate)
     t_ns = T0_NS + np.rint(tr.t * 1e9).astype(np.int64)
     w, f = tr.omega_ib_b.copy(), tr.f_b.copy()
-    if noisy:
+    grade = imu_grade or (TACTICAL if noisy else None)
+    if grade is not None:
         dt = 1.0 / rate
-        w += math.radians(0.5) / 3600 * rng.standard_normal(3)
-        w += math.radians(0.1) / 60 / math.sqrt(dt) * rng.standard_normal(w.shape)
-        f += 3e-4 * 9.81 * rng.standard_normal(3)
-        f += 50e-6 * 9.81 / math.sqrt(dt) * rng.standard_normal(f.shape)
+        bias = (np.asarray(gyro_bias_dph) if gyro_bias_dph is not None
+                else grade[0] * rng.standard_normal(3))
+        w += np.radians(bias) / 3600
+        w += math.radians(grade[1]) / 60 / math.sqrt(dt) * rng.standard_normal(w.shape)
+        f += grade[2] * rng.standard_normal(3)
+        f += grade[3] / math.sqrt(dt) * rng.standard_normal(f.shape)
     body = "base_link_frd" if ned else "base_link"
     world = "odom_ned" if ned else "odom"
     imu_frame = imu_frame or ("imu_frd" if ned else "imu_link")
@@ -78,8 +107,10 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
     q = tr.q_nb if ned else quat_mult(quat_mult(Q_ENU_NED, tr.q_nb), Q_FRD_FLU)
     pos_w = d_ned if ned else d_ned[:, [1, 0, 2]] * np.array([1.0, 1.0, -1.0])
     v_b = np.einsum("kji,kj->ki", _dcm(tr.q_nb), tr.v_n)
+    m_b = np.einsum("kji,j->ki", _dcm(tr.q_nb), wmm_ned(LAT, LON, H))
+    m_b[:, 0] += mag_bias_nT * 1e-9
     if not ned:
-        w, f, v_b = w * FLIP, f * FLIP, v_b * FLIP
+        w, f, v_b, m_b = w * FLIP, f * FLIP, v_b * FLIP, m_b * FLIP
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     gps_sigma = np.array([1.5, 1.5, 3.0]) if noisy else np.array([0.01, 0.01, 0.01])
     with Writer(path, version=9, storage_plugin=plugin) as bag:
@@ -87,16 +118,33 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
         c_fix = bag.add_connection("/gnss/fix", "sensor_msgs/msg/NavSatFix", typestore=STORE)
         c_odo = bag.add_connection("/ground_truth/odom", "nav_msgs/msg/Odometry",
                                    typestore=STORE)
+        if poses:
+            c_pose = bag.add_connection("/truth/pose", "geometry_msgs/msg/PoseStamped",
+                                        typestore=STORE)
+            c_pcov = bag.add_connection("/truth/pose_cov",
+                                        "geometry_msgs/msg/PoseWithCovarianceStamped",
+                                        typestore=STORE)
         zero9 = np.zeros(9)
         ocov = zero9.copy()
         ocov[0] = -1.0
+        lag = int(round(imu_lag * 1e9))
         for k in range(1, len(t_ns)):
             msg = T["sensor_msgs/msg/Imu"](
-                header=_header(t_ns[k], imu_frame), orientation=_q([1.0, 0, 0, 0]),
+                header=_header(0 if imu_zero_stamps else t_ns[k], imu_frame),
+                orientation=_q([1.0, 0, 0, 0]),
                 orientation_covariance=ocov, angular_velocity=_v3(w[k - 1]),
                 angular_velocity_covariance=zero9, linear_acceleration=_v3(f[k - 1]),
                 linear_acceleration_covariance=zero9)
-            bag.write(c_imu, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+            bag.write(c_imu, int(t_ns[k]) + lag, STORE.serialize_cdr(msg, msg.__msgtype__))
+        if mag:
+            c_mag = bag.add_connection("/imu/mag", "sensor_msgs/msg/MagneticField",
+                                       typestore=STORE)
+            frame = mag_frame or ("imu_frd" if ned else "imu_link")
+            for k in range(0, len(t_ns), int(rate) // 10):
+                msg = T["sensor_msgs/msg/MagneticField"](
+                    header=_header(t_ns[k], frame), magnetic_field=_v3(m_b[k]),
+                    magnetic_field_covariance=zero9)
+                bag.write(c_mag, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
         step = int(rate)
         for k in range(0, len(t_ns), step):
             pos = tr.pos[k].copy()
@@ -123,7 +171,29 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
             msg = T["nav_msgs/msg/Odometry"](header=_header(t_ns[k], world), child_frame_id=body,
                                              pose=pose, twist=twist)
             bag.write(c_odo, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+            if poses:
+                for conn, msg in (
+                        (c_pose, T["geometry_msgs/msg/PoseStamped"](
+                            header=_header(t_ns[k], world), pose=pose.pose)),
+                        (c_pcov, T["geometry_msgs/msg/PoseWithCovarianceStamped"](
+                            header=_header(t_ns[k], world), pose=pose))):
+                    bag.write(conn, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
     return path
+
+
+def truth_table(duration: float = 300.0, rate: float = 50.0) -> dict[str, np.ndarray]:
+    """The truth of :func:`write_bag` at its Odometry times (10 Hz): ``t_ns``, geodetic
+    ``lla`` [rad, rad, m], ``enu`` [m] from the first point, ``q_enu_flu`` (w, x, y, z),
+    ``v_n`` [m/s] and ``euler`` (roll, pitch, yaw [rad], FRD -> NED)."""
+    from navreplay.geo.rotations import quat_to_euler
+
+    tr = trajectory(duration, rate)
+    k = np.arange(0, len(tr.t), int(rate) // 10)
+    d_ned = earth.lla_to_ned_offset(LAT, LON, H, *tr.pos[k].T)
+    return {"t_ns": T0_NS + np.rint(tr.t[k] * 1e9).astype(np.int64), "lla": tr.pos[k],
+            "enu": d_ned[:, [1, 0, 2]] * np.array([1.0, 1.0, -1.0]),
+            "q_enu_flu": quat_mult(quat_mult(Q_ENU_NED, tr.q_nb[k]), Q_FRD_FLU),
+            "v_n": tr.v_n[k], "euler": quat_to_euler(tr.q_nb[k])}
 
 
 def _dcm(q):

@@ -224,7 +224,9 @@ def test_read_reports_nan_with_file_topic_and_time(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("how", ["goes backwards", "repeats"])
 def test_read_reports_bad_time_with_file_topic_and_time(tmp_path: Path, how: str) -> None:
-    """Header stamps that disagree with the (ordered) log times of a file from elsewhere."""
+    """Header stamps that disagree with the (ordered) log times of a file from elsewhere: the
+    log times are used, with a warning naming the file, topic and message; with the log times
+    bad as well, the error names the file, topic and time."""
     depth = random_stream("depth", np.random.default_rng(6), duration_s=10)
     t_ns = depth.t_ns.copy()
     if how == "repeats":
@@ -233,9 +235,16 @@ def test_read_reports_bad_time_with_file_topic_and_time(tmp_path: Path, how: str
         t_ns[5], t_ns[6] = t_ns[6], t_ns[5]
     stream = Stream("depth", t_ns, depth.columns, depth.frame_id)
     path = _raw_file(tmp_path / "back.mcap", "/depth", "depth", stream, log_times=depth.t_ns)
+    with pytest.warns(RecordingWarning, match="header stamps do not increase") as caught:
+        rec = read_recording(path)
+    msg = next(str(w.message) for w in caught if "do not increase" in str(w.message))
+    assert msg.startswith(f"{path}: topic /depth (navreplay_msgs/msg/Depth): ")
+    assert f"message 6, stamp {t_ns[6]} ns" in msg
+    np.testing.assert_array_equal(rec["depth"].t_ns, depth.t_ns)
+    path = _raw_file(tmp_path / "back_log.mcap", "/depth", "depth", stream, log_times=t_ns)
     t = t_ns[6]
     with pytest.raises(RecordingError) as info:
-        read_recording(path)
+        read_recording(path, time="log")
     msg = str(info.value)
     assert msg.startswith(f"{path}: topic /depth (navreplay_msgs/msg/Depth): timestamp {how}")
     assert f"at t = {(t - depth.t_ns[0]) * 1e-9:.9f} s ({t} ns)" in msg

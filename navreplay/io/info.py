@@ -273,8 +273,9 @@ def _json_lines(title: str, obj: dict) -> list[str]:
     return lines
 
 
-def format_info(info: RecordingInfo) -> str:
-    """A human-readable, multi-line summary of :func:`recording_info`'s result."""
+def format_info(info: RecordingInfo, topic_table: bool = True) -> str:
+    """A human-readable, multi-line summary of :func:`recording_info`'s result (without the
+    per-topic table when ``topic_table`` is False: ``navreplay info`` prints its own)."""
     meta = info.metadata
     lines = [
         f"{info.path}  ({_size(info.size_bytes)}, profile {info.profile or '-'!r}, "
@@ -296,7 +297,7 @@ def format_info(info: RecordingInfo) -> str:
         )
     header = ("topic", "type", "stream", "count", "rate [Hz]", "start [s]", "end [s]")
     rows = [header]
-    for t in info.topics:
+    for t in info.topics if topic_table else ():
         rows.append(
             (
                 t.topic,
@@ -309,7 +310,7 @@ def format_info(info: RecordingInfo) -> str:
             )
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
-    for r in rows:
+    for r in rows if topic_table else ():
         cells = [
             c.ljust(w) if i < 3 else c.rjust(w)
             for i, (c, w) in enumerate(zip(r, widths, strict=True))

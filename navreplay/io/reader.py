@@ -62,6 +62,7 @@ class _Topic:
         self.in_order = True
         self._next = 0
         self._count = 0
+        self.log_ns: np.ndarray | None = None  # log times of finish()'s rows
 
     @property
     def label(self) -> str:
@@ -186,6 +187,7 @@ class _Topic:
             order = by_time if order is None else order[by_time]
         if order is not None:
             out = {k: v[order] for k, v in out.items()}
+        self.log_ns = log_time
         return out
 
 
@@ -356,9 +358,11 @@ def read_recording(
     validate: bool = True,
     topics: Mapping[StreamKind | str, str] | None = None,
     frames: Mapping[StreamKind | str, Convention | str] | None = None,
+    time: str = "header",
 ) -> Recording:
     """Read a recording into columnar streams (see :func:`read_streams`)."""
-    return read_streams(path, kinds=kinds, validate=validate, topics=topics, frames=frames)[0]
+    return read_streams(path, kinds=kinds, validate=validate, topics=topics, frames=frames,
+                        time=time)[0]
 
 
 def read_streams(
@@ -368,6 +372,7 @@ def read_streams(
     validate: bool = True,
     topics: Mapping[StreamKind | str, str] | None = None,
     frames: Mapping[StreamKind | str, Convention | str] | None = None,
+    time: str = "header",
 ) -> tuple[Recording, dict[StreamKind, TopicSource]]:
     """Read a recording into columnar streams.
 
@@ -389,11 +394,15 @@ def read_streams(
     frames : mapping of StreamKind or str to Convention or str, optional
         Declared axis convention of a stream's topic (``flu``/``frd`` for imu and mag,
         ``enu``/``ned`` for gps_vel), replacing the guess from the frame id.
+    time : {"header", "log"}
+        Sample times: the messages' ``header.stamp`` (falling back to the log times, with a
+        warning, for a topic whose stamps are zero or do not increase), or the log (receive)
+        times (:func:`sample_times`).
 
     Returns
     -------
     Recording
-        Streams in :class:`StreamKind` order; ``t_ns`` are the header stamps [ns]. The metadata is
+        Streams in :class:`StreamKind` order; ``t_ns`` as ``time`` says [ns]. The metadata is
         the file's ``navreplay`` record, or ``Metadata()`` for a recording without one, whose
         ``t0_ns`` is then its first message's log time.
     sources : dict[StreamKind, TopicSource]
@@ -422,7 +431,8 @@ def read_streams(
     if is_rosbag(path):
         from navreplay.io.rosbag import read_rosbag
 
-        return read_rosbag(path, wanted, explicit, topic_kinds, declared, validate, topics)
+        return read_rosbag(path, wanted, explicit, topic_kinds, declared, validate, topics,
+                           time)
     plan = _Plan(where, wanted, topic_kinds)
     try:
         f = open(path, "rb")  # noqa: SIM115 - closed below
@@ -470,10 +480,42 @@ def read_streams(
         if len(topic.frame_ids) > 1:
             _warn(f"{topic.label}: frame_id changes between messages "
                   f"({sorted(topic.frame_ids)}); using {frame_id!r}")
+        fields = topic.finish()
+        fields["t_ns"] = sample_times(fields["t_ns"], topic.log_ns, time, topic.label)
         streams[kind], sources[kind] = build_stream(
-            kind, topic.finish(), frame_id, topic.label, aux, t0_ns, validate,
+            kind, fields, frame_id, topic.label, aux, t0_ns, validate,
             declared.get(kind), topic.channel.topic, plan.others(kind, topic.channel.topic))
     return Recording(streams=streams, metadata=meta, t0_ns=t0_ns), sources
+
+
+TIME_SOURCES = ("header", "log")
+"""``--time``: sample times from the header stamps (default) or the log (receive) times."""
+
+
+def sample_times(stamps: np.ndarray, log_ns: np.ndarray | None, time: str, label: str
+                 ) -> np.ndarray:
+    """A topic's sample times [ns], rows in log-time order.
+
+    ``time="log"``: the log times. ``"header"``: the header stamps, unless any is zero or they
+    do not increase (a driver that never sets them, or stamps that jump back): then the log
+    times, with a warning that says why.
+    """
+    if time not in TIME_SOURCES:
+        raise ValueError(f"time source {time!r}: use header or log")
+    log = stamps if log_ns is None else np.asarray(log_ns, dtype=np.int64)
+    if time == "log" or not stamps.size:
+        return log.copy()
+    why = ""
+    if not stamps.all():
+        why = f"{int(np.sum(stamps == 0))} header stamps are zero"
+    elif np.any(np.diff(stamps) <= 0):
+        k = int(np.argmax(np.diff(stamps) <= 0)) + 1
+        why = (f"header stamps do not increase (message {k}, stamp {int(stamps[k])} ns after "
+               f"{int(stamps[k - 1])} ns)")
+    if why and not np.array_equal(log, stamps):
+        _warn(f"{label}: {why}; the log times are used (--time log says so explicitly)")
+        return log.copy()
+    return stamps
 
 
 def topic_map(topics: Mapping[StreamKind | str, str] | None) -> dict[str, StreamKind]:

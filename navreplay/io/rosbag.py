@@ -8,8 +8,9 @@ standard type store. Messages are deserialised one by one (rosbags), their field
 same leaf paths as the bulk decoder (:mod:`navreplay.io.schemas`), and then decoded, converted
 and checked exactly like an MCAP topic (:func:`navreplay.io.reader.build_stream`).
 
-Times: ``header.stamp`` is the sample time. A topic whose stamps are all zero (a driver that
-never sets them) takes the bag's log (receive) times instead, with a warning.
+Times: ``header.stamp`` is the sample time, or the log (receive) time with ``--time log``; a
+topic whose stamps are zero or do not increase takes the log times, with a warning
+(:func:`navreplay.io.reader.sample_times`).
 """
 
 from __future__ import annotations
@@ -128,17 +129,6 @@ def _open(path: Path) -> _Bag:
     return _Bag(path)
 
 
-def stamps(msgs: list[Any], log_ns: np.ndarray, label: str) -> np.ndarray:
-    """Header stamps [ns], or the log times when no message has one (with a warning)."""
-    t = np.array([m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in msgs],
-                 dtype=np.int64)
-    if t.size and not t.any():
-        warnings.warn(RecordingWarning(
-            f"{label}: header stamps are all zero; the bag's log times are used"), stacklevel=3)
-        return log_ns.copy()
-    return t
-
-
 def read_rosbag(
     path: Path,
     wanted: set[StreamKind],
@@ -147,9 +137,10 @@ def read_rosbag(
     declared: Mapping[StreamKind, Convention],
     validate: bool,
     topics: Mapping[StreamKind | str, str] | None = None,
+    time: str = "header",
 ) -> tuple[Recording, dict[StreamKind, Any]]:
     """Read the streams of a rosbag2 folder or .db3 (arguments as in ``read_streams``)."""
-    from navreplay.io.reader import build_stream, check_named_topics, pick_topic
+    from navreplay.io.reader import build_stream, check_named_topics, pick_topic, sample_times
 
     where = str(path)
     with _open(path) as bag:
@@ -192,10 +183,12 @@ def read_rosbag(
         topic = chosen[kind]
         label = f"{where}: topic {topic} ({SPECS[kind].message.name})"
         fields = _fields(msgs, kind, label)
-        fields["t_ns"] = stamps(msgs, np.asarray(log_t, dtype=np.int64), label)
-        order = np.argsort(np.asarray(log_t, dtype=np.int64), kind="stable")
+        log_ns = np.asarray(log_t, dtype=np.int64)
+        order = np.argsort(log_ns, kind="stable")
         if np.any(order != np.arange(order.size)):
             fields = {k: v[order] for k, v in fields.items()}
+            log_ns = log_ns[order]
+        fields["t_ns"] = sample_times(fields["t_ns"], log_ns, time, label)
         frames = {m.header.frame_id for m in msgs}
         frame_id = msgs[0].header.frame_id if msgs else SPECS[kind].frame_id
         if len(frames) > 1:
@@ -214,7 +207,7 @@ def _fields(msgs: list[Any], kind: StreamKind, label: str) -> dict[str, np.ndarr
     except (AttributeError, TypeError, ValueError) as exc:
         raise RecordingError(f"{label}: messages lack a field of "
                              f"{SPECS[kind].message.name} ({exc})") from None
-    out: dict[str, np.ndarray] = {"frame_id": fields["frame_id"]}
+    out: dict[str, np.ndarray] = {"frame_id": fields["frame_id"], "t_ns": fields["t_ns"]}
     for name, columns in REDUCE[kind].items():
         value = np.asarray(fields[name])
         out[name] = np.array(value if columns is None else value[:, columns])

@@ -124,10 +124,7 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
         return _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
-    if job.log is not None and job.log != type(job.log)():
-        raise _params.ParamError("--topic, --frame, --init, --reference and the [topics], "
-                                 "[frames], [initial] tables need a single recording")
-    tasks = file_tasks(job.recordings)
+    tasks = file_tasks(job.recordings, job.log)
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
     return campaign(tasks, job.filters, job.viz, default, job.summary_path, job.workers,

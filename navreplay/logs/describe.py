@@ -1,5 +1,7 @@
-"""``navreplay info``: per topic its type, frame id, the stream it feeds (and which topic was
-picked when several could), the convention it is read in and why, rate and gaps."""
+"""``navreplay info``: one table of the topics — type, the stream each feeds (and which topic was
+picked when several could; topics usable as ``--reference`` are marked), frame id, the axis
+convention it is read in, count, rate, span and gaps — and below it why each convention was
+assumed."""
 
 from __future__ import annotations
 
@@ -11,42 +13,73 @@ from navreplay.io.errors import RecordingError
 from navreplay.io.info import format_info, recording_info
 from navreplay.io.reader import is_rosbag, read_streams
 from navreplay.logs.options import LogOptions
+from navreplay.logs.reference import REFERENCE_TYPES
+from navreplay.streams import seconds
 
 
 def describe_log(path: str | Path, options: LogOptions | None = None) -> str:
-    """The ``info`` text of a log: the container summary, then how each stream is fed."""
+    """The ``info`` text of a log: the container summary, the topic table, the conventions."""
     options = options or LogOptions()
     path = Path(path)
-    lines = []
     if is_rosbag(path):
         from navreplay.io.rosbag import bag_topics
 
-        lines.append(f"{path}  (rosbag2)")
-        for topic, type_name, fmt, count in bag_topics(path):
-            lines.append(f"  {topic}  {type_name}  {count} messages  ({fmt})")
+        listing = [(t, ty, n, None, None) for t, ty, _, n in bag_topics(path)]
+        lines = [f"{path}  (rosbag2, {sum(r[2] for r in listing)} messages)"]
     else:
-        lines.append(format_info(recording_info(path)))
+        info = recording_info(path)
+        listing = [(t.topic, t.schema or "-", t.count, t.start_ns, t.end_ns)
+                   for t in info.topics]
+        lines = [format_info(info, topic_table=False)]
+    problem = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             recording, sources = read_streams(path, topics=options.topics,
-                                              frames=options.stream_frames, validate=False)
+                                              frames=options.stream_frames, validate=False,
+                                              time=options.time)
         except RecordingError as exc:
-            return "\n".join([*lines, "", f"streams: cannot be read: {exc}"])
-    lines += ["", "streams (what `navreplay run` replays):"]
+            recording, sources, problem = None, {}, str(exc)
+    by_topic = {src.topic: kind for kind, src in sources.items()}
+    rows = [("topic", "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
+             "end [s]", "gaps")]
+    for topic, type_name, count, start, end in listing:
+        kind = by_topic.get(topic)
+        stream = "(reference)" if type_name in REFERENCE_TYPES else "-"
+        frame, axes, gaps = "", "", ""
+        if kind is not None and recording is not None:
+            s, src = recording[kind], sources[kind]
+            stream, frame = kind.value, src.frame_id
+            axes = src.convention.value.upper() if src.convention else "-"
+            gaps = "yes" if gap_report(s, recording.t0_ns) else "no"
+            if len(s):  # the stream's sample times (header stamps or log times)
+                start, end = int(s.t_ns[0]), int(s.t_ns[-1])
+        t0 = recording.t0_ns if recording is not None else (start or 0)
+        span = (end - start) * 1e-9 if start is not None and end is not None else 0.0
+        rows.append((topic, type_name, stream, frame, axes, str(count),
+                     f"{(count - 1) / span:.3f}" if count > 1 and span > 0 else "-",
+                     f"{float(seconds(start, t0)):.3f}" if start is not None else "-",
+                     f"{float(seconds(end, t0)):.3f}" if end is not None else "-", gaps))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines.append("")
+    for r in rows:
+        cells = [c.rjust(w) if 5 <= i <= 8 else c.ljust(w)
+                 for i, (c, w) in enumerate(zip(r, widths, strict=True))]
+        lines.append("  ".join(cells).rstrip())
+    if problem is not None:
+        return "\n".join([*lines, "", f"streams: cannot be read: {problem}"])
+    lines += ["", f"streams (what `navreplay run` replays; times from {options.time} "
+                  f"{'stamps' if options.time == 'header' else 'times'}):"]
     for kind, src in sources.items():
-        s = recording[kind]
-        dur = (s.t_ns[-1] - s.t_ns[0]) * 1e-9 if len(s) > 1 else 0.0
-        rate = (len(s) - 1) / dur if dur > 0 else 0.0
-        conv = src.convention.value.upper() if src.convention else "-"
         picked = f"; picked over {', '.join(src.picked_from)}" if src.picked_from else ""
-        lines.append(f"  {kind.value:<10} <- {src.topic} ({src.type_name}), frame id "
-                     f"{src.frame_id!r}{picked}")
-        lines.append(f"  {'':<10}    convention {conv}: {src.reason}")
-        gaps = gap_report(s, recording.t0_ns)
-        lines.append(f"  {'':<10}    {len(s)} samples, {rate:.3f} Hz, "
-                     f"{gaps or 'no gaps'}")
+        axes = (f"{src.convention.value.upper()}: {src.reason}" if src.convention
+                else "no axes to convert")
+        lines.append(f"  {kind.value:<8} <- {src.topic}: {axes}{picked}")
+        gaps = gap_report(recording[kind], recording.t0_ns)
+        if gaps:
+            lines.append(f"  {'':<8}    {gaps}")
     for w in caught:
-        if "several topics" in str(w.message):
-            lines.append(f"  ! {w.message}")
+        text = str(w.message)
+        if "several topics" in text or "header stamps" in text:
+            lines.append(f"  ! {text}")
     return "\n".join(lines)

@@ -14,10 +14,12 @@ method's, one by one (with their sigmas).
 * heading by gyrocompassing: the mean rate levelled, psi = atan2(-w_y, w_x); its 1-sigma
   sqrt(s_w^2 + b_g^2) / (Omega cos lat) with s_w the standard error of the 1 s block means and
   b_g the larger of the assumed gyro bias (``gyro_bias_sigma_dph``) and the bias the data show
-  (vertical rate minus -Omega sin lat, horizontal magnitude minus Omega cos lat). Used when that
-  sigma is below :data:`GYROCOMPASS_MAX_SIGMA`;
+  (vertical rate minus -Omega sin lat, horizontal magnitude minus Omega cos lat), combined with
+  the levelling sigma times tan(lat) (a tilt turns vertical earth rate into horizontal). Used
+  when that sigma is below :data:`GYROCOMPASS_MAX_SIGMA`;
 * else magnetometer heading (levelled field + WMM declination), 1-sigma
-  :data:`MAG_HEADING_SIGMA` (local disturbances);
+  :data:`MAG_HEADING_SIGMA` (local disturbances) combined with the levelling sigma times
+  tan(dip);
 * else GNSS course over ground at the first fix faster than :data:`COG_MIN_SPEED`, carried back
   to the start by the integrated yaw rate; 1-sigma from the velocity noise and
   :data:`COG_SIDESLIP` (the vehicle moving along its x axis).
@@ -53,6 +55,8 @@ STILL_VEL_SIGMA = 0.02
 MIN_STILL_S = 2.0
 DEFAULT_ACCEL_BIAS = 1000.0 * MICRO_G
 OMEGA_E = 7.292115e-5
+REF_DIFF_VEL_SIGMA = 0.05
+"""1-sigma [m/s] of a start velocity differenced from a reference without velocity."""
 
 
 class InitialisationError(RecordingError):
@@ -107,19 +111,26 @@ def _interp_stream(s: Stream, t_ns: int, col: str) -> np.ndarray:
 
 
 def from_reference(recording: Recording) -> dict[str, Any]:
-    """Initial solution from the reference's sample at the first IMU sample."""
+    """Initial solution from the reference's sample at the first IMU sample (a reference
+    without velocity: the difference of its two positions around that time)."""
     ref = recording[StreamKind.TRUTH]
     imu = recording[StreamKind.IMU]
     t_ns = int(max(imu.t_ns[0], ref.t_ns[0]))
     nav: dict[str, Any] = {"t_ns": t_ns, "method": "reference"}
     if "pos" in ref.columns:
         nav["pos"] = list(_interp_stream(ref, t_ns, "pos"))
+    s_v = 0.01
     if "v_n" in ref.columns:
         nav["v_n"] = list(_interp_stream(ref, t_ns, "v_n"))
+    elif "pos" in ref.columns:  # a pose reference: the velocity of its bracketing positions
+        i = int(np.clip(np.searchsorted(ref.t_ns, t_ns, side="right"), 1, len(ref) - 1))
+        d = earth.lla_to_ned_offset(*ref["pos"][i - 1], *ref["pos"][i])
+        nav["v_n"] = list(np.asarray(d, dtype=float) / ((ref.t_ns[i] - ref.t_ns[i - 1]) * 1e-9))
+        s_v = REF_DIFF_VEL_SIGMA
     if "q_nb" in ref.columns:
         i = int(np.clip(np.searchsorted(ref.t_ns, t_ns), 0, len(ref) - 1))
         nav["q_nb"] = list(ref["q_nb"][i])
-    nav["sigma"] = {"pos_ned": [0.1] * 3, "v_n": [0.01] * 3, "phi": [math.radians(0.1)] * 3}
+    nav["sigma"] = {"pos_ned": [0.1] * 3, "v_n": [s_v] * 3, "phi": [math.radians(0.1)] * 3}
     return nav
 
 
@@ -162,7 +173,7 @@ def align(recording: Recording, table: Mapping[str, Any]) -> tuple[dict[str, Any
     s_level = math.sqrt(b_a**2 + float(np.mean(f.var(axis=0))) / stop) / g
     C_lb = euler_to_dcm(np.array([roll, pitch, 0.0]))
     lat = float(pos[0])
-    how, yaw, s_yaw = _heading(recording, stop, C_lb, lat, pos, table)
+    how, yaw, s_yaw = _heading(recording, stop, C_lb, lat, pos, table, s_level)
     nav = {
         "t_ns": t_ns, "pos": list(pos), "v_n": [0.0, 0.0, 0.0],
         "q_nb": list(euler_to_quat(np.array([roll, pitch, yaw]))),
@@ -177,7 +188,7 @@ def align(recording: Recording, table: Mapping[str, Any]) -> tuple[dict[str, Any
 
 
 def _heading(recording: Recording, stop: int, C_lb: np.ndarray, lat: float, pos: np.ndarray,
-             table: Mapping[str, Any]) -> tuple[str, float, float]:
+             table: Mapping[str, Any], s_level: float) -> tuple[str, float, float]:
     imu = recording[StreamKind.IMU]
     reasons = []
     if "yaw_deg" in table:
@@ -193,7 +204,9 @@ def _heading(recording: Recording, stop: int, C_lb: np.ndarray, lat: float, pos:
         horiz = OMEGA_E * math.cos(lat)
         shown = max(abs(wm[2] + OMEGA_E * math.sin(lat)), abs(math.hypot(wm[0], wm[1]) - horiz))
         b_g = max(float(table.get("gyro_bias_sigma_dph", 0.0)) * DEG_PER_HOUR, shown)
-        sigma = math.sqrt(s_w**2 + b_g**2) / max(horiz, 1e-12)
+        # a level error phi couples the vertical earth rate into the horizontal: tan(lat) phi
+        sigma = math.hypot(math.sqrt(s_w**2 + b_g**2) / max(horiz, 1e-12),
+                           s_level * abs(math.tan(lat)))
         if sigma < GYROCOMPASS_MAX_SIGMA:
             return "gyrocompassing", math.atan2(-wm[1], wm[0]), sigma
         reasons.append(f"gyrocompassing would give {math.degrees(sigma):.0f} deg")
@@ -203,16 +216,23 @@ def _heading(recording: Recording, stop: int, C_lb: np.ndarray, lat: float, pos:
         m_l = C_lb @ mag["m_b"][:n].mean(axis=0)
         field = wmm_field_ned(pos[0], pos[1], pos[2], int(imu.t_ns[0]))
         decl = math.atan2(field[1], field[0])
-        return "magnetometer", float(wrap_angle(math.atan2(-m_l[1], m_l[0]) + decl)), \
-            MAG_HEADING_SIGMA
+        # a level error phi turns the vertical field into the horizontal: tan(dip) phi
+        tan_dip = abs(field[2]) / max(math.hypot(field[0], field[1]), 1e-12)
+        sigma = math.hypot(MAG_HEADING_SIGMA, s_level * tan_dip)
+        return (_because("magnetometer", reasons),
+                float(wrap_angle(math.atan2(-m_l[1], m_l[0]) + decl)), sigma)
     reasons.append("no magnetometer")
     cog = _course_over_ground(recording, stop, C_lb)
     if cog is not None:
-        return cog
+        return _because(cog[0], reasons), cog[1], cog[2]
     reasons.append(f"no GNSS course over {COG_MIN_SPEED:g} m/s")
     raise InitialisationError(
         "--init align cannot find the heading (" + "; ".join(reasons) + "): give yaw_deg in "
         "[initial], a magnetometer topic, or use --init reference")
+
+
+def _because(how: str, reasons: list[str]) -> str:
+    return f"{how}; {', '.join(reasons)}" if reasons else how
 
 
 def _course_over_ground(recording: Recording, stop: int, C_lb: np.ndarray
@@ -312,6 +332,6 @@ def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[
         names = {"pos": "a position (lat_deg, lon_deg, h)", "v_n": "a velocity (v_n)",
                  "q_nb": "an attitude (roll_deg, pitch_deg, yaw_deg)"}
         raise InitialisationError(
-            f"--init {method.value}: no {', no '.join(names[k] for k in missing)}; add them to "
-            "[initial] or use --init align")
+            f"--init {method.value}: missing {', '.join(names[k] for k in missing)}; add them "
+            "to [initial] or use --init align")
     return nav, note

@@ -67,6 +67,8 @@ class LogOptions:
         A topic of the log or a TUM / CSV file.
     check_frames : bool
         Check the data against the frames before replaying.
+    time : str
+        ``header`` (stamps, falling back to log times when unusable) or ``log`` (``--time``).
     """
 
     topics: Mapping[StreamKind, str] = dataclasses.field(default_factory=dict)
@@ -75,6 +77,7 @@ class LogOptions:
     initial: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     reference: str | None = None
     check_frames: bool = True
+    time: str = "header"
 
     @property
     def stream_frames(self) -> dict[StreamKind, Convention]:
@@ -106,6 +109,7 @@ def log_options(
     reference: str | None = None,
     config: Mapping[str, Any] | None = None,
     check_frames: bool = True,
+    time: str | None = None,
 ) -> LogOptions:
     """Parse ``--topic``/``--frame`` items and the TOML tables into :class:`LogOptions`."""
     config = config or {}
@@ -149,4 +153,8 @@ def log_options(
             raise ParamError(f"--init {init}: use metadata, reference, align or table") from None
     if method is InitMethod.REFERENCE and reference is None:
         raise ParamError("--init reference needs --reference TOPIC|FILE")
-    return LogOptions(topic_map, frame_map, method, dict(initial), reference, check_frames)
+    time = time or "header"
+    if time not in ("header", "log"):
+        raise ParamError(f"--time {time}: use header or log")
+    return LogOptions(topic_map, frame_map, method, dict(initial), reference, check_frames,
+                      time)

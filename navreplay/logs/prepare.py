@@ -43,12 +43,12 @@ def open_log(path: str | Path, options: LogOptions | None = None) -> PreparedLog
     path = Path(path)
     with salvage_watch() as lost:
         recording, sources = read_streams(path, topics=options.topics,
-                                          frames=options.stream_frames)
+                                          frames=options.stream_frames, time=options.time)
     recording.metadata.extra.setdefault("source", str(path))
     notes: list[str] = []
     if options.reference is not None:
         ref = read_reference(options.reference, path, recording,
-                             options.frames.get(REFERENCE))
+                             options.frames.get(REFERENCE), options.time)
         stream, note = reference_stream(ref, recording, options.initial)
         recording.streams[StreamKind.TRUTH] = stream
         notes.append(note)

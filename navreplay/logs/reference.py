@@ -37,7 +37,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +47,7 @@ from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.reader import is_rosbag
+from navreplay.io.reader import is_rosbag, sample_times
 from navreplay.io.schemas import normalize_type_name
 from navreplay.streams import Recording, Stream, StreamKind, seconds
 
@@ -142,19 +142,18 @@ def _xyz(v: Any) -> list[float]:
     return [v.x, v.y, v.z]
 
 
-def _stamp(m: Any, t: int) -> int:
-    s = m.header.stamp
-    ns = int(s.sec) * 1_000_000_000 + int(s.nanosec)
-    return ns if ns else t
-
-
 def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
-                  declared: Convention | None) -> Reference:
-    """A reference from decoded messages (log time, message) of one topic."""
+                  declared: Convention | None, time: str = "header") -> Reference:
+    """A reference from decoded messages (log time, message) of one topic, in log-time order;
+    times as ``--time`` says (:func:`navreplay.io.reader.sample_times`)."""
     if not items:
         raise ReferenceError(f"reference {source}: the topic has no messages")
+    items = sorted(items, key=lambda item: item[0])
     msgs = [m for _, m in items]
-    t_ns = np.array([_stamp(m, t) for t, m in items], dtype=np.int64)
+    stamps = np.array([int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
+                       for m in msgs], dtype=np.int64)
+    t_ns = sample_times(stamps, np.array([t for t, _ in items], dtype=np.int64), time,
+                        f"reference {source}")
     if type_name == NAV_SAT_FIX:
         keep = np.array([m.status.status >= 0 for m in msgs])
         pos = np.array([[math.radians(m.latitude), math.radians(m.longitude), m.altitude]
@@ -221,11 +220,60 @@ def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
     return type_name, items
 
 
-def _file_rows(path: Path) -> Iterator[list[str]]:
-    with open(path, newline="") as f:
-        for line in f:
-            if line.strip() and not line.lstrip().startswith("#"):
-                yield line
+def _table(path: Path, csv_header: bool
+           ) -> tuple[list[str] | None, np.ndarray, np.ndarray | None]:
+    """Rows of numbers of a TUM (whitespace) or CSV (a header row, commas) file; blank lines
+    and ``#`` comments skipped. Every row must have the header's (or the first row's) number
+    of fields, all finite numbers, and the time (``t_ns``, ``t`` or the first column) must
+    increase: anything else raises :class:`ReferenceError` naming the file and line.
+
+    Returns the header (CSV), the values and, for a ``t_ns`` column, its exact integers."""
+    where = f"reference {path}"
+    try:
+        with open(path, newline="") as f:
+            lines = [(n, line.strip()) for n, line in enumerate(f, start=1)
+                     if line.strip() and not line.lstrip().startswith("#")]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ReferenceError(f"{where}: cannot be read ({exc})") from None
+    header = None
+    if csv_header:
+        if not lines:
+            raise ReferenceError(f"{where}: no header row")
+        header = [c.strip() for c in next(csv.reader([lines.pop(0)[1]]))]
+    rows = (csv.reader(line for _, line in lines) if csv_header
+            else (line.split() for _, line in lines))
+    width = len(header) if header is not None else None
+    ti = next((header.index(k) for k in ("t_ns", "t") if header and k in header), 0)
+    exact = header is not None and "t_ns" in header
+    out: list[list[float]] = []
+    t_ns: list[int] = []
+    for (n, _), fields in zip(lines, rows, strict=True):
+        here = f"{where}, line {n}"
+        if width is None:
+            width = len(fields)
+            if width != 8:
+                raise ReferenceError(f"{here}: {width} columns; a TUM file has 8 "
+                                     "(t x y z qx qy qz qw)")
+        if len(fields) != width:
+            raise ReferenceError(f"{here}: {len(fields)} columns, expected {width}")
+        try:
+            values = [float(v) for v in fields]
+            if exact:
+                t_ns.append(int(fields[ti].strip()))
+                values[ti] = t_ns[-1]
+        except ValueError:
+            raise ReferenceError(f"{here}: not a number in {','.join(fields)!r}") from None
+        bad = [header[i] if header else f"column {i + 1}"
+               for i, v in enumerate(values) if not math.isfinite(v)]
+        if bad:
+            raise ReferenceError(f"{here}: non-finite {', '.join(bad)}")
+        if out and values[ti] <= out[-1][ti]:
+            raise ReferenceError(f"{here}: time {fields[ti].strip()} does not increase "
+                                 "(it must, row after row)")
+        out.append(values)
+    if len(out) < 2:
+        raise ReferenceError(f"{where}: fewer than 2 rows")
+    return header, np.array(out), np.array(t_ns, dtype=np.int64) if exact else None
 
 
 def _times(t: np.ndarray, t0_ns: int) -> np.ndarray:
@@ -237,23 +285,13 @@ def _times(t: np.ndarray, t0_ns: int) -> np.ndarray:
 
 def from_file(path: Path, t0_ns: int, declared: Convention | None) -> Reference:
     """A reference from a TUM or CSV file (module docstring)."""
-    where = f"reference {path}"
-    try:
-        if path.suffix.lower() == ".csv":
-            with open(path, newline="") as f:
-                rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
-            if not rows:
-                raise ReferenceError(f"{where}: no rows")
-            cols = {k.strip(): np.array([float(r[k]) for r in rows]) for k in rows[0]}
-            return _from_columns(where, cols, t0_ns, declared)
-        data = np.loadtxt(list(_file_rows(path)), ndmin=2)
-    except ReferenceError:
-        raise
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ReferenceError(f"{where}: cannot be read ({exc})") from None
-    if data.shape[1] != 8:
-        raise ReferenceError(f"{where}: a TUM file has 8 columns (t x y z qx qy qz qw), "
-                             f"this one {data.shape[1]}")
+    is_csv = path.suffix.lower() == ".csv"
+    header, data, t_ns = _table(path, is_csv)
+    if header is not None:
+        cols = {k: data[:, i] for i, k in enumerate(header)}
+        if t_ns is not None:
+            cols["t_ns"] = t_ns
+        return _from_columns(f"reference {path}", cols, t0_ns, declared)
     world = declared or Convention.ENU
     local, q_nb = to_ned(world, data[:, 1:4], data[:, 4:8], world is Convention.NED)
     return Reference(str(path), _times(data[:, 0], t0_ns), local_ned=local, q_nb=q_nb)
@@ -262,7 +300,7 @@ def from_file(path: Path, t0_ns: int, declared: Convention | None) -> Reference:
 def _from_columns(where: str, c: Mapping[str, np.ndarray], t0_ns: int,
                   declared: Convention | None) -> Reference:
     if "t_ns" in c:
-        t_ns = c["t_ns"].astype(np.int64)
+        t_ns = np.asarray(c["t_ns"]).astype(np.int64)
     elif "t" in c:
         t_ns = _times(c["t"], t0_ns)
     else:
@@ -289,7 +327,7 @@ def _from_columns(where: str, c: Mapping[str, np.ndarray], t0_ns: int,
 
 
 def read_reference(spec: str, log: Path, recording: Recording,
-                   declared: Convention | None) -> Reference:
+                   declared: Convention | None, time: str = "header") -> Reference:
     """Read ``spec`` (a file when one exists by that name, else a topic of ``log``)."""
     path = Path(spec)
     if path.is_file() and path.suffix.lower() in (".csv", ".tum", ".txt"):
@@ -298,7 +336,7 @@ def read_reference(spec: str, log: Path, recording: Recording,
         raise ReferenceError(f"reference {spec}: no such file, and not a topic (topics start "
                              "with '/')")
     type_name, items = _iter_topic(log, spec)
-    return from_messages(spec, type_name, items, declared)
+    return from_messages(spec, type_name, items, declared, time)
 
 
 def origin_from_gnss(ref: Reference, recording: Recording) -> np.ndarray:

@@ -103,6 +103,8 @@ class RunTask:
         Write the simulated recording to this file (never overwritten unless ``force``).
     force : bool
         Overwrite ``keep`` if it exists.
+    log : LogOptions, optional
+        Topics, frames, time source, initialisation and reference applied to ``path``.
     """
 
     index: int
@@ -112,6 +114,8 @@ class RunTask:
     seed: int | None = None
     keep: str | None = None
     force: bool = False
+    log: Any = None
+    """How to read a log from elsewhere (:class:`navreplay.logs.options.LogOptions`)."""
 
     @property
     def source(self) -> str:
@@ -149,9 +153,10 @@ def monte_carlo_tasks(
     return tasks
 
 
-def file_tasks(paths: Iterable[str | Path]) -> list[RunTask]:
-    """Tasks replaying over recording files, one per path."""
-    return [RunTask(i, path=str(p)) for i, p in enumerate(paths)]
+def file_tasks(paths: Iterable[str | Path], log: Any = None) -> list[RunTask]:
+    """Tasks replaying over recording files, one per path, each read with the same ``log``
+    options (:class:`navreplay.logs.options.LogOptions`)."""
+    return [RunTask(i, path=str(p), log=log) for i, p in enumerate(paths)]
 
 
 # --------------------------------------------------------------------------------------------
@@ -187,9 +192,9 @@ class RunOutput:
 def load_task(task: RunTask) -> Recording:
     """Read or simulate the task's recording (writing it to ``task.keep`` if asked)."""
     if task.path is not None:
-        from navreplay.io import read_recording
+        from navreplay.logs.prepare import open_log
 
-        return read_recording(task.path)
+        return open_log(task.path, task.log).recording
     if task.scenario is None:
         raise ValueError(f"run {task.index}: neither a recording path nor a scenario")
     from navreplay.sim.scenario import simulate
