@@ -300,7 +300,7 @@ def test_align_heading_sources_and_their_sigmas(short_bags: dict[str, Path]) -> 
                                                  "accel_bias_sigma": 3e-4})
     assert how == "align (gyrocompassing)"
     assert abs(err) < sigma < math.radians(0.5)
-    how, err, sigma = _align(short_bags["nav"])  # the default 1 mg levelling widens it
+    how, err, sigma = _align(short_bags["nav"])  # levelling sigma from the grade shown
     assert how == "align (gyrocompassing)" and abs(err) < sigma
     mems = {"accel_bias_sigma": 0.03, "gyro_bias_sigma_dph": 10.0}
     how, err, sigma = _align(short_bags["mems"], mems)
@@ -372,3 +372,21 @@ def test_campaign_applies_log_options_per_recording(short_bags: dict[str, Path],
     res = CliRunner().invoke(cli, [*args[:3], bad, *args[4:], "--force"])
     err = [ln for ln in res.output.splitlines() if ln.startswith("Error")]
     assert res.exit_code != 0 and len(err) == 1 and bad in err[0] and "--frame mag=flu" in err[0]
+
+
+@pytest.mark.filterwarnings("ignore::navreplay.io.errors.RecordingWarning")
+def test_levelling_sigma_follows_the_grade_the_gyro_shows(short_bags: dict[str, Path]) -> None:
+    """Without [initial] accel_bias_sigma the levelling sigma comes from the grade the gyro
+    shows at rest: navigation grade gives a few thousandths of a degree, MEMS about a degree;
+    in both the roll and pitch errors lie within 3 sigma (horizontal accelerometer biases are
+    not observable at rest, so the sigma must cover them)."""
+    claimed = {}
+    for name in ("nav", "mems"):
+        prepared = open_log(short_bags[name], log_options(init="align"))
+        nav = prepared.recording.metadata.initial_nav
+        roll, pitch, _ = quat_to_euler(np.asarray(nav["q_nb"]))
+        s_level = nav["sigma"]["phi"][0]
+        assert max(abs(roll), abs(pitch)) < 3 * s_level, name
+        claimed[name] = math.degrees(s_level)
+        assert ("navigation grade" if name == "nav" else "MEMS grade") in " ".join(prepared.notes)
+    assert claimed["nav"] < 0.01 and 0.3 < claimed["mems"] < 3.0

@@ -9,8 +9,11 @@ method's, one by one (with their sigmas).
 ``align`` (self-alignment, while still at the start, :func:`~navreplay.logs.framecheck.still_window`):
 
 * levelling: roll = atan2(-f_y, -f_z), pitch = atan2(f_x, hypot(f_y, f_z)) of the mean specific
-  force (FRD); 1-sigma sqrt(b_a^2 + s_f^2 / n) / g with b_a the assumed accelerometer bias
-  (``[initial] accel_bias_sigma``, default 1 mg) and s_f the sample scatter;
+  force (FRD); 1-sigma sqrt(b_a^2 + s_f^2 / n) / g with s_f the sample scatter and b_a the
+  accelerometer bias: ``[initial] accel_bias_sigma`` when given, else the typical bias of the
+  grade the gyro shows at rest (:func:`grade_accel_bias`), and never less than the vertical
+  bias the data show (``| |f| - g |``): horizontal biases are not observable at rest, so the
+  sigma must come from what the sensor is, not from the fit;
 * heading by gyrocompassing: the mean rate levelled, psi = atan2(-w_y, w_x); its 1-sigma
   sqrt(s_w^2 + b_g^2) / (Omega cos lat) with s_w the standard error of the 1 s block means and
   b_g the larger of the assumed gyro bias (``gyro_bias_sigma_dph``) and the bias the data show
@@ -53,7 +56,13 @@ CHORD_LENGTH = 30.0
 GNSS_POS_SIGMA = 5.0
 STILL_VEL_SIGMA = 0.02
 MIN_STILL_S = 2.0
-DEFAULT_ACCEL_BIAS = 1000.0 * MICRO_G
+GRADE_ACCEL_BIAS: tuple[tuple[float, float, str], ...] = (
+    (0.05 * DEG_PER_HOUR, 50.0 * MICRO_G, "navigation"),
+    (5.0 * DEG_PER_HOUR, 1000.0 * MICRO_G, "tactical"),
+    (math.inf, 20000.0 * MICRO_G, "MEMS"),
+)
+"""(largest gyro bias shown at rest [rad/s], typical accelerometer bias [m/s^2], grade name):
+the accelerometer bias assumed for levelling when ``[initial] accel_bias_sigma`` is not given."""
 OMEGA_E = 7.292115e-5
 REF_DIFF_VEL_SIGMA = 0.05
 """1-sigma [m/s] of a start velocity differenced from a reference without velocity."""
@@ -169,7 +178,11 @@ def align(recording: Recording, table: Mapping[str, Any]) -> tuple[dict[str, Any
     fm = f.mean(axis=0)
     roll = math.atan2(-fm[1], -fm[2])
     pitch = math.atan2(fm[0], math.hypot(fm[1], fm[2]))
-    b_a = float(table.get("accel_bias_sigma", DEFAULT_ACCEL_BIAS))
+    if "accel_bias_sigma" in table:
+        b_a, grade = float(table["accel_bias_sigma"]), "[initial] accel_bias_sigma"
+    else:
+        b_a, grade = grade_accel_bias(imu, stop)
+    b_a = max(b_a, abs(float(np.linalg.norm(fm)) - g))
     s_level = math.sqrt(b_a**2 + float(np.mean(f.var(axis=0))) / stop) / g
     C_lb = euler_to_dcm(np.array([roll, pitch, 0.0]))
     lat = float(pos[0])
@@ -182,9 +195,29 @@ def align(recording: Recording, table: Mapping[str, Any]) -> tuple[dict[str, Any
         "method": f"align ({how})",
     }
     note = (f"align over the still start ({t[stop - 1]:.1f} s): roll {math.degrees(roll):.2f}, "
-            f"pitch {math.degrees(pitch):.2f} deg (1-sigma {math.degrees(s_level):.3f} deg), "
+            f"pitch {math.degrees(pitch):.2f} deg (1-sigma {math.degrees(s_level):.3f} deg, "
+            f"accelerometer bias {b_a / (1000.0 * MICRO_G):.2g} mg: {grade}), "
             f"yaw {math.degrees(yaw):.2f} deg by {how} (1-sigma {math.degrees(s_yaw):.2f} deg)")
     return nav, note
+
+
+def gyro_bias_shown(omega_ib_b: np.ndarray) -> float:
+    """A lower bound of the gyro bias [rad/s] from rates at rest (N, 3): at rest the true rate
+    is the earth rate whatever the attitude, so ``| |mean rate| - Omega |`` <= |bias|."""
+    return abs(float(np.linalg.norm(omega_ib_b.mean(axis=0))) - OMEGA_E)
+
+
+def grade_accel_bias(imu: Stream, stop: int) -> tuple[float, str]:
+    """Typical accelerometer bias [m/s^2] of the grade the gyro shows over the still window
+    (:data:`GRADE_ACCEL_BIAS`), and a note naming the grade; tactical without gyros."""
+    if "omega_ib_b" not in imu.columns:
+        return GRADE_ACCEL_BIAS[1][1], "tactical assumed (no gyro to tell the grade)"
+    shown = gyro_bias_shown(imu["omega_ib_b"][:stop])
+    for limit, b_a, name in GRADE_ACCEL_BIAS:
+        if shown <= limit:
+            return b_a, (f"{name} grade, the gyro shows {shown / DEG_PER_HOUR:.2g} deg/h at "
+                         "rest")
+    raise AssertionError("unreachable: the last grade has no limit")
 
 
 def _heading(recording: Recording, stop: int, C_lb: np.ndarray, lat: float, pos: np.ndarray,
