@@ -201,8 +201,9 @@ class Reference:
         """The columns at filter times ``t`` [s since the recording start].
 
         Samples at equal times are taken as they are; between samples, vectors are interpolated
-        linearly (longitude unwrapped) and quaternions normalised-linearly. Times outside the
-        reference are clipped to its ends.
+        linearly (longitude unwrapped) and quaternions normalised-linearly. Times within half a
+        sample interval outside the reference take its end sample; times further outside are
+        NaN (not scored: a reference that ends early does not freeze).
 
         Returns
         -------
@@ -235,6 +236,12 @@ class Reference:
             if name == "pos":
                 v[:, 1] = wrap_angle(v[:, 1])
             out[name] = v
+        if len(ts) > 1:
+            half = 0.5 * float(np.median(np.diff(ts)))
+            outside = (t < ts[0] - half) | (t > ts[-1] + half)
+            if outside.any():
+                for v in out.values():
+                    v[outside] = np.nan
         return out
 
     def distance(self, t: np.ndarray | None = None) -> np.ndarray | float:
@@ -557,7 +564,7 @@ class RunMetrics:
             p = self.nav.pos_ned
             if np.isfinite(p).any():
                 h = np.hypot(p[:, 0], p[:, 1])
-                out["pos_err_final_h"] = float(h[-1])
+                out["pos_err_final_h"] = float(h[np.isfinite(h)][-1])
                 out["pos_rms_h"] = float(rms(h, None))
                 out["pos_rms_v"] = float(rms(p[:, 2], None))
                 if out.get("distance", 0.0) > 0.0:

@@ -74,10 +74,11 @@ def test_yaw_difference_wrapped():
 
 def test_truth_interpolation():
     rec = _recording(n=11, dt=1.0)
-    tr = metrics.truth_at(rec, np.array([2.0, 2.25, 10.0, 12.0]))
+    tr = metrics.truth_at(rec, np.array([2.0, 2.25, 10.0, 10.4, 12.0]))
     R_M, _ = earth.radii(LAT0)
     north = (tr["pos"][:, 0] - LAT0) * (R_M + H0)
-    np.testing.assert_allclose(north, [20.0, 22.5, 100.0, 100.0], atol=1e-6)
+    # within half a sample past the end: the end sample; further: not scored
+    np.testing.assert_allclose(north, [20.0, 22.5, 100.0, 100.0, np.nan], atol=1e-6)
 
 
 def test_cep50_and_distance_travelled_on_constructed_data():
@@ -250,6 +251,25 @@ def test_a_reference_with_positions_only_scores_positions():
     assert "pos_rms_h" in s and "vel_rms" not in s and "att_rms_heading" not in s
     assert s["distance"] == pytest.approx(100.0, rel=1e-6)  # 10 m/s for 10 s, from positions
     assert s["nees_dof"] == 1
+
+
+def test_a_reference_that_ends_early_leaves_later_outputs_unscored():
+    """Outputs past the reference's end (beyond half a sample) are not scored against its last
+    sample: the final error is the last one inside the reference."""
+    rec = _recording(n=21)
+    t = np.array([5.0, 10.0, 15.0])
+    err = np.array([[3.0, -4.0, 1.0], [1.0, 2.0, -1.0], [100.0, 0.0, 0.0]])
+    states = (State("dh", "m", Quantity.POSITION, NavError(Nav.H), nees=True),)
+    res = _result(rec, t, pos_ned_err=err, states=states, P=np.tile(np.eye(1), (3, 1, 1)))
+    truth = rec[StreamKind.TRUTH]
+    keep = slice(0, 11)  # 0..10 s
+    short = Stream(StreamKind.TRUTH, truth.t_ns[keep], {k: v[keep] for k, v in truth.columns.items()})
+    m = metrics.run_metrics(res, metrics.Reference(short, T0_NS))
+    assert np.isfinite(m.nav.pos_ned[:2]).all() and np.isnan(m.nav.pos_ned[2]).all()
+    assert np.isnan(m.nees[2])
+    s = m.summary()
+    assert s["pos_err_final_h"] == pytest.approx(np.hypot(1.0, 2.0), rel=1e-6)
+    assert s["pos_rms_h"] == pytest.approx(np.sqrt((25.0 + 5.0) / 2), rel=1e-6)
 
 
 def test_format_table():
