@@ -213,6 +213,10 @@ def _all_finite(a: np.ndarray) -> bool:
     return True
 
 
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def _finite(a: np.ndarray, name: str, t: float | None) -> None:
     if not (_all_finite(a) if a.dtype == np.float64 else np.all(np.isfinite(a))):
         raise FilterDivergedError(f"{name} has non-finite entries", t)
@@ -220,6 +224,86 @@ def _finite(a: np.ndarray, name: str, t: float | None) -> None:
 
 # --------------------------------------------------------------------------------------------
 # predict / correct
+
+
+@numba.njit(cache=True)
+def transition_rows_kernel(F: np.ndarray, r: int, dt: float, M: np.ndarray) -> None:
+    """Eq. (3) compiled for an F that is zero outside its first r rows: those rows of Phi.
+
+    F (>= r, nc) holds the non-zero columns of F, the first r of them being states 0..r-1 (the
+    other rows of F, if any, are ignored: zero); M (r, nc) receives rows 0..r-1 of Phi over the
+    same columns. The other rows of Phi are those of the identity.
+    """
+    nc = F.shape[1]
+    h = 0.5 * dt * dt
+    for i in range(r):  # (F dt)^2 [0:r, :] = F[0:r, 0:r] F[0:r, :] dt^2
+        for j in range(nc):
+            s = 0.0
+            for k in range(r):
+                s += F[i, k] * F[k, j]
+            M[i, j] = F[i, j] * dt + h * s
+        M[i, i] += 1.0
+
+
+@numba.njit(cache=True)
+def predict_kernel(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> np.ndarray:
+    """Eq. (6) compiled, dense: a new ``P = Phi P Phi^T + Qd``, symmetrised; no checks."""
+    n = P.shape[0]
+    T = np.empty((n, n))
+    for i in range(n):  # T = Phi P
+        for j in range(n):
+            s = 0.0
+            for k in range(n):
+                s += Phi[i, k] * P[k, j]
+            T[i, j] = s
+    out = np.empty((n, n))
+    for i in range(n):  # T Phi^T, its lower triangle mirrored (P symmetric)
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += T[i, k] * Phi[j, k]
+            v = s + 0.5 * (Qd[i, j] + Qd[j, i])
+            out[i, j] = v
+            out[j, i] = v
+    return out
+
+
+@numba.njit(cache=True)
+def predict_rows_kernel(
+    P: np.ndarray, M: np.ndarray, cols: np.ndarray, Qd: np.ndarray, T: np.ndarray
+) -> np.ndarray:
+    """Eq. (6) compiled for a Phi that is the identity but for its first r rows.
+
+    ``Phi[0:r, cols] = M`` (r, nc) and ``Phi[0:r, other columns] = 0``, with ``cols[:r]`` =
+    0..r-1 (the diagonal); rows r.. of Phi are those of the identity (random constants and
+    random walks). Then only rows and columns 0..r-1 of ``Phi P Phi^T`` differ from P:
+    ``T = M P[cols, :]`` gives them and ``T[:, cols] M^T`` their r x r block, about
+    ``r nc (n + r)`` products instead of ``2 n^3``. T (r, n) is scratch. Returns a new
+    ``P = Phi P Phi^T + Qd``, symmetric; no checks.
+    """
+    n = P.shape[0]
+    r, nc = M.shape
+    for i in range(r):
+        for j in range(n):
+            s = 0.0
+            for k in range(nc):
+                s += M[i, k] * P[cols[k], j]
+            T[i, j] = s
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            if i < r:  # row block: j < i < r
+                s = 0.0
+                for k in range(nc):
+                    s += T[i, cols[k]] * M[j, k]
+            elif j < r:
+                s = T[j, i]
+            else:
+                s = 0.5 * (P[i, j] + P[j, i])
+            v = s + 0.5 * (Qd[i, j] + Qd[j, i])
+            out[i, j] = v
+            out[j, i] = v
+    return out
 
 
 def predict(
@@ -258,9 +342,7 @@ def predict(
         _check_matrix(Qd, (n, n), "Qd")
         _finite(Phi, "Phi", t)
     x = Phi @ x
-    P = Phi @ P @ Phi.T
-    P += Qd
-    P = 0.5 * (P + P.T)
+    P = predict_kernel(_f64(P), _f64(Phi), _f64(Qd))
     if check:
         check_covariance(P, name="predicted P", t=t)
     return x, P
