@@ -196,7 +196,7 @@ def test_enu_to_ned_conversion_of_the_papers_equations_worked_example():
     # the measurement matrix (27) converts by right-multiplication with the same map
     m_hat = np.array([1e-3, -2e-3])
     vc_ned = np.array([0.2, -0.1])
-    _, H = rai.rpm_measurement(nav, 14.0, 0.01, m_hat, vc_ned)
+    _, H, _ = rai.rpm_measurement(nav, 14.0, 0.01, m_hat, vc_ned, 0.05)
     w_enu = v_enu - T @ np.r_[vc_ned, 0.0]
     C_bn_enu = C_enu.T
     np.testing.assert_allclose(H[:, 3:6], C_bn_enu @ T, atol=1e-15)
@@ -219,7 +219,7 @@ def test_H_rpm_matches_finite_differences_of_eq25():
     _, nav = _state(36.0, 70.0, [8.0, 11.0, -0.4], [0.01, 0.06, 0.95])
     v, C = nav[3:6], rotations.quat_to_dcm(nav[6:10])
     v_rpm, k, m, v_c = 13.7, 0.018, np.array([1.2e-3, -2.1e-3]), np.array([0.21, -0.13])
-    z, H = rai.rpm_measurement(nav, v_rpm, k, m, v_c)
+    z, H, _ = rai.rpm_measurement(nav, v_rpm, k, m, v_c, 0.05)
     np.testing.assert_allclose(z, _eq25(v, C, v_rpm, k, m, v_c), atol=1e-14)
 
     def z_of(dx):  # the estimate carrying the extra error dx
@@ -241,7 +241,7 @@ def test_H_rpm_is_the_printed_form_at_zero_rpm_errors():
     _, nav = _state(36.0, 70.0, [8.0, 11.0, -0.4], [0.01, 0.06, 0.95])
     C = rotations.quat_to_dcm(nav[6:10])
     u = 13.7
-    _, H = rai.rpm_measurement(nav, u, 0.0, np.zeros(2), np.zeros(2))
+    _, H, _ = rai.rpm_measurement(nav, u, 0.0, np.zeros(2), np.zeros(2), 0.05)
     np.testing.assert_allclose(H[:, 15], [u, 0, 0])
     np.testing.assert_allclose(H[:, 16], [0, 0, u])
     np.testing.assert_allclose(H[:, 17], [0, -u, 0], atol=1e-15)
@@ -256,10 +256,11 @@ def test_rpm_residual_vanishes_for_a_consistent_truth_and_depth_measurement():
     v_c = np.array([0.2, 0.1])
     u, k = 14.0, -0.02
     nav[3:6] = C @ rotations.rotvec_to_dcm(np.r_[0.0, m])[:, 0] * u + np.r_[v_c, 0.0]
-    z, _ = rai.rpm_measurement(nav, (1 + k) * u, k, m, v_c)
+    z, _, _ = rai.rpm_measurement(nav, (1 + k) * u, k, m, v_c, 0.05)
     np.testing.assert_allclose(z, 0.0, atol=1e-13)
-    z, H = rai.depth_measurement(nav, 69.5)
+    z, H, R = rai.depth_measurement(nav, 69.5, 0.1)
     assert z[0] == pytest.approx(0.5) and H[0, 2] == 1.0 and H.sum() == 1.0
+    assert R == pytest.approx([0.01])
 
 
 # --------------------------------------------------------------------------------------------

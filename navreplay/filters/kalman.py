@@ -59,6 +59,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from navreplay.filters.base import Innovation
 from navreplay.lti import discrete_noise, discretize, van_loan  # noqa: F401  (part of this API)
 
 DEFAULT_RTOL = 1e-9
@@ -77,6 +78,27 @@ class FilterDivergedError(RuntimeError):
     def __init__(self, message: str, t: float | None = None) -> None:
         self.t = t
         super().__init__(message if t is None else f"t = {t:.6f} s: {message}")
+
+
+class Measurement(NamedTuple):
+    """A linearised measurement, the shape every measurement model returns.
+
+    ``z ~ H x + v``, ``v ~ N(0, R)``. For an error-state filter after feedback (x = 0), z is
+    the innovation itself (e.g. INS minus GPS). Apply it with ``correct(x, P, *measurement)``.
+
+    Attributes
+    ----------
+    z : ndarray, shape (m,)
+        Measurement or residual.
+    H : ndarray, shape (m, n)
+        Measurement matrix.
+    R : ndarray, shape (m,) or (m, m)
+        Noise covariance (a diagonal as a vector).
+    """
+
+    z: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
 
 
 class Correction(NamedTuple):
@@ -104,6 +126,11 @@ class Correction(NamedTuple):
     nu: np.ndarray
     S: np.ndarray
     nu_normalised: np.ndarray
+
+    def innovation(self, name: str, t: float, rows: slice = slice(None)) -> Innovation:
+        """The record a filter returns from ``update``: innovation and its covariance (of
+        the rows ``rows`` of a stacked measurement)."""
+        return Innovation(name, t, self.nu[rows], self.S[rows, rows])
 
 
 # --------------------------------------------------------------------------------------------

@@ -123,8 +123,8 @@ writes the nominal lever arm there, with its knowledge error) and fails if that 
 Implementation
 --------------
 The model, the prediction and the feedback (steps 2, 3 and 4-6) are numba kernels,
-:func:`predict_and_measure` and :func:`feedback`, around the shared correction and covariance
-check of :mod:`navreplay.filters.kalman`. The tests check the model functions against finite
+:func:`predict_and_measure` and :func:`feedback`, around the shared discretisation, prediction
+kernel, correction and covariance check of :mod:`navreplay.filters.kalman`. The tests check the model functions against finite
 differences of the nonlinear equations and against :mod:`navreplay.geo`, and the prediction
 against :func:`navreplay.filters.kalman.predict`.
 """
@@ -848,7 +848,7 @@ class TransferAlignment(Filter):
         self.sigma_phi = sigma_phi
         self.t = t
         self._reset_sums()
-        out = [Innovation("velocity", t, c.nu[ZV], c.S[ZV, ZV])]
+        out = [c.innovation("velocity", t, ZV)]
         if len(self.s):
-            out.append(Innovation("quaternion", t, c.nu[ZQ], c.S[ZQ, ZQ]))
+            out.append(c.innovation("quaternion", t, ZQ))
         return out
