@@ -73,6 +73,7 @@ from navreplay.filters.base import (
     check_states,
 )
 from navreplay.filters.kalman import FilterDivergedError
+from navreplay.io.checks import first_problem
 from navreplay.io.errors import RecordingError
 from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.streams import Recording, Stream, StreamKind
@@ -171,38 +172,18 @@ def consumed_streams(filter_cls: type[Filter]) -> tuple[StreamKind, ...] | None:
 
 
 def validate_recording(recording: Recording, source: str = "") -> None:
-    """Raise :class:`InvalidRecordingError` on non-finite samples or non-increasing time.
+    """Raise :class:`InvalidRecordingError` on non-finite samples, negative sigmas or time that
+    does not increase (the checks of :func:`navreplay.io.checks.first_problem`, which the
+    reader and the writer apply to files).
 
     Files are validated by the reader; call this for recordings built in memory. The message
     names the recording, the stream, the column and the time of the first bad sample.
     """
     source = source or recording_name(recording)
     for kind, stream in recording.streams.items():
-        t_ns = stream.t_ns
-        if len(t_ns) > 1:
-            d = np.diff(t_ns)
-            bad = np.flatnonzero(d <= 0)
-            if bad.size:
-                i = int(bad[0]) + 1
-                what = "repeats" if d[i - 1] == 0 else "goes backwards"
-                raise InvalidRecordingError(
-                    f"{source}: stream {kind}: time {what} at sample {i} "
-                    f"(t = {_t_str(t_ns[i], recording.t0_ns)} after "
-                    f"{_t_str(t_ns[i - 1], recording.t0_ns)})"
-                )
-        for name, col in stream.columns.items():
-            finite = np.isfinite(col)
-            if not finite.all():
-                rows = ~finite.reshape(len(col), -1).all(axis=1)
-                i = int(np.argmax(rows))
-                raise InvalidRecordingError(
-                    f"{source}: stream {kind}: column {name} has a non-finite value "
-                    f"({col[i].tolist()}) at sample {i} (t = {_t_str(t_ns[i], recording.t0_ns)})"
-                )
-
-
-def _t_str(t_ns: int | np.integer, t0_ns: int) -> str:
-    return f"{(int(t_ns) - int(t0_ns)) * 1e-9:.6f} s"
+        problem = first_problem(stream, recording.t0_ns)
+        if problem is not None:
+            raise InvalidRecordingError(f"{source}: stream {kind}: {problem}")
 
 
 def build_params(
