@@ -11,7 +11,7 @@ from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.ins import InsFilter
 from navreplay.geo import earth, rotations
-from navreplay.replay.engine import replay
+from navreplay.replay.engine import FilterInitError, replay
 from navreplay.sim.scenario import simulate
 
 # --------------------------------------------------------------------------------------------
@@ -313,11 +313,11 @@ def test_ins_runs_from_the_initial_solution_without_updates():
 def test_ins_needs_an_initial_solution():
     rec = simulate("stationary", {"duration": 1}, seed=0)
     rec.metadata.initial_nav = {}
-    with pytest.raises(ValueError, match="initial_nav"):
+    with pytest.raises(FilterInitError, match="filter 'ins' cannot start on .*initial_nav"):
         replay(rec, InsFilter)
     rec = simulate("stationary", {"duration": 1}, seed=0)
     del rec.metadata.initial_nav["sigma"]["phi"]
-    with pytest.raises(ValueError, match="init_att_sigma"):
+    with pytest.raises(FilterInitError, match="init_att_sigma"):
         replay(rec, InsFilter)
     replay(rec, InsFilter, {"init_att_sigma": "0.001"})
 

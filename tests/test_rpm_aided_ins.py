@@ -18,7 +18,7 @@ from navreplay.filters.registry import load_filter
 from navreplay.geo import earth, kernels, rotations
 from navreplay.metrics import position_error_ned
 from navreplay.params import ParamError, build
-from navreplay.replay.engine import replay
+from navreplay.replay.engine import FilterInitError, replay
 from navreplay.sim.scenario import get_scenario, simulate
 from navreplay.sim.scenarios.underwater import ROUTE, UnderwaterRpmParams
 from navreplay.streams import FIELDS, StreamKind
@@ -398,7 +398,8 @@ def test_registered_and_parameters():
 def test_aided_modes_need_the_speed_log():
     short = simulate("underwater-rpm", {"duration": 2.0}, seed=0)
     del short.streams[StreamKind.SPEED_LOG]
-    with pytest.raises(ValueError, match="needs the speed_log stream.*has: depth, imu, truth"):
+    with pytest.raises(FilterInitError, match="filter 'rpm-aided-ins' cannot start on .*"
+                       "needs the speed_log stream.*has: depth, imu, truth"):
         replay(short, rai.RpmAidedIns, {"mode": "rpm"})
     res = replay(short, rai.RpmAidedIns, {"mode": "pure"})
     assert res.t[-1] == pytest.approx(2.0)

@@ -112,6 +112,12 @@ class FilterFailedError(ReplayError):
     message names the filter, the recording and the time, the original is the ``__cause__``."""
 
 
+class FilterInitError(ReplayError, ValueError):
+    """A filter raised in ``__init__`` (a parameter it rejects, a missing initial solution,
+    ...); the message names the filter and the recording, the original is the ``__cause__``.
+    A ValueError too: the filter could not start from what it was given."""
+
+
 class _BadOutput(Exception):
     """An invalid estimate, before the engine names the filter, recording and time."""
 
@@ -509,6 +515,12 @@ def replay(
         ``validate`` and a non-finite sample or a timestamp that repeats or goes backwards.
     navreplay.params.ParamError
         Parameters that do not fit ``filter_cls.Params``.
+    FilterInitError
+        The filter raised while it was built; the message names the filter and the recording.
+    FilterFailedError
+        The filter raised inside ``propagate``, ``update`` or ``estimate``.
+    FilterOutputError
+        An estimate or innovation that breaks the filter contract.
     navreplay.filters.kalman.FilterDivergedError
         The filter raised it, a linear-algebra error, or produced a non-finite estimate; the
         message names the filter, the recording and the time.
@@ -524,7 +536,12 @@ def replay(
         t0_ns=recording.t0_ns,
         streams=frozenset(recording.kinds()),
     )
-    filt = filter_cls(p, context)
+    try:
+        filt = filter_cls(p, context)
+    except Exception as e:
+        raise FilterInitError(
+            f"filter {label!r} cannot start on {source}: {_one_line(e)}"
+        ) from e
     states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
     names = tuple(st.name for st in states)
     scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
