@@ -35,6 +35,13 @@ BLOCKS = {"p": rai.POS, "v": rai.VEL, "phi": rai.ATT, "ba": rai.BA, "bg": rai.BG
           "k": rai.K_RPM, "m": rai.M_RPM, "vc": rai.CURRENT, "mu": rai.MOUNT, "T": rai.DELAY}
 
 
+def _system_matrix(nav, f_b, *, curvature_derivatives=True):
+    """F of the 24 states, eqs. (14)-(19) in NED: the INS error model with depth, 0 beyond."""
+    F = np.zeros((rai.N_STATES, rai.N_STATES))
+    return ie.system_matrix(nav[0:3], nav[3:6], ie.nav_dcm(nav), f_b, vertical=ie.Vertical.DEPTH,
+                            curvature_derivatives=curvature_derivatives, out=F)
+
+
 def _state(lat_deg, d, v, euler):
     lat = np.deg2rad(lat_deg)
     C = rotations.euler_to_dcm(euler)
@@ -53,7 +60,7 @@ def test_every_F_block_matches_finite_differences_of_the_mechanization(lat_deg):
         e[j] = STEPS[j]
         F_num[:, j] = (error_rate(truth, e, f_b, w_ib_b, depth=True)
                        - error_rate(truth, -e, f_b, w_ib_b, depth=True)) / (2 * STEPS[j])
-    F = rai.system_matrix(nav, f_b)
+    F = _system_matrix(nav, f_b)
     for rname, rows in BLOCKS.items():
         for cname, cols in BLOCKS.items():
             a, b = F[rows, cols], F_num[rows, cols]
@@ -74,8 +81,8 @@ def test_every_F_block_matches_finite_differences_of_the_mechanization(lat_deg):
 def test_dropping_the_curvature_derivatives_touches_column_0_only_and_changes_little():
     _, nav = _state(36.0, 80.0, [12.0, 7.0, 0.5], [0.0, -0.05, 0.6])
     f_b = np.array([0.1, 0.0, -9.8])
-    F = rai.system_matrix(nav, f_b)
-    F0 = rai.system_matrix(nav, f_b, curvature_derivatives=False)
+    F = _system_matrix(nav, f_b)
+    F0 = _system_matrix(nav, f_b, curvature_derivatives=False)
     np.testing.assert_array_equal(np.delete(F, 0, axis=1), np.delete(F0, 0, axis=1))
     assert F0[0, 0] == 0.0 and F[0, 0] != 0.0  # F_pp[0, 0] is all dR_M/dL
     assert np.count_nonzero(F[:, 0] - F0[:, 0]) >= 5
@@ -101,7 +108,7 @@ def test_structured_covariance_step_equals_the_dense_prediction():
     q = np.zeros(24)
     q[3:6], q[6:9], q[18:20] = 4e-10, 2.5e-11, 1e-6
     dt = 0.1
-    _, P_ref = kalman.predict(np.zeros(24), P, kalman.discretize(rai.system_matrix(nav, f_b), dt),
+    _, P_ref = kalman.predict(np.zeros(24), P, kalman.discretize(_system_matrix(nav, f_b), dt),
                               np.diag(q * dt))
     P_new = itu.propagate_covariance(P, nav[None], f_b[None], np.zeros((1, 3)), np.array([dt]),
                                     itu.ProcessNoise(q), vertical=ie.Vertical.DEPTH)
@@ -185,7 +192,7 @@ def test_enu_to_ned_conversion_of_the_papers_equations_worked_example():
     S[9:15, 9:15] = np.eye(6)
     F_expected = S @ F_enu @ S.T  # M_NED = T M_ENU T, blockwise
     nav = np.r_[lat, 130 * DEG, h, v_ned, rotations.dcm_to_quat(C_ned)]
-    F_ned = rai.system_matrix(nav, f_b)[:15, :15]
+    F_ned = _system_matrix(nav, f_b)[:15, :15]
     np.testing.assert_allclose(F_ned, F_expected, rtol=1e-11, atol=1e-18)
     # a few entries by hand (§4.2)
     assert F_ned[0, 3] == pytest.approx(1 / (R_M + h))  # F_pv = diag(1/R_Mh, ...)

@@ -274,35 +274,6 @@ class RpmAidedInsParams(FilterParams):
 
 
 # --------------------------------------------------------------------------------------------
-# system matrix
-
-
-def system_matrix(nav: np.ndarray, f_b: np.ndarray, *,
-                  curvature_derivatives: bool = True) -> np.ndarray:
-    """The continuous system matrix F of the 24 states, eqs. (14)-(19) in NED.
-
-    Parameters
-    ----------
-    nav : ndarray, shape (10,)
-        Navigation vector ``[lat, lon, h, v_N, v_E, v_D, q0, q1, q2, q3]`` (height, as in
-        :mod:`navreplay.strapdown`; the position error state uses depth d = -h).
-    f_b : ndarray, shape (3,)
-        Bias-compensated specific force, body [m/s^2].
-    curvature_derivatives : bool
-        Keep the dR_M/dL, dR_N/dL terms.
-
-    Returns
-    -------
-    F : ndarray, shape (24, 24)
-        Rows 9-23 and columns 15-23 are 0.
-    """
-    F = np.zeros((N_STATES, N_STATES))
-    return ie.system_matrix(nav[strapdown.POS], nav[strapdown.VEL], ie.nav_dcm(nav), f_b,
-                            vertical=ie.Vertical.DEPTH,
-                            curvature_derivatives=curvature_derivatives, out=F)
-
-
-# --------------------------------------------------------------------------------------------
 # measurement models
 
 
