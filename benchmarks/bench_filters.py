@@ -145,7 +145,7 @@ def main(duration: float = 3600.0) -> None:
         ("kalman.correct (check=False)", lambda: kalman.correct(x, P, z, H, R, check=False)),
         ("kalman.check_covariance", lambda: kalman.check_covariance(P)),
         ("ins_error.system_matrix", lambda: ie.system_matrix(nav[:3], nav[3:6], np.eye(3), fb)),
-        ("ins_error.propagate_covariance, 1 step",
+        ("ins_time_update.propagate_covariance, 1 step",
          lambda: itu.propagate_covariance(P, nav[None], fb[None], np.zeros((1, 3)),
                                          np.array([0.1]), noise)),
     ]

@@ -47,14 +47,14 @@ def _timed(fn: Callable[[], Any], repeat: int = 1) -> tuple[float, Any]:
 
 def _null_filter() -> type:
     """A filter that does nothing: what remains is the engine's own cost per event."""
-    from navreplay.filters.base import Estimate, Filter, NavSolution
+    from navreplay.filters.base import Estimate, Filter, NavSolution, Quantity, State
     from navreplay.streams import StreamKind
 
     class Null(Filter):
         name = "null"
         requires = (StreamKind.IMU, StreamKind.GPS)
         optional = (StreamKind.GPS_VEL,)
-        state_names = tuple(f"s{i}" for i in range(15))
+        states = tuple(State(f"s{i}", "-", Quantity.OTHER) for i in range(15))
 
         def __init__(self, params: Any, context: Any) -> None:
             super().__init__(params, context)

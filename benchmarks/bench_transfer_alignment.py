@@ -28,7 +28,7 @@ from benchmarks import best
 from navreplay import strapdown
 from navreplay.filters import kalman
 from navreplay.filters import transfer_alignment as ta
-from navreplay.filters.base import Estimate, Filter
+from navreplay.filters.base import Estimate, Filter, Quantity, State
 from navreplay.geo import kernels
 from navreplay.replay.engine import replay
 from navreplay.reproduce.transfer_alignment import REPRODUCTION
@@ -43,7 +43,7 @@ class _Engine(Filter):
 
     name = "bench-engine"
     requires = (StreamKind.IMU,)
-    state_names = ("x",) * 9
+    states = tuple(State(f"x{i}", "-", Quantity.OTHER) for i in range(9))
 
     def propagate(self, t, imu):
         self.t = float(t[-1])

@@ -25,7 +25,6 @@ EXPECTED_ERRORS: tuple[type[BaseException], ...] = ()
 def _expected_errors() -> tuple[type[BaseException], ...]:
     global EXPECTED_ERRORS
     if not EXPECTED_ERRORS:
-        from navreplay.filters.ins import InitialNavError
         from navreplay.filters.kalman import FilterDivergedError
         from navreplay.filters.registry import FilterLoadError
         from navreplay.io import RecordingError
@@ -36,9 +35,9 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
         from navreplay.viz import VizUnavailableError
 
         EXPECTED_ERRORS = (
-            RecordingError, OutputError, ParamError, FilterLoadError, FilterDivergedError, ReplayError,
-            RunFailedError, VizUnavailableError, InitialNavError, KeyError, FileExistsError, FileNotFoundError,
-            IsADirectoryError, PermissionError,
+            RecordingError, OutputError, ParamError, FilterLoadError, FilterDivergedError,
+            ReplayError, RunFailedError, VizUnavailableError, KeyError, FileExistsError,
+            FileNotFoundError, IsADirectoryError, PermissionError,
         )
     return EXPECTED_ERRORS
 

@@ -11,11 +11,14 @@ block of :mod:`navreplay.filters.kalman`::
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 
+@numba.njit(cache=True)
 def discretize(F: np.ndarray, dt: float) -> np.ndarray:
-    """Transition matrix by the second-order series, eq. (3).
+    """Transition matrix by the second-order series, eq. (3) (compiled: callable from Python
+    and from the filters' numba kernels).
 
     Parameters
     ----------
@@ -28,11 +31,16 @@ def discretize(F: np.ndarray, dt: float) -> np.ndarray:
     -------
     Phi : ndarray, shape (n, n)
     """
-    Fdt = F * dt
-    Phi = Fdt @ Fdt
-    Phi *= 0.5
-    Phi += Fdt
-    Phi[np.diag_indices_from(Phi)] += 1.0
+    n = F.shape[0]
+    h = 0.5 * dt * dt
+    Phi = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            s = 0.0
+            for k in range(n):
+                s += F[i, k] * F[k, j]
+            Phi[i, j] = F[i, j] * dt + h * s
+        Phi[i, i] += 1.0
     return Phi
 
 

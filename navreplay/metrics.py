@@ -269,13 +269,6 @@ def truth_at(recording: Recording | Reference, t: np.ndarray) -> dict[str, np.nd
     return Reference.of(recording).at(t)
 
 
-def distance_travelled(
-    recording: Recording | Reference, t: np.ndarray | None = None
-) -> np.ndarray | float:
-    """Length of the true path [m] (:meth:`Reference.distance`)."""
-    return Reference.of(recording).distance(t)
-
-
 # --------------------------------------------------------------------------------------------
 # navigation errors
 
@@ -552,6 +545,13 @@ class RunMetrics:
     distance: np.ndarray
     extra_error: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     states: tuple[State, ...] = ()
+
+    def state_error_sigma(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per scored state: its estimation error (M,) and predicted 1-sigma (M,) (what the
+        Rerun view plots with its +-3 sigma band)."""
+        sigma = np.sqrt(np.clip(self.state_var, 0.0, None))
+        return {name: (self.state_error[:, j], sigma[:, j])
+                for j, name in enumerate(self.state_names)}
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
         """Scalar scores (SI; see :data:`SUMMARY_UNITS`) for tables and JSON."""

@@ -4,6 +4,7 @@ the code under test: the reference for the finite-difference checks of the INS e
 
 import numpy as np
 
+from navreplay import strapdown
 from navreplay.geo import earth, rotations
 
 
@@ -36,3 +37,18 @@ def error_rate(truth, dx, f_b, w_ib_b, *, depth=False):
     phi_dot = -rotations.vee(C_e @ C.T + C_hat @ C_t.T)
     # biases and any further states are constants: zero rate
     return np.concatenate([dp_dot, v_e - v_t, phi_dot, np.zeros(len(dx) - 9)])
+
+
+def inject_error(nav_true, dx, depth=False):
+    """A navigation vector (10,) carrying the errors dx (9: position [rad, rad, m], velocity,
+    phi), the inverse of ``ins_error.nav_error``; the attitude is ``q_hat = q(-phi) (x) q``
+    (exact rotation by -phi). With ``depth`` the third position error is dd = -dh."""
+    nav = np.array(nav_true, dtype=float)
+    dp = np.array(dx[0:3], dtype=float)
+    if depth:
+        dp[2] = -dp[2]
+    nav[strapdown.POS] += dp
+    nav[strapdown.VEL] += dx[3:6]
+    q = rotations.quat_mult(rotations.rotvec_to_quat(-np.asarray(dx[6:9])), nav[strapdown.QUAT])
+    nav[strapdown.QUAT] = rotations.quat_normalize(q)
+    return nav

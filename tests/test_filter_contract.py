@@ -61,6 +61,13 @@ class Raises(GpsInsFilter):
         if t >= 20.0:
             raise RuntimeError("lookup table exhausted")
         return super().update(kind, t, sample)
+
+
+class RejectsItsStart(GpsInsFilter):
+    name = "rejects-its-start"
+
+    def __init__(self, params, context):
+        raise ValueError("needs a surveyed antenna position")
 '''
 
 
@@ -144,3 +151,31 @@ def test_the_summary_and_the_rrd_carry_the_same_navigation_errors(drive, tmp_pat
     assert np.sqrt(np.mean(p_d**2)) == pytest.approx(s["pos_rms_v"], rel=1e-6)
     assert np.hypot(p_n, p_e)[-1] == pytest.approx(s["pos_err_final_h"], rel=1e-6)
     assert np.sqrt(np.mean(p_n**2 + p_e**2)) == pytest.approx(s["pos_rms_h"], rel=1e-6)
+
+
+@pytest.mark.parametrize(("how", "what"), [
+    ("plugin", "filter 'rejects-its-start' cannot start on {rec}: ValueError: needs a surveyed "
+               "antenna position"),
+    ("no-initial-nav", "filter 'ins' cannot start on {rec}: InitialNavError: no initial "
+                       "solution"),
+])
+def test_a_filter_that_cannot_start_stops_with_one_line(plugins, drive, tmp_path, how, what):
+    from navreplay.io import read_recording, write_recording
+
+    if how == "plugin":
+        args, rec = ["--filter", f"{plugins}:RejectsItsStart", str(drive)], drive
+    else:  # a built-in whose recording lacks the initial solution
+        rec = tmp_path / "no_init.mcap"
+        r = read_recording(drive)
+        r.metadata.initial_nav = {}
+        write_recording(rec, r)
+        args = ["ins", str(rec)]
+    res = CliRunner().invoke(cli, ["run", *args, "--no-viz"])
+    assert res.exit_code != 0
+    assert "Traceback" not in res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("Error:")]
+    assert len(errors) == 1, res.output
+    assert what.format(rec=rec) in errors[0], errors[0]
+    res = CliRunner().invoke(cli, ["--debug", "run", *args, "--no-viz"])
+    assert isinstance(res.exception, ValueError)  # FilterInitError, the filter's error its cause
+    assert isinstance(res.exception.__cause__, ValueError)

@@ -5,6 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from ins_reference import inject_error
 
 from navreplay import metrics
 from navreplay.filters import ins_error as ie
@@ -36,7 +37,7 @@ STEPS = np.array([1e-7, 1e-7, 0.1, 0.01, 0.01, 0.01, 1e-5, 1e-5, 1e-5,
 
 def _measurement(kind, dx):
     """The nonlinear measurement of a solution with errors dx (18,), against fixed data."""
-    nav = ie.inject_error(NAV, dx[:9])
+    nav = inject_error(NAV, dx[:9])
     lever = LEVER_B + dx[LEVER]
     if kind == "pos":
         z, _, _ = gps_position_model(nav, lever, NAV[:3], np.ones(3), 18, lever_states=True)

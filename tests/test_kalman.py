@@ -241,3 +241,49 @@ def test_batched_prediction_equals_the_shared_kalman_prediction():
         np.testing.assert_allclose(Pb[i], Pi, rtol=1e-14, atol=1e-15)
     with pytest.raises(FilterDivergedError, match="t = 2.000000 s"):
         kalman.predict_batch(x, np.full((B, n, n), np.nan), Phi, Qd, t=2.0)
+
+
+@pytest.mark.parametrize(("n", "r", "nc"), [(15, 9, 15), (21, 9, 18), (24, 9, 15), (9, 6, 6)])
+def test_row_prediction_kernel_equals_the_dense_one_and_numpy(n, r, nc):
+    # Phi differs from I only in its first r rows, over the columns cols (the INS error model:
+    # 9 navigation rows; the gyro z-rate columns placed after other states)
+    rng = np.random.default_rng(n)
+    A = rng.normal(size=(n, n))
+    P = A @ A.T + np.eye(n)
+    cols = np.r_[np.arange(r), rng.choice(np.arange(r, n), nc - r, replace=False)].astype(np.int64)
+    F = np.zeros((n, n))
+    F[np.ix_(np.arange(r), cols)] = 0.1 * rng.normal(size=(r, nc))
+    Phi = kalman.discretize(F, 0.1)
+    np.testing.assert_allclose(Phi, np.eye(n) + F * 0.1 + (F @ F) * 0.005, atol=1e-15)
+    Fc = np.ascontiguousarray(F[np.ix_(np.arange(r), cols)])
+    M = np.empty((r, nc))
+    kalman.transition_rows_kernel(Fc, r, 0.1, M)
+    np.testing.assert_allclose(M, Phi[np.ix_(np.arange(r), cols)], rtol=0, atol=1e-15)
+    Qd = rng.normal(size=(n, n)) * 1e-3
+    Qd = Qd @ Qd.T
+    ref = Phi @ P @ Phi.T + Qd
+    ref = 0.5 * (ref + ref.T)
+    dense = kalman.predict_kernel(P, Phi, Qd)
+    rows = kalman.predict_rows_kernel(P, M, cols, Qd, np.empty((r, n)))
+    for got in (dense, rows):
+        np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-13)
+        np.testing.assert_array_equal(got, got.T)
+
+
+def test_measurement_shape_and_innovation_record():
+    # a stacked measurement (z, H, R) applied once; the record of a block of rows is that block
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(4, 4))
+    P = A @ A.T + np.eye(4)
+    m = kalman.Measurement(rng.normal(size=3), rng.normal(size=(3, 4)), np.array([1.0, 2.0, 3.0]))
+    c = kalman.correct(np.zeros(4), P, *m, t=1.5)
+    S = m.H @ P @ m.H.T + np.diag(m.R)
+    np.testing.assert_allclose(c.S, S, rtol=1e-12)
+    np.testing.assert_allclose(c.nu, m.z)
+    assert c.nis == pytest.approx(m.z @ np.linalg.solve(S, m.z), rel=1e-12)
+    rec = c.innovation("velocity", 1.5, slice(0, 2))
+    assert (rec.name, rec.t) == ("velocity", 1.5)
+    np.testing.assert_array_equal(rec.nu, c.nu[:2])
+    np.testing.assert_array_equal(rec.S, c.S[:2, :2])
+    whole = c.innovation("all", 1.5)
+    np.testing.assert_array_equal(whole.S, c.S)

@@ -84,7 +84,7 @@ def test_truth_interpolation():
 def test_cep50_and_distance_travelled_on_constructed_data():
     # 5 runs with known final north/east errors over a 1000 m drive
     rec = _recording(n=101, dt=1.0, speed=10.0)
-    assert metrics.distance_travelled(rec) == pytest.approx(1000.0)
+    assert metrics.Reference.of(rec).distance() == pytest.approx(1000.0)
     t = np.arange(0.0, 101.0, 10.0)
     north = np.array([3.0, -1.0, 2.0, 0.0, -4.0])
     east = np.array([1.0, 1.0, -2.0, 5.0, 0.0])

@@ -18,7 +18,7 @@ from navreplay.filters.registry import load_filter
 from navreplay.geo import earth, kernels, rotations
 from navreplay.metrics import position_error_ned
 from navreplay.params import ParamError, build
-from navreplay.replay.engine import replay
+from navreplay.replay.engine import FilterInitError, replay
 from navreplay.sim.scenario import get_scenario, simulate
 from navreplay.sim.scenarios.underwater import ROUTE, UnderwaterRpmParams
 from navreplay.streams import FIELDS, StreamKind
@@ -33,6 +33,13 @@ STEPS = np.r_[1e-6, 1e-6, 1.0, np.full(3, 1e-2), np.full(3, 1e-5), np.full(3, 1e
               np.full(3, 1e-6), 1e-3, 1e-4, 1e-4, 1e-2, 1e-2, 1e-4, 1e-4, 1e-4, 1e-3]
 BLOCKS = {"p": rai.POS, "v": rai.VEL, "phi": rai.ATT, "ba": rai.BA, "bg": rai.BG,
           "k": rai.K_RPM, "m": rai.M_RPM, "vc": rai.CURRENT, "mu": rai.MOUNT, "T": rai.DELAY}
+
+
+def _system_matrix(nav, f_b, *, curvature_derivatives=True):
+    """F of the 24 states, eqs. (14)-(19) in NED: the INS error model with depth, 0 beyond."""
+    F = np.zeros((rai.N_STATES, rai.N_STATES))
+    return ie.system_matrix(nav[0:3], nav[3:6], ie.nav_dcm(nav), f_b, vertical=ie.Vertical.DEPTH,
+                            curvature_derivatives=curvature_derivatives, out=F)
 
 
 def _state(lat_deg, d, v, euler):
@@ -53,7 +60,7 @@ def test_every_F_block_matches_finite_differences_of_the_mechanization(lat_deg):
         e[j] = STEPS[j]
         F_num[:, j] = (error_rate(truth, e, f_b, w_ib_b, depth=True)
                        - error_rate(truth, -e, f_b, w_ib_b, depth=True)) / (2 * STEPS[j])
-    F = rai.system_matrix(nav, f_b)
+    F = _system_matrix(nav, f_b)
     for rname, rows in BLOCKS.items():
         for cname, cols in BLOCKS.items():
             a, b = F[rows, cols], F_num[rows, cols]
@@ -74,8 +81,8 @@ def test_every_F_block_matches_finite_differences_of_the_mechanization(lat_deg):
 def test_dropping_the_curvature_derivatives_touches_column_0_only_and_changes_little():
     _, nav = _state(36.0, 80.0, [12.0, 7.0, 0.5], [0.0, -0.05, 0.6])
     f_b = np.array([0.1, 0.0, -9.8])
-    F = rai.system_matrix(nav, f_b)
-    F0 = rai.system_matrix(nav, f_b, curvature_derivatives=False)
+    F = _system_matrix(nav, f_b)
+    F0 = _system_matrix(nav, f_b, curvature_derivatives=False)
     np.testing.assert_array_equal(np.delete(F, 0, axis=1), np.delete(F0, 0, axis=1))
     assert F0[0, 0] == 0.0 and F[0, 0] != 0.0  # F_pp[0, 0] is all dR_M/dL
     assert np.count_nonzero(F[:, 0] - F0[:, 0]) >= 5
@@ -101,7 +108,7 @@ def test_structured_covariance_step_equals_the_dense_prediction():
     q = np.zeros(24)
     q[3:6], q[6:9], q[18:20] = 4e-10, 2.5e-11, 1e-6
     dt = 0.1
-    _, P_ref = kalman.predict(np.zeros(24), P, kalman.discretize(rai.system_matrix(nav, f_b), dt),
+    _, P_ref = kalman.predict(np.zeros(24), P, kalman.discretize(_system_matrix(nav, f_b), dt),
                               np.diag(q * dt))
     P_new = itu.propagate_covariance(P, nav[None], f_b[None], np.zeros((1, 3)), np.array([dt]),
                                     itu.ProcessNoise(q), vertical=ie.Vertical.DEPTH)
@@ -185,7 +192,7 @@ def test_enu_to_ned_conversion_of_the_papers_equations_worked_example():
     S[9:15, 9:15] = np.eye(6)
     F_expected = S @ F_enu @ S.T  # M_NED = T M_ENU T, blockwise
     nav = np.r_[lat, 130 * DEG, h, v_ned, rotations.dcm_to_quat(C_ned)]
-    F_ned = rai.system_matrix(nav, f_b)[:15, :15]
+    F_ned = _system_matrix(nav, f_b)[:15, :15]
     np.testing.assert_allclose(F_ned, F_expected, rtol=1e-11, atol=1e-18)
     # a few entries by hand (§4.2)
     assert F_ned[0, 3] == pytest.approx(1 / (R_M + h))  # F_pv = diag(1/R_Mh, ...)
@@ -196,7 +203,7 @@ def test_enu_to_ned_conversion_of_the_papers_equations_worked_example():
     # the measurement matrix (27) converts by right-multiplication with the same map
     m_hat = np.array([1e-3, -2e-3])
     vc_ned = np.array([0.2, -0.1])
-    _, H = rai.rpm_measurement(nav, 14.0, 0.01, m_hat, vc_ned)
+    _, H, _ = rai.rpm_measurement(nav, 14.0, 0.01, m_hat, vc_ned, 0.05)
     w_enu = v_enu - T @ np.r_[vc_ned, 0.0]
     C_bn_enu = C_enu.T
     np.testing.assert_allclose(H[:, 3:6], C_bn_enu @ T, atol=1e-15)
@@ -219,7 +226,7 @@ def test_H_rpm_matches_finite_differences_of_eq25():
     _, nav = _state(36.0, 70.0, [8.0, 11.0, -0.4], [0.01, 0.06, 0.95])
     v, C = nav[3:6], rotations.quat_to_dcm(nav[6:10])
     v_rpm, k, m, v_c = 13.7, 0.018, np.array([1.2e-3, -2.1e-3]), np.array([0.21, -0.13])
-    z, H = rai.rpm_measurement(nav, v_rpm, k, m, v_c)
+    z, H, _ = rai.rpm_measurement(nav, v_rpm, k, m, v_c, 0.05)
     np.testing.assert_allclose(z, _eq25(v, C, v_rpm, k, m, v_c), atol=1e-14)
 
     def z_of(dx):  # the estimate carrying the extra error dx
@@ -241,7 +248,7 @@ def test_H_rpm_is_the_printed_form_at_zero_rpm_errors():
     _, nav = _state(36.0, 70.0, [8.0, 11.0, -0.4], [0.01, 0.06, 0.95])
     C = rotations.quat_to_dcm(nav[6:10])
     u = 13.7
-    _, H = rai.rpm_measurement(nav, u, 0.0, np.zeros(2), np.zeros(2))
+    _, H, _ = rai.rpm_measurement(nav, u, 0.0, np.zeros(2), np.zeros(2), 0.05)
     np.testing.assert_allclose(H[:, 15], [u, 0, 0])
     np.testing.assert_allclose(H[:, 16], [0, 0, u])
     np.testing.assert_allclose(H[:, 17], [0, -u, 0], atol=1e-15)
@@ -256,10 +263,11 @@ def test_rpm_residual_vanishes_for_a_consistent_truth_and_depth_measurement():
     v_c = np.array([0.2, 0.1])
     u, k = 14.0, -0.02
     nav[3:6] = C @ rotations.rotvec_to_dcm(np.r_[0.0, m])[:, 0] * u + np.r_[v_c, 0.0]
-    z, _ = rai.rpm_measurement(nav, (1 + k) * u, k, m, v_c)
+    z, _, _ = rai.rpm_measurement(nav, (1 + k) * u, k, m, v_c, 0.05)
     np.testing.assert_allclose(z, 0.0, atol=1e-13)
-    z, H = rai.depth_measurement(nav, 69.5)
+    z, H, R = rai.depth_measurement(nav, 69.5, 0.1)
     assert z[0] == pytest.approx(0.5) and H[0, 2] == 1.0 and H.sum() == 1.0
+    assert R == pytest.approx([0.01])
 
 
 # --------------------------------------------------------------------------------------------
@@ -397,7 +405,8 @@ def test_registered_and_parameters():
 def test_aided_modes_need_the_speed_log():
     short = simulate("underwater-rpm", {"duration": 2.0}, seed=0)
     del short.streams[StreamKind.SPEED_LOG]
-    with pytest.raises(ValueError, match="needs the speed_log stream.*has: depth, imu, truth"):
+    with pytest.raises(FilterInitError, match="filter 'rpm-aided-ins' cannot start on .*"
+                       "needs the speed_log stream.*has: depth, imu, truth"):
         replay(short, rai.RpmAidedIns, {"mode": "rpm"})
     res = replay(short, rai.RpmAidedIns, {"mode": "pure"})
     assert res.t[-1] == pytest.approx(2.0)

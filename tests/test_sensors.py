@@ -27,7 +27,6 @@ from navreplay.sensors import (
 from navreplay.sensors.magnetometer import decimal_year
 from navreplay.sensors.noise import (
     density_from_average_sigma,
-    density_from_sample_sigma,
     gauss_markov,
     nyquist_sample_sigma,
     random_walk,
@@ -47,7 +46,7 @@ def rng(seed: int = 0) -> np.random.Generator:
 
 def test_noise_conversions():
     assert sample_sigma(1e-3, 0.01) == pytest.approx(1e-2)
-    assert density_from_sample_sigma(sample_sigma(2e-4, 0.005), 0.005) == pytest.approx(2e-4)
+    assert sample_sigma(2e-4, 0.005) == pytest.approx(2e-4 / np.sqrt(0.005))
     # "80 ug/sqrt(Hz)" read at Nyquist for 4 Hz instantaneous samples: 113.1 ug
     # (docs/methods/vector-matching.md §3.1)
     assert nyquist_sample_sigma(80 * MICRO_G, 0.25) / MICRO_G == pytest.approx(113.137, abs=1e-3)

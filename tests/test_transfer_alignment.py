@@ -24,7 +24,7 @@ from navreplay.geo.rotations import (
     quat_to_euler,
 )
 from navreplay.metrics import position_error_ned, truth_at
-from navreplay.replay.engine import replay
+from navreplay.replay.engine import FilterInitError, replay
 from navreplay.reproduce import get as get_reproduction
 from navreplay.reproduce import transfer_alignment as rep
 from navreplay.sim.scenario import simulate
@@ -388,7 +388,8 @@ def test_filter_takes_the_lever_arm_from_metadata_or_parameter():
     c = replay(rec, FILTER, {"lever_arm_r": "0,0,0"})
     assert not np.array_equal(a.x, c.x)
     rec.metadata.params.pop("lever_arm_r_nom")
-    with pytest.raises(ValueError, match="lever_arm_r"):
+    with pytest.raises(FilterInitError, match="filter 'transfer-alignment' cannot start on .*"
+                       "lever_arm_r"):
         replay(rec, FILTER)
 
 

@@ -41,7 +41,7 @@ from navreplay.geo.rotations import (
     skew,
 )
 from navreplay.params import ParamError
-from navreplay.replay.engine import MissingStreamError, replay
+from navreplay.replay.engine import FilterInitError, MissingStreamError, replay
 from navreplay.reproduce import get as get_reproduction
 from navreplay.reproduce.vector_matching import (
     ACCEL_G,
@@ -401,7 +401,7 @@ def test_registered_and_fails_fast_on_missing_inputs():
     with pytest.raises(MissingStreamError, match="mag"):
         replay(no_mag, cls)
     md = dataclasses.replace(rec.metadata, extra={})
-    with pytest.raises(ValueError, match="earth_field_n"):
+    with pytest.raises(FilterInitError, match="earth_field_n"):
         replay(dataclasses.replace(rec, metadata=md), cls)
     # the parameter overrides the metadata
     res = replay(dataclasses.replace(rec, metadata=md), cls,

@@ -187,7 +187,7 @@ def gps_position_model(
     *,
     lag: float = 0.0,
     lever_states: bool = False,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> kalman.Measurement:
     """GPS position measurement, eqs. (4)-(7).
 
     Parameters
@@ -227,7 +227,7 @@ def gps_position_model(
     H[:, ie.ATT] = skew(l_n)
     if lever_states:
         H[:, LEVER] = C
-    return z, H, np.asarray(pos_sigma, dtype=float) ** 2  # (7)
+    return kalman.Measurement(z, H, np.asarray(pos_sigma, dtype=float) ** 2)  # (7)
 
 
 def gps_velocity_model(
@@ -240,7 +240,7 @@ def gps_velocity_model(
     *,
     lever_states: bool = False,
     gyro_z_states: int | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> kalman.Measurement:
     """GPS velocity measurement, eqs. (8)-(11).
 
     Parameters
@@ -284,7 +284,7 @@ def gps_velocity_model(
         H[:, gyro_z_states:gyro_z_states + ie.N_GYRO_Z] = C @ L_b * omega_ib_b[2]
     if lever_states:
         H[:, LEVER] = C @ skew(omega_ib_b) - W_in @ C
-    return z, H, np.asarray(vel_sigma, dtype=float) ** 2  # (11)
+    return kalman.Measurement(z, H, np.asarray(vel_sigma, dtype=float) ** 2)  # (11)
 
 
 @register_filter
@@ -353,14 +353,14 @@ class GpsInsFilter(InsFilter):
         lever_states = self.params.estimate_lever_arm
         if kind is StreamKind.GPS:
             lag = max(t - self.t, 0.0)
-            z, H, R = gps_position_model(
+            measurement = gps_position_model(
                 self.nav, self.lever_arm_b, np.asarray(sample["pos"]),
                 np.asarray(sample["pos_sigma"]) * self.params.gps_pos_sigma_scale, n,
                 lag=lag, lever_states=lever_states,
             )
             name = "gps_pos"
         elif kind is StreamKind.GPS_VEL and self.params.use_gps_vel:
-            z, H, R = gps_velocity_model(
+            measurement = gps_velocity_model(
                 self.nav, self.lever_arm_b, self.omega_ib_b, np.asarray(sample["v_n"]),
                 np.asarray(sample["vel_sigma"]) * self.params.gps_vel_sigma_scale, n,
                 lever_states=lever_states,
@@ -370,10 +370,10 @@ class GpsInsFilter(InsFilter):
         else:
             return None
         self._sync_covariance()
-        c = kalman.correct(np.zeros(n), self.P, z, H, R, t=t)  # (12)
+        c = kalman.correct(np.zeros(n), self.P, *measurement, t=t)  # (12)
         self.P = c.P
         self._feedback(c.x)
-        return [Innovation(name, t, c.nu, c.S)]
+        return [c.innovation(name, t)]
 
     def _feedback(self, dx: np.ndarray) -> None:
         super()._feedback(dx)

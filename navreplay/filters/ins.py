@@ -226,7 +226,7 @@ def initial_solution(context: FilterContext, filter_name: str) -> tuple[np.ndarr
     missing = [k for k in ("t_ns", "pos", "v_n", "q_nb") if k not in init]
     if missing:
         raise InitialNavError(
-            f"filter {filter_name!r} cannot start: no initial solution (missing "
+            f"no initial solution (missing "
             f"{', '.join(missing)}); give one with --init align, --init reference "
             "(with --reference) or an [initial] table"
         )

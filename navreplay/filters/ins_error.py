@@ -120,10 +120,7 @@ from navreplay.filters.base import Nav, NavError, Quantity, State, TruthColumn
 from navreplay.geo import earth, kernels
 from navreplay.geo.rotations import (
     attitude_error,
-    quat_mult,
-    quat_normalize,
     quat_to_dcm,
-    rotvec_to_quat,
     wrap_angle,
 )
 
@@ -431,23 +428,6 @@ def nav_error(
         quat_to_dcm(nav_hat[..., NAV_Q]), quat_to_dcm(nav_true[..., NAV_Q])
     )
     return dx
-
-
-def inject_error(
-    nav_true: np.ndarray, dx: np.ndarray, vertical: Vertical = Vertical.HEIGHT
-) -> np.ndarray:
-    """A navigation vector with the errors ``dx`` (9,), the inverse of :func:`nav_error`.
-
-    The attitude is ``q_hat = q(-phi) (x) q`` (exact rotation by -phi, first order eq. 1).
-    """
-    nav = np.array(nav_true, dtype=float)
-    dp = np.array(dx[0:3], dtype=float)
-    if vertical is Vertical.DEPTH:
-        dp[2] = -dp[2]
-    nav[NAV_POS] += dp
-    nav[NAV_VEL] += dx[3:6]
-    nav[NAV_Q] = quat_normalize(quat_mult(rotvec_to_quat(-np.asarray(dx[6:9])), nav[NAV_Q]))
-    return nav
 
 
 def apply_correction(

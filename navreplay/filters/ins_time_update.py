@@ -1,10 +1,10 @@
 """The time update of an INS filter over the error model of :mod:`navreplay.filters.ins_error`.
 
-``P <- Phi P Phi^T + Qd`` with ``Phi = I + F T + (F T)^2 / 2`` (kalman eqs. 3, 6) in compiled
-loops that use the structure of F: it has non-zero rows only for position, velocity and
-attitude and non-zero columns only for the 15 states here and the optional three of eq. (22)
-(the states a larger filter adds are random constants or random walks), so only 9 rows and
-columns of P change.
+``P <- Phi P Phi^T + Qd`` with ``Phi = I + F T + (F T)^2 / 2`` (kalman eqs. 3, 6) by the
+compiled kernels of :mod:`navreplay.filters.kalman` for a Phi that is the identity but for a
+few rows: F has non-zero rows only for position, velocity and attitude and non-zero columns
+only for the 15 states here and the optional three of eq. (22) (the states a larger filter
+adds are random constants or random walks), so only 9 rows and columns of P change.
 :func:`propagate_covariance` steps over given points, :func:`accumulate_covariance` collects
 IMU samples into steps of a given length, and :class:`TimeUpdate` is the whole time update of
 an INS filter over an IMU block (bias compensation, :mod:`navreplay.strapdown`, covariance) in
@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from navreplay import strapdown
+from navreplay.filters import kalman
 from navreplay.filters.ins_error import N_GYRO_Z, N_STATES, Vertical, fill_system_matrix
 from navreplay.filters.kalman import FilterDivergedError, check_covariance
 from navreplay.geo import kernels
@@ -34,20 +35,19 @@ _TIME_TOL = 1e-9
 def _covariance_step(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: float,
     q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int,
-    F: np.ndarray, M: np.ndarray, T: np.ndarray,
+    F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
 ) -> np.ndarray:
     """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19), (22) and Qd from (20),
     (21); returns a new P.
 
     F has non-zero rows only for position, velocity and attitude and non-zero columns only for
     the 15 navigation states and, with ``gz >= 0``, the three gyro z-rate states at
-    ``gz, gz + 1, gz + 2`` (eq. 22), so ``Phi = [[M], [0 I]]`` with M (9 x nc) its first 9 rows
-    over those nc columns, and only the first 9 rows and columns of P change:
-    ``T = M P[cols, :]`` gives the new rows and ``T[:, cols] M^T`` the new 9 x 9 block.
-    F (15, nc), M (9, nc) and T (9, n) are scratch (nc = 15, or 18 with ``gz >= 0``).
+    ``gz, gz + 1, gz + 2`` (eq. 22), listed in ``cols``: Phi is the identity but for its first
+    9 rows, and :func:`navreplay.filters.kalman.predict_rows_kernel` propagates P.
+    F (15, nc), M (9, nc), T (9, n) and Q (n, n, diagonal) are scratch (nc = 15, or 18 with
+    ``gz >= 0``).
     """
     n = P.shape[0]
-    nc = F.shape[1]
     F[:, :] = 0.0
     C = kernels.quat_to_dcm(nav[6:10])
     fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], C, f_b, depth, curvature, F)
@@ -55,33 +55,9 @@ def _covariance_step(
         for i in range(3):
             for j in range(3):
                 F[6 + i, N_STATES + j] = C[i, j] * omega_b[2]
-    h = 0.5 * dt * dt
-    for i in range(N_NAV):  # kalman (3): (F dt)^2 [0:9, :] = F[0:9, 0:9] F[0:9, :] dt^2
-        for j in range(nc):
-            s = 0.0
-            for k in range(N_NAV):
-                s += F[i, k] * F[k, j]
-            M[i, j] = F[i, j] * dt + h * s
-        M[i, i] += 1.0
-    for i in range(N_NAV):  # kalman (6)
-        for j in range(n):
-            s = 0.0
-            for k in range(nc):
-                s += M[i, k] * P[k if k < N_STATES else gz + k - N_STATES, j]
-            T[i, j] = s
-    out = P.copy()
-    for i in range(N_NAV):
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(nc):
-                s += T[i, k if k < N_STATES else gz + k - N_STATES] * M[j, k]
-            out[i, j] = s
-            out[j, i] = s
-        for j in range(N_NAV, n):
-            out[i, j] = T[i, j]
-            out[j, i] = T[i, j]
+    kalman.transition_rows_kernel(F, N_NAV, dt, M)  # kalman (3)
     for i in range(n):
-        out[i, i] += q[i] * dt  # kalman (4), diagonal (20)
+        Q[i, i] = q[i] * dt  # kalman (4), diagonal (20)
     if k_acc > 0.0:  # (21): |a_n|^2 = |C f_b + g_n|^2, g on the ellipsoid
         g = kernels.gravity(nav[0], 0.0)
         a2 = 0.0
@@ -91,21 +67,25 @@ def _covariance_step(
                 a += g
             a2 += a * a
         for i in range(3, 6):
-            out[i, i] += k_acc * a2 * dt
+            Q[i, i] += k_acc * a2 * dt
     if k_gyro > 0.0:  # (21): |omega_ib_b|^2
         w2 = omega_b[0] ** 2 + omega_b[1] ** 2 + omega_b[2] ** 2
         for i in range(6, 9):
-            out[i, i] += k_gyro * w2 * dt
-    return out
+            Q[i, i] += k_gyro * w2 * dt
+    return kalman.predict_rows_kernel(P, M, cols, Q, T)  # kalman (6)
 
 
 @numba.njit(cache=True)
-def _scratch(n: int, gz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """F, M, T of :func:`_covariance_step` for n states (gyro z-rate states at ``gz``, or
-    none for -1) and the means of :func:`_close_step`."""
+def _scratch(n: int, gz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                       np.ndarray, np.ndarray]:
+    """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro z-rate states at
+    ``gz``, or none for -1) and the means of :func:`_close_step`."""
     nc = N_STATES + (N_GYRO_Z if gz >= 0 else 0)
+    cols = np.empty(nc, dtype=np.int64)
+    for k in range(nc):
+        cols[k] = k if k < N_STATES else gz + k - N_STATES
     return (np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
-            np.zeros((2, 3)))
+            np.zeros((n, n)), cols, np.zeros((2, 3)))
 
 
 @numba.njit(cache=True)
@@ -113,10 +93,10 @@ def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int,
 ) -> np.ndarray:
-    F, M, T, _ = _scratch(P.shape[0], gz)
+    F, M, T, Q, cols, _ = _scratch(P.shape[0], gz)
     for k in range(dt.shape[0]):
         P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
-                             curvature, gz, F, M, T)
+                             curvature, gz, F, M, T, Q, cols)
     return P
 
 
@@ -124,7 +104,7 @@ def _propagate_covariance(
 def _close_step(
     P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
     gz: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
-    T: np.ndarray, mean: np.ndarray,
+    T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray,
 ) -> np.ndarray:
     """P propagated over the open step, with F at its start and the mean specific force and
     body rate over it; the step is then cleared (P itself when none is open)."""
@@ -135,7 +115,7 @@ def _close_step(
         mean[0, j] = open_sums[1 + j] / dt
         mean[1, j] = open_sums[4 + j] / dt
     P = _covariance_step(P, open_nav, mean[0], mean[1], dt, q, k_acc, k_gyro, depth, curvature,
-                         gz, F, M, T)
+                         gz, F, M, T, Q, cols)
     open_sums[:] = 0.0
     return P
 
@@ -146,7 +126,7 @@ def _accumulate_covariance(
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
     gz: int, open_nav: np.ndarray, open_sums: np.ndarray,
 ) -> np.ndarray:
-    F, M, T, mean = _scratch(P.shape[0], gz)
+    F, M, T, Q, cols, mean = _scratch(P.shape[0], gz)
     for k in range(dt.shape[0]):
         if open_sums[0] == 0.0:
             open_nav[:] = hist[k]
@@ -156,7 +136,7 @@ def _accumulate_covariance(
             open_sums[4 + j] += omega_b[k, j] * dt[k]
         if open_sums[0] >= step - 1e-9:
             P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, open_nav, open_sums, F, M,
-                            T, mean)
+                            T, Q, cols, mean)
     return P
 
 

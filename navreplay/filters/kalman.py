@@ -59,6 +59,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from navreplay.filters.base import Innovation
 from navreplay.lti import discrete_noise, discretize, van_loan  # noqa: F401  (part of this API)
 
 DEFAULT_RTOL = 1e-9
@@ -77,6 +78,27 @@ class FilterDivergedError(RuntimeError):
     def __init__(self, message: str, t: float | None = None) -> None:
         self.t = t
         super().__init__(message if t is None else f"t = {t:.6f} s: {message}")
+
+
+class Measurement(NamedTuple):
+    """A linearised measurement, the shape every measurement model returns.
+
+    ``z ~ H x + v``, ``v ~ N(0, R)``. For an error-state filter after feedback (x = 0), z is
+    the innovation itself (e.g. INS minus GPS). Apply it with ``correct(x, P, *measurement)``.
+
+    Attributes
+    ----------
+    z : ndarray, shape (m,)
+        Measurement or residual.
+    H : ndarray, shape (m, n)
+        Measurement matrix.
+    R : ndarray, shape (m,) or (m, m)
+        Noise covariance (a diagonal as a vector).
+    """
+
+    z: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
 
 
 class Correction(NamedTuple):
@@ -104,6 +126,11 @@ class Correction(NamedTuple):
     nu: np.ndarray
     S: np.ndarray
     nu_normalised: np.ndarray
+
+    def innovation(self, name: str, t: float, rows: slice = slice(None)) -> Innovation:
+        """The record a filter returns from ``update``: innovation and its covariance (of
+        the rows ``rows`` of a stacked measurement)."""
+        return Innovation(name, t, self.nu[rows], self.S[rows, rows])
 
 
 # --------------------------------------------------------------------------------------------
@@ -213,6 +240,10 @@ def _all_finite(a: np.ndarray) -> bool:
     return True
 
 
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def _finite(a: np.ndarray, name: str, t: float | None) -> None:
     if not (_all_finite(a) if a.dtype == np.float64 else np.all(np.isfinite(a))):
         raise FilterDivergedError(f"{name} has non-finite entries", t)
@@ -220,6 +251,86 @@ def _finite(a: np.ndarray, name: str, t: float | None) -> None:
 
 # --------------------------------------------------------------------------------------------
 # predict / correct
+
+
+@numba.njit(cache=True)
+def transition_rows_kernel(F: np.ndarray, r: int, dt: float, M: np.ndarray) -> None:
+    """Eq. (3) compiled for an F that is zero outside its first r rows: those rows of Phi.
+
+    F (>= r, nc) holds the non-zero columns of F, the first r of them being states 0..r-1 (the
+    other rows of F, if any, are ignored: zero); M (r, nc) receives rows 0..r-1 of Phi over the
+    same columns. The other rows of Phi are those of the identity.
+    """
+    nc = F.shape[1]
+    h = 0.5 * dt * dt
+    for i in range(r):  # (F dt)^2 [0:r, :] = F[0:r, 0:r] F[0:r, :] dt^2
+        for j in range(nc):
+            s = 0.0
+            for k in range(r):
+                s += F[i, k] * F[k, j]
+            M[i, j] = F[i, j] * dt + h * s
+        M[i, i] += 1.0
+
+
+@numba.njit(cache=True)
+def predict_kernel(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> np.ndarray:
+    """Eq. (6) compiled, dense: a new ``P = Phi P Phi^T + Qd``, symmetrised; no checks."""
+    n = P.shape[0]
+    T = np.empty((n, n))
+    for i in range(n):  # T = Phi P
+        for j in range(n):
+            s = 0.0
+            for k in range(n):
+                s += Phi[i, k] * P[k, j]
+            T[i, j] = s
+    out = np.empty((n, n))
+    for i in range(n):  # T Phi^T, its lower triangle mirrored (P symmetric)
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += T[i, k] * Phi[j, k]
+            v = s + 0.5 * (Qd[i, j] + Qd[j, i])
+            out[i, j] = v
+            out[j, i] = v
+    return out
+
+
+@numba.njit(cache=True)
+def predict_rows_kernel(
+    P: np.ndarray, M: np.ndarray, cols: np.ndarray, Qd: np.ndarray, T: np.ndarray
+) -> np.ndarray:
+    """Eq. (6) compiled for a Phi that is the identity but for its first r rows.
+
+    ``Phi[0:r, cols] = M`` (r, nc) and ``Phi[0:r, other columns] = 0``, with ``cols[:r]`` =
+    0..r-1 (the diagonal); rows r.. of Phi are those of the identity (random constants and
+    random walks). Then only rows and columns 0..r-1 of ``Phi P Phi^T`` differ from P:
+    ``T = M P[cols, :]`` gives them and ``T[:, cols] M^T`` their r x r block, about
+    ``r nc (n + r)`` products instead of ``2 n^3``. T (r, n) is scratch. Returns a new
+    ``P = Phi P Phi^T + Qd``, symmetric; no checks.
+    """
+    n = P.shape[0]
+    r, nc = M.shape
+    for i in range(r):
+        for j in range(n):
+            s = 0.0
+            for k in range(nc):
+                s += M[i, k] * P[cols[k], j]
+            T[i, j] = s
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            if i < r:  # row block: j < i < r
+                s = 0.0
+                for k in range(nc):
+                    s += T[i, cols[k]] * M[j, k]
+            elif j < r:
+                s = T[j, i]
+            else:
+                s = 0.5 * (P[i, j] + P[j, i])
+            v = s + 0.5 * (Qd[i, j] + Qd[j, i])
+            out[i, j] = v
+            out[j, i] = v
+    return out
 
 
 def predict(
@@ -258,9 +369,7 @@ def predict(
         _check_matrix(Qd, (n, n), "Qd")
         _finite(Phi, "Phi", t)
     x = Phi @ x
-    P = Phi @ P @ Phi.T
-    P += Qd
-    P = 0.5 * (P + P.T)
+    P = predict_kernel(_f64(P), _f64(Phi), _f64(Qd))
     if check:
         check_covariance(P, name="predicted P", t=t)
     return x, P

@@ -274,35 +274,6 @@ class RpmAidedInsParams(FilterParams):
 
 
 # --------------------------------------------------------------------------------------------
-# system matrix
-
-
-def system_matrix(nav: np.ndarray, f_b: np.ndarray, *,
-                  curvature_derivatives: bool = True) -> np.ndarray:
-    """The continuous system matrix F of the 24 states, eqs. (14)-(19) in NED.
-
-    Parameters
-    ----------
-    nav : ndarray, shape (10,)
-        Navigation vector ``[lat, lon, h, v_N, v_E, v_D, q0, q1, q2, q3]`` (height, as in
-        :mod:`navreplay.strapdown`; the position error state uses depth d = -h).
-    f_b : ndarray, shape (3,)
-        Bias-compensated specific force, body [m/s^2].
-    curvature_derivatives : bool
-        Keep the dR_M/dL, dR_N/dL terms.
-
-    Returns
-    -------
-    F : ndarray, shape (24, 24)
-        Rows 9-23 and columns 15-23 are 0.
-    """
-    F = np.zeros((N_STATES, N_STATES))
-    return ie.system_matrix(nav[strapdown.POS], nav[strapdown.VEL], ie.nav_dcm(nav), f_b,
-                            vertical=ie.Vertical.DEPTH,
-                            curvature_derivatives=curvature_derivatives, out=F)
-
-
-# --------------------------------------------------------------------------------------------
 # measurement models
 
 
@@ -342,8 +313,9 @@ def rpm_measurement(
     k_hat: float,
     m_hat: np.ndarray,
     v_c_hat: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """RPM water-velocity residual and its Jacobian, eqs. (25)-(27).
+    sigma: float,
+) -> kalman.Measurement:
+    """RPM water-velocity residual, its Jacobian and noise, eqs. (25)-(27).
 
     Parameters
     ----------
@@ -357,13 +329,14 @@ def rpm_measurement(
         Misalignment estimates m_y, m_z [rad].
     v_c_hat : ndarray, shape (2,)
         Current estimate N, E [m/s] (zeros when it is not estimated).
+    sigma : float
+        1-sigma of each body axis of the RPM velocity [m/s].
 
     Returns
     -------
-    z : ndarray, shape (3,)
-        ``C_nb_hat^T (v_hat - v_c_hat) - C_bv_hat [u_hat, 0, 0]`` [m/s], body axes.
-    H : ndarray, shape (3, 24)
-        ``z ~ H dx`` to first order.
+    kalman.Measurement
+        z (3,): ``C_nb_hat^T (v_hat - v_c_hat) - C_bv_hat [u_hat, 0, 0]`` [m/s], body axes;
+        H (3, 24): ``z ~ H dx`` to first order; R (3,): ``sigma^2`` [(m/s)^2].
     """
     C_bn = ie.nav_dcm(nav).T
     a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
@@ -378,15 +351,15 @@ def rpm_measurement(
     H[:, 15] = a * (u / (1.0 + k_hat))
     H[:, M_RPM] = -u * da
     H[:, CURRENT] = -C_bn[:, 0:2]
-    return z, H
+    return kalman.Measurement(z, H, np.full(3, sigma * sigma))
 
 
-def depth_measurement(nav: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
-    """Depth residual ``d_hat - d_meas`` [m], shape (1,), and H (1, 24)
-    (docs/methods/rpm-aided-ins.md §4.5)."""
+def depth_measurement(nav: np.ndarray, depth: float, sigma: float) -> kalman.Measurement:
+    """Depth residual ``d_hat - d_meas`` [m], shape (1,), H (1, 24) and R (1,) of the 1-sigma
+    ``sigma`` [m] (docs/methods/rpm-aided-ins.md §4.5)."""
     H = np.zeros((1, N_STATES))
     H[0, 2] = 1.0
-    return np.array([-nav[2] - depth]), H
+    return kalman.Measurement(np.array([-nav[2] - depth]), H, np.array([sigma * sigma]))
 
 
 # --------------------------------------------------------------------------------------------
@@ -481,10 +454,6 @@ class RpmAidedIns(Filter):
         self._frozen[INERT] = True
         if not estimate_current:
             self._frozen[CURRENT] = True
-        self._R_rpm = np.eye(3) * p.rpm_sigma**2
-        self._R_depth = np.array([[p.depth_sigma**2]])
-        for name, R in (("R_rpm", self._R_rpm), ("R_depth", self._R_depth)):
-            kalman.check_covariance(R, name=name)
         self._rpm_schedule = _Schedule(p.update_rate)
         self._depth_schedule = _Schedule(p.update_rate)
         self._next_check = self.t + _CHECK_INTERVAL
@@ -515,26 +484,28 @@ class RpmAidedIns(Filter):
                 raise kalman.FilterDivergedError(
                     f"RPM scale-factor estimate {self.k_rpm:.3f} is beyond +-0.5", t)
             v_c = self.v_c if self.mode is Mode.RPM_CURRENT else np.zeros(2)
-            z, H = rpm_measurement(self.nav, self.speed_per_rpm * float(sample["rpm"]),
-                                   self.k_rpm, self.m_rpm, v_c)
-            R, name = self._R_rpm, "rpm"
+            measurement = rpm_measurement(self.nav, self.speed_per_rpm * float(sample["rpm"]),
+                                          self.k_rpm, self.m_rpm, v_c, self.params.rpm_sigma)
+            name = "rpm"
         elif kind is StreamKind.DEPTH and self.params.depth_aiding:
             if not self._depth_schedule.due(t):
                 return None
-            z, H = depth_measurement(self.nav, float(sample["depth"]))
-            R, name = self._R_depth, "depth"
+            measurement = depth_measurement(self.nav, float(sample["depth"]),
+                                            self.params.depth_sigma)
+            name = "depth"
         else:
             return None
+        z, H, _ = measurement
         if not (np.isfinite(z).all() and np.isfinite(H).all()):
             raise ValueError(f"{name} measurement at t = {t:.6f} s is not finite: z = {z}")
         self._sync_covariance()
-        # shapes and R are fixed by construction (R checked once); P is checked below
-        c = kalman.correct(np.zeros(N_STATES), self.P, z, H, R, frozen=self._frozen, t=t,
+        # shapes are fixed by construction and R by the parameters; P is checked below
+        c = kalman.correct(np.zeros(N_STATES), self.P, *measurement, frozen=self._frozen, t=t,
                            check=False)
         kalman.check_covariance(c.P, name="corrected P", t=t)
         self.P = c.P
         self._feedback(c.x)
-        return [Innovation(name, t, c.nu, c.S)]
+        return [c.innovation(name, t)]
 
     def estimate(self) -> Estimate:
         self._sync_covariance()

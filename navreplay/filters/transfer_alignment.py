@@ -123,8 +123,8 @@ writes the nominal lever arm there, with its knowledge error) and fails if that 
 Implementation
 --------------
 The model, the prediction and the feedback (steps 2, 3 and 4-6) are numba kernels,
-:func:`predict_and_measure` and :func:`feedback`, around the shared correction and covariance
-check of :mod:`navreplay.filters.kalman`. The tests check the model functions against finite
+:func:`predict_and_measure` and :func:`feedback`, around the shared discretisation, prediction
+kernel, correction and covariance check of :mod:`navreplay.filters.kalman`. The tests check the model functions against finite
 differences of the nonlinear equations and against :mod:`navreplay.geo`, and the prediction
 against :func:`navreplay.filters.kalman.predict`.
 """
@@ -243,8 +243,8 @@ class TransferAlignmentParams(FilterParams):
 # --------------------------------------------------------------------------------------------
 # The model as numba kernels: the per-GINS-sample model and feedback are ~40 small matrix
 # operations, which numpy pays for in call overhead. The quaternion and earth-model helpers are
-# the single-value kernels of navreplay.geo.kernels. The correction and the covariance check are
-# the shared ones of navreplay.filters.kalman.
+# the single-value kernels of navreplay.geo.kernels; the discretisation, the prediction, the
+# correction and the covariance check are the shared ones of navreplay.filters.kalman.
 
 
 @numba.njit(cache=True)
@@ -294,17 +294,6 @@ def _put(A, i0, j0, B, scale):
     for i in range(B.shape[0]):
         for j in range(B.shape[1]):
             A[i0 + i, j0 + j] = scale * B[i, j]
-
-
-@numba.njit(cache=True)
-def _symmetrise(P):
-    """(P + P^T) / 2 in place."""
-    n = P.shape[0]
-    for i in range(n):
-        for j in range(i):
-            v = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = v
-            P[j, i] = v
 
 
 @numba.njit(cache=True)
@@ -529,22 +518,14 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     # prediction: (14), then Phi = I + A dt + (A dt)^2/2 and Qd = G Qc G^T dt (kalman (3), (4))
     R, w_in = earth_terms(nav[0], nav[2], nav[3:6])
     A, G = system_matrix(q_bn, nav[3:6], nav[0], R, w_ib, w_in, f_b, n)
-    Phi = _mm(A, A)
     Gq = np.empty((n, 6))
     for i in range(n):
-        for j in range(n):
-            Phi[i, j] = A[i, j] * dt + 0.5 * dt * dt * Phi[i, j]
-        Phi[i, i] += 1.0
         for j in range(6):
             Gq[i, j] = G[i, j] * qc[j] * dt
     Qd = _mmt(Gq, G)
     for i in range(6, n):
         Qd[i, i] += q_br * dt
-    P = _mmt(_mm(Phi, P), Phi)  # kalman (6)
-    for i in range(n):
-        for j in range(n):
-            P[i, j] += Qd[i, j]
-    _symmetrise(P)
+    P = kalman.predict_kernel(P, kalman.discretize(A, dt), Qd)  # kalman (3), (6)
 
     # measurement: (3), (6) velocity; (5) quaternion rows s; H of (15)
     lever_v = lever_velocity(q_bn, q_m, w_now, w_in, lever_arm_r)
@@ -867,7 +848,7 @@ class TransferAlignment(Filter):
         self.sigma_phi = sigma_phi
         self.t = t
         self._reset_sums()
-        out = [Innovation("velocity", t, c.nu[ZV], c.S[ZV, ZV])]
+        out = [c.innovation("velocity", t, ZV)]
         if len(self.s):
-            out.append(Innovation("quaternion", t, c.nu[ZQ], c.S[ZQ, ZQ]))
+            out.append(c.innovation("quaternion", t, ZQ))
         return out

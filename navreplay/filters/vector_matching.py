@@ -410,6 +410,43 @@ def measurement_noise(
     return R
 
 
+def epoch_measurement(
+    params: VectorMatchingParams,
+    ref: Reference,
+    C_nb_hat: np.ndarray,
+    f_b: np.ndarray,
+    m_b: np.ndarray,
+    v_n: np.ndarray,
+    v_n_prev: np.ndarray,
+    vel_sigma: np.ndarray,
+    vel_sigma_prev: np.ndarray,
+    dt: float,
+) -> tuple[kalman.Measurement, np.ndarray]:
+    """The measurement of an epoch, eqs. (10)-(15), (28): ``(z, H, R)`` and the GNSS
+    acceleration a_n of eq. (13) it used; leading axes (...) for a stack of runs.
+
+    Parameters
+    ----------
+    params : VectorMatchingParams
+    ref : Reference
+    C_nb_hat : ndarray, shape (..., 3, 3)
+        Attitude estimate before the correction.
+    f_b, m_b : ndarray, shape (..., 3)
+        Accelerometer [m/s^2] and magnetometer [T] at t_k.
+    v_n, v_n_prev : ndarray, shape (..., 3)
+        GNSS velocity at t_k and t_k-1 [m/s].
+    vel_sigma, vel_sigma_prev : ndarray, shape (..., 3)
+        Their reported 1-sigma [m/s].
+    dt : float
+        t_k - t_k-1 [s].
+    """
+    a_n = gps_acceleration(v_n, v_n_prev, dt)  # (13)
+    z, H = measurement(params.model, C_nb_hat, f_b, m_b, a_n, ref.g_n, ref.h_n)
+    R = measurement_noise(vel_sigma, vel_sigma_prev, dt, params.accel_noise_sigma,
+                          params.mag_noise_sigma)
+    return kalman.Measurement(z, H, R), a_n
+
+
 def triad(f_b: np.ndarray, m_b: np.ndarray, g_n: np.ndarray, h_n: np.ndarray) -> np.ndarray:
     """Attitude from two vector pairs by TRIAD, for a vehicle at rest.
 
@@ -657,22 +694,17 @@ class VectorMatchingFilter(Filter):
             np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
             float(qd) * np.eye(N_STATES), t=cur.t,
         )
-        a_n = gps_acceleration(cur.v_n, prev.v_n, dt)  # (13)
-        z, H = measurement(
-            p.model, quat_to_dcm(self.q_nb), cur.f_b, cur.m_b, a_n, self.ref.g_n, self.ref.h_n
-        )
-        R = measurement_noise(
-            cur.vel_sigma, prev.vel_sigma, dt, p.accel_noise_sigma, p.mag_noise_sigma
-        )
-        c = kalman.correct(np.zeros(N_STATES), P, z, H, R, t=cur.t)
+        m, a_n = epoch_measurement(p, self.ref, quat_to_dcm(self.q_nb), cur.f_b, cur.m_b,
+                                   cur.v_n, prev.v_n, cur.vel_sigma, prev.vel_sigma, dt)
+        c = kalman.correct(np.zeros(N_STATES), P, *m, t=cur.t)
         self.q_nb = feedback(self.q_nb, c.x[QE])  # x_hat <- 0
         self.P = c.P
         if p.model is MatchModel.GRAVITY:
-            self._diag = model_induced_error(z, a_n, self.ref.g_n, self.ref.h_n)
+            self._diag = model_induced_error(m.z, a_n, self.ref.g_n, self.ref.h_n)
         self.t = float(cur.t)
         self._prev = cur
         self._estimate = None
-        return Innovation("vector", self.t, c.nu, c.S)
+        return c.innovation("vector", self.t)
 
 
 def reference(
@@ -796,17 +828,13 @@ def run_batch(
         dt = t[k] - t[k - 1]
         phi, qd = process_noise(dt, params.tau, params.q_w)  # (16)-(18)
         _, P = kalman.predict_batch(x0, P, float(phi) * eye, float(qd) * eye, t=float(t[k]))
-        a_n = gps_acceleration(v_n[:, k], v_n[:, k - 1], dt)  # (13)
-        z, H = measurement(params.model, quat_to_dcm(q), f_b[:, k], m_b[:, k], a_n,
-                           ref.g_n, ref.h_n)
-        R = measurement_noise(
-            vel_sigma[:, k], vel_sigma[:, k - 1], dt, params.accel_noise_sigma,
-            params.mag_noise_sigma,
-        )
-        c = kalman.correct_batch(x0, P, z, H, R, t=float(t[k]))
+        m, a_n = epoch_measurement(params, ref, quat_to_dcm(q), f_b[:, k], m_b[:, k],
+                                   v_n[:, k], v_n[:, k - 1], vel_sigma[:, k],
+                                   vel_sigma[:, k - 1], dt)
+        c = kalman.correct_batch(x0, P, *m, t=float(t[k]))
         q = feedback(q, c.x[..., QE])  # x_hat <- 0
         P = c.P
         q_out[:, k], P_out[:, k] = q, P
         if diag is not None:
-            diag[:, k] = model_induced_error(z, a_n, ref.g_n, ref.h_n)
+            diag[:, k] = model_induced_error(m.z, a_n, ref.g_n, ref.h_n)
     return BatchEstimates(t, q_out, P_out, diag)

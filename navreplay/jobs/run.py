@@ -9,8 +9,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from navreplay import params as _params
 from navreplay import tables
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
@@ -27,14 +25,6 @@ from navreplay.replay.ensemble import (
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, StreamKind
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
-
-
-def state_errors(m: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Estimation errors and predicted sigmas of the scored states, for the Rerun view."""
-    return {
-        name: (m.state_error[:, j], np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
-        for j, name in enumerate(m.state_names)
-    }
 
 
 @dataclasses.dataclass
@@ -169,7 +159,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             scored = metrics.run_metrics(result, recording)  # NIS only without a reference
             summaries[spec.label] = scored.summary()
             if has_truth:
-                errors = state_errors(scored)
+                errors = scored.state_error_sigma()
             outputs.collect(result, recording, scored if has_truth else None)
             if sink is not None:
                 sink.log_run(result, truth=recording if has_truth else None, metrics=errors)

@@ -5,6 +5,9 @@ runs in parallel (:mod:`~navreplay.replay.ensemble`) and the columnar result
 
 from navreplay.replay.engine import (
     STREAM_PRIORITY,
+    FilterFailedError,
+    FilterInitError,
+    FilterOutputError,
     InvalidRecordingError,
     MissingStreamError,
     ReplayError,
@@ -33,6 +36,9 @@ __all__ = [
     "STREAM_PRIORITY",
     "EnsembleRun",
     "Executor",
+    "FilterFailedError",
+    "FilterInitError",
+    "FilterOutputError",
     "FilterSpec",
     "InlineExecutor",
     "InnovationSeries",

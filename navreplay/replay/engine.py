@@ -73,6 +73,7 @@ from navreplay.filters.base import (
     check_states,
 )
 from navreplay.filters.kalman import FilterDivergedError
+from navreplay.io.checks import first_problem
 from navreplay.io.errors import RecordingError
 from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.result import InnovationSeries, RunResult
@@ -112,16 +113,18 @@ class FilterFailedError(ReplayError):
     message names the filter, the recording and the time, the original is the ``__cause__``."""
 
 
+class FilterInitError(ReplayError, ValueError):
+    """A filter raised in ``__init__`` (a parameter it rejects, a missing initial solution,
+    ...); the message names the filter and the recording, the original is the ``__cause__``.
+    A ValueError too: the filter could not start from what it was given."""
+
+
 class _BadOutput(Exception):
     """An invalid estimate, before the engine names the filter, recording and time."""
 
 
 class MissingStreamError(ReplayError):
     """The recording lacks a stream (or a stream lacks a column) that the filter requires."""
-
-
-class FilterStartError(ReplayError, ValueError):
-    """The recording cannot start the filter (no initial solution, no sigma for it, ...)."""
 
 
 class InvalidRecordingError(ReplayError, RecordingError):
@@ -176,38 +179,18 @@ def consumed_streams(filter_cls: type[Filter]) -> tuple[StreamKind, ...] | None:
 
 
 def validate_recording(recording: Recording, source: str = "") -> None:
-    """Raise :class:`InvalidRecordingError` on non-finite samples or non-increasing time.
+    """Raise :class:`InvalidRecordingError` on non-finite samples, negative sigmas or time that
+    does not increase (the checks of :func:`navreplay.io.checks.first_problem`, which the
+    reader and the writer apply to files).
 
     Files are validated by the reader; call this for recordings built in memory. The message
     names the recording, the stream, the column and the time of the first bad sample.
     """
     source = source or recording_name(recording)
     for kind, stream in recording.streams.items():
-        t_ns = stream.t_ns
-        if len(t_ns) > 1:
-            d = np.diff(t_ns)
-            bad = np.flatnonzero(d <= 0)
-            if bad.size:
-                i = int(bad[0]) + 1
-                what = "repeats" if d[i - 1] == 0 else "goes backwards"
-                raise InvalidRecordingError(
-                    f"{source}: stream {kind}: time {what} at sample {i} "
-                    f"(t = {_t_str(t_ns[i], recording.t0_ns)} after "
-                    f"{_t_str(t_ns[i - 1], recording.t0_ns)})"
-                )
-        for name, col in stream.columns.items():
-            finite = np.isfinite(col)
-            if not finite.all():
-                rows = ~finite.reshape(len(col), -1).all(axis=1)
-                i = int(np.argmax(rows))
-                raise InvalidRecordingError(
-                    f"{source}: stream {kind}: column {name} has a non-finite value "
-                    f"({col[i].tolist()}) at sample {i} (t = {_t_str(t_ns[i], recording.t0_ns)})"
-                )
-
-
-def _t_str(t_ns: int | np.integer, t0_ns: int) -> str:
-    return f"{(int(t_ns) - int(t0_ns)) * 1e-9:.6f} s"
+        problem = first_problem(stream, recording.t0_ns)
+        if problem is not None:
+            raise InvalidRecordingError(f"{source}: stream {kind}: {problem}")
 
 
 def build_params(
@@ -537,6 +520,12 @@ def replay(
         ``validate`` and a non-finite sample or a timestamp that repeats or goes backwards.
     navreplay.params.ParamError
         Parameters that do not fit ``filter_cls.Params``.
+    FilterInitError
+        The filter raised while it was built; the message names the filter and the recording.
+    FilterFailedError
+        The filter raised inside ``propagate``, ``update`` or ``estimate``.
+    FilterOutputError
+        An estimate or innovation that breaks the filter contract.
     navreplay.filters.kalman.FilterDivergedError
         The filter raised it, a linear-algebra error, or produced a non-finite estimate; the
         message names the filter, the recording and the time.
@@ -554,8 +543,10 @@ def replay(
     )
     try:
         filt = filter_cls(p, context)
-    except ValueError as e:  # the recording cannot start this filter (e.g. no initial_nav)
-        raise FilterStartError(f"{source}: {e}") from None
+    except Exception as e:
+        raise FilterInitError(
+            f"filter {label!r} cannot start on {source}: {_one_line(e)}"
+        ) from e
     states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
     names = tuple(st.name for st in states)
     scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")

@@ -48,11 +48,6 @@ def sample_sigma(density: float, dt: float) -> float:
     return density / math.sqrt(dt)
 
 
-def density_from_sample_sigma(sigma: float, dt: float) -> float:
-    """Inverse of :func:`sample_sigma`: density [unit*sqrt(s)] of per-sample sigma [unit]."""
-    return sigma * math.sqrt(dt)
-
-
 def density_from_average_sigma(sigma_avg: float, averaging_time: float = 1.0) -> float:
     """Density of white noise whose T-second average has 1-sigma ``sigma_avg``.
 

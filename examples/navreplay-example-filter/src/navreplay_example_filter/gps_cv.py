@@ -130,7 +130,7 @@ class GpsConstantVelocity(Filter):
         H[:, POS] = np.eye(3)
         c = kalman.correct(self.x, self.P, z, H, R, t=t)
         self.x, self.P = c.x, c.P
-        return [Innovation("gps_pos", t, c.nu, c.S)]
+        return [c.innovation("gps_pos", t)]
 
     def estimate(self) -> Estimate | None:
         if self.ref is None:
