@@ -20,3 +20,14 @@ def best(fn: Callable[[], Any], repeat: int = 3, number: int = 1) -> float:
             fn()
         shortest = min(shortest, time.perf_counter() - start)
     return shortest / number
+
+
+def peak_rss() -> int:
+    """Peak resident memory of this process [bytes] (``VmHWM``; Linux).
+
+    Not ``resource.getrusage(...).ru_maxrss``: Linux carries that over from the parent at fork
+    and keeps it across exec, so a fresh interpreter started by a large parent reports the
+    parent's peak. Measure each figure in a fresh interpreter and read this there."""
+    with open("/proc/self/status") as f:
+        line = next(x for x in f if x.startswith("VmHWM:"))
+    return int(line.split()[1]) * 1024

@@ -5,7 +5,7 @@
 * read: the same file into numpy columns, ``read_recording`` vs mcap's reader with
   mcap-ros2-support's ``DecoderFactory``;
 * memory: peak RSS of writing (and of reading back) a 1-hour, 200 Hz IMU + truth recording, each in
-  a fresh subprocess (``resource.getrusage``).
+  a fresh interpreter (its own ``VmHWM``, :func:`benchmarks.peak_rss`).
 
 Timings keep the best of ``--repeat`` runs, since the machine may be shared.
 
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import subprocess
 import sys
 import tempfile
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import peak_rss
 from navreplay.io import TOPICS, read_recording, write_recording
 from navreplay.io.schemas import SPECS
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
@@ -134,23 +134,23 @@ def _rss_child(mode: str, path: str) -> None:
     """Subprocess entry: print JSON with peak RSS [MiB] before and after the I/O."""
     if mode == "write":
         rec = hour_recording()
-        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        before = peak_rss()
         start = time.perf_counter()
         write_recording(path, rec, force=True)
     else:
-        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        before = peak_rss()
         start = time.perf_counter()
         rec = read_recording(path)
     seconds = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    after = peak_rss()
     data = sum(
         s.t_ns.nbytes + sum(c.nbytes for c in s.columns.values()) for s in rec.streams.values()
     )
     print(
         json.dumps(
             {
-                "before_mib": before / 1024,
-                "peak_mib": after / 1024,
+                "before_mib": before / 2**20,
+                "peak_mib": after / 2**20,
                 "data_mib": data / 2**20,
                 "seconds": seconds,
                 "messages": sum(len(s) for s in rec.streams.values()),

@@ -86,14 +86,14 @@ if sys.argv[1] != "-":
     assert res.t.shape[0] > 0
 else:
     import navreplay.filters.builtins, navreplay.io, navreplay.replay  # noqa: F401
-# VmHWM: this process's own peak (ru_maxrss would include the parent's, inherited at fork)
-hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")][0]
-print(int(hwm.split()[1]) * 1024)
+from benchmarks import peak_rss  # VmHWM: ru_maxrss would carry the parent's peak over
+print(peak_rss())
 """
 
 
 def _peak_rss(path: str) -> int:
     out = subprocess.run([sys.executable, "-c", _RSS_CHILD, path], check=True,
+                         cwd=Path(__file__).resolve().parent.parent,
                          capture_output=True, text=True)
     return int(out.stdout.strip().splitlines()[-1])
 
@@ -169,6 +169,9 @@ def _throughput(path: Path) -> tuple[Any, Any, float]:
     print(f"  strapdown, one call over the record    {t_sd:6.2f} s {rate(t_sd)}")
     print(f"ratios: end to end / strapdown = {t_e2e / t_sd:.1f}; engine share of the gps-ins "
           f"replay = {t_null / t_filt:.0%}")
+    ok = "ok" if t_filt <= 4.0 * t_sd else "ABOVE the target of 4"
+    print(f"gps-ins replay / strapdown on the same samples = {t_filt / t_sd:.1f} ({ok}); "
+          f"decode + replay {n_imu / (t_dec + t_filt) / 1e3:.0f}k IMU samples/s (target 500k)")
     return result, recording, t_filt
 
 

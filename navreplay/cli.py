@@ -212,6 +212,14 @@ def _result_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
 # the group
 
 
+
+def _check_executor(ctx: click.Context, param: click.Parameter, value: str) -> str:
+    from navreplay.replay.dask_executor import is_address
+
+    if value in ("process", "dask") or is_address(value):
+        return value
+    raise click.BadParameter(f"{value!r}: use process, dask or dask://HOST:PORT")
+
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="navreplay")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
@@ -418,6 +426,10 @@ def _looks_like_recording(arg: str) -> bool:
               help="Write the summary figures as JSON.")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="Processes (for several recordings).")
+@click.option("--executor", default="process", show_default=True,
+              metavar="process|dask|dask://HOST:PORT", callback=_check_executor,
+              help="Where the runs go: a process pool of --workers, a Dask LocalCluster of "
+                   "--workers processes, or a running Dask scheduler.")
 @click.option("--rate", type=float, metavar="X",
               help="Replay at X times real time (1.0 = real time), for live viewing.")
 @click.option("--output-rate", type=float, default=10.0, show_default=True, metavar="HZ",
@@ -438,7 +450,8 @@ def _looks_like_recording(arg: str) -> bool:
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
-        summary: str | None, workers: int, rate: float | None, output_rate: float,
+        summary: str | None, workers: int, executor: str, rate: float | None,
+        output_rate: float,
         topics: Sequence[str], frames: Sequence[str], time: str, init: str | None,
         reference: str | None, no_frame_check: bool,
         export: str | None, report: str | None, max_imu_gap: float | None,
@@ -474,7 +487,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         recordings=tuple(Path(a) for a in args),
         viz=_viz_options(save, spawn, connect, serve, no_viz),
         summary_path=Path(summary) if summary else None,
-        workers=workers, pacing=rate, output_rate=output_rate, max_imu_gap=max_imu_gap,
+        workers=workers, executor=executor, pacing=rate, output_rate=output_rate,
+        max_imu_gap=max_imu_gap,
         log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time),
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None, force=force,
@@ -500,6 +514,10 @@ def _finish(report: Any) -> None:
 @click.option("--seed", type=int, default=0, show_default=True, help="Run i uses seed + i.")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="Processes.")
+@click.option("--executor", default="process", show_default=True,
+              metavar="process|dask|dask://HOST:PORT", callback=_check_executor,
+              help="Where the runs go: a process pool of --workers, a Dask LocalCluster of "
+                   "--workers processes, or a running Dask scheduler.")
 @click.option("--filter", "refs", multiple=True, metavar="MODULE:CLASS",
               help="Add a filter class by import path (repeatable).")
 @click.option("-p", "--param", "params", multiple=True, metavar="[FILTER.|scenario.]KEY=VALUE",
@@ -515,7 +533,7 @@ def _finish(report: Any) -> None:
               help="Write per-run and ensemble figures as JSON.")
 @_result_flags
 def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, workers: int,
-               refs: Sequence[str], params: Sequence[str], duration: float | None,
+               executor: str, refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
                spawn: bool, connect: str | None, serve: bool, no_viz: bool,
                summary: str | None, export: str | None, report: str | None) -> None:
@@ -527,6 +545,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     \b
     Example:
       navreplay montecarlo vehicle-drive ins,gps-ins --runs 50 --workers 2 -p scenario.duration=300
+      navreplay montecarlo vehicle-drive gps-ins --runs 1000 --executor dask://scheduler:8786
     """
     from navreplay import jobs
 
@@ -541,7 +560,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         filters=jobs.filter_specs(filter_names, refs, filter_items, cfg),
         runs=runs,
         values=jobs.scenario_values(scenario_items, cfg, duration),
-        seed=seed, workers=workers,
+        seed=seed, workers=workers, executor=executor,
         keep_dir=Path(keep) if keep else None, force=force,
         viz=_viz_options(save, spawn, connect, serve, no_viz),
         summary_path=Path(summary) if summary else None,

@@ -53,7 +53,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from navreplay.filters.base import Nav, NavError, State, TrueConstant, TruthColumn
 from navreplay.geo import earth
@@ -99,7 +99,8 @@ def chi2_bounds(dof: int, runs: int = 1, probability: float = 0.95) -> tuple[flo
     if dof < 1 or runs < 1:
         raise ValueError(f"dof and runs must be >= 1, got {dof}, {runs}")
     a = 0.5 * (1.0 - probability)
-    lo, hi = stats.chi2.ppf([a, 1.0 - a], runs * dof) / runs
+    # chi2.ppf(p, k) = 2 gammaincinv(k / 2, p): scipy.special, not the heavy scipy.stats
+    lo, hi = 2.0 * special.gammaincinv(0.5 * runs * dof, [a, 1.0 - a]) / runs
     return float(lo), float(hi)
 
 

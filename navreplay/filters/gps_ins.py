@@ -325,8 +325,11 @@ class GpsInsFilter(InsFilter):
                  p.gyro_scale_factor_sigma]) ** 2)
 
     def _extra_values(self) -> np.ndarray:
-        return np.r_[self.lever_arm_b if self.params.estimate_lever_arm else np.zeros(0),
-                     self.gyro_z if self._gz is not None else np.zeros(0)]
+        if not self.params.estimate_lever_arm:
+            return self.gyro_z if self._gz is not None else np.zeros(0)
+        if self._gz is None:
+            return self.lever_arm_b
+        return np.concatenate((self.lever_arm_b, self.gyro_z))
 
     def _process_noise(self, n: int) -> itu.ProcessNoise:
         noise = super()._process_noise(n)
@@ -335,12 +338,8 @@ class GpsInsFilter(InsFilter):
         # (2a): the z-rate errors are states; the motion noise of the gyro is off
         return dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start)
 
-    def _compensate_gyro(self, omega_ib_b: np.ndarray) -> np.ndarray:
-        if self._gz is None or not np.any(self.gyro_z):
-            return omega_ib_b
-        # (2a): omega - k_hat (omega_z - b_z); the time update subtracts b_g
-        w_z = omega_ib_b[:, 2] - self.b_g[2]
-        return omega_ib_b - w_z[:, None] * self.gyro_z[None, :]
+    def _gyro_z_estimates(self) -> np.ndarray | None:
+        return self.gyro_z if self._gz is not None else None
 
     # -- updates ---------------------------------------------------------------------------
 

@@ -317,10 +317,26 @@ class InsFilter(Filter):
         """The process noise (and model options) of the time update for n states."""
         return self.params.process_noise(n)
 
+    def _gyro_z_estimates(self) -> np.ndarray | None:
+        """Estimates of the gyro z-rate errors (m_xz, m_yz, s_z) of ins_error eq. (22) that
+        the IMU is compensated for, or None; none here."""
+        return None
+
     def _compensate_gyro(self, omega_ib_b: np.ndarray) -> np.ndarray:
         """Raw gyro samples (k, 3) with the compensations other than the bias applied (the
-        time update subtracts the bias estimate); none here."""
-        return omega_ib_b
+        time update subtracts the bias estimate): the z-rate errors, if any."""
+        k_z = self._gyro_z_estimates()
+        if k_z is None or not k_z.any():
+            return omega_ib_b
+        return itu.compensate_gyro_z(omega_ib_b, self.b_g, k_z)
+
+    def _state_vector(self) -> np.ndarray:
+        """``Estimate.x``: zeros for the error states, the bias and extra estimates."""
+        x = np.zeros(self.P.shape[0])
+        x[ie.BA] = self.b_a
+        x[ie.BG] = self.b_g
+        x[ie.N_STATES:] = self._extra_values()
+        return x
 
     # -- the Filter interface --------------------------------------------------------------
 
@@ -354,14 +370,28 @@ class InsFilter(Filter):
 
     def estimate(self) -> Estimate:
         self._sync_covariance()
-        x = np.zeros(self.P.shape[0])
-        x[ie.BA] = self.b_a
-        x[ie.BG] = self.b_g
-        x[ie.N_STATES:] = self._extra_values()
         return Estimate(
-            self.t, x, self.P,
+            self.t, self._state_vector(), self.P,
             NavSolution.from_vector(self.nav),
         )
+
+    def propagate_outputs(
+        self, t: np.ndarray, imu: Mapping[str, np.ndarray], ends: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`propagate` over each segment ``[ends[j-1], ends[j])`` of an IMU block, each
+        followed by :meth:`estimate`, in one compiled call (the replay engine's batch of
+        output ticks); returns the estimates' columns (t, x, P, nav vectors)."""
+        t_out, nav_out, P_out, w_last = self._time_update.propagate_outputs(
+            self.nav, self.P, self.t, t, imu["omega_ib_b"], imu["f_b"], self.b_a, self.b_g,
+            ends, self._gyro_z_estimates(),
+        )
+        self.nav = nav_out[-1].copy()
+        self.P = P_out[-1].copy()
+        self.t = float(t_out[-1])
+        if not np.isnan(w_last[0]):
+            self.omega_ib_b = w_last
+        x = np.broadcast_to(self._state_vector(), (len(t_out), self.P.shape[0]))
+        return t_out, x, P_out, nav_out
 
     # -- covariance propagation ------------------------------------------------------------
 

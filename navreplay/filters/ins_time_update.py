@@ -22,7 +22,12 @@ import numpy as np
 from navreplay import strapdown
 from navreplay.filters import kalman
 from navreplay.filters.ins_error import N_GYRO_Z, N_STATES, Vertical, fill_system_matrix
-from navreplay.filters.kalman import FilterDivergedError, check_covariance
+from navreplay.filters.kalman import (
+    DEFAULT_RTOL,
+    FilterDivergedError,
+    _covariance_ok,
+    check_covariance,
+)
 from navreplay.geo import kernels
 
 N_NAV = 9
@@ -187,6 +192,19 @@ def _propagate_block(
         if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
             return -3, first, nav, P
     return code, first, hist[k].copy(), P
+
+
+@numba.njit(cache=True)
+def compensate_gyro_z(omega: np.ndarray, b_g: np.ndarray, k_z: np.ndarray) -> np.ndarray:
+    """Gyro samples (k, 3) compensated for the z-rate errors k_z = (m_xz, m_yz, s_z) of
+    ins_error eq. (22): ``omega - k_z (omega_z - b_g_z)`` (the bias itself is subtracted by
+    the time update)."""
+    out = np.empty(omega.shape)
+    for i in range(omega.shape[0]):
+        w_z = omega[i, 2] - b_g[2]
+        for c in range(3):
+            out[i, c] = omega[i, c] - w_z * k_z[c]
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -471,6 +489,12 @@ class TimeUpdate:
             return nav, P, float(t[-1])
         if code == -4:
             return None
+        self._fail(code, first, t, t_nav, omega_ib_b, f_b, P)
+        return None
+
+    def _fail(self, code: int, first: int, t: np.ndarray, t_nav: float, omega_ib_b: np.ndarray,
+              f_b: np.ndarray, P: np.ndarray) -> None:
+        """Raise the error of a failed :func:`_propagate_block` (code, first sample used)."""
         if code == -5:
             raise ValueError(f"P must be {self._shape} as the process noise, got {P.shape}")
         if code == -3:
@@ -480,10 +504,56 @@ class TimeUpdate:
             raise FilterDivergedError("navigation state is not finite", t_nav)
         i = first + code
         raise ValueError(
-            f"IMU sample at t = {t[i]:.6f} s (previous {t[i - 1] if code else t_nav:.6f} s): "
-            f"omega_ib_b = {omega_ib_b[i]}, f_b = {f_b[i]}: not finite, or the time does not "
-            "increase"
+            f"IMU sample at t = {t[i]:.6f} s (previous {t[i - 1] if i > first else t_nav:.6f} "
+            f"s): omega_ib_b = {omega_ib_b[i]}, f_b = {f_b[i]}: not finite, or the time does "
+            "not increase"
         )
+
+    def propagate_outputs(
+        self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
+        omega_ib_b: np.ndarray, f_b: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
+        ends: np.ndarray, gyro_z: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`propagate` over each segment ``[ends[j-1], ends[j])`` of a block followed by
+        :meth:`close`, in one compiled call; the state after each segment is an output.
+
+        The same arithmetic as the calls one by one (the gyro compensated first for the
+        z-rate error estimates ``gyro_z`` (m_xz, m_yz, s_z) of eq. (22), if given).
+
+        Returns
+        -------
+        t_out : ndarray, shape (m,)
+            Time of the state after each segment [s] (that of the last sample used).
+        nav_out : ndarray, shape (m, 10)
+        P_out : ndarray, shape (m, n, n)
+            P at those times, checked.
+        w_last : ndarray, shape (3,)
+            The last compensated body rate [rad/s] (``t_nav``'s if no sample was used: NaN).
+
+        Raises
+        ------
+        as :meth:`propagate` and :meth:`close`.
+        """
+        m = ends.shape[0]
+        t_out = np.empty(m)
+        nav_out = np.empty((m, nav.shape[0]))
+        P_out = np.empty((m, *self._shape))
+        w_last = np.full(3, np.nan)
+        k_z = np.zeros(3) if gyro_z is None else _f64(gyro_z)
+        code, j, first, nav_j, P_j, t_j = _propagate_outputs(
+            nav, P, t, t_nav, omega_ib_b, f_b, b_a, b_g, k_z, self.prev, self.step,
+            *self._model, self.open_step.nav, self.open_step.sums, *self._work, ends,
+            DEFAULT_RTOL, t_out, nav_out, P_out, w_last,
+        )
+        if code == -1:
+            return t_out, nav_out, P_out, w_last
+        if code in (-6, -7):
+            check_covariance(P_j, t=t_j)  # names what is wrong
+            raise FilterDivergedError("P is not symmetric positive semi-definite", t_j)
+        a = int(ends[j - 1]) if j else 0
+        self._fail(code, first - a, t[a:ends[j]], t_j, omega_ib_b[a:ends[j]], f_b[a:ends[j]],
+                   P_j)
+        raise AssertionError("unreachable")
 
     def close(self, P: np.ndarray, t: float) -> np.ndarray:
         """P at the time t [s] of the last sample: propagated over the open covariance step,
@@ -496,3 +566,54 @@ class TimeUpdate:
         P = _close_step(P, *self._model, self.open_step.nav, self.open_step.sums, *self._work)
         check_covariance(P, t=t)
         return P
+
+
+@numba.njit(cache=True)
+def _propagate_outputs(
+    nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
+    f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, k_z: np.ndarray, prev: np.ndarray,
+    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
+    gz: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
+    T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray, ends: np.ndarray,
+    rtol: float, t_out: np.ndarray,
+    nav_out: np.ndarray, P_out: np.ndarray, w_last: np.ndarray,
+) -> tuple[int, int, int, np.ndarray, np.ndarray, float]:
+    """:func:`_propagate_block` over the segments ``[ends[j-1], ends[j])`` of a block, each
+    followed by :func:`_close_step` and the output of (t, nav, P) into row j.
+
+    The gyro samples are compensated first for the z-rate errors ``k_z`` (eq. 22):
+    ``omega - k_z (omega_z - b_g_z)``. Returns (code, j, first, nav, P, t_nav): code -1 when
+    all went well; else the code of :func:`_propagate_block` of segment j (``first`` its first
+    sample used), -6 when P after it fails the check of
+    :func:`navreplay.filters.kalman.check_covariance`, -7 when P after the close fails it (P
+    is checked once per segment, after the close when a covariance step was open).
+    ``w_last`` receives the last compensated body rate.
+    """
+    w = omega
+    if k_z[0] != 0.0 or k_z[1] != 0.0 or k_z[2] != 0.0:
+        w = compensate_gyro_z(omega, b_g, k_z)
+    a = 0
+    for j in range(ends.shape[0]):
+        b = ends[j]
+        if b > a:
+            code, first, nav_b, P_b = _propagate_block(
+                nav, P, t[a:b], t_nav, w[a:b], f[a:b], b_a, b_g, prev, step, q, k_acc,
+                k_gyro, depth, curvature, gz, open_nav, open_sums)
+            if code == -1:
+                nav, P, t_nav = nav_b, P_b, t[b - 1]
+                for c in range(3):
+                    w_last[c] = w[b - 1, c] - b_g[c]
+                if open_sums[0] <= 0.0 and not _covariance_ok(P, rtol):  # else checked below
+                    return -6, j, a + first, nav, P, t_nav
+            elif code != -4:
+                return code, j, a + first, nav, P_b, t_nav
+            a = b
+        if open_sums[0] > 0.0:
+            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, open_nav, open_sums, F,
+                            M, T, Q, cols, mean)
+            if not _covariance_ok(P, rtol):
+                return -7, j, a, nav, P, t_nav
+        t_out[j] = t_nav
+        nav_out[j] = nav
+        P_out[j] = P
+    return -1, ends.shape[0], 0, nav, P, t_nav

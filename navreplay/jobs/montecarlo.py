@@ -40,6 +40,9 @@ class MonteCarloJob:
     output_rate : float
     export_dir, report_path : Path, optional
         ``--export DIR`` (ensemble statistics as CSV) and ``--report FILE.html``.
+    executor : str
+        ``process``, ``dask`` or ``dask://HOST:PORT``
+        (:func:`navreplay.replay.ensemble.make_executor`).
     """
 
     scenario: str
@@ -55,6 +58,7 @@ class MonteCarloJob:
     output_rate: float = 10.0
     export_dir: Path | None = None
     report_path: Path | None = None
+    executor: str = "process"
 
 
 def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunReport:
@@ -86,4 +90,4 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
              f"{job.runs} runs, seeds {job.seed}..{job.seed + job.runs - 1}")
     return campaign(tasks, job.filters, job.viz, DEFAULT_OUT / f"montecarlo-{job.scenario}.rrd",
                      job.summary_path, job.workers, progress, title, job.output_rate,
-                     per_run_table=False, outputs=outputs_of(job))
+                     per_run_table=False, outputs=outputs_of(job), executor=job.executor)

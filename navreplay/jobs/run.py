@@ -69,6 +69,9 @@ class RunJob:
         Overwrite existing export and report files.
     max_imu_gap : float, optional
         Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
+    executor : str
+        Where several recordings run: ``process``, ``dask`` or ``dask://HOST:PORT``
+        (:func:`navreplay.replay.ensemble.make_executor`).
     """
 
     filters: tuple[FilterSpec, ...]
@@ -83,6 +86,7 @@ class RunJob:
     report_path: Path | None = None
     force: bool = False
     max_imu_gap: float | None = None
+    executor: str = "process"
 
 
 def outputs_of(job: Any) -> Outputs:
@@ -119,7 +123,7 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
     return campaign(tasks, job.filters, job.viz, default, job.summary_path, job.workers,
                      progress, title, job.output_rate, per_run_table=True,
-                     outputs=outputs_of(job))
+                     outputs=outputs_of(job), executor=job.executor)
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
@@ -202,6 +206,7 @@ def campaign(
     output_rate: float,
     per_run_table: bool,
     outputs: Outputs | None = None,
+    executor: str = "process",
 ) -> RunReport:
     from navreplay import metrics
 
@@ -227,7 +232,8 @@ def campaign(
     sink = open_output(viz_options, default_rrd, title)
     try:
         done = run_ensemble(tasks, filters, collect, extract=campaign_extract,
-                            workers=workers, progress=progress, output_rate=output_rate)
+                            workers=workers, executor=executor, progress=progress,
+                            output_rate=output_rate)
         ens = {label: s.result() for label, s in stats.items() if s.runs}
         if sink is not None:
             from navreplay.viz.ensemble import log_ensemble
@@ -262,7 +268,7 @@ def campaign(
                      + tables.format_summaries({label: e.summary() for label, e in ens.items()}))
     notes += [
         f"{done.runs} runs in {done.seconds:.1f} s wall ({done.run_seconds:.1f} s of run time, "
-        f"{workers} worker(s))",
+        f"{workers} worker(s)" + ("" if executor == "process" else f" on {executor}") + ")",
     ]
     if summary_path is not None:
         notes.append(f"Summary written to {summary_path}")

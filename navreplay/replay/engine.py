@@ -69,6 +69,7 @@ from navreplay.filters.base import (
     Filter,
     FilterContext,
     FilterParams,
+    NavSolution,
     State,
     check_states,
 )
@@ -310,11 +311,12 @@ def _ticks(first_ns: int, last_ns: int, t0_ns: int, rate: float) -> np.ndarray:
 
 
 class _Columns:
-    """Estimate columns with geometric growth up to a known upper bound."""
+    """Estimate columns allocated at a known upper bound of rows (the operating system backs
+    only the rows written with memory, so they are neither grown nor copied)."""
 
     def __init__(self, first: Estimate, upper: int) -> None:
         self.upper = max(upper, 1)
-        self.cap = min(self.upper, 1024)
+        self.cap = self.upper
         self.m = 0
         n = first.x.shape[0]
         self.t = np.empty(self.cap)
@@ -365,9 +367,30 @@ class _Columns:
             col[m] = est.extras[k]
         self.m = m + 1
 
+    def add_rows(self, t: np.ndarray, x: np.ndarray, P: np.ndarray, nav: np.ndarray) -> None:
+        """Append a batch of estimates (columns of m rows; nav as navigation vectors)."""
+        k = t.shape[0]
+        n = self.x.shape[1]
+        if x.shape != (k, n) or P.shape != (k, n, n):
+            raise _BadOutput(f"x has shape {x.shape[1:]} and P {P.shape[1:]}; the filter "
+                             f"declares {n} states")
+        while self.m + k > self.cap:
+            self._grow()
+        m = self.m
+        self.t[m:m + k] = t
+        self.x[m:m + k] = x
+        self.P[m:m + k] = P
+        if self.has_nav:
+            self.pos[m:m + k] = nav[:, 0:3]
+            self.v_n[m:m + k] = nav[:, 3:6]
+            self.q_nb[m:m + k] = nav[:, 6:10]
+        self.m = m + k
+
     def first_nonfinite(self, start: int) -> tuple[int, str] | None:
         """First row >= start with a non-finite entry, and the column's name."""
         stop = self.m
+        if stop <= start:
+            return None
         cols: list[tuple[str, np.ndarray]] = [("state", self.x), ("covariance", self.P)]
         if self.has_nav:
             cols += [("position", self.pos), ("velocity", self.v_n), ("attitude", self.q_nb)]
@@ -383,17 +406,8 @@ class _Columns:
         return found
 
     def result(self, **kw: Any) -> RunResult:
-        m = self.m
-        return RunResult(
-            t=self.t[:m].copy(),
-            x=self.x[:m].copy(),
-            P=self.P[:m].copy(),
-            nav_pos=self.pos[:m].copy() if self.has_nav else None,
-            nav_v_n=self.v_n[:m].copy() if self.has_nav else None,
-            nav_q_nb=self.q_nb[:m].copy() if self.has_nav else None,
-            extras={k: v[:m].copy() for k, v in self.extras.items()},
-            **kw,
-        )
+        """The rows written (views: the rows never written were never backed by memory)."""
+        return self.view(**kw)
 
     def view(self, **kw: Any) -> RunResult:
         """The rows so far, without copying (for live observers)."""
@@ -596,10 +610,34 @@ def replay(
     next_observe = wall0 + observe_interval
     slow = pacing is not None or observer is not None or progress is not None
 
+    batch = None if pacing is not None else _batch_hook(filt)
+    tick_run_end = _tick_runs(plan.code).tolist() if batch is not None else []
     i = -1
     t_now = 0.0
     try:
-        for i in range(n_events + 1):
+        while i < n_events:
+            i += 1
+            if batch is not None and i < n_events and ev_code[i] == TICK:
+                j = tick_run_end[i]
+                if feeder.clean(ev_end[j - 1]):  # outputs of a run of ticks in one call
+                    t_now = ev_t[i]
+                    block = feeder.take(ev_end[j - 1])
+                    ends = plan.imu_end[i:j] - block[2]
+                    rows = batch(block[0], block[1], ends)
+                    if columns is None:
+                        columns = _Columns(_first_estimate(rows, len(states), names), upper)
+                    columns.add_rows(*rows)
+                    t_now = ev_t[j - 1]
+                    i = j - 1
+                    if columns.m - checked >= _CHECK_EVERY:
+                        _check_finite(columns, checked, label, source, names)
+                        checked = columns.m
+                    if observer is not None and time.perf_counter() >= next_observe:
+                        observer(columns.view(**meta))
+                        next_observe = time.perf_counter() + observe_interval
+                    if progress is not None:
+                        progress(min(i + 1, n_events), n_events)
+                    continue
             if i < n_events:
                 t_now = ev_t[i]
                 end = ev_end[i]
@@ -677,6 +715,49 @@ def replay(
             innovations=inn_series, **meta,
         )
     return columns.result(innovations=inn_series, **meta)
+
+
+def _batch_hook(filt: Filter) -> Callable[..., tuple[np.ndarray, ...]] | None:
+    """The filter's ``propagate_outputs(t, imu, ends)``, when it has one that belongs with its
+    ``propagate`` and ``estimate`` (defined by the same class or a subclass of theirs).
+
+    ``propagate_outputs`` is equivalent to ``propagate`` over each segment
+    ``[ends[j-1], ends[j])`` of the IMU block followed by ``estimate``, and returns the
+    estimates' columns ``(t (m,), x (m, n), P (m, n, n), nav (m, 10))``; the engine hands it
+    runs of output ticks (no aiding sample, no IMU gap) at once.
+    """
+    cls = type(filt)
+    if getattr(cls, "propagate_outputs", None) is None:
+        return None
+
+    def owner(name: str) -> type:
+        return next(c for c in cls.__mro__ if name in c.__dict__)
+
+    hook = owner("propagate_outputs")
+    if all(issubclass(hook, owner(n)) for n in ("propagate", "estimate")):
+        return filt.propagate_outputs  # type: ignore[attr-defined]
+    return None
+
+
+def _tick_runs(code: np.ndarray) -> np.ndarray:
+    """For each event, the index after the run of output ticks that starts there."""
+    n = code.shape[0]
+    is_tick = code == TICK
+    # index of the next non-tick event at or after each position
+    nxt = np.where(~is_tick, np.arange(n), n)
+    return np.minimum.accumulate(nxt[::-1])[::-1] if n else nxt
+
+
+def _first_estimate(rows: tuple[np.ndarray, ...], n_states: int,
+                    names: tuple[str, ...]) -> Estimate:
+    """The first row of a batch as an Estimate (it sizes the output columns)."""
+    t, x, P, nav = rows
+    if np.shape(x)[1:] != (n_states,):
+        raise _BadOutput(
+            f"x has shape {np.shape(x)[1:]}; the filter declares {n_states} states "
+            f"({', '.join(names) or 'none'}; set Filter.states)"
+        )
+    return Estimate(float(t[0]), x[0], P[0], NavSolution.from_vector(nav[0]))
 
 
 def _imu_feeder(filt: Filter, imu_t: np.ndarray, imu_cols: list[tuple[str, np.ndarray]],

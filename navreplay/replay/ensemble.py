@@ -10,8 +10,9 @@ the parent hands them, in task order, to a *sink* that accumulates statistics (f
 Parallelism is behind a small seam, :class:`Executor`: anything with the
 ``concurrent.futures.Executor`` methods ``submit`` and ``shutdown`` whose futures have
 ``result()``. The default is a :class:`concurrent.futures.ProcessPoolExecutor` (or
-:class:`InlineExecutor` for one worker); a Dask cluster plugs in as
-``distributed.Client(...).get_executor()``, other engines through a thin adapter.
+:class:`InlineExecutor` for one worker); a Dask cluster, local or remote, through
+:class:`navreplay.replay.dask_executor.DaskExecutor` (``--executor dask[://host:port]``), other
+engines through a thin adapter of the same two methods.
 
 The extractor and the sink are the campaign-specific parts (the paper reproductions supply
 their own). An extractor is a module-level function (it is pickled to the workers)::
@@ -299,10 +300,24 @@ class InlineExecutor:
         return None
 
 
-def make_executor(workers: int) -> Executor:
-    """An :class:`InlineExecutor` for one worker, else a process pool of ``workers``."""
+EXECUTORS = ("process", "dask", "dask://HOST:PORT")
+"""What ``--executor`` takes: a process pool on this machine (the default), a Dask
+LocalCluster of ``--workers`` processes, or a running Dask scheduler."""
+
+
+def make_executor(workers: int, spec: str = "process") -> Executor:
+    """The executor of a campaign: for ``spec == "process"`` an :class:`InlineExecutor` for one
+    worker, else a process pool of ``workers``; for ``"dask"`` a Dask LocalCluster of
+    ``workers`` processes; for a scheduler address (``dask://host:port``, ``tcp://...``) a
+    client of that cluster (:mod:`navreplay.replay.dask_executor`)."""
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
+    from navreplay.replay import dask_executor
+
+    if spec == "dask" or dask_executor.is_address(spec):
+        return dask_executor.DaskExecutor(None if spec == "dask" else spec, workers)
+    if spec != "process":
+        raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}; got {spec!r}")
     if workers == 1:
         return InlineExecutor()
     return cf.ProcessPoolExecutor(max_workers=workers, initializer=lifecycle.worker_init,
@@ -353,7 +368,7 @@ def run_ensemble(
     *,
     extract: Extractor = default_extract,
     workers: int = 1,
-    executor: Executor | None = None,
+    executor: Executor | str | None = None,
     progress: Callable[[int, int], None] | None = None,
     output_rate: float | None = 10.0,
     keep_going: bool = False,
@@ -372,8 +387,9 @@ def run_ensemble(
         Reduces a run to compact metrics in the worker (a module-level function).
     workers : int
         Worker processes (1 = in this process); ignored when ``executor`` is given.
-    executor : Executor, optional
-        An executor to use instead of a new process pool (left running afterwards).
+    executor : Executor or str, optional
+        An executor to use instead of a new process pool (left running afterwards), or an
+        ``--executor`` value for :func:`make_executor` (shut down afterwards).
     progress : callable, optional
         ``progress(done, total)`` after each run.
     output_rate : float or None
@@ -392,9 +408,10 @@ def run_ensemble(
         raise ValueError(f"filter labels must be unique; repeated: {', '.join(dupes)}")
     for spec in filters:  # fail on an unknown filter or bad parameters before any work
         build_params(spec.load(), spec.params)
-    own = executor is None
-    ex = make_executor(workers) if own else executor
-    window = 1 if isinstance(ex, InlineExecutor) else 2 * max(workers, 1)
+    own = executor is None or isinstance(executor, str)
+    ex = make_executor(workers, executor or "process") if own else executor
+    parallelism = getattr(ex, "parallelism", workers)
+    window = 1 if isinstance(ex, InlineExecutor) else 2 * max(parallelism, 1)
     total = len(tasks)
     pending: collections.deque[tuple[RunTask, Future]] = collections.deque()
     queue = iter(tasks)

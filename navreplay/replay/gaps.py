@@ -125,6 +125,18 @@ class ImuFeeder:
             self._bridge_to(t_now)  # an aiding sample inside the gap
             return
 
+    def clean(self, end: int) -> bool:
+        """Whether samples ``[start, end)`` hold no gap to bridge (:meth:`take` may hand them
+        over in one block)."""
+        return not (self._g < len(self._gaps) and self._gaps[self._g] <= end)
+
+    def take(self, end: int) -> tuple[np.ndarray, dict[str, np.ndarray], int]:
+        """Samples ``[start, end)`` as (t, columns, start) for a batch; they count as handed
+        over. Only when :meth:`clean`."""
+        a = self.start
+        self.start = max(end, a)
+        return self._t[a:end], {k: v[a:end] for k, v in self._columns}, a
+
     def _bridge_to(self, t: float) -> None:
         if self._bridge is not None and t > self._bridged and t > self._t[self.start - 1]:
             self._bridge(t, float(self._t[self.start - 1]))

@@ -1,0 +1,73 @@
+"""Runs of output ticks handed to a filter at once (``propagate_outputs``) give the same bits
+as the same ticks one by one, with and without IMU gaps, and only to filters whose hook
+belongs with their ``propagate`` and ``estimate``."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+import pytest
+
+from navreplay.filters.gps_ins import GpsInsFilter
+from navreplay.filters.ins import InsFilter
+from navreplay.replay import engine, replay
+from navreplay.sim.scenario import simulate
+from navreplay.streams import Recording, StreamKind
+
+
+@pytest.fixture(scope="module")
+def drive() -> Recording:
+    return simulate("vehicle-drive", {"duration": 120.0}, seed=3)
+
+
+def _one_by_one(monkeypatch: pytest.MonkeyPatch, *args: Any, **kw: Any) -> Any:
+    with monkeypatch.context() as m:
+        m.setattr(engine, "_batch_hook", lambda filt: None)
+        return replay(*args, **kw)
+
+
+def _assert_same(a: Any, b: Any) -> None:
+    assert a.t.shape == b.t.shape and a.t.shape[0] > 100
+    for name in ("t", "x", "P", "nav_pos", "nav_v_n", "nav_q_nb"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert a.innovations.keys() == b.innovations.keys()
+    for k in a.innovations:
+        np.testing.assert_array_equal(a.innovations[k].nu, b.innovations[k].nu, err_msg=k)
+
+
+@pytest.mark.parametrize("filter_cls, params", [
+    (GpsInsFilter, {"estimate_lever_arm": True}),
+    (GpsInsFilter, {}),
+    (InsFilter, {}),
+])
+def test_batched_ticks_are_bitwise_the_events_one_by_one(
+    drive: Recording, monkeypatch: pytest.MonkeyPatch, filter_cls: type, params: dict,
+) -> None:
+    assert engine._batch_hook(filter_cls.__new__(filter_cls)) is not None
+    fast = replay(drive, filter_cls, params, output_rate=20.0)
+    slow = _one_by_one(monkeypatch, drive, filter_cls, params, output_rate=20.0)
+    _assert_same(fast, slow)
+
+
+def test_batched_ticks_around_an_imu_gap(drive: Recording,
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    imu = drive[StreamKind.IMU]
+    t = (imu.t_ns - imu.t_ns[0]) * 1e-9
+    keep = (t < 50.0) | (t > 50.35)  # a 0.35 s gap: bridged, with ticks inside it
+    gapped = dataclasses.replace(imu, t_ns=imu.t_ns[keep],
+                                 columns={k: v[keep] for k, v in imu.columns.items()})
+    rec = Recording({**drive.streams, StreamKind.IMU: gapped}, drive.metadata)
+    _assert_same(replay(rec, GpsInsFilter), _one_by_one(monkeypatch, rec, GpsInsFilter))
+
+
+def test_no_batch_for_a_subclass_that_changes_estimate() -> None:
+    class Changed(InsFilter):
+        name = "changed"
+
+        def estimate(self) -> Any:
+            return super().estimate()
+
+    assert engine._batch_hook(Changed.__new__(Changed)) is None
+    assert engine._batch_hook(InsFilter.__new__(InsFilter)) is not None
