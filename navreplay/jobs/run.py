@@ -8,8 +8,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from navreplay import params as _params
 from navreplay import tables
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
@@ -25,14 +23,6 @@ from navreplay.replay.ensemble import (
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, StreamKind
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
-
-
-def state_errors(m: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Estimation errors and predicted sigmas of the scored states, for the Rerun view."""
-    return {
-        name: (m.state_error[:, j], np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
-        for j, name in enumerate(m.state_names)
-    }
 
 
 @dataclasses.dataclass
@@ -135,13 +125,12 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
                 output_rate=job.output_rate, pacing=job.pacing, validate=False,
                 progress=prog, observer=observer,
             )
-            errors = None
+            scored = None
             if has_truth:
                 scored = metrics.run_metrics(result, recording)
                 summaries[spec.label] = scored.summary()
-                errors = state_errors(scored)
             if sink is not None:
-                sink.log_run(result, truth=recording if has_truth else None, metrics=errors)
+                sink.log_run(result, truth=recording if has_truth else None, metrics=scored)
         hint = close_output(sink, job.viz)
     except BaseException:
         if sink is not None:
@@ -181,8 +170,12 @@ def campaign(
     rows: list[dict[str, Any]] = []
     notes: list[str] = []
 
+    drill: dict[int, Any] = {}  # per-run metrics for the view when the runs are kept
+
     def collect(out: RunOutput) -> None:
         per: PerRun = out.metrics
+        if tasks[out.index].keep:
+            drill[out.index + 1] = per.metrics
         rows.append({"run": out.index + 1, "recording": out.source, "seed": out.seed,
                      "seconds": out.seconds, "filters": per.summaries})
         for label, m in per.metrics.items():
@@ -199,10 +192,13 @@ def campaign(
                             workers=workers, progress=progress, output_rate=output_rate)
         ens = {label: s.result() for label, s in stats.items() if s.runs}
         if sink is not None:
-            from navreplay.viz.ensemble import log_ensemble
+            from navreplay.viz.ensemble import log_ensemble, log_runs
 
+            declared = {spec.label: getattr(spec.load(), "states", None) for spec in filters}
             for label, e in ens.items():
-                log_ensemble(sink, label, e)
+                states = declared.get(label)
+                log_ensemble(sink, label, e, states if isinstance(states, tuple) else None)
+            log_runs(sink, drill)
         hint = close_output(sink, viz_options)
     except BaseException:
         if sink is not None:
