@@ -115,7 +115,7 @@ def read_rrd(path) -> dict[str, dict[str, np.ndarray]]:
                 if name.startswith("rerun.controls"):
                     continue
                 col = rb.column(name)
-                if name in ("time", "timestamp"):
+                if name in ("time", "timestamp", "acceleration_mg"):
                     cols.setdefault(name, []).append(col.cast(pa.int64()).to_numpy())
                 else:
                     flat = col
@@ -126,7 +126,7 @@ def read_rrd(path) -> dict[str, dict[str, np.ndarray]]:
                     values = flat.to_numpy(zero_copy_only=False).astype(np.float64)
                     cols.setdefault(name, []).append(values.reshape(len(col), -1))
         merged = {k: np.concatenate(v) for k, v in cols.items()}
-        order = np.argsort(merged["time"], kind="stable")
+        order = np.argsort(merged.get("time", merged.get("acceleration_mg")), kind="stable")
         out[path] = {k: v[order] for k, v in merged.items()}
     out["static"] = static  # type: ignore[assignment]
     return out
@@ -649,3 +649,45 @@ def test_live_sink_sends_the_blueprint_before_the_data(tmp_path, monkeypatch):
             checked += 1
     assert checked > 20 and "/live/error/p_N" in plotted
     sink.abort()
+
+
+def test_sweep_on_its_own_axis_and_one_colour_per_variant(tmp_path):
+    from navreplay.viz.sink import SIGMA_SHADE, lighter
+
+    a_mg = np.arange(-1500.0, 1501.0, 100.0)
+    path = tmp_path / "sweep.rrd"
+    with open_sink(path) as sink:
+        for k in range(2):
+            sink.log_ensemble(f"sweep {k}", a_mg, {"gravity": a_mg * 0 + k, "specific-force": a_mg},
+                              unit="deg", timeline="acceleration_mg")
+        sink.log_ensemble("azimuth", np.arange(5.0), {"full RMS": np.ones(5),
+                                                      "full sigma": np.ones(5)}, unit="mrad")
+    store = rr.chunk.RrdReader(path).stream().collect()
+    timelines = {}
+    for chunk in store.stream().to_chunks():
+        if not chunk.is_static:
+            names = set(chunk.to_record_batch().schema.names)
+            timelines[chunk.entity_path] = {"acceleration_mg", "time"} & names
+    assert timelines["/ensemble/sweep\\ 0/gravity"] == {"acceleration_mg"}
+    assert timelines["/ensemble/azimuth/full\\ RMS"] == {"time"}
+    data = read_rrd_any(path, "acceleration_mg")
+    np.testing.assert_array_equal(data["/ensemble/sweep\\ 1/gravity"]["acceleration_mg"], a_mg)
+    full = read_rrd(path)
+    # a variant keeps its colour across plots; its sigma is a lighter shade of it
+    c0 = first_color(full, "/ensemble/sweep\\ 0/gravity")
+    assert c0 == first_color(full, "/ensemble/sweep\\ 1/gravity")
+    assert c0 != first_color(full, "/ensemble/sweep\\ 0/specific-force")
+    rms = first_color(full, "/ensemble/azimuth/full\\ RMS")
+    assert first_color(full, "/ensemble/azimuth/full\\ sigma") == lighter(rms, SIGMA_SHADE)
+    tabs, _ = read_blueprint(path)
+    assert tabs["Ensemble"][0] == "sweep 0 [deg]"
+
+
+def read_rrd_any(path, timeline: str) -> dict[str, dict[str, np.ndarray]]:
+    """Index values of ``timeline`` per entity."""
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for chunk in rr.chunk.RrdReader(path).stream().collect().stream().to_chunks():
+        rb = chunk.to_record_batch()
+        if timeline in rb.schema.names:
+            out[chunk.entity_path] = {timeline: rb.column(timeline).to_numpy()}
+    return out

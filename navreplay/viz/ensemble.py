@@ -19,16 +19,13 @@ import numpy as np
 from navreplay.filters.base import NavError, State
 from navreplay.metrics import EnsembleResult, RunMetrics, chi2_bounds_per_count
 from navreplay.viz.naming import Tab, display_unit, quantity_of, resolve_unit
-from navreplay.viz.sink import Sink, lighter
+from navreplay.viz.sink import SIGMA_SHADE, Sink, lighter
 
 _ENSEMBLE_NAV = (
     ("pos_ned", "position", ("N", "E", "D"), "m", 1.0),
     ("v_n", "velocity", ("N", "E", "D"), "m/s", 1.0),
     ("phi", "attitude", ("phi_N", "phi_E", "phi_D"), "deg", 180.0 / math.pi),
 )
-
-SIGMA_SHADE = 0.5
-"""The mean predicted sigma is drawn in the filter's colour this much lighter, and thinner."""
 
 
 def _tab(group: str) -> tuple[str, str]:

@@ -120,6 +120,8 @@ PALETTE = (
 )  # fmt: skip
 """Filter colours in order of first appearance (grey is reserved for the truth)."""
 AXIS_COLORS = ((230, 60, 60), (60, 200, 60), (70, 110, 240))
+SIGMA_SHADE = 0.5
+"""A predicted sigma beside its RMS is drawn in the same colour this much lighter, and thinner."""
 _BACKGROUND = (18, 18, 18)
 """The viewer's dark plot background, that band colours are blended towards."""
 
@@ -994,11 +996,20 @@ class Sink:
                     f"ensemble {name!r}: series {key!r} has shape {values.shape}, t {t.shape}"
                 )
             path = f"{root}/{entity_path(key)[1:]}"
-            color, width = styles[key] if key in styles else (self.color_of(key), 1.5)
+            color, width = styles[key] if key in styles else self._variant_style(key)
             self._style(path, [key], [color], [width])
             self._scalars(path, idx, values)
             self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
                              legend=legend, tab_title=tab_title)
+
+    def _variant_style(self, key: str) -> tuple[tuple[int, int, int], float]:
+        """Colour and width of an ensemble series named ``"<variant>[ RMS| sigma| σ]"``: the
+        variant's colour; a sigma lighter and thinner than its RMS."""
+        for suffix, sigma in ((" RMS", False), (" mean σ", True), (" sigma", True), (" σ", True)):
+            if key.endswith(suffix) and len(key) > len(suffix):
+                color = self.color_of(key[: -len(suffix)])
+                return (lighter(color, SIGMA_SHADE), 1.0) if sigma else (color, 2.0)
+        return self.color_of(key), 1.5
 
     # -- blueprint and lifecycle ---------------------------------------------------------
 
