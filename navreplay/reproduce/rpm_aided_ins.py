@@ -392,7 +392,8 @@ class RpmAidedInsReproduction(Reproduction):
         for j, axis in enumerate("NE"):
             sink.log_ensemble(
                 f"fig3 current error {axis} RMS", t,
-                {"RMS": figs["current_rms"][:, j], "filter sigma": figs["current_sigma"][:, j]},
+                {"filter RMS": figs["current_rms"][:, j],
+                 "filter sigma": figs["current_sigma"][:, j]},
                 unit="m/s",
             )
         for fig, key, what in (("fig4", "long", "longitude (east)"), ("fig5", "lat", "latitude "

@@ -440,7 +440,7 @@ class VectorMatchingReproduction(Reproduction):
         """Log the Figs. 1-5 equivalents into an open :class:`navreplay.viz.Sink`.
 
         Sweeps: one plot per axis and angle, ``/ensemble/fig<1..3> <axis> sweep: RMS <angle> at
-        10 s/<model>``, versus the acceleration [mg] on the sequence timeline ``acceleration_mg``
+        10 s/<model>``, in tab "Sweeps", versus the acceleration [mg] on the sequence timeline ``acceleration_mg``
         (a sweep has no time). Yaw cases: ``/ensemble/fig<4..5> case <x|y>: RMS <angle>/<model>``
         versus time [s]. Each model keeps its colour in every plot.
         """
@@ -449,9 +449,10 @@ class VectorMatchingReproduction(Reproduction):
             r = np.asarray(figures["sweep"]["rms_deg"][axis])
             for k, angle in enumerate(ANGLES):
                 sink.log_ensemble(
-                    f"fig{fig} {axis} sweep: RMS {angle} at 10 s vs acceleration [mg]", a_mg,
+                    f"fig{fig} {axis} sweep: RMS {angle} at 10 s", a_mg,
                     {str(m): r[:, j, k] for j, m in enumerate(MODELS)}, unit="deg",
-                    timeline="acceleration_mg", tab="sweeps", tab_title="Sweeps (x: acceleration_mg)",
+                    timeline="acceleration_mg", tab="sweeps",
+                    tab_title="Sweeps (x: acceleration [mg])",
                 )
         t = np.asarray(figures["yaw"]["t"], dtype=float)
         for fig, case in enumerate(CASES, start=4):

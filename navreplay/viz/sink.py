@@ -1004,7 +1004,9 @@ class Sink:
 
     def _variant_style(self, key: str) -> tuple[tuple[int, int, int], float]:
         """Colour and width of an ensemble series named ``"<variant>[ RMS| sigma| σ]"``: the
-        variant's colour; a sigma lighter and thinner than its RMS."""
+        variant's colour; a sigma lighter and thinner than its RMS; ``"truth"`` grey."""
+        if key == "truth":
+            return TRUTH_COLOR, 2.0
         for suffix, sigma in ((" RMS", False), (" mean σ", True), (" sigma", True), (" σ", True)):
             if key.endswith(suffix) and len(key) > len(suffix):
                 color = self.color_of(key[: -len(suffix)])
