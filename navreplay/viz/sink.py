@@ -260,26 +260,31 @@ class Sink:
 
     # -- live layout ---------------------------------------------------------------------
 
-    def _layout_first(self, log: Callable[[], None]) -> None:
-        """Run ``log``; on a live sink, first send the blueprint for what it will log: ``log``
-        runs once against a stream that drops everything (filling the catalog), the blueprint
-        goes out if the catalog changed, then ``log`` runs for real."""
+    def _layout_first(self, log: Callable[[], None], *, plan: bool = True) -> None:
+        """Run ``log``; on a live sink, first send the blueprint for what it will log: with
+        ``plan``, ``log`` runs once against a stream that drops everything (filling the
+        catalog), the blueprint goes out if the catalog changed, then ``log`` runs for real.
+        Without ``plan`` (later rows of a run already laid out) a plot that appears anyway is
+        announced right after its first rows."""
         if not self.live:
             log()
             return
-        saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
-                 self._extent, self._truth, self._truth_yaw, self._truth_stream,
-                 self._world_coords, set(self._truth_columns))
-        self._rec = _NullStream()  # type: ignore[assignment]
-        try:
-            log()
-        finally:
-            (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
-             self._truth_yaw, self._truth_stream, self._world_coords,
-             self._truth_columns) = saved
+        if plan:
+            saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
+                     self._extent, self._truth, self._truth_yaw, self._truth_stream,
+                     self._world_coords, set(self._truth_columns))
+            self._rec = _NullStream()  # type: ignore[assignment]
+            try:
+                log()
+            finally:
+                (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
+                 self._truth_yaw, self._truth_stream, self._world_coords,
+                 self._truth_columns) = saved
+            if self.catalog.signature() != self._sent:
+                self.send_blueprint()
+        log()
         if self.catalog.signature() != self._sent:
             self.send_blueprint()
-        log()
 
     # -- low-level helpers ---------------------------------------------------------------
 
@@ -550,7 +555,8 @@ class Sink:
                 raise ValueError(f"run {result.label!r} is already logged in this sink")
             self._layout_first(
                 lambda: self._log_rows(self._runs[result.label], result,
-                                       self._runs[result.label].rows, result.t.shape[0])
+                                       self._runs[result.label].rows, result.t.shape[0]),
+                plan=run.rows == 0,
             )
 
         return observe
@@ -597,7 +603,9 @@ class Sink:
             errors, nees = _from_run_metrics(result, metrics)
         else:
             errors = _metric_columns(result, metrics or {})
-        nav_override = {n: errors.pop(n) for n in _NAV_ERRORS if n in errors}
+        nav_override = {} if isinstance(metrics, RunMetrics) else {
+            n: errors.pop(n) for n in _NAV_ERRORS if n in errors
+        }
         if nav_override and run.rows:
             warnings.warn(
                 f"{result.label}: navigation errors were already logged live from the truth; "
@@ -862,7 +870,8 @@ class Sink:
                 continue
             label, scale = self._unit(run, key, result, 0, M)
             tab = self._tab(run, key)
-            path = entity_path(L, "error", n)
+            # a state named like a navigation error (phi_N) keeps its own entity
+            path = entity_path(L, "error", f"{n} state" if n in _NAV_ERRORS else n)
             sig = None if s is None else s * scale
             self._bounded(path, idx, e * scale, sig, L, run.color)
             bounds = "" if s is None else ", ±3σ"
