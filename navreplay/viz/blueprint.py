@@ -99,6 +99,8 @@ class Catalog:
     world: tuple[np.ndarray, np.ndarray] | None = None
     geo: bool = False
     timeline: str = "time"
+    covariances: list[str] = dataclasses.field(default_factory=list)
+    """Ellipsoid entities under ``/world`` (left out of the top-down view)."""
     _paths: set[str] = dataclasses.field(default_factory=set, repr=False)
 
     def add(
@@ -156,6 +158,7 @@ class Catalog:
         return (
             tuple((t, k, len(p.paths)) for t, plots in self.plots.items() for k, p in plots.items()),
             world,
+            len(self.covariances),
             self.geo,
             self.timeline,
         )
@@ -177,7 +180,7 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
     for key in order:
         if key == "world":
             if catalog.world is not None:
-                tabs.append(_trajectory_tab(catalog.world, titles[key]))
+                tabs.append(_trajectory_tab(catalog.world, catalog.covariances, titles[key]))
             continue
         if key == "map":
             if catalog.geo:
@@ -213,7 +216,9 @@ def _series_view(plot: Plot) -> rrb.TimeSeriesView:
     )
 
 
-def _trajectory_tab(box: tuple[np.ndarray, np.ndarray], name: str) -> rrb.Container:
+def _trajectory_tab(
+    box: tuple[np.ndarray, np.ndarray], covariances: list[str], name: str
+) -> rrb.Container:
     """Top-down N/E view (camera above the trajectory, north up) beside the 3D view, both
     framed on the NED box [m] of the trajectories."""
     lo, hi = box
@@ -222,7 +227,7 @@ def _trajectory_tab(box: tuple[np.ndarray, np.ndarray], name: str) -> rrb.Contai
     top = rrb.Spatial3DView(
         origin="/world",
         name="top-down N/E [m] (north up)",
-        contents=["+ /world/**", "- /world/**/covariance"],
+        contents=["+ /world/**", *(f"- {p}" for p in covariances)],
         eye_controls=rrb.EyeControls3D(
             position=(centre[0], centre[1], centre[2] - 1.25 * span),
             look_target=tuple(centre),

@@ -833,8 +833,11 @@ class Sink:
         cap = ELLIPSOID_CAP * max(self._extent, 10.0)
         factor = np.minimum(1.0, cap / np.maximum(half.max(axis=1), 1e-12))
         labels = ["" if f >= 1.0 else f"{L} 3σ drawn × {f:.2g}" for f in factor]
+        cov_path = entity_path("world", L, "covariance")
+        if cov_path not in self.catalog.covariances:
+            self.catalog.covariances.append(cov_path)
         self._rec.send_columns(
-            entity_path("world", L, "covariance"),
+            cov_path,
             indexes=self._indexes(nav.t[c], result.t0_ns),
             columns=rr.Ellipsoids3D.columns(
                 centers=ned[c],
