@@ -556,10 +556,17 @@ def test_each_filter_keeps_its_colour_in_every_error_plot(saved):
 
 
 def test_single_run_nees_with_band(tmp_path):
+    from navreplay.filters.base import Quantity, State, TruthColumn
     from navreplay.metrics import run_metrics
 
     truth = make_truth(duration=60.0)
     r = make_result("f", 4, truth, m=600)
+    # a scored extra: its error is plotted with the declared unit and quantity
+    theta = State("theta", "rad", Quantity.MISALIGNMENT, TruthColumn("theta_f"))
+    tr = truth[StreamKind.TRUTH]
+    k = np.searchsorted(tr.t_ns, T0_NS + np.rint(r.t * 1e9).astype(np.int64))
+    r = dataclasses.replace(r, extras={"theta": tr["theta_f"][k] + 1e-3},
+                            scored_extras=(theta,))
     m = run_metrics(r, truth)
     path = tmp_path / "nees.rrd"
     with open_sink(path) as sink:
@@ -571,6 +578,8 @@ def test_single_run_nees_with_band(tmp_path):
     np.testing.assert_allclose(band[:, [0, -1]], np.tile([lo, hi], (600, 1)))
     tabs, _ = read_blueprint(path)
     assert f"f: NEES ({len(m.nees_states)} states), 95 % band [-]" in tabs["NEES / NIS"]
+    np.testing.assert_allclose(scalars(data, "/f/error/theta")[:, 0], 1e-3 / DEG, rtol=1e-9)
+    assert "f: theta error [deg]" in tabs["Sensor errors"]
 
 
 def test_ensemble_view_colours_tabs_and_bands(tmp_path):

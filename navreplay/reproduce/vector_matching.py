@@ -440,9 +440,10 @@ class VectorMatchingReproduction(Reproduction):
         """Log the Figs. 1-5 equivalents into an open :class:`navreplay.viz.Sink`.
 
         Sweeps: one plot per axis and angle, ``/ensemble/fig<1..3> <axis> sweep: RMS <angle> at
-        10 s/<model>``, in tab "Sweeps", versus the acceleration [mg] on the sequence timeline ``acceleration_mg``
-        (a sweep has no time). Yaw cases: ``/ensemble/fig<4..5> case <x|y>: RMS <angle>/<model>``
-        versus time [s]. Each model keeps its colour in every plot.
+        10 s/<model>``, in tab "Sweeps", versus the acceleration [mg] on the sequence timeline
+        ``acceleration_mg`` (a sweep has no time). Yaw cases: ``/ensemble/fig<4..5> case <x|y>:
+        RMS <angle>/<model>`` versus time [s], tab "Yaw cases". Each model keeps its colour in
+        every plot.
         """
         a_mg = 1000.0 * np.asarray(figures["sweep"]["accel_g"], dtype=float)
         for fig, axis in enumerate(AXES, start=1):
