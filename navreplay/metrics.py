@@ -547,13 +547,6 @@ class RunMetrics:
     extra_error: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     states: tuple[State, ...] = ()
 
-    def state_error_sigma(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Per scored state: its estimation error (M,) and predicted 1-sigma (M,) (what the
-        Rerun view plots with its +-3 sigma band)."""
-        sigma = np.sqrt(np.clip(self.state_var, 0.0, None))
-        return {name: (self.state_error[:, j], sigma[:, j])
-                for j, name in enumerate(self.state_names)}
-
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
         """Scalar scores (SI; see :data:`SUMMARY_UNITS`) for tables and JSON."""
         out: dict[str, Any] = {"duration": float(self.t[-1] - self.t[0]) if self.t.size else 0.0}

@@ -532,7 +532,7 @@ def test_quick_reproduction_report_and_rerun_view(tmp_path):
                    "/ensemble/fig5 latitude (north) error RMS/pure sigma",
                    "/ensemble/fig3 current N (run 1)/estimate",
                    "/ensemble/fig3 current error E RMS/filter sigma",
-                   "/ensemble/position NEES (2 dof, run average)/rpm-current"):
+                   "/ensemble/rpm-current position NEES (2 dof, run average)/rpm-current"):
         assert needed in series, needed
     np.testing.assert_allclose(series["/ensemble/fig5 latitude (north) error RMS/rpm RMS"][:, 0],
                                report.figures["lat_rms"]["rpm"], rtol=1e-6)

@@ -38,6 +38,7 @@ from navreplay.viz import (
     targets,
 )
 from navreplay.viz.blueprint import Catalog, build_blueprint
+from navreplay.viz.sink import BAND_LINES, PALETTE, TRUTH_COLOR
 
 STATES = tuple(dataclasses.replace(s, name=s.name.replace("b_", "db_", 1))
                if s.name.startswith("b_") else s for s in ie.nav_states())
@@ -114,16 +115,18 @@ def read_rrd(path) -> dict[str, dict[str, np.ndarray]]:
                 if name.startswith("rerun.controls"):
                     continue
                 col = rb.column(name)
-                if name in ("time", "timestamp"):
+                if name in ("time", "timestamp", "acceleration_mg"):
                     cols.setdefault(name, []).append(col.cast(pa.int64()).to_numpy())
                 else:
                     flat = col
                     while pa.types.is_list(flat.type) or pa.types.is_fixed_size_list(flat.type):
                         flat = flat.flatten()
+                    if pa.types.is_string(flat.type):
+                        continue  # labels
                     values = flat.to_numpy(zero_copy_only=False).astype(np.float64)
                     cols.setdefault(name, []).append(values.reshape(len(col), -1))
         merged = {k: np.concatenate(v) for k, v in cols.items()}
-        order = np.argsort(merged["time"], kind="stable")
+        order = np.argsort(merged.get("time", merged.get("acceleration_mg")), kind="stable")
         out[path] = {k: v[order] for k, v in merged.items()}
     out["static"] = static  # type: ignore[assignment]
     return out
@@ -158,18 +161,20 @@ def test_entity_tree(saved):
     path, *_, data = saved
     b = naming.entity_path("gps-ins[q=2]")
     expected = [
-        "/truth/nav/roll", "/truth/nav/v_N", "/truth/nav/p_E", "/truth/extra/theta_f",
+        "/truth/nav/roll", "/truth/nav/v_N", "/truth/nav/p_E",
         "/gps-ins/state/phi_N", "/gps-ins/sigma/db_g_z", "/gps-ins/error/db_g_x",
-        "/gps-ins/error/roll", "/gps-ins/error/p_N", "/gps-ins/nav/yaw",
+        "/gps-ins/error/phi_N", "/gps-ins/error/p_N", "/gps-ins/nav/yaw",
         "/gps-ins/extra/misalignment_euler", "/gps-ins/innovation/gps_pos/0",
         "/gps-ins/innovation/gps_pos/nis", f"{b}/state/db_a_y", f"{b}/error/v_D",
         "/world/gps-ins/body", "/world/gps-ins/covariance", "/world/truth/body",
+        "/map/gps-ins/position", "/map/truth/position",
         "/ensemble/NEES/gps-ins", "/ensemble/NEES/bounds",
     ]  # fmt: skip
     missing = [p for p in expected if p not in data]
     assert not missing
     for p in ("/world", "/world/truth/trajectory", "/world/gps-ins/trajectory",
-              "/gps-ins/error/db_g_x", "/world/gps-ins/body/axes"):  # fmt: skip
+              "/gps-ins/error/db_g_x", "/world/gps-ins/body/axes", "/map/truth/track",
+              "/map/gps-ins/track"):  # fmt: skip
         assert p in data["static"], p
     reader = rr.chunk.RrdReader(path)
     (entry,) = reader.recordings()
@@ -206,13 +211,15 @@ def test_error_with_three_sigma_bounds(saved):
     np.testing.assert_allclose(e[:, 1], 3 * sig, rtol=1e-12)
     np.testing.assert_allclose(e[:, 2], -3 * sig, rtol=1e-12)
     style = data["static"]["/gps-ins/error/db_g_x"].to_pydict()
-    assert style["SeriesLines:names"][0] == ["gps-ins", "gps-ins +3σ", "gps-ins -3σ"]
+    assert style["SeriesLines:names"][0] == ["gps-ins", "+3σ", "-3σ"]
 
 
 def test_navigation_errors_and_bounds(saved):
-    # the nav solution equals the truth at the output times: errors ~ 0; position bounds from P
+    # the nav solution equals the truth at the output times: errors ~ 0; bounds from P
     path, _, a, *_, data = saved
-    np.testing.assert_allclose(scalars(data, "/gps-ins/error/roll")[:, 0], 0.0, atol=1e-9)
+    phi = scalars(data, "/gps-ins/error/phi_D")
+    np.testing.assert_allclose(phi[:, 0], 0.0, atol=1e-9)
+    np.testing.assert_allclose(phi[:, 1], 3 * np.sqrt(a.P[:, 8, 8]) / DEG, rtol=1e-12)
     np.testing.assert_allclose(scalars(data, "/gps-ins/error/p_N")[:, 0], 0.0, atol=1e-6)
     R_M, _ = radii(a.nav_pos[:, 0])
     sig_n = (R_M + a.nav_pos[:, 2]) * np.sqrt(a.P[:, 0, 0])
@@ -248,13 +255,18 @@ def test_innovations_and_nis(saved):
     nis = scalars(data, "/gps-ins/innovation/gps_pos/nis")
     np.testing.assert_allclose(nis[:, 0], s.nis, rtol=1e-12)
     lo, hi = chi2_bounds(3)
-    np.testing.assert_allclose(nis[0, 1:], [lo, hi])
+    band = scalars(data, "/gps-ins/innovation/gps_pos/nis/band")
+    assert band.shape == (s.t.shape[0], BAND_LINES)
+    np.testing.assert_allclose(band[:, 0], lo)
+    np.testing.assert_allclose(band[:, -1], hi)
+    assert np.all(np.diff(band, axis=1) > 0)  # lines fill the band
 
 
 def test_ensemble_bounds(saved):
     path, *_, data = saved
     lo, hi = chi2_bounds(15, 50)
-    np.testing.assert_allclose(scalars(data, "/ensemble/NEES/bounds")[0], [lo, hi])
+    band = scalars(data, "/ensemble/NEES/bounds")
+    np.testing.assert_allclose(band[0, [0, -1]], [lo, hi])
     np.testing.assert_allclose(scalars(data, "/ensemble/NEES/gps-ins")[:, 0], 15.2)
 
 
@@ -262,18 +274,21 @@ def test_blueprint_adapts_to_what_was_logged(saved):
     *_, sink, _ = saved
     plots = sink.catalog.plots
     assert list(plots["attitude"])[:3] == ["nav:roll", "nav:pitch", "nav:yaw"]
-    assert plots["attitude"]["error:roll"][0] == "roll error [deg]"
-    assert plots["position"]["error:p_N"][0] == "position N error [m]"
+    # errors: one pane per filter (own scale), the filter named in the title, no legend
+    pane = plots["attitude"]["error:phi_N@gps-ins"]
+    assert pane.title == "gps-ins: attitude phi_N error [deg], ±3σ" and not pane.legend
+    assert plots["position"]["error:p_N@gps-ins[q=2]"].title.startswith("gps-ins[q=2]: position N")
     # components of a prefix share one plot; both filters overlay
-    assert len(plots["sensor"]["state:db_g"][1]) == 6
+    assert len(plots["states"]["state:db_g"].paths) == 6
     # a state with an error plot leaves the sigma plot (its bounds are in the error plot)
-    assert "/gps-ins/sigma/db_g_x" not in plots["sensor"]["sigma:db_g"][1]
-    assert "/gps-ins/sigma/db_g_y" in plots["sensor"]["sigma:db_g"][1]
-    assert plots["innovation"]["nis:gps_pos"][0] == "gps_pos NIS (dof 3) [-]"
-    assert sink.catalog.world
+    assert "/gps-ins/sigma/db_g_x" not in plots["states"]["sigma:db_g@gps-ins"].paths
+    assert "/gps-ins/sigma/db_g_y" in plots["states"]["sigma:db_g@gps-ins"].paths
+    assert plots["consistency"]["nis:gps_pos@gps-ins"].title == (
+        "gps-ins: gps_pos NIS (3 dof), 95 % band [-]")
+    assert sink.catalog.world is not None and sink.catalog.geo
     # a filter without nav solution or innovations: no attitude/innovation tabs
     bare = Catalog()
-    bare.add("sensor", "state:b", "b [SI]", "/f/state/b")
+    bare.add("sensor", "state:b", "b [-]", "/f/state/b")
     build_blueprint(bare)  # builds
     assert not bare.plots["attitude"] and not bare.plots["innovation"]
 
@@ -452,7 +467,236 @@ def test_truth_interpolation_is_nan_outside():
 def test_units_and_groups_follow_the_state_names():
     assert naming.resolve_unit("phi_D").label == "deg"
     assert naming.resolve_unit("db_g_x").label == "deg/h"
-    assert naming.resolve_unit("dk").label == "SI"
+    assert naming.resolve_unit("dk").label == "-"
     assert naming.resolve_unit("dk", {"dk": "-"}).label == "-"
-    assert naming.quantity_of("dd") is naming.Quantity.POSITION
+    assert naming.quantity_of("dd") is naming.Tab.POSITION
     assert naming.group_of("dVc_N") == "dVc"
+
+
+# ----------------------------------------------------------------------------------------------
+# comparison view: colours, blueprint, bands, ensembles, live layout
+
+
+def read_blueprint(path) -> tuple[dict[str, list[str]], dict[str, tuple[str, list[str]]]]:
+    """Tabs (title -> view names) and views (name -> (kind, contents queries)) of the default
+    blueprint stored in an .rrd."""
+    reader = rr.chunk.RrdReader(path)
+    store = reader.stream(store=reader.blueprints()[0]).collect()
+    fields: dict[str, dict[str, list]] = {}
+    for chunk in store.stream().to_chunks():
+        rb = chunk.to_record_batch()
+        parts = chunk.entity_path.strip("/").split("/")
+        key = "/".join(parts[:2])
+        for name in rb.schema.names:
+            if ":" in name:
+                fields.setdefault(key, {})[name] = rb.column(name).to_pylist()[-1]
+    views = {}
+    for key, f in fields.items():
+        if key.startswith("view/") and "ViewBlueprint:display_name" in f:
+            views[key] = (f["ViewBlueprint:display_name"][0], f["ViewBlueprint:class_identifier"][0],
+                          f.get("ViewContents:query", []))
+    (tabs_box,) = [f for f in fields.values() if "ContainerBlueprint:active_tab" in f]
+    tabs = {}
+    for ref in tabs_box["ContainerBlueprint:contents"]:
+        box = fields[ref]
+        stack = list(box.get("ContainerBlueprint:contents", []))
+        names = []
+        while stack:
+            item = stack.pop(0)
+            if item in views:
+                names.append(views[item][0])
+            else:
+                stack.extend(fields[item].get("ContainerBlueprint:contents", []))
+        tabs[box["ContainerBlueprint:display_name"][0]] = names
+    return tabs, {name: (kind, q) for name, kind, q in views.values()}
+
+
+def first_color(data, path) -> tuple[int, int, int]:
+    packed = data["static"][path].to_pydict()["SeriesLines:colors"][0][0]
+    return (packed >> 24) & 255, (packed >> 16) & 255, (packed >> 8) & 255
+
+
+def test_blueprint_in_the_file_has_tabs_units_and_per_filter_panes(saved):
+    path, *_ = saved
+    tabs, views = read_blueprint(path)
+    assert list(tabs)[:3] == ["Attitude", "Velocity", "Position"]
+    assert {"Sensor errors", "State estimates", "NEES / NIS", "Innovations", "Trajectory",
+            "Map", "Ensemble"} <= set(tabs)
+    for name, (kind, _) in views.items():
+        if kind == "TimeSeries":  # every plot says its unit, never a placeholder
+            assert name.endswith("]") or "[" in name, name
+            assert "[SI]" not in name and "[0]" not in name, name
+    assert "gps-ins: position N error [m], ±3σ" in tabs["Position"]
+    assert "gps-ins[q=2]: position N error [m], ±3σ" in tabs["Position"]
+    assert tabs["Attitude"][:3] == ["roll [deg]", "pitch [deg]", "yaw (unwrapped) [deg]"]
+    assert views["latitude / longitude"][0] == "Map"
+    assert {k for k, _ in views.values()} >= {"TimeSeries", "3D", "Map"}
+    # each per-filter pane holds that filter's entity only
+    q = views["gps-ins: position N error [m], ±3σ"][1]
+    assert q == ["+ /gps-ins/error/p_N"]
+
+
+def test_each_filter_keeps_its_colour_in_every_error_plot(saved):
+    path, *_, sink, data = saved
+    colors = {}
+    for tab in ("attitude", "velocity", "position", "sensor", "innovation", "consistency"):
+        for key, plot in sink.catalog.plots[tab].items():
+            if "@" not in key:
+                continue
+            label = key.split("@", 1)[1]
+            for p in plot.paths:
+                if p.endswith("/band"):
+                    continue
+                colors.setdefault(label, set()).add(first_color(data, p))
+    assert colors["gps-ins"] == {PALETTE[0]} and colors["gps-ins[q=2]"] == {PALETTE[1]}
+    # overlays: each filter in its colour, truth grey
+    assert first_color(data, "/gps-ins/nav/roll") == PALETTE[0]
+    assert first_color(data, "/gps-ins\\[q\\=2\\]/nav/roll") == PALETTE[1]
+    assert first_color(data, "/truth/nav/roll") == TRUTH_COLOR
+
+
+def test_single_run_nees_with_band(tmp_path):
+    from navreplay.filters.base import Quantity, State, TruthColumn
+    from navreplay.metrics import run_metrics
+
+    truth = make_truth(duration=60.0)
+    r = make_result("f", 4, truth, m=600)
+    # a scored extra: its error is plotted with the declared unit and quantity
+    theta = State("theta", "rad", Quantity.MISALIGNMENT, TruthColumn("theta_f"))
+    tr = truth[StreamKind.TRUTH]
+    k = np.searchsorted(tr.t_ns, T0_NS + np.rint(r.t * 1e9).astype(np.int64))
+    r = dataclasses.replace(r, extras={"theta": tr["theta_f"][k] + 1e-3},
+                            scored_extras=(theta,))
+    m = run_metrics(r, truth)
+    path = tmp_path / "nees.rrd"
+    with open_sink(path) as sink:
+        sink.log_run(r, truth=truth, metrics=m)
+    data = read_rrd(path)
+    np.testing.assert_allclose(scalars(data, "/f/nees")[:, 0], m.nees, rtol=1e-12)
+    lo, hi = chi2_bounds(len(m.nees_states))
+    band = scalars(data, "/f/nees/band")
+    np.testing.assert_allclose(band[:, [0, -1]], np.tile([lo, hi], (600, 1)))
+    tabs, _ = read_blueprint(path)
+    assert f"f: NEES ({len(m.nees_states)} states), 95 % band [-]" in tabs["NEES / NIS"]
+    np.testing.assert_allclose(scalars(data, "/f/error/theta")[:, 0], 1e-3 / DEG, rtol=1e-9)
+    assert "f: theta error [deg]" in tabs["Sensor errors"]
+
+
+def test_ensemble_view_colours_tabs_and_bands(tmp_path):
+    from navreplay.metrics import EnsembleStats, run_metrics
+    from navreplay.viz.ensemble import SIGMA_SHADE, log_ensemble, log_runs
+    from navreplay.viz.sink import lighter
+
+    truth = make_truth(duration=30.0)
+    stats = {"ins": EnsembleStats("ins"), "gps-ins": EnsembleStats("gps-ins")}
+    per_run = {}
+    for k in range(3):
+        per_run[k + 1] = {}
+        for label, st in stats.items():
+            m = run_metrics(make_result(label, 10 + k, truth, m=300), truth)
+            st.add(m)
+            per_run[k + 1][label] = m
+    path = tmp_path / "ens.rrd"
+    with open_sink(path) as sink:
+        for label, st in stats.items():
+            log_ensemble(sink, label, st.result(), STATES)
+        log_runs(sink, per_run)
+    data = read_rrd(path)
+    tabs, _ = read_blueprint(path)
+    assert {"Ensemble position", "Ensemble velocity", "Ensemble attitude",
+            "Ensemble NEES / NIS", "Ensemble runs"} <= set(tabs)
+    # navigation-error states (scored: dlat, dv_N, phi_N..) are not repeated as states
+    assert not any("dlat" in v or "dv_N" in v for vs in tabs.values() for v in vs)
+    for i, label in enumerate(("ins", "gps-ins")):
+        root = naming.entity_path("ensemble", f"{label}: position error N, RMS and σ")
+        rms = first_color(data, f"{root}/{label}\\ RMS")
+        sigma = first_color(data, f"{root}/{label}\\ σ")
+        assert rms == PALETTE[i] and sigma == lighter(PALETTE[i], SIGMA_SHADE)
+        nees = naming.entity_path("ensemble", f"{label}: NEES (9 states, 3 runs), 95 % band")
+        band = scalars(data, f"{nees}/bounds")
+        assert band.shape[1] == BAND_LINES and np.all(band[:, -1] > band[:, 0])
+    assert "ins: horizontal position error, every run [m]" in tabs["Ensemble runs"]
+
+
+def test_live_sink_sends_the_blueprint_before_the_data(tmp_path, monkeypatch):
+    from navreplay.viz.sink import Sink
+
+    events: list[tuple[str, str]] = []
+    rec = rr.RecordingStream("navreplay", recording_id="live-test")
+    rec.save(tmp_path / "live.rrd")
+    sink = Sink(rec, Connect("rerun+http://127.0.0.1:1/proxy"), url="test")
+    real_send = rec.send_columns
+    monkeypatch.setattr(rec, "send_columns",
+                        lambda path, **kw: (events.append(("data", str(path))),
+                                            real_send(path, **kw))[1])
+    real_bp = sink._rec.send_blueprint
+    planned: list[set[str]] = []
+
+    def send_blueprint(bp, **kw):
+        events.append(("blueprint", ""))
+        planned.append(set(sink.catalog.paths()))
+        return real_bp(bp, **kw)
+
+    monkeypatch.setattr(rec, "send_blueprint", send_blueprint)
+    truth = make_truth(duration=20.0)
+    r = make_result("live", 5, truth, m=200)
+    observe = sink.observer(truth)
+    for stop in (50, 200):
+        observe(dataclasses.replace(r, t=r.t[:stop], x=r.x[:stop], P=r.P[:stop],
+                                    nav_pos=r.nav_pos[:stop], nav_v_n=r.nav_v_n[:stop],
+                                    nav_q_nb=r.nav_q_nb[:stop], extras={}, innovations={}))
+    assert events[0][0] == "blueprint"
+    # every plotted entity's first data comes after a blueprint that already shows it
+    plotted = set(sink.catalog.paths())
+    sent = 0
+    checked = 0
+    for kind, path in events:
+        if kind == "blueprint":
+            sent += 1
+        elif path in plotted:
+            assert any(path in p for p in planned[:sent]), path
+            checked += 1
+    assert checked > 20 and "/live/error/p_N" in plotted
+    sink.abort()
+
+
+def test_sweep_on_its_own_axis_and_one_colour_per_variant(tmp_path):
+    from navreplay.viz.sink import SIGMA_SHADE, lighter
+
+    a_mg = np.arange(-1500.0, 1501.0, 100.0)
+    path = tmp_path / "sweep.rrd"
+    with open_sink(path) as sink:
+        for k in range(2):
+            sink.log_ensemble(f"sweep {k}", a_mg, {"gravity": a_mg * 0 + k, "specific-force": a_mg},
+                              unit="deg", timeline="acceleration_mg")
+        sink.log_ensemble("azimuth", np.arange(5.0), {"full RMS": np.ones(5),
+                                                      "full sigma": np.ones(5)}, unit="mrad")
+    store = rr.chunk.RrdReader(path).stream().collect()
+    timelines = {}
+    for chunk in store.stream().to_chunks():
+        if not chunk.is_static:
+            names = set(chunk.to_record_batch().schema.names)
+            timelines[chunk.entity_path] = {"acceleration_mg", "time"} & names
+    assert timelines["/ensemble/sweep\\ 0/gravity"] == {"acceleration_mg"}
+    assert timelines["/ensemble/azimuth/full\\ RMS"] == {"time"}
+    data = read_rrd_any(path, "acceleration_mg")
+    np.testing.assert_array_equal(data["/ensemble/sweep\\ 1/gravity"]["acceleration_mg"], a_mg)
+    full = read_rrd(path)
+    # a variant keeps its colour across plots; its sigma is a lighter shade of it
+    c0 = first_color(full, "/ensemble/sweep\\ 0/gravity")
+    assert c0 == first_color(full, "/ensemble/sweep\\ 1/gravity")
+    assert c0 != first_color(full, "/ensemble/sweep\\ 0/specific-force")
+    rms = first_color(full, "/ensemble/azimuth/full\\ RMS")
+    assert first_color(full, "/ensemble/azimuth/full\\ sigma") == lighter(rms, SIGMA_SHADE)
+    tabs, _ = read_blueprint(path)
+    assert tabs["Ensemble"][0] == "sweep 0 [deg]"
+
+
+def read_rrd_any(path, timeline: str) -> dict[str, dict[str, np.ndarray]]:
+    """Index values of ``timeline`` per entity."""
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for chunk in rr.chunk.RrdReader(path).stream().collect().stream().to_chunks():
+        rb = chunk.to_record_batch()
+        if timeline in rb.schema.names:
+            out[chunk.entity_path] = {timeline: rb.column(timeline).to_numpy()}
+    return out

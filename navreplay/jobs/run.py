@@ -159,14 +159,12 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
                 output_rate=job.output_rate, pacing=job.pacing, validate=False,
                 progress=prog, observer=observer, max_imu_gap=job.max_imu_gap,
             )
-            errors = None
             scored = metrics.run_metrics(result, recording)  # NIS only without a reference
             summaries[spec.label] = scored.summary()
-            if has_truth:
-                errors = scored.state_error_sigma()
             outputs.collect(result, recording, scored if has_truth else None)
             if sink is not None:
-                sink.log_run(result, truth=recording if has_truth else None, metrics=errors)
+                sink.log_run(result, truth=recording if has_truth else None,
+                             metrics=scored if has_truth else None)
         hint = close_output(sink, job.viz)
     except BaseException:
         if sink is not None:
@@ -217,8 +215,12 @@ def campaign(
     rows: list[dict[str, Any]] = []
     notes: list[str] = []
 
+    drill: dict[int, Any] = {}  # per-run metrics for the view when the runs are kept
+
     def collect(out: RunOutput) -> None:
         per: PerRun = out.metrics
+        if tasks[out.index].keep:
+            drill[out.index + 1] = per.metrics
         rows.append({"run": out.index + 1, "recording": out.source, "seed": out.seed,
                      "seconds": out.seconds, "filters": per.summaries})
         for label, m in per.metrics.items():
@@ -236,10 +238,13 @@ def campaign(
                             output_rate=output_rate)
         ens = {label: s.result() for label, s in stats.items() if s.runs}
         if sink is not None:
-            from navreplay.viz.ensemble import log_ensemble
+            from navreplay.viz.ensemble import log_ensemble, log_runs
 
+            declared = {spec.label: getattr(spec.load(), "states", None) for spec in filters}
             for label, e in ens.items():
-                log_ensemble(sink, label, e)
+                states = declared.get(label)
+                log_ensemble(sink, label, e, states if isinstance(states, tuple) else None)
+            log_runs(sink, drill)
         hint = close_output(sink, viz_options)
     except BaseException:
         if sink is not None:

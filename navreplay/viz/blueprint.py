@@ -2,28 +2,37 @@
 
 A :class:`Catalog` records every plotted series (entity path, tab, plot, title); the sink fills
 it while logging. :func:`build_blueprint` turns it into tabs of grids of time-series views, one
-view per plot, in which every filter's series overlay the truth:
+view per plot. Plots of one quantity that several filters share (the navigation solution with
+the truth, state estimates) overlay the filters; errors, NEES and NIS are one pane per filter,
+each at its own scale, so that a filter with small errors is not flattened by one with large
+ones (a row per filter, a column per component):
 
 =================  =====================================================================
 tab                views
 =================  =====================================================================
-Attitude           roll, pitch, yaw [deg]; their errors; attitude-error states
-Velocity           velocity N/E/D [m/s]; their errors; velocity-error states
-Position           position N/E/D [m] (local NED); their errors; position-error states
-Sensor errors      the other states grouped by prefix (``db_g_x..z`` in one view), their
-                   errors with +-3 sigma, extras
-Innovations        per measurement: components with +-3 sqrt(S_ii), NIS with 95 % bounds
-3D                 /world: trajectories, body axes, 3-sigma position ellipsoids (NED)
-Ensemble           one view per :meth:`~navreplay.viz.Sink.log_ensemble` plot
+Attitude           roll, pitch, yaw [deg] (yaw unwrapped); per filter phi_N, phi_E, phi_D
+                   errors with +-3 sigma; attitude states
+Velocity           velocity N/E/D [m/s]; per filter their errors with +-3 sigma
+Position           position N/E/D [m] (local NED); per filter their errors [m] with +-3 sigma
+Sensor errors      per filter the other states' errors with +-3 sigma
+State estimates    states that move (all filters, with the truth column they estimate), sigmas
+                   of unscored states, extras
+NEES / NIS         per filter the NEES and each measurement's NIS with the 95 % band
+Innovations        per filter, measurement and component: nu with +-3 sqrt(S_ii)
+Trajectory         top-down N/E (north up) and the 3D view, both framed on the trajectory
+Map                latitude/longitude on a map (tiles need a network)
+Ensemble ...       Monte Carlo statistics, one tab per group (position, velocity, ...)
 =================  =====================================================================
 
-Empty tabs are left out.
+Empty tabs are left out. Legends are shown only where several series share a view and take
+little space (top right, filter labels only); a per-filter pane names its filter in its title.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
@@ -32,11 +41,37 @@ TABS: tuple[tuple[str, str], ...] = (
     ("velocity", "Velocity"),
     ("position", "Position"),
     ("sensor", "Sensor errors"),
+    ("states", "State estimates"),
+    ("consistency", "NEES / NIS"),
     ("innovation", "Innovations"),
-    ("world", "3D"),
+    ("world", "Trajectory"),
+    ("map", "Map"),
     ("ensemble", "Ensemble"),
 )
-"""Tab keys in display order and their titles."""
+"""Tab keys in display order and their titles; other tabs (ensemble groups) follow in the order
+they were first used."""
+
+
+@dataclasses.dataclass
+class Plot:
+    """One time-series view.
+
+    Attributes
+    ----------
+    title : str
+        View name, with the unit.
+    paths : list[str]
+        Entities shown.
+    rank : int
+        Order within the tab (lower first); ties keep the order of first use.
+    legend : bool
+        Whether the view shows its legend.
+    """
+
+    title: str
+    paths: list[str]
+    rank: int = 0
+    legend: bool = True
 
 
 @dataclasses.dataclass
@@ -45,36 +80,61 @@ class Catalog:
 
     Attributes
     ----------
-    plots : dict[str, dict[str, tuple[str, list[str]]]]
-        Per tab key: plot key -> (title, entity paths), in insertion order.
-    world : bool
-        Whether anything was logged under ``/world``.
+    plots : dict[str, dict[str, Plot]]
+        Per tab key: plot key -> plot, in insertion order.
+    tab_titles : dict[str, str]
+        Titles of the tabs not in :data:`TABS`.
+    world : tuple[ndarray, ndarray] or None
+        Lower and upper NED corner [m] of the trajectories under ``/world`` (frames the views).
+    geo : bool
+        Whether anything was logged under ``/map``.
+    timeline : str
+        Timeline selected in the time panel.
     """
 
-    plots: dict[str, dict[str, tuple[str, list[str]]]] = dataclasses.field(
+    plots: dict[str, dict[str, Plot]] = dataclasses.field(
         default_factory=lambda: {key: {} for key, _ in TABS}
     )
-    world: bool = False
+    tab_titles: dict[str, str] = dataclasses.field(default_factory=dict)
+    world: tuple[np.ndarray, np.ndarray] | None = None
+    geo: bool = False
+    timeline: str = "time"
+    covariances: list[str] = dataclasses.field(default_factory=list)
+    """Ellipsoid entities under ``/world`` (left out of the top-down view)."""
     _paths: set[str] = dataclasses.field(default_factory=set, repr=False)
 
-    def add(self, tab: str, plot: str, title: str, path: str) -> None:
-        """Put the series at ``path`` into plot ``plot`` (created with ``title``) of ``tab``."""
+    def add(
+        self,
+        tab: str,
+        plot: str,
+        title: str,
+        path: str,
+        *,
+        rank: int = 0,
+        legend: bool = True,
+        tab_title: str | None = None,
+    ) -> None:
+        """Put the series at ``path`` into plot ``plot`` (created with ``title``, ``rank`` and
+        ``legend``) of ``tab`` (created with ``tab_title`` if it is not one of :data:`TABS`)."""
+        if tab not in self.plots:
+            self.plots[tab] = {}
+            self.tab_titles[tab] = tab_title or tab
         plots = self.plots[tab]
         if plot not in plots:
-            plots[plot] = (title, [])
-        paths = plots[plot][1]
+            plots[plot] = Plot(title, [], rank, legend)
+        paths = plots[plot].paths
         if path not in paths:
             paths.append(path)
             self._paths.add(path)
 
     def discard(self, tab: str, plot: str, path: str) -> None:
         """Take ``path`` out of a plot; a plot left empty disappears."""
-        plots = self.plots[tab]
-        if plot in plots and path in plots[plot][1]:
-            plots[plot][1].remove(path)
-            if not plots[plot][1]:
+        plots = self.plots.get(tab, {})
+        if plot in plots and path in plots[plot].paths:
+            plots[plot].paths.remove(path)
+            if not plots[plot].paths:
                 del plots[plot]
-        if not any(path in ps for tab_plots in self.plots.values() for _, ps in tab_plots.values()):
+        if not any(path in p.paths for tab_plots in self.plots.values() for p in tab_plots.values()):
             self._paths.discard(path)
 
     def has(self, path: str) -> bool:
@@ -83,52 +143,108 @@ class Catalog:
 
     def paths(self) -> list[str]:
         """Every catalogued entity path, in plot order."""
-        return [p for plots in self.plots.values() for _, ps in plots.values() for p in ps]
+        return [p for plots in self.plots.values() for plot in plots.values() for p in plot.paths]
+
+    def frame(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Grow the NED box [m] that the trajectory views are framed on."""
+        if self.world is None:
+            self.world = (np.array(lo, dtype=float), np.array(hi, dtype=float))
+        else:
+            self.world = (np.minimum(self.world[0], lo), np.maximum(self.world[1], hi))
+
+    def signature(self) -> tuple:
+        """What the blueprint depends on (to resend it only when this changes)."""
+        world = None if self.world is None else tuple(np.round(np.r_[self.world], 1))
+        return (
+            tuple((t, k, len(p.paths)) for t, plots in self.plots.items() for k, p in plots.items()),
+            world,
+            len(self.covariances),
+            self.geo,
+            self.timeline,
+        )
 
 
 def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint:
-    """Tabs of grids of time-series views for the catalogued plots, and the 3D view.
+    """Tabs of grids of time-series views for the catalogued plots, the trajectory views and
+    the map.
 
     Parameters
     ----------
     catalog : Catalog
     grid_columns : int
-        Views per grid row.
+        Views per grid row (a row per filter for the per-filter panes of N, E, D components).
     """
     tabs: list[rrb.Container] = []
-    for key, name in TABS:
+    order = [k for k, _ in TABS] + [k for k in catalog.plots if k not in dict(TABS)]
+    titles = {**dict(TABS), **catalog.tab_titles}
+    for key in order:
         if key == "world":
-            if catalog.world:
-                tabs.append(
-                    rrb.Horizontal(
-                        rrb.Spatial3DView(origin="/world", name="3D (NED) [m]"), name=name
-                    )
-                )
+            if catalog.world is not None:
+                tabs.append(_trajectory_tab(catalog.world, catalog.covariances, titles[key]))
             continue
-        plots = catalog.plots[key]
+        if key == "map":
+            if catalog.geo:
+                tabs.append(rrb.Horizontal(
+                    rrb.MapView(origin="/map", name="latitude / longitude"), name=titles[key]
+                ))
+            continue
+        plots = catalog.plots.get(key, {})
         if not plots:
             continue
-        ordered = sorted(plots.items(), key=lambda kv: _rank(kv[0]))
-        views = [
-            rrb.TimeSeriesView(
-                origin="/",
-                contents=[f"+ {p}" for p in paths],
-                name=title,
-                plot_legend=rrb.Corner2D.LeftTop,
-                axis_x=_WHOLE_RUN,
-            )
-            for _, (title, paths) in ordered
-        ]
-        tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)), name=name))
-    if not tabs:
-        return rrb.Blueprint(
-            rrb.TimeSeriesView(origin="/", name="all", axis_x=_WHOLE_RUN),
-            rrb.TimePanel(timeline="time"),
-            collapse_panels=False,
-        )
-    return rrb.Blueprint(
-        rrb.Tabs(*tabs, active_tab=0), rrb.TimePanel(timeline="time"), collapse_panels=False
+        ordered = sorted(plots.values(), key=lambda p: p.rank)  # stable: first use breaks ties
+        views = [_series_view(p) for p in ordered]
+        tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)), name=titles[key]))
+    # side panels collapsed: the plots get the whole window (each panel opens with one click)
+    panels = (
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline=catalog.timeline, state="collapsed"),
     )
+    if not tabs:
+        return rrb.Blueprint(rrb.TimeSeriesView(origin="/", name="all", axis_x=_WHOLE_RUN),
+                             *panels)
+    return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), *panels)
+
+
+def _series_view(plot: Plot) -> rrb.TimeSeriesView:
+    return rrb.TimeSeriesView(
+        origin="/",
+        contents=[f"+ {p}" for p in plot.paths],
+        name=plot.title,
+        plot_legend=rrb.PlotLegend(rrb.Corner2D.RightTop, visible=plot.legend),
+        axis_x=_WHOLE_RUN,
+    )
+
+
+def _trajectory_tab(
+    box: tuple[np.ndarray, np.ndarray], covariances: list[str], name: str
+) -> rrb.Container:
+    """Top-down N/E view (camera above the trajectory, north up) beside the 3D view, both
+    framed on the NED box [m] of the trajectories."""
+    lo, hi = box
+    centre = 0.5 * (lo + hi)
+    span = float(max(np.max(hi[:2] - lo[:2]), 10.0))
+    top = rrb.Spatial3DView(
+        origin="/world",
+        name="top-down N/E [m] (north up)",
+        contents=["+ /world/**", *(f"- {p}" for p in covariances)],
+        eye_controls=rrb.EyeControls3D(
+            position=(centre[0], centre[1], centre[2] - 1.25 * span),
+            look_target=tuple(centre),
+            eye_up=(1.0, 0.0, 0.0),  # north at the top of the screen
+        ),
+        line_grid=rrb.LineGrid3D(visible=False),
+    )
+    persp = rrb.Spatial3DView(
+        origin="/world",
+        name="3D NED [m], 3-sigma position ellipsoids",
+        eye_controls=rrb.EyeControls3D(
+            position=(centre[0] - 0.8 * span, centre[1] - 0.8 * span, centre[2] - 0.6 * span),
+            look_target=tuple(centre),
+            eye_up=(0.0, 0.0, -1.0),
+        ),
+    )
+    return rrb.Horizontal(top, persp, name=name)
 
 
 # Plots show the whole run (the viewer's default is a window around the time cursor).
@@ -137,15 +253,3 @@ _WHOLE_RUN = rrb.TimeAxis(
         start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
     )
 )
-
-
-_RANK = {"nav": 0, "error": 3, "state": 2, "sigma": 4, "extra": 5, "truth": 6}
-_NAV_PLOTS = {"roll", "pitch", "yaw", "v_N", "v_E", "v_D", "p_N", "p_E", "p_D"}
-
-
-def _rank(plot: str) -> int:
-    """Order within a tab: solution, its errors, states, state errors, sigmas, extras, truth."""
-    kind, _, name = plot.partition(":")
-    if kind == "error" and name in _NAV_PLOTS:
-        return 1
-    return _RANK.get(kind, 7)

@@ -9,8 +9,6 @@ scalar first; the xyzw order appears only in :func:`ellipsoids`, whose output go
 from __future__ import annotations
 
 import dataclasses
-import re
-from collections.abc import Sequence
 
 import numpy as np
 from scipy import stats
@@ -120,40 +118,6 @@ class PositionStates:
     index: tuple[int, int, int]
     geodetic: bool
     vertical_sign: float = -1.0
-
-
-_POS_PATTERNS = (
-    (("dlat", "dlon", "dh"), True, -1.0),
-    (("dlat", "dlon", "dd"), True, 1.0),
-    (("dL", "dlambda", "dh"), True, -1.0),
-    (("dL", "dlambda", "dd"), True, 1.0),
-    (("dp_N", "dp_E", "dp_D"), False, 1.0),
-    (("dr_N", "dr_E", "dr_D"), False, 1.0),
-    (("p_N", "p_E", "p_D"), False, 1.0),
-)
-_VEL_PATTERN = re.compile(r"^d?v_?([NED])$")
-
-
-def find_position_states(state_names: Sequence[str]) -> PositionStates | None:
-    """The position-error states among ``state_names`` by the project's naming, or None."""
-    where = {n: i for i, n in enumerate(state_names)}
-    for names, geodetic, sign in _POS_PATTERNS:
-        if all(n in where for n in names):
-            idx = (where[names[0]], where[names[1]], where[names[2]])
-            return PositionStates(idx, geodetic, sign)
-    return None
-
-
-def find_velocity_states(state_names: Sequence[str]) -> tuple[int, int, int] | None:
-    """Indices of the NED velocity (error) states (``dv_N``.. or ``v_N``..), or None."""
-    found: dict[str, int] = {}
-    for i, n in enumerate(state_names):
-        m = _VEL_PATTERN.match(n)
-        if m and m.group(1) not in found:
-            found[m.group(1)] = i
-    if len(found) == 3:
-        return found["N"], found["E"], found["D"]
-    return None
 
 
 def position_cov_ned(P: np.ndarray, states: PositionStates, pos: np.ndarray | None) -> np.ndarray:

@@ -1,46 +1,133 @@
-"""Layout of Monte Carlo statistics in the Rerun view: one plot per error component with the
-RMS over runs and the mean predicted sigma, and the average NEES and NIS with their bounds."""
+"""Layout of Monte Carlo statistics in the Rerun view.
+
+Per filter, in the filter's colour (the same as in the single-run tabs): the RMS over runs of
+each error component (solid) and the mean predicted sigma (thinner, lighter), one pane per
+filter and component so that each filter is read at its own scale; the run-averaged NEES and
+NIS with their 95 % band. Tabs: "Ensemble position", "... velocity", "... attitude",
+"... states" (the scored states that are not navigation errors), "Ensemble NEES / NIS".
+With the runs' metrics (``navreplay montecarlo --keep``), "Ensemble runs" shows every run's
+navigation errors, one thin line per run, to find the runs behind an RMS.
+"""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from navreplay.metrics import EnsembleResult, chi2_bounds_per_count
-from navreplay.viz.naming import resolve_unit
-from navreplay.viz.sink import Sink
+from navreplay.filters.base import NavError, State
+from navreplay.metrics import EnsembleResult, RunMetrics, chi2_bounds_per_count
+from navreplay.viz.naming import Tab, display_unit, quantity_of, resolve_unit
+from navreplay.viz.sink import SIGMA_SHADE, Sink, lighter
 
-_ENSEMBLE_NAV = (("pos_ned", "position", ("N", "E", "D"), "m", 1.0),
-                 ("v_n", "velocity", ("N", "E", "D"), "m/s", 1.0),
-                 ("phi", "attitude", ("phi_N", "phi_E", "phi_D"), "deg", 180.0 / math.pi))
+_ENSEMBLE_NAV = (
+    ("pos_ned", "position", ("N", "E", "D"), "m", 1.0),
+    ("v_n", "velocity", ("N", "E", "D"), "m/s", 1.0),
+    ("phi", "attitude", ("phi_N", "phi_E", "phi_D"), "deg", 180.0 / math.pi),
+)
 
 
-def log_ensemble(sink: Sink, label: str, ens: EnsembleResult) -> None:
+def _tab(group: str) -> tuple[str, str]:
+    return f"ensemble:{group}", f"Ensemble {group}"
+
+
+def log_ensemble(
+    sink: Sink,
+    label: str,
+    ens: EnsembleResult,
+    states: Sequence[State] | None = None,
+) -> None:
     """Log one filter's Monte Carlo statistics: RMS error vs mean predicted sigma over time for
-    the navigation errors and scored states, average NEES and NIS with their 95 % bounds."""
+    the navigation errors and the scored states, average NEES and NIS with their 95 % bands.
+
+    Parameters
+    ----------
+    sink : Sink
+    label : str
+        Filter label (its colour is :meth:`Sink.color_of`).
+    ens : EnsembleResult
+    states : sequence of State, optional
+        The filter's declarations: units of the scored states, and which of them are
+        navigation errors (shown once, as the navigation errors). Without them the units and
+        the navigation-error states are guessed from the names.
+    """
+    color = sink.color_of(label)
+    order = sink.order_of(label)
+    rms_style = (color, 2.0)
+    sigma_style = (lighter(color, SIGMA_SHADE), 1.0)
     t = ens.t
     for key, what, axes, unit, scale in _ENSEMBLE_NAV:
         if key not in ens.rms:
             continue
+        tab, tab_title = _tab(what)
         for i, axis in enumerate(axes):
             sigma = ens.sigma.get(key)
             series = {f"{label} RMS": ens.rms[key][:, i] * scale}
+            styles = {f"{label} RMS": rms_style}
             if sigma is not None and np.isfinite(sigma[:, i]).any():
                 series[f"{label} σ"] = sigma[:, i] * scale
-            sink.log_ensemble(f"{what} error {axis}", t, series, unit=unit)
+                styles[f"{label} σ"] = sigma_style
+            sink.log_ensemble(f"{label}: {what} error {axis}, RMS and σ", t, series, unit=unit,
+                              styles=styles, tab=tab, tab_title=tab_title, rank=order)
+    declared = {s.name: s for s in states or ()}
+    tab, tab_title = _tab("states")
     for j, name in enumerate(ens.state_names):
-        u = resolve_unit(name)
+        st = declared.get(name)
+        if st is not None:
+            if isinstance(st.truth, NavError):
+                continue  # the same error as the navigation error above
+            u = display_unit(st.unit)
+        else:
+            if quantity_of(name) is not Tab.SENSOR:
+                continue
+            u = resolve_unit(name)
         sink.log_ensemble(
-            f"{name} error", t,
+            f"{label}: {name} error, RMS and σ", t,
             {f"{label} RMS": ens.state_rms[:, j] * u.scale,
              f"{label} σ": ens.state_sigma[:, j] * u.scale},
-            unit=u.label,
+            unit=u.label, styles={f"{label} RMS": rms_style, f"{label} σ": sigma_style},
+            tab=tab, tab_title=tab_title, rank=order,
         )
+    tab, tab_title = _tab("NEES / NIS")
     if ens.nees_dof and np.isfinite(ens.nees_mean).any():
-        sink.log_ensemble(f"{label} NEES (dof {ens.nees_dof}, {ens.runs} runs)", t,
-                          {f"{label} NEES": ens.nees_mean}, unit="-", bounds=ens.nees_bounds)
+        sink.log_ensemble(f"{label}: NEES ({ens.nees_dof} states, {ens.runs} runs), 95 % band",
+                          t, {f"{label} NEES": ens.nees_mean}, unit="-", bounds=ens.nees_bounds,
+                          styles={f"{label} NEES": rms_style}, tab=tab, tab_title=tab_title,
+                          rank=order)
     for meas, (t_k, mean, count, dof) in ens.nis_mean.items():
         lo, hi = chi2_bounds_per_count(dof, count)
-        sink.log_ensemble(f"{label} NIS {meas} (dof {dof})", t_k[: mean.shape[0]],
-                          {f"{label} NIS": mean}, unit="-", bounds=(lo, hi))
+        sink.log_ensemble(f"{label}: {meas} NIS ({dof} dof, {ens.runs} runs), 95 % band",
+                          t_k[: mean.shape[0]], {f"{label} NIS": mean}, unit="-",
+                          bounds=(lo, hi), styles={f"{label} NIS": rms_style}, tab=tab,
+                          tab_title=tab_title, rank=order)
+
+
+def log_runs(sink: Sink, runs: Mapping[int, Mapping[str, RunMetrics]]) -> None:
+    """Every run's navigation errors, one thin line per run in its filter's colour (a pane per
+    filter and quantity, tab "Ensemble runs"): the drill-down behind the RMS.
+
+    Parameters
+    ----------
+    sink : Sink
+    runs : mapping run number -> (filter label -> RunMetrics)
+    """
+    tab, tab_title = "ensemble:runs", "Ensemble runs"
+    for k, per_filter in sorted(runs.items()):
+        for label, m in per_filter.items():
+            if m.nav is None:
+                continue
+            color = lighter(sink.color_of(label), 0.25 * (k % 3))
+            order = sink.order_of(label)
+            h = np.hypot(m.nav.pos_ned[:, 0], m.nav.pos_ned[:, 1])
+            for what, values, unit in (
+                ("horizontal position error", h, "m"),
+                ("vertical position error", m.nav.pos_ned[:, 2], "m"),
+                ("heading error phi_D", np.degrees(m.nav.phi[:, 2]), "deg"),
+            ):
+                if not np.isfinite(values).any():
+                    continue
+                sink.log_ensemble(f"{label}: {what}, every run", m.t,
+                                  {f"{label} run {k}": values}, unit=unit,
+                                  styles={f"{label} run {k}": (color, 1.0)},
+                                  tab=tab, tab_title=tab_title, rank=order, legend=False)

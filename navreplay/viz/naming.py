@@ -1,17 +1,19 @@
 """Entity paths, display units and plot grouping for the Rerun output (no rerun import here).
 
 Values are SI inside navreplay; plots show them in the units a navigation engineer reads
-(degrees, deg/h, mg). A name's SI unit comes from the caller (``units={"db_g_x": "rad/s"}``)
-or, failing that, from the naming conventions of the project's filters
-(:mod:`navreplay.filters.ins_error`: ``dlat``, ``dv_N``, ``phi_D``, ``db_a_x``, ``db_g_z``, ...);
-an unknown name is plotted unscaled and titled ``[SI]``.
+(degrees, deg/h, mg). States and scored extras carry their SI unit and quantity in their
+declarations (:class:`navreplay.filters.base.State`): :func:`tab_of` maps a quantity to its tab.
+Only for what is not declared (other extras, measurement names, truth columns) the unit comes
+from the caller (``units={"dk": "-"}``) or, failing that, from the naming conventions of the
+project's filters (``dlat``, ``dv_N``, ``phi_D``, ``db_a_x``, ...); an unknown name is plotted
+unscaled and titled ``[-]``.
 
 Examples
 --------
 >>> guess_si_unit("db_g_x"), display_unit("rad/s").label
 ('rad/s', 'deg/h')
 >>> quantity_of("dv_N"), group_of("db_a_z")
-(<Quantity.VELOCITY: 'velocity'>, 'db_a')
+(<Tab.VELOCITY: 'velocity'>, 'db_a')
 >>> entity_path("gps-ins[match=vel]", "state", "phi_N")
 '/gps-ins\\\\[match\\\\=vel\\\\]/state/phi_N'
 """
@@ -23,11 +25,12 @@ import enum
 import re
 from collections.abc import Mapping
 
+from navreplay.filters.base import Quantity as StateQuantity
 from navreplay.units import DEG, DEG_PER_HOUR, MILLI_G
 
 
-class Quantity(enum.StrEnum):
-    """Which tab of the default blueprint a named quantity belongs to."""
+class Tab(enum.StrEnum):
+    """Which tab of the default blueprint a state or output belongs to."""
 
     ATTITUDE = "attitude"
     VELOCITY = "velocity"
@@ -55,53 +58,67 @@ SI_TO_DISPLAY: dict[str, DisplayUnit] = {
 }
 """Display unit for each SI unit string; other strings are shown as given, unscaled."""
 
-UNKNOWN = DisplayUnit("SI", 1.0)
+UNKNOWN = DisplayUnit("-", 1.0)
 
 # (pattern, SI unit, quantity), first match wins; names follow navreplay.filters.ins_error.
-_RULES: tuple[tuple[re.Pattern[str], str, Quantity], ...] = tuple(
+_RULES: tuple[tuple[re.Pattern[str], str, Tab], ...] = tuple(
     (re.compile(p), unit, q)
     for p, unit, q in (
-        (r"^(roll|pitch|yaw|heading)$", "rad", Quantity.ATTITUDE),
-        (r"^d?(phi|psi|theta|att)_?[NEDxyz0-9]?$", "rad", Quantity.ATTITUDE),
-        (r"^d?q(_?[a-z]{2})?_?[0-3]$", "-", Quantity.ATTITUDE),
-        (r"^d?v_?[NED]$", "m/s", Quantity.VELOCITY),
-        (r"^d?(lat|lon|L|lambda)$", "rad", Quantity.POSITION),
-        (r"^d?(h|d|depth|alt)$", "m", Quantity.POSITION),
-        (r"^d?(p|r|pos)_?[NED]$", "m", Quantity.POSITION),
-        (r"^d?(b_?a|bias_a|acc_bias)(_?[xyz0-9])?$", "m/s^2", Quantity.SENSOR),
-        (r"^d?(b_?g|bias_g|gyro_bias)(_?[xyz0-9])?$", "rad/s", Quantity.SENSOR),
-        (r"^d?(s|sf|k)_?[ag](_?[xyz0-9])?$", "-", Quantity.SENSOR),
-        (r"^d?(mu|m|misalign\w*|gamma)_?[NEDxyz0-9]?$", "rad", Quantity.SENSOR),
-        (r"^d?(lever\w*|l)_?[xyz0-9]?$", "m", Quantity.SENSOR),
-        (r"^d?[vV]c_?[NED]$", "m/s", Quantity.SENSOR),
-        (r"^d?(T|tau|delay)$", "s", Quantity.SENSOR),
+        (r"^(roll|pitch|yaw|heading)$", "rad", Tab.ATTITUDE),
+        (r"^d?(phi|psi|theta|att)_?[NEDxyz0-9]?$", "rad", Tab.ATTITUDE),
+        (r"^d?q(_?[a-z]{2})?_?[0-3]$", "-", Tab.ATTITUDE),
+        (r"^d?v_?[NED]$", "m/s", Tab.VELOCITY),
+        (r"^d?(lat|lon|L|lambda)$", "rad", Tab.POSITION),
+        (r"^d?(h|d|depth|alt)$", "m", Tab.POSITION),
+        (r"^d?(p|r|pos)_?[NED]$", "m", Tab.POSITION),
+        (r"^d?(b_?a|bias_a|acc_bias)(_?[xyz0-9])?$", "m/s^2", Tab.SENSOR),
+        (r"^d?(b_?g|bias_g|gyro_bias)(_?[xyz0-9])?$", "rad/s", Tab.SENSOR),
+        (r"^d?(s|sf|k)_?[ag](_?[xyz0-9])?$", "-", Tab.SENSOR),
+        (r"^d?(mu|m|misalign\w*|gamma)_?[NEDxyz0-9]?$", "rad", Tab.SENSOR),
+        (r"^d?(lever\w*|l)_?[xyz0-9]?$", "m", Tab.SENSOR),
+        (r"^d?[vV]c_?[NED]$", "m/s", Tab.SENSOR),
+        (r"^d?(T|tau|delay)$", "s", Tab.SENSOR),
+        # measurement names (innovations): positions in m, velocities and speeds in m/s
+        (r"^\w*(pos|position|range)\w*$", "m", Tab.SENSOR),
+        (r"^\w*(vel|velocity|speed|rpm|dvl)\w*$", "m/s", Tab.SENSOR),
     )
 )
 
-NAV_NAMES: dict[Quantity, tuple[str, ...]] = {
-    Quantity.ATTITUDE: ("roll", "pitch", "yaw"),
-    Quantity.VELOCITY: ("v_N", "v_E", "v_D"),
-    Quantity.POSITION: ("p_N", "p_E", "p_D"),
+NAV_NAMES: dict[Tab, tuple[str, ...]] = {
+    Tab.ATTITUDE: ("roll", "pitch", "yaw"),
+    Tab.VELOCITY: ("v_N", "v_E", "v_D"),
+    Tab.POSITION: ("p_N", "p_E", "p_D"),
 }
-"""Navigation-solution quantities plotted under ``/<label>/nav`` and ``/<label>/error``;
-positions are local NED offsets [m] from the reference point of the 3D view."""
+"""Navigation-solution quantities plotted under ``/<label>/nav``; positions are local NED
+offsets [m] from the reference point of the 3D view."""
+
+NAV_ERROR_NAMES: dict[Tab, tuple[str, ...]] = {
+    Tab.ATTITUDE: ("phi_N", "phi_E", "phi_D"),
+    Tab.VELOCITY: ("v_N", "v_E", "v_D"),
+    Tab.POSITION: ("p_N", "p_E", "p_D"),
+}
+"""Navigation errors plotted under ``/<label>/error`` (:func:`navreplay.metrics.nav_errors`):
+attitude as phi, the quantity and sign of the attitude-error states."""
 
 NAV_UNITS: dict[str, str] = {
-    **{n: "rad" for n in NAV_NAMES[Quantity.ATTITUDE]},
-    **{n: "m/s" for n in NAV_NAMES[Quantity.VELOCITY]},
-    **{n: "m" for n in NAV_NAMES[Quantity.POSITION]},
+    **{n: "rad" for n in NAV_NAMES[Tab.ATTITUDE] + NAV_ERROR_NAMES[Tab.ATTITUDE]},
+    **{n: "m/s" for n in NAV_NAMES[Tab.VELOCITY]},
+    **{n: "m" for n in NAV_NAMES[Tab.POSITION]},
 }
 
 NAV_TITLES: dict[str, str] = {
     "roll": "roll",
     "pitch": "pitch",
-    "yaw": "yaw",
+    "yaw": "yaw (unwrapped)",
     "v_N": "velocity N",
     "v_E": "velocity E",
     "v_D": "velocity D",
     "p_N": "position N",
     "p_E": "position E",
     "p_D": "position D",
+    "phi_N": "attitude phi_N",
+    "phi_E": "attitude phi_E",
+    "phi_D": "heading phi_D",
 }
 """Plot titles of the navigation quantities (the unit is appended)."""
 
@@ -118,15 +135,28 @@ def guess_si_unit(name: str) -> str | None:
     return None
 
 
-def quantity_of(name: str) -> Quantity:
+def quantity_of(name: str) -> Tab:
     """Tab of a state or output: attitude, velocity, position, or sensor (anything else)."""
     for q, names in NAV_NAMES.items():
-        if name in names:
+        if name in names or name in NAV_ERROR_NAMES[q]:
             return q
     for pattern, _, q in _RULES:
         if pattern.match(name):
             return q
-    return Quantity.SENSOR
+    return Tab.SENSOR
+
+
+_TAB_OF_QUANTITY = {
+    StateQuantity.POSITION: Tab.POSITION,
+    StateQuantity.VELOCITY: Tab.VELOCITY,
+    StateQuantity.ATTITUDE: Tab.ATTITUDE,
+}
+
+
+def tab_of(quantity: StateQuantity) -> Tab:
+    """Tab of a declared quantity: position, velocity, attitude; everything else (biases,
+    scale factors, misalignments, lever arms, currents, clocks) goes to the sensor tab."""
+    return _TAB_OF_QUANTITY.get(StateQuantity(quantity), Tab.SENSOR)
 
 
 def group_of(name: str) -> str:

@@ -5,26 +5,30 @@ Entity tree
 -----------
 ::
 
-    /truth/nav/{roll,pitch,yaw}          [deg]   true attitude (ZYX Euler)
+    /truth/nav/{roll,pitch,yaw}          [deg]   true attitude (ZYX Euler, yaw unwrapped)
     /truth/nav/{v_N,v_E,v_D}             [m/s]
     /truth/nav/{p_N,p_E,p_D}             [m]     local NED from the reference point
     /truth/extra/<column>                        other truth columns (<= 3 components)
     /<label>/state/<name>                        state estimate, display units
     /<label>/sigma/<name>                        1-sigma from the diagonal of P
     /<label>/error/<name>                        estimate - truth, +3 sigma, -3 sigma
+    /<label>/error/{p_N..p_D,v_N..v_D,phi_N..phi_D}   navigation errors (metrics.nav_errors)
     /<label>/nav/<roll..p_D>                     navigation solution (as /truth/nav)
     /<label>/extra/<key>[_<i>]                   RunResult.extras
+    /<label>/nees, /<label>/nees/band            NEES of the declared NEES states, 95 % band
     /<label>/innovation/<meas>/<i>               nu_i, +3 sqrt(S_ii), -3 sqrt(S_ii)
-    /<label>/innovation/<meas>/nis               NIS, 95 % chi-square bounds
+    /<label>/innovation/<meas>/nis[/band]        NIS, 95 % chi-square band
     /world                                       NED, metres from the reference point
     /world/truth/trajectory, /world/<label>/trajectory    LineStrips3D (static)
     /world/{truth,<label>}/body                  Transform3D over time (q_nb as xyzw)
     /world/{truth,<label>}/body/axes             body FRD axes (Arrows3D, static)
     /world/<label>/covariance                    3-sigma position Ellipsoids3D, 1 Hz
+    /map/{truth,<label>}/track, .../position     GeoLineStrings (static), GeoPoints (1 Hz)
     /ensemble/<plot>/<series>                    Monte Carlo statistics
 
 Every series is a column send on the timelines ``time`` (duration since the recording start)
 and ``timestamp`` (absolute, from ``t0_ns``); style (names, colours) is static per entity.
+Each filter label keeps one colour in every plot and tab (:meth:`Sink.color_of`); truth is grey.
 
 Examples
 --------
@@ -44,6 +48,7 @@ True
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import os
 import time
@@ -57,25 +62,28 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from navreplay.geo import quat_wxyz_to_xyzw
-from navreplay.metrics import nav_errors
+from navreplay import metrics as _metrics
+from navreplay.filters.base import Nav, NavError, State, TruthColumn
+from navreplay.geo import quat_wxyz_to_xyzw, radii
+from navreplay.metrics import RunMetrics, nav_errors
 from navreplay.outputs import release
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, Stream, StreamKind
 from navreplay.viz import convert
 from navreplay.viz.blueprint import Catalog, build_blueprint
 from navreplay.viz.naming import (
-    NAV_NAMES,
+    NAV_ERROR_NAMES,
     NAV_UNITS,
-    Quantity,
     display_unit,
     entity_path,
     group_of,
     quantity_of,
     resolve_unit,
+    tab_of,
     title,
 )
 from navreplay.viz.targets import (
+    Save,
     Serve,
     Target,
     VizUnavailableError,
@@ -90,23 +98,55 @@ TIMESTAMP = "timestamp"
 WORLD_RATE_HZ = 10.0
 """Rate of attitude transforms in /world [Hz]."""
 COVARIANCE_RATE_HZ = 1.0
-"""Rate of the position-covariance ellipsoids [Hz]."""
+"""Rate of the position-covariance ellipsoids and map positions [Hz]."""
 TRUTH_RATE_HZ = 20.0
 """Default rate of the truth time series [Hz]; None in :meth:`Sink.log_truth` keeps all rows."""
 MAX_STRIP_POINTS = 20_000
 """Trajectory strips are decimated to at most this many points."""
 N_SIGMA = 3.0
+ELLIPSOID_CAP = 0.25
+"""A 3-sigma ellipsoid whose largest semi-axis exceeds this fraction of the trajectory's extent
+is drawn scaled down to it (labelled with the factor), so that it does not hide the trajectory;
+its true size is in the error plots."""
+BAND_LINES = 48
+"""A shaded band (NEES/NIS 95 % interval) is drawn as this many dim lines between its bounds:
+Rerun 0.41's time-series view has no fill between two series."""
+BAND_WIDTH = 8.0
+"""Width of each band line [px]."""
 
-TRUTH_COLOR = (200, 200, 200)
+TRUTH_COLOR = (150, 150, 150)
 PALETTE = (
     (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207), (127, 127, 127),
+    (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207),
 )  # fmt: skip
+"""Filter colours in order of first appearance (grey is reserved for the truth)."""
 AXIS_COLORS = ((230, 60, 60), (60, 200, 60), (70, 110, 240))
+SIGMA_SHADE = 0.5
+"""A predicted sigma beside its RMS is drawn in the same colour this much lighter, and thinner."""
+_BACKGROUND = (18, 18, 18)
+"""The viewer's dark plot background, that band colours are blended towards."""
+
+# plot ranks (order inside a tab): overlays first, then per-filter rows
+_RANK_NAV, _RANK_ERROR, _RANK_STATE, _RANK_SIGMA, _RANK_EXTRA, _RANK_TRUTH = (
+    0, 100, 300, 400, 500, 600
+)
 
 
 def _remove(path: Path) -> None:
     release(path)
+
+
+def lighter(color: tuple[int, ...], f: float) -> tuple[int, int, int]:
+    """``color`` moved a fraction ``f`` towards white."""
+    r, g, b = (int(round(c + (255 - c) * f)) for c in color[:3])
+    return r, g, b
+
+
+def dimmer(color: tuple[int, ...], f: float) -> tuple[int, int, int]:
+    """``color`` moved a fraction ``f`` towards the plot background (an opaque 'transparent'
+    colour: Rerun's plot lines ignore alpha)."""
+    r, g, b = (int(round(c + (bg - c) * f)) for c, bg in zip(color[:3], _BACKGROUND, strict=True))
+    return r, g, b
 
 
 # ------------------------------------------------------------------------------------------
@@ -119,16 +159,19 @@ class _Run:
 
     label: str
     color: tuple[int, int, int]
+    order: int
     units: Mapping[str, str] | None
+    states: dict[str, State] = dataclasses.field(default_factory=dict)
     rows: int = 0
     world_t: float = -np.inf
     cov_t: float = -np.inf
     axes: bool = False
+    yaw: float | None = None
     finished: bool = False
 
 
 Truth = Recording | Stream
-Metrics = Mapping[str, np.ndarray | tuple[np.ndarray, np.ndarray | None]]
+Metrics = Mapping[str, np.ndarray | tuple[np.ndarray, np.ndarray | None]] | RunMetrics
 
 
 class Sink:
@@ -136,6 +179,10 @@ class Sink:
 
     Use as a context manager (closes on success, aborts on an exception) or call
     :meth:`close` / :meth:`abort`.
+
+    A live sink (Spawn, Connect, Serve) sends the default blueprint before the data it lays
+    out, and again whenever a plot is added, so a viewer shows navreplay's layout from the
+    first sample.
 
     Attributes
     ----------
@@ -171,11 +218,18 @@ class Sink:
         self.web_url = web_url
         self.recording_id = str(rec.get_recording_id())
         self.catalog = Catalog()
+        self.live = not isinstance(target, Save)
+        self._sent: tuple | None = None
+        self._colors: dict[str, tuple[int, int, int]] = {}
         self._runs: dict[str, _Run] = {}
         self._styled: set[str] = set()
         self._ref: np.ndarray | None = None
+        self._extent = 0.0
         self._truth: convert.NavColumns | None = None
+        self._truth_yaw: np.ndarray | None = None
         self._truth_stream: Stream | None = None
+        self._truth_keep: tuple[np.ndarray, int, str] | None = None
+        self._truth_columns: set[str] = set()
         self._closed = False
         self._world_coords = False
         self._cleanup = weakref.finalize(self, _remove, tmp) if tmp is not None else None
@@ -190,6 +244,48 @@ class Sink:
             self.close()
         else:
             self.abort()
+
+    # -- colours -------------------------------------------------------------------------
+
+    def color_of(self, label: str) -> tuple[int, int, int]:
+        """The colour of a filter label (or an ensemble variant) in every plot of this sink:
+        :data:`PALETTE` in order of first use."""
+        if label not in self._colors:
+            self._colors[label] = PALETTE[len(self._colors) % len(PALETTE)]
+        return self._colors[label]
+
+    def order_of(self, label: str) -> int:
+        """Position of a label in first-use order (the row of its panes)."""
+        self.color_of(label)
+        return list(self._colors).index(label)
+
+    # -- live layout ---------------------------------------------------------------------
+
+    def _layout_first(self, log: Callable[[], None], *, plan: bool = True) -> None:
+        """Run ``log``; on a live sink, first send the blueprint for what it will log: with
+        ``plan``, ``log`` runs once against a stream that drops everything (filling the
+        catalog), the blueprint goes out if the catalog changed, then ``log`` runs for real.
+        Without ``plan`` (later rows of a run already laid out) a plot that appears anyway is
+        announced right after its first rows."""
+        if not self.live:
+            log()
+            return
+        if plan:
+            saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
+                     self._extent, self._truth, self._truth_yaw, self._truth_stream,
+                     self._world_coords, set(self._truth_columns))
+            self._rec = _NullStream()  # type: ignore[assignment]
+            try:
+                log()
+            finally:
+                (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
+                 self._truth_yaw, self._truth_stream, self._world_coords,
+                 self._truth_columns) = saved
+            if self.catalog.signature() != self._sent:
+                self.send_blueprint()
+        log()
+        if self.catalog.signature() != self._sent:
+            self.send_blueprint()
 
     # -- low-level helpers ---------------------------------------------------------------
 
@@ -227,24 +323,44 @@ class Sink:
         name: str,
         color: tuple[int, int, int],
     ) -> None:
-        """A value with +-N_SIGMA bounds as three series (value, +3 sigma, -3 sigma)."""
+        """A value with +-N_SIGMA bounds as three series (value, +3 sigma, -3 sigma): the
+        value in the filter's colour, the bounds thinner and lighter."""
         if sigma is None:
             self._style(path, [name], [color], [1.5])
             self._scalars(path, idx, value)
             return
-        faint = (*color, 140)
+        faint = lighter(color, 0.45)
         self._style(
             path,
-            [name, f"{name} +3σ", f"{name} -3σ"],
+            [name, "+3σ", "-3σ"],
             [color, faint, faint],
             [1.5, 1.0, 1.0],
         )
         self._scalars(path, idx, np.stack([value, N_SIGMA * sigma, -N_SIGMA * sigma], axis=1))
 
+    def band(
+        self,
+        path: str,
+        idx: list[rr.TimeColumn],
+        lo: np.ndarray,
+        hi: np.ndarray,
+        color: tuple[int, ...] = TRUTH_COLOR,
+        name: str = "95 % band",
+    ) -> None:
+        """A shaded band between ``lo`` and ``hi`` (arrays on ``idx``): Rerun 0.41 cannot fill
+        between series, so :data:`BAND_LINES` wide dim lines fill it."""
+        lo = np.asarray(lo, dtype=np.float64)
+        hi = np.asarray(hi, dtype=np.float64)
+        f = np.linspace(0.0, 1.0, BAND_LINES)
+        lines = lo[:, None] + (hi - lo)[:, None] * f[None, :]
+        shade = dimmer(color, 0.8)
+        self._style(path, [name] * BAND_LINES, [shade] * BAND_LINES, [BAND_WIDTH] * BAND_LINES)
+        self._scalars(path, idx, lines)
+
     def _run(self, label: str, units: Mapping[str, str] | None) -> _Run:
         run = self._runs.get(label)
         if run is None:
-            run = _Run(label, PALETTE[len(self._runs) % len(PALETTE)], units)
+            run = _Run(label, self.color_of(label), self.order_of(label), units)
             self._runs[label] = run
         elif units is not None:
             run.units = units
@@ -256,7 +372,6 @@ class Sink:
                 "/world", rr.ViewCoordinates.FRD, static=True
             )  # NED = x fwd, y right, z down
             self._world_coords = True
-            self.catalog.world = True
 
     def _axes(self, path: str, size: float) -> None:
         self._rec.log(
@@ -265,14 +380,58 @@ class Sink:
             static=True,
         )
 
-    def _strip(self, path: str, ned: np.ndarray, color: tuple[int, int, int]) -> None:
+    def _strip(
+        self, path: str, ned: np.ndarray, color: tuple[int, int, int], width: float = 2.5
+    ) -> None:
         ned = ned[np.isfinite(ned).all(axis=1)]
         if ned.shape[0] < 2:
             return
-        step = max(1, int(np.ceil(ned.shape[0] / MAX_STRIP_POINTS)))
-        pts = np.concatenate([ned[::step], ned[-1:]]) if (ned.shape[0] - 1) % step else ned[::step]
+        pts = _thin(ned)
         self._set_world()
-        self._rec.log(path, rr.LineStrips3D([pts], colors=[color], radii=[-1.5]), static=True)
+        self.catalog.frame(pts.min(axis=0), pts.max(axis=0))
+        self._rec.log(path, rr.LineStrips3D([pts], colors=[color], radii=[-width / 2]), static=True)
+
+    def _geo(
+        self,
+        label: str,
+        t: np.ndarray,
+        pos: np.ndarray,
+        t0_ns: int,
+        color: tuple[int, int, int],
+        *,
+        track: bool,
+        width: float = 3.0,
+    ) -> None:
+        """Latitude/longitude for the map view: the track (static, once) and the position at
+        :data:`COVARIANCE_RATE_HZ` over time."""
+        ok = np.isfinite(pos[:, :2]).all(axis=1)
+        if not ok.any():
+            return
+        deg = np.degrees(pos[ok, :2])
+        root = entity_path("map", label)
+        if track and deg.shape[0] >= 2:
+            self._rec.log(
+                f"{root}/track",
+                rr.GeoLineStrings(
+                    lat_lon=[_thin(deg)], colors=[color], radii=rr.Radius.ui_points(width / 2)
+                ),
+                static=True,
+            )
+        k = convert.decimate(t[ok], COVARIANCE_RATE_HZ)
+        if k.shape[0]:
+            self._rec.send_columns(
+                f"{root}/position",
+                indexes=self._indexes(t[ok][k], t0_ns),
+                columns=rr.GeoPoints.columns(positions=deg[k]),
+            )
+            if f"{root}/position" not in self._styled:
+                self._styled.add(f"{root}/position")
+                self._rec.log(
+                    f"{root}/position",
+                    rr.GeoPoints.from_fields(colors=[color], radii=rr.Radius.ui_points(6.0)),
+                    static=True,
+                )
+        self.catalog.geo = True
 
     # -- truth ---------------------------------------------------------------------------
 
@@ -299,42 +458,39 @@ class Sink:
             Decimate the time series to this rate [Hz]; None keeps every row. Errors are always
             computed against the full-rate truth.
         """
-        stream, t0 = _truth_stream(truth, t0_ns)
         if self._truth_stream is not None:
             raise ValueError("truth is already logged in this sink (one recording per sink)")
+        self._layout_first(lambda: self._log_truth(truth, t0_ns, entity, rate_hz))
+
+    def _log_truth(
+        self, truth: Truth, t0_ns: int | None, entity: str, rate_hz: float | None
+    ) -> None:
+        stream, t0 = _truth_stream(truth, t0_ns)
         nav = _truth_nav(stream, t0)
         self._truth = nav
         self._truth_stream = stream
         if self._ref is None and nav.t.shape[0]:
             self._ref = nav.pos[0].copy()
+        ned = convert.local_ned(nav.pos, self._ref)
+        finite = ned[np.isfinite(ned).all(axis=1)]
+        if finite.shape[0]:
+            self._extent = max(self._extent, float(np.max(np.ptp(finite, axis=0))))
+        values = convert.nav_values(nav, self._ref)
+        self._truth_yaw = values["yaw"] = np.unwrap(values["yaw"])
         keep = convert.decimate(nav.t, rate_hz) if rate_hz else np.arange(nav.t.shape[0])
-        sub = convert.NavColumns(nav.t[keep], nav.pos[keep], nav.v_n[keep], nav.q_nb[keep])
-        idx = self._indexes(sub.t, t0)
+        self._truth_keep = (keep, t0, "/" + entity.strip("/"))
+        idx = self._indexes(nav.t[keep], t0)
         root = "/" + entity.strip("/")
-        for name, values in convert.nav_values(sub, self._ref).items():
+        for name, v in values.items():
             u = display_unit(NAV_UNITS[name])
             path = f"{root}/nav/{name}"
             self._style(path, ["truth"], [TRUTH_COLOR], [2.0])
-            self._scalars(path, idx, values * u.scale)
-            self.catalog.add(quantity_of(name).value, f"nav:{name}", title(name, u), path)
-        for col, values in stream.columns.items():
-            if col in ("pos", "v_n", "q_nb"):
-                continue
-            flat = values[keep].reshape(
-                keep.shape[0], int(np.prod(values.shape[1:], dtype=np.int64))
-            )
-            if flat.shape[1] > 3:
-                continue
-            u = resolve_unit(col)
-            path = f"{root}/extra/{entity_path(col)[1:]}"
-            names = [col] if flat.shape[1] == 1 else [f"{col}[{j}]" for j in range(flat.shape[1])]
-            self._style(path, [f"truth {n}" for n in names], [TRUTH_COLOR] * len(names))
-            self._scalars(path, idx, flat * u.scale)
-            self.catalog.add(Quantity.SENSOR.value, f"truth:{col}", f"true {col} [{u.label}]", path)
-        # 3D
-        ned = convert.local_ned(nav.pos, self._ref)
+            self._scalars(path, idx, v[keep] * u.scale)
+            self.catalog.add(quantity_of(name).value, f"nav:{name}", title(name, u), path,
+                             rank=_RANK_NAV)
+        # 3D and map
         world = f"/world{root}"
-        self._strip(f"{world}/trajectory", ned, TRUTH_COLOR)
+        self._strip(f"{world}/trajectory", ned, TRUTH_COLOR, width=1.5)
         w = convert.decimate(nav.t, WORLD_RATE_HZ)
         if w.shape[0]:
             self._rec.send_columns(
@@ -342,7 +498,31 @@ class Sink:
                 indexes=self._indexes(nav.t[w], t0),
                 columns=rr.Transform3D.columns(translation=ned[w], quaternion=_xyzw(nav.q_nb[w])),
             )
-            self._axes(f"{world}/body/axes", _axis_size(ned))
+            self._axes(f"{world}/body/axes", _axis_size(self._extent))
+        self._geo(root.strip("/"), nav.t, nav.pos, t0, TRUTH_COLOR, track=True, width=1.5)
+
+    def _truth_column(self, column: str, unit: str) -> str | None:
+        """Entity of a truth column (all components, in the display unit of ``unit``), logged
+        on first use; None when the truth lacks it or has more than 3 components."""
+        stream = self._truth_stream
+        if stream is None or self._truth_keep is None or column not in stream.columns:
+            return None
+        keep, t0, root = self._truth_keep
+        path = f"{root}/extra/{entity_path(column)[1:]}"
+        if column in self._truth_columns:
+            return path
+        values = stream.columns[column][keep]
+        flat = values.reshape(keep.shape[0], int(np.prod(values.shape[1:], dtype=np.int64)))
+        if flat.shape[1] > 3:
+            return None
+        k = flat.shape[1]
+        names = ["truth"] if k == 1 else [f"truth {column}[{j}]" for j in range(k)]
+        self._style(path, names, [lighter(TRUTH_COLOR, 0.3 * j) for j in range(k)], [2.0] * k)
+        u = display_unit(unit)
+        t = (stream.t_ns[keep] - np.int64(t0)).astype(np.float64) * 1e-9
+        self._scalars(path, self._indexes(t, t0), flat * u.scale)
+        self._truth_columns.add(column)
+        return path
 
     def _ensure_truth(self, truth: Truth, t0_ns: int) -> None:
         """Log ``truth`` unless this sink already holds it; refuse a different recording's."""
@@ -374,7 +554,11 @@ class Sink:
             run = self._run(result.label, units)
             if run.finished:
                 raise ValueError(f"run {result.label!r} is already logged in this sink")
-            self._log_rows(run, result, run.rows, result.t.shape[0])
+            self._layout_first(
+                lambda: self._log_rows(self._runs[result.label], result,
+                                       self._runs[result.label].rows, result.t.shape[0]),
+                plan=run.rows == 0,
+            )
 
         return observe
 
@@ -386,31 +570,43 @@ class Sink:
         *,
         units: Mapping[str, str] | None = None,
     ) -> None:
-        """Log one filter's results; several runs (labels) overlay in the same plots.
+        """Log one filter's results; several runs (labels) share the tabs, each label with its
+        own colour and its own error panes.
 
         Parameters
         ----------
         result : RunResult
-            Entities go under ``/<result.label>``.
+            Entities go under ``/<result.label>``; units, tabs and groups come from
+            ``result.states`` and ``result.scored_extras``.
         truth : Recording or truth Stream, optional
             Logged under /truth (once per sink) and used for the navigation errors
-            (roll/pitch/yaw, velocity and position N/E/D) of a result with a nav solution.
-        metrics : mapping, optional
-            Errors (estimate minus truth, SI) of named outputs at ``result.t``:
-            ``name -> error`` or ``name -> (error, sigma)``, arrays (M,) or (M, k). A state name
-            takes its sigma from P; the navigation names above replace the computed errors.
+            (:func:`navreplay.metrics.nav_errors`: position N/E/D [m], velocity, attitude phi)
+            of a result with a navigation solution, with +-3 sigma from the declared
+            navigation-error states.
+        metrics : RunMetrics or mapping, optional
+            The run's scores (:func:`navreplay.metrics.run_metrics`): the errors of the scored
+            states with their sigmas, the errors of the scored extras and the NEES with its
+            95 % band. Or a mapping of errors (estimate minus truth, SI) of named outputs at
+            ``result.t``: ``name -> error`` or ``name -> (error, sigma)``, arrays (M,) or
+            (M, k); a state name takes its sigma from P; the navigation-error names
+            (``p_N``.., ``v_N``.., ``phi_N``..) replace the computed errors.
         units : mapping, optional
-            SI unit per state, extra or measurement name (``"rad"``, ``"rad/s"``, ``"m/s^2"``,
-            ``"m"``, ``"m/s"``, ``"-"``...); names not given are guessed from the naming
-            conventions, else titled ``[SI]``.
+            SI unit of undeclared extras or measurement names (``"rad"``, ``"m/s^2"``, ...);
+            names neither declared nor given are guessed from the naming conventions.
         """
         if truth is not None:
             self._ensure_truth(truth, result.t0_ns)
         run = self._run(result.label, units)
         if run.finished:
             raise ValueError(f"run {result.label!r} is already logged in this sink")
-        errors = _metric_columns(result, metrics or {})
-        nav_override = {n: errors.pop(n) for n in _NAV_ALL if n in errors}
+        nees = None
+        if isinstance(metrics, RunMetrics):
+            errors, nees = _from_run_metrics(result, metrics)
+        else:
+            errors = _metric_columns(result, metrics or {})
+        nav_override = {} if isinstance(metrics, RunMetrics) else {
+            n: errors.pop(n) for n in _NAV_ERRORS if n in errors
+        }
         if nav_override and run.rows:
             warnings.warn(
                 f"{result.label}: navigation errors were already logged live from the truth; "
@@ -418,13 +614,48 @@ class Sink:
                 stacklevel=2,
             )
             nav_override = {}
-        self._log_rows(run, result, run.rows, result.t.shape[0], nav_override)
-        self._log_errors(run, result, errors)
-        self._log_innovations(run, result)
-        if result.nav_pos is not None and self._ref is not None:
-            ned = convert.local_ned(result.nav_pos, self._ref)
-            self._strip(entity_path("world", run.label, "trajectory"), ned, run.color)
+
+        def log() -> None:
+            r = self._runs[result.label]
+            self._log_rows(r, result, r.rows, result.t.shape[0], nav_override)
+            self._log_errors(r, result, errors)
+            if nees is not None:
+                self._log_nees(r, result, *nees)
+            self._log_innovations(r, result)
+            if result.nav_pos is not None and self._ref is not None:
+                ned = convert.local_ned(result.nav_pos, self._ref)
+                self._strip(entity_path("world", r.label, "trajectory"), ned, r.color)
+                self._geo(r.label, result.t, result.nav_pos, result.t0_ns, r.color, track=True)
+
+        self._layout_first(log)
         run.finished = True
+
+    def _declare(self, run: _Run, result: RunResult) -> None:
+        run.states = {s.name: s for s in (*result.states, *result.scored_extras)}
+
+    def _unit(
+        self, run: _Run, name: str, result: RunResult, a: int, b: int
+    ) -> tuple[str, float | np.ndarray]:
+        """Display unit label and scale of a state or extra: latitude and longitude error
+        states in metres north and east, others by their declared (else guessed) SI unit."""
+        st = run.states.get(name)
+        if st is None:
+            u = resolve_unit(name, run.units)
+            return u.label, u.scale
+        if (
+            isinstance(st.truth, NavError)
+            and st.truth.q in (Nav.LAT, Nav.LON)
+            and result.nav_pos is not None
+        ):
+            lat, h = result.nav_pos[a:b, 0], result.nav_pos[a:b, 2]
+            R_M, R_N = radii(lat)
+            return "m", (R_M + h) if st.truth.q is Nav.LAT else (R_N + h) * np.cos(lat)
+        u = display_unit(st.unit)
+        return u.label, u.scale
+
+    def _tab(self, run: _Run, name: str) -> str:
+        st = run.states.get(name)
+        return (tab_of(st.quantity) if st is not None else quantity_of(name)).value
 
     def _log_rows(
         self,
@@ -436,6 +667,7 @@ class Sink:
     ) -> None:
         if b <= a:
             return
+        self._declare(run, result)
         L = run.label
         t = result.t[a:b]
         idx = self._indexes(t, result.t0_ns)
@@ -451,33 +683,43 @@ class Sink:
         for n in names:
             groups.setdefault(group_of(n), []).append(n)
         for i, n in enumerate(names):
-            u = resolve_unit(n, run.units)
+            label, scale = self._unit(run, n, result, a, b)
             g = group_of(n)
-            shade = _shade(run.color, groups[g].index(n))
-            tab = quantity_of(n).value
+            shade = lighter(run.color, min(0.3 * groups[g].index(n), 0.75))
             legend = L if len(groups[g]) == 1 else f"{L} {n}"
             p_state = entity_path(L, "state", n)
             self._style(p_state, [legend], [shade], [1.5])
-            self._scalars(p_state, idx, result.x[a:b, i] * u.scale)
+            self._scalars(p_state, idx, result.x[a:b, i] * scale)
             # an error state that feedback keeps at zero is logged but gets no plot of its own
             # (its error against the truth and its sigma are what is worth looking at)
+            st = run.states.get(n)
             if np.any(result.x[a:b, i] != 0.0):
-                self.catalog.add(tab, f"state:{g}", title(g, u), p_state)
+                self.catalog.add("states", f"state:{g}", f"{g} [{label}]", p_state,
+                                 rank=_RANK_STATE)
+                if st is not None and isinstance(st.truth, TruthColumn):
+                    p_true = self._truth_column(st.truth.column, st.unit)
+                    if p_true is not None:
+                        self.catalog.add("states", f"state:{g}", f"{g} [{label}]", p_true,
+                                         rank=_RANK_STATE)
             p_sig = entity_path(L, "sigma", n)
             self._style(p_sig, [f"σ {legend}"], [shade], [1.5])
-            self._scalars(p_sig, idx, sigma[:, i] * u.scale)
-            if not self.catalog.has(entity_path(L, "error", n)):
-                self.catalog.add(tab, f"sigma:{g}", f"σ {title(g, u)}", p_sig)
+            self._scalars(p_sig, idx, sigma[:, i] * scale)
+            nav_state = st is not None and isinstance(st.truth, NavError)
+            if not nav_state and not self.catalog.has(entity_path(L, "error", n)):
+                # sigma of an unscored state; a navigation-error state's is in the nav bounds
+                self.catalog.add("states", f"sigma:{g}@{L}", f"{L}: σ {g} [{label}]", p_sig,
+                                 rank=_RANK_SIGMA + run.order)
         for key, arr in result.extras.items():
             arr = np.asarray(arr[a:b], dtype=np.float64)
             flat = arr.reshape(b - a, int(np.prod(arr.shape[1:], dtype=np.int64)))
-            u = resolve_unit(key, run.units)
+            label, scale = self._unit(run, key, result, a, b)
             path = entity_path(L, "extra", key)
             k = flat.shape[1]
             legend = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
-            self._style(path, legend, [_shade(run.color, j) for j in range(k)])
-            self._scalars(path, idx, flat * u.scale)
-            self.catalog.add(quantity_of(key).value, f"extra:{key}", title(key, u), path)
+            self._style(path, legend, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
+            self._scalars(path, idx, flat * scale)
+            self.catalog.add("states", f"extra:{key}", f"{key} [{label}]", path,
+                             rank=_RANK_EXTRA)
         if (
             result.nav_pos is not None
             and result.nav_v_n is not None
@@ -505,30 +747,55 @@ class Sink:
                 return
             self._ref = nav.pos[finite[0]].copy()
         values = convert.nav_values(nav, self._ref)
+        values["yaw"] = self._unwrap_yaw(run, t, values["yaw"])
         for n, v in values.items():
             u = display_unit(NAV_UNITS[n])
             path = entity_path(L, "nav", n)
             self._style(path, [L], [run.color], [1.5])
             self._scalars(path, idx, v * u.scale)
-            self.catalog.add(quantity_of(n).value, f"nav:{n}", title(n, u), path)
-        nav_sigma = _nav_sigma(result, a, b)
+            self.catalog.add(quantity_of(n).value, f"nav:{n}", title(n, u), path, rank=_RANK_NAV)
+        part = _rows(result, a, b)
+        sig = _metrics.nav_sigma(part)
+        nav_sigma = {f"{p}_{ax}": sig[k][:, i]
+                     for k, p in (("pos_ned", "p"), ("v_n", "v"), ("phi", "phi"))
+                     for i, ax in enumerate("NED")}
         errors: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
         if self._truth is not None:
             tr = self._truth.at(t)
             ne = nav_errors(nav.pos, nav.v_n, nav.q_nb,
                             {"pos": tr.pos, "v_n": tr.v_n, "q_nb": tr.q_nb})
-            cols = {n: c for n, c in ne.columns().items() if not n.startswith("phi")}
-            cols.update(roll=ne.euler[:, 0], pitch=ne.euler[:, 1], yaw=ne.euler[:, 2])
-            for n, e in cols.items():
-                errors[n] = (e, nav_sigma.get(n))
+            for n, e in ne.columns().items():
+                s = nav_sigma[n]
+                errors[n] = (e, s if np.isfinite(s).any() else None)
         for n, (e, s, _) in nav_override.items():
             errors[n] = (e[a:b], nav_sigma.get(n) if s is None else s[a:b])
         for n, (e, s) in errors.items():
             u = display_unit(NAV_UNITS[n])
             path = entity_path(L, "error", n)
             self._bounded(path, idx, e * u.scale, None if s is None else s * u.scale, L, run.color)
-            self.catalog.add(quantity_of(n).value, f"error:{n}", title(n, u, "error"), path)
+            bounds = "" if s is None else ", ±3σ"
+            self.catalog.add(quantity_of(n).value, f"error:{n}@{L}",
+                             f"{L}: {title(n, u, 'error')}{bounds}", path,
+                             rank=_RANK_ERROR + run.order, legend=False)
         self._log_world(run, result, nav, a, b, values)
+
+    def _unwrap_yaw(self, run: _Run, t: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+        """Yaw without +-180 deg jumps, continuing the previous rows, on the truth's branch."""
+        ok = np.isfinite(yaw)
+        if not ok.any():
+            return yaw
+        out = yaw.copy()
+        out[ok] = np.unwrap(yaw[ok])
+        first = out[ok][0]
+        if run.yaw is not None:
+            target = run.yaw
+        elif self._truth is not None and self._truth_yaw is not None and self._truth.t.size:
+            target = float(np.interp(t[ok][0], self._truth.t, self._truth_yaw))
+        else:
+            target = first
+        out += 2.0 * np.pi * np.round((target - first) / (2.0 * np.pi))
+        run.yaw = float(out[ok][-1])
+        return out
 
     def _log_world(
         self,
@@ -545,6 +812,7 @@ class Sink:
         w = w[np.isfinite(ned[w]).all(axis=1) & np.isfinite(nav.q_nb[w]).all(axis=1)]
         if w.shape[0]:
             self._set_world()
+            self.catalog.frame(ned[w].min(axis=0), ned[w].max(axis=0))
             self._rec.send_columns(
                 entity_path("world", L, "body"),
                 indexes=self._indexes(nav.t[w], result.t0_ns),
@@ -552,12 +820,10 @@ class Sink:
             )
             run.world_t = float(nav.t[w[-1]])
             if not run.axes:
-                ref_ned = (
-                    ned if self._truth is None else convert.local_ned(self._truth.pos, self._ref)
-                )
-                self._axes(entity_path("world", L, "body", "axes"), _axis_size(ref_ned))
+                extent = self._extent or float(np.max(np.ptp(ned[w], axis=0)))
+                self._axes(entity_path("world", L, "body", "axes"), _axis_size(extent))
                 run.axes = True
-        P_ned = _position_cov(result, a, b)
+        P_ned = _position_cov(run, result, a, b)
         if P_ned is None:
             return
         c = convert.decimate(nav.t, COVARIANCE_RATE_HZ, after=run.cov_t)
@@ -565,14 +831,21 @@ class Sink:
         if not c.shape[0]:
             return
         half, q = convert.ellipsoids(P_ned[c], N_SIGMA)
+        cap = ELLIPSOID_CAP * max(self._extent, 10.0)
+        factor = np.minimum(1.0, cap / np.maximum(half.max(axis=1), 1e-12))
+        labels = ["" if f >= 1.0 else f"{L} 3σ drawn × {f:.2g}" for f in factor]
+        cov_path = entity_path("world", L, "covariance")
+        if cov_path not in self.catalog.covariances:
+            self.catalog.covariances.append(cov_path)
         self._rec.send_columns(
-            entity_path("world", L, "covariance"),
+            cov_path,
             indexes=self._indexes(nav.t[c], result.t0_ns),
             columns=rr.Ellipsoids3D.columns(
                 centers=ned[c],
-                half_sizes=half,
+                half_sizes=half * factor[:, None],
                 quaternions=q,
                 colors=np.tile((*run.color, 90), (c.shape[0], 1)),
+                labels=labels,
             ),
         )
         run.cov_t = float(nav.t[c[-1]])
@@ -583,21 +856,51 @@ class Sink:
         result: RunResult,
         errors: Mapping[str, tuple[np.ndarray, np.ndarray | None, str]],
     ) -> None:
-        """Whole-run error series of states and extras, with 3-sigma bounds when known."""
+        """Whole-run error series of states and extras, with 3-sigma bounds when known; a
+        navigation-error state that feedback keeps at zero is left out (its error is the
+        navigation error, plotted already)."""
         if not errors:
             return
         L = run.label
         idx = self._indexes(result.t, result.t0_ns)
-        states = set(result.state_names)
+        states = {n: i for i, n in enumerate(result.state_names)}
+        M = result.t.shape[0]
         for n, (e, s, key) in errors.items():
-            u = resolve_unit(key, run.units)
-            tab = quantity_of(key).value
-            path = entity_path(L, "error", n)
-            sig = None if s is None else s * u.scale
-            self._bounded(path, idx, e * u.scale, sig, L, run.color)
-            self.catalog.add(tab, f"error:{n}", title(n, u, "error"), path)
+            st = run.states.get(key)
+            if (
+                st is not None and isinstance(st.truth, NavError) and n in states
+                and result.nav_pos is not None and not np.any(result.x[:, states[n]] != 0.0)
+            ):
+                continue
+            label, scale = self._unit(run, key, result, 0, M)
+            tab = self._tab(run, key)
+            # a state named like a navigation error (phi_N) keeps its own entity
+            path = entity_path(L, "error", f"{n} state" if n in _NAV_ERRORS else n)
+            sig = None if s is None else s * scale
+            self._bounded(path, idx, e * scale, sig, L, run.color)
+            bounds = "" if s is None else ", ±3σ"
+            self.catalog.add(tab, f"error:{n}@{L}", f"{L}: {n} error [{label}]{bounds}", path,
+                             rank=_RANK_ERROR + run.order, legend=False)
             if n in states:
-                self.catalog.discard(tab, f"sigma:{group_of(n)}", entity_path(L, "sigma", n))
+                self.catalog.discard("states", f"sigma:{group_of(n)}@{L}",
+                                     entity_path(L, "sigma", n))
+
+    def _log_nees(self, run: _Run, result: RunResult, t: np.ndarray, nees: np.ndarray,
+                  dof: int) -> None:
+        """The run's NEES over its declared NEES states, with the 95 % chi-square band."""
+        if dof == 0 or not np.isfinite(nees).any():
+            return
+        L = run.label
+        idx = self._indexes(t, result.t0_ns)
+        lo, hi = convert.chi2_bounds(dof)
+        root = entity_path(L, "nees")
+        plot = f"nees@{L}"
+        ttl = f"{L}: NEES ({dof} states), 95 % band [-]"
+        self.band(f"{root}/band", idx, np.full(t.shape, lo), np.full(t.shape, hi), run.color)
+        self.catalog.add("consistency", plot, ttl, f"{root}/band", rank=run.order, legend=False)
+        self._style(root, [f"{L} NEES"], [run.color], [1.5])
+        self._scalars(root, idx, nees)
+        self.catalog.add("consistency", plot, ttl, root, rank=run.order, legend=False)
 
     def _log_innovations(self, run: _Run, result: RunResult) -> None:
         L = run.label
@@ -618,20 +921,20 @@ class Sink:
                 path = entity_path(L, "innovation", meas, str(i))
                 self._bounded(path, idx, nu[:, i] * u.scale, sd[:, i] * u.scale, L, run.color)
                 self.catalog.add(
-                    "innovation", f"nu:{meas}:{i}", f"{meas} innovation [{i}] [{u.label}]", path
+                    "innovation", f"nu:{meas}:{i}@{L}",
+                    f"{L}: {meas} innovation {_component(i, dim)}, ±3√S [{u.label}]", path,
+                    rank=run.order, legend=False,
                 )
             lo, hi = convert.chi2_bounds(dim)
-            path = entity_path(L, "innovation", meas, "nis")
-            faint = (*run.color, 140)
-            self._style(
-                path,
-                [f"{L} NIS", "95% low", "95% high"],
-                [run.color, faint, faint],
-                [1.5, 1.0, 1.0],
-            )
-            nis = np.asarray(s.nis, dtype=np.float64)
-            self._scalars(path, idx, np.stack([nis, np.full(k, lo), np.full(k, hi)], axis=1))
-            self.catalog.add("innovation", f"nis:{meas}", f"{meas} NIS (dof {dim}) [-]", path)
+            root = entity_path(L, "innovation", meas, "nis")
+            plot = f"nis:{meas}@{L}"
+            ttl = f"{L}: {meas} NIS ({dim} dof), 95 % band [-]"
+            self.band(f"{root}/band", idx, np.full(k, lo), np.full(k, hi), run.color)
+            self.catalog.add("consistency", plot, ttl, f"{root}/band", rank=run.order,
+                             legend=False)
+            self._style(root, [f"{L} NIS"], [run.color], [1.5])
+            self._scalars(root, idx, np.asarray(s.nis, dtype=np.float64))
+            self.catalog.add("consistency", plot, ttl, root, rank=run.order, legend=False)
 
     # -- ensembles -----------------------------------------------------------------------
 
@@ -643,7 +946,13 @@ class Sink:
         *,
         unit: str = "",
         bounds: tuple[np.ndarray | float, np.ndarray | float] | None = None,
-        bounds_name: str = "95% bounds",
+        bounds_name: str = "95 % band",
+        styles: Mapping[str, tuple[tuple[int, int, int], float]] | None = None,
+        tab: str = "ensemble",
+        tab_title: str | None = None,
+        timeline: str | None = None,
+        rank: int = 0,
+        legend: bool = True,
     ) -> None:
         """Log one Monte Carlo plot under ``/ensemble/<name>/<series>``.
 
@@ -652,39 +961,70 @@ class Sink:
         name : str
             Plot name, e.g. ``"roll error"`` or ``"NEES"``.
         t : ndarray, shape (K,)
-            Time [s since the recording start].
+            Time [s since the recording start], or the abscissa on ``timeline``.
         series : mapping str -> ndarray (K,)
             Overlaid series in display units, e.g. ``{"rpm RMS": ..., "rpm mean σ": ...,
-            "pure RMS": ...}``; one colour per series in order.
+            "pure RMS": ...}``.
         unit : str
             Unit of every series, shown in the title (``"deg"``, ``"m"``, ``"-"``).
         bounds : (lower, upper), optional
             Scalars or arrays (K,), e.g. :func:`navreplay.viz.chi2_bounds` for the average
-            NEES; drawn as two grey series.
+            NEES; drawn as a shaded band (:meth:`band`).
+        styles : mapping, optional
+            Colour and width per series; a series without one takes the colour of its name
+            (:meth:`color_of`), so a variant keeps its colour in every plot.
+        tab, tab_title : str, optional
+            Tab key and title (default: one "Ensemble" tab).
+        timeline : str, optional
+            Put ``t`` on this sequence timeline instead of ``time`` (e.g. an acceleration
+            sweep in mg): ``t`` is rounded to integers.
+        rank : int
+            Order of the plot in its tab.
+        legend : bool
+            Whether the plot shows its legend.
         """
         t = np.asarray(t, dtype=np.float64)
-        idx = [rr.TimeColumn(TIMELINE, duration=np.rint(t * 1e9).astype("timedelta64[ns]"))]
+        if timeline is None:
+            idx = [rr.TimeColumn(TIMELINE, duration=np.rint(t * 1e9).astype("timedelta64[ns]"))]
+        else:
+            idx = [rr.TimeColumn(timeline, sequence=np.rint(t).astype(np.int64))]
+            if self.catalog.timeline == TIMELINE and not any(
+                p for k, plots in self.catalog.plots.items() for p in plots
+            ):
+                self.catalog.timeline = timeline
         root = entity_path("ensemble", name)
         plot_title = f"{name} [{unit}]" if unit else name
-        for i, (key, values) in enumerate(series.items()):
+        styles = styles or {}
+        if bounds is not None:
+            path = f"{root}/bounds"
+            lo = np.broadcast_to(np.asarray(bounds[0], dtype=np.float64), t.shape)
+            hi = np.broadcast_to(np.asarray(bounds[1], dtype=np.float64), t.shape)
+            self.band(path, idx, lo, hi, TRUTH_COLOR, bounds_name)
+            self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
+                             legend=legend, tab_title=tab_title)
+        for key, values in series.items():
             values = np.asarray(values, dtype=np.float64)
             if values.shape != t.shape:
                 raise ValueError(
                     f"ensemble {name!r}: series {key!r} has shape {values.shape}, t {t.shape}"
                 )
             path = f"{root}/{entity_path(key)[1:]}"
-            self._style(path, [key], [PALETTE[i % len(PALETTE)]], [1.5])
+            color, width = styles[key] if key in styles else self._variant_style(key)
+            self._style(path, [key], [color], [width])
             self._scalars(path, idx, values)
-            self.catalog.add("ensemble", f"ensemble:{name}", plot_title, path)
-        if bounds is not None:
-            lo = np.broadcast_to(np.asarray(bounds[0], dtype=np.float64), t.shape)
-            hi = np.broadcast_to(np.asarray(bounds[1], dtype=np.float64), t.shape)
-            path = f"{root}/bounds"
-            self._style(
-                path, [f"{bounds_name} low", f"{bounds_name} high"], [TRUTH_COLOR] * 2, [1.0, 1.0]
-            )
-            self._scalars(path, idx, np.stack([lo, hi], axis=1))
-            self.catalog.add("ensemble", f"ensemble:{name}", plot_title, path)
+            self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
+                             legend=legend, tab_title=tab_title)
+
+    def _variant_style(self, key: str) -> tuple[tuple[int, int, int], float]:
+        """Colour and width of an ensemble series named ``"<variant>[ RMS| sigma| σ]"``: the
+        variant's colour; a sigma lighter and thinner than its RMS; ``"truth"`` grey."""
+        if key == "truth":
+            return TRUTH_COLOR, 2.0
+        for suffix, sigma in ((" RMS", False), (" mean σ", True), (" sigma", True), (" σ", True)):
+            if key.endswith(suffix) and len(key) > len(suffix):
+                color = self.color_of(key[: -len(suffix)])
+                return (lighter(color, SIGMA_SHADE), 1.0) if sigma else (color, 2.0)
+        return self.color_of(key), 1.5
 
     # -- blueprint and lifecycle ---------------------------------------------------------
 
@@ -693,7 +1033,9 @@ class Sink:
         return build_blueprint(self.catalog)
 
     def send_blueprint(self) -> None:
-        """Send the default blueprint now (also done by :meth:`close`)."""
+        """Send the default blueprint now (also done by :meth:`close`, and by a live sink
+        before the data of every new plot)."""
+        self._sent = self.catalog.signature()
         self._rec.send_blueprint(self.blueprint(), make_active=True, make_default=True)
 
     def flush(self, timeout: float = 30.0) -> None:
@@ -749,7 +1091,38 @@ class Sink:
 # ------------------------------------------------------------------------------------------
 # helpers
 
-_NAV_ALL = tuple(n for names in NAV_NAMES.values() for n in names)
+_NAV_ERRORS = tuple(n for names in NAV_ERROR_NAMES.values() for n in names)
+
+
+class _NullStream:
+    """Stands in for the recording stream while a live sink lays out what it will log."""
+
+    def send_columns(self, *args: Any, **kwargs: Any) -> None:
+        pass
+
+    def log(self, *args: Any, **kwargs: Any) -> None:
+        pass
+
+
+def _component(i: int, dim: int) -> str:
+    return "NED"[i] if dim == 3 else str(i)
+
+
+def _thin(pts: np.ndarray) -> np.ndarray:
+    """At most :data:`MAX_STRIP_POINTS` of ``pts``, keeping the last."""
+    step = max(1, int(np.ceil(pts.shape[0] / MAX_STRIP_POINTS)))
+    return np.concatenate([pts[::step], pts[-1:]]) if (pts.shape[0] - 1) % step else pts[::step]
+
+
+def _rows(result: RunResult, a: int, b: int) -> RunResult:
+    """The rows [a, b) of a result (the columns the navigation sigmas need)."""
+    def cut(v: np.ndarray | None) -> np.ndarray | None:
+        return None if v is None else v[a:b]
+
+    return dataclasses.replace(
+        result, t=result.t[a:b], x=result.x[a:b], P=result.P[a:b], nav_pos=cut(result.nav_pos),
+        nav_v_n=cut(result.nav_v_n), nav_q_nb=cut(result.nav_q_nb), extras={}, innovations={},
+    )
 
 
 def _truth_stream(truth: Truth, t0_ns: int | None) -> tuple[Stream, int]:
@@ -776,23 +1149,30 @@ def _xyzw(q_nb: np.ndarray) -> np.ndarray:
     return quat_wxyz_to_xyzw(q_nb)
 
 
-def _axis_size(ned: np.ndarray) -> float:
-    finite = ned[np.isfinite(ned).all(axis=1)]
-    if finite.shape[0] == 0:
-        return 1.0
-    extent = float(np.max(np.ptp(finite, axis=0)))
+def _axis_size(extent: float) -> float:
     return max(1.0, 0.03 * extent)
 
 
-def _shade(color: tuple[int, int, int], j: int) -> tuple[int, int, int]:
-    """Component j of a group: the run's colour, lightened for j > 0."""
-    f = min(0.3 * j, 0.75)
-    r, g, b = (int(round(c + (255 - c) * f)) for c in color)
-    return r, g, b
+def _from_run_metrics(
+    result: RunResult, m: RunMetrics
+) -> tuple[dict[str, tuple[np.ndarray, np.ndarray | None, str]], tuple | None]:
+    """Error columns (scored states with their sigmas, scored extras) and the NEES of a run's
+    metrics."""
+    out: dict[str, tuple[np.ndarray, np.ndarray | None, str]] = {}
+    for j, name in enumerate(m.state_names):
+        out[name] = (m.state_error[:, j], np.sqrt(np.clip(m.state_var[:, j], 0.0, None)), name)
+    M = result.t.shape[0]
+    for key, err in m.extra_error.items():
+        err = np.asarray(err, dtype=np.float64)
+        cols = err.reshape(M, int(np.prod(err.shape[1:], dtype=np.int64)))
+        for j in range(cols.shape[1]):
+            out[key if cols.shape[1] == 1 else f"{key}_{j}"] = (cols[:, j], None, key)
+    nees = (m.t, m.nees, len(m.nees_states)) if m.nees_states else None
+    return out, nees
 
 
 def _metric_columns(
-    result: RunResult, metrics: Metrics
+    result: RunResult, metrics: Mapping[str, Any]
 ) -> dict[str, tuple[np.ndarray, np.ndarray | None, str]]:
     """Validate metrics and split them into columns: ``name -> (error, sigma or None, key)``.
 
@@ -836,29 +1216,20 @@ def _metric_columns(
     return out
 
 
-def _position_cov(result: RunResult, a: int, b: int) -> np.ndarray | None:
-    """Position-error covariance in NED metres for rows [a, b), or None if not known."""
-    if "P_pos_n" in result.extras:
-        return np.asarray(result.extras["P_pos_n"][a:b], dtype=np.float64).reshape(b - a, 3, 3)
-    states = convert.find_position_states(result.state_names)
-    if states is None:
-        return None
-    pos = None if result.nav_pos is None else result.nav_pos[a:b]
-    if states.geodetic and pos is None:
-        return None
-    return convert.position_cov_ned(result.P[a:b], states, pos)
+_POSITION_STATES = ((Nav.LAT, Nav.LON, Nav.H, -1.0), (Nav.LAT, Nav.LON, Nav.DEPTH, 1.0))
 
 
-def _nav_sigma(result: RunResult, a: int, b: int) -> dict[str, np.ndarray]:
-    """1-sigma of the navigation errors that the state covariance gives (position, velocity)."""
-    out: dict[str, np.ndarray] = {}
-    P_ned = _position_cov(result, a, b)
-    if P_ned is not None:
-        sd = np.sqrt(np.clip(np.diagonal(P_ned, axis1=1, axis2=2), 0.0, None))
-        out.update(p_N=sd[:, 0], p_E=sd[:, 1], p_D=sd[:, 2])
-    vel = convert.find_velocity_states(result.state_names)
-    if vel is not None:
-        i = np.asarray(vel)
-        sd = np.sqrt(np.clip(result.P[a:b, i, i], 0.0, None))
-        out.update(v_N=sd[:, 0], v_E=sd[:, 1], v_D=sd[:, 2])
-    return out
+def _position_cov(run: _Run, result: RunResult, a: int, b: int) -> np.ndarray | None:
+    """Position-error covariance in NED metres for rows [a, b) from the declared latitude,
+    longitude and height (or depth) error states, or None."""
+    where = {
+        s.truth.q: i for i, s in enumerate(result.states) if isinstance(s.truth, NavError)
+    }
+    if result.nav_pos is None:
+        return None
+    for lat, lon, vert, sign in _POSITION_STATES:
+        if lat in where and lon in where and vert in where:
+            states = convert.PositionStates((where[lat], where[lon], where[vert]), True, sign)
+            return convert.position_cov_ned(result.P[a:b], states, result.nav_pos[a:b])
+    return None
+
