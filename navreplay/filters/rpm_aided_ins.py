@@ -79,7 +79,7 @@ speed ``u_hat = c_rpm rpm / (1 + k_hat)``, ``w = v_hat - v_c_hat`` (``v_c_hat = 
     H_rpm[:, m_y,z] = u_hat [(C_bv_hat e_x) x] J(m_hat)[:, 1:3]      = [0, 0, u_hat]^T,
                                                                        [0, -u_hat, 0]^T (*)
     H_rpm[:, v_c]   = -C_nb_hat^T[:, 0:2]
-    R_rpm = rpm_sigma^2 I3
+    R_rpm = diag(rpm_sigma^2, constraint_sigma^2, constraint_sigma^2)
 
 (*) the printed forms of §4.4 are the values at k_hat = m_hat = 0; the ones used here are
 the exact first derivatives (J is the left Jacobian of SO(3)), equal to first order.
@@ -249,7 +249,10 @@ class RpmAidedInsParams(FilterParams):
     pos_sigma_floor: float = 1.0
     """Lower bound of the initial position 1-sigma per N, E, D axis [m] (conditioning)."""
     rpm_sigma: float = 0.05
-    """RPM velocity measurement noise per body axis [m/s]."""
+    """RPM speed noise along the RPM axis [m/s] (the forward row of the RPM update)."""
+    constraint_sigma: float = 0.002
+    """Noise of the no-sideslip and no-heave rows of the RPM update [m/s]: the vehicle's
+    lateral and vertical water-relative velocity in the RPM frame."""
     depth_sigma: float = 0.1
     """Depth measurement noise [m]."""
     depth_aiding: bool = True
@@ -275,7 +278,7 @@ class RpmAidedInsParams(FilterParams):
                      "current_sigma", "init_vel_sigma", "init_level_sigma",
                      "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor"):
             check_number(self, name)
-        for name in ("rpm_sigma", "depth_sigma", "speed_per_rpm"):
+        for name in ("rpm_sigma", "constraint_sigma", "depth_sigma", "speed_per_rpm"):
             check_number(self, name, positive=True)
         check_number(self, "update_rate", positive=True, upper=100.0)
         check_number(self, "cov_step", positive=True, upper=10.0)
@@ -493,7 +496,7 @@ class RpmAidedIns(Filter):
         self._frozen[INERT] = True
         if not estimate_current:
             self._frozen[CURRENT] = True
-        self._R_rpm = np.eye(3) * p.rpm_sigma**2
+        self._R_rpm = np.diag([p.rpm_sigma, p.constraint_sigma, p.constraint_sigma]) ** 2
         self._R_depth = np.array([[p.depth_sigma**2]])
         for name, R in (("R_rpm", self._R_rpm), ("R_depth", self._R_depth)):
             kalman.check_covariance(R, name=name)
