@@ -64,9 +64,10 @@ scale-factor and misalignment errors (s_a, s_g, 1-sigma) enter as the motion-dep
 of (5a) by states for the errors the yaw rate drives (ins_error eq. 22).
 
 Scoring (:mod:`navreplay.metrics`): the navigation error states are scored by the errors of the
-navigation solution (``nav:`` truth keys), the biases by the truth stream's total bias columns,
-which lack the gravity-dependent parts above; the default NEES block (``nees_states``) is
-therefore the nine navigation errors.
+navigation solution (``nav:`` truth keys), the biases by the truth stream's effective biases
+``accel_bias_eff`` and ``gyro_bias_eff`` (the total bias plus the scale-factor, misalignment and
+g-sensitivity errors at rest, :func:`navreplay.sensors.imu.effective_biases`); the default NEES
+block (``nees_states``) is the nine navigation errors.
 """
 
 from __future__ import annotations
@@ -254,11 +255,12 @@ NAV_TRUTH_KEYS: dict[str, str] = {
     "dlat": "nav:lat", "dlon": "nav:lon", "dh": "nav:h",
     "dv_N": "nav:v_N", "dv_E": "nav:v_E", "dv_D": "nav:v_D",
     "phi_N": "nav:phi_N", "phi_E": "nav:phi_E", "phi_D": "nav:phi_D",
-    **{f"b_a_{a}": f"truth:accel_bias[{i}]" for i, a in enumerate("xyz")},
-    **{f"b_g_{a}": f"truth:gyro_bias[{i}]" for i, a in enumerate("xyz")},
+    **{f"b_a_{a}": f"truth:accel_bias_eff[{i}]" for i, a in enumerate("xyz")},
+    **{f"b_g_{a}": f"truth:gyro_bias_eff[{i}]" for i, a in enumerate("xyz")},
 }
 """Scoring keys (see :mod:`navreplay.metrics`): the navigation error states are scored by the
-navigation solution's error, the biases by the truth stream's total bias columns."""
+navigation solution's error, the biases by the truth stream's effective biases (the total bias
+plus the scale-factor and misalignment errors at rest, which a bias state absorbs)."""
 
 
 @register_filter
