@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from campaign_seeds import SLOW_SEEDS
 
 from navreplay import strapdown
 from navreplay.filters import kalman
@@ -451,8 +452,9 @@ def test_quick_report_and_rerun_view(tmp_path):
 
 
 @pytest.mark.slow
-def test_full_campaign_meets_every_acceptance_band():
-    report = rep.REPRODUCTION.run(runs=36, seed=0, workers=2)
+@pytest.mark.parametrize("seed", SLOW_SEEDS)
+def test_full_campaign_meets_every_acceptance_band(seed):
+    report = rep.REPRODUCTION.run(runs=36, seed=seed, workers=2)
     assert report.figures["timing"]["filter_runs"] == 36 * 7
     names = [c.name for c in report.checks]
     assert len(names) == 8
