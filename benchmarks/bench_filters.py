@@ -80,6 +80,7 @@ def _driver(recording: Any, filter_cls: type, block_period: float) -> Callable[[
 def main(duration: float = 3600.0) -> None:
     from navreplay import strapdown
     from navreplay.filters import ins_error as ie
+    from navreplay.filters import ins_time_update as itu
     from navreplay.filters import kalman
     from navreplay.filters.gps_ins import GpsInsFilter
     from navreplay.filters.ins import InsFilter
@@ -137,7 +138,7 @@ def main(duration: float = 3600.0) -> None:
     nav = np.r_[nav0]
     fb = np.array([0.1, 0.2, -9.8])
     noise = GpsInsFilter.Params().process_noise()
-    ie.propagate_covariance(P, nav[None], fb[None], np.zeros((1, 3)), np.array([0.1]), noise)
+    itu.propagate_covariance(P, nav[None], fb[None], np.zeros((1, 3)), np.array([0.1]), noise)
     calls = [
         ("kalman.predict (checked)", lambda: kalman.predict(x, P, Phi, Qd)),
         ("kalman.correct (checked)", lambda: kalman.correct(x, P, z, H, R)),
@@ -145,7 +146,7 @@ def main(duration: float = 3600.0) -> None:
         ("kalman.check_covariance", lambda: kalman.check_covariance(P)),
         ("ins_error.system_matrix", lambda: ie.system_matrix(nav[:3], nav[3:6], np.eye(3), fb)),
         ("ins_error.propagate_covariance, 1 step",
-         lambda: ie.propagate_covariance(P, nav[None], fb[None], np.zeros((1, 3)),
+         lambda: itu.propagate_covariance(P, nav[None], fb[None], np.zeros((1, 3)),
                                          np.array([0.1]), noise)),
     ]
     print(f"\n{'per call (15 states, m = 3)':46s} {'us':>11s}")

@@ -2,7 +2,7 @@
 
 Each figure is drawn from the ``figures`` of the :class:`navreplay.reproduce.Report` that
 ``navreplay reproduce NAME`` computes, with the same campaign sizes and seed as the tables of
-docs/reproduction.md. matplotlib is needed here only (``pip install -e '.[docs]'``)::
+docs/reproduction.md (matplotlib comes with navreplay)::
 
     python docs/plots.py                          # all three, into docs/img/
     python docs/plots.py vector-matching --workers 2

@@ -25,17 +25,19 @@ EXPECTED_ERRORS: tuple[type[BaseException], ...] = ()
 def _expected_errors() -> tuple[type[BaseException], ...]:
     global EXPECTED_ERRORS
     if not EXPECTED_ERRORS:
+        from navreplay.filters.ins import InitialNavError
         from navreplay.filters.kalman import FilterDivergedError
         from navreplay.filters.registry import FilterLoadError
         from navreplay.io import RecordingError
+        from navreplay.outputs import OutputError
         from navreplay.params import ParamError
         from navreplay.replay.engine import ReplayError
         from navreplay.replay.ensemble import RunFailedError
         from navreplay.viz import VizUnavailableError
 
         EXPECTED_ERRORS = (
-            RecordingError, ParamError, FilterLoadError, FilterDivergedError, ReplayError,
-            RunFailedError, VizUnavailableError, KeyError, FileExistsError, FileNotFoundError,
+            RecordingError, OutputError, ParamError, FilterLoadError, FilterDivergedError, ReplayError,
+            RunFailedError, VizUnavailableError, InitialNavError, KeyError, FileExistsError, FileNotFoundError,
             IsADirectoryError, PermissionError,
         )
     return EXPECTED_ERRORS
@@ -53,8 +55,10 @@ class _Group(click.Group):
     """Turns the project's expected errors into one line and shows warnings as one line."""
 
     def invoke(self, ctx: click.Context) -> Any:
+        from navreplay.lifecycle import Terminated, handle_signals, interrupted_by
+
         debug = bool(ctx.params.get("debug"))
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), handle_signals():
             warnings.showwarning = _show_warning  # type: ignore[assignment]
             try:
                 return super().invoke(ctx)
@@ -62,10 +66,11 @@ class _Group(click.Group):
                 raise
             except (click.ClickException, click.Abort):
                 raise
-            except KeyboardInterrupt:
-                click.echo("interrupted", err=True)
-                raise click.exceptions.Exit(130) from None
-            except Exception as e:
+            except (Exception, KeyboardInterrupt, Terminated) as e:
+                stop = interrupted_by(e)
+                if stop is not None:  # also when a compiled function was hit by the signal
+                    click.echo(str(stop) or "interrupted", err=True)
+                    raise click.exceptions.Exit(getattr(stop, "exit_code", 130)) from None
                 if debug or not isinstance(e, _expected_errors()):
                     raise
                 raise click.ClickException(_message(e)) from None
@@ -113,12 +118,20 @@ def _stderr_is_tty() -> bool:
         return False
 
 
-def _load_config(path: str | None) -> dict[str, Any] | None:
+def _load_config(path: str | None, *tables: str) -> dict[str, Any] | None:
+    """The TOML file, strict: only ``tables`` (``scenario``, ``filter``, ``topics``, ``frames``,
+    ``initial``) may appear."""
     if path is None:
         return None
     from navreplay.params import load_toml
 
-    return load_toml(path)
+    allowed: dict[str, Any] = {"scenario": None, "topics": None, "frames": None,
+                               "initial": None}
+    if "filter" in tables:
+        from navreplay.filters.registry import filters
+
+        allowed["filter"] = list(filters())
+    return load_toml(path, tables={t: allowed[t] for t in tables})
 
 
 def _viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool,
@@ -158,6 +171,42 @@ def _viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
 
 
 _PARAM_HELP = "Parameter as key=value (repeatable)."
+_FORCE_HELP = "Overwrite existing output files (never an input of the command)."
+
+
+def _check_outputs(force: bool, inputs: Sequence[str | Path | None], *items: Any) -> None:
+    """Refuse, before any work, outputs that would lose a file or fail late
+    (:func:`navreplay.outputs.check_outputs`); ``items`` are Outputs or None."""
+    from navreplay.outputs import check_outputs
+
+    check_outputs(items, [p for p in inputs if p is not None], force=force)
+
+
+def _out(path: str | Path | None, option: str, **kw: Any) -> Any:
+    """An :class:`navreplay.outputs.Output`, or None without a path."""
+    from navreplay.outputs import Output
+
+    return None if path is None else Output(Path(path), option, **kw)
+
+
+def _viz_out(save: str | None, no_viz: bool, live: bool) -> Any:
+    """The .rrd output: --save, or the default directory (its files are regenerated)."""
+    if save is not None:
+        return _out(save, "--save")
+    if no_viz or live:
+        return None
+    from navreplay.jobs import DEFAULT_OUT
+
+    return _out(DEFAULT_OUT, "--save (default)", directory=True)
+
+
+def _result_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--export DIR and --report FILE.html (navreplay.jobs.results)."""
+    fn = click.option("--report", "report", type=click.Path(dir_okay=False),
+                      metavar="OUT.html", help="Write a self-contained HTML report.")(fn)
+    return click.option("--export", "export", type=click.Path(file_okay=False), metavar="DIR",
+                        help="Write CSV, TUM and Odometry MCAP (run) or ensemble CSV "
+                             "(several recordings, montecarlo) into DIR.")(fn)
 
 
 # --------------------------------------------------------------------------------------------
@@ -178,6 +227,22 @@ def cli(debug: bool) -> None:
       navreplay filters
       navreplay run ins,gps-ins recordings/drive.mcap     # -> out/drive.rrd
       navreplay montecarlo vehicle-drive gps-ins --runs 20 --workers 2
+
+    \b
+    Outputs (-o, --save, --summary, --keep) never replace an existing file without --force
+    and never an input of the command; they are checked before the work starts and written
+    under a temporary name that is renamed only when complete.
+
+    \b
+    Exit status:
+      0    success
+      1    an error (one line on stderr); an acceptance check that failed in `reproduce` or
+           `demo` (unless --no-strict); a DAMAGED recording in `info`
+      2    usage error
+      130  interrupted by Ctrl-C (SIGINT)
+      129, 143  stopped by SIGHUP, SIGTERM
+    A stopped command deletes its temporary files; those of a killed one (kill -9) are
+    deleted by the next command writing into the same directory.
     """
 
 
@@ -218,7 +283,7 @@ def scenarios(verbose: bool) -> None:
               help="Number of recordings (seeds seed, seed+1, ...).")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="Processes for --runs.")
-@click.option("--force", is_flag=True, help="Overwrite existing files.")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
 def simulate(scenario: str, output: str, seed: int, duration: float | None,
              params: Sequence[str], config: str | None, runs: int, workers: int,
              force: bool) -> None:
@@ -228,9 +293,10 @@ def simulate(scenario: str, output: str, seed: int, duration: float | None,
     job = jobs.SimulateJob(
         scenario=scenario,
         output=Path(output),
-        values=jobs.scenario_values(params, _load_config(config), duration),
+        values=jobs.scenario_values(params, _load_config(config, "scenario"), duration),
         seed=seed, runs=runs, force=force, workers=workers,
     )
+    _check_outputs(force, [config], *(_out(p, "-o") for p in job.paths()))
     with _Progress(f"simulate {scenario}") as progress:
         paths = jobs.simulate(job, progress if runs > 1 else None)
     if len(paths) <= 3:
@@ -240,13 +306,44 @@ def simulate(scenario: str, output: str, seed: int, duration: float | None,
         click.echo(f"wrote {len(paths)} recordings: {paths[0]} ... {paths[-1]}")
 
 
-@cli.command()
-@click.argument("recording", type=click.Path(dir_okay=False))
-def info(recording: str) -> None:
-    """Topics, rates, durations and scenario metadata of a RECORDING."""
-    from navreplay.io import format_info, recording_info
+def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
+    opts = [
+        click.option("--topic", "topics", multiple=True, metavar="KIND=/TOPIC",
+                     help="Topic that feeds a stream (imu, gps, gps_vel, mag, ...); repeatable."),
+        click.option("--frame", "frames", multiple=True, metavar="KIND=flu|frd|enu|ned",
+                     help="Axis convention of a stream's topic, or reference=enu|ned; "
+                          "repeatable."),
+    ]
+    for opt in reversed(opts):
+        fn = opt(fn)
+    return fn
 
-    click.echo(format_info(recording_info(recording)))
+
+@cli.command()
+@click.argument("recording", type=click.Path())
+@_log_flags
+@click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
+              help="TOML file with [topics] and [frames] tables.")
+def info(recording: str, topics: Sequence[str], frames: Sequence[str],
+         config: str | None) -> None:
+    """Topics, types, frames, rates, gaps and metadata of a RECORDING (MCAP file, rosbag2
+    folder or .db3), and which stream each topic feeds.
+
+    Exits with status 1 after the report when the file is DAMAGED or holds no message.
+    """
+    from navreplay.io import recording_info
+    from navreplay.io.reader import is_rosbag
+    from navreplay.logs.describe import describe_log
+    from navreplay.logs.options import log_options
+
+    click.echo(describe_log(recording, log_options(
+        topics, frames, config=_load_config(config, "topics", "frames"))))
+    report = None if is_rosbag(Path(recording)) else recording_info(recording)
+    if report is not None and report.damage:
+        raise click.ClickException(f"{recording}: DAMAGED ({report.message_count} messages "
+                                   "readable; see above)")
+    if report is not None and not report.message_count:
+        raise click.ClickException(f"{recording}: no message")
 
 
 # --------------------------------------------------------------------------------------------
@@ -302,7 +399,7 @@ def filters(name: str | None) -> None:
 
 
 def _looks_like_recording(arg: str) -> bool:
-    return arg.endswith(".mcap") or Path(arg).is_file()
+    return arg.endswith((".mcap", ".db3")) or Path(arg).is_file() or Path(arg).is_dir()
 
 
 @cli.command()
@@ -322,9 +419,27 @@ def _looks_like_recording(arg: str) -> bool:
               help="Replay at X times real time (1.0 = real time), for live viewing.")
 @click.option("--output-rate", type=float, default=10.0, show_default=True, metavar="HZ",
               help="Estimate output rate between aiding samples [Hz].")
+@_log_flags
+@click.option("--init", "init", type=click.Choice(["metadata", "reference", "align", "table"]),
+              help="Initial solution: the recording's metadata (default when present), the "
+                   "reference's first sample, self-alignment, or the [initial] table.")
+@click.option("--reference", "reference", metavar="TOPIC|FILE",
+              help="Score against a topic (Odometry, PoseStamped, PoseWithCovarianceStamped, "
+                   "NavSatFix, navreplay truth) or a TUM / CSV file.")
+@click.option("--no-frame-check", is_flag=True,
+              help="Skip the gravity and magnetic-dip checks of the frames.")
+@_result_flags
+@click.option("--max-imu-gap", type=float, metavar="S",
+              help="Longest IMU gap [s] a filter bridges; a longer one stops the run "
+                   "(default: 6 s).")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
-        summary: str | None, workers: int, rate: float | None, output_rate: float) -> None:
+        summary: str | None, workers: int, rate: float | None, output_rate: float,
+        topics: Sequence[str], frames: Sequence[str], init: str | None,
+        reference: str | None, no_frame_check: bool,
+        export: str | None, report: str | None, max_imu_gap: float | None,
+        force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b
@@ -334,6 +449,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
       navreplay run 'gps-ins[gps_pos_sigma_scale=1],gps-ins[gps_pos_sigma_scale=3]' drive.mcap
       navreplay run --filter mypkg.myfilter:MyFilter drive.mcap
       navreplay run gps-ins runs/*.mcap --workers 2      # ensemble statistics
+      navreplay run ins,gps-ins drive.mcap --export out/drive --report out/drive.html
     """
     from navreplay import jobs
 
@@ -343,12 +459,22 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         names = args.pop(0)
     if not args:
         raise click.UsageError("no RECORDING given")
+    from navreplay.logs.options import log_options
+
+    _check_outputs(force, [*args, config, reference],
+                   _viz_out(save, no_viz, spawn or serve or bool(connect)),
+                   _out(summary, "--summary"), _out(export, "--export", directory=True),
+                   _out(report, "--report"))
+    cfg = _load_config(config, "filter", "topics", "frames", "initial")
     job = jobs.RunJob(
-        filters=jobs.filter_specs(names, refs, params, _load_config(config)),
+        filters=jobs.filter_specs(names, refs, params, cfg),
         recordings=tuple(Path(a) for a in args),
         viz=_viz_options(save, spawn, connect, serve, no_viz),
         summary_path=Path(summary) if summary else None,
-        workers=workers, pacing=rate, output_rate=output_rate,
+        workers=workers, pacing=rate, output_rate=output_rate, max_imu_gap=max_imu_gap,
+        log=log_options(topics, frames, init, reference, cfg, not no_frame_check),
+        export_dir=Path(export) if export else None,
+        report_path=Path(report) if report else None, force=force,
     )
     label = "replay" if len(args) == 1 else f"replay {len(args)} recordings"
     with _Progress(label) as progress:
@@ -380,15 +506,16 @@ def _finish(report: Any) -> None:
               help="TOML file with [scenario] and [filter.NAME] tables (-p wins).")
 @click.option("--keep", "keep", type=click.Path(file_okay=False), metavar="DIR",
               help="Also write every run's recording into DIR.")
-@click.option("--force", is_flag=True, help="Overwrite kept recordings.")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
 @_viz_flags
 @click.option("--summary", "summary", type=click.Path(dir_okay=False), metavar="OUT.json",
               help="Write per-run and ensemble figures as JSON.")
+@_result_flags
 def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, workers: int,
                refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
                spawn: bool, connect: str | None, serve: bool, no_viz: bool,
-               summary: str | None) -> None:
+               summary: str | None, export: str | None, report: str | None) -> None:
     """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
 
     Prints per-filter ensemble statistics (RMS error vs mean filter sigma, NEES with its
@@ -400,9 +527,12 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     """
     from navreplay import jobs
 
+    _check_outputs(force, [config], _out(keep, "--keep", directory=True),
+                   _viz_out(save, no_viz, spawn or serve or bool(connect)),
+                   _out(summary, "--summary"))
     scenario_items = [p.partition(".")[2] for p in params if p.startswith("scenario.")]
     filter_items = [p for p in params if not p.startswith("scenario.")]
-    cfg = _load_config(config)
+    cfg = _load_config(config, "scenario", "filter")
     job = jobs.MonteCarloJob(
         scenario=scenario,
         filters=jobs.filter_specs(filter_names, refs, filter_items, cfg),
@@ -412,6 +542,8 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         keep_dir=Path(keep) if keep else None, force=force,
         viz=_viz_options(save, spawn, connect, serve, no_viz),
         summary_path=Path(summary) if summary else None,
+        export_dir=Path(export) if export else None,
+        report_path=Path(report) if report else None,
     )
     with _Progress(f"montecarlo {scenario}") as progress:
         report = jobs.montecarlo(job, progress)
@@ -431,9 +563,11 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
               help="Processes.")
 @click.option("--save", "save", type=click.Path(dir_okay=False), metavar="OUT.rrd",
               help="Save the Rerun view of the figures.")
-@click.option("--strict", is_flag=True, help="Exit with status 1 if an acceptance check fails.")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
+@click.option("--strict/--no-strict", default=True, show_default=True,
+              help="Exit with status 1 if an acceptance check fails.")
 def reproduce(name: str | None, runs: int | None, quick: bool, seed: int, workers: int,
-              save: str | None, strict: bool) -> None:
+              save: str | None, force: bool, strict: bool) -> None:
     """Reproduce a paper's results (NAME; without it, list them) and check the bands."""
     from navreplay import reproduce as registry
 
@@ -446,6 +580,7 @@ def reproduce(name: str | None, runs: int | None, quick: bool, seed: int, worker
             click.echo(f"{n:<20}  {summary}")
         return
     rep = registry.get(name)
+    _check_outputs(force, [], _out(save, "--save"))
     if quick and runs is None:
         runs = getattr(rep, "quick_runs", None)
     with _Progress(f"reproduce {name}") as progress:
@@ -455,8 +590,11 @@ def reproduce(name: str | None, runs: int | None, quick: bool, seed: int, worker
     if save:
         click.echo(f"\nRerun view saved to {save}; open it with: rerun {save}")
     if strict and not report.passed:
-        failed = sum(not c.passed for c in report.checks)
-        raise click.ClickException(f"{failed} acceptance check(s) failed")
+        _checks_failed(sum(not c.passed for c in report.checks))
+
+
+def _checks_failed(count: int) -> None:
+    raise click.ClickException(f"{count} acceptance check(s) failed (--no-strict: exit 0 anyway)")
 
 
 @cli.command()
@@ -467,10 +605,14 @@ def reproduce(name: str | None, runs: int | None, quick: bool, seed: int, worker
               help="Processes for the reproductions.")
 @click.option("--view/--no-view", default=None,
               help="Open the Rerun viewer (default: only if one can be shown here).")
-def demo(out: str, no_reproductions: bool, workers: int, view: bool | None) -> None:
+@click.option("--strict/--no-strict", default=True, show_default=True,
+              help="Exit with status 1 if an acceptance check fails.")
+def demo(out: str, no_reproductions: bool, workers: int, view: bool | None,
+         strict: bool) -> None:
     """Simulate a drive, replay ins and gps-ins, run the quick paper reproductions, save .rrd."""
     from navreplay import jobs
 
+    _check_outputs(False, [], _out(out, "--out", directory=True))
     job = jobs.DemoJob(out_dir=Path(out), reproductions=not no_reproductions, workers=workers,
                        view=view)
     bars: dict[str, _Progress] = {}
@@ -486,6 +628,8 @@ def demo(out: str, no_reproductions: bool, workers: int, view: bool | None) -> N
         for bar in bars.values():
             bar.close()
     click.echo(report.format())
+    if strict and report.failed_checks:
+        _checks_failed(report.failed_checks)
 
 
 def main(argv: Sequence[str] | None = None) -> None:

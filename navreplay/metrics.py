@@ -22,19 +22,19 @@ Definitions
 
 Eqs. 29 and 30 are those of the RPM-aided INS paper (docs/methods/rpm-aided-ins.md §6).
 
-Scoring error states: ``Filter.truth_keys``
--------------------------------------------
-A filter maps an output name (a state name or an extras key) to the truth of that quantity:
+Scoring against a reference
+---------------------------
+A run is scored against a :class:`Reference`: a truth-like stream (the recording's truth, or
+an external reference) with whichever of ``pos``, ``v_n``, ``q_nb`` it has, plus the true
+constants of ``metadata.true_errors``. What is absent is not scored: a reference with positions
+only gives position errors and leaves velocity, attitude and the states that need them out.
 
-``"nav:<q>"``
-    The state is an error of the navigation solution (an error-state filter): its estimation
-    error is the solution's error in ``q`` minus the state estimate, ``e = (nav_hat - truth)_q -
-    x``; ``q`` is one of ``lat, lon, h, depth`` (rad, rad, m, m positive down), ``v_N, v_E,
-    v_D`` (m/s), ``phi_N, phi_E, phi_D`` (rad).
-``"truth:<column>"`` or ``"truth:<column>[i]"``
-    A column of the truth stream (interpolated to the estimate times): ``e = x - truth``.
-``"<key>"``, ``"<key>.<subkey>"``, optionally ``[i]`` or ``[i][j]``
-    A constant in ``metadata.true_errors``: ``e = x - value``.
+Which states are scored, and against what, the filter declares once
+(:class:`navreplay.filters.base.State`, copied into ``RunResult.states``): a ``NavError(q)``
+state has ``e = (nav_hat - ref)_q - x`` (``q`` in :class:`navreplay.filters.base.Nav`), a
+``TruthColumn`` state ``e = x - ref[column][index]``, a ``TrueConstant`` state ``e = x -
+true_errors[key][index]``. The NEES is over the states declared with ``nees=True`` that are
+scored.
 
 Examples
 --------
@@ -49,13 +49,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from scipy import stats
 
+from navreplay.filters.base import Nav, NavError, State, TrueConstant, TruthColumn
 from navreplay.geo import earth
 from navreplay.geo.rotations import (
     attitude_error,
@@ -64,13 +64,14 @@ from navreplay.geo.rotations import (
     wrap_angle,
 )
 from navreplay.replay.result import RunResult
-from navreplay.streams import Recording, StreamKind, seconds
+from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 CEP50_FACTOR = 0.5887
 """CEP50 = CEP50_FACTOR (LatRMS + LongRMS) (circular approximation for similar axes)."""
 
-NAV_QUANTITIES = ("lat", "lon", "h", "depth", "v_N", "v_E", "v_D", "phi_N", "phi_E", "phi_D")
-"""Quantities of ``"nav:<q>"`` truth keys."""
+NAV_COLUMNS = ("pos", "v_n", "q_nb")
+"""Reference columns of the navigation errors: position [lat, lon rad, h m], velocity NED [m/s],
+attitude quaternion (scalar first)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -165,75 +166,107 @@ def nees(e: np.ndarray, P: np.ndarray) -> np.ndarray:
 # truth
 
 
-def truth_at(recording: Recording, t: np.ndarray) -> dict[str, np.ndarray]:
-    """The truth stream's columns at filter times ``t`` [s since the recording start].
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """What runs are scored against.
 
-    Samples at equal times are taken as they are; between samples, vectors are interpolated
-    linearly (longitude unwrapped) and quaternions normalised-linearly. Times outside the
-    truth are clipped to its ends.
-
-    Parameters
+    Attributes
     ----------
-    recording : Recording
-        Must hold a truth stream.
-    t : ndarray, shape (M,)
-
-    Returns
-    -------
-    dict
-        Column name -> array (M, ...).
+    stream : Stream
+        Truth-like columns: any of ``pos`` (lat, lon [rad], h [m]), ``v_n`` [m/s], ``q_nb``
+        (scalar first), and further columns that ``TruthColumn`` states name.
+    t0_ns : int
+        Recording start [ns]: filter time 0.
+    true_errors : mapping
+        The constants ``TrueConstant`` states name (``metadata.true_errors``).
     """
-    if StreamKind.TRUTH not in recording:
-        raise ValueError("the recording has no truth stream to score against")
-    truth = recording[StreamKind.TRUTH]
-    ts = seconds(truth.t_ns, recording.t0_ns)
-    t = np.asarray(t, dtype=float)
-    j = np.clip(np.searchsorted(ts, t, side="left"), 1, max(len(ts) - 1, 1))
-    i = j - 1
-    if len(ts) == 1:
-        w = np.zeros_like(t)
-        i = j = np.zeros_like(t, dtype=int)
-    else:
-        w = np.clip((t - ts[i]) / (ts[j] - ts[i]), 0.0, 1.0)
-    out = {}
-    for name, col in truth.columns.items():
-        a, b = col[i], col[j]
-        if name == "pos":
-            b = b.copy()
-            b[:, 1] = a[:, 1] + wrap_angle(b[:, 1] - a[:, 1])
-        if name.startswith("q_") and col.ndim == 2 and col.shape[1] == 4:
-            sign = np.where(np.einsum("ki,ki->k", a, b) < 0.0, -1.0, 1.0)
-            q = (1.0 - w)[:, None] * a + (w * sign)[:, None] * b
-            out[name] = q / np.linalg.norm(q, axis=1, keepdims=True)
-            continue
-        ww = w.reshape((-1,) + (1,) * (col.ndim - 1))
-        v = (1.0 - ww) * a + ww * b
-        if name == "pos":
-            v[:, 1] = wrap_angle(v[:, 1])
-        out[name] = v
-    return out
+
+    stream: Stream
+    t0_ns: int
+    true_errors: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def of(cls, source: Recording | Reference) -> Reference:
+        """The reference of a recording (its truth stream and true errors)."""
+        if isinstance(source, Reference):
+            return source
+        if StreamKind.TRUTH not in source:
+            raise ValueError("the recording has no truth stream to score against")
+        return cls(source[StreamKind.TRUTH], source.t0_ns, source.metadata.true_errors)
+
+    def __contains__(self, column: str) -> bool:
+        return column in self.stream.columns
+
+    def at(self, t: np.ndarray) -> dict[str, np.ndarray]:
+        """The columns at filter times ``t`` [s since the recording start].
+
+        Samples at equal times are taken as they are; between samples, vectors are interpolated
+        linearly (longitude unwrapped) and quaternions normalised-linearly. Times outside the
+        reference are clipped to its ends.
+
+        Returns
+        -------
+        dict
+            Column name -> array (M, ...).
+        """
+        ref = self.stream
+        ts = seconds(ref.t_ns, self.t0_ns)
+        t = np.asarray(t, dtype=float)
+        j = np.clip(np.searchsorted(ts, t, side="left"), 1, max(len(ts) - 1, 1))
+        i = j - 1
+        if len(ts) == 1:
+            w = np.zeros_like(t)
+            i = j = np.zeros_like(t, dtype=int)
+        else:
+            w = np.clip((t - ts[i]) / (ts[j] - ts[i]), 0.0, 1.0)
+        out = {}
+        for name, col in ref.columns.items():
+            a, b = col[i], col[j]
+            if name == "pos":
+                b = b.copy()
+                b[:, 1] = a[:, 1] + wrap_angle(b[:, 1] - a[:, 1])
+            if name.startswith("q_") and col.ndim == 2 and col.shape[1] == 4:
+                sign = np.where(np.einsum("ki,ki->k", a, b) < 0.0, -1.0, 1.0)
+                q = (1.0 - w)[:, None] * a + (w * sign)[:, None] * b
+                out[name] = q / np.linalg.norm(q, axis=1, keepdims=True)
+                continue
+            ww = w.reshape((-1,) + (1,) * (col.ndim - 1))
+            v = (1.0 - ww) * a + ww * b
+            if name == "pos":
+                v[:, 1] = wrap_angle(v[:, 1])
+            out[name] = v
+        return out
+
+    def distance(self, t: np.ndarray | None = None) -> np.ndarray | float:
+        """Length of the reference path [m]: ``integral |v_n| dt`` (trapezoid), or the sum of
+        the position steps when there is no velocity; NaN with neither.
+
+        With filter times ``t`` (M,): the distance up to each."""
+        ref = self.stream
+        ts = seconds(ref.t_ns, self.t0_ns)
+        if "v_n" in ref.columns:
+            speed = np.linalg.norm(ref["v_n"], axis=1)
+            steps = 0.5 * (speed[1:] + speed[:-1]) * np.diff(ts)
+        elif "pos" in ref.columns:
+            steps = np.linalg.norm(position_error_ned(ref["pos"][1:], ref["pos"][:-1]), axis=1)
+        else:
+            return np.full(np.shape(t), np.nan) if t is not None else math.nan
+        cum = np.concatenate([[0.0], np.cumsum(steps)])
+        if t is None:
+            return float(cum[-1])
+        return np.interp(t, ts, cum)
 
 
-def distance_travelled(recording: Recording, t: np.ndarray | None = None) -> np.ndarray | float:
-    """Length of the true path, ``integral |v_n| dt`` [m] (trapezoid over the truth samples).
+def truth_at(recording: Recording | Reference, t: np.ndarray) -> dict[str, np.ndarray]:
+    """The reference's columns at filter times ``t`` (:meth:`Reference.at`)."""
+    return Reference.of(recording).at(t)
 
-    Parameters
-    ----------
-    recording : Recording
-    t : ndarray, shape (M,), optional
-        Filter times [s]: return the distance from the truth's start up to each (M,).
 
-    Returns
-    -------
-    float or ndarray
-    """
-    truth = recording[StreamKind.TRUTH]
-    ts = seconds(truth.t_ns, recording.t0_ns)
-    speed = np.linalg.norm(truth["v_n"], axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(ts))])
-    if t is None:
-        return float(cum[-1])
-    return np.interp(t, ts, cum)
+def distance_travelled(
+    recording: Recording | Reference, t: np.ndarray | None = None
+) -> np.ndarray | float:
+    """Length of the true path [m] (:meth:`Reference.distance`)."""
+    return Reference.of(recording).distance(t)
 
 
 # --------------------------------------------------------------------------------------------
@@ -242,20 +275,32 @@ def distance_travelled(recording: Recording, t: np.ndarray | None = None) -> np.
 
 @dataclasses.dataclass
 class NavErrors:
-    """Errors of a navigation solution, estimate minus truth, each (M, 3).
+    """Errors of a navigation solution, estimate minus reference, each (M, 3); NaN where the
+    reference lacks the column (``pos``, ``v_n``, ``q_nb``).
 
     Attributes
     ----------
-    pos_ned : north, east, down [m].
+    pos_ned : north, east, down [m]: ``(lat_hat - lat)(R_M + h)``, ``(lon_hat - lon)(R_N + h)
+        cos lat``, ``-(h_hat - h)`` (the height error, positive when the estimate is too deep).
     v_n : velocity NED [m/s].
-    phi : attitude error phi, NED [rad] (``C_hat = (I - [phi x]) C``).
-    euler : roll, pitch, yaw differences [rad], yaw wrapped to [-pi, pi).
+    phi : attitude error phi, NED [rad] (``C_hat = (I - [phi x]) C``: a positive phi_D is an
+        estimated heading *smaller* than the reference's).
+    euler : roll, pitch, yaw differences [rad], yaw wrapped to [-pi, pi) (yaw ~ -phi_D).
     """
 
     pos_ned: np.ndarray
     v_n: np.ndarray
     phi: np.ndarray
     euler: np.ndarray
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The errors by the names of the view and the tables: ``p_N, p_E, p_D`` [m],
+        ``v_N, v_E, v_D`` [m/s], ``phi_N, phi_E, phi_D`` [rad]."""
+        out = {}
+        for prefix, arr in (("p", self.pos_ned), ("v", self.v_n), ("phi", self.phi)):
+            for i, axis in enumerate("NED"):
+                out[f"{prefix}_{axis}"] = arr[:, i]
+        return out
 
 
 def position_error_ned(pos_hat: np.ndarray, pos_true: np.ndarray) -> np.ndarray:
@@ -274,89 +319,101 @@ def position_error_ned(pos_hat: np.ndarray, pos_true: np.ndarray) -> np.ndarray:
 def nav_errors(
     pos: np.ndarray, v_n: np.ndarray, q_nb: np.ndarray, truth: Mapping[str, np.ndarray]
 ) -> NavErrors:
-    """Errors of a navigation solution against the truth at the same times.
+    """Errors of a navigation solution against the reference at the same times: the one
+    navigation-error computation of navreplay (tables, ensembles and the Rerun view).
 
     Parameters
     ----------
     pos, v_n : ndarray, shape (M, 3)
     q_nb : ndarray, shape (M, 4)
     truth : mapping
-        ``pos``, ``v_n``, ``q_nb`` arrays at the same times (:func:`truth_at`).
+        Any of ``pos``, ``v_n``, ``q_nb`` at the same times (:meth:`Reference.at`); the errors
+        of absent columns are NaN.
 
     Returns
     -------
     NavErrors
     """
-    C_hat = quat_to_dcm(q_nb)
-    C = quat_to_dcm(truth["q_nb"])
-    e_hat = quat_to_euler(q_nb)
-    e = quat_to_euler(truth["q_nb"])
-    return NavErrors(
-        pos_ned=position_error_ned(pos, truth["pos"]),
-        v_n=np.asarray(v_n) - truth["v_n"],
-        phi=attitude_error(C_hat, C),
-        euler=wrap_angle(e_hat - e),
-    )
+    nan = np.full((np.shape(pos)[0], 3), np.nan)
+    pos_ned = position_error_ned(pos, truth["pos"]) if "pos" in truth else nan
+    dv = np.asarray(v_n) - truth["v_n"] if "v_n" in truth else nan
+    if "q_nb" in truth:
+        phi = attitude_error(quat_to_dcm(q_nb), quat_to_dcm(truth["q_nb"]))
+        euler = wrap_angle(quat_to_euler(q_nb) - quat_to_euler(truth["q_nb"]))
+    else:
+        phi = euler = nan
+    return NavErrors(pos_ned=pos_ned, v_n=dv, phi=phi, euler=euler)
 
 
-def _nav_quantity(q: str, result: RunResult, truth: Mapping[str, np.ndarray],
-                  phi: np.ndarray) -> np.ndarray:
-    """Error of the navigation solution in quantity q (units of the corresponding state)."""
-    if result.nav_pos is None:
-        raise ValueError(f"truth key nav:{q} needs a navigation solution in the result")
-    if q == "lat":
-        return result.nav_pos[:, 0] - truth["pos"][:, 0]
-    if q == "lon":
-        return wrap_angle(result.nav_pos[:, 1] - truth["pos"][:, 1])
-    if q == "h":
-        return result.nav_pos[:, 2] - truth["pos"][:, 2]
-    if q == "depth":
-        return -(result.nav_pos[:, 2] - truth["pos"][:, 2])
-    if q in ("v_N", "v_E", "v_D"):
-        return result.nav_v_n[:, "NED".index(q[-1])] - truth["v_n"][:, "NED".index(q[-1])]
-    if q in ("phi_N", "phi_E", "phi_D"):
-        return phi[:, "NED".index(q[-1])]
-    raise ValueError(f"unknown navigation quantity nav:{q}; known: {', '.join(NAV_QUANTITIES)}")
+_NAV_PART: dict[Nav, tuple[str, int, float]] = {
+    Nav.LAT: ("pos", 0, 1.0), Nav.LON: ("pos", 1, 1.0), Nav.H: ("pos", 2, 1.0),
+    Nav.DEPTH: ("pos", 2, -1.0),
+    Nav.V_N: ("v_n", 0, 1.0), Nav.V_E: ("v_n", 1, 1.0), Nav.V_D: ("v_n", 2, 1.0),
+    Nav.PHI_N: ("q_nb", 0, 1.0), Nav.PHI_E: ("q_nb", 1, 1.0), Nav.PHI_D: ("q_nb", 2, 1.0),
+}
+"""Reference column, component and sign of each navigation quantity."""
 
 
-_INDEX = re.compile(r"^(.*?)((?:\[\d+\])*)$")
+def _nav_quantity(q: Nav, result: RunResult, truth: Mapping[str, np.ndarray],
+                  nav: NavErrors) -> np.ndarray | None:
+    """Error of the navigation solution in quantity q (units of the state), or None when the
+    result has no solution or the reference lacks the column."""
+    column, i, sign = _NAV_PART[q]
+    if result.nav_pos is None or column not in truth:
+        return None
+    if column == "pos":
+        d = result.nav_pos[:, i] - truth["pos"][:, i]
+        return sign * (wrap_angle(d) if i == 1 else d)
+    if column == "v_n":
+        return nav.v_n[:, i]
+    return nav.phi[:, i]
 
 
-def _lookup(key: str, true_errors: Mapping[str, Any]) -> float:
-    path, idx = _INDEX.match(key).groups()  # type: ignore[union-attr]
+def _constant(truth: TrueConstant, true_errors: Mapping[str, Any]) -> np.ndarray | None:
     value: Any = true_errors
-    for part in path.split("."):
+    for part in truth.key.split("."):
         if not isinstance(value, Mapping) or part not in value:
-            raise KeyError(f"metadata.true_errors has no {path!r} (truth key {key!r})")
+            return None
         value = value[part]
     arr = np.asarray(value, dtype=float)
-    for i in re.findall(r"\[(\d+)\]", idx):
-        arr = arr[int(i)]
-    if arr.ndim != 0:
-        raise ValueError(f"truth key {key!r} does not select a single value (shape {arr.shape})")
-    return float(arr)
+    return arr[truth.index] if truth.index else arr
+
+
+def reference_value(state: State, truth: Mapping[str, np.ndarray],
+                    true_errors: Mapping[str, Any]) -> np.ndarray | None:
+    """The reference of a ``TruthColumn`` or ``TrueConstant`` declaration at the output times
+    (None when the reference lacks it)."""
+    t = state.truth
+    if isinstance(t, TruthColumn):
+        if t.column not in truth:
+            return None
+        v = truth[t.column]
+        return v[(slice(None), *t.index)] if t.index else v
+    if isinstance(t, TrueConstant):
+        return _constant(t, true_errors)
+    return None
 
 
 def state_errors(
     result: RunResult,
     truth: Mapping[str, np.ndarray],
     true_errors: Mapping[str, Any],
-    truth_keys: Mapping[str, str],
-    phi: np.ndarray | None = None,
+    states: tuple[State, ...],
+    nav: NavErrors,
 ) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-    """Estimation errors of the states that have a truth (see the module docstring).
+    """Estimation errors of the declared states that the reference can score.
 
     Parameters
     ----------
     result : RunResult
     truth : mapping
-        Truth columns at ``result.t`` (:func:`truth_at`).
+        Reference columns at ``result.t`` (:meth:`Reference.at`).
     true_errors : mapping
         ``metadata.true_errors``.
-    truth_keys : mapping
-        The filter's ``truth_keys``; keys that are not state names are skipped.
-    phi : ndarray, shape (M, 3), optional
-        Attitude error of the navigation solution, if already computed.
+    states : tuple of State
+        Declarations of the columns of ``result.x``.
+    nav : NavErrors
+        Errors of the result's navigation solution.
 
     Returns
     -------
@@ -368,26 +425,20 @@ def state_errors(
         Their covariance (the block of ``result.P``).
     """
     names, cols, idx = [], [], []
-    for i, name in enumerate(result.state_names):
-        key = truth_keys.get(name)
-        if key is None:
-            continue
+    for i, st in enumerate(states):
         x = result.x[:, i]
-        if key.startswith("nav:"):
-            if phi is None and key.startswith("nav:phi"):
-                phi = attitude_error(quat_to_dcm(result.nav_q_nb), quat_to_dcm(truth["q_nb"]))
-            e = _nav_quantity(key[4:], result, truth, phi) - x
-        elif key.startswith("truth:"):
-            col, sub = _INDEX.match(key[6:]).groups()  # type: ignore[union-attr]
-            if col not in truth:
-                raise KeyError(f"the truth stream has no column {col!r} (truth key {key!r})")
-            v = truth[col]
-            for j in re.findall(r"\[(\d+)\]", sub):
-                v = v[:, int(j)]
-            e = x - v
+        if isinstance(st.truth, NavError):
+            err = _nav_quantity(st.truth.q, result, truth, nav)
+            e = None if err is None else err - x
         else:
-            e = x - _lookup(key, true_errors)
-        names.append(name)
+            ref = reference_value(st, truth, true_errors)
+            e = None if ref is None else x - ref
+        if e is None:
+            continue
+        if e.shape != x.shape:
+            raise ValueError(f"{result.label}: the reference of state {st.name} ({st.truth}) "
+                             f"has shape {e.shape[1:]}, not a single value per row")
+        names.append(st.name)
         cols.append(e)
         idx.append(i)
     M = result.t.shape[0]
@@ -397,32 +448,48 @@ def state_errors(
     return tuple(names), np.stack(cols, axis=1), result.P[:, ix[:, None], ix[None, :]]
 
 
-def _nav_sigma(result: RunResult, truth_keys: Mapping[str, str]) -> dict[str, np.ndarray]:
-    """Predicted 1-sigma of the navigation errors (pos_ned [m], v_n, phi), NaN if unknown."""
+def extra_errors(result: RunResult, truth: Mapping[str, np.ndarray],
+                 true_errors: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Errors ``extra - reference`` of the scored extras the reference has, (M, ...) each."""
+    out = {}
+    for st in result.scored_extras:
+        if st.name not in result.extras:
+            continue
+        ref = reference_value(st, truth, true_errors)
+        if ref is None:
+            continue
+        out[st.name] = np.asarray(result.extras[st.name], dtype=float) - ref
+    return out
+
+
+_NAV_SIGMA: dict[Nav, tuple[str, int]] = {
+    Nav.LAT: ("pos_ned", 0), Nav.LON: ("pos_ned", 1), Nav.H: ("pos_ned", 2),
+    Nav.DEPTH: ("pos_ned", 2), Nav.V_N: ("v_n", 0), Nav.V_E: ("v_n", 1), Nav.V_D: ("v_n", 2),
+    Nav.PHI_N: ("phi", 0), Nav.PHI_E: ("phi", 1), Nav.PHI_D: ("phi", 2),
+}
+
+
+def nav_sigma(result: RunResult, states: tuple[State, ...] | None = None) -> dict[str, np.ndarray]:
+    """Predicted 1-sigma of the navigation errors (``pos_ned`` [m], ``v_n`` [m/s], ``phi``
+    [rad], each (M, 3)) from the ``NavError`` states; NaN where the filter has none."""
+    states = result.states if states is None else states
     M = result.t.shape[0]
     out = {k: np.full((M, 3), np.nan) for k in ("pos_ned", "v_n", "phi")}
     var = np.diagonal(result.P, axis1=1, axis2=2)
-    where = {
-        "nav:lat": ("pos_ned", 0), "nav:lon": ("pos_ned", 1), "nav:h": ("pos_ned", 2),
-        "nav:depth": ("pos_ned", 2),
-        "nav:v_N": ("v_n", 0), "nav:v_E": ("v_n", 1), "nav:v_D": ("v_n", 2),
-        "nav:phi_N": ("phi", 0), "nav:phi_E": ("phi", 1), "nav:phi_D": ("phi", 2),
-    }
     scale = None
     if result.nav_pos is not None:
         lat, h = result.nav_pos[:, 0], result.nav_pos[:, 2]
         R_M, R_N = earth.radii(lat)
-        scale = {"nav:lat": R_M + h, "nav:lon": (R_N + h) * np.cos(lat)}
-    for i, name in enumerate(result.state_names):
-        key = truth_keys.get(name)
-        if key not in where:
+        scale = {Nav.LAT: R_M + h, Nav.LON: (R_N + h) * np.cos(lat)}
+    for i, st in enumerate(states):
+        if not isinstance(st.truth, NavError):
             continue
-        group, j = where[key]
+        group, j = _NAV_SIGMA[st.truth.q]
         s = np.sqrt(np.clip(var[:, i], 0.0, None))
-        if key in ("nav:lat", "nav:lon"):
+        if st.truth.q in (Nav.LAT, Nav.LON):
             if scale is None:
                 continue
-            s = s * scale[key]
+            s = s * scale[st.truth.q]
         out[group][:, j] = s
     return out
 
@@ -458,6 +525,11 @@ class RunMetrics:
         Per measurement: update times [s], NIS, dof.
     distance : ndarray, shape (M,)
         True distance travelled up to each estimate [m].
+    extra_error : dict[str, ndarray (M, ...)]
+        Errors of the scored extras (``RunResult.scored_extras``).
+    states : tuple of State
+        The declarations of the scored states (``state_names``, same order): units and
+        quantities for tables, exports and plots.
     """
 
     label: str
@@ -471,22 +543,30 @@ class RunMetrics:
     nees_states: tuple[str, ...]
     nis: dict[str, tuple[np.ndarray, np.ndarray, int]]
     distance: np.ndarray
+    extra_error: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    states: tuple[State, ...] = ()
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
         """Scalar scores (SI; see :data:`SUMMARY_UNITS`) for tables and JSON."""
-        out: dict[str, Any] = {"duration": float(self.t[-1] - self.t[0]) if self.t.size else 0.0,
-                               "distance": float(self.distance[-1]) if self.t.size else 0.0}
+        out: dict[str, Any] = {"duration": float(self.t[-1] - self.t[0]) if self.t.size else 0.0}
+        if self.t.size and np.isfinite(self.distance[-1]):
+            out["distance"] = float(self.distance[-1])
+        elif not self.t.size:
+            out["distance"] = 0.0
         if self.nav is not None and self.t.size:
             p = self.nav.pos_ned
-            h = np.hypot(p[:, 0], p[:, 1])
-            out["pos_err_final_h"] = float(h[-1])
-            out["pos_rms_h"] = float(rms(h, None))
-            out["pos_rms_v"] = float(rms(p[:, 2], None))
-            out["vel_rms"] = float(rms(np.linalg.norm(self.nav.v_n, axis=1), None))
-            out["att_rms_level"] = float(rms(self.nav.phi[:, :2], None))
-            out["att_rms_heading"] = float(rms(self.nav.phi[:, 2], None))
-            if out["distance"] > 0.0:
-                out["pos_err_final_dt"] = 100.0 * out["pos_err_final_h"] / out["distance"]
+            if np.isfinite(p).any():
+                h = np.hypot(p[:, 0], p[:, 1])
+                out["pos_err_final_h"] = float(h[-1])
+                out["pos_rms_h"] = float(rms(h, None))
+                out["pos_rms_v"] = float(rms(p[:, 2], None))
+                if out.get("distance", 0.0) > 0.0:
+                    out["pos_err_final_dt"] = 100.0 * out["pos_err_final_h"] / out["distance"]
+            if np.isfinite(self.nav.v_n).any():
+                out["vel_rms"] = float(rms(np.linalg.norm(self.nav.v_n, axis=1), None))
+            if np.isfinite(self.nav.phi).any():
+                out["att_rms_level"] = float(rms(self.nav.phi[:, :2], None))
+                out["att_rms_heading"] = float(rms(self.nav.phi[:, 2], None))
         _chi2_summary(out, "nees", "", self.nees, np.isfinite(self.nees).astype(int),
                       len(self.nees_states), probability)
         for name, (_, v, dof) in self.nis.items():
@@ -534,77 +614,70 @@ def chi2_bounds_per_count(
 
 def run_metrics(
     result: RunResult,
-    recording: Recording,
+    reference: Recording | Reference | None,
     *,
-    truth_keys: Mapping[str, str] | None = None,
-    nees_states: Sequence[str] | None = None,
+    states: tuple[State, ...] | None = None,
 ) -> RunMetrics:
-    """Score one filter run against the recording's truth.
+    """Score one filter run against a reference (the recording's truth, or any
+    :class:`Reference`); what the reference lacks is left unscored. Without a reference (None,
+    or a recording without a truth stream) only the innovation statistics are kept.
 
     Parameters
     ----------
     result : RunResult
-    recording : Recording
-        The recording the filter ran over (truth stream and metadata).
-    truth_keys : mapping, optional
-        Output name -> truth key; default: the registered filter's ``truth_keys``.
-    nees_states : sequence of str, optional
-        States of the NEES (a block); default: the filter class's ``nees_states`` attribute
-        when it declares one, else every scored state whose variance is positive at some
-        epoch.
+    reference : Recording or Reference or None
+        The recording the filter ran over (truth stream and ``metadata.true_errors``), or a
+        reference built from elsewhere, or None.
+    states : tuple of State, optional
+        Score with these declarations instead of ``result.states`` (same names and order),
+        e.g. against other truth columns.
 
     Returns
     -------
     RunMetrics
     """
-    if truth_keys is None or nees_states is None:
-        keys, default_nees = _registered_scoring(result.filter_name)
-        truth_keys = keys if truth_keys is None else truth_keys
-        if nees_states is None and default_nees is not None:
-            nees_states = [s for s in default_nees if s in result.state_names]
-    truth = truth_at(recording, result.t)
+    nis = {name: (s.t.copy(), s.nis.copy(), int(s.nu.shape[1]))
+           for name, s in result.innovations.items()}
+    M = result.t.shape[0]
+    if reference is None or (isinstance(reference, Recording)
+                             and StreamKind.TRUTH not in reference):
+        return RunMetrics(
+            label=result.label, t=result.t.copy(), nav=None, nav_sigma=nav_sigma(result),
+            state_names=(), state_error=np.zeros((M, 0)), state_var=np.zeros((M, 0)),
+            nees=np.full(M, np.nan), nees_states=(), nis=nis, distance=np.full(M, np.nan),
+        )
+    ref = Reference.of(reference)
+    states = result.states if states is None else states
+    if tuple(s.name for s in states) != result.state_names:
+        raise ValueError(f"{result.label}: the scoring declarations name other states than "
+                         f"the result ({', '.join(result.state_names)})")
+    truth = ref.at(result.t)
     nav = None
     if result.nav_pos is not None:
         nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth)
-    names, e, P = state_errors(result, truth, recording.metadata.true_errors, truth_keys,
-                               phi=None if nav is None else nav.phi)
+    nav_for_states = nav if nav is not None else NavErrors(*(np.full((M, 3), np.nan),) * 4)
+    names, e, P = state_errors(result, truth, ref.true_errors, states, nav_for_states)
+    by_name = {st.name: st for st in states}
     var = np.diagonal(P, axis1=1, axis2=2).copy()
-    if nees_states is None:
-        sel = [i for i in range(len(names)) if np.any(var[:, i] > 0.0)]
-    else:
-        missing = [s for s in nees_states if s not in names]
-        if missing:
-            raise ValueError(f"NEES states without a truth: {', '.join(missing)} "
-                             f"(scored: {', '.join(names)})")
-        sel = [names.index(s) for s in nees_states]
+    in_nees = {s.name for s in states if s.nees}
+    sel = [i for i, n in enumerate(names) if n in in_nees]
     ix = np.array(sel, dtype=int)
     nees_v = nees(e[:, ix], P[:, ix[:, None], ix[None, :]])
-    nis = {name: (s.t.copy(), s.nis.copy(), int(s.nu.shape[1]))
-           for name, s in result.innovations.items()}
     return RunMetrics(
         label=result.label,
         t=result.t.copy(),
         nav=nav,
-        nav_sigma=_nav_sigma(result, truth_keys),
+        nav_sigma=nav_sigma(result, states),
         state_names=names,
         state_error=e,
         state_var=var,
         nees=nees_v,
         nees_states=tuple(names[i] for i in sel),
         nis=nis,
-        distance=np.asarray(distance_travelled(recording, result.t)),
+        distance=np.asarray(ref.distance(result.t)),
+        states=tuple(by_name[n] for n in names),
+        extra_error=extra_errors(result, truth, ref.true_errors),
     )
-
-
-def _registered_scoring(filter_name: str) -> tuple[Mapping[str, str], Sequence[str] | None]:
-    """``truth_keys`` and ``nees_states`` (or None) of a registered filter."""
-    from navreplay.filters.registry import FilterLoadError, load_filter
-
-    try:
-        cls = load_filter(filter_name)
-    except FilterLoadError:
-        return {}, None
-    return cls.truth_keys, getattr(cls, "nees_states", None)
 
 
 # --------------------------------------------------------------------------------------------
@@ -664,6 +737,8 @@ class EnsembleResult:
     sigma : dict[str, ndarray (M, 3)]
         ``sqrt(mean predicted variance)`` of ``pos_ned``, ``v_n``, ``phi``.
     state_names : tuple of str
+    states : tuple of State
+        Their declarations (units, quantities).
     state_rms, state_mean, state_sigma : ndarray, shape (M, k)
     nees_mean : ndarray, shape (M,)
     nees_count : ndarray, shape (M,)
@@ -684,6 +759,7 @@ class EnsembleResult:
     mean: dict[str, np.ndarray]
     sigma: dict[str, np.ndarray]
     state_names: tuple[str, ...]
+    states: tuple[State, ...]
     state_rms: np.ndarray
     state_mean: np.ndarray
     state_sigma: np.ndarray
@@ -708,7 +784,7 @@ class EnsembleResult:
             return out
         out["duration"] = float(self.t[-1] - self.t[0])
         out["distance"] = float(self.distance[-1])
-        if "pos_ned" in self.rms:
+        if "pos_ned" in self.rms and np.isfinite(self.rms["pos_ned"]).any():
             r = self.rms["pos_ned"][-1]
             out["lat_rms_final"] = float(r[0])
             out["long_rms_final"] = float(r[1])
@@ -717,6 +793,7 @@ class EnsembleResult:
                 out["dt_cep50_final"] = float(self.dt_cep50[-1])
             out["pos_rms_h"] = float(np.sqrt(np.nanmean(np.sum(self.rms["pos_ned"][:, :2] ** 2,
                                                                  axis=1))))
+        if "phi" in self.rms and np.isfinite(self.rms["phi"]).any():
             out["att_rms_level"] = float(rms(self.rms["phi"][:, :2], None))
             out["att_rms_heading"] = float(rms(self.rms["phi"][:, 2], None))
         _chi2_summary(out, "nees", "", self.nees_mean, self.nees_count, self.nees_dof,
@@ -756,6 +833,7 @@ class EnsembleStats:
         self._nis: dict[str, tuple[_Acc, list, int]] = {}
         self._state_names: tuple[str, ...] | None = None
         self._nees_states: tuple[str, ...] | None = None
+        self._states: tuple[State, ...] = ()
 
     def add(self, m: RunMetrics) -> None:
         """Add one run's metrics."""
@@ -768,6 +846,7 @@ class EnsembleStats:
             raise ValueError(f"run {self.runs + 1} ({m.label}) has other output times")
         if self._state_names is None:
             self._state_names, self._nees_states = m.state_names, m.nees_states
+            self._states = m.states
             self.label = self.label or m.label
         elif m.state_names != self._state_names or m.nees_states != self._nees_states:
             raise ValueError(f"run {self.runs + 1} ({m.label}) scores other states")
@@ -821,6 +900,7 @@ class EnsembleStats:
             mean=mean,
             sigma=sigma,
             state_names=self._state_names or (),
+            states=self._states,
             state_rms=self._state.rms() if self._state.sum is not None else empty,
             state_mean=self._state.mean() if self._state.sum is not None else empty,
             state_sigma=(np.sqrt(self._state_var.mean()) if self._state_var.sum is not None
@@ -834,87 +914,3 @@ class EnsembleStats:
             cep50=c50,
             distance=self._dist.mean(),
         )
-
-
-# --------------------------------------------------------------------------------------------
-# tables
-
-SUMMARY_UNITS: dict[str, tuple[str, float]] = {
-    "runs": ("", 1.0),
-    "duration": ("s", 1.0),
-    "distance": ("km", 1e-3),
-    "pos_err_final_h": ("m", 1.0),
-    "pos_err_final_dt": ("%DT", 1.0),
-    "pos_rms_h": ("m", 1.0),
-    "pos_rms_v": ("m", 1.0),
-    "vel_rms": ("m/s", 1.0),
-    "att_rms_level": ("mrad", 1e3),
-    "att_rms_heading": ("mrad", 1e3),
-    "lat_rms_final": ("m", 1.0),
-    "long_rms_final": ("m", 1.0),
-    "cep50_final": ("m", 1.0),
-    "dt_cep50_final": ("%", 1.0),
-    "nees_mean": ("", 1.0),
-    "nees_dof": ("", 1.0),
-    "nees_in_bounds": ("%", 100.0),
-}
-"""Display unit and factor from SI for each summary key (``nis_*`` keys like ``nees_*``)."""
-
-
-def _unit(key: str) -> tuple[str, float]:
-    if key in SUMMARY_UNITS:
-        return SUMMARY_UNITS[key]
-    for prefix in ("nis_mean_", "nis_dof_", "nis_in_bounds_"):
-        if key.startswith(prefix):
-            return SUMMARY_UNITS[prefix.replace("nis", "nees").rstrip("_")]
-    return ("", 1.0)
-
-
-def format_table(
-    summaries: Mapping[str, Mapping[str, Any]], keys: Sequence[str] | None = None
-) -> str:
-    """A compact text table of summary dicts, one row per label.
-
-    Parameters
-    ----------
-    summaries : mapping
-        Label -> summary dict (:meth:`RunMetrics.summary`, :meth:`EnsembleResult.summary`).
-    keys : sequence of str, optional
-        Columns; default: every numeric key present in any summary, in first-seen order.
-
-    Returns
-    -------
-    str
-
-    Examples
-    --------
-    >>> print(format_table({"ins": {"pos_rms_h": 812.0, "att_rms_level": 0.00123},
-    ...                     "gps-ins": {"pos_rms_h": 0.9}}))
-    label    pos_rms_h  att_rms_level
-             [m]        [mrad]
-    ins      812        1.23
-    gps-ins  0.9        -
-    """
-    if keys is None:
-        keys = []
-        for s in summaries.values():
-            for k, v in s.items():
-                if k not in keys and isinstance(v, int | float) and not isinstance(v, bool):
-                    keys.append(k)
-    header = ["label", *keys]
-    units = ["", *(f"[{_unit(k)[0]}]" if _unit(k)[0] else "" for k in keys)]
-    rows = []
-    for label, s in summaries.items():
-        row = [label]
-        for k in keys:
-            v = s.get(k)
-            if v is None or (isinstance(v, float) and not math.isfinite(v)):
-                row.append("-")
-            else:
-                row.append(f"{float(v) * _unit(k)[1]:.3g}")
-        rows.append(row)
-    table = [header, units, *rows]
-    widths = [max(len(r[i]) for r in table) for i in range(len(header))]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
-             for r in table]
-    return "\n".join(line for line in lines if line)

@@ -81,21 +81,86 @@ def parse_assignments(items: Iterable[str]) -> dict[str, str]:
     return out
 
 
-def load_toml(path: str | Path, table: str | None = None) -> dict[str, Any]:
-    """Read a TOML file (optionally one table of it) as parameter values."""
+def load_toml(
+    path: str | Path,
+    table: str | None = None,
+    *,
+    tables: Mapping[str, Iterable[str] | None] | None = None,
+) -> dict[str, Any]:
+    """Read a TOML file (optionally one table of it) as parameter values.
+
+    ``tables`` makes the file strict: it maps each table the command reads to the names its
+    sub-tables may have (None: a table of plain values, e.g. ``scenario``; for ``filter``, the
+    filter names, a sub-table named like a ``MODULE:CLASS`` reference or a ``name[...]`` label is
+    accepted too). Any other table, sub-table or a key outside every table is a
+    :class:`ParamError` naming the file and line.
+    """
     path = Path(path)
     try:
-        with path.open("rb") as f:
-            data = tomllib.load(f)
+        text = path.read_bytes().decode("utf-8")
+        data = tomllib.loads(text)
     except FileNotFoundError:
         raise ParamError(f"{path}: no such config file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ParamError(f"{path}: cannot read the config file: {e}") from None
     except tomllib.TOMLDecodeError as e:
         raise ParamError(f"{path}: invalid TOML: {e}") from None
+    if tables is not None:
+        _check_tables(path, text, data, tables)
     if table is not None:
         data = data.get(table, {})
         if not isinstance(data, dict):
             raise ParamError(f"{path}: [{table}] is not a table")
     return data
+
+
+def _check_tables(path: Path, text: str, data: Mapping[str, Any],
+                  tables: Mapping[str, Iterable[str] | None]) -> None:
+    for key, value in data.items():
+        if key not in tables:
+            if isinstance(value, dict):
+                raise ParamError(f"{path}:{_line(text, key)}: unknown table [{key}] (this command "
+                                 f"reads {', '.join(f'[{t}]' for t in tables) or 'no table'})")
+            raise ParamError(f"{path}:{_line(text, key, top=True)}: {key} = ... is outside any "
+                             f"table (put it under {' or '.join(f'[{t}]' for t in tables)})")
+        names = tables[key]
+        if not isinstance(value, dict):
+            raise ParamError(f"{path}:{_line(text, key, top=True)}: {key} must be a table")
+        if names is None:
+            continue
+        allowed = set(names)
+        for sub, sub_value in value.items():
+            if sub in allowed or ":" in sub or "[" in sub:
+                if not isinstance(sub_value, dict):
+                    raise ParamError(f"{path}:{_line(text, f'{key}.{sub}')}: {key}.{sub} must "
+                                     "be a table")
+                continue
+            raise ParamError(f"{path}:{_line(text, f'{key}.{sub}')}: [{key}.{sub}]: no such "
+                             f"{key} (known: {', '.join(sorted(allowed))})")
+
+
+def _line(text: str, dotted: str, top: bool = False) -> int:
+    """Line (1-based) of the header of table ``dotted`` or, with ``top``, of the key before any
+    header; 1 when not found (a key written in another form)."""
+    parts = dotted.split(".")
+    table = 0
+    for no, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if line.startswith("["):
+            table += 1
+            inner = line.strip("[]").split("#")[0].strip()
+            names = [p.strip().strip("\"'") for p in inner.split(".")]
+            if not top and names[: len(parts)] == parts:
+                return no
+        elif top and not table:
+            key = line.split("=", 1)[0].strip().strip("\"'").split(".")[0].strip()
+            if "=" in line and key == parts[0]:
+                return no
+        elif not top and "=" in line and not table:
+            key = line.split("=", 1)[0].strip().strip("\"'")
+            if key.split(".")[: len(parts)] == parts:
+                return no
+    return 1
 
 
 def _coerce(name: str, tp: Any, value: Any) -> Any:

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from navreplay.filters.base import Estimate, Filter, Innovation, NavSolution
+from navreplay.filters.base import Estimate, Filter, Innovation, NavSolution, Quantity, State
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.replay.engine import (
     STREAM_PRIORITY,
@@ -54,7 +54,7 @@ class Recorder(Filter):
     name = "recorder"
     requires = (StreamKind.IMU,)
     optional = (StreamKind.GPS, StreamKind.MAG, StreamKind.DEPTH, StreamKind.TRUTH)
-    state_names = ("n_imu", "n_updates")
+    states = (State("n_imu", "-", Quantity.OTHER), State("n_updates", "-", Quantity.OTHER))
 
     def __init__(self, params, context):
         super().__init__(params, context)

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from navreplay import metrics
+from navreplay import metrics, tables
+from navreplay.filters.base import Nav, NavError, Quantity, State, TrueConstant, TruthColumn
 from navreplay.geo import earth, rotations
 from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
@@ -25,7 +26,7 @@ def _recording(n=101, dt=1.0, speed=10.0, true_errors=None, extra_columns=None):
                      t0_ns=T0_NS)
 
 
-def _result(rec, t, pos_ned_err=None, x=None, P=None, names=(), innovations=None,
+def _result(rec, t, pos_ned_err=None, x=None, P=None, states=(), innovations=None,
             euler_err=None):
     truth = metrics.truth_at(rec, t)
     M = t.shape[0]
@@ -38,10 +39,10 @@ def _result(rec, t, pos_ned_err=None, x=None, P=None, names=(), innovations=None
     q = truth["q_nb"]
     if euler_err is not None:
         q = rotations.euler_to_quat(rotations.quat_to_euler(q) + euler_err)
-    k = len(names)
+    k = len(states)
     return RunResult(
         filter_name="synthetic", label="syn", recording="rec", t0_ns=T0_NS, t=t,
-        state_names=tuple(names),
+        states=tuple(states),
         x=np.zeros((M, k)) if x is None else x,
         P=np.zeros((M, k, k)) if P is None else P,
         nav_pos=pos, nav_v_n=truth["v_n"], nav_q_nb=q,
@@ -54,7 +55,7 @@ def test_position_and_attitude_error_signs():
     t = np.array([10.0, 20.5])
     err = np.array([[3.0, -4.0, 1.5], [-2.0, 1.0, -0.5]])
     res = _result(rec, t, pos_ned_err=err, euler_err=np.array([[0.0, 0.0, 0.01]] * 2))
-    m = metrics.run_metrics(res, rec, truth_keys={})
+    m = metrics.run_metrics(res, rec)
     np.testing.assert_allclose(m.nav.pos_ned, err, atol=1e-6)
     # a heading too large by 0.01 rad: phi_D = -0.01 (C_hat = (I - [phi x]) C)
     np.testing.assert_allclose(m.nav.phi, [[0, 0, -0.01]] * 2, atol=1e-6)
@@ -90,7 +91,7 @@ def test_cep50_and_distance_travelled_on_constructed_data():
     for i in range(5):
         err = np.zeros((t.size, 3))
         err[-1, :2] = north[i], east[i]
-        stats.add(metrics.run_metrics(_result(rec, t, pos_ned_err=err), rec, truth_keys={}))
+        stats.add(metrics.run_metrics(_result(rec, t, pos_ned_err=err), rec))
     res = stats.result()
     lat_rms, long_rms = np.sqrt(np.mean(north**2)), np.sqrt(np.mean(east**2))
     assert res.cep50[-1] == pytest.approx(0.5887 * (lat_rms + long_rms), rel=1e-6)
@@ -103,12 +104,16 @@ def test_cep50_and_distance_travelled_on_constructed_data():
     assert metrics.cep50(north, east) == pytest.approx(res.cep50[-1], rel=1e-6)
 
 
+def _zero_states(k):
+    return tuple(State(f"s{i}", "-", Quantity.OTHER, TruthColumn("zero", (i,)), nees=True)
+                 for i in range(k))
+
+
 def _consistent_runs(rng, runs, M, k=4):
     """Runs whose state errors are N(0, P) with a random, time-varying P."""
     rec = _recording(n=M, dt=1.0, extra_columns={"zero": np.zeros((M, k))})
     t = np.arange(M, dtype=float)
-    names = [f"s{i}" for i in range(k)]
-    keys = {n: f"truth:zero[{i}]" for i, n in enumerate(names)}
+    states = _zero_states(k)
     A = rng.normal(size=(M, k, k)) * np.array([1.0, 1e-3, 1e2, 1e-6])  # mixed units
     P = A @ A.transpose(0, 2, 1) + np.diag([1.0, 1e-6, 1e4, 1e-12])
     out = []
@@ -118,8 +123,8 @@ def _consistent_runs(rng, runs, M, k=4):
         nu = rng.normal(size=(M, 2)) * [2.0, 3.0]
         nis = np.einsum("ki,ki->k", nu, np.linalg.solve(S, nu[..., None])[..., 0])
         inn = {"meas": InnovationSeries(t=t, nu=nu, S=S, nis=nis)}
-        out.append(metrics.run_metrics(_result(rec, t, x=x, P=P, names=names, innovations=inn),
-                                       rec, truth_keys=keys))
+        out.append(metrics.run_metrics(_result(rec, t, x=x, P=P, states=states, innovations=inn),
+                                       rec))
     return out
 
 
@@ -170,15 +175,13 @@ def test_ensemble_stats_equals_batch_computation():
     # give the navigation solutions errors too
     rec = _recording(n=M, dt=1.0, extra_columns={"zero": np.zeros((M, 4))})
     t = np.arange(M, dtype=float)
-    keys = {f"s{i}": f"truth:zero[{i}]" for i in range(4)}
     ms = []
     pos_err = rng.normal(size=(runs, M, 3)) * [2.0, 3.0, 5.0]
     for i in range(runs):
         x = rng.normal(size=(M, 4))
         P = np.tile(np.eye(4), (M, 1, 1)) * (1 + i)
         ms.append(metrics.run_metrics(
-            _result(rec, t, pos_ned_err=pos_err[i], x=x, P=P, names=list(keys)), rec,
-            truth_keys=keys))
+            _result(rec, t, pos_ned_err=pos_err[i], x=x, P=P, states=_zero_states(4)), rec))
     stats = metrics.EnsembleStats()
     for m in ms:
         stats.add(m)
@@ -208,23 +211,49 @@ def test_ensemble_rejects_other_time_grids():
         stats.add(b)
 
 
-def test_truth_keys_from_metadata_and_nav():
+def test_declared_truths_from_metadata_and_nav():
     rec = _recording(n=11, true_errors={"imu": {"gyro_bias": [1e-5, 2e-5, 3e-5]}})
     t = np.array([5.0])
     x = np.array([[2.5e-5, 0.0]])
     res = _result(rec, t, pos_ned_err=np.array([[0.0, 0.0, 2.0]]), x=x,
-                  P=np.diag([1e-10, 4.0])[None], names=["b_g_y", "dh"])
-    keys = {"b_g_y": "imu.gyro_bias[1]", "dh": "nav:h"}
-    m = metrics.run_metrics(res, rec, truth_keys=keys)
+                  P=np.diag([1e-10, 4.0])[None],
+                  states=[State("b_g_y", "rad/s", Quantity.GYRO_BIAS,
+                                TrueConstant("imu.gyro_bias", (1,)), nees=True),
+                          State("dh", "m", Quantity.POSITION, NavError(Nav.H), nees=True)])
+    m = metrics.run_metrics(res, rec)
     # down error 2 m is height error -2 m; the state estimate 0 leaves e = -2 m
     np.testing.assert_allclose(m.state_error, [[0.5e-5, -2.0]], atol=1e-9)
     assert m.nees[0] == pytest.approx(0.25 + 1.0)
-    with pytest.raises(KeyError, match="true_errors has no"):
-        metrics.run_metrics(res, rec, truth_keys={"b_g_y": "imu.accel_bias[1]"})
+    # a constant the reference does not hold leaves that state unscored (and out of the NEES)
+    other = (State("b_g_y", "rad/s", Quantity.GYRO_BIAS, TrueConstant("imu.accel_bias", (1,)),
+                   nees=True), res.states[1])
+    m = metrics.run_metrics(res, rec, states=other)
+    assert m.state_names == ("dh",) and m.nees_states == ("dh",)
+    assert m.nees[0] == pytest.approx(1.0)
+
+
+def test_a_reference_with_positions_only_scores_positions():
+    rec = _recording(n=21)
+    t = np.array([5.0, 10.0])
+    err = np.array([[3.0, -4.0, 1.0], [1.0, 2.0, -1.0]])
+    states = (State("dh", "m", Quantity.POSITION, NavError(Nav.H), nees=True),
+              State("dv_N", "m/s", Quantity.VELOCITY, NavError(Nav.V_N), nees=True),
+              State("b", "-", Quantity.OTHER, TruthColumn("accel_bias", (0,)), nees=True))
+    res = _result(rec, t, pos_ned_err=err, states=states, P=np.tile(np.eye(3), (2, 1, 1)))
+    truth = rec[StreamKind.TRUTH]
+    ref = metrics.Reference(Stream(StreamKind.TRUTH, truth.t_ns, {"pos": truth["pos"]}), T0_NS)
+    m = metrics.run_metrics(res, ref)
+    np.testing.assert_allclose(m.nav.pos_ned, err, atol=1e-6)
+    assert np.isnan(m.nav.v_n).all() and np.isnan(m.nav.phi).all()
+    assert m.state_names == ("dh",) and m.nees_states == ("dh",)
+    s = m.summary()
+    assert "pos_rms_h" in s and "vel_rms" not in s and "att_rms_heading" not in s
+    assert s["distance"] == pytest.approx(100.0, rel=1e-6)  # 10 m/s for 10 s, from positions
+    assert s["nees_dof"] == 1
 
 
 def test_format_table():
-    table = metrics.format_table({
+    table = tables.format_table({
         "ins": {"pos_rms_h": 812.0, "att_rms_level": 1.23e-3, "nees_in_bounds": 0.5},
         "gps-ins": {"pos_rms_h": 0.91, "nis_mean_gps_pos": 3.02},
     })

@@ -12,6 +12,7 @@ from campaign_seeds import SLOW_SEEDS
 from ins_reference import error_rate
 
 from navreplay.filters import ins_error as ie
+from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters import rpm_aided_ins as rai
 from navreplay.filters.registry import load_filter
@@ -103,8 +104,8 @@ def test_structured_covariance_step_equals_the_dense_prediction():
     dt = 0.1
     _, P_ref = kalman.predict(np.zeros(24), P, kalman.discretize(rai.system_matrix(nav, f_b), dt),
                               np.diag(q * dt))
-    P_new = ie.propagate_covariance(P, nav[None], f_b[None], np.zeros((1, 3)), np.array([dt]),
-                                    ie.ProcessNoise(q), vertical=ie.Vertical.DEPTH)
+    P_new = itu.propagate_covariance(P, nav[None], f_b[None], np.zeros((1, 3)), np.array([dt]),
+                                    itu.ProcessNoise(q), vertical=ie.Vertical.DEPTH)
     np.testing.assert_allclose(P_new, P_ref, rtol=1e-11, atol=1e-13 * np.abs(P_ref).max())
     kalman.check_covariance(P_new)
     np.testing.assert_array_equal(P_new[20:], 0.0)  # inert states stay inert
@@ -390,7 +391,8 @@ def test_registered_and_parameters():
         with pytest.raises(ParamError, match=match):
             build(rai.RpmAidedInsParams, values)
     assert len(rai.STATE_NAMES) == rai.N_STATES == 24
-    assert set(rai.STATE_UNITS) == set(rai.STATE_NAMES)
+    assert [s.name for s in rai.STATES] == list(rai.STATE_NAMES)
+    assert [s.name for s in rai.STATES if s.nees] == ["dlat", "dlon"]
 
 
 def test_aided_modes_need_the_speed_log():

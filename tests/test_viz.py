@@ -3,6 +3,7 @@ unreachable viewers fail fast; saving is atomic."""
 
 from __future__ import annotations
 
+import dataclasses
 import socket
 import sys
 import time
@@ -12,6 +13,7 @@ import pyarrow as pa
 import pytest
 import rerun as rr
 
+from navreplay.filters import ins_error as ie
 from navreplay.geo import (
     euler_to_quat,
     lla_to_ned_offset,
@@ -37,10 +39,8 @@ from navreplay.viz import (
 )
 from navreplay.viz.blueprint import Catalog, build_blueprint
 
-STATES = (
-    "dlat", "dlon", "dh", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
-    "db_a_x", "db_a_y", "db_a_z", "db_g_x", "db_g_y", "db_g_z",
-)  # fmt: skip
+STATES = tuple(dataclasses.replace(s, name=s.name.replace("b_", "db_", 1))
+               if s.name.startswith("b_") else s for s in ie.nav_states())
 T0_NS = 1_700_000_000_123_456_789
 REF = np.array([0.6544, 2.2131, 12.0])  # lat, lon [rad], h [m]
 M = 5000  # output rows at 10 Hz: more than one 4096-row chunk
@@ -85,7 +85,7 @@ def make_result(label: str, seed: int, truth: Recording | None = None, m: int = 
     )
     return RunResult(
         filter_name="gps-ins", label=label, recording="synthetic", t0_ns=T0_NS, t=t,
-        state_names=STATES, x=x, P=P, extras={"misalignment_euler": rng.normal(size=(m, 3))},
+        states=STATES, x=x, P=P, extras={"misalignment_euler": rng.normal(size=(m, 3))},
         innovations={"gps_pos": innov}, **nav,
     )  # fmt: skip
 
@@ -290,7 +290,7 @@ def test_observer_then_log_run_logs_each_row_once(tmp_path):
         observe = sink.observer(truth)
         for stop in (0, 150, 151, 400, 600):
             view = RunResult(
-                r.filter_name, r.label, r.recording, r.t0_ns, r.t[:stop], r.state_names,
+                r.filter_name, r.label, r.recording, r.t0_ns, r.t[:stop], r.states,
                 r.x[:stop], r.P[:stop], r.nav_pos[:stop], r.nav_v_n[:stop], r.nav_q_nb[:stop],
                 {k: v[:stop] for k, v in r.extras.items()},
             )  # fmt: skip
@@ -317,7 +317,7 @@ def test_observer_without_navigation_solution(tmp_path):
                     r.recording,
                     r.t0_ns,
                     r.t[:stop],
-                    r.state_names,
+                    r.states,
                     r.x[:stop],
                     r.P[:stop],
                 )  # fmt: skip

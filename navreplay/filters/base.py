@@ -9,12 +9,43 @@ recording without aiding samples, it asks for :meth:`Filter.estimate` and stores
 Filters never print, never touch files and never import rerun.
 
 Time inside a filter is float seconds since the recording start.
+
+Declared states
+---------------
+A filter says once, as data, what each entry of ``Estimate.x`` is: a :class:`State` with its
+name, SI unit, :class:`Quantity` and what it is scored against (``truth``), and whether it
+counts in the run's NEES. The replay engine copies the declarations into the run result;
+metrics, the Rerun view and the tables read them from there, so a plug-in filter is scored and
+shown exactly as a built-in one::
+
+    states = (
+        State("dlat", "rad", Quantity.POSITION, NavError(Nav.LAT), nees=True),
+        State("b_a_x", "m/s^2", Quantity.ACCEL_BIAS, TruthColumn("accel_bias", (0,))),
+        State("s_g_z", "-", Quantity.GYRO_SCALE_FACTOR, TrueConstant("imu.gyro_scale_factor", (2,))),
+    )
+
+What a state is scored against (``truth``), with e the estimation error of the state:
+
+:class:`NavError`
+    The state *is* an error of the navigation solution (an error-state filter, estimate minus
+    reference): ``e = (nav_hat - ref)_q - x`` for ``q`` in :class:`Nav`.
+:class:`TruthColumn`
+    A column of the reference (truth) stream, interpolated to the estimate times:
+    ``e = x - truth[column][index]``.
+:class:`TrueConstant`
+    A constant of ``metadata.true_errors`` (dotted key): ``e = x - value[index]``.
+None
+    Not scored (shown with its sigma only).
+
+A reference without the column a state needs (a real log with only positions, say) leaves
+that state unscored instead of failing.
 """
 
 from __future__ import annotations
 
 import abc
 import dataclasses
+import enum
 import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
@@ -22,6 +53,133 @@ from typing import Any, ClassVar
 import numpy as np
 
 from navreplay.streams import Metadata, StreamKind
+
+
+class Quantity(enum.StrEnum):
+    """What a state (or a scored extra) is: its tab in the view, its group in tables."""
+
+    POSITION = "position"
+    VELOCITY = "velocity"
+    ATTITUDE = "attitude"
+    ACCEL_BIAS = "accel_bias"
+    GYRO_BIAS = "gyro_bias"
+    ACCEL_SCALE_FACTOR = "accel_scale_factor"
+    GYRO_SCALE_FACTOR = "gyro_scale_factor"
+    ACCEL_MISALIGNMENT = "accel_misalignment"
+    GYRO_MISALIGNMENT = "gyro_misalignment"
+    LEVER_ARM = "lever_arm"
+    MISALIGNMENT = "misalignment"
+    """Mounting / boresight misalignment between two frames."""
+    SPEED_SCALE_FACTOR = "speed_scale_factor"
+    CURRENT = "current"
+    CLOCK = "clock"
+    """Time offsets and delays."""
+    OTHER = "other"
+
+
+class Nav(enum.StrEnum):
+    """Components of the navigation solution an error state can be the error of.
+
+    Units: ``lat``, ``lon`` rad; ``h`` m (positive up); ``depth`` m (positive down, so its
+    error is ``-(h_hat - h)``); ``v_N, v_E, v_D`` m/s; ``phi_N, phi_E, phi_D`` rad, the attitude
+    error of :func:`navreplay.geo.attitude_error` (``C_nb_hat = (I - [phi x]) C_nb``).
+    """
+
+    LAT = "lat"
+    LON = "lon"
+    H = "h"
+    DEPTH = "depth"
+    V_N = "v_N"
+    V_E = "v_E"
+    V_D = "v_D"
+    PHI_N = "phi_N"
+    PHI_E = "phi_E"
+    PHI_D = "phi_D"
+
+
+@dataclasses.dataclass(frozen=True)
+class NavError:
+    """The state is the error of the navigation solution in ``q``: ``e = (nav_hat - ref)_q - x``."""
+
+    q: Nav
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "q", Nav(self.q))
+
+
+@dataclasses.dataclass(frozen=True)
+class TruthColumn:
+    """The state estimates ``column[index]`` of the reference (truth) stream: ``e = x - truth``.
+
+    ``index`` selects within one row (``()`` for the whole row of a scored extra)."""
+
+    column: str
+    index: tuple[int, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class TrueConstant:
+    """The state estimates a constant of ``metadata.true_errors``: ``key`` is dotted
+    (``"imu.gyro_misalignment"``), ``index`` selects within its value; ``e = x - value``."""
+
+    key: str
+    index: tuple[int, ...] = ()
+
+
+Truth = NavError | TruthColumn | TrueConstant
+"""What a state is scored against."""
+
+
+@dataclasses.dataclass(frozen=True)
+class State:
+    """Declaration of one entry of ``Estimate.x`` (or of one scored ``Estimate.extras`` key).
+
+    Attributes
+    ----------
+    name : str
+        E.g. ``"dv_N"``; unique within the filter.
+    unit : str
+        SI unit as shown on axes: ``"rad"``, ``"m"``, ``"m/s"``, ``"m/s^2"``, ``"rad/s"``,
+        ``"s"``, ``"-"``. The view converts angles, rates and accelerations to display units.
+    quantity : Quantity
+    truth : NavError, TruthColumn, TrueConstant or None
+        What the estimate is scored against (see the module docstring).
+    nees : bool
+        Counts in the run's NEES (needs ``truth``).
+    """
+
+    name: str
+    unit: str
+    quantity: Quantity
+    truth: Truth | None = None
+    nees: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"state name must be a non-empty string, got {self.name!r}")
+        object.__setattr__(self, "quantity", Quantity(self.quantity))
+        if self.truth is not None and not isinstance(self.truth, Truth):
+            raise TypeError(f"state {self.name}: truth must be NavError, TruthColumn, "
+                            f"TrueConstant or None, got {self.truth!r}")
+        if self.nees and self.truth is None:
+            raise ValueError(f"state {self.name}: nees=True needs a truth to score against")
+
+
+def check_states(states: object, what: str = "states") -> tuple[State, ...]:
+    """``states`` as a tuple of :class:`State` with unique names, or ``TypeError`` /
+    ``ValueError`` naming what is wrong."""
+    if not isinstance(states, tuple | list) or not all(isinstance(s, State) for s in states):
+        raise TypeError(f"{what} must be a tuple of navreplay.filters.base.State, got {states!r}")
+    names = [s.name for s in states]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise ValueError(f"{what}: names declared twice: {', '.join(dupes)}")
+    return tuple(states)
+
+
+def state_names(states: tuple[State, ...]) -> tuple[str, ...]:
+    """The names of declared states, in order."""
+    return tuple(s.name for s in states)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -111,7 +269,7 @@ class Estimate:
     t : float
         Time [s since the recording start].
     x : ndarray, shape (n,)
-        Named state vector (``Filter.state_names``); for an error-state filter with feedback,
+        State vector, one entry per ``Filter.states``; for an error-state filter with feedback,
         the *total* estimates of the error quantities it tracks (e.g. the bias estimate), or the
         error estimate itself where there is no total (document which in the filter).
     P : ndarray, shape (n, n)
@@ -119,8 +277,8 @@ class Estimate:
     nav : NavSolution | None
         The navigation solution, when the filter has one.
     extras : dict[str, ndarray]
-        Further named outputs of fixed shape (e.g. ``"misalignment_euler"``), SI. Scored against
-        ``Metadata.true_errors`` through ``Filter.truth_keys``.
+        Further named outputs of fixed shape (e.g. ``"misalignment_euler"``), SI; those the
+        filter declares in ``Filter.scored_extras`` are scored like states.
     """
 
     t: float
@@ -162,15 +320,12 @@ class Filter(abc.ABC):
         accelerometer-only filter); the engine checks them before running.
     Params : type[FilterParams]
         Parameter dataclass.
-    truth_keys : dict[str, str]
-        Maps an ``Estimate`` output (a state name or an extras key) to the key of
-        ``Metadata.true_errors`` (or to ``"truth:<column>"`` for a truth-stream column) holding
-        its true value, so metrics can score error states.
-
-    Instance attributes
-    -------------------
-    state_names : tuple[str, ...]
-        Names of the entries of ``Estimate.x`` (may depend on parameters, e.g. variants).
+    states : tuple[State, ...]
+        One declaration per entry of ``Estimate.x``, in order (a class attribute, or an
+        instance attribute set in ``__init__`` when it depends on the parameters).
+    scored_extras : tuple[State, ...]
+        Declarations of ``Estimate.extras`` keys scored against a truth (``name`` is the key;
+        a ``TruthColumn`` with ``index=()`` compares the whole extra with the column row).
     """
 
     name: ClassVar[str]
@@ -179,9 +334,14 @@ class Filter(abc.ABC):
     optional: ClassVar[tuple[StreamKind, ...]] = ()
     required_columns: ClassVar[Mapping[StreamKind, tuple[str, ...]]] = {}
     Params: ClassVar[type[FilterParams]] = FilterParams
-    truth_keys: ClassVar[dict[str, str]] = {}
 
-    state_names: tuple[str, ...] = ()
+    states: tuple[State, ...] = ()
+    scored_extras: tuple[State, ...] = ()
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """Names of the declared states, in order."""
+        return state_names(self.states)
 
     def __init__(self, params: FilterParams, context: FilterContext) -> None:
         self.params = params

@@ -28,7 +28,7 @@ g+2   s_g_z                b (FRD)   -            gyro z scale-factor error; x h
 ===== ==================== ========= ============ =============================================
 
 The gyro z-rate states (``gyro_misalignment_states``) follow the lever arm when it is
-estimated: g = 18 with ``estimate_lever_arm``, else 15. Scoring (``truth_keys``): the
+estimated: g = 18 with ``estimate_lever_arm``, else 15. Scoring (declared ``states``): the
 navigation states and biases as ``ins``; m_g_xz, m_g_yz, s_g_z against the constants
 ``metadata.true_errors["imu"]["gyro_misalignment"][0][2]``, ``[1][2]`` and
 ``["gyro_scale_factor"][2]`` (the M and S of :mod:`navreplay.sensors.imu`,
@@ -94,8 +94,18 @@ import numpy as np
 
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
+from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
-from navreplay.filters.base import FilterContext, FilterParams, Innovation, check_number
+from navreplay.filters.base import (
+    FilterContext,
+    FilterParams,
+    Innovation,
+    Quantity,
+    State,
+    TrueConstant,
+    check_number,
+    state_names,
+)
 from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.registry import register_filter
 from navreplay.geo import kernels
@@ -105,15 +115,20 @@ from navreplay.units import PPM
 
 LEVER = slice(15, 18)
 """Lever-arm error states (present with ``estimate_lever_arm``)."""
-GYRO_Z_NAMES: tuple[str, ...] = ("m_g_xz", "m_g_yz", "s_g_z")
-"""Names of the gyro z-rate states (``gyro_misalignment_states``): misalignments M[0, 2],
-M[1, 2] and scale factor S[2, 2] of :mod:`navreplay.sensors.imu`."""
-GYRO_Z_TRUTH_KEYS: dict[str, str] = {
-    "m_g_xz": "imu.gyro_misalignment[0][2]",
-    "m_g_yz": "imu.gyro_misalignment[1][2]",
-    "s_g_z": "imu.gyro_scale_factor[2]",
-}
-"""Scoring keys of the gyro z-rate states: the constants in ``metadata.true_errors["imu"]``."""
+LEVER_STATES: tuple[State, ...] = tuple(
+    State(f"l_{a}", "m", Quantity.LEVER_ARM) for a in "xyz")
+"""Lever-arm estimates (``estimate_lever_arm``), body [m]; the truth is the parameter's."""
+GYRO_Z_STATES: tuple[State, ...] = (
+    State("m_g_xz", "rad", Quantity.GYRO_MISALIGNMENT,
+          TrueConstant("imu.gyro_misalignment", (0, 2))),
+    State("m_g_yz", "rad", Quantity.GYRO_MISALIGNMENT,
+          TrueConstant("imu.gyro_misalignment", (1, 2))),
+    State("s_g_z", "-", Quantity.GYRO_SCALE_FACTOR, TrueConstant("imu.gyro_scale_factor", (2,))),
+)
+"""The gyro z-rate states (``gyro_misalignment_states``): misalignments M[0, 2], M[1, 2] and
+scale factor S[2, 2] of :mod:`navreplay.sensors.imu`, scored against the constants in
+``metadata.true_errors["imu"]``."""
+GYRO_Z_NAMES: tuple[str, ...] = state_names(GYRO_Z_STATES)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -284,7 +299,6 @@ class GpsInsFilter(InsFilter):
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU, StreamKind.GPS)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.GPS_VEL,)
     Params: ClassVar[type[FilterParams]] = GpsInsParams
-    truth_keys: ClassVar[dict[str, str]] = {**InsFilter.truth_keys, **GYRO_Z_TRUTH_KEYS}
 
     params: GpsInsParams
 
@@ -297,13 +311,9 @@ class GpsInsFilter(InsFilter):
 
     # -- extra states ----------------------------------------------------------------------
 
-    def _extra_states(self) -> int:
-        return ((3 if self.params.estimate_lever_arm else 0)
-                + (ie.N_GYRO_Z if self._gz is not None else 0))
-
-    def _extra_names(self) -> tuple[str, ...]:
-        return (("l_x", "l_y", "l_z") if self.params.estimate_lever_arm else ()) + (
-            GYRO_Z_NAMES if self._gz is not None else ())
+    def _extra_declarations(self) -> tuple[State, ...]:
+        return ((LEVER_STATES if self.params.estimate_lever_arm else ())
+                + (GYRO_Z_STATES if self._gz is not None else ()))
 
     def _init_extra(self) -> None:
         p = self.params
@@ -318,7 +328,7 @@ class GpsInsFilter(InsFilter):
         return np.r_[self.lever_arm_b if self.params.estimate_lever_arm else np.zeros(0),
                      self.gyro_z if self._gz is not None else np.zeros(0)]
 
-    def _process_noise(self, n: int) -> ie.ProcessNoise:
+    def _process_noise(self, n: int) -> itu.ProcessNoise:
         noise = super()._process_noise(n)
         if self._gz is None:
             return noise

@@ -4,7 +4,7 @@ The baseline every aided filter is compared to. It integrates the IMU with
 :mod:`navreplay.strapdown` from the initial solution in ``metadata.initial_nav`` and
 propagates the covariance of the 15 navigation error states of
 :mod:`navreplay.filters.ins_error` with the IMU error model, both by
-:class:`navreplay.filters.ins_error.TimeUpdate`. It makes no measurement update. The class is
+:class:`navreplay.filters.ins_time_update.TimeUpdate`. It makes no measurement update. The class is
 the base of :class:`navreplay.filters.gps_ins.GpsInsFilter` (feedback of estimated errors,
 extra states); the module's :func:`initial_solution`, :func:`initial_sigma` and
 :func:`initial_covariance` also serve ``rpm-aided-ins``.
@@ -80,8 +80,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from navreplay import strapdown
+from navreplay.filters import imu_gap, kalman
 from navreplay.filters import ins_error as ie
-from navreplay.filters import kalman
+from navreplay.filters import ins_time_update as itu
 from navreplay.filters.base import (
     Estimate,
     Filter,
@@ -89,7 +90,9 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     NavSolution,
+    State,
     check_number,
+    state_names,
 )
 from navreplay.filters.registry import register_filter
 from navreplay.streams import StreamKind
@@ -143,12 +146,18 @@ class InsParams(FilterParams):
     """Correlation time tau of eq. (5a) [s]: a manoeuvre and the time its error persists."""
     cov_step: float = 0.1
     """Covariance propagation step [s] (cut short at updates and outputs)."""
+    gap_accel_sigma: float = 2.0
+    """Unknown acceleration during an IMU gap, 1-sigma per NED axis, held over the gap
+    [m/s^2] (:mod:`navreplay.filters.imu_gap`)."""
+    gap_rate_sigma: float = 0.1
+    """Unknown body rate during an IMU gap, 1-sigma per axis, held over the gap [rad/s]."""
 
     def __post_init__(self) -> None:
         for name in ("accel_vrw", "gyro_arw", "accel_bias_sigma", "accel_bias_sigma_z",
                      "gyro_bias_sigma",
                      "accel_bias_rw", "gyro_bias_rw", "init_pos_sigma", "init_vel_sigma",
-                     "init_att_sigma", "accel_sf_mis", "gyro_sf_mis", "sf_mis_time"):
+                     "init_att_sigma", "accel_sf_mis", "gyro_sf_mis", "sf_mis_time",
+                     "gap_accel_sigma", "gap_rate_sigma"):
             check_number(self, name)
         check_number(self, "cov_step", positive=True, upper=10.0)
 
@@ -157,14 +166,14 @@ class InsParams(FilterParams):
         z = self.accel_bias_sigma if self.accel_bias_sigma_z is None else self.accel_bias_sigma_z
         return np.array([self.accel_bias_sigma, self.accel_bias_sigma, z])
 
-    def process_noise(self, n_states: int = ie.N_STATES) -> ie.ProcessNoise:
+    def process_noise(self, n_states: int = ie.N_STATES) -> itu.ProcessNoise:
         """The process noise of eqs. (5), (5a) for a filter of ``n_states`` (extra states 0)."""
         q = np.zeros(n_states)
         q[: ie.N_STATES] = ie.process_noise_diagonal(
             ie.noise_densities(self.accel_vrw, self.gyro_arw, self.accel_bias_rw,
                                self.gyro_bias_rw), 1.0)
-        k = ie.ProcessNoise.motion_coefficient
-        return ie.ProcessNoise(q, k(self.accel_sf_mis, self.sf_mis_time),
+        k = itu.ProcessNoise.motion_coefficient
+        return itu.ProcessNoise(q, k(self.accel_sf_mis, self.sf_mis_time),
                                k(self.gyro_sf_mis, self.sf_mis_time))
 
 
@@ -204,6 +213,10 @@ def initial_covariance(
     return np.diag(d**2)
 
 
+class InitialNavError(ValueError):
+    """A filter has no initial solution to start from."""
+
+
 def initial_solution(context: FilterContext, filter_name: str) -> tuple[np.ndarray, float]:
     """The navigation vector (10,) and time [s] of ``metadata.initial_nav``.
 
@@ -213,9 +226,10 @@ def initial_solution(context: FilterContext, filter_name: str) -> tuple[np.ndarr
     init = context.metadata.initial_nav
     missing = [k for k in ("t_ns", "pos", "v_n", "q_nb") if k not in init]
     if missing:
-        raise ValueError(
-            f"filter {filter_name!r} needs metadata.initial_nav with t_ns, pos, v_n, q_nb "
-            f"(missing: {', '.join(missing)})"
+        raise InitialNavError(
+            f"filter {filter_name!r} cannot start: no initial solution (missing "
+            f"{', '.join(missing)}); give one with --init align, --init reference "
+            "(with --reference) or an [initial] table"
         )
     nav = strapdown.nav_vector(init["pos"], init["v_n"], init["q_nb"])
     if not np.all(np.isfinite(nav)):
@@ -245,22 +259,9 @@ def initial_sigma(
     return out
 
 
-NAV_STATE_NAMES: tuple[str, ...] = (
-    "dlat", "dlon", "dh", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
-    "b_a_x", "b_a_y", "b_a_z", "b_g_x", "b_g_y", "b_g_z",
-)
-"""Names of the 15 entries of ``Estimate.x`` (biases as total estimates)."""
-
-NAV_TRUTH_KEYS: dict[str, str] = {
-    "dlat": "nav:lat", "dlon": "nav:lon", "dh": "nav:h",
-    "dv_N": "nav:v_N", "dv_E": "nav:v_E", "dv_D": "nav:v_D",
-    "phi_N": "nav:phi_N", "phi_E": "nav:phi_E", "phi_D": "nav:phi_D",
-    **{f"b_a_{a}": f"truth:accel_bias_eff[{i}]" for i, a in enumerate("xyz")},
-    **{f"b_g_{a}": f"truth:gyro_bias_eff[{i}]" for i, a in enumerate("xyz")},
-}
-"""Scoring keys (see :mod:`navreplay.metrics`): the navigation error states are scored by the
-navigation solution's error, the biases by the truth stream's effective biases (the total bias
-plus the scale-factor and misalignment errors at rest, which a bias state absorbs)."""
+NAV_STATES: tuple[State, ...] = ie.nav_states(ie.Vertical.HEIGHT)
+"""Declarations of the 15 entries of ``Estimate.x`` (biases as total estimates)."""
+NAV_STATE_NAMES: tuple[str, ...] = state_names(NAV_STATES)
 
 
 @register_filter
@@ -273,20 +274,16 @@ class InsFilter(Filter):
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     Params: ClassVar[type[FilterParams]] = InsParams
-    truth_keys: ClassVar[dict[str, str]] = NAV_TRUTH_KEYS
-    nees_states: ClassVar[tuple[str, ...]] = NAV_STATE_NAMES[:9]
-    """Default NEES block of :func:`navreplay.metrics.run_metrics`: the navigation errors (the
-    bias states estimate effective biases, which the truth's bias columns do not hold)."""
 
     params: InsParams
 
     def __init__(self, params: InsParams, context: FilterContext) -> None:
         super().__init__(params, context)
         self.nav, self.t = initial_solution(context, self.name)
-        self.b_a = np.zeros(3)
-        self.b_g = np.zeros(3)
-        p = params
         init = context.metadata.initial_nav
+        self.b_a = np.asarray(init.get("accel_bias", np.zeros(3)), dtype=float).reshape(3)
+        self.b_g = np.asarray(init.get("gyro_bias", np.zeros(3)), dtype=float).reshape(3)
+        p = params
         P0 = initial_covariance(
             self.nav[strapdown.POS],
             initial_sigma(init, "pos_ned", p.init_pos_sigma, param="init_pos_sigma"),
@@ -295,22 +292,20 @@ class InsFilter(Filter):
             p.accel_bias_sigmas(),
             p.gyro_bias_sigma,
         )
-        n = ie.N_STATES + self._extra_states()
+        self.states = NAV_STATES + self._extra_declarations()
+        n = len(self.states)
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
-        self._time_update = ie.TimeUpdate(self._process_noise(n), p.cov_step)
+        self._noise = self._process_noise(n)
+        self._time_update = itu.TimeUpdate(self._noise, p.cov_step)
         self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
-        self.state_names = NAV_STATE_NAMES + self._extra_names()
         self._init_extra()
         kalman.check_covariance(self.P, name="P0", t=self.t)
 
     # -- hooks for filters with more states ----------------------------------------------
 
-    def _extra_states(self) -> int:
-        """Number of states after the 15 (random constants; F = 0, Q = 0 for them)."""
-        return 0
-
-    def _extra_names(self) -> tuple[str, ...]:
+    def _extra_declarations(self) -> tuple[State, ...]:
+        """Declarations of the states after the 15 (random constants; F = 0, Q = 0 for them)."""
         return ()
 
     def _init_extra(self) -> None:
@@ -319,7 +314,7 @@ class InsFilter(Filter):
     def _extra_values(self) -> np.ndarray:
         return np.zeros(0)
 
-    def _process_noise(self, n: int) -> ie.ProcessNoise:
+    def _process_noise(self, n: int) -> itu.ProcessNoise:
         """The process noise (and model options) of the time update for n states."""
         return self.params.process_noise(n)
 
@@ -344,6 +339,19 @@ class InsFilter(Filter):
         self, kind: StreamKind, t: float, sample: Mapping[str, Any]
     ) -> list[Innovation] | None:
         return None
+
+    def bridge_imu_gap(self, t: float, since: float) -> None:
+        """No IMU samples from ``since`` until after ``t`` [s]: dead-reckon to t with the
+        covariance of the unknown motion (:func:`navreplay.filters.imu_gap.bridge`)."""
+        if t <= self.t:
+            return
+        self._sync_covariance()
+        p = self.params
+        self.nav, self.P = imu_gap.bridge(self.nav, self.P, (self.t - since, t - since),
+                                          p.gap_accel_sigma, p.gap_rate_sigma, self._noise.q)
+        self.t = t
+        self._time_update.prev[:] = 0.0  # no coning/sculling across the gap
+        kalman.check_covariance(self.P, t=self.t)
 
     def estimate(self) -> Estimate:
         self._sync_covariance()

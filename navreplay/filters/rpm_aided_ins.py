@@ -65,7 +65,7 @@ with the navigation blocks of :mod:`navreplay.filters.ins_error` in their depth 
 
 F has non-zero rows only for position, velocity and attitude, and non-zero columns only for
 those and the biases, so ``Phi = [[M], [0 I]]`` with M the 9 x 15 top block: the product
-touches 9 rows of P (:func:`navreplay.filters.ins_error.propagate_covariance`, shared with the
+touches 9 rows of P (:func:`navreplay.filters.ins_time_update.propagate_covariance`, shared with the
 other INS filters).
 
 RPM water-velocity measurement (eq. 25, re-derived in §4.4), with the corrected
@@ -123,6 +123,7 @@ import numpy as np
 
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
+from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
@@ -131,7 +132,12 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     NavSolution,
+    Quantity,
+    State,
+    TrueConstant,
+    TruthColumn,
     check_number,
+    state_names,
 )
 from navreplay.filters.ins import initial_covariance, initial_sigma, initial_solution
 from navreplay.filters.registry import register_filter
@@ -168,38 +174,23 @@ _CHECK_INTERVAL = 1.0
 """Filter time between full symmetry / PSD checks of the propagated P [s] (every correction
 is checked, and every propagation step checks the variances)."""
 
-STATE_NAMES: tuple[str, ...] = (
-    "dlat", "dlon", "dd", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D",
-    "b_a_x", "b_a_y", "b_a_z", "b_g_x", "b_g_y", "b_g_z",
-    "k_rpm", "m_y", "m_z", "vc_N", "vc_E", "mu_x", "mu_y", "mu_z", "dT",
+STATES: tuple[State, ...] = (
+    *(dataclasses.replace(s, nees=s.name in ("dlat", "dlon"))
+      for s in ie.nav_states(ie.Vertical.DEPTH)),
+    State("k_rpm", "-", Quantity.SPEED_SCALE_FACTOR, TrueConstant("rpm_scale_factor")),
+    State("m_y", "rad", Quantity.MISALIGNMENT, TrueConstant("rpm_misalignment", (1,))),
+    State("m_z", "rad", Quantity.MISALIGNMENT, TrueConstant("rpm_misalignment", (2,))),
+    State("vc_N", "m/s", Quantity.CURRENT, TruthColumn("current_n", (0,))),
+    State("vc_E", "m/s", Quantity.CURRENT, TruthColumn("current_n", (1,))),
+    *(State(f"mu_{a}", "rad", Quantity.MISALIGNMENT) for a in "xyz"),
+    State("dT", "s", Quantity.CLOCK),
 )
-"""Names of the entries of ``Estimate.x``."""
-
-STATE_UNITS: dict[str, str] = {
-    name: unit
-    for names, unit in (
-        (("dlat", "dlon"), "rad"), (("dd",), "m"), (("dv_N", "dv_E", "dv_D"), "m/s"),
-        (("phi_N", "phi_E", "phi_D", "m_y", "m_z", "mu_x", "mu_y", "mu_z"), "rad"),
-        (("b_a_x", "b_a_y", "b_a_z"), "m/s^2"), (("b_g_x", "b_g_y", "b_g_z"), "rad/s"),
-        (("k_rpm",), "-"), (("vc_N", "vc_E"), "m/s"), (("dT",), "s"),
-    )
-    for name in names
-}
-"""SI unit of each state (for plots)."""
-
-TRUTH_KEYS: dict[str, str] = {
-    "dlat": "nav:lat", "dlon": "nav:lon", "dd": "nav:depth",
-    "dv_N": "nav:v_N", "dv_E": "nav:v_E", "dv_D": "nav:v_D",
-    "phi_N": "nav:phi_N", "phi_E": "nav:phi_E", "phi_D": "nav:phi_D",
-    **{f"b_a_{a}": f"truth:accel_bias_eff[{i}]" for i, a in enumerate("xyz")},
-    **{f"b_g_{a}": f"truth:gyro_bias_eff[{i}]" for i, a in enumerate("xyz")},
-    "k_rpm": "rpm_scale_factor",
-    "m_y": "rpm_misalignment[1]", "m_z": "rpm_misalignment[2]",
-    "vc_N": "truth:current_n[0]", "vc_E": "truth:current_n[1]",
-}
-"""Scoring keys (see :mod:`navreplay.metrics`): navigation errors by the navigation
-solution's error, biases and current by the truth stream, the RPM parameters by
-``Metadata.true_errors`` of the ``underwater-rpm`` scenario."""
+"""Declarations of the entries of ``Estimate.x``. Only the horizontal position errors count
+in the NEES: the consistency band of docs/methods/rpm-aided-ins.md §6 is on horizontal
+position, 2 dof. Navigation errors are scored by the navigation solution's error, biases
+(effective) and current by the truth stream, the RPM parameters by ``Metadata.true_errors``
+of the ``underwater-rpm`` scenario."""
+STATE_NAMES: tuple[str, ...] = state_names(STATES)
 
 
 class Mode(enum.StrEnum):
@@ -433,10 +424,7 @@ class RpmAidedIns(Filter):
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.SPEED_LOG, StreamKind.DEPTH)
     Params: ClassVar[type[FilterParams]] = RpmAidedInsParams
-    truth_keys: ClassVar[dict[str, str]] = TRUTH_KEYS
-    nees_states: ClassVar[tuple[str, ...]] = ("dlat", "dlon")
-    """The NEES of the consistency band of docs/methods/rpm-aided-ins.md §6: horizontal
-    position, 2 dof."""
+    states: tuple[State, ...] = STATES
 
     params: RpmAidedInsParams
 
@@ -461,7 +449,6 @@ class RpmAidedIns(Filter):
         self.k_rpm = 0.0
         self.m_rpm = np.zeros(2)
         self.v_c = np.zeros(2)
-        self.state_names = STATE_NAMES
 
         # P0, §4.6 of the method
         init = context.metadata.initial_nav
@@ -488,8 +475,8 @@ class RpmAidedIns(Filter):
         q[ATT] = p.gyro_noise**2
         if estimate_current:
             q[CURRENT] = p.current_noise**2
-        self._time_update = ie.TimeUpdate(
-            ie.ProcessNoise(q), p.cov_step, vertical=ie.Vertical.DEPTH,
+        self._time_update = itu.TimeUpdate(
+            itu.ProcessNoise(q), p.cov_step, vertical=ie.Vertical.DEPTH,
             curvature_derivatives=p.curvature_derivatives,
         )
         self._frozen = np.zeros(N_STATES, dtype=bool)

@@ -149,6 +149,9 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     NavSolution,
+    Quantity,
+    State,
+    TruthColumn,
     check_number,
 )
 from navreplay.filters.registry import register_filter
@@ -737,10 +740,11 @@ class TransferAlignment(Filter):
     )
     requires = (StreamKind.IMU, StreamKind.MASTER_INS)
     Params = TransferAlignmentParams
-    truth_keys = {
-        "misalignment_euler": "truth:misalignment_euler",
-        "q_rb": "truth:q_rb",
-    }
+    scored_extras = (
+        State("misalignment_euler", "rad", Quantity.MISALIGNMENT,
+              TruthColumn("misalignment_euler")),
+        State("q_rb", "-", Quantity.MISALIGNMENT, TruthColumn("q_rb")),
+    )
 
     def __init__(self, params: TransferAlignmentParams, context: FilterContext) -> None:
         super().__init__(params, context)
@@ -760,8 +764,11 @@ class TransferAlignment(Filter):
         self.s = np.array(p.match.components, dtype=np.int64)
         self.u = np.array([i for i in range(4) if i not in p.match.components], dtype=np.int64)
         self.n = N_NAV + len(self.s)
-        self.state_names = ("v_N", "v_E", "q_nb0", "q_nb1", "q_nb2", "q_nb3") + tuple(
-            f"q_rb{i}" for i in self.s
+        self.states = (
+            State("v_N", "m/s", Quantity.VELOCITY),
+            State("v_E", "m/s", Quantity.VELOCITY),
+            *(State(f"q_nb{i}", "-", Quantity.ATTITUDE) for i in range(4)),
+            *(State(f"q_rb{i}", "-", Quantity.MISALIGNMENT) for i in self.s),
         )
         self._qc = np.array([p.accel_noise**2] * 3 + [p.gyro_noise**2] * 3)
         self._q_br = p.misalignment_noise**2

@@ -140,6 +140,8 @@ from navreplay.filters.base import (
     FilterContext,
     FilterParams,
     Innovation,
+    Quantity,
+    State,
     check_number,
 )
 from navreplay.filters.registry import register_filter
@@ -168,7 +170,8 @@ Z_H = slice(3, 6)
 """Magnetic-field residual rows of z and H."""
 N_MEAS = 6
 
-STATE_NAMES = ("q_e1", "q_e2", "q_e3")
+STATES = tuple(State(f"q_e{i}", "-", Quantity.ATTITUDE) for i in (1, 2, 3))
+"""Vector part of the attitude error quaternion."""
 
 # --------------------------------------------------------------------------------------------
 # datasheet values of the paper's Table 1 (docs/methods/vector-matching.md §3.1), converted once
@@ -557,13 +560,12 @@ class VectorMatchingFilter(Filter):
     requires = (StreamKind.IMU, StreamKind.MAG, StreamKind.GPS_VEL)
     required_columns = {StreamKind.IMU: ("f_b",)}  # an accelerometer: no gyro column needed
     Params = VectorMatchingParams
-    truth_keys: dict[str, str] = {}
+    states = STATES
 
     def __init__(self, params: VectorMatchingParams, context: FilterContext) -> None:
         super().__init__(params, context)
         self.params: VectorMatchingParams = params
         self.ref = reference(params, context.metadata.extra, context.metadata.initial_nav)
-        self.state_names = STATE_NAMES
         self._f: tuple[np.ndarray, np.ndarray] | None = None  # accelerometer block (t, f_b)
         self._m: tuple[float, np.ndarray] | None = None
         self._v: tuple[float, np.ndarray, np.ndarray] | None = None

@@ -276,30 +276,43 @@ class GenericDecoder:
         RecordingError
             If a message lacks a field of ``message`` or has sequences of different lengths.
         """
-        msgs = [self._decode(p) for p in payloads]
-        n = len(msgs)
-        out: dict[str, np.ndarray] = {
-            "t_ns": np.array(
-                [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in msgs],
-                dtype=np.int64,
-            ),
-            "frame_id": np.array([m.header.frame_id for m in msgs], dtype=object),
-        }
-        for leaf in message.leaves:
-            out[leaf.name] = _gather(msgs, leaf.paths, leaf.count, leaf.ctype)
-        seq = message.sequence
-        if seq is not None:
-            lengths = {len(_get(m, seq.paths[0])) for m in msgs}
-            if len(lengths) > 1:
-                raise RecordingError(
-                    f"{message.name}: field {seq.name!r} changes length between messages "
-                    f"({sorted(lengths)})"
-                )
-            width = lengths.pop() if lengths else 0
-            out[seq.name] = np.array(
-                [list(_get(m, seq.paths[0])) for m in msgs], dtype=np.float64
-            ).reshape(n, width)
-        return out
+        return fields_of_messages([self._decode(p) for p in payloads], message)
+
+
+def fields_of_messages(msgs: Sequence[Any], message: MessageType) -> dict[str, np.ndarray]:
+    """The fields of :func:`records_to_fields` gathered from decoded message objects (of
+    mcap-ros2-support or rosbags), by the leaf paths of ``message``.
+
+    Raises
+    ------
+    RecordingError
+        If the messages have sequences of different lengths; AttributeError if one lacks a
+        field.
+    """
+    msgs = list(msgs)
+    n = len(msgs)
+    out: dict[str, np.ndarray] = {
+        "t_ns": np.array(
+            [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in msgs],
+            dtype=np.int64,
+        ),
+        "frame_id": np.array([m.header.frame_id for m in msgs], dtype=object),
+    }
+    for leaf in message.leaves:
+        out[leaf.name] = _gather(msgs, leaf.paths, leaf.count, leaf.ctype)
+    seq = message.sequence
+    if seq is not None:
+        lengths = {len(_get(m, seq.paths[0])) for m in msgs}
+        if len(lengths) > 1:
+            raise RecordingError(
+                f"{message.name}: field {seq.name!r} changes length between messages "
+                f"({sorted(lengths)})"
+            )
+        width = lengths.pop() if lengths else 0
+        out[seq.name] = np.array(
+            [list(_get(m, seq.paths[0])) for m in msgs], dtype=np.float64
+        ).reshape(n, width)
+    return out
 
 
 def _get(obj: Any, path: str) -> Any:

@@ -16,12 +16,15 @@ Conventions on the wire (see docs/recording-format.md):
 Foreign recordings: REP-103 says frames are FLU / ENU unless their name ends in ``_frd`` /
 ``_ned``. IMU and magnetometer data in a frame not ending in ``_frd`` are turned to FRD
 (y and z negated), a twist in a frame not named ``ned`` / ``*_ned`` is taken as ENU and turned to
-NED; each such conversion is reported as a note.
+NED; each such conversion is reported as a note. A declared convention (``--frame imu=frd``,
+:class:`Convention`) replaces the guess from the name; :func:`assumed_convention` says which one
+applies and why.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import enum
 from collections.abc import Callable, Mapping
 
 import numpy as np
@@ -218,12 +221,18 @@ class Decoded:
         Frame of the decoded columns.
     notes : list[str]
         Conversions or drops worth a warning.
+    convention : Convention or None
+        Convention the wire vectors were read in (None: no frame-dependent vectors).
+    reason : str
+        Why that convention (declared, or the frame id's REP-103 meaning).
     """
 
     columns: dict[str, np.ndarray]
     keep: np.ndarray | None = None
     frame_id: str = ""
     notes: list[str] = dataclasses.field(default_factory=list)
+    convention: Convention | None = None
+    reason: str = ""
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
@@ -241,8 +250,79 @@ def _is_ned(frame_id: str) -> bool:
 _FLU_TO_FRD = np.array([1.0, -1.0, -1.0])
 
 
-def _body_vectors(d: Decoded, names: tuple[str, ...], frame_id: str, what: str) -> None:
-    if _is_frd(frame_id):
+class Convention(enum.StrEnum):
+    """Axis convention of a topic's vectors: body FLU / FRD, or navigation ENU / NED."""
+
+    FLU = "flu"
+    FRD = "frd"
+    ENU = "enu"
+    NED = "ned"
+
+
+BODY_KINDS = (StreamKind.IMU, StreamKind.MAG)
+"""Streams whose vectors are in a body frame (FLU or FRD on the wire)."""
+NAV_KINDS = (StreamKind.GPS_VEL,)
+"""Streams whose vectors are in a local-level frame (ENU or NED on the wire)."""
+
+
+def assumed_convention(
+    kind: StreamKind, frame_id: str, declared: Convention | str | None = None
+) -> tuple[Convention | None, str]:
+    """The convention a topic's vectors are read in, and why.
+
+    Parameters
+    ----------
+    kind : StreamKind
+    frame_id : str
+        ``header.frame_id`` of the topic.
+    declared : Convention or str, optional
+        The user's declaration (``--frame`` or ``[frames]``).
+
+    Returns
+    -------
+    convention : Convention or None
+        None for a stream without frame-dependent vectors.
+    reason : str
+
+    Raises
+    ------
+    ValueError
+        A declaration that does not fit the stream (a body stream declared ENU, ...).
+
+    >>> assumed_convention(StreamKind.IMU, "imu_link")
+    (<Convention.FLU: 'flu'>, "frame id 'imu_link' has no _frd suffix: FLU by REP-103")
+    >>> assumed_convention(StreamKind.IMU, "imu_link", "frd")[1]
+    'declared frd'
+    """
+    if kind in BODY_KINDS:
+        default, named, suffix, is_named = (Convention.FLU, Convention.FRD, "_frd",
+                                            _is_frd(frame_id))
+    elif kind in NAV_KINDS:
+        default, named, suffix, is_named = (Convention.ENU, Convention.NED, "_ned",
+                                            _is_ned(frame_id))
+    else:
+        if declared is not None:
+            raise ValueError(f"stream {kind.value} has no frame-dependent vectors to declare")
+        return None, "no frame-dependent vectors"
+    if declared is not None:
+        conv = Convention(str(declared).lower())
+        if conv not in (default, named):
+            raise ValueError(
+                f"stream {kind.value} can be {default.value} or {named.value}, not {conv.value}"
+            )
+        return conv, f"declared {conv.value}"
+    if is_named:
+        return named, f"frame id {frame_id!r} ends in {suffix} (REP-103)"
+    return default, (f"frame id {frame_id!r} has no {suffix} suffix: "
+                     f"{default.value.upper()} by REP-103")
+
+
+def _body_vectors(d: Decoded, names: tuple[str, ...], frame_id: str, kind: StreamKind,
+                  convention: Convention | None) -> None:
+    what = "IMU" if kind is StreamKind.IMU else "magnetometer"
+    conv, reason = assumed_convention(kind, frame_id, convention)
+    d.convention, d.reason = conv, reason
+    if conv is Convention.FRD:
         d.frame_id = frame_id
         return
     for name in names:
@@ -250,12 +330,13 @@ def _body_vectors(d: Decoded, names: tuple[str, ...], frame_id: str, what: str) 
             d.columns[name] = d.columns[name] * _FLU_TO_FRD
     d.frame_id = f"{frame_id}_frd" if frame_id else "frd"
     d.notes.append(
-        f"{what} frame {frame_id!r} taken as FLU (REP-103) and converted to FRD "
+        f"{what} frame {frame_id!r} taken as FLU ({reason}) and converted to FRD "
         f"(y and z negated); frame_id is now {d.frame_id!r}"
     )
 
 
-def _imu_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]) -> Decoded:
+def _imu_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn],
+        convention: Convention | None = None) -> Decoded:
     flag = np.asarray(f["angular_velocity_covariance"])[:, 0] == NOT_PROVIDED
     d = Decoded({"f_b": _f64(f["linear_acceleration"])})
     if flag.size and flag.all():
@@ -267,11 +348,12 @@ def _imu_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn
         )
     else:
         d.columns = {"omega_ib_b": _f64(f["angular_velocity"]), **d.columns}
-    _body_vectors(d, ("omega_ib_b", "f_b"), frame_id, "IMU")
+    _body_vectors(d, ("omega_ib_b", "f_b"), frame_id, StreamKind.IMU, convention)
     return d
 
 
-def _gps_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]) -> Decoded:
+def _gps_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn],
+        convention: Convention | None = None) -> Decoded:
     pos = np.stack(
         [np.radians(f["latitude"]), np.radians(f["longitude"]), np.asarray(f["altitude"])],
         axis=1,
@@ -292,43 +374,51 @@ def _gps_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn
     return d
 
 
-def _gps_vel_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]) -> Decoded:
+def _gps_vel_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn],
+        convention: Convention | None = None) -> Decoded:
     v = _f64(f["linear"])
     var = np.asarray(f["covariance"])
     d = Decoded({"v_n": v}, frame_id=frame_id)
     if var.size == 0 or (var != 0.0).any():
         d.columns["vel_sigma"] = _f64(np.sqrt(var))
-    if not _is_ned(frame_id):
+    d.convention, d.reason = assumed_convention(StreamKind.GPS_VEL, frame_id, convention)
+    if d.convention is Convention.ENU:
         d.columns["v_n"] = np.stack([v[:, 1], v[:, 0], -v[:, 2]], axis=1)
         if "vel_sigma" in d.columns:
             d.columns["vel_sigma"] = d.columns["vel_sigma"][:, [1, 0, 2]].copy()
         d.frame_id = "ned"
-        d.notes.append(f"velocity frame {frame_id!r} taken as ENU (REP-103) and converted to NED")
+        d.notes.append(f"velocity frame {frame_id!r} taken as ENU ({d.reason}) and converted "
+                       "to NED")
     return d
 
 
-def _mag_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]) -> Decoded:
+def _mag_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn],
+        convention: Convention | None = None) -> Decoded:
     d = Decoded({"m_b": _f64(f["magnetic_field"])})
-    _body_vectors(d, ("m_b",), frame_id, "magnetometer")
+    _body_vectors(d, ("m_b",), frame_id, StreamKind.MAG, convention)
     return d
 
 
 def _master_ins_columns(
-    f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]
+    f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn],
+    convention: Convention | None = None,
 ) -> Decoded:
     cols = {"euler": _f64(f["euler"]), "v_n": _f64(f["v_n"]), "pos": _f64(f["pos"])}
     return Decoded(cols, frame_id=frame_id)
 
 
-def _speed_log_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]) -> Decoded:
+def _speed_log_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn],
+        convention: Convention | None = None) -> Decoded:
     return Decoded({"rpm": _f64(f["rpm"])}, frame_id=frame_id)
 
 
-def _depth_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]) -> Decoded:
+def _depth_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn],
+        convention: Convention | None = None) -> Decoded:
     return Decoded({"depth": _f64(f["depth"])}, frame_id=frame_id)
 
 
-def _truth_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn]) -> Decoded:
+def _truth_columns(f: Mapping[str, np.ndarray], frame_id: str, aux: list[AuxColumn],
+        convention: Convention | None = None) -> Decoded:
     cols = {"pos": _f64(f["pos"]), "v_n": _f64(f["v_n"]), "q_nb": _f64(f["q_nb"])}
     flat = np.asarray(f["aux"])
     n, width = flat.shape
@@ -378,7 +468,7 @@ position covariance is reduced to its diagonal (E, N, U variances), the twist co
 linear diagonal, the gyro covariance to its "not provided" flag.
 """
 
-DECODERS: dict[StreamKind, Callable[[Mapping[str, np.ndarray], str, list[AuxColumn]], Decoded]] = {
+DECODERS: dict[StreamKind, Callable[..., Decoded]] = {
     StreamKind.IMU: _imu_columns,
     StreamKind.MASTER_INS: _master_ins_columns,
     StreamKind.GPS: _gps_columns,

@@ -17,3 +17,12 @@ class RecordingExistsError(RecordingError, FileExistsError):
 
 class RecordingWarning(UserWarning):
     """A recording was read, but not all of it is as expected (salvaged tail, gaps, ...)."""
+
+
+class SalvagedWarning(RecordingWarning):
+    """A damaged file was read up to the damage: ``data_complete`` tells whether every message
+    survived (only the summary was lost) or the messages after ``offset`` are lost."""
+
+    def __init__(self, message: str, *, data_complete: bool = False) -> None:
+        super().__init__(message)
+        self.data_complete = data_complete

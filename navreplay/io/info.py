@@ -20,6 +20,7 @@ from mcap.opcode import Opcode
 
 from navreplay.io.checks import when
 from navreplay.io.errors import RecordingError
+from navreplay.io.integrity import contents_problems
 from navreplay.io.mcapfile import DAMAGE_ERRORS, FileContents, walk
 from navreplay.io.metadata import decode_metadata
 from navreplay.io.schemas import KIND_BY_TYPE, METADATA_NAME, SPECS, normalize_type_name
@@ -226,6 +227,14 @@ def recording_info(path: str | os.PathLike[str]) -> RecordingInfo:
         d = contents.damage
         what = "summary or footer" if d.data_complete else "file"
         damage = f"{what} truncated or damaged at byte {d.offset} of {contents.size} ({d.reason})"
+    duration = meta.params.get("duration") if records else None
+    problems = contents_problems(
+        counts.count, counts.lo, counts.hi, {c: ch.topic for c, ch in contents.channels.items()},
+        contents.statistics if contents.intact else None, t0_ns,
+        float(duration) if isinstance(duration, int | float) else None,
+    )
+    if problems:
+        damage = "; ".join(([damage] if damage else []) + problems)
     return RecordingInfo(
         path=path,
         size_bytes=contents.size,

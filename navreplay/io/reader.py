@@ -20,8 +20,8 @@ from mcap.records import Channel, Schema
 
 from navreplay.io import cdr
 from navreplay.io.checks import first_problem, gap_report, when
-from navreplay.io.convert import DECODERS, REDUCE, AuxColumn
-from navreplay.io.errors import RecordingError, RecordingWarning
+from navreplay.io.convert import DECODERS, REDUCE, AuxColumn, Convention
+from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.mcapfile import FileContents, MessageBlock, walk
 from navreplay.io.metadata import decode_metadata
 from navreplay.io.schemas import (
@@ -37,6 +37,10 @@ from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 def _warn(message: str) -> None:
     warnings.warn(RecordingWarning(message), stacklevel=3)
+
+
+def _salvaged(data_complete: bool, message: str) -> None:
+    warnings.warn(SalvagedWarning(message, data_complete=data_complete), stacklevel=3)
 
 
 class _Topic:
@@ -263,6 +267,11 @@ class _Plan:
             if topic is not None:
                 topic.add(block, np.flatnonzero(channels == cid))
 
+    def others(self, kind: StreamKind, topic: str) -> tuple[str, ...]:
+        """The other topics that could have been stream ``kind``."""
+        return tuple(sorted(c.channel.topic for c in self.candidates.values()
+                            if c is not None and c.kind is kind and c.channel.topic != topic))
+
     def resolve(self, contents: FileContents, explicit: bool) -> dict[StreamKind, _Topic]:
         """Pick one topic per wanted kind; raise for a kind that cannot be mapped."""
         for cid in contents.channels:
@@ -272,29 +281,37 @@ class _Plan:
             if kind not in self.wanted:
                 continue
             cands = [c for c in self.candidates.values() if c is not None and c.kind is kind]
-            canonical = [c for c in cands if c.canonical]
-            spec = SPECS[kind]
-            for c in canonical:
-                if c.type_name != spec.message.name or c.encoding != MESSAGE_ENCODING:
-                    raise RecordingError(
-                        f"{self.where}: topic {c.channel.topic} has schema "
-                        f"{c.schema.name if c.schema else None!r} in {c.encoding!r} encoding; "
-                        f"stream {kind.value} needs {spec.message.name} in "
-                        f"{MESSAGE_ENCODING!r} encoding"
-                    )
-            pick = canonical or cands
-            if len(pick) == 1:
-                chosen[kind] = self.topics[pick[0].channel.id]
-            elif len(pick) > 1:
-                names = ", ".join(sorted(c.channel.topic for c in pick))
-                message = (
-                    f"{self.where}: several topics could be stream {kind.value} ({names}); "
-                    "name one with read_recording(..., topics={...})"
-                )
-                if explicit:
-                    raise RecordingError(message)
-                _warn(message + "; stream skipped")
+            i = pick_topic(self.where, kind, [(c.channel.topic, c.type_name, c.encoding,
+                                               c.canonical) for c in cands], explicit)
+            if i is not None:
+                chosen[kind] = self.topics[cands[i].channel.id]
         return chosen
+
+
+def pick_topic(where: str, kind: StreamKind, cands: list[tuple[str, str, str, bool]],
+               explicit: bool) -> int | None:
+    """Index of the topic that feeds stream ``kind`` among candidates (topic, type, encoding,
+    named-for-it), or None; several equally good ones are an error when ``explicit``, else a
+    warning (the stream is skipped)."""
+    spec = SPECS[kind]
+    for topic, type_name, encoding, canonical in cands:
+        if canonical and (type_name != spec.message.name or encoding != MESSAGE_ENCODING):
+            raise RecordingError(
+                f"{where}: topic {topic} has schema {type_name or None!r} in {encoding!r} "
+                f"encoding; stream {kind.value} needs {spec.message.name} in "
+                f"{MESSAGE_ENCODING!r} encoding"
+            )
+    pick = [i for i, c in enumerate(cands) if c[3]] or list(range(len(cands)))
+    if len(pick) == 1:
+        return pick[0]
+    if len(pick) > 1:
+        names = ", ".join(sorted(cands[i][0] for i in pick))
+        message = (f"{where}: several topics could be stream {kind.value} ({names}); "
+                   f"name one with --topic {kind.value}=TOPIC (or a [topics] table)")
+        if explicit:
+            raise RecordingError(message)
+        _warn(message + "; stream skipped")
+    return None
 
 
 def _describe_topics(contents: FileContents) -> str:
@@ -305,19 +322,61 @@ def _describe_topics(contents: FileContents) -> str:
     return ", ".join(items) or "no topics"
 
 
+@dataclasses.dataclass(frozen=True)
+class TopicSource:
+    """Where a stream came from and how its vectors were read.
+
+    Attributes
+    ----------
+    topic : str
+    type_name : str
+        Message type (``pkg/msg/Type``).
+    frame_id : str
+        ``header.frame_id`` on the wire (of the first message).
+    convention : Convention or None
+        Axis convention the vectors were read in (None: no frame-dependent vectors).
+    reason : str
+        Why (declared by the user, or the frame id's REP-103 meaning).
+    picked_from : tuple of str
+        Other topics that could have fed the stream (empty when it was the only one).
+    """
+
+    topic: str
+    type_name: str
+    frame_id: str
+    convention: Convention | None
+    reason: str
+    picked_from: tuple[str, ...] = ()
+
+
 def read_recording(
     path: str | os.PathLike[str],
     *,
     kinds: Iterable[StreamKind | str] | None = None,
     validate: bool = True,
     topics: Mapping[StreamKind | str, str] | None = None,
+    frames: Mapping[StreamKind | str, Convention | str] | None = None,
 ) -> Recording:
+    """Read a recording into columnar streams (see :func:`read_streams`)."""
+    return read_streams(path, kinds=kinds, validate=validate, topics=topics, frames=frames)[0]
+
+
+def read_streams(
+    path: str | os.PathLike[str],
+    *,
+    kinds: Iterable[StreamKind | str] | None = None,
+    validate: bool = True,
+    topics: Mapping[StreamKind | str, str] | None = None,
+    frames: Mapping[StreamKind | str, Convention | str] | None = None,
+) -> tuple[Recording, dict[StreamKind, TopicSource]]:
     """Read a recording into columnar streams.
 
     Parameters
     ----------
     path : path-like
-        An MCAP file (ROS 2 profile, CDR messages).
+        An MCAP file (ROS 2 profile, CDR messages), read in bulk; or a rosbag2 folder (its
+        ``metadata.yaml``; MCAP or sqlite3 storage, split files) or a ``.db3`` file, read with
+        ``rosbags`` (:mod:`navreplay.io.rosbag`).
     kinds : iterable of StreamKind or str, optional
         Streams to read (all known ones when None). A kind asked for and absent is an error.
     validate : bool
@@ -327,6 +386,9 @@ def read_recording(
     topics : mapping of StreamKind or str to str, optional
         Topic to read for a kind, overriding :data:`~navreplay.io.schemas.TOPICS` (for recordings
         from elsewhere).
+    frames : mapping of StreamKind or str to Convention or str, optional
+        Declared axis convention of a stream's topic (``flu``/``frd`` for imu and mag,
+        ``enu``/``ned`` for gps_vel), replacing the guess from the frame id.
 
     Returns
     -------
@@ -334,6 +396,8 @@ def read_recording(
         Streams in :class:`StreamKind` order; ``t_ns`` are the header stamps [ns]. The metadata is
         the file's ``navreplay`` record, or ``Metadata()`` for a recording without one, whose
         ``t0_ns`` is then its first message's log time.
+    sources : dict[StreamKind, TopicSource]
+        Topic, frame id and convention of each stream.
 
     Raises
     ------
@@ -353,11 +417,12 @@ def read_recording(
     where = str(path)
     explicit = kinds is not None
     wanted = set(SPECS) if kinds is None else {StreamKind(k) for k in kinds}
-    topic_kinds = {spec.topic: kind for kind, spec in SPECS.items()}
-    for kind, topic in (topics or {}).items():
-        kind = StreamKind(kind)
-        topic_kinds = {t: k for t, k in topic_kinds.items() if k is not kind}
-        topic_kinds[topic] = kind
+    topic_kinds = topic_map(topics)
+    declared = {StreamKind(k): Convention(str(v).lower()) for k, v in (frames or {}).items()}
+    if is_rosbag(path):
+        from navreplay.io.rosbag import read_rosbag
+
+        return read_rosbag(path, wanted, explicit, topic_kinds, declared, validate, topics)
     plan = _Plan(where, wanted, topic_kinds)
     try:
         f = open(path, "rb")  # noqa: SIM115 - closed below
@@ -377,18 +442,20 @@ def read_recording(
     if damage is not None:
         last = contents.last_log_time
         if damage.data_complete:
-            _warn(
-                f"{where}: summary or footer missing or damaged at byte {damage.offset} of "
+            _salvaged(
+                True, f"{where}: summary or footer missing or damaged at byte {damage.offset} of "
                 f"{contents.size} ({damage.reason}); all {contents.message_count} messages "
                 f"were recovered, the last at {when(last, t0_ns)}"
             )
         else:
-            _warn(
-                f"{where}: file is truncated or damaged at byte {damage.offset} of "
+            _salvaged(
+                False, f"{where}: file is truncated or damaged at byte {damage.offset} of "
                 f"{contents.size} ({damage.reason}); salvaged {contents.message_count} messages, "
                 f"the last good one at {when(last, t0_ns)}; anything after is lost"
             )
     chosen = plan.resolve(contents, explicit)
+    check_named_topics(where, topics, {k: t.channel.topic for k, t in chosen.items()},
+                       _describe_topics(contents))
     if explicit:
         missing = [k.value for k in SPECS if k in wanted and k not in chosen]
         if missing:
@@ -397,9 +464,43 @@ def read_recording(
                 f"{_describe_topics(contents)}"
             )
     streams: dict[StreamKind, Stream] = {}
+    sources: dict[StreamKind, TopicSource] = {}
     for kind, topic in chosen.items():
-        streams[kind] = _stream(kind, topic, aux, t0_ns, validate)
-    return Recording(streams=streams, metadata=meta, t0_ns=t0_ns)
+        frame_id = topic.first_frame_id or SPECS[kind].frame_id
+        if len(topic.frame_ids) > 1:
+            _warn(f"{topic.label}: frame_id changes between messages "
+                  f"({sorted(topic.frame_ids)}); using {frame_id!r}")
+        streams[kind], sources[kind] = build_stream(
+            kind, topic.finish(), frame_id, topic.label, aux, t0_ns, validate,
+            declared.get(kind), topic.channel.topic, plan.others(kind, topic.channel.topic))
+    return Recording(streams=streams, metadata=meta, t0_ns=t0_ns), sources
+
+
+def topic_map(topics: Mapping[StreamKind | str, str] | None) -> dict[str, StreamKind]:
+    """Topic -> stream kind: the canonical topics, with ``topics`` (kind -> topic) replacing
+    them kind by kind."""
+    topic_kinds = {spec.topic: kind for kind, spec in SPECS.items()}
+    for kind, topic in (topics or {}).items():
+        kind = StreamKind(kind)
+        topic_kinds = {t: k for t, k in topic_kinds.items() if k is not kind}
+        topic_kinds[topic] = kind
+    return topic_kinds
+
+
+def check_named_topics(where: str, topics: Mapping[StreamKind | str, str] | None,
+                       chosen: Mapping[StreamKind, str], available: str) -> None:
+    """Raise when a topic named for a stream was not found (or not usable)."""
+    for kind, topic in (topics or {}).items():
+        if chosen.get(StreamKind(kind)) != topic:
+            raise RecordingError(
+                f"{where}: topic {topic} named for stream {StreamKind(kind).value} is not in "
+                f"the file; it has {available}"
+            )
+
+
+def is_rosbag(path: Path) -> bool:
+    """Whether ``path`` is a rosbag2 folder, its metadata.yaml, or a sqlite3 ``.db3`` file."""
+    return path.is_dir() or path.suffix == ".db3" or path.name == "metadata.yaml"
 
 
 def _metadata(contents: FileContents, where: str) -> tuple[Metadata, int, list[AuxColumn]]:
@@ -416,33 +517,38 @@ def _metadata(contents: FileContents, where: str) -> tuple[Metadata, int, list[A
     return meta, t0_ns, aux
 
 
-def _stream(
-    kind: StreamKind, topic: _Topic, aux: list[AuxColumn], t0_ns: int, validate: bool
-) -> Stream:
-    fields = topic.finish()
-    frame_id = topic.first_frame_id or SPECS[kind].frame_id
-    if len(topic.frame_ids) > 1:
-        _warn(
-            f"{topic.label}: frame_id changes between messages ({sorted(topic.frame_ids)}); "
-            f"using {frame_id!r}"
-        )
+def build_stream(
+    kind: StreamKind,
+    fields: Mapping[str, np.ndarray],
+    frame_id: str,
+    label: str,
+    aux: list[AuxColumn],
+    t0_ns: int,
+    validate: bool,
+    convention: Convention | None = None,
+    topic: str = "",
+    others: tuple[str, ...] = (),
+) -> tuple[Stream, TopicSource]:
+    """Decoded message fields of one topic -> a checked stream (conversions reported)."""
     try:
-        decoded = DECODERS[kind](fields, frame_id, aux)
-    except RecordingError as exc:
-        raise RecordingError(f"{topic.label}: {exc}") from None
+        decoded = DECODERS[kind](fields, frame_id, aux, convention)
+    except (RecordingError, ValueError) as exc:
+        raise RecordingError(f"{label}: {exc}") from None
     t_ns = fields["t_ns"]
     columns = decoded.columns
     if decoded.keep is not None:
         t_ns = t_ns[decoded.keep]
         columns = {k: v[decoded.keep] for k, v in columns.items()}
     for note in decoded.notes:
-        _warn(f"{topic.label}: {note}")
+        _warn(f"{label}: {note}")
     stream = Stream(kind, t_ns, columns, decoded.frame_id or frame_id)
     if validate:
         problem = first_problem(stream, t0_ns)
         if problem:
-            raise RecordingError(f"{topic.label}: {problem}")
+            raise RecordingError(f"{label}: {problem}")
         gaps = gap_report(stream, t0_ns)
         if gaps:
-            _warn(f"{topic.label}: {gaps}")
-    return stream
+            _warn(f"{label}: {gaps}")
+    source = TopicSource(topic, SPECS[kind].message.name, frame_id, decoded.convention,
+                         decoded.reason, others)
+    return stream, source

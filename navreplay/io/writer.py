@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-import secrets
 from pathlib import Path
 from typing import BinaryIO
 
@@ -33,6 +32,7 @@ from navreplay.io.schemas import (
     SPECS,
     TopicSpec,
 )
+from navreplay.outputs import release, temporary_path
 from navreplay.streams import Recording, Stream, StreamKind
 
 WINDOW = 16_384
@@ -196,19 +196,17 @@ def write_recording(
     plan = _plan(recording, where, validate)
     if target.exists() and not force:
         raise RecordingExistsError(f"{where}: file exists; pass force=True to replace it")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.part")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+    tmp = temporary_path(target)
     try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0),
+                     0o666)
         with os.fdopen(fd, "wb") as out:
             _write_mcap(out, recording, plan)
             out.flush()
             os.fsync(out.fileno())
         _commit(tmp, target, force)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-        raise
+    finally:
+        release(tmp)
     _fsync_dir(target.parent)
     return target
 

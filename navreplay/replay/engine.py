@@ -30,11 +30,11 @@ Examples
 --------
 >>> import numpy as np
 >>> from navreplay.streams import Metadata, Recording, Stream, StreamKind
->>> from navreplay.filters.base import Estimate, Filter
+>>> from navreplay.filters.base import Estimate, Filter, Quantity, State
 >>> class Count(Filter):
 ...     name = "count"
 ...     requires = (StreamKind.IMU,)
-...     state_names = ("n",)
+...     states = (State("n", "-", Quantity.OTHER),)
 ...     def __init__(self, params, context):
 ...         super().__init__(params, context)
 ...         self.n, self.t = 0, 0.0
@@ -64,9 +64,17 @@ from typing import Any
 import numpy as np
 
 from navreplay import params as _params
-from navreplay.filters.base import Estimate, Filter, FilterContext, FilterParams
+from navreplay.filters.base import (
+    Estimate,
+    Filter,
+    FilterContext,
+    FilterParams,
+    State,
+    check_states,
+)
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.io.errors import RecordingError
+from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.streams import Recording, Stream, StreamKind
 
@@ -94,8 +102,26 @@ class ReplayError(RuntimeError):
     """A replay that cannot start or cannot go on (base of the replay errors)."""
 
 
+class FilterOutputError(ReplayError):
+    """A filter handed back an estimate or innovation that breaks the contract of
+    :mod:`navreplay.filters.base` (wrong length, covariance not symmetric PSD, non-finite)."""
+
+
+class FilterFailedError(ReplayError):
+    """A filter raised inside ``propagate``, ``update`` or ``estimate``; the
+    message names the filter, the recording and the time, the original is the ``__cause__``."""
+
+
+class _BadOutput(Exception):
+    """An invalid estimate, before the engine names the filter, recording and time."""
+
+
 class MissingStreamError(ReplayError):
     """The recording lacks a stream (or a stream lacks a column) that the filter requires."""
+
+
+class FilterStartError(ReplayError, ValueError):
+    """The recording cannot start the filter (no initial solution, no sigma for it, ...)."""
 
 
 class InvalidRecordingError(ReplayError, RecordingError):
@@ -336,6 +362,12 @@ class _Columns:
 
     def add(self, est: Estimate) -> None:
         m = self.m
+        n = self.x.shape[1]
+        if np.shape(est.x) != (n,) or np.shape(est.P) != (n, n):
+            raise _BadOutput(
+                f"x has shape {np.shape(est.x)} and P {np.shape(est.P)}; the filter declares "
+                f"{n} states"
+            )
         if m == self.cap:
             self._grow()
         self.t[m] = est.t
@@ -395,12 +427,39 @@ class _Columns:
         )
 
 
-def _innovation_series(items: list[tuple[float, np.ndarray, np.ndarray]]) -> InnovationSeries:
+def _innovation_series(
+    items: list[tuple[float, np.ndarray, np.ndarray]],
+) -> tuple[InnovationSeries, tuple[int, str] | None]:
+    """The series of one measurement and its first invalid update (index, what), if any:
+    nu (m,) and S (m, m) finite, S symmetric positive semi-definite and not singular."""
     t = np.array([it[0] for it in items], dtype=np.float64)
+    m = np.shape(items[0][1])
+    bad_shape = next((k for k, it in enumerate(items)
+                      if np.shape(it[1]) != m or np.shape(it[2]) != m + m), None)
+    if len(m) != 1 or bad_shape is not None:
+        k = bad_shape or 0
+        empty = InnovationSeries(t=t, nu=np.zeros((len(t), 0)), S=np.zeros((len(t), 0, 0)),
+                                 nis=np.zeros(len(t)))
+        return empty, (k, f"nu has shape {np.shape(items[k][1])} and S "
+                          f"{np.shape(items[k][2])}; expected (m,) and (m, m)")
     nu = np.stack([np.asarray(it[1], dtype=np.float64) for it in items])
     S = np.stack([np.asarray(it[2], dtype=np.float64) for it in items])
-    nis = np.einsum("ki,ki->k", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-    return InnovationSeries(t=t, nu=nu, S=S, nis=nis)
+    nan = np.full(len(t), np.nan)
+    bad_nu = ~np.isfinite(nu).all(axis=1)
+    problem = covariance_problem(S)
+    first: tuple[int, str] | None = None
+    if bad_nu.any():
+        first = (int(np.argmax(bad_nu)), "nu is not finite")
+    if problem is not None and (first is None or problem[0] < first[0]):
+        first = (problem[0], problem[1].replace("covariance P", "S"))
+    if first is not None:
+        return InnovationSeries(t=t, nu=nu, S=S, nis=nan), first
+    try:
+        nis = np.einsum("ki,ki->k", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+    except np.linalg.LinAlgError:
+        k = int(np.argmin(np.abs(np.linalg.det(S))))
+        return InnovationSeries(t=t, nu=nu, S=S, nis=nan), (k, "S is singular")
+    return InnovationSeries(t=t, nu=nu, S=S, nis=nis), None
 
 
 # --------------------------------------------------------------------------------------------
@@ -426,6 +485,7 @@ def replay(
     progress: Progress | None = None,
     observer: Observer | None = None,
     observe_interval: float = 0.25,
+    max_imu_gap: float | None = None,
 ) -> RunResult:
     """Replay one filter over one recording.
 
@@ -459,6 +519,9 @@ def replay(
         the end (for live sinks; the arrays are views valid during the call only).
     observe_interval : float
         Wall time between observer calls [s].
+    max_imu_gap : float, optional
+        Longest IMU gap [s] the filter may bridge (:mod:`navreplay.replay.gaps`); default
+        :data:`navreplay.replay.gaps.MAX_IMU_GAP`.
 
     Returns
     -------
@@ -489,7 +552,13 @@ def replay(
         t0_ns=recording.t0_ns,
         streams=frozenset(recording.kinds()),
     )
-    filt = filter_cls(p, context)
+    try:
+        filt = filter_cls(p, context)
+    except ValueError as e:  # the recording cannot start this filter (e.g. no initial_nav)
+        raise FilterStartError(f"{source}: {e}") from None
+    states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
+    names = tuple(st.name for st in states)
+    scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
     plan = plan_events(recording, output_rate, consumed_streams(filter_cls))
     t0_ns = recording.t0_ns
 
@@ -503,6 +572,8 @@ def replay(
         imu_t = np.zeros(0)
         imu_cols = []
         n_imu = 0
+    feeder = _imu_feeder(filt, imu_t, imu_cols, max_imu_gap, source,
+                         StreamKind.IMU in filter_cls.requires)
     aiding: list[Stream] = [recording[k] for k in plan.kinds]
     sample_cols = [list(s.columns.items()) for s in aiding]
     ev_t = ((plan.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9).tolist()
@@ -513,7 +584,6 @@ def replay(
     ev_record = np.append(plan.t_ns[1:] != plan.t_ns[:-1], True).tolist()
     kinds = plan.kinds
 
-    propagate = filt.propagate
     update = filt.update
     estimate = filt.estimate
     innovations: dict[str, list[tuple[float, np.ndarray, np.ndarray]]] = {}
@@ -526,7 +596,8 @@ def replay(
         label=label,
         recording=source,
         t0_ns=t0_ns,
-        state_names=(),
+        states=states,
+        scored_extras=scored_extras,
     )
 
     wall0 = time.perf_counter()
@@ -534,7 +605,6 @@ def replay(
     next_observe = wall0 + observe_interval
     slow = pacing is not None or observer is not None or progress is not None
 
-    start = 0
     i = -1
     t_now = 0.0
     try:
@@ -546,12 +616,10 @@ def replay(
             else:  # the IMU samples after the last event, then a last estimate
                 end = n_imu
                 c = TICK
-                if end == start:
+                if end == feeder.start:
                     break
                 t_now = float(imu_t[end - 1])
-            if end > start:
-                propagate(imu_t[start:end], {k: v[start:end] for k, v in imu_cols})
-                start = end
+            feeder.advance(end, t_now)
             if c != TICK:
                 r = ev_row[i]
                 inn = update(kinds[c], t_now, {k: v[r] for k, v in sample_cols[c]})
@@ -561,11 +629,16 @@ def replay(
             est = estimate() if i == n_events or ev_record[i] else None
             if est is not None:
                 if columns is None:
+                    if np.shape(est.x) != (len(states),):
+                        raise _BadOutput(
+                            f"x has shape {np.shape(est.x)}; the filter declares "
+                            f"{len(states)} states ({', '.join(names) or 'none'}; set "
+                            "Filter.states)"
+                        )
                     columns = _Columns(est, upper)
-                    meta["state_names"] = tuple(getattr(filt, "state_names", ()))
                 columns.add(est)
                 if columns.m - checked >= _CHECK_EVERY:
-                    _check_finite(columns, checked, label, source)
+                    _check_finite(columns, checked, label, source, names)
                     checked = columns.m
             if slow:
                 if pacing is not None:
@@ -583,20 +656,31 @@ def replay(
         raise _diverged(label, source, e.t if e.t is not None else t_now, str(e)) from e
     except (np.linalg.LinAlgError, FloatingPointError) as e:
         raise _diverged(label, source, t_now, f"{type(e).__name__}: {e}") from e
-    except Exception as e:
-        e.add_note(f"while replaying filter {label!r} over {source} at t = {t_now:.6f} s")
+    except FilterOutputError:
         raise
+    except _BadOutput as e:
+        raise _invalid(label, source, t_now, str(e)) from None
+    except Exception as e:
+        raise FilterFailedError(
+            f"filter {label!r} failed on {source} at t = {t_now:.3f} s: {_one_line(e)}"
+        ) from e
 
     if columns is not None:
-        _check_finite(columns, checked, label, source)
+        _check_finite(columns, checked, label, source, names)
     if observer is not None and columns is not None:
         observer(columns.view(**meta))
     if progress is not None:
         progress(n_events, n_events)
 
-    inn_series = {name: _innovation_series(items) for name, items in innovations.items()}
+    inn_series = {}
+    for name, items in innovations.items():
+        series, bad = _innovation_series(items)
+        if bad is not None:
+            raise _invalid(label, source, float(series.t[bad[0]]),
+                           f"innovation {name!r}: {bad[1]}")
+        inn_series[name] = series
     if columns is None:
-        n = len(getattr(filt, "state_names", ()))
+        n = len(states)
         return RunResult(
             t=np.zeros(0), x=np.zeros((0, n)), P=np.zeros((0, n, n)),
             innovations=inn_series, **meta,
@@ -604,12 +688,93 @@ def replay(
     return columns.result(innovations=inn_series, **meta)
 
 
-def _check_finite(columns: _Columns, start: int, label: str, source: str) -> None:
+def _imu_feeder(filt: Filter, imu_t: np.ndarray, imu_cols: list[tuple[str, np.ndarray]],
+                max_gap: float | None, source: str, required: bool) -> ImuFeeder:
+    """The IMU block feeder of a replay; refuses IMU streams too short or with too long gaps."""
+    where = f"{source}: stream {StreamKind.IMU}"
+    gaps, nominal = np.zeros(0, np.int64), 0.0
+    if required or len(imu_t) >= MIN_IMU_SAMPLES:
+        try:
+            gaps, nominal = find_gaps(imu_t, max_gap, where)
+        except ValueError as e:
+            raise ReplayError(str(e)) from None
+    return ImuFeeder(filt.propagate, getattr(filt, "bridge_imu_gap", None), imu_t, imu_cols,
+                     gaps, nominal)
+
+
+PSD_TOLERANCE = 1e-6
+"""Tolerance of the covariance checks, relative to the standard deviations: a covariance is
+accepted as symmetric when ``|P_ij - P_ji| <= tol sqrt(P_ii P_jj)`` and as positive
+semi-definite when the smallest eigenvalue of its correlation matrix is ``>= -tol``."""
+
+
+def covariance_problem(P: np.ndarray, names: tuple[str, ...] | None = None
+                       ) -> tuple[int, str] | None:
+    """The first of a stack of covariances (K, n, n) that is not finite, symmetric and positive
+    semi-definite within :data:`PSD_TOLERANCE`, and what is wrong; None if all are.
+
+    ``names`` name the rows (states) in the message."""
+    K = P.shape[0]
+    if K == 0 or P.shape[1] == 0:
+        return None
+    what = (lambda j: names[j]) if names else (lambda j: f"[{j}]")
+    flat = P.reshape(K, -1)
+    finite = np.isfinite(flat).all(axis=1)
+    d = np.diagonal(P, axis1=1, axis2=2)
+    neg = (d < 0.0) & finite[:, None]
+    scale = np.sqrt(np.where(d > 0.0, d, 1.0))
+    with np.errstate(invalid="ignore", over="ignore"):
+        C = P / (scale[:, :, None] * scale[:, None, :])
+        asym = np.abs(C - C.transpose(0, 2, 1)).max(axis=(1, 2)) > PSD_TOLERANCE
+    bad_rows = ~finite | neg.any(axis=1) | asym
+    first: tuple[int, str] | None = None
+    if bad_rows.any():
+        k = int(np.argmax(bad_rows))
+        if not finite[k]:
+            first = (k, "covariance P is not finite")
+        elif neg[k].any():
+            j = int(np.argmax(neg[k]))
+            first = (k, f"covariance P has a negative variance {P[k, j, j]:.3g} of state "
+                        f"{what(j)}")
+        else:
+            first = (k, "covariance P is not symmetric")
+    ok = ~bad_rows if first is None else ~bad_rows & (np.arange(K) < first[0])
+    if ok.any():
+        idx = np.flatnonzero(ok)
+        sym = 0.5 * (C[idx] + C[idx].transpose(0, 2, 1))
+        try:  # all positive definite after a shift of the tolerance: the common, cheap case
+            np.linalg.cholesky(sym + PSD_TOLERANCE * np.eye(sym.shape[1]))
+            return first
+        except np.linalg.LinAlgError:
+            pass
+        lam = np.linalg.eigvalsh(sym)[:, 0]
+        low = lam < -PSD_TOLERANCE
+        if low.any():
+            k = int(idx[np.argmax(low)])
+            first = (k, f"covariance P is not positive semi-definite (smallest eigenvalue of "
+                        f"its correlation matrix {lam[np.argmax(low)]:.3g})")
+    return first
+
+
+def _check_finite(columns: _Columns, start: int, label: str, source: str,
+                  names: tuple[str, ...]) -> None:
+    """Check rows [start, m) of the estimates: finite, P symmetric PSD."""
     bad = columns.first_nonfinite(start)
+    stop = columns.m if bad is None else bad[0]
+    cov = covariance_problem(columns.P[start:stop], names)
+    if cov is not None:
+        raise _invalid(label, source, float(columns.t[start + cov[0]]), cov[1])
     if bad is not None:
-        i, what = bad
-        t = float(columns.t[i])
-        raise _diverged(label, source, t, f"non-finite {what} estimate")
+        raise _diverged(label, source, float(columns.t[bad[0]]), f"non-finite {bad[1]} estimate")
+
+
+def _invalid(label: str, source: str, t: float, why: str) -> FilterOutputError:
+    return FilterOutputError(f"filter {label!r} on {source} at t = {t:.3f} s: {why}")
+
+
+def _one_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
 
 
 def _diverged(label: str, source: str, t: float, why: str) -> FilterDivergedError:

@@ -35,12 +35,13 @@ from __future__ import annotations
 import collections
 import concurrent.futures as cf
 import dataclasses
-import signal
+import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
+from navreplay import lifecycle
 from navreplay.filters.base import Filter
 from navreplay.filters.registry import load_filter
 from navreplay.replay.engine import build_params, check_streams, replay
@@ -299,12 +300,8 @@ def make_executor(workers: int) -> Executor:
         raise ValueError(f"workers must be at least 1, got {workers}")
     if workers == 1:
         return InlineExecutor()
-    return cf.ProcessPoolExecutor(max_workers=workers, initializer=_ignore_sigint)
-
-
-def _ignore_sigint() -> None:
-    """Workers leave Ctrl-C to the parent, which cancels the campaign and shuts the pool down."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return cf.ProcessPoolExecutor(max_workers=workers, initializer=lifecycle.worker_init,
+                                  initargs=(os.getpid(),))
 
 
 # --------------------------------------------------------------------------------------------
@@ -430,6 +427,7 @@ def run_ensemble(
                 ex.shutdown(wait=True)
             elif isinstance(ex, cf.Executor):
                 ex.shutdown(wait=False, cancel_futures=True)
+                lifecycle.stop_workers(ex)
             else:
                 ex.shutdown(wait=False)
     return EnsembleRun(done - len(failed), failed, time.perf_counter() - t0, run_seconds)

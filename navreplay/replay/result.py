@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 
+from navreplay.filters.base import State, check_states
+
 
 @dataclasses.dataclass
 class InnovationSeries:
@@ -31,7 +33,9 @@ class RunResult:
     t0_ns : int
         Recording start [ns]; ``t`` is relative to it.
     t : (M,) [s]
-    state_names : tuple[str, ...]
+    states : tuple[State, ...]
+        The filter's declarations of the entries of ``x`` (name, unit, quantity, truth, NEES):
+        what metrics and the view read.
     x : (M, n)
     P : (M, n, n)
     nav_pos : (M, 3) or None   latitude, longitude [rad], height [m]
@@ -39,6 +43,8 @@ class RunResult:
     nav_q_nb : (M, 4) or None
     extras : dict[str, (M, ...)]
     innovations : dict[str, InnovationSeries]
+    scored_extras : tuple[State, ...]
+        Declarations of the ``extras`` that are scored.
     """
 
     filter_name: str
@@ -46,7 +52,7 @@ class RunResult:
     recording: str
     t0_ns: int
     t: np.ndarray
-    state_names: tuple[str, ...]
+    states: tuple[State, ...]
     x: np.ndarray
     P: np.ndarray
     nav_pos: np.ndarray | None = None
@@ -54,6 +60,16 @@ class RunResult:
     nav_q_nb: np.ndarray | None = None
     extras: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     innovations: dict[str, InnovationSeries] = dataclasses.field(default_factory=dict)
+    scored_extras: tuple[State, ...] = ()
+
+    def __post_init__(self) -> None:
+        self.states = check_states(self.states, f"{self.label}: states")
+        self.scored_extras = check_states(self.scored_extras, f"{self.label}: scored_extras")
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """Names of the states, in order."""
+        return tuple(s.name for s in self.states)
 
     @property
     def sigma(self) -> np.ndarray:

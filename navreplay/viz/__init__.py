@@ -9,35 +9,40 @@ Open a sink, log truth, runs and ensembles, close::
             sink.log_run(result, truth=recording)   # overlaid in the same plots
     # out.rrd appears only now, complete, with the default blueprint inside
 
-Targets (:mod:`navreplay.viz.targets`): :class:`Save` (default, headless, atomic),
-:class:`Spawn`, :class:`Connect`, :class:`Serve`; the last three check that the viewer can be
-reached first and raise :class:`VizUnavailableError`. Entity tree, units and blueprint:
-:mod:`navreplay.viz.sink` and docs/rerun-view.md.
+Modules: :mod:`~navreplay.viz.targets` (:class:`Save`, default, headless, atomic;
+:class:`Spawn`, :class:`Connect`, :class:`Serve`, which check that the viewer can be reached
+first and raise :class:`VizUnavailableError`), :mod:`~navreplay.viz.connect` (opening a sink on
+a target), :mod:`~navreplay.viz.sink` (entity tree), :mod:`~navreplay.viz.ensemble` (Monte Carlo
+plots), :mod:`~navreplay.viz.blueprint` (default layout), :mod:`~navreplay.viz.naming` (units
+and tabs), :mod:`~navreplay.viz.options` (a job's output choice; imports no rerun) and
+docs/rerun-view.md. The names below are imported (with rerun) on first use.
 """
 
-from navreplay.viz.blueprint import Catalog, build_blueprint
-from navreplay.viz.convert import chi2_bounds
-from navreplay.viz.sink import APPLICATION_ID, Sink, open_sink
-from navreplay.viz.targets import (
-    Connect,
-    Save,
-    Serve,
-    Spawn,
-    Target,
-    VizUnavailableError,
-)
+from __future__ import annotations
 
-__all__ = [
-    "APPLICATION_ID",
-    "Catalog",
-    "Connect",
-    "Save",
-    "Serve",
-    "Sink",
-    "Spawn",
-    "Target",
-    "VizUnavailableError",
-    "build_blueprint",
-    "chi2_bounds",
-    "open_sink",
-]
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "APPLICATION_ID": "navreplay.viz.sink",
+    "Sink": "navreplay.viz.sink",
+    "open_sink": "navreplay.viz.connect",
+    "Catalog": "navreplay.viz.blueprint",
+    "build_blueprint": "navreplay.viz.blueprint",
+    "chi2_bounds": "navreplay.viz.convert",
+    "Connect": "navreplay.viz.targets",
+    "Save": "navreplay.viz.targets",
+    "Serve": "navreplay.viz.targets",
+    "Spawn": "navreplay.viz.targets",
+    "Target": "navreplay.viz.targets",
+    "VizUnavailableError": "navreplay.viz.targets",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'navreplay.viz' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)

@@ -21,7 +21,6 @@ from navreplay.geo import (
     quat_to_euler,
     quat_wxyz_to_xyzw,
     radii,
-    wrap_angle,
 )
 
 
@@ -100,25 +99,6 @@ def nav_values(nav: NavColumns, ref: np.ndarray) -> dict[str, np.ndarray]:
         "roll": e[:, 0], "pitch": e[:, 1], "yaw": e[:, 2],
         "v_N": nav.v_n[:, 0], "v_E": nav.v_n[:, 1], "v_D": nav.v_n[:, 2],
         "p_N": p[:, 0], "p_E": p[:, 1], "p_D": p[:, 2],
-    }  # fmt: skip
-
-
-def nav_errors(est: NavColumns, truth: NavColumns) -> dict[str, np.ndarray]:
-    """Estimate minus truth at the same times (SI).
-
-    Position errors are the NED offset [m] of the estimate from the true position; attitude
-    errors are differences of ZYX Euler angles [rad], wrapped to [-pi, pi).
-    """
-    d_ned = lla_to_ned_offset(
-        truth.pos[:, 0], truth.pos[:, 1], truth.pos[:, 2],
-        est.pos[:, 0], est.pos[:, 1], est.pos[:, 2],
-    )  # fmt: skip
-    dv = est.v_n - truth.v_n
-    de = wrap_angle(euler(est.q_nb) - euler(truth.q_nb))
-    return {
-        "roll": de[:, 0], "pitch": de[:, 1], "yaw": de[:, 2],
-        "v_N": dv[:, 0], "v_E": dv[:, 1], "v_D": dv[:, 2],
-        "p_N": d_ned[:, 0], "p_E": d_ned[:, 1], "p_D": d_ned[:, 2],
     }  # fmt: skip
 
 

@@ -1,14 +1,5 @@
-"""Rerun sinks: where the plots go (.rrd file, local viewer, remote viewer, served web viewer)
-and how run results, truth and Monte Carlo statistics become entities.
-
-Targets
--------
-:class:`Save` (the default) writes an .rrd atomically: into a temporary file beside the target,
-renamed on :meth:`Sink.close`; a failed or aborted run leaves the target untouched.
-:class:`Spawn`, :class:`Connect` and :class:`Serve` check first that a viewer can be reached
-(a TCP connect with a short timeout; for Spawn, a viewer executable and a display) and raise
-:class:`VizUnavailableError` with a one-line reason, instead of Rerun's silent loss of all data
-after ~12 s.
+"""The Rerun sink: how run results, truth and Monte Carlo statistics become entities of a
+recording stream (opened on a target by :func:`navreplay.viz.connect.open_sink`).
 
 Entity tree
 -----------
@@ -40,8 +31,11 @@ Examples
 >>> import tempfile, pathlib, numpy as np
 >>> from navreplay.replay.result import RunResult
 >>> t = np.arange(5) * 0.1
->>> r = RunResult("f", "f", "demo", 0, t, ("db_g_x",), np.zeros((5, 1)), np.ones((5, 1, 1)))
+>>> from navreplay.filters.base import Quantity, State
+>>> b_g = (State("b_g_x", "rad/s", Quantity.GYRO_BIAS),)
+>>> r = RunResult("f", "f", "demo", 0, t, b_g, np.zeros((5, 1)), np.ones((5, 1, 1)))
 >>> out = pathlib.Path(tempfile.mkdtemp()) / "demo.rrd"
+>>> from navreplay.viz import Save, open_sink
 >>> with open_sink(Save(out)) as sink:
 ...     sink.log_run(r)
 >>> out.exists()
@@ -53,8 +47,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
-import urllib.parse
-import uuid
 import warnings
 import weakref
 from collections.abc import Callable, Mapping
@@ -66,9 +58,11 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from navreplay.geo import quat_wxyz_to_xyzw
+from navreplay.metrics import nav_errors
+from navreplay.outputs import release
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, Stream, StreamKind
-from navreplay.viz import convert, targets
+from navreplay.viz import convert
 from navreplay.viz.blueprint import Catalog, build_blueprint
 from navreplay.viz.naming import (
     NAV_NAMES,
@@ -82,16 +76,9 @@ from navreplay.viz.naming import (
     title,
 )
 from navreplay.viz.targets import (
-    Connect,
-    Save,
     Serve,
-    Spawn,
     Target,
     VizUnavailableError,
-    display_problem,
-    parse_url,
-    port_error,
-    port_free,
 )
 
 APPLICATION_ID = "navreplay"
@@ -118,145 +105,8 @@ PALETTE = (
 AXIS_COLORS = ((230, 60, 60), (60, 200, 60), (70, 110, 240))
 
 
-def _new_stream(recording_id: str | None, recording_name: str | None) -> rr.RecordingStream:
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or str(uuid.uuid4()))
-    if recording_name:
-        rec.send_recording_name(recording_name)
-    return rec
-
-
-_WEB_VIEWERS: set[int] = set()
-"""Web-viewer ports served by this process."""
-_SERVERS: dict[int, rr.RecordingStream] = {}
-"""gRPC servers of this process by port: the serving stream stays alive (not disconnected) so
-that browsers can still connect after its sink is closed; they stop when the process exits."""
-
-
-def open_sink(
-    target: Target | str | os.PathLike[str],
-    *,
-    recording_name: str | None = None,
-    recording_id: str | None = None,
-) -> Sink:
-    """Open a Rerun sink; checks that the viewer is reachable before anything is logged.
-
-    Parameters
-    ----------
-    target : Save, Spawn, Connect, Serve, or a path (same as ``Save(path)``)
-    recording_name : str, optional
-        Name shown in the viewer (e.g. the recording file's name).
-    recording_id : str, optional
-        Rerun recording id; a fresh UUID by default, so every sink is its own recording.
-
-    Returns
-    -------
-    Sink
-
-    Raises
-    ------
-    VizUnavailableError
-        Spawn: no viewer executable, no display, or the viewer did not start listening;
-        Connect: nothing answers at the URL; Serve: the web port is taken.
-    FileExistsError
-        Save with ``overwrite=False`` and the file exists.
-    """
-    if isinstance(target, str | os.PathLike):
-        target = Save(target)
-    if isinstance(target, Save):
-        return _open_save(target, recording_name, recording_id)
-    if isinstance(target, Connect):
-        url, host, port = parse_url(target.url)
-        err = port_error(host, port, target.timeout)
-        if err is not None:
-            raise VizUnavailableError(
-                f"no Rerun viewer reachable at {url} ({err}); start one with `rerun` or use --save"
-            )
-        rec = _new_stream(recording_id, recording_name)
-        rec.connect_grpc(url)
-        return Sink(rec, target, url=url)
-    if isinstance(target, Spawn):
-        return _open_spawn(target, recording_name, recording_id)
-    if isinstance(target, Serve):
-        return _open_serve(target, recording_name, recording_id)
-    raise TypeError(f"unknown Rerun target {target!r}")
-
-
-def _open_spawn(target: Spawn, name: str | None, rid: str | None) -> Sink:
-    url, _, _ = parse_url(target.port)
-    if port_error("127.0.0.1", target.port, 0.5) is None:  # a viewer is already up
-        rec = _new_stream(rid, name)
-        rec.connect_grpc(url)
-        return Sink(rec, target, url=url)
-    exe = targets.find_viewer()
-    if exe is None:
-        raise VizUnavailableError(
-            "no `rerun` viewer executable on PATH (pip install rerun-sdk); use --save"
-        )
-    problem = display_problem() if target.check_display else None
-    if problem is not None:
-        raise VizUnavailableError(f"cannot spawn a Rerun viewer: {problem}; use --save or --serve")
-    rec = _new_stream(rid, name)
-    try:
-        rr.spawn(
-            port=target.port, connect=False, memory_limit=target.memory_limit,
-            executable_path=exe, recording=rec,
-        )  # fmt: skip
-    except RuntimeError as e:
-        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise VizUnavailableError(f"cannot spawn a Rerun viewer ({exe}): {first}") from None
-    err = port_error("127.0.0.1", target.port, 1.0)
-    if err is not None:
-        raise VizUnavailableError(
-            f"the Rerun viewer ({exe}) did not start listening on port {target.port} ({err})"
-        )
-    rec.connect_grpc(url)
-    return Sink(rec, target, url=url)
-
-
-def _open_serve(target: Serve, name: str | None, rid: str | None) -> Sink:
-    url, _, _ = parse_url(target.grpc_port)
-    start_web = target.web_port not in _WEB_VIEWERS
-    if start_web and not port_free(target.web_port):
-        raise VizUnavailableError(f"cannot serve the web viewer: port {target.web_port} is in use")
-    rec = _new_stream(rid, name)
-    owner = False
-    if port_error("127.0.0.1", target.grpc_port, 0.5) is None:
-        rec.connect_grpc(url)  # the server of an earlier sink (or of another process)
-    else:
-        url = rec.serve_grpc(
-            grpc_port=target.grpc_port, server_memory_limit=target.server_memory_limit
-        )
-        _SERVERS[target.grpc_port] = rec
-        owner = True
-    if start_web:
-        rr.serve_web_viewer(
-            web_port=target.web_port, open_browser=target.open_browser, connect_to=url
-        )
-        _WEB_VIEWERS.add(target.web_port)
-    web = f"http://localhost:{target.web_port}/?url={urllib.parse.quote(url, safe='')}"
-    return Sink(rec, target, url=url, web_url=web, keep_alive=owner)
-
-
-def _open_save(target: Save, name: str | None, rid: str | None) -> Sink:
-    path = Path(target.path)
-    if path.is_dir():
-        raise IsADirectoryError(f"{path} is a directory, not an .rrd file")
-    if path.exists() and not target.overwrite:
-        raise FileExistsError(f"{path} exists (overwrite it explicitly)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.part")
-    rec = _new_stream(rid, name)
-    try:
-        rec.save(tmp)
-    except BaseException:
-        rec.disconnect()
-        tmp.unlink(missing_ok=True)
-        raise
-    return Sink(rec, target, path=path, tmp=tmp)
-
-
 def _remove(path: Path) -> None:
-    path.unlink(missing_ok=True)
+    release(path)
 
 
 # ------------------------------------------------------------------------------------------
@@ -664,8 +514,12 @@ class Sink:
         nav_sigma = _nav_sigma(result, a, b)
         errors: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
         if self._truth is not None:
-            truth_at = self._truth.at(t)
-            for n, e in convert.nav_errors(nav, truth_at).items():
+            tr = self._truth.at(t)
+            ne = nav_errors(nav.pos, nav.v_n, nav.q_nb,
+                            {"pos": tr.pos, "v_n": tr.v_n, "q_nb": tr.q_nb})
+            cols = {n: c for n, c in ne.columns().items() if not n.startswith("phi")}
+            cols.update(roll=ne.euler[:, 0], pitch=ne.euler[:, 1], yaw=ne.euler[:, 2])
+            for n, e in cols.items():
                 errors[n] = (e, nav_sigma.get(n))
         for n, (e, s, _) in nav_override.items():
             errors[n] = (e[a:b], nav_sigma.get(n) if s is None else s[a:b])

@@ -14,7 +14,9 @@ index  symbol  frame  unit   meaning
 3:6    v_n     n      m/s    velocity N, E, D
 =====  ======  =====  =====  =========================================
 
-Error definition: estimate minus truth.
+Error definition: estimate minus truth. The states are declared once (``states``): the
+velocity is scored against the truth stream's ``v_n`` column and counts in the NEES; the
+position, relative to the first fix, is scored through the navigation solution instead.
 
 Models
 ------
@@ -43,7 +45,16 @@ from typing import Any
 import numpy as np
 
 from navreplay.filters import kalman
-from navreplay.filters.base import Estimate, Filter, FilterParams, Innovation, NavSolution
+from navreplay.filters.base import (
+    Estimate,
+    Filter,
+    FilterParams,
+    Innovation,
+    NavSolution,
+    Quantity,
+    State,
+    TruthColumn,
+)
 from navreplay.geo import euler_to_quat, radii
 from navreplay.streams import StreamKind
 
@@ -81,7 +92,11 @@ class GpsConstantVelocity(Filter):
     summary = "GNSS-only constant-velocity KF (example plug-in): position, velocity, course"
     requires = (StreamKind.GPS,)
     Params = GpsCvParams
-    state_names = ("p_N", "p_E", "p_D", "v_N", "v_E", "v_D")
+    states = (
+        *(State(f"p_{a}", "m", Quantity.POSITION) for a in "NED"),
+        *(State(f"v_{a}", "m/s", Quantity.VELOCITY, TruthColumn("v_n", (i,)), nees=True)
+          for i, a in enumerate("NED")),
+    )
 
     def __init__(self, params: GpsCvParams, context: Any) -> None:
         super().__init__(params, context)

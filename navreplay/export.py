@@ -1,0 +1,757 @@
+"""Results that leave navreplay: CSV tables, TUM trajectories and an MCAP of
+``nav_msgs/msg/Odometry`` estimates (docs/exports.md describes every file and column).
+
+``navreplay run ... --export DIR`` writes, per filter label ``L`` (made file-safe):
+
+``L.csv``
+    One row per estimate: time, navigation solution, its predicted 1-sigma, the state vector and
+    its 1-sigma, and with a reference the errors (estimate minus reference) and the NEES. Column
+    names carry their unit, ``name [unit]``.
+``L.tum``
+    ``timestamp tx ty tz qx qy qz qw`` (evo's TUM format): absolute time [s], position [m] in
+    the local ENU frame of :class:`LocalFrame`, orientation of base_link (FLU) in that frame.
+``reference.tum``
+    The reference (truth) in the same frame, when the recording has one.
+``estimates.mcap``
+    One ``nav_msgs/msg/Odometry`` topic per filter (``/estimates/<L>/odom``) and the reference
+    (``/reference/odom``), ROS 2 profile, CDR: header.frame_id ``map`` (ENU about the origin,
+    REP-103/105), child_frame_id ``base_link`` (FLU), pose and twist with covariance.
+``manifest.json``
+    The origin, the frames, the files and every column with its unit and meaning.
+
+``navreplay montecarlo ... --export DIR`` writes ``L.ensemble.csv`` (RMS, mean predicted sigma,
+NEES mean and bounds over time) and ``L.nis.<measurement>.csv`` per filter.
+
+Frames. navreplay works in NED / FRD; ROS in ENU / FLU. With ``T = [[0,1,0],[1,0,0],[0,0,-1]]``
+(NED <-> ENU, a proper rotation, its own inverse) and ``F = diag(1,-1,-1)`` (FRD <-> FLU), an
+estimate at (lat, lon, h) maps to the ENU frame at the origin through
+``R = C_enu0<-ecef C_ecef<-ned(lat, lon)`` (``R = T`` at the origin itself):
+
+    position   p_enu = C_enu0<-ecef (r_ecef - r0_ecef)
+    attitude   C_enu0<-flu = R C_nb F
+    covariance Sigma_pose  = blkdiag(R, R) Sigma_(pos_ned, phi) blkdiag(R, R)^T
+               Sigma_twist = J Sigma_(v_n, phi) J^T,  J = F C_nb^T [I, -[v_n x]]
+               (the body velocity v_b = C_nb^T v_n to first order in the attitude error phi,
+               ``C_hat = (I - [phi x]) C``).
+
+The twist's angular part is not estimated: zeros, with -1 on its covariance diagonal (the
+sensor_msgs convention for "not available"); the same marks any pose or linear-velocity element
+whose variance the filter does not hold.
+
+Everything is read from the run through :func:`filter_output`, the one adapter between
+:class:`~navreplay.replay.result.RunResult` and the exports and the report.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import math
+import os
+import re
+import secrets
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from navreplay.filters.base import Nav, NavError, State
+from navreplay.geo import earth
+from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, quat_to_euler, skew
+from navreplay.replay.result import RunResult
+from navreplay.streams import Recording, StreamKind
+
+MANIFEST = "manifest.json"
+ODOMETRY_FILE = "estimates.mcap"
+REFERENCE_LABEL = "reference"
+WORLD_FRAME = "map"
+BODY_FRAME = "base_link"
+UNKNOWN_VARIANCE = -1.0
+"""Covariance diagonal of an element the filter does not estimate (sensor_msgs convention)."""
+
+T_NED_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+"""NED <-> ENU (its own inverse)."""
+F_FRD_FLU = np.diag([1.0, -1.0, -1.0])
+"""FRD <-> FLU (its own inverse)."""
+
+NAV_AXES = ("north", "east", "down")
+NAV_ROWS = (*NAV_AXES, "v_N", "v_E", "v_D", "phi_N", "phi_E", "phi_D")
+"""Order of :attr:`FilterOutput.nav_cov`: position error NED [m], velocity error [m/s],
+attitude error phi [rad]."""
+
+_NAV_ROWS: dict[Nav, int] = {
+    Nav.LAT: 0, Nav.LON: 1, Nav.H: 2, Nav.DEPTH: 2,
+    Nav.V_N: 3, Nav.V_E: 4, Nav.V_D: 5,
+    Nav.PHI_N: 6, Nav.PHI_E: 7, Nav.PHI_D: 8,
+}
+"""Row of each navigation quantity in the 9x9 navigation covariance (north, east, down
+position; velocity NED; attitude error phi)."""
+
+
+# --------------------------------------------------------------------------------------------
+# the adapter
+
+
+@dataclasses.dataclass
+class FilterOutput:
+    """What leaves navreplay of one filter run (built by :func:`filter_output`).
+
+    Attributes
+    ----------
+    label : str
+    t0_ns : int
+        Recording start [ns].
+    t : ndarray, shape (M,)
+        Estimate times [s since t0_ns].
+    state_names, state_units : tuple of str
+    x, sigma : ndarray, shape (M, n)
+        State vector and its 1-sigma.
+    nav_pos, nav_v_n, nav_q_nb : ndarray (M, 3), (M, 3), (M, 4) or None
+        Navigation solution (lat, lon [rad], h [m]; NED velocity; q_nb scalar first).
+    nav_cov : ndarray, shape (M, 9, 9) or None
+        Covariance of the navigation errors in the order of :data:`NAV_ROWS`; NaN rows and
+        columns where the filter has no state for a quantity.
+    metrics : RunMetrics or None
+        Errors against the reference (None without one).
+    nis : dict[str, tuple[ndarray (K,), ndarray (K,), int]]
+        Per measurement: update times [s], NIS, dof.
+    nav_states : tuple of str
+        The states that are errors of the navigation solution (they make ``nav_cov``).
+    """
+
+    label: str
+    t0_ns: int
+    t: np.ndarray
+    state_names: tuple[str, ...]
+    state_units: tuple[str, ...]
+    x: np.ndarray
+    sigma: np.ndarray
+    nav_pos: np.ndarray | None
+    nav_v_n: np.ndarray | None
+    nav_q_nb: np.ndarray | None
+    nav_cov: np.ndarray | None
+    metrics: Any
+    nis: dict[str, tuple[np.ndarray, np.ndarray, int]]
+    nav_states: tuple[str, ...] = ()
+
+    @property
+    def has_nav(self) -> bool:
+        return self.nav_pos is not None and self.nav_v_n is not None and self.nav_q_nb is not None
+
+    @property
+    def stamps_ns(self) -> np.ndarray:
+        """Absolute estimate times [ns]."""
+        return np.int64(self.t0_ns) + np.rint(self.t * 1e9).astype(np.int64)
+
+
+def filter_output(result: RunResult, recording: Recording | None = None,
+                  metrics: Any = None) -> FilterOutput:
+    """The one place that reads a run's estimates for exports and reports.
+
+    Parameters
+    ----------
+    result : RunResult
+    recording : Recording, optional
+        The recording the filter ran over; its truth (if any) scores the run.
+    metrics : RunMetrics, optional
+        Already computed :func:`navreplay.metrics.run_metrics` of this run (else computed here
+        when the recording has a truth).
+    """
+    from navreplay import metrics as _metrics
+
+    if metrics is None and recording is not None and StreamKind.TRUTH in recording:
+        metrics = _metrics.run_metrics(result, recording)
+    return FilterOutput(
+        label=result.label,
+        t0_ns=int(result.t0_ns),
+        t=np.asarray(result.t, dtype=float),
+        state_names=tuple(result.state_names),
+        state_units=tuple(st.unit for st in result.states),
+        x=np.asarray(result.x, dtype=float),
+        sigma=result.sigma,
+        nav_pos=result.nav_pos,
+        nav_v_n=result.nav_v_n,
+        nav_q_nb=result.nav_q_nb,
+        nav_cov=_nav_covariance(result) if result.nav_pos is not None else None,
+        metrics=metrics,
+        nis={name: (s.t, s.nis, int(s.nu.shape[1])) for name, s in result.innovations.items()},
+        nav_states=nav_state_names(result.states),
+    )
+
+
+def nav_state_names(states: Sequence[State]) -> tuple[str, ...]:
+    """The declared states that are errors of the navigation solution."""
+    return tuple(st.name for st in states if isinstance(st.truth, NavError))
+
+
+def _nav_covariance(result: RunResult) -> np.ndarray:
+    """Covariance (M, 9, 9) of the navigation errors from the states declared as navigation
+    errors (lat/lon scaled to metres, height negated to down); NaN where none is."""
+    M = result.t.shape[0]
+    lat, h = result.nav_pos[:, 0], result.nav_pos[:, 2]
+    R_M, R_N = earth.radii(lat)
+    scale_of = {Nav.LAT: R_M + h, Nav.LON: (R_N + h) * np.cos(lat), Nav.H: -np.ones(M)}
+    idx, rows, scales = [], [], []
+    for i, st in enumerate(result.states):
+        if not isinstance(st.truth, NavError):
+            continue
+        q = st.truth.q
+        if _NAV_ROWS[q] not in rows:
+            idx.append(i)
+            rows.append(_NAV_ROWS[q])
+            scales.append(scale_of.get(q, np.ones(M)))
+    out = np.full((M, 9, 9), np.nan)
+    if idx:
+        ix, r = np.array(idx), np.array(rows)
+        s = np.stack(scales, axis=1)
+        sub = result.P[:, ix[:, None], ix[None, :]] * s[:, :, None] * s[:, None, :]
+        out[:, r[:, None], r[None, :]] = sub
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# output files: refuse to overwrite, write atomically
+
+
+def check_targets(paths: Iterable[Path], force: bool) -> None:
+    """Raise FileExistsError naming the first existing target unless ``force``."""
+    if force:
+        return
+    existing = [p for p in paths if Path(p).exists()]
+    if existing:
+        more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
+        raise FileExistsError(f"{existing[0]} exists{more}; use --force to overwrite")
+
+
+@contextmanager
+def atomic_path(path: Path) -> Iterator[Path]:
+    """A temporary path beside ``path``, renamed onto it when the block succeeds."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.part")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write a text file atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def file_stem(label: str) -> str:
+    """A file-safe name for a filter label: ``gps-ins[k=2]`` -> ``gps-ins_k_2``."""
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", label).strip("._") or "filter"
+    return stem
+
+
+def _stems(labels: Sequence[str]) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for label in labels:
+        stem, k = file_stem(label), 2
+        base = stem
+        while stem in out.values() or stem == REFERENCE_LABEL:
+            stem, k = f"{base}_{k}", k + 1
+        out[label] = stem
+    return out
+
+
+def topic_name(label: str) -> str:
+    """A valid ROS 2 topic segment for a filter label (letters, digits, underscores)."""
+    seg = re.sub(r"[^A-Za-z0-9_]+", "_", label).strip("_") or "filter"
+    return seg if not seg[0].isdigit() else f"f_{seg}"
+
+
+def run_targets(out_dir: Path, labels: Sequence[str], has_reference: bool) -> list[Path]:
+    """Every file ``--export DIR`` of a single run writes (for the overwrite check)."""
+    out_dir = Path(out_dir)
+    stems = _stems(labels)
+    paths = [out_dir / MANIFEST, out_dir / ODOMETRY_FILE]
+    for stem in stems.values():
+        paths += [out_dir / f"{stem}.csv", out_dir / f"{stem}.tum"]
+    if has_reference:
+        paths.append(out_dir / f"{REFERENCE_LABEL}.tum")
+    return paths
+
+
+def ensemble_targets(out_dir: Path, labels: Sequence[str]) -> list[Path]:
+    """The ensemble CSVs ``--export DIR`` of a campaign writes, before their NIS files."""
+    return [Path(out_dir) / MANIFEST] + [Path(out_dir) / f"{s}.ensemble.csv"
+                                         for s in _stems(labels).values()]
+
+
+# --------------------------------------------------------------------------------------------
+# local frame
+
+
+@dataclasses.dataclass(frozen=True)
+class LocalFrame:
+    """The ENU (``map``) frame of the exports: origin on the WGS84 ellipsoid and its axes.
+
+    Attributes
+    ----------
+    lat, lon, h : float
+        Origin [rad, rad, m]: the reference's first sample, else the first filter's first
+        navigation estimate.
+    source : str
+        Where the origin comes from.
+    """
+
+    lat: float
+    lon: float
+    h: float
+    source: str
+
+    @property
+    def C_enu_e(self) -> np.ndarray:
+        """ECEF -> ENU at the origin, (3, 3)."""
+        return T_NED_ENU @ earth.C_en(self.lat, self.lon).T
+
+    def position(self, pos: np.ndarray) -> np.ndarray:
+        """ENU position [m] (M, 3) of lat, lon, h (M, 3)."""
+        dr = earth.lla_to_ecef(pos[:, 0], pos[:, 1], pos[:, 2]) - earth.lla_to_ecef(
+            self.lat, self.lon, self.h)
+        return dr @ self.C_enu_e.T
+
+    def rotation(self, pos: np.ndarray) -> np.ndarray:
+        """``R = C_enu0<-ned``, (M, 3, 3), the local NED frame at each position to ENU."""
+        return np.einsum("ij,mjk->mik", self.C_enu_e, earth.C_en(pos[:, 0], pos[:, 1]))
+
+    def to_json(self) -> dict[str, Any]:
+        return {"lat_deg": math.degrees(self.lat), "lon_deg": math.degrees(self.lon),
+                "h_m": self.h, "source": self.source}
+
+
+def local_frame(outputs: Sequence[FilterOutput], recording: Recording | None) -> LocalFrame | None:
+    """The export frame's origin (None when neither a reference nor a solution exists)."""
+    if recording is not None and StreamKind.TRUTH in recording:
+        p = recording[StreamKind.TRUTH]["pos"][0]
+        return LocalFrame(float(p[0]), float(p[1]), float(p[2]), "first reference sample")
+    for out in outputs:
+        if out.has_nav and len(out.t):
+            p = out.nav_pos[0]
+            return LocalFrame(float(p[0]), float(p[1]), float(p[2]),
+                              f"first navigation estimate of {out.label}")
+    return None
+
+
+@dataclasses.dataclass
+class Poses:
+    """Poses in ROS frames: ENU position [m], q (base_link FLU -> map ENU) xyzw, ENU-frame
+    pose covariance (M, 6, 6), body velocity FLU [m/s] and twist covariance (M, 6, 6)."""
+
+    stamps_ns: np.ndarray
+    p_enu: np.ndarray
+    q_xyzw: np.ndarray
+    pose_cov: np.ndarray
+    v_flu: np.ndarray
+    twist_cov: np.ndarray
+
+
+def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np.ndarray,
+              q_nb: np.ndarray, nav_cov: np.ndarray | None) -> Poses:
+    """Convert a NED/FRD navigation solution and its error covariance to ROS frames
+    (see the module docstring for the formulas)."""
+    M = len(stamps_ns)
+    R = frame.rotation(pos)
+    C_nb = quat_to_dcm(q_nb)
+    C = R @ C_nb @ F_FRD_FLU
+    q = dcm_to_quat(C)
+    v_b = np.einsum("mji,mj->mi", C_nb, v_n)
+    cov = np.full((M, 9, 9), np.nan) if nav_cov is None else nav_cov
+    B = np.zeros((M, 6, 6))
+    B[:, :3, :3] = R
+    B[:, 3:, 3:] = R
+    pose_cov = B @ cov[:, [0, 1, 2, 6, 7, 8]][:, :, [0, 1, 2, 6, 7, 8]] @ B.transpose(0, 2, 1)
+    J = np.concatenate([np.broadcast_to(np.eye(3), (M, 3, 3)), -skew(v_n)], axis=2)
+    J = F_FRD_FLU @ C_nb.transpose(0, 2, 1) @ J
+    lin = J @ cov[:, 3:9, 3:9] @ J.transpose(0, 2, 1)
+    twist_cov = np.zeros((M, 6, 6))
+    twist_cov[:, :3, :3] = lin
+    twist_cov[:, 3:, 3:] = np.full((M, 3, 3), np.nan)  # angular rate: not estimated
+    return Poses(np.asarray(stamps_ns, dtype=np.int64), frame.position(pos),
+                 np.concatenate([q[:, 1:], q[:, :1]], axis=1), _mark_unknown(pose_cov),
+                 v_b @ F_FRD_FLU, _mark_unknown(twist_cov))
+
+
+def _mark_unknown(cov: np.ndarray) -> np.ndarray:
+    """Rows/columns whose variance is not finite: 0, and UNKNOWN_VARIANCE on the diagonal."""
+    cov = cov.copy()
+    bad = ~np.isfinite(np.diagonal(cov, axis1=1, axis2=2))
+    cov[np.broadcast_to(bad[:, :, None], cov.shape) | np.broadcast_to(bad[:, None, :], cov.shape)] = 0.0
+    cov[~np.isfinite(cov)] = 0.0
+    d = np.arange(cov.shape[1])
+    cov[:, d, d] = np.where(bad, UNKNOWN_VARIANCE, cov[:, d, d])
+    return cov
+
+
+def _reference_poses(frame: LocalFrame, recording: Recording) -> Poses:
+    truth = recording[StreamKind.TRUTH]
+    zero = np.zeros((len(truth), 9, 9))
+    return ros_poses(frame, truth.t_ns, truth["pos"], truth["v_n"], truth["q_nb"], zero)
+
+
+# --------------------------------------------------------------------------------------------
+# TUM
+
+
+def tum_text(poses: Poses) -> str:
+    """evo's TUM format: one ``timestamp tx ty tz qx qy qz qw`` line per pose, single spaces,
+    no trailing delimiter; ``#`` comment lines first. Timestamps are absolute seconds with
+    nanosecond digits."""
+    lines = ["# timestamp tx ty tz qx qy qz qw",
+             f"# position [m] in the local ENU frame '{WORLD_FRAME}' (see manifest.json);"
+             f" orientation of '{BODY_FRAME}' (FLU) in it"]
+    s, ns = np.divmod(poses.stamps_ns, 1_000_000_000)
+    for si, ni, p, q in zip(s.tolist(), ns.tolist(), poses.p_enu, poses.q_xyzw, strict=True):
+        lines.append(f"{si}.{ni:09d} {p[0]:.6f} {p[1]:.6f} {p[2]:.6f} "
+                     f"{q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------------------------
+# CSV
+
+
+@dataclasses.dataclass(frozen=True)
+class Column:
+    """One CSV column: its name, unit, meaning and values."""
+
+    name: str
+    unit: str
+    description: str
+    values: np.ndarray
+    fmt: str = "%.9g"
+
+    @property
+    def header(self) -> str:
+        return f"{self.name} [{self.unit}]"
+
+    def to_json(self) -> dict[str, str]:
+        return {"name": self.header, "unit": self.unit, "description": self.description}
+
+
+_RAD_TO_DEG = 180.0 / math.pi
+
+
+def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
+    """The columns of one filter's CSV (see docs/exports.md)."""
+    cols = [Column("stamp", "ns", "absolute estimate time", out.stamps_ns, "%d"),
+            Column("t", "s", "time since the recording start", out.t)]
+    if out.has_nav:
+        euler = quat_to_euler(out.nav_q_nb) * _RAD_TO_DEG
+        cols += [Column("lat", "deg", "geodetic latitude (WGS84)", out.nav_pos[:, 0] * _RAD_TO_DEG,
+                        "%.10f"),
+                 Column("lon", "deg", "longitude", out.nav_pos[:, 1] * _RAD_TO_DEG, "%.10f"),
+                 Column("h", "m", "height above the ellipsoid", out.nav_pos[:, 2], "%.4f")]
+        if frame is not None:
+            p = frame.position(out.nav_pos)
+            cols += [Column(a, "m", f"position {a} in the local ENU frame", p[:, i], "%.4f")
+                     for i, a in enumerate(("east", "north", "up"))]
+        cols += [Column(f"v_{a}", "m/s", f"velocity {a} (NED)", out.nav_v_n[:, i])
+                 for i, a in enumerate("NED")]
+        cols += [Column(a, "deg", f"{a} (ZYX Euler angles of body FRD to NED)", euler[:, i])
+                 for i, a in enumerate(("roll", "pitch", "yaw"))]
+        sig = np.sqrt(np.clip(np.diagonal(out.nav_cov, axis1=1, axis2=2), 0.0, None))
+        units = ("m",) * 3 + ("m/s",) * 3 + ("deg",) * 3
+        for i, (name, unit) in enumerate(zip(NAV_ROWS, units, strict=True)):
+            scale = _RAD_TO_DEG if unit == "deg" else 1.0
+            cols.append(Column(f"sigma_{name}", unit, f"predicted 1-sigma of the {name} error",
+                               sig[:, i] * scale))
+    for j, (name, unit) in enumerate(zip(out.state_names, out.state_units, strict=True)):
+        cols.append(Column(f"x.{name}", unit, f"state {name}", out.x[:, j]))
+        cols.append(Column(f"sigma.{name}", unit, f"predicted 1-sigma of state {name}",
+                           out.sigma[:, j]))
+    m = out.metrics
+    if m is not None:
+        if m.nav is not None:
+            for key, names, unit, scale, what in (
+                ("pos_ned", NAV_AXES, "m", 1.0, "position error"),
+                ("v_n", ("v_N", "v_E", "v_D"), "m/s", 1.0, "velocity error"),
+                ("phi", ("phi_N", "phi_E", "phi_D"), "deg", _RAD_TO_DEG,
+                 "attitude error phi (C_hat = (I - [phi x]) C)"),
+                ("euler", ("roll", "pitch", "yaw"), "deg", _RAD_TO_DEG, "Euler angle error"),
+            ):
+                v = getattr(m.nav, key)
+                cols += [Column(f"error_{n}", unit, f"{what} {n}, estimate minus reference",
+                                v[:, i] * scale) for i, n in enumerate(names)]
+        units = dict(zip(out.state_names, out.state_units, strict=True))
+        for j, name in enumerate(m.state_names):
+            cols.append(Column(f"error.{name}", units.get(name, "-"),
+                               f"estimation error of state {name} against the reference",
+                               m.state_error[:, j]))
+        if m.nees_states:
+            cols.append(Column("nees", "-", f"NEES over {', '.join(m.nees_states)} "
+                               f"({len(m.nees_states)} dof)", m.nees))
+    return cols
+
+
+def csv_text(cols: Sequence[Column]) -> str:
+    """Comma-separated values with a one-line header ``name [unit],...``."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow([c.header for c in cols])
+    n = len(cols[0].values) if cols else 0
+    rows = [[c.fmt % v for v in np.asarray(c.values).tolist()] for c in cols]
+    for i in range(n):
+        w.writerow([r[i] for r in rows])
+    return buf.getvalue()
+
+
+def ensemble_columns(ens: Any) -> list[Column]:
+    """The columns of one filter's ensemble CSV (an :class:`~navreplay.metrics.EnsembleResult`)."""
+    runs = f"over {ens.runs} runs"
+    cols = [Column("t", "s", "time since the recording start", ens.t)]
+    for key, names, unit, scale, what in (
+        ("pos_ned", NAV_AXES, "m", 1.0, "position error"),
+        ("v_n", ("v_N", "v_E", "v_D"), "m/s", 1.0, "velocity error"),
+        ("phi", ("phi_N", "phi_E", "phi_D"), "deg", _RAD_TO_DEG, "attitude error phi"),
+    ):
+        if key not in ens.rms:
+            continue
+        for i, n in enumerate(names):
+            cols.append(Column(f"rms_{n}", unit, f"RMS {runs} of the {what} {n}",
+                               ens.rms[key][:, i] * scale))
+            cols.append(Column(f"sigma_{n}", unit, f"sqrt(mean predicted variance) of the "
+                               f"{what} {n}", ens.sigma[key][:, i] * scale))
+    if "pos_ned" in ens.rms:
+        cols.append(Column("cep50", "m", "0.5887 (LatRMS + LongRMS)", ens.cep50))
+    units = {st.name: st.unit for st in ens.states}
+    for j, name in enumerate(ens.state_names):
+        unit = units.get(name, "-")
+        cols.append(Column(f"rms.{name}", unit, f"RMS {runs} of the error of state {name}",
+                           ens.state_rms[:, j]))
+        cols.append(Column(f"sigma.{name}", unit, f"sqrt(mean predicted variance) of state "
+                           f"{name}", ens.state_sigma[:, j]))
+    if ens.nees_dof:
+        lo, hi = ens.nees_bounds
+        cols += [Column("nees_mean", "-", f"NEES averaged {runs} ({ens.nees_dof} dof)",
+                        ens.nees_mean),
+                 Column("nees_lo", "-", "lower 95 % chi-square bound of the mean", lo),
+                 Column("nees_hi", "-", "upper 95 % chi-square bound of the mean", hi),
+                 Column("nees_runs", "-", "runs with a finite NEES", ens.nees_count, "%d")]
+    return cols
+
+
+def nis_columns(t: np.ndarray, mean: np.ndarray, count: np.ndarray, dof: int) -> list[Column]:
+    """Columns of a run-averaged NIS series with its 95 % chi-square bounds."""
+    from navreplay.metrics import chi2_bounds_per_count
+
+    n = mean.shape[0]
+    lo, hi = chi2_bounds_per_count(dof, count[:n])
+    return [Column("t", "s", "update time since the recording start", t[:n]),
+            Column("nis_mean", "-", f"NIS averaged over runs ({dof} dof)", mean),
+            Column("nis_lo", "-", "lower 95 % chi-square bound of the mean", lo),
+            Column("nis_hi", "-", "upper 95 % chi-square bound of the mean", hi),
+            Column("nis_runs", "-", "runs with this update", count[:n], "%d")]
+
+
+# --------------------------------------------------------------------------------------------
+# Odometry MCAP
+
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+_SEP = "=" * 80
+_ODOMETRY_SCHEMA = "\n".join([
+    "std_msgs/Header header",
+    "string child_frame_id",
+    "geometry_msgs/PoseWithCovariance pose",
+    "geometry_msgs/TwistWithCovariance twist",
+    _SEP, "MSG: std_msgs/Header",
+    "builtin_interfaces/Time stamp",
+    "string frame_id",
+    _SEP, "MSG: builtin_interfaces/Time",
+    "int32 sec",
+    "uint32 nanosec",
+    _SEP, "MSG: geometry_msgs/PoseWithCovariance",
+    "geometry_msgs/Pose pose",
+    "float64[36] covariance",
+    _SEP, "MSG: geometry_msgs/Pose",
+    "geometry_msgs/Point position",
+    "geometry_msgs/Quaternion orientation",
+    _SEP, "MSG: geometry_msgs/Point",
+    "float64 x", "float64 y", "float64 z",
+    _SEP, "MSG: geometry_msgs/Quaternion",
+    "float64 x", "float64 y", "float64 z", "float64 w",
+    _SEP, "MSG: geometry_msgs/TwistWithCovariance",
+    "geometry_msgs/Twist twist",
+    "float64[36] covariance",
+    _SEP, "MSG: geometry_msgs/Twist",
+    "geometry_msgs/Vector3 linear",
+    "geometry_msgs/Vector3 angular",
+    _SEP, "MSG: geometry_msgs/Vector3",
+    "float64 x", "float64 y", "float64 z",
+]) + "\n"
+"""ros2msg schema text of nav_msgs/msg/Odometry with its dependencies."""
+
+
+def _aligned(pos: int, size: int) -> int:
+    """Next offset aligned to ``size``, counted after the 4-byte encapsulation header."""
+    return 4 + -(-(pos - 4) // size) * size
+
+
+def odometry_dtype(frame_len: int, child_len: int) -> np.dtype:
+    """Fixed CDR layout of nav_msgs/msg/Odometry for frame ids of the given byte lengths (NUL
+    included): one numpy record per message (see :mod:`navreplay.io.cdr`)."""
+    names = ["encap", "sec", "nanosec", "frame_len", "frame_id"]
+    formats: list[Any] = [("u1", (4,)), "<i4", "<u4", "<u4", f"S{frame_len}"]
+    offsets = [0, 4, 8, 12, 16]
+    pos = _aligned(16 + frame_len, 4)
+    names += ["child_len", "child_frame_id"]
+    formats += ["<u4", f"S{child_len}"]
+    offsets += [pos, pos + 4]
+    pos = _aligned(pos + 4 + child_len, 8)
+    for name, count in (("position", 3), ("orientation", 4), ("pose_covariance", 36),
+                        ("linear", 3), ("angular", 3), ("twist_covariance", 36)):
+        names.append(name)
+        formats.append(("<f8", (count,)))
+        offsets.append(pos)
+        pos += 8 * count
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": pos})
+
+
+def encode_odometry(poses: Poses, frame_id: str = WORLD_FRAME,
+                    child_frame_id: str = BODY_FRAME) -> np.ndarray:
+    """CDR records (M,) of nav_msgs/msg/Odometry; ``rec[i].tobytes()`` is message i."""
+    from navreplay.io.cdr import ENCAPSULATION_LE, split_time
+
+    f, c = frame_id.encode(), child_frame_id.encode()
+    rec = np.zeros(len(poses.stamps_ns), dtype=odometry_dtype(len(f) + 1, len(c) + 1))
+    rec["encap"] = np.frombuffer(ENCAPSULATION_LE, dtype=np.uint8)
+    rec["sec"], rec["nanosec"] = split_time(poses.stamps_ns)
+    rec["frame_len"], rec["frame_id"] = len(f) + 1, f
+    rec["child_len"], rec["child_frame_id"] = len(c) + 1, c
+    rec["position"] = poses.p_enu
+    rec["orientation"] = poses.q_xyzw
+    rec["pose_covariance"] = poses.pose_cov.reshape(-1, 36)
+    rec["linear"] = poses.v_flu
+    rec["twist_covariance"] = poses.twist_cov.reshape(-1, 36)
+    return rec
+
+
+def write_odometry(path: Path, topics: Mapping[str, Poses]) -> None:
+    """One MCAP (ROS 2 profile) with a nav_msgs/msg/Odometry topic per entry, atomically."""
+    from mcap.writer import CompressionType, Writer
+
+    from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
+    from navreplay.io.writer import LIBRARY
+
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD, enable_crcs=True)
+        w.start(profile=PROFILE, library=LIBRARY)
+        sid = w.register_schema(ODOMETRY_TYPE, SCHEMA_ENCODING, _ODOMETRY_SCHEMA.encode())
+        times, cids, payloads = [], [], []
+        for topic, poses in topics.items():
+            cid = w.register_channel(topic, MESSAGE_ENCODING, sid)
+            rec = encode_odometry(poses)
+            buf, size = rec.tobytes(), rec.dtype.itemsize
+            payloads += [buf[i:i + size] for i in range(0, len(buf), size)]
+            times.append(poses.stamps_ns)
+            cids.append(np.full(len(rec), cid))
+        if times:
+            t, c = np.concatenate(times), np.concatenate(cids)
+            for i in np.argsort(t, kind="stable").tolist():
+                w.add_message(int(c[i]), int(t[i]), payloads[i], int(t[i]))
+        w.finish()
+        f.flush()
+        os.fsync(f.fileno())
+
+
+# --------------------------------------------------------------------------------------------
+# the exports of a run and of an ensemble
+
+
+def export_run(out_dir: Path, outputs: Sequence[FilterOutput], recording: Recording | None,
+               *, source: str = "", force: bool = False) -> list[Path]:
+    """Write the CSV and TUM files of every filter, the Odometry MCAP and the manifest.
+
+    Returns the written files. Refuses to overwrite any of them unless ``force`` (checked
+    before the first one is written).
+    """
+    out_dir = Path(out_dir)
+    has_ref = recording is not None and StreamKind.TRUTH in recording
+    check_targets(run_targets(out_dir, [o.label for o in outputs], has_ref), force)
+    stems = _stems([o.label for o in outputs])
+    frame = local_frame(outputs, recording)
+    written: list[Path] = []
+    manifest: dict[str, Any] = {
+        "recording": source,
+        "frames": {
+            "map": "local ENU (east, north, up) about the origin, metres (REP-103/105); "
+                   "TUM positions and Odometry poses",
+            "base_link": "vehicle body FLU (forward, left, up); Odometry twist",
+            "nav": "navreplay's NED / FRD: CSV velocities, attitudes and errors",
+        },
+        "origin": frame.to_json() if frame is not None else None,
+        "filters": {},
+    }
+    odometry: dict[str, Poses] = {}
+    for out in outputs:
+        stem = stems[out.label]
+        cols = run_columns(out, frame)
+        entry: dict[str, Any] = {"csv": f"{stem}.csv",
+                                 "columns": [c.to_json() for c in cols]}
+        write_text(out_dir / entry["csv"], csv_text(cols))
+        written.append(out_dir / entry["csv"])
+        if out.has_nav and frame is not None:
+            poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
+                              out.nav_cov)
+            entry["tum"] = f"{stem}.tum"
+            write_text(out_dir / entry["tum"], tum_text(poses))
+            written.append(out_dir / entry["tum"])
+            entry["odometry_topic"] = f"/estimates/{topic_name(out.label)}/odom"
+            odometry[entry["odometry_topic"]] = poses
+        manifest["filters"][out.label] = entry
+    if has_ref and frame is not None:
+        ref = _reference_poses(frame, recording)
+        write_text(out_dir / f"{REFERENCE_LABEL}.tum", tum_text(ref))
+        written.append(out_dir / f"{REFERENCE_LABEL}.tum")
+        manifest["reference"] = {"tum": f"{REFERENCE_LABEL}.tum",
+                                 "odometry_topic": "/reference/odom"}
+        odometry["/reference/odom"] = ref
+    if odometry:
+        write_odometry(out_dir / ODOMETRY_FILE, odometry)
+        written.append(out_dir / ODOMETRY_FILE)
+        manifest["odometry"] = {"file": ODOMETRY_FILE, "type": ODOMETRY_TYPE,
+                                "frame_id": WORLD_FRAME, "child_frame_id": BODY_FRAME,
+                                "topics": sorted(odometry)}
+    write_text(out_dir / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+    written.append(out_dir / MANIFEST)
+    return written
+
+
+def export_ensemble(out_dir: Path, ensembles: Mapping[str, Any], *, title: str = "",
+                    force: bool = False) -> list[Path]:
+    """Write each filter's ensemble statistics (``L.ensemble.csv``, ``L.nis.<meas>.csv``) and
+    the manifest; refuses to overwrite unless ``force``."""
+    out_dir = Path(out_dir)
+    stems = _stems(list(ensembles))
+    targets = ensemble_targets(out_dir, list(ensembles))
+    nis_paths = {(label, meas): out_dir / f"{stems[label]}.nis.{file_stem(meas)}.csv"
+                 for label, ens in ensembles.items() for meas in ens.nis_mean}
+    check_targets(targets + list(nis_paths.values()), force)
+    written: list[Path] = []
+    manifest: dict[str, Any] = {"campaign": title, "filters": {}}
+    for label, ens in ensembles.items():
+        cols = ensemble_columns(ens)
+        path = out_dir / f"{stems[label]}.ensemble.csv"
+        write_text(path, csv_text(cols))
+        written.append(path)
+        entry: dict[str, Any] = {"runs": ens.runs, "csv": path.name,
+                                 "columns": [c.to_json() for c in cols], "nis": {}}
+        for meas, (t, mean, count, dof) in ens.nis_mean.items():
+            ncols = nis_columns(t, mean, count, dof)
+            p = nis_paths[(label, meas)]
+            write_text(p, csv_text(ncols))
+            written.append(p)
+            entry["nis"][meas] = {"csv": p.name, "columns": [c.to_json() for c in ncols]}
+        manifest["filters"][label] = entry
+    write_text(out_dir / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+    written.append(out_dir / MANIFEST)
+    return written

@@ -1,0 +1,148 @@
+"""Static figures of filter runs and ensembles (matplotlib, Agg backend), as a paper shows them.
+
+Each function takes plain arrays and returns a matplotlib Figure, so the HTML report
+(:mod:`navreplay.report`) and scripts draw the same pictures:
+
+* :func:`bounded_errors` — estimation errors with their shaded +-3 sigma, one panel per quantity;
+* :func:`consistency` — NEES and NIS (log scale) inside their shaded chi-square band;
+* :func:`rms_vs_sigma` — ensemble RMS error (solid) against the mean predicted sigma (dashed).
+
+A filter keeps its colour (:func:`filter_color`, by its position in the command) in every
+figure. Importing this module loads matplotlib: import it only when figures are wanted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+from collections.abc import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown",
+          "tab:pink", "tab:olive", "tab:cyan")
+BAND_COLOR = "0.82"
+DPI = 100
+PANEL_SIZE = (4.2, 2.4)
+"""Width and height of one panel [in]."""
+
+
+def filter_color(index: int) -> str:
+    """The colour of the index-th filter of a command."""
+    return COLORS[index % len(COLORS)]
+
+
+@dataclasses.dataclass(frozen=True)
+class Panel:
+    """One time series of a figure.
+
+    Attributes
+    ----------
+    title : str
+    unit : str
+        Shown on the y axis.
+    t : ndarray, shape (M,)
+        Time [s].
+    value : ndarray, shape (M,)
+        Error (bounded_errors), RMS (rms_vs_sigma) or NEES/NIS (consistency).
+    bound : ndarray (M,) or None
+        1-sigma (bounded_errors), mean predicted sigma (rms_vs_sigma).
+    band : tuple of ndarray (M,) or None
+        Lower and upper chi-square bounds (consistency).
+    """
+
+    title: str
+    unit: str
+    t: np.ndarray
+    value: np.ndarray
+    bound: np.ndarray | None = None
+    band: tuple[np.ndarray, np.ndarray] | None = None
+
+
+def _grid(n: int, cols: int, title: str) -> tuple[plt.Figure, list[plt.Axes]]:
+    cols = max(1, min(cols, n))
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(PANEL_SIZE[0] * cols, PANEL_SIZE[1] * rows + 0.5),
+                             squeeze=False, layout="constrained")
+    fig.suptitle(title)
+    flat = list(axes.ravel())
+    for ax in flat[n:]:
+        ax.set_visible(False)
+    return fig, flat[:n]
+
+
+def _style(ax: plt.Axes, p: Panel, last_row: bool) -> None:
+    ax.set_title(p.title, fontsize=10)
+    ax.set_ylabel(f"[{p.unit}]" if p.unit else "")
+    if last_row:
+        ax.set_xlabel("time [s]")
+    ax.grid(True, color="0.9", linewidth=0.8)
+    ax.set_axisbelow(True)
+    ax.margins(x=0)
+
+
+def bounded_errors(title: str, panels: Sequence[Panel], color: str = COLORS[0],
+                   cols: int = 3) -> plt.Figure:
+    """Errors (solid) inside their shaded +-3 sigma, each panel at its own scale."""
+    fig, axes = _grid(len(panels), cols, title)
+    for k, (ax, p) in enumerate(zip(axes, panels, strict=True)):
+        if p.bound is not None and np.isfinite(p.bound).any():
+            b = 3.0 * p.bound
+            ax.fill_between(p.t, -b, b, color=color, alpha=0.15, linewidth=0, label="±3σ")
+            ax.plot(p.t, b, color=color, linewidth=0.6, alpha=0.6)
+            ax.plot(p.t, -b, color=color, linewidth=0.6, alpha=0.6)
+        ax.plot(p.t, p.value, color=color, linewidth=1.1, label="error")
+        ax.axhline(0.0, color="0.5", linewidth=0.6)
+        _style(ax, p, k >= len(panels) - cols)
+    if axes:
+        axes[0].legend(loc="upper left", fontsize=8, frameon=False)
+    return fig
+
+
+def consistency(title: str, panels: Sequence[Panel], color: str = COLORS[0]) -> plt.Figure:
+    """NEES / NIS series (log scale) with their 95 % chi-square band shaded."""
+    fig, axes = _grid(len(panels), 1, title)
+    fig.set_size_inches(2.2 * PANEL_SIZE[0], PANEL_SIZE[1] * len(panels) + 0.5)
+    for k, (ax, p) in enumerate(zip(axes, panels, strict=True)):
+        value = np.where(p.value > 0, p.value, np.nan)
+        if p.band is not None:
+            lo, hi = p.band
+            ax.fill_between(p.t, lo, hi, color=BAND_COLOR, alpha=0.8, linewidth=0,
+                            label="95 % χ² band")
+        ax.plot(p.t, value, color=color, linewidth=0.9, marker="." if len(p.t) < 200 else None,
+                markersize=3, label=p.title)
+        ax.set_yscale("log")
+        _style(ax, p, k == len(panels) - 1)
+        if p.band is not None:
+            inside = np.mean((p.value >= p.band[0]) & (p.value <= p.band[1]))
+            ax.set_title(f"{p.title}: {100 * inside:.0f} % inside the band", fontsize=10)
+        ax.legend(loc="upper right", fontsize=8, frameon=False)
+    return fig
+
+
+def rms_vs_sigma(title: str, panels: Sequence[Panel], color: str = COLORS[0],
+                 cols: int = 3) -> plt.Figure:
+    """Ensemble RMS error (solid) against the mean predicted sigma (dashed), same colour."""
+    fig, axes = _grid(len(panels), cols, title)
+    for k, (ax, p) in enumerate(zip(axes, panels, strict=True)):
+        ax.plot(p.t, p.value, color=color, linewidth=1.3, label="RMS")
+        if p.bound is not None and np.isfinite(p.bound).any():
+            ax.plot(p.t, p.bound, color=color, linewidth=1.3, linestyle="--", label="σ")
+        ax.set_ylim(bottom=0.0)
+        _style(ax, p, k >= len(panels) - cols)
+    if axes:
+        axes[0].legend(loc="upper left", fontsize=8, frameon=False)
+    return fig
+
+
+def png(fig: plt.Figure) -> bytes:
+    """The figure as PNG bytes (no metadata), and close it."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
+    plt.close(fig)
+    return buf.getvalue()

@@ -1,0 +1,283 @@
+"""``navreplay run``: replay filters over one recording (Rerun view and summary table) or over
+several (in parallel: per-recording summaries and ensemble statistics)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from navreplay import params as _params
+from navreplay import tables
+from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
+from navreplay.jobs.results import Outputs
+from navreplay.replay.engine import Progress, check_streams, replay
+from navreplay.replay.ensemble import (
+    FilterSpec,
+    RunOutput,
+    RunTask,
+    default_extract,
+    file_tasks,
+    run_ensemble,
+)
+from navreplay.replay.result import RunResult
+from navreplay.streams import Recording, StreamKind
+from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
+
+
+def state_errors(m: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Estimation errors and predicted sigmas of the scored states, for the Rerun view."""
+    return {
+        name: (m.state_error[:, j], np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
+        for j, name in enumerate(m.state_names)
+    }
+
+
+@dataclasses.dataclass
+class PerRun:
+    """What a worker returns for one recording: per-filter metrics and scalar summaries."""
+
+    metrics: dict[str, Any]
+    summaries: dict[str, dict[str, Any]]
+
+
+def campaign_extract(
+    recording: Recording, results: dict[str, RunResult], task: RunTask
+) -> PerRun:
+    """Extractor of ``navreplay run`` over several recordings and ``navreplay montecarlo``."""
+    scored = default_extract(recording, results, task)
+    return PerRun(scored, {label: m.summary() for label, m in scored.items()})
+
+
+@dataclasses.dataclass(frozen=True)
+class RunJob:
+    """``navreplay run``.
+
+    Attributes
+    ----------
+    filters : tuple of FilterSpec
+    recordings : tuple of Path
+    viz : VizOptions
+        Default: save ``out/<recording>.rrd`` (``out/ensemble.rrd`` for several recordings).
+    summary_path : Path, optional
+        Write the summary as JSON.
+    workers : int
+        Processes for several recordings.
+    pacing : float, optional
+        Replay at this multiple of real time (live viewing of one recording).
+    output_rate : float
+        Output rate where no aiding sample falls [Hz].
+    log : LogOptions, optional
+        Topics, frames, ``--init`` and ``--reference`` (:mod:`navreplay.logs.options`).
+    export_dir, report_path : Path, optional
+        ``--export DIR`` and ``--report FILE.html`` (:mod:`navreplay.jobs.results`).
+    force : bool
+        Overwrite existing export and report files.
+    max_imu_gap : float, optional
+        Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
+    """
+
+    filters: tuple[FilterSpec, ...]
+    recordings: tuple[Path, ...]
+    viz: VizOptions = VizOptions()
+    summary_path: Path | None = None
+    workers: int = 1
+    pacing: float | None = None
+    output_rate: float = 10.0
+    log: Any = None
+    export_dir: Path | None = None
+    report_path: Path | None = None
+    force: bool = False
+    max_imu_gap: float | None = None
+
+
+def outputs_of(job: Any) -> Outputs:
+    """The ``--export`` / ``--report`` outputs of a run or Monte Carlo job."""
+    return Outputs(job.export_dir, job.report_path, job.force)
+
+
+def _check_files(paths: Sequence[Path]) -> None:
+    from navreplay.io.reader import is_rosbag
+
+    for p in paths:
+        if not (Path(p).is_file() or (Path(p).is_dir() and is_rosbag(Path(p)))):
+            what = ("is a directory, not a recording or rosbag2 folder" if Path(p).is_dir()
+                    else "no such recording")
+            raise FileNotFoundError(f"{p}: {what}")
+
+
+def run(job: RunJob, progress: Progress | None = None) -> RunReport:
+    """Replay the filters over one recording (in this process, with Rerun output and a summary
+    table) or over several (in parallel, per-recording summaries and ensemble statistics)."""
+    if not job.recordings:
+        raise _params.ParamError("no recording given")
+    _check_files(job.recordings)
+    if job.pacing is not None and not (0 < job.pacing < math.inf):
+        raise _params.ParamError(f"--rate must be positive, got {job.pacing}")
+    if not (0 < job.output_rate < math.inf):
+        raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
+    if len(job.recordings) == 1:
+        return _run_one(job, progress)
+    if job.pacing is not None:
+        raise _params.ParamError("--rate (paced replay) needs a single recording")
+    if job.log is not None and job.log != type(job.log)():
+        raise _params.ParamError("--topic, --frame, --init, --reference and the [topics], "
+                                 "[frames], [initial] tables need a single recording")
+    tasks = file_tasks(job.recordings)
+    default = DEFAULT_OUT / "ensemble.rrd"
+    title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
+    return campaign(tasks, job.filters, job.viz, default, job.summary_path, job.workers,
+                     progress, title, job.output_rate, per_run_table=True,
+                     outputs=outputs_of(job))
+
+
+def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
+    from navreplay import metrics
+    from navreplay.io.integrity import coverage
+    from navreplay.logs.prepare import open_log
+
+    path = Path(job.recordings[0])
+    classes = [spec.load() for spec in job.filters]
+    prepared = open_log(path, job.log)
+    recording = prepared.recording
+    for cls in classes:
+        check_streams(recording, cls, str(path))
+    has_truth = StreamKind.TRUTH in recording
+    outputs = outputs_of(job)
+    outputs.check([s.label for s in job.filters], ensemble=False, has_reference=has_truth)
+    n_filters = len(classes)
+    summaries: dict[str, dict[str, Any]] = {}
+    sink = open_output(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
+    try:
+        if sink is not None and has_truth:
+            sink.log_truth(recording)
+        for k, (spec, cls) in enumerate(zip(job.filters, classes, strict=True)):
+            def prog(done: int, total: int, k: int = k) -> None:
+                if progress is not None:
+                    progress(k * total + done, n_filters * total)
+
+            observer = None
+            if sink is not None and (job.viz.live or job.pacing is not None):
+                observer = sink.observer(recording if has_truth else None)
+            result = replay(
+                recording, cls, spec.params, label=spec.label, source=str(path),
+                output_rate=job.output_rate, pacing=job.pacing, validate=False,
+                progress=prog, observer=observer, max_imu_gap=job.max_imu_gap,
+            )
+            errors = None
+            scored = metrics.run_metrics(result, recording)  # NIS only without a reference
+            summaries[spec.label] = scored.summary()
+            if has_truth:
+                errors = state_errors(scored)
+            outputs.collect(result, recording, scored if has_truth else None)
+            if sink is not None:
+                sink.log_run(result, truth=recording if has_truth else None, metrics=errors)
+        hint = close_output(sink, job.viz)
+    except BaseException:
+        if sink is not None:
+            sink.abort()
+        raise
+    covered = coverage(recording, prepared.salvaged)
+    summary = {"recording": str(path), "coverage": covered, "salvaged": prepared.salvaged,
+               "filters": summaries}
+    notes = list(prepared.notes)
+    if prepared.salvaged:
+        notes.append(f"SALVAGED: {path} is damaged; replayed "
+                     f"{'an unknown part' if covered is None else f'{100 * covered:.1f} %'} of it")
+    notes += outputs.write_run(recording, summaries, source=str(path),
+                               title=f"{', '.join(s.label for s in job.filters)} over {path.name}")
+    if job.summary_path is not None:
+        write_json(job.summary_path, summary)
+        notes.append(f"Summary written to {job.summary_path}")
+    table = tables.format_summaries(summaries)
+    if not has_truth:
+        table = "(no truth or reference: innovation statistics only)\n\n" + table
+    return RunReport(
+        title=f"{', '.join(s.label for s in job.filters)} over {path}",
+        table=table, summary=summary, viz=hint, notes=notes,
+        sink=sink if job.viz.mode is VizMode.SERVE else None,
+    )
+
+
+def campaign(
+    tasks: Sequence[RunTask],
+    filters: Sequence[FilterSpec],
+    viz_options: VizOptions,
+    default_rrd: Path,
+    summary_path: Path | None,
+    workers: int,
+    progress: Progress | None,
+    title: str,
+    output_rate: float,
+    per_run_table: bool,
+    outputs: Outputs | None = None,
+) -> RunReport:
+    from navreplay import metrics
+
+    outputs = outputs or Outputs()
+    outputs.check([spec.label for spec in filters], ensemble=True)
+
+    stats: dict[str, Any] = {spec.label: metrics.EnsembleStats(spec.label) for spec in filters}
+    rows: list[dict[str, Any]] = []
+    notes: list[str] = []
+
+    def collect(out: RunOutput) -> None:
+        per: PerRun = out.metrics
+        rows.append({"run": out.index + 1, "recording": out.source, "seed": out.seed,
+                     "seconds": out.seconds, "filters": per.summaries})
+        for label, m in per.metrics.items():
+            if label in stats:
+                try:
+                    stats[label].add(m)
+                except ValueError as e:  # recordings of different lengths or rates
+                    del stats[label]
+                    notes.append(f"no ensemble statistics for {label}: {e}")
+
+    sink = open_output(viz_options, default_rrd, title)
+    try:
+        done = run_ensemble(tasks, filters, collect, extract=campaign_extract,
+                            workers=workers, progress=progress, output_rate=output_rate)
+        ens = {label: s.result() for label, s in stats.items() if s.runs}
+        if sink is not None:
+            from navreplay.viz.ensemble import log_ensemble
+
+            for label, e in ens.items():
+                log_ensemble(sink, label, e)
+        hint = close_output(sink, viz_options)
+    except BaseException:
+        if sink is not None:
+            sink.abort()
+        raise
+    summary = {
+        "runs": rows,
+        "ensemble": {label: e.summary() for label, e in ens.items()},
+        "wall_seconds": done.seconds,
+    }
+    notes += outputs.write_ensemble(ens, summary["ensemble"], title=title)
+    if summary_path is not None:
+        write_json(summary_path, summary)
+    parts = []
+    if per_run_table:
+        names = [Path(r["recording"]).name for r in rows]
+        if len(set(names)) < len(names):
+            names = [f"{n} (run {r['run']})" for n, r in zip(names, rows, strict=True)]
+        per_run = {f"{label} @ {name}": s
+                   for name, r in zip(names, rows, strict=True)
+                   for label, s in r["filters"].items()}
+        keys = [k for k in tables.ERROR_KEYS if any(k in s for s in per_run.values())]
+        parts.append("Per recording:\n" + tables.format_table(per_run, keys))
+    if ens:
+        parts.append(f"Ensemble over {done.runs} runs:\n"
+                     + tables.format_summaries({label: e.summary() for label, e in ens.items()}))
+    notes += [
+        f"{done.runs} runs in {done.seconds:.1f} s wall ({done.run_seconds:.1f} s of run time, "
+        f"{workers} worker(s))",
+    ]
+    if summary_path is not None:
+        notes.append(f"Summary written to {summary_path}")
+    return RunReport(title=title, table="\n\n".join(parts), summary=summary, viz=hint,
+                     notes=notes, sink=sink if viz_options.mode is VizMode.SERVE else None)

@@ -1,0 +1,128 @@
+"""Stopping cleanly: signals in the command process, and workers that die with their parent.
+
+* :func:`handle_signals` (the command line wraps every command in it) turns SIGTERM and SIGHUP
+  into :class:`Terminated` and SIGINT into ``KeyboardInterrupt``, after deleting the live
+  temporary files (:func:`navreplay.outputs.remove_temporaries`): whatever was being written is
+  gone at once, even if unwinding takes a while, and existing targets are untouched.
+* :func:`worker_init` is the initializer of the process pools: a worker ignores Ctrl-C (the parent
+  cancels the campaign), deletes its temporaries and exits on SIGTERM/SIGHUP, and exits when its
+  parent dies — at once on Linux (``prctl(PR_SET_PDEATHSIG)``), within a second elsewhere (a
+  thread watching the parent PID).
+* :func:`stop_workers` terminates the processes of a pool whose campaign failed or was stopped.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+from types import FrameType
+from typing import Any
+
+from navreplay import outputs
+
+STOP_SIGNALS: tuple[str, ...] = ("SIGTERM", "SIGHUP")
+"""Signals that stop a command (SIGINT stops it too, as ``KeyboardInterrupt``)."""
+
+
+class Terminated(BaseException):  # noqa: N818 - like KeyboardInterrupt
+    """The process was told to stop by a signal; ``exit_code`` is ``128 + signum``."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        self.exit_code = 128 + signum
+        super().__init__(f"terminated by {signal.Signals(signum).name}")
+
+
+def _on_stop(signum: int, frame: FrameType | None) -> None:
+    outputs.remove_temporaries()
+    raise Terminated(signum)
+
+
+def _on_interrupt(signum: int, frame: FrameType | None) -> None:
+    outputs.remove_temporaries()
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def handle_signals() -> Iterator[None]:
+    """Install the stop handlers for the block (main thread only; elsewhere a no-op)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    wanted = [(signal.SIGINT, _on_interrupt)] + [
+        (getattr(signal, name), _on_stop) for name in STOP_SIGNALS if hasattr(signal, name)
+    ]
+    old: list[tuple[int, Any]] = []
+    try:
+        for signum, handler in wanted:
+            old.append((signum, signal.signal(signum, handler)))
+        yield
+    finally:
+        for signum, handler in old:
+            signal.signal(signum, handler)
+
+
+def interrupted_by(exc: BaseException) -> BaseException | None:
+    """The ``KeyboardInterrupt`` or :class:`Terminated` behind ``exc`` (itself, or the context
+    of an error that a compiled function raised while the signal arrived), else None."""
+    seen = 0
+    e: BaseException | None = exc
+    while e is not None and seen < 16:
+        if isinstance(e, KeyboardInterrupt | Terminated):
+            return e
+        e = e.__cause__ or e.__context__
+        seen += 1
+    return None
+
+
+# --------------------------------------------------------------------------------------------
+# workers
+
+_PR_SET_PDEATHSIG = 1
+
+
+def worker_init(parent_pid: int | None = None) -> None:
+    """Initializer of a worker process (see the module docstring)."""
+    parent = os.getppid() if parent_pid is None else parent_pid
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name in STOP_SIGNALS:
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), _worker_stop)
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    if os.getppid() != parent:  # the parent died before the death signal was armed
+        _exit_now(1)
+    threading.Thread(target=_watch_parent, args=(parent,), name="navreplay-parent-watch",
+                     daemon=True).start()
+
+
+def _worker_stop(signum: int, frame: FrameType | None) -> None:
+    _exit_now(128 + signum)
+
+
+def _exit_now(code: int) -> None:
+    outputs.remove_temporaries()
+    os._exit(code)
+
+
+def _watch_parent(parent: int, interval: float = 1.0) -> None:
+    stop = threading.Event()
+    while not stop.wait(interval):
+        if os.getppid() != parent:
+            _exit_now(1)
+
+
+def stop_workers(executor: Any) -> None:
+    """Terminate the worker processes of a ``concurrent.futures.ProcessPoolExecutor``."""
+    processes = getattr(executor, "_processes", None) or {}
+    for proc in list(processes.values()):
+        with contextlib.suppress(Exception):
+            proc.terminate()

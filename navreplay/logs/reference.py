@@ -1,0 +1,356 @@
+"""References to score against: a topic of the log or a TUM / CSV file, as a truth-like stream.
+
+The result is a :class:`~navreplay.streams.Stream` of kind ``truth`` holding whichever of
+``pos`` (lat, lon, h), ``v_n`` (NED) and ``q_nb`` (FRD -> NED) the reference has; scoring uses
+what is there (docs/real-logs.md).
+
+Sources
+-------
+``nav_msgs/msg/Odometry``
+    pose in ``header.frame_id`` (a local world frame: ENU, or NED when its name ends in ``_ned``
+    or ``--frame reference=ned``), twist in ``child_frame_id`` (the body: FLU, or FRD when its
+    name ends in ``_frd``). Gives pos, v_n, q_nb.
+``geometry_msgs/msg/PoseStamped``, ``PoseWithCovarianceStamped``
+    pose as above (body FLU with an ENU world, FRD with a NED one). Gives pos, q_nb.
+``sensor_msgs/msg/NavSatFix``
+    Gives pos (fixes with status NO_FIX dropped).
+``navreplay_msgs/msg/Truth``
+    A navreplay truth topic: pos, v_n, q_nb as they are.
+TUM file (``.tum``, ``.txt``)
+    Lines ``t x y z qx qy qz qw`` (``#`` comments): t [s] UNIX time (values below 1e9 are
+    seconds since the log's start), position in a local world frame (ENU unless
+    ``--frame reference=ned``), orientation body -> world (FLU body with ENU, FRD with NED).
+CSV file (``.csv``)
+    A header row naming the columns; ``t`` [s, UNIX or since the start as for TUM] or ``t_ns``
+    [ns UNIX]; position as ``lat_deg, lon_deg, h`` or local ``x, y, z``; optional velocity
+    ``v_N, v_E, v_D`` [m/s]; optional attitude ``roll_deg, pitch_deg, yaw_deg`` (FRD -> NED) or
+    ``qw, qx, qy, qz`` (body -> world, as for TUM).
+
+Local positions need the geodetic position of the world origin: ``lat_deg``/``lon_deg``/``h``
+of the ``[initial]`` table when given, else a fit to the log's NavSatFix stream: the origin is the
+mean over all fixes inside the reference's time span of (fix - reference position at the fix
+time), which averages the GNSS noise (the antenna lever arm is neglected).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from navreplay.geo import earth
+from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
+from navreplay.io.convert import Convention
+from navreplay.io.errors import RecordingError
+from navreplay.io.reader import is_rosbag
+from navreplay.io.schemas import normalize_type_name
+from navreplay.streams import Recording, Stream, StreamKind, seconds
+
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSE = "geometry_msgs/msg/PoseStamped"
+POSE_COV = "geometry_msgs/msg/PoseWithCovarianceStamped"
+NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"
+TRUTH = "navreplay_msgs/msg/Truth"
+REFERENCE_TYPES = (ODOMETRY, POSE, POSE_COV, NAV_SAT_FIX, TRUTH)
+
+_NED_FROM_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+_Q_NED_ENU = np.array([0.0, math.sqrt(0.5), math.sqrt(0.5), 0.0])
+"""q rotating ENU vectors into NED (C = _NED_FROM_ENU), scalar first."""
+_Q_FLU_FRD = np.array([0.0, 1.0, 0.0, 0.0])
+"""q rotating FRD vectors into FLU (a half turn about x), scalar first."""
+
+
+class ReferenceError(RecordingError):
+    """A reference cannot be read or used; raised before any replay."""
+
+
+@dataclasses.dataclass
+class Reference:
+    """A reference as columns, before it is placed on the earth.
+
+    Attributes
+    ----------
+    source : str
+        Topic or file, for messages.
+    t_ns : ndarray (N,)
+    pos : ndarray (N, 3) or None
+        lat, lon [rad], h [m] (geodetic references).
+    local_ned : ndarray (N, 3) or None
+        Position in the local world frame, resolved NED [m] (needs an origin).
+    v_n : ndarray (N, 3) or None
+    q_nb : ndarray (N, 4) or None
+    """
+
+    source: str
+    t_ns: np.ndarray
+    pos: np.ndarray | None = None
+    local_ned: np.ndarray | None = None
+    v_n: np.ndarray | None = None
+    q_nb: np.ndarray | None = None
+
+    @property
+    def has(self) -> tuple[str, ...]:
+        """Which of pos, v_n, q_nb the reference gives."""
+        have = ["pos"] if self.pos is not None or self.local_ned is not None else []
+        return tuple(have + [k for k in ("v_n", "q_nb") if getattr(self, k) is not None])
+
+
+def _world(frame_id: str, declared: Convention | None) -> Convention:
+    if declared is not None:
+        if declared not in (Convention.ENU, Convention.NED):
+            raise ReferenceError(f"--frame reference={declared.value}: use enu or ned")
+        return declared
+    name = frame_id.lower()
+    return Convention.NED if name.endswith("_ned") or name == "ned" else Convention.ENU
+
+
+def _body_is_frd(child: str, world: Convention) -> bool:
+    name = child.lower()
+    if name.endswith("_frd") or name == "frd":
+        return True
+    if name.endswith("_flu") or name == "flu":
+        return False
+    return world is Convention.NED
+
+
+def to_ned(world: Convention, xyz: np.ndarray, q_wb_xyzw: np.ndarray | None, body_frd: bool
+           ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Local positions (N, 3) and orientations (N, 4 xyzw, body -> world) to NED and q_nb
+    (FRD -> NED, scalar first)."""
+    xyz = np.asarray(xyz, dtype=float)
+    ned = xyz @ _NED_FROM_ENU.T if world is Convention.ENU else xyz.copy()
+    if q_wb_xyzw is None:
+        return ned, None
+    q = quat_normalize(np.asarray(q_wb_xyzw, dtype=float)[:, [3, 0, 1, 2]])
+    if world is Convention.ENU:
+        q = quat_mult(_Q_NED_ENU, q)
+    if not body_frd:
+        q = quat_mult(q, _Q_FLU_FRD)
+    return ned, quat_normalize(q)
+
+
+def _xyzw(o: Any) -> list[float]:
+    return [o.x, o.y, o.z, o.w]
+
+
+def _xyz(v: Any) -> list[float]:
+    return [v.x, v.y, v.z]
+
+
+def _stamp(m: Any, t: int) -> int:
+    s = m.header.stamp
+    ns = int(s.sec) * 1_000_000_000 + int(s.nanosec)
+    return ns if ns else t
+
+
+def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
+                  declared: Convention | None) -> Reference:
+    """A reference from decoded messages (log time, message) of one topic."""
+    if not items:
+        raise ReferenceError(f"reference {source}: the topic has no messages")
+    msgs = [m for _, m in items]
+    t_ns = np.array([_stamp(m, t) for t, m in items], dtype=np.int64)
+    if type_name == NAV_SAT_FIX:
+        keep = np.array([m.status.status >= 0 for m in msgs])
+        pos = np.array([[math.radians(m.latitude), math.radians(m.longitude), m.altitude]
+                        for m in msgs])
+        return Reference(source, t_ns[keep], pos=pos[keep])
+    if type_name == TRUTH:
+        return Reference(source, t_ns, pos=np.array([list(m.pos) for m in msgs]),
+                         v_n=np.array([list(m.v_n) for m in msgs]),
+                         q_nb=np.array([list(m.q_nb) for m in msgs]))
+    pose = {ODOMETRY: lambda m: m.pose.pose, POSE_COV: lambda m: m.pose.pose,
+            POSE: lambda m: m.pose}.get(type_name)
+    if pose is None:
+        raise ReferenceError(f"reference {source}: type {type_name} cannot be a reference "
+                             f"(use one of {', '.join(REFERENCE_TYPES)})")
+    world = _world(msgs[0].header.frame_id, declared)
+    child = getattr(msgs[0], "child_frame_id", "")
+    frd = _body_is_frd(child, world)
+    xyz = np.array([_xyz(pose(m).position) for m in msgs])
+    q_raw = np.array([_xyzw(pose(m).orientation) for m in msgs])
+    q_given = bool(np.any(np.abs(q_raw) > 0))
+    local, q_nb = to_ned(world, xyz, q_raw if q_given else None, frd)
+    ref = Reference(source, t_ns, local_ned=local, q_nb=q_nb)
+    if type_name == ODOMETRY and q_nb is not None:
+        v_b = np.array([_xyz(m.twist.twist.linear) for m in msgs])
+        if not frd:
+            v_b = v_b * np.array([1.0, -1.0, -1.0])
+        from navreplay.geo.rotations import quat_to_dcm
+
+        ref.v_n = np.einsum("kij,kj->ki", quat_to_dcm(q_nb), v_b)
+    return ref
+
+
+def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
+    """Type name and (log time, decoded message) of one topic of a bag or MCAP file."""
+    if is_rosbag(path):
+        from navreplay.io.rosbag import bag_topics, iter_messages
+
+        types = {t: ty for t, ty, _, _ in bag_topics(path)}
+        if topic not in types:
+            raise ReferenceError(f"reference {topic}: no such topic in {path} (it has "
+                                 f"{', '.join(sorted(types)) or 'no topics'})")
+        return types[topic], list(iter_messages(path, topic))
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    items: list[tuple[int, Any]] = []
+    type_name = ""
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            summary = reader.get_summary()
+            topics = {c.topic: normalize_type_name(summary.schemas[c.schema_id].name)
+                      for c in summary.channels.values()} if summary else {}
+            if topic not in topics:
+                raise ReferenceError(f"reference {topic}: no such topic in {path} (it has "
+                                     f"{', '.join(sorted(topics)) or 'no topics'})")
+            type_name = topics[topic]
+            for _, _, message, decoded in reader.iter_decoded_messages(topics=[topic]):
+                items.append((message.log_time, decoded))
+    except ReferenceError:
+        raise
+    except Exception as exc:
+        raise ReferenceError(f"reference {topic} in {path}: cannot be read ({exc!r})") from None
+    return type_name, items
+
+
+def _file_rows(path: Path) -> Iterator[list[str]]:
+    with open(path, newline="") as f:
+        for line in f:
+            if line.strip() and not line.lstrip().startswith("#"):
+                yield line
+
+
+def _times(t: np.ndarray, t0_ns: int) -> np.ndarray:
+    """Seconds (UNIX, or since the log start when below 1e9) -> int64 ns."""
+    if t.size and np.nanmax(np.abs(t)) < 1e9:
+        return np.int64(t0_ns) + np.rint(t * 1e9).astype(np.int64)
+    return np.rint(t * 1e9).astype(np.int64)
+
+
+def from_file(path: Path, t0_ns: int, declared: Convention | None) -> Reference:
+    """A reference from a TUM or CSV file (module docstring)."""
+    where = f"reference {path}"
+    try:
+        if path.suffix.lower() == ".csv":
+            with open(path, newline="") as f:
+                rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
+            if not rows:
+                raise ReferenceError(f"{where}: no rows")
+            cols = {k.strip(): np.array([float(r[k]) for r in rows]) for k in rows[0]}
+            return _from_columns(where, cols, t0_ns, declared)
+        data = np.loadtxt(list(_file_rows(path)), ndmin=2)
+    except ReferenceError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ReferenceError(f"{where}: cannot be read ({exc})") from None
+    if data.shape[1] != 8:
+        raise ReferenceError(f"{where}: a TUM file has 8 columns (t x y z qx qy qz qw), "
+                             f"this one {data.shape[1]}")
+    world = declared or Convention.ENU
+    local, q_nb = to_ned(world, data[:, 1:4], data[:, 4:8], world is Convention.NED)
+    return Reference(str(path), _times(data[:, 0], t0_ns), local_ned=local, q_nb=q_nb)
+
+
+def _from_columns(where: str, c: Mapping[str, np.ndarray], t0_ns: int,
+                  declared: Convention | None) -> Reference:
+    if "t_ns" in c:
+        t_ns = c["t_ns"].astype(np.int64)
+    elif "t" in c:
+        t_ns = _times(c["t"], t0_ns)
+    else:
+        raise ReferenceError(f"{where}: needs a column t [s] or t_ns [ns]; has {', '.join(c)}")
+    ref = Reference(where.removeprefix("reference "), t_ns)
+    world = declared or Convention.ENU
+    if {"lat_deg", "lon_deg", "h"} <= set(c):
+        ref.pos = np.stack([np.radians(c["lat_deg"]), np.radians(c["lon_deg"]), c["h"]], axis=1)
+    elif {"x", "y", "z"} <= set(c):
+        ref.local_ned = to_ned(world, np.stack([c["x"], c["y"], c["z"]], axis=1), None,
+                               False)[0]
+    if {"v_N", "v_E", "v_D"} <= set(c):
+        ref.v_n = np.stack([c["v_N"], c["v_E"], c["v_D"]], axis=1)
+    if {"roll_deg", "pitch_deg", "yaw_deg"} <= set(c):
+        ref.q_nb = euler_to_quat(np.radians(np.stack(
+            [c["roll_deg"], c["pitch_deg"], c["yaw_deg"]], axis=1)))
+    elif {"qw", "qx", "qy", "qz"} <= set(c):
+        q = np.stack([c["qx"], c["qy"], c["qz"], c["qw"]], axis=1)
+        ref.q_nb = to_ned(world, np.zeros((len(q), 3)), q, world is Convention.NED)[1]
+    if not ref.has:
+        raise ReferenceError(f"{where}: no position, velocity or attitude columns (see "
+                             "docs/real-logs.md); has " + ", ".join(c))
+    return ref
+
+
+def read_reference(spec: str, log: Path, recording: Recording,
+                   declared: Convention | None) -> Reference:
+    """Read ``spec`` (a file when one exists by that name, else a topic of ``log``)."""
+    path = Path(spec)
+    if path.is_file() and path.suffix.lower() in (".csv", ".tum", ".txt"):
+        return from_file(path, recording.t0_ns, declared)
+    if not spec.startswith("/") and not path.exists():
+        raise ReferenceError(f"reference {spec}: no such file, and not a topic (topics start "
+                             "with '/')")
+    type_name, items = _iter_topic(log, spec)
+    return from_messages(spec, type_name, items, declared)
+
+
+def origin_from_gnss(ref: Reference, recording: Recording) -> np.ndarray:
+    """Geodetic origin (lat, lon, h) of a local reference fitted to the GNSS fixes."""
+    gps = recording[StreamKind.GPS]
+    t_ref = seconds(ref.t_ns, recording.t0_ns)
+    t_fix = seconds(gps.t_ns, recording.t0_ns)
+    inside = (t_fix >= t_ref[0]) & (t_fix <= t_ref[-1])
+    if not inside.any():
+        raise ReferenceError(f"reference {ref.source}: no GNSS fix inside its time span to "
+                             "place its local origin; give lat_deg, lon_deg, h in [initial]")
+    d = np.stack([np.interp(t_fix[inside], t_ref, ref.local_ned[:, i]) for i in range(3)], 1)
+    fixes = gps["pos"][inside]
+    origin = fixes[0] - 0.0
+    for _ in range(3):
+        C = earth.C_en(origin[0], origin[1])
+        r0 = earth.lla_to_ecef(*fixes.T) - d @ C.T
+        origin = np.array(earth.ecef_to_lla(r0.mean(axis=0)))
+    return origin
+
+
+def reference_stream(ref: Reference, recording: Recording, initial: Mapping[str, Any]
+                     ) -> tuple[Stream, str]:
+    """The reference as a truth stream, and one line saying what it holds and how it was
+    placed."""
+    note = ""
+    pos = ref.pos
+    if ref.local_ned is not None:
+        if "lat_deg" in initial and "lon_deg" in initial:
+            origin = np.array([math.radians(initial["lat_deg"]), math.radians(initial["lon_deg"]),
+                               float(initial.get("h", 0.0))])
+            how = "[initial] lat_deg, lon_deg, h"
+        elif StreamKind.GPS in recording:
+            origin = origin_from_gnss(ref, recording)
+            how = f"a fit to {len(recording[StreamKind.GPS])} GNSS fixes"
+        else:
+            raise ReferenceError(
+                f"reference {ref.source}: local positions need an origin: a NavSatFix topic "
+                "in the log, or lat_deg, lon_deg, h in [initial]")
+        lat, lon, h = earth.ned_offset_to_lla(origin[0], origin[1], origin[2], ref.local_ned)
+        pos = np.stack([lat, lon, h], axis=1)
+        note = (f" (local origin {math.degrees(origin[0]):.7f} deg, "
+                f"{math.degrees(origin[1]):.7f} deg, {origin[2]:.2f} m from {how})")
+    cols = {k: v for k, v in (("pos", pos), ("v_n", ref.v_n), ("q_nb", ref.q_nb))
+            if v is not None}
+    order = np.argsort(ref.t_ns, kind="stable")
+    t_ns = ref.t_ns[order]
+    keep = np.append(True, np.diff(t_ns) > 0)
+    stream = Stream(StreamKind.TRUTH, t_ns[keep], {k: v[order][keep] for k, v in cols.items()},
+                    "ned")
+    bad = [k for k, v in stream.columns.items() if not np.isfinite(v).all()]
+    if bad or len(stream) < 2:
+        raise ReferenceError(f"reference {ref.source}: "
+                             + (f"non-finite {', '.join(bad)}" if bad else "fewer than 2 samples"))
+    return stream, f"reference {ref.source}: {', '.join(ref.has)}{note}"

@@ -1,0 +1,227 @@
+"""Output files: checked before any work, written through temporaries, never lost.
+
+Every file a command writes (a recording, an .rrd view, a JSON summary, an export, a report)
+goes through this module:
+
+* :func:`check_outputs` runs before the work starts. It refuses a target that exists (unless
+  ``force``), a target that is one of the command's inputs (even with ``force``: resolved paths
+  and device/inode are compared, so links and ``./x`` spellings are caught), two outputs on the
+  same file, a target that is a directory, and a target whose directory cannot be created or
+  written. Each refusal is one line naming the option and the file.
+* :func:`temporary_path` names the file the work writes into: ``.NAME.PID.XXXXXXXX.part`` beside
+  the target, renamed onto it only when complete (:func:`atomic_path` does both). Live
+  temporaries are registered so that :func:`remove_temporaries` (called by the signal handlers of
+  :mod:`navreplay.lifecycle`) deletes them when the process is told to stop.
+* A run killed outright (``kill -9``, power loss) cannot clean up; the PID in the name lets the
+  next write into the same directory recognise the leftovers of a process that no longer exists
+  and delete them (:func:`clean_stale`, reported as a warning).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+import re
+import secrets
+import threading
+import warnings
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+
+class OutputError(OSError):
+    """An output that must not or cannot be written; the message is one line."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Output:
+    """A file (or, for ``directory``, a folder of files) a command will write.
+
+    Attributes
+    ----------
+    path : Path
+    option : str
+        How the user named it, for messages: ``--save``, ``--summary``, ``-o``, ``--keep``...
+    explicit : bool
+        Named by the user. An existing file is then replaced only with ``force``; a default
+        target (under ``out/``) is the tool's own and is regenerated.
+    directory : bool
+        A directory the command fills (``--keep DIR``); it may exist, its files are checked as
+        outputs of their own.
+    """
+
+    path: Path
+    option: str
+    explicit: bool = True
+    directory: bool = False
+
+
+def check_outputs(
+    outputs: Iterable[Output | None],
+    inputs: Iterable[str | os.PathLike[str]] = (),
+    *,
+    force: bool = False,
+) -> None:
+    """Refuse outputs that would lose a file or fail after the work (see the module docstring).
+
+    Raises
+    ------
+    OutputError
+        The first problem found, naming the option and the file.
+    """
+    seen: dict[str, Output] = {}
+    ins = [Path(p) for p in inputs]
+    for out in outputs:
+        if out is None:
+            continue
+        path = Path(out.path)
+        label = f"{out.option} {path}"
+        key = os.path.normcase(os.path.abspath(path.resolve()))
+        if key in seen:
+            raise OutputError(f"{label}: the same file as {seen[key].option} {seen[key].path}")
+        seen[key] = out
+        for src in ins:
+            if _same_file(path, src):
+                raise OutputError(f"{label}: is an input of this command ({src}); choose "
+                                  "another file")
+        if out.directory:
+            if path.exists() and not path.is_dir():
+                raise OutputError(f"{label}: exists and is not a directory")
+            _check_directory(label, path)
+            continue
+        if path.is_dir():
+            raise OutputError(f"{label}: is a directory, not a file")
+        if path.exists() and out.explicit and not force:
+            raise OutputError(f"{label} exists; use --force to overwrite")
+        _check_directory(label, path.parent)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        if a.resolve() == b.resolve():
+            return True
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _check_directory(label: str, directory: Path) -> None:
+    """The directory exists (or can be made) and this process may create files in it."""
+    d = Path(os.path.abspath(directory))
+    while not d.exists():
+        if d.parent == d:
+            break
+        d = d.parent
+    if not d.is_dir():
+        raise OutputError(f"{label}: {d} is not a directory")
+    if not os.access(d, os.W_OK | os.X_OK):
+        raise OutputError(f"{label}: directory {d} is not writable")
+
+
+# --------------------------------------------------------------------------------------------
+# temporaries
+
+_PART = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.part$")
+"""Name of a temporary: ``.NAME.PID.XXXXXXXX.part``."""
+
+_LIVE: set[Path] = set()
+_LOCK = threading.Lock()
+
+
+def temporary_path(target: str | os.PathLike[str]) -> Path:
+    """A fresh temporary beside ``target``, registered for removal on a signal.
+
+    Creates the target's directory, removes stale temporaries in it (:func:`clean_stale`) and
+    returns ``.NAME.PID.XXXXXXXX.part``; release it with :func:`release` once renamed or
+    abandoned.
+    """
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    clean_stale(target.parent)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.part")
+    with _LOCK:
+        _LIVE.add(tmp)
+    return tmp
+
+
+def release(tmp: Path, *, remove: bool = True) -> None:
+    """Forget a temporary (and delete it unless ``remove`` is False)."""
+    with _LOCK:
+        _LIVE.discard(tmp)
+    if remove:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def remove_temporaries() -> list[Path]:
+    """Delete every live temporary of this process (signal handlers call this); returns them."""
+    with _LOCK:
+        live = [p for p in _LIVE if _pid_of(p) == os.getpid()]
+        _LIVE.clear()
+    for p in live:
+        with contextlib.suppress(OSError):
+            p.unlink()
+    return live
+
+
+@contextlib.contextmanager
+def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
+    """A temporary path beside ``target``, renamed onto it when the block succeeds; removed
+    otherwise (an existing target is then untouched)."""
+    target = Path(target)
+    tmp = temporary_path(target)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    finally:
+        release(tmp)
+
+
+def _pid_of(path: Path) -> int | None:
+    m = _PART.match(path.name)
+    return int(m["pid"]) if m else None
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    if os.name != "posix":  # no cheap test elsewhere: keep the file
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, another user's
+        return True
+    return True
+
+
+def stale_temporaries(directory: str | os.PathLike[str]) -> list[Path]:
+    """Temporaries in ``directory`` whose writing process no longer exists."""
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return []
+    out = []
+    for name in names:
+        m = _PART.match(name)
+        if m and not _alive(int(m["pid"])):
+            out.append(Path(directory) / name)
+    return sorted(out)
+
+
+def clean_stale(directory: str | os.PathLike[str]) -> list[Path]:
+    """Delete the temporaries a killed run left in ``directory``; warn about each."""
+    removed = []
+    for p in stale_temporaries(directory):
+        try:
+            p.unlink()
+        except OSError as e:
+            warnings.warn(f"{p}: temporary file of an interrupted run; cannot remove it: "
+                          f"{e.strerror}", stacklevel=2)
+            continue
+        removed.append(p)
+        warnings.warn(f"removed {p}, the temporary file of an interrupted run", stacklevel=2)
+    return removed
+

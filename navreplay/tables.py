@@ -1,0 +1,126 @@
+"""Text tables of summaries: errors with display units, NEES and NIS against their bounds.
+
+Summary dicts hold SI values (:meth:`navreplay.metrics.RunMetrics.summary`,
+:meth:`navreplay.metrics.EnsembleResult.summary`); :data:`SUMMARY_UNITS` converts them for
+display.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+SUMMARY_UNITS: dict[str, tuple[str, float]] = {
+    "runs": ("", 1.0),
+    "duration": ("s", 1.0),
+    "distance": ("km", 1e-3),
+    "pos_err_final_h": ("m", 1.0),
+    "pos_err_final_dt": ("%DT", 1.0),
+    "pos_rms_h": ("m", 1.0),
+    "pos_rms_v": ("m", 1.0),
+    "vel_rms": ("m/s", 1.0),
+    "att_rms_level": ("mrad", 1e3),
+    "att_rms_heading": ("mrad", 1e3),
+    "lat_rms_final": ("m", 1.0),
+    "long_rms_final": ("m", 1.0),
+    "cep50_final": ("m", 1.0),
+    "dt_cep50_final": ("%", 1.0),
+    "nees_mean": ("", 1.0),
+    "nees_dof": ("", 1.0),
+    "nees_in_bounds": ("%", 100.0),
+}
+"""Display unit and factor from SI for each summary key (``nis_*`` keys like ``nees_*``)."""
+
+
+def summary_unit(key: str) -> tuple[str, float]:
+    """Display unit and factor from SI of a summary key."""
+    if key in SUMMARY_UNITS:
+        return SUMMARY_UNITS[key]
+    for prefix in ("nis_mean_", "nis_dof_", "nis_in_bounds_"):
+        if key.startswith(prefix):
+            return SUMMARY_UNITS[prefix.replace("nis", "nees").rstrip("_")]
+    return ("", 1.0)
+
+
+def format_table(
+    summaries: Mapping[str, Mapping[str, Any]], keys: Sequence[str] | None = None
+) -> str:
+    """A compact text table of summary dicts, one row per label.
+
+    Parameters
+    ----------
+    summaries : mapping
+        Label -> summary dict (:meth:`RunMetrics.summary`, :meth:`EnsembleResult.summary`).
+    keys : sequence of str, optional
+        Columns; default: every numeric key present in any summary, in first-seen order.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> print(format_table({"ins": {"pos_rms_h": 812.0, "att_rms_level": 0.00123},
+    ...                     "gps-ins": {"pos_rms_h": 0.9}}))
+    label    pos_rms_h  att_rms_level
+             [m]        [mrad]
+    ins      812        1.23
+    gps-ins  0.9        -
+    """
+    if keys is None:
+        keys = []
+        for s in summaries.values():
+            for k, v in s.items():
+                if k not in keys and isinstance(v, int | float) and not isinstance(v, bool):
+                    keys.append(k)
+    header = ["label", *keys]
+    units = ["", *(f"[{summary_unit(k)[0]}]" if summary_unit(k)[0] else "" for k in keys)]
+    rows = []
+    for label, s in summaries.items():
+        row = [label]
+        for k in keys:
+            v = s.get(k)
+            if v is None or (isinstance(v, float) and not math.isfinite(v)):
+                row.append("-")
+            else:
+                row.append(f"{float(v) * summary_unit(k)[1]:.3g}")
+        rows.append(row)
+    return _align([header, units, *rows])
+
+
+def _align(rows: Sequence[Sequence[str]]) -> str:
+    """Rows of cells as left-aligned columns two spaces apart (empty lines dropped)."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
+             for r in rows]
+    return "\n".join(line for line in lines if line)
+
+
+ERROR_KEYS = ("runs", "distance", "pos_rms_h", "pos_rms_v", "pos_err_final_h", "pos_err_final_dt",
+              "lat_rms_final", "long_rms_final", "cep50_final", "dt_cep50_final", "vel_rms",
+              "att_rms_level", "att_rms_heading")
+"""Columns of the error table (those present in a summary)."""
+
+
+def format_summaries(summaries: Mapping[str, Mapping[str, Any]]) -> str:
+    """Two tables of summary dicts: errors, then consistency (NEES and NIS against their 95 %
+    chi-square bounds)."""
+    if not summaries:
+        return "(nothing to score)"
+    keys = [k for k in ERROR_KEYS if any(k in s for s in summaries.values())]
+    out = [format_table(summaries, keys)]
+    rows = [("consistency", "dof", "mean", "in 95% bounds")]
+    for label, s in summaries.items():
+        if "nees_mean" in s:
+            rows.append((f"{label} NEES", str(s["nees_dof"]), f"{s['nees_mean']:.3g}",
+                         f"{100 * s['nees_in_bounds']:.0f} %"))
+        for key in s:
+            if key.startswith("nis_mean_"):
+                meas = key.removeprefix("nis_mean_")
+                rows.append((f"{label} NIS {meas}", str(s.get(f"nis_dof_{meas}", "")),
+                             f"{s[key]:.3g}",
+                             f"{100 * s.get(f'nis_in_bounds_{meas}', math.nan):.0f} %"))
+    if len(rows) > 1:
+        out.append(_align(rows))
+    return "\n\n".join(out)
