@@ -263,6 +263,24 @@ def test_rpm_residual_vanishes_for_a_consistent_truth_and_depth_measurement():
     assert z[0] == pytest.approx(0.5) and H[0, 2] == 1.0 and H.sum() == 1.0
 
 
+def test_rpm_noise_covariance_is_the_speed_noise_along_the_rpm_axis():
+    # the residual's noise when only the speed is noisy, by sampling eq. (25)
+    _, nav = _state(36.0, 70.0, [0.0, 0.0, 0.0], [0.0, -0.07, 2.0])
+    C = rotations.quat_to_dcm(nav[6:10])
+    m, k, u, sigma = np.array([0.02, -0.03]), 0.05, 14.0, 0.05
+    nav[3:6] = C @ rotations.rotvec_to_dcm(np.r_[0.0, m])[:, 0] * u
+    noise = np.random.default_rng(3).standard_normal(4000) * sigma
+    z = np.array([rai.rpm_measurement(nav, (1 + k) * u + n, k, m, np.zeros(2))[0]
+                  for n in noise])
+    R = rai.rpm_noise_covariance(m, k, sigma, 0.0)
+    np.testing.assert_allclose(np.cov(z.T), R, atol=0.06 * sigma**2)
+    # the rows across the axis see the speed noise through the misalignment (~ m sigma)
+    assert np.sqrt(R[1, 1]) == pytest.approx(abs(m[1]) * sigma / (1 + k), rel=0.01)
+    # without misalignment: diag(speed, constraint, constraint)
+    np.testing.assert_allclose(rai.rpm_noise_covariance(np.zeros(2), 0.0, 0.05, 0.002),
+                               np.diag([0.05, 0.002, 0.002]) ** 2, atol=1e-18)
+
+
 # --------------------------------------------------------------------------------------------
 # the scenario
 

@@ -79,7 +79,11 @@ speed ``u_hat = c_rpm rpm / (1 + k_hat)``, ``w = v_hat - v_c_hat`` (``v_c_hat = 
     H_rpm[:, m_y,z] = u_hat [(C_bv_hat e_x) x] J(m_hat)[:, 1:3]      = [0, 0, u_hat]^T,
                                                                        [0, -u_hat, 0]^T (*)
     H_rpm[:, v_c]   = -C_nb_hat^T[:, 0:2]
-    R_rpm = diag(rpm_sigma^2, constraint_sigma^2, constraint_sigma^2)
+    a     = C_bv_hat e_x  (the estimated RPM axis in the body frame)
+    R_rpm = (rpm_sigma / (1 + k_hat))^2 a a^T + constraint_sigma^2 (I - a a^T)
+
+(the speed noise lies along the RPM axis; across it, the vehicle's sideslip and heave
+through the water: :func:`rpm_noise_covariance`)
 
 (*) the printed forms of §4.4 are the values at k_hat = m_hat = 0; the ones used here are
 the exact first derivatives (J is the left Jacobian of SO(3)), equal to first order.
@@ -217,8 +221,10 @@ class RpmAidedInsParams(FilterParams):
     gyro_noise: float = 5e-6
     """sqrt(q_g): attitude process noise density [rad/sqrt(s)] (about 1.7 x the ARW, covering
     the gyro scale factor during turns)."""
-    current_noise: float = 1e-3
-    """sqrt(q_c): sea-current random-walk density [(m/s)/sqrt(s)] (``rpm_current`` only)."""
+    current_noise: float = 0.0
+    """sqrt(q_c): sea-current random-walk density [(m/s)/sqrt(s)] (``rpm_current`` only). 0:
+    the current is a random constant, as in ``underwater-rpm``; a current that changes over
+    the mission needs a positive value (it widens the position sigma as t^1.5)."""
     accel_bias_sigma: float = 100.0 * MICRO_G
     """Initial 1-sigma of the accelerometer bias per axis [m/s^2] (100 ug)."""
     gyro_bias_sigma: float = 0.1 * DEG_PER_HOUR
@@ -227,8 +233,10 @@ class RpmAidedInsParams(FilterParams):
     """Initial 1-sigma of the RPM scale factor k [-] (2 %)."""
     rpm_misalignment_sigma: float = 0.1 * DEG
     """Initial 1-sigma of the RPM-axis misalignments m_y, m_z [rad] (0.1 deg)."""
-    current_sigma: float = 0.3
-    """Initial 1-sigma of the current per horizontal axis [m/s] (``rpm_current`` only)."""
+    current_sigma: float = 0.25 / math.sqrt(2.0)
+    """Initial 1-sigma of the current per horizontal axis [m/s] (``rpm_current`` only): the
+    per-axis RMS of a current of known speed (0.25 m/s, ``underwater-rpm``'s default) flowing
+    in an unknown direction, ``speed / sqrt(2)``. The position sigma scales with it."""
     init_vel_sigma: float | None = None
     """Initial velocity 1-sigma per axis [m/s]; None: ``initial_nav["sigma"]["v_n"]``."""
     init_level_sigma: float | None = None
@@ -237,8 +245,9 @@ class RpmAidedInsParams(FilterParams):
     """Initial phi_D 1-sigma [rad]; None: ``initial_nav["sigma"]["phi"][2]``."""
     init_depth_sigma: float | None = None
     """Initial depth 1-sigma [m]; None: ``initial_nav["sigma"]["pos_ned"][2]``."""
-    pos_sigma_floor: float = 1.0
-    """Lower bound of the initial position 1-sigma per N, E, D axis [m] (conditioning)."""
+    pos_sigma_floor: float = 0.01
+    """Lower bound of the initial position 1-sigma per N, E, D axis [m] (conditioning; a
+    known launch point has sigma 0)."""
     rpm_sigma: float = 0.05
     """RPM speed noise along the RPM axis [m/s] (the forward row of the RPM update)."""
     constraint_sigma: float = 0.002
@@ -383,6 +392,23 @@ def rpm_measurement(
     return z, H
 
 
+def rpm_noise_covariance(m_hat: np.ndarray, k_hat: float, speed_sigma: float,
+                         constraint_sigma: float) -> np.ndarray:
+    """R of the RPM residual (25), shape (3, 3) [(m/s)^2].
+
+    The speed noise n (``speed_sigma`` [m/s] on ``c_rpm rpm``) enters z as
+    ``-C_bv_hat e_x n / (1 + k_hat)``: along the estimated RPM axis a, which the misalignment
+    tilts out of body x, so it also reaches the no-sideslip and no-heave rows (about
+    ``m speed_sigma``). Across a, the water-relative sideslip and heave of the vehicle
+    (``constraint_sigma``)::
+
+        R = (speed_sigma / (1 + k_hat))^2 a a^T + constraint_sigma^2 (I - a a^T)
+    """
+    a, _ = rpm_axis(float(m_hat[0]), float(m_hat[1]))
+    aa = np.outer(a, a)
+    return (speed_sigma / (1.0 + k_hat)) ** 2 * aa + constraint_sigma**2 * (np.eye(3) - aa)
+
+
 def depth_measurement(nav: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
     """Depth residual ``d_hat - d_meas`` [m], shape (1,), and H (1, 24)
     (docs/methods/rpm-aided-ins.md §4.5)."""
@@ -483,10 +509,8 @@ class RpmAidedIns(Filter):
         self._frozen[INERT] = True
         if not estimate_current:
             self._frozen[CURRENT] = True
-        self._R_rpm = np.diag([p.rpm_sigma, p.constraint_sigma, p.constraint_sigma]) ** 2
         self._R_depth = np.array([[p.depth_sigma**2]])
-        for name, R in (("R_rpm", self._R_rpm), ("R_depth", self._R_depth)):
-            kalman.check_covariance(R, name=name)
+        kalman.check_covariance(self._R_depth, name="R_depth")
         self._rpm_schedule = _Schedule(p.update_rate)
         self._depth_schedule = _Schedule(p.update_rate)
         self._next_check = self.t + _CHECK_INTERVAL
@@ -519,7 +543,9 @@ class RpmAidedIns(Filter):
             v_c = self.v_c if self.mode is Mode.RPM_CURRENT else np.zeros(2)
             z, H = rpm_measurement(self.nav, self.speed_per_rpm * float(sample["rpm"]),
                                    self.k_rpm, self.m_rpm, v_c)
-            R, name = self._R_rpm, "rpm"
+            R = rpm_noise_covariance(self.m_rpm, self.k_rpm, self.params.rpm_sigma,
+                                     self.params.constraint_sigma)
+            name = "rpm"
         elif kind is StreamKind.DEPTH and self.params.depth_aiding:
             if not self._depth_schedule.due(t):
                 return None
