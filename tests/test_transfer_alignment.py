@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from campaign_seeds import SLOW_SEEDS
 
 from navreplay import strapdown
 from navreplay.filters import kalman
@@ -23,7 +24,7 @@ from navreplay.geo.rotations import (
     quat_to_dcm,
     quat_to_euler,
 )
-from navreplay.metrics import position_error_ned, truth_at
+from navreplay.metrics import chi2_bounds, position_error_ned, truth_at
 from navreplay.replay.engine import FilterInitError, replay
 from navreplay.reproduce import get as get_reproduction
 from navreplay.reproduce import transfer_alignment as rep
@@ -419,6 +420,48 @@ def test_replay_is_block_size_independent():
 # reproduction
 
 
+@pytest.mark.parametrize("values, rate_sigma", [
+    ({}, ta.TransferAlignmentParams().flexure_rate_sigma),
+    ({"flexure_sigma": 0.0}, 0.0),
+])
+def test_innovations_are_consistent_with_their_covariance(values, rate_sigma):
+    # the flexure turns the lever arm with the SDINS and the velocity R carries the flexure
+    # rate the lever-arm term misses: the run-averaged NIS of both measurements stays inside
+    # its 95 % chi-square band (8 runs of 30 s, seeds never used for tuning)
+    runs = 8
+    nis = {"velocity": [], "quaternion": []}
+    for i in range(runs):
+        rec = simulate(SCENARIO, {**values, "duration": 30.0}, seed=9100 + i)
+        res = replay(rec, FILTER, {"flexure_rate_sigma": rate_sigma})
+        for name in nis:
+            nis[name].append(res.innovations[name].nis)
+    for name, dof in (("velocity", 2), ("quaternion", 3)):
+        mean = np.mean(nis[name], axis=0)[20:]  # from 2 s on
+        lo, hi = chi2_bounds(dof, runs)
+        assert lo < mean.mean() < hi, (name, mean.mean())
+    # per epoch for the velocity (the quaternion rows run high while the 3 deg initial
+    # misalignment is being removed under flexure: docs/reproduction.md)
+    mean = np.mean(nis["velocity"], axis=0)[20:]
+    lo, hi = chi2_bounds(2, runs)
+    assert np.mean((mean >= lo) & (mean <= hi)) >= 0.9
+
+
+def test_flexure_rate_sigma_matches_the_simulated_flexure():
+    # the rate the lever-arm term misses: the flexure rate at the end of an IMU interval
+    # against the interval's mean rate, for the scenario's flexure (eq. 19)
+    p = sc.ShipTransferAlignmentParams()
+    n, dt = 200_001, 1.0 / p.imu_rate
+    normals = np.random.default_rng(3).standard_normal((n, 2))
+    theta, rate = sc.flexure_state(n, dt, p.flexure_sigma, p.flexure_zeta, p.flexure_wn, normals)
+    missed = rate[1:] - np.diff(theta) / dt
+    want = ta.flexure_rate_sigma(p.flexure_sigma, p.flexure_zeta, p.flexure_wn, p.imu_rate)
+    assert np.std(missed) == pytest.approx(want, rel=0.03)
+    assert want == pytest.approx(ta.TransferAlignmentParams().flexure_rate_sigma, rel=0.01)
+    # the rate integrates to the angle (trapezoid, one interval)
+    assert np.std(0.5 * (rate[1:] + rate[:-1]) * dt - np.diff(theta)) < 0.2 * np.std(
+        np.diff(theta))
+
+
 def test_short_campaign_partial_beats_full_under_flexure():
     cond = dataclasses.replace(rep.CONDITIONS[0], variants=(rep.PARTIAL, rep.FULL))
     stats, _ = rep.run_campaign(8, seed=100, workers=2, conditions=(cond,))
@@ -452,8 +495,9 @@ def test_quick_report_and_rerun_view(tmp_path):
 
 
 @pytest.mark.slow
-def test_full_campaign_meets_every_acceptance_band():
-    report = rep.REPRODUCTION.run(runs=36, seed=0, workers=2)
+@pytest.mark.parametrize("seed", SLOW_SEEDS)
+def test_full_campaign_meets_every_acceptance_band(seed):
+    report = rep.REPRODUCTION.run(runs=36, seed=seed, workers=2)
     assert report.figures["timing"]["filter_runs"] == 36 * 7
     names = [c.name for c in report.checks]
     assert len(names) == 8

@@ -64,9 +64,10 @@ scale-factor and misalignment errors (s_a, s_g, 1-sigma) enter as the motion-dep
 of (5a) by states for the errors the yaw rate drives (ins_error eq. 22).
 
 Scoring (:mod:`navreplay.metrics`): the navigation error states are scored by the errors of the
-navigation solution (``nav:`` truth keys), the biases by the truth stream's total bias columns,
-which lack the gravity-dependent parts above; the default NEES block (``nees_states``) is
-therefore the nine navigation errors.
+navigation solution (``nav:`` truth keys), the biases by the truth stream's effective biases
+``accel_bias_eff`` and ``gyro_bias_eff`` (the total bias plus the scale-factor, misalignment and
+g-sensitivity errors at rest, :func:`navreplay.sensors.imu.effective_biases`); the default NEES
+block (``nees_states``) is the nine navigation errors.
 """
 
 from __future__ import annotations

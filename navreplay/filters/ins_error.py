@@ -172,9 +172,10 @@ class Vertical(enum.StrEnum):
 def nav_states(vertical: Vertical = Vertical.HEIGHT) -> tuple[State, ...]:
     """Declarations of the 15 states of a filter's ``Estimate.x`` that uses this model: the
     9 navigation errors (scored against the navigation solution's error, in the NEES) and the
-    accelerometer and gyro biases as total estimates ``b_a_*``, ``b_g_*`` (scored against the
-    truth stream's ``accel_bias`` and ``gyro_bias`` columns; not in the NEES, since they
-    estimate effective biases that also hold scale-factor and misalignment effects)."""
+    accelerometer and gyro biases as total estimates ``b_a_*``, ``b_g_*``: effective biases
+    that also hold the scale-factor, misalignment and g-sensitivity errors at rest, scored
+    against the truth stream's ``accel_bias_eff`` and ``gyro_bias_eff`` columns; not in the
+    NEES."""
     depth = vertical is Vertical.DEPTH
     return (
         State("dlat", "rad", Quantity.POSITION, NavError(Nav.LAT), nees=True),
@@ -185,9 +186,9 @@ def nav_states(vertical: Vertical = Vertical.HEIGHT) -> tuple[State, ...]:
           for a in "NED"),
         *(State(f"phi_{a}", "rad", Quantity.ATTITUDE, NavError(Nav(f"phi_{a}")), nees=True)
           for a in "NED"),
-        *(State(f"b_a_{a}", "m/s^2", Quantity.ACCEL_BIAS, TruthColumn("accel_bias", (i,)))
+        *(State(f"b_a_{a}", "m/s^2", Quantity.ACCEL_BIAS, TruthColumn("accel_bias_eff", (i,)))
           for i, a in enumerate("xyz")),
-        *(State(f"b_g_{a}", "rad/s", Quantity.GYRO_BIAS, TruthColumn("gyro_bias", (i,)))
+        *(State(f"b_g_{a}", "rad/s", Quantity.GYRO_BIAS, TruthColumn("gyro_bias_eff", (i,)))
           for i, a in enumerate("xyz")),
     )
 

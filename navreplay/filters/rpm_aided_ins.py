@@ -79,7 +79,11 @@ speed ``u_hat = c_rpm rpm / (1 + k_hat)``, ``w = v_hat - v_c_hat`` (``v_c_hat = 
     H_rpm[:, m_y,z] = u_hat [(C_bv_hat e_x) x] J(m_hat)[:, 1:3]      = [0, 0, u_hat]^T,
                                                                        [0, -u_hat, 0]^T (*)
     H_rpm[:, v_c]   = -C_nb_hat^T[:, 0:2]
-    R_rpm = rpm_sigma^2 I3
+    a     = C_bv_hat e_x  (the estimated RPM axis in the body frame)
+    R_rpm = (rpm_sigma / (1 + k_hat))^2 a a^T + constraint_sigma^2 (I - a a^T)
+
+(the speed noise lies along the RPM axis; across it, the vehicle's sideslip and heave
+through the water: :func:`rpm_noise_covariance`)
 
 (*) the printed forms of §4.4 are the values at k_hat = m_hat = 0; the ones used here are
 the exact first derivatives (J is the left Jacobian of SO(3)), equal to first order.
@@ -187,11 +191,10 @@ STATES: tuple[State, ...] = (
 )
 """Declarations of the entries of ``Estimate.x``. Only the horizontal position errors count
 in the NEES: the consistency band of docs/methods/rpm-aided-ins.md §6 is on horizontal
-position, 2 dof."""
+position, 2 dof. Navigation errors are scored by the navigation solution's error, biases
+(effective) and current by the truth stream, the RPM parameters by ``Metadata.true_errors``
+of the ``underwater-rpm`` scenario."""
 STATE_NAMES: tuple[str, ...] = state_names(STATES)
-"""Scoring keys (see :mod:`navreplay.metrics`): navigation errors by the navigation
-solution's error, biases and current by the truth stream, the RPM parameters by
-``Metadata.true_errors`` of the ``underwater-rpm`` scenario."""
 
 
 class Mode(enum.StrEnum):
@@ -218,8 +221,10 @@ class RpmAidedInsParams(FilterParams):
     gyro_noise: float = 5e-6
     """sqrt(q_g): attitude process noise density [rad/sqrt(s)] (about 1.7 x the ARW, covering
     the gyro scale factor during turns)."""
-    current_noise: float = 1e-3
-    """sqrt(q_c): sea-current random-walk density [(m/s)/sqrt(s)] (``rpm_current`` only)."""
+    current_noise: float = 0.0
+    """sqrt(q_c): sea-current random-walk density [(m/s)/sqrt(s)] (``rpm_current`` only). 0:
+    the current is a random constant, as in ``underwater-rpm``; a current that changes over
+    the mission needs a positive value (it widens the position sigma as t^1.5)."""
     accel_bias_sigma: float = 100.0 * MICRO_G
     """Initial 1-sigma of the accelerometer bias per axis [m/s^2] (100 ug)."""
     gyro_bias_sigma: float = 0.1 * DEG_PER_HOUR
@@ -228,8 +233,10 @@ class RpmAidedInsParams(FilterParams):
     """Initial 1-sigma of the RPM scale factor k [-] (2 %)."""
     rpm_misalignment_sigma: float = 0.1 * DEG
     """Initial 1-sigma of the RPM-axis misalignments m_y, m_z [rad] (0.1 deg)."""
-    current_sigma: float = 0.3
-    """Initial 1-sigma of the current per horizontal axis [m/s] (``rpm_current`` only)."""
+    current_sigma: float = 0.25 / math.sqrt(2.0)
+    """Initial 1-sigma of the current per horizontal axis [m/s] (``rpm_current`` only): the
+    per-axis RMS of a current of known speed (0.25 m/s, ``underwater-rpm``'s default) flowing
+    in an unknown direction, ``speed / sqrt(2)``. The position sigma scales with it."""
     init_vel_sigma: float | None = None
     """Initial velocity 1-sigma per axis [m/s]; None: ``initial_nav["sigma"]["v_n"]``."""
     init_level_sigma: float | None = None
@@ -238,10 +245,14 @@ class RpmAidedInsParams(FilterParams):
     """Initial phi_D 1-sigma [rad]; None: ``initial_nav["sigma"]["phi"][2]``."""
     init_depth_sigma: float | None = None
     """Initial depth 1-sigma [m]; None: ``initial_nav["sigma"]["pos_ned"][2]``."""
-    pos_sigma_floor: float = 1.0
-    """Lower bound of the initial position 1-sigma per N, E, D axis [m] (conditioning)."""
+    pos_sigma_floor: float = 0.01
+    """Lower bound of the initial position 1-sigma per N, E, D axis [m] (conditioning; a
+    known launch point has sigma 0)."""
     rpm_sigma: float = 0.05
-    """RPM velocity measurement noise per body axis [m/s]."""
+    """RPM speed noise along the RPM axis [m/s] (the forward row of the RPM update)."""
+    constraint_sigma: float = 0.002
+    """Noise of the no-sideslip and no-heave rows of the RPM update [m/s]: the vehicle's
+    lateral and vertical water-relative velocity in the RPM frame."""
     depth_sigma: float = 0.1
     """Depth measurement noise [m]."""
     depth_aiding: bool = True
@@ -267,7 +278,7 @@ class RpmAidedInsParams(FilterParams):
                      "current_sigma", "init_vel_sigma", "init_level_sigma",
                      "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor"):
             check_number(self, name)
-        for name in ("rpm_sigma", "depth_sigma", "speed_per_rpm"):
+        for name in ("rpm_sigma", "constraint_sigma", "depth_sigma", "speed_per_rpm"):
             check_number(self, name, positive=True)
         check_number(self, "update_rate", positive=True, upper=100.0)
         check_number(self, "cov_step", positive=True, upper=10.0)
@@ -313,7 +324,8 @@ def rpm_measurement(
     k_hat: float,
     m_hat: np.ndarray,
     v_c_hat: np.ndarray,
-    sigma: float,
+    speed_sigma: float,
+    constraint_sigma: float,
 ) -> kalman.Measurement:
     """RPM water-velocity residual, its Jacobian and noise, eqs. (25)-(27).
 
@@ -329,14 +341,15 @@ def rpm_measurement(
         Misalignment estimates m_y, m_z [rad].
     v_c_hat : ndarray, shape (2,)
         Current estimate N, E [m/s] (zeros when it is not estimated).
-    sigma : float
-        1-sigma of each body axis of the RPM velocity [m/s].
+    speed_sigma, constraint_sigma : float
+        1-sigma of the RPM speed and of the water-relative sideslip and heave [m/s]
+        (:func:`rpm_noise_covariance`).
 
     Returns
     -------
     kalman.Measurement
         z (3,): ``C_nb_hat^T (v_hat - v_c_hat) - C_bv_hat [u_hat, 0, 0]`` [m/s], body axes;
-        H (3, 24): ``z ~ H dx`` to first order; R (3,): ``sigma^2`` [(m/s)^2].
+        H (3, 24): ``z ~ H dx`` to first order; R (3, 3) [(m/s)^2].
     """
     C_bn = ie.nav_dcm(nav).T
     a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
@@ -351,7 +364,25 @@ def rpm_measurement(
     H[:, 15] = a * (u / (1.0 + k_hat))
     H[:, M_RPM] = -u * da
     H[:, CURRENT] = -C_bn[:, 0:2]
-    return kalman.Measurement(z, H, np.full(3, sigma * sigma))
+    return kalman.Measurement(z, H, rpm_noise_covariance(m_hat, k_hat, speed_sigma,
+                                                         constraint_sigma))
+
+
+def rpm_noise_covariance(m_hat: np.ndarray, k_hat: float, speed_sigma: float,
+                         constraint_sigma: float) -> np.ndarray:
+    """R of the RPM residual (25), shape (3, 3) [(m/s)^2].
+
+    The speed noise n (``speed_sigma`` [m/s] on ``c_rpm rpm``) enters z as
+    ``-C_bv_hat e_x n / (1 + k_hat)``: along the estimated RPM axis a, which the misalignment
+    tilts out of body x, so it also reaches the no-sideslip and no-heave rows (about
+    ``m speed_sigma``). Across a, the water-relative sideslip and heave of the vehicle
+    (``constraint_sigma``)::
+
+        R = (speed_sigma / (1 + k_hat))^2 a a^T + constraint_sigma^2 (I - a a^T)
+    """
+    a, _ = rpm_axis(float(m_hat[0]), float(m_hat[1]))
+    aa = np.outer(a, a)
+    return (speed_sigma / (1.0 + k_hat)) ** 2 * aa + constraint_sigma**2 * (np.eye(3) - aa)
 
 
 def depth_measurement(nav: np.ndarray, depth: float, sigma: float) -> kalman.Measurement:
@@ -485,7 +516,8 @@ class RpmAidedIns(Filter):
                     f"RPM scale-factor estimate {self.k_rpm:.3f} is beyond +-0.5", t)
             v_c = self.v_c if self.mode is Mode.RPM_CURRENT else np.zeros(2)
             measurement = rpm_measurement(self.nav, self.speed_per_rpm * float(sample["rpm"]),
-                                          self.k_rpm, self.m_rpm, v_c, self.params.rpm_sigma)
+                                          self.k_rpm, self.m_rpm, v_c, self.params.rpm_sigma,
+                                          self.params.constraint_sigma)
             name = "rpm"
         elif kind is StreamKind.DEPTH and self.params.depth_aiding:
             if not self._depth_schedule.due(t):

@@ -217,20 +217,27 @@ class TransferAlignmentParams(FilterParams):
     """Process noise density of the dQ_br states sqrt(q_br) [1/sqrt(s)]."""
     vel_sigma: float = 0.3 * FOOT
     """Velocity measurement noise, 1 sigma per axis [m/s] (the GINS white velocity noise)."""
-    quat_sigma: float = 0.5 * ARCMIN * math.sqrt(2.0)
-    """Quaternion measurement noise, 1 sigma per component [-] (1/2 x 1 arcmin x sqrt 2)."""
+    quat_sigma: float = 0.5 * ARCMIN
+    """Quaternion measurement noise, 1 sigma per component [-]: half the GINS synchro white
+    noise of 1 arcmin per Euler angle (a small rotation phi moves a component by phi / 2)."""
     init_vel_sigma: float = 0.25
     """Initial velocity error, 1 sigma per axis [m/s]."""
     init_misalignment: float = 3.0 * DEG
     """Initial mounting misalignment per axis [rad]; p1 = sin(init_misalignment / 2)^2."""
     init_q0_sigma: float = 1.5e-3
     """Initial 1 sigma of the scalar part of dQ_br, sqrt(p0) [-]."""
+    flexure_rate_sigma: float = 0.0133
+    """1 sigma of the flexure rate about the ship's Y axis that the lever-arm term misses at
+    the GINS time [rad/s]: the body rate is extrapolated from the last IMU samples, and the
+    flexure rate wanders in the meantime (:func:`flexure_rate_sigma`; 0.0133 for the
+    scenario's default flexure at 100 Hz, 0 without flexure)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "match", Match(self.match))
         for name in ("accel_noise", "gyro_noise", "misalignment_noise", "vel_sigma",
                      "quat_sigma", "init_vel_sigma", "init_misalignment", "init_q0_sigma"):
             check_number(self, name, positive=True)
+        check_number(self, "flexure_rate_sigma", positive=False)
         if self.init_misalignment >= math.pi:
             raise ValueError(f"init_misalignment must be < pi rad, got {self.init_misalignment}")
         if self.lever_arm_r is not None:
@@ -420,6 +427,29 @@ def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
     return out
+
+
+def flexure_rate_sigma(sigma: float, zeta: float, wn: float, imu_rate: float) -> float:
+    """Flexure rate the lever-arm term misses at the GINS time, 1 sigma [rad/s].
+
+    For the second-order Markov flexure of eq. (19) (steady-state sigma, damping zeta, natural
+    frequency wn) the rate is driven by white noise of PSD ``q = 4 zeta wn^3 sigma^2``; over
+    one IMU interval it wanders like a random walk, so the rate at the GINS time differs from
+    the rate the last interval mean (and its extrapolation) gives by ``sqrt(q dt / 3)``,
+    dt = 1 / imu_rate.
+    """
+    return math.sqrt(4.0 * zeta * wn**3 * sigma**2 / (3.0 * imu_rate))
+
+
+def velocity_noise(q_m: np.ndarray, lever_arm_r: np.ndarray, vel_sigma: float,
+                   rate_sigma: float) -> np.ndarray:
+    """R of the north and east velocity rows, (2, 2) [m^2/s^2].
+
+    The GINS white velocity noise plus the lever-arm velocity of the flexure rate the filter
+    misses: ``dV = C(Q_m) (dw e_Y x L^r)`` with ``dw ~ N(0, rate_sigma^2)``.
+    """
+    d = kernels.quat_to_dcm(q_m) @ np.cross([0.0, 1.0, 0.0], lever_arm_r)
+    return vel_sigma**2 * np.eye(2) + rate_sigma**2 * np.outer(d[:2], d[:2])
 
 
 @numba.njit(cache=True)
@@ -841,7 +871,10 @@ class TransferAlignment(Filter):
             self.nav, self.q_rb, self.P, self.s, q_m, v_r, self._sums, self._count,
             self._w_last, self._w_prev, self.lever_arm_r, dt, self._qc, self._q_br,
         )
-        c = kalman.correct(self._x0, P, z, H, self._r, t=t)  # also step 7's check of P
+        R = np.diag(self._r)
+        R[ZV, ZV] = velocity_noise(q_m, self.lever_arm_r, self.params.vel_sigma,
+                                   self.params.flexure_rate_sigma)
+        c = kalman.correct(self._x0, P, z, H, R, t=t)  # also step 7's check of P
         sigma_phi = feedback(self.nav, self.q_rb, c.x, c.P, self.s, self.u, q_m, v_r, pos,
                              w_now, w_in, self.lever_arm_r)
         self.P = c.P

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.filters.transfer_alignment import flexure_rate_sigma
 from navreplay.geo.rotations import attitude_error, quat_to_dcm
 from navreplay.metrics import rms, truth_at
 from navreplay.replay.ensemble import (
@@ -53,6 +54,7 @@ from navreplay.replay.result import RunResult
 from navreplay.reproduce import Check, Progress, Report, Reproduction, slashed, warm_up
 from navreplay.sim.scenarios.ship_transfer_alignment import ShipTransferAlignmentParams
 from navreplay.streams import Recording
+from navreplay.units import DEG
 
 SCENARIO = "ship-transfer-alignment"
 FILTER = "transfer-alignment"
@@ -71,12 +73,16 @@ class Condition:
     key: str
     values: Mapping[str, Any]
     variants: tuple[str, ...]
+    filter_values: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    """Filter parameters of the condition: the flexure rate its lever-arm term misses."""
 
 
 CONDITIONS = (
     Condition("flexure", "flexure", {}, (PARTIAL, FULL, VEL_ONLY)),
-    Condition("no flexure", "no_flexure", {"flexure_sigma": 0.0}, (PARTIAL, FULL)),
-    Condition("wn 1 rad/s", "wn_1", {"flexure_wn": 1.0}, (PARTIAL, FULL)),
+    Condition("no flexure", "no_flexure", {"flexure_sigma": 0.0}, (PARTIAL, FULL),
+              {"flexure_rate_sigma": 0.0}),
+    Condition("wn 1 rad/s", "wn_1", {"flexure_wn": 1.0}, (PARTIAL, FULL),
+              {"flexure_rate_sigma": flexure_rate_sigma(0.5 * DEG, 0.7, 1.0, 100.0)}),
 )
 
 PAPER = {
@@ -237,7 +243,8 @@ def run_campaign(
     try:
         for cond in conditions:
             tasks = monte_carlo_tasks(SCENARIO, runs, values=cond.values, seed=seed)
-            filters = [FilterSpec(FILTER, {"match": v}, label=v) for v in cond.variants]
+            filters = [FilterSpec(FILTER, {"match": v, **cond.filter_values}, label=v)
+                       for v in cond.variants]
             sink = _Collector()
             run_ensemble(tasks, filters, sink, extract=extract, workers=workers,
                          executor=executor, progress=step)

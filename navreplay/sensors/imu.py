@@ -42,6 +42,8 @@ import enum
 import numpy as np
 
 from navreplay import units
+from navreplay.geo import earth
+from navreplay.geo.rotations import quat_to_dcm
 from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors._common import RealisedErrors, draw_misalignment, triad_matrix
 from navreplay.sensors.noise import gauss_markov, random_walk, sample_sigma
@@ -284,6 +286,44 @@ class ImuMeasurement:
     def columns(self) -> dict[str, np.ndarray]:
         """The IMU stream columns (``FIELDS[StreamKind.IMU]``)."""
         return {"omega_ib_b": self.omega_ib_b, "f_b": self.f_b}
+
+
+def effective_biases(
+    errors: ImuErrors, meas: ImuMeasurement, q_nb: np.ndarray, pos: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The biases a filter without scale-factor and misalignment states estimates.
+
+    A bias state absorbs every error that is constant while the vehicle is level and at rest:
+    the true total bias plus the scale-factor, misalignment (and, for the gyro, g-sensitivity)
+    errors acting on the rest values of the inputs, the gravity reaction
+    ``f_0^b = -C_bn g^n`` and the earth rate ``w_ie^b = C_bn w_ie^n``::
+
+        b_a,eff = b_a + (S_a + M_a) f_0^b
+        b_g,eff = b_g + (S_g + M_g) w_ie^b + K_g f_0^b
+
+    Parameters
+    ----------
+    errors : ImuErrors
+    meas : ImuMeasurement
+        Its ``gyro_bias`` and ``accel_bias`` rows align with ``q_nb`` and ``pos``.
+    q_nb : ndarray, shape (M + 1, 4)
+        True attitude.
+    pos : ndarray, shape (M + 1, 3)
+        True latitude, longitude [rad] and height [m].
+
+    Returns
+    -------
+    gyro_bias_eff, accel_bias_eff : ndarray, shape (M + 1, 3)
+        [rad/s] and [m/s^2].
+    """
+    C_bn = np.swapaxes(quat_to_dcm(q_nb), -1, -2)
+    f0 = -np.einsum("kij,kj->ki", C_bn, earth.gravity_n(pos[:, 0], pos[:, 2]))
+    w_ie = np.einsum("kij,kj->ki", C_bn, earth.omega_ie_n(pos[:, 0]))
+    eye = np.eye(3)
+    accel = meas.accel_bias + f0 @ (errors.accel_matrix() - eye).T
+    gyro = (meas.gyro_bias + w_ie @ (errors.gyro_matrix() - eye).T
+            + f0 @ errors.gyro_g_sensitivity.T)
+    return gyro, accel
 
 
 class ImuGrade(enum.StrEnum):

@@ -25,7 +25,7 @@ import numpy as np
 
 import navreplay
 from navreplay import params as _params
-from navreplay.sensors.imu import ImuMeasurement
+from navreplay.sensors.imu import ImuErrors, ImuMeasurement, effective_biases
 from navreplay.sim.trajectory import Trajectory
 from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
 
@@ -132,13 +132,19 @@ def truth_stream(
     meas: ImuMeasurement,
     t0_ns: int,
     index: np.ndarray | None = None,
+    errors: ImuErrors | None = None,
     **columns: np.ndarray,
 ) -> Stream:
     """The truth stream of a route: ``pos``, ``v_n``, ``q_nb``, ``euler``, the scenario's own
     ``columns`` (truth-rate arrays, N rows), then the true total IMU biases ``gyro_bias`` and
-    ``accel_bias``; at the truth samples ``index`` (default: all)."""
+    ``accel_bias`` and, given the run's ``errors``, the effective biases ``gyro_bias_eff`` and
+    ``accel_bias_eff`` (:func:`navreplay.sensors.imu.effective_biases`); at the truth samples
+    ``index`` (default: all)."""
     cols = {"pos": traj.pos, "v_n": traj.v_n, "q_nb": traj.q_nb, "euler": traj.euler,
             **columns, "gyro_bias": meas.gyro_bias, "accel_bias": meas.accel_bias}
+    if errors is not None:
+        cols["gyro_bias_eff"], cols["accel_bias_eff"] = effective_biases(
+            errors, meas, traj.q_nb, traj.pos)
     t = traj.t
     if index is not None:
         t = t[index]

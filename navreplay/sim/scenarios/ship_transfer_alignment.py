@@ -15,7 +15,9 @@ Motion
     The rotation centre is the GINS, so the GINS (master) velocity is the constant cruise
     velocity V_R. The SDINS sits at the lever arm L^r from the GINS::
 
-        V_B = V_R + C_nr (omega_nr_r x L^r)                  (w_en and flexure translation ignored)
+        V_B = V_R + C_nr (omega_nr_r x L_f^r + dL_f^r/dt)    (w_en ignored)
+
+    where L_f^r is the lever arm as the flexure bends it (:func:`flexed_lever_arm`).
 
 Flexure and mounting
     The SDINS frame b is mounted with a fixed misalignment C_mis (three ZYX Euler angles, each
@@ -243,12 +245,20 @@ def harmonics(
 def flexure(
     n: int, dt: float, sigma: float, zeta: float, wn: float, normals: np.ndarray
 ) -> np.ndarray:
-    """Stationary second-order Markov flexure angle, eq. (19), exactly discretised.
+    """The flexure angle theta_f of :func:`flexure_state` [rad], (n,)."""
+    return flexure_state(n, dt, sigma, zeta, wn, normals)[0]
+
+
+def flexure_state(
+    n: int, dt: float, sigma: float, zeta: float, wn: float, normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Stationary second-order Markov flexure angle and rate, eq. (19), exactly discretised.
 
     State s = [theta, theta'], ``s' = F s + [0, 1]^T w`` with ``F = [[0, 1], [-wn^2,
     -2 zeta wn]]`` and PSD ``4 zeta wn^3 sigma^2``. ``s_0 ~ N(0, diag(sigma^2, (wn sigma)^2))``
     (the stationary distribution) and ``s_k+1 = Phi s_k + w_k`` with (Phi, Qd) by Van Loan.
-    The recursion for theta alone (Cayley-Hamilton) runs as one IIR filter.
+    The recursion for theta alone (Cayley-Hamilton) runs as one IIR filter, and the rate's row
+    ``theta'_k+1 = Phi10 theta_k + Phi11 theta'_k + w1_k`` as a second one.
 
     Parameters
     ----------
@@ -265,6 +275,8 @@ def flexure(
     -------
     theta : ndarray, shape (n,)
         [rad].
+    theta_rate : ndarray, shape (n,)
+        [rad/s].
     """
     F = np.array([[0.0, 1.0], [-wn * wn, -2.0 * zeta * wn]])
     G = np.array([[0.0], [1.0]])
@@ -273,7 +285,8 @@ def flexure(
     s0 = normals[0] * np.array([1.0, wn])
     w = normals[1:n] @ Lq.T  # w_0 .. w_n-2
     theta = np.empty(n)
-    theta[0] = s0[0]
+    rate = np.empty(n)
+    theta[0], rate[0] = s0
     if n > 1:
         theta[1] = Phi[0] @ s0 + w[0, 0]
     if n > 2:
@@ -282,7 +295,41 @@ def flexure(
         a = [1.0, -np.trace(Phi), np.linalg.det(Phi)]
         zi = lfiltic([1.0], a, y=[theta[1], theta[0]])
         theta[2:], _ = lfilter([1.0], a, u, zi=zi)
-    return sigma * theta
+    if n > 1:
+        a1 = [1.0, -Phi[1, 1]]
+        rate[1:], _ = lfilter([1.0], a1, Phi[1, 0] * theta[:-1] + w[:, 1],
+                              zi=lfiltic([1.0], a1, y=[rate[0]]))
+    return sigma * theta, sigma * rate
+
+
+def flexed_lever_arm(
+    lever_arm_r: np.ndarray, theta: np.ndarray, theta_rate: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lever arm GINS -> SDINS in the ship frame as the flexure bends it, and its rate.
+
+    The bending that turns the SDINS by theta_f about the ship's Y axis turns the lever arm
+    with it (to first order in theta_f)::
+
+        L_f^r = L^r + theta_f (e_Y x L^r),    dL_f^r/dt = theta_f' (e_Y x L^r)
+
+    so that the SDINS velocity ``V_R + C_nr (w_nr^r x L_f^r + dL_f^r/dt)`` is the rigid-body
+    lever-arm velocity with the SDINS's own rate ``w_nb = w_nr + theta_f' e_Y``, the rate the
+    SDINS gyro senses (docs/methods/transfer-alignment.md §3.2).
+
+    Parameters
+    ----------
+    lever_arm_r : ndarray, shape (3,)
+        Unbent lever arm [m].
+    theta, theta_rate : ndarray, shape (N,)
+        Flexure angle [rad] and rate [rad/s].
+
+    Returns
+    -------
+    arm, arm_rate : ndarray, shape (N, 3)
+        [m] and [m/s].
+    """
+    ey_x_arm = np.cross([0.0, 1.0, 0.0], lever_arm_r)
+    return lever_arm_r + np.outer(theta, ey_x_arm), np.outer(theta_rate, ey_x_arm)
 
 
 @register_scenario
@@ -335,19 +382,22 @@ class ShipTransferAlignment(Scenario):
         euler_r, omega_nr_r = ship(t)
         q_nr = euler_to_quat(euler_r)
         C_nr = quat_to_dcm(q_nr)
-        theta_f = flexure(n + 1, dt, p.flexure_sigma, p.flexure_zeta, p.flexure_wn,
-                          flexure_normals)
+        theta_f, theta_rate = flexure_state(n + 1, dt, p.flexure_sigma, p.flexure_zeta,
+                                            p.flexure_wn, flexure_normals)
         q_mis = euler_to_quat(mounting_euler)
         q_flex = np.zeros((n + 1, 4))  # Ry(theta_f)
         q_flex[:, 0] = np.cos(0.5 * theta_f)
         q_flex[:, 2] = np.sin(0.5 * theta_f)
         q_rb = quat_mult(q_flex, q_mis)  # C_rb = Ry(theta_f) C_mis
         q_nb = quat_mult(q_nr, q_rb)  # C_nb = C_nr C_rb
-        v_b_n = v_r_n + np.einsum("kij,kj->ki", C_nr, np.cross(omega_nr_r, lever_arm_r))
+        arm_r, arm_rate_r = flexed_lever_arm(lever_arm_r, theta_f, theta_rate)
+        v_b_n = v_r_n + np.einsum(
+            "kij,kj->ki", C_nr, np.cross(omega_nr_r, arm_r) + arm_rate_r
+        )
         pos_r0 = np.array([p.lat, p.lon, p.height])
         pos_r = integrate_position(t, np.tile(v_r_n, (n + 1, 1)), pos_r0)
         pos_b = integrate_position(
-            t, v_b_n, np.array(ned_offset_to_lla(p.lat, p.lon, p.height, C_nr[0] @ lever_arm_r))
+            t, v_b_n, np.array(ned_offset_to_lla(p.lat, p.lon, p.height, C_nr[0] @ arm_r[0]))
         )
 
         # SDINS IMU (Table 2 errors on the ideal interval means)

@@ -130,6 +130,9 @@ _TRUTH_COLUMNS = {
     "current_n": "true sea-current velocity NED [m/s] (constant)",
     "gyro_bias": "true total gyro bias, FRD [rad/s]",
     "accel_bias": "true total accelerometer bias, FRD [m/s^2]",
+    "gyro_bias_eff": "effective gyro bias: + (S + M) w_ie^b + K_g f_0^b, FRD [rad/s]",
+    "accel_bias_eff": "effective accelerometer bias: + (S + M) f_0^b (gravity reaction),"
+                      " FRD [m/s^2]",
 }
 
 
@@ -354,7 +357,8 @@ class UnderwaterRpm(Scenario):
                                          rpm_cols, "rpm_log"),
             StreamKind.DEPTH: Stream(StreamKind.DEPTH, nanoseconds(traj.t[di], t0_ns),
                                      depth_cols, "depth"),
-            StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, ti, speed=traj.speed,
+            StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, ti, imu_errors,
+                                           speed=traj.speed,
                                            current_n=np.broadcast_to(v_c, (n, 3))),
         }
         meta = self.metadata(

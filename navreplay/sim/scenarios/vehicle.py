@@ -69,6 +69,9 @@ _TRUTH_COLUMNS = {
     "euler": "true roll, pitch, yaw (ZYX) [rad], yaw in [-pi, pi)",
     "gyro_bias": "true total gyro bias (constant + Gauss-Markov + random walk), FRD [rad/s]",
     "accel_bias": "true total accelerometer bias, FRD [m/s^2]",
+    "gyro_bias_eff": "effective gyro bias: + (S + M) w_ie^b + K_g f_0^b, FRD [rad/s]",
+    "accel_bias_eff": "effective accelerometer bias: + (S + M) f_0^b (gravity reaction),"
+                      " FRD [m/s^2]",
 }
 
 
@@ -273,7 +276,7 @@ class VehicleDrive(Scenario):
                                        "ned"),
             StreamKind.MAG: Stream(StreamKind.MAG, nanoseconds(traj.t[mi], t0_ns), mag_cols,
                                    "mag_frd"),
-            StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns),
+            StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, errors=imu_errors),
         }
         meta = self.metadata(
             p, seed,
@@ -370,5 +373,5 @@ class Stationary(Scenario):
             },
         )
         streams = {StreamKind.IMU: imu_stream(traj.t, imu_meas, t0_ns),
-                   StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns)}
+                   StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, errors=imu_errors)}
         return Recording(streams=streams, metadata=meta, t0_ns=t0_ns)
