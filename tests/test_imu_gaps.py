@@ -1,0 +1,127 @@
+"""A 2 s IMU gap for every built-in filter: the run stays consistent after it, or stops with one
+line; never exit 0 with an inconsistent result."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_robustness import cut_imu, invoke, one_line_error
+
+from navreplay import metrics
+from navreplay.filters.gps_ins import GpsInsFilter
+from navreplay.filters.ins import InsFilter
+from navreplay.filters.registry import filters
+from navreplay.filters.rpm_aided_ins import RpmAidedIns
+from navreplay.filters.vector_matching import VectorMatchingFilter
+from navreplay.geo.rotations import quat_to_euler
+from navreplay.io import write_recording
+from navreplay.replay.engine import ReplayError, replay
+from navreplay.sim.scenario import simulate
+
+GAP = 2.0
+
+
+def test_every_builtin_filter_is_covered():
+    """A new built-in filter must be added to the tests of this module."""
+    assert set(filters()) == {"ins", "gps-ins", "rpm-aided-ins", "transfer-alignment",
+                              "vector-matching"}
+
+
+@pytest.fixture(scope="module")
+def underwater():
+    return simulate("underwater-rpm", {"duration": 110.0}, seed=1)
+
+
+@pytest.mark.parametrize("t_gap", [75.0, 88.0])  # inside the 60-90 s turn, and at its end
+def test_rpm_aided_ins_nees_in_band_after_a_gap(underwater, t_gap):
+    """The bridge holds the last turn rate through the gap; whether the turn goes on (75 s) or
+    ends in the gap (88 s), the horizontal-position NEES (2 dof) stays in its band after it
+    and the RPM and depth NIS stay in theirs."""
+    res = replay(cut_imu(underwater, t_gap, GAP), RpmAidedIns)
+    m = metrics.run_metrics(res, underwater)
+    lo, hi = metrics.chi2_bounds(2)
+    after = (m.t > t_gap + GAP) & (m.t <= 108.0)
+    assert after.sum() > 10
+    assert np.all(m.nees[after] < hi), m.nees[after].max()
+    assert lo < np.mean(m.nees[after]) < hi
+    for name, (t, nis, dof) in m.nis.items():
+        sel = (t > t_gap) & (t <= 108.0)
+        assert np.mean(nis[sel]) < metrics.chi2_bounds(dof, runs=int(sel.sum()))[1], name
+
+
+def test_rpm_aided_ins_without_the_bridge_covariance_would_fail(underwater):
+    """Held motion without the covariance of its unknown change: the NEES of a longer gap at
+    the end of the turn leaves the band (the test above can fail)."""
+    res = replay(cut_imu(underwater, 88.0, 5.0), RpmAidedIns,
+                 {"gap_accel_sigma": 0.0, "gap_rate_sigma": 0.0})
+    m = metrics.run_metrics(res, underwater)
+    after = (m.t > 93.0) & (m.t <= 108.0)
+    assert np.max(m.nees[after]) > metrics.chi2_bounds(2)[1]
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return simulate("vehicle-drive", {"duration": 60.0}, seed=1)
+
+
+def test_ins_nees_in_band_after_a_gap(drive):
+    """Free inertial: after a 2 s gap at 40 s (the vehicle turning) the covariance covers the
+    error, 9-dof NEES below its band's top at every output (nothing aids the filter to bring
+    the bridged covariance back down: it may stay conservative); without the covariance of
+    the unknown motion it would not."""
+    hi = metrics.chi2_bounds(9)[1]
+    for sigmas, covered in (({}, True), ({"gap_accel_sigma": 0.0, "gap_rate_sigma": 0.0}, False)):
+        m = metrics.run_metrics(replay(cut_imu(drive, 40.0, GAP), InsFilter, sigmas), drive)
+        assert len(m.nees_states) == 9
+        after = m.t > 42.0
+        assert np.all(m.nees[after] < hi) == covered, np.max(m.nees[after])
+
+
+def test_gps_ins_gap_is_bridged(drive):
+    """(The NEES band after the gap: tests/test_robustness.py.) The bridge is used."""
+    assert callable(GpsInsFilter.bridge_imu_gap)
+
+
+def _attitude_error(res, rec) -> np.ndarray:
+    truth = rec["truth"]
+    t = (truth.t_ns - rec.t0_ns) * 1e-9
+    euler = np.unwrap(np.array([quat_to_euler(q) for q in truth.columns["q_nb"]]), axis=0)
+    ref = np.array([np.interp(res.t, t, euler[:, i]) for i in range(3)]).T
+    return np.angle(np.exp(1j * (res.extras["euler"] - ref)))
+
+
+def test_vector_matching_after_a_gap_is_as_good_as_without():
+    """Gyro-free: the epochs without an accelerometer only carry the covariance and the GNSS
+    velocity; after the gap the attitude error and the NIS are those of the run without a
+    gap (the filter's own consistency is the published model's, not a band)."""
+    rec = simulate("gimpo-accel-yaw", {}, seed=1)
+    whole = replay(rec, VectorMatchingFilter)
+    gap = replay(cut_imu(rec, 15.0, GAP), VectorMatchingFilter)
+    sel_w, sel_g = whole.t > 18.0, gap.t > 18.0
+    err_w = np.abs(_attitude_error(whole, rec)[sel_w]).max(axis=0)
+    err_g = np.abs(_attitude_error(gap, rec)[sel_g]).max(axis=0)
+    assert np.all(err_g <= err_w + np.radians(0.2)), np.degrees([err_g, err_w])
+    nis_w = metrics.run_metrics(whole, rec).nis["vector"]
+    nis_g = metrics.run_metrics(gap, rec).nis["vector"]
+    assert np.mean(nis_g[1][nis_g[0] > 18.0]) < 1.1 * np.mean(nis_w[1][nis_w[0] > 18.0])
+    assert gap.t[(gap.t > 15.0) & (gap.t < 17.0)].size > 0  # estimates through the gap
+
+
+def test_transfer_alignment_gap_stops_in_one_line(tmp_path):
+    """Transfer alignment has no honest bridge (the unmatched Q_br component is recovered from
+    the SDINS attitude): a gap stops the run, naming the filter, the gap and --max-imu-gap."""
+    rec = simulate("ship-transfer-alignment", {"duration": 20.0}, seed=1)
+    path = tmp_path / "ship.mcap"
+    write_recording(path, cut_imu(rec, 10.0, GAP))
+    one_line_error(invoke("run", "transfer-alignment", path, "--no-viz"), str(path),
+                   "'transfer-alignment'", "2.010 s", "t = 10.000 s", "bridge_imu_gap",
+                   "--max-imu-gap")
+
+
+def test_a_plugin_without_a_bridge_stops_on_a_gap(drive):
+    class NoBridge(GpsInsFilter):
+        bridge_imu_gap = None
+
+    with pytest.raises(ReplayError, match="cannot bridge an IMU gap"):
+        replay(cut_imu(drive, 40.0, GAP), NoBridge)
+    replay(drive, NoBridge)  # without a gap it runs
