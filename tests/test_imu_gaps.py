@@ -3,6 +3,8 @@ line; never exit 0 with an inconsistent result."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from test_robustness import cut_imu, invoke, one_line_error
@@ -125,3 +127,61 @@ def test_a_plugin_without_a_bridge_stops_on_a_gap(drive):
     with pytest.raises(ReplayError, match="cannot bridge an IMU gap"):
         replay(cut_imu(drive, 40.0, GAP), NoBridge)
     replay(drive, NoBridge)  # without a gap it runs
+
+
+# --------------------------------------------------------------------------------------------
+# campaigns: --max-imu-gap and salvaged runs
+
+
+@pytest.fixture(scope="module")
+def gap_files(tmp_path_factory, drive):
+    d = tmp_path_factory.mktemp("gaps")
+    whole, cut = d / "whole.mcap", d / "cut.mcap"
+    write_recording(whole, drive)
+    write_recording(cut, cut_imu(drive, 40.0, 8.0))
+    return whole, cut
+
+
+def test_run_over_several_recordings_honours_max_imu_gap(gap_files, tmp_path):
+    whole, cut = gap_files
+    one_line_error(invoke("run", "gps-ins", whole, cut, "--no-viz"), str(cut), "8.010 s",
+                   "t = 40.000 s", "--max-imu-gap")
+    summary = tmp_path / "s.json"
+    res = invoke("run", "gps-ins", whole, cut, "--no-viz", "--max-imu-gap", "9",
+                 "--summary", summary)
+    assert res.exit_code == 0, res.output
+    rows = json.loads(summary.read_text())["runs"]
+    assert [(r["salvaged"], r["coverage"]) for r in rows] == [(False, 1.0), (False, 1.0)]
+    one_line_error(invoke("run", "gps-ins", whole, cut, "--no-viz", "--max-imu-gap", "-1",
+                          "--summary", tmp_path / "t.json"), "--max-imu-gap")
+    assert not (tmp_path / "t.json").exists()
+
+
+def test_montecarlo_max_imu_gap_is_checked_before_the_work(tmp_path):
+    res = invoke("montecarlo", "stationary", "ins", "--runs", "2", "--duration", "5",
+                 "--no-viz", "--max-imu-gap", "nan", "--summary", tmp_path / "s.json")
+    one_line_error(res, "--max-imu-gap")
+    assert not (tmp_path / "s.json").exists()
+    res = invoke("montecarlo", "stationary", "ins", "--runs", "2", "--duration", "5",
+                 "--no-viz", "--max-imu-gap", "3", "--summary", tmp_path / "s.json")
+    assert res.exit_code == 0, res.output
+    rows = json.loads((tmp_path / "s.json").read_text())["runs"]
+    assert [(r["salvaged"], r["coverage"]) for r in rows] == [(False, 1.0), (False, 1.0)]
+
+
+def test_campaign_rows_say_which_runs_were_salvaged(gap_files, tmp_path, monkeypatch):
+    from navreplay.io import writer
+
+    monkeypatch.setattr(writer, "CHUNK_SIZE", 1 << 16)
+    small = tmp_path / "small.mcap"
+    write_recording(small, simulate("vehicle-drive", {"duration": 20.0}, seed=3))
+    data = small.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    summary = tmp_path / "s.json"
+    res = invoke("run", "gps-ins", small, cut, "--no-viz", "--summary", summary)
+    assert res.exit_code == 0, res.output
+    assert f"SALVAGED: {cut}" in res.output and f"SALVAGED: {small}" not in res.output
+    rows = json.loads(summary.read_text())["runs"]
+    assert rows[0]["salvaged"] is False and rows[0]["coverage"] == 1.0
+    assert rows[1]["salvaged"] is True and 0.2 < rows[1]["coverage"] < 0.9

@@ -40,6 +40,8 @@ class MonteCarloJob:
     output_rate : float
     export_dir, report_path : Path, optional
         ``--export DIR`` (ensemble statistics as CSV) and ``--report FILE.html``.
+    max_imu_gap : float, optional
+        Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
     """
 
     scenario: str
@@ -55,6 +57,7 @@ class MonteCarloJob:
     output_rate: float = 10.0
     export_dir: Path | None = None
     report_path: Path | None = None
+    max_imu_gap: float | None = None
 
 
 def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunReport:
@@ -86,4 +89,5 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
              f"{job.runs} runs, seeds {job.seed}..{job.seed + job.runs - 1}")
     return campaign(tasks, job.filters, job.viz, DEFAULT_OUT / f"montecarlo-{job.scenario}.rrd",
                      job.summary_path, job.workers, progress, title, job.output_rate,
-                     per_run_table=False, outputs=outputs_of(job))
+                     per_run_table=False, outputs=outputs_of(job),
+                     max_imu_gap=job.max_imu_gap)

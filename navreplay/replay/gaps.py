@@ -29,6 +29,15 @@ MIN_IMU_SAMPLES = 10
 """Fewer IMU samples give no usable rate or motion: the recording is refused."""
 
 
+def check_max_gap(max_gap: float | None) -> float:
+    """The longest IMU gap allowed [s] (None: :data:`MAX_IMU_GAP`); ``ValueError`` unless a
+    positive number."""
+    limit = MAX_IMU_GAP if max_gap is None else float(max_gap)
+    if not limit > 0.0:
+        raise ValueError(f"--max-imu-gap must be a positive number of seconds, got {max_gap}")
+    return limit
+
+
 def find_gaps(
     t: np.ndarray, max_gap: float | None, where: str, unbridged: str | None = None
 ) -> tuple[np.ndarray, float]:
@@ -52,9 +61,7 @@ def find_gaps(
         Too few samples, a gap longer than ``max_gap``, or any gap for an ``unbridged`` filter
         (one line naming ``where`` and the time).
     """
-    limit = MAX_IMU_GAP if max_gap is None else float(max_gap)
-    if not limit > 0.0:
-        raise ValueError(f"--max-imu-gap must be a positive number of seconds, got {max_gap}")
+    limit = check_max_gap(max_gap)
     if len(t) < MIN_IMU_SAMPLES:
         raise ValueError(f"{where}: only {len(t)} IMU sample(s); at least {MIN_IMU_SAMPLES} "
                          "are needed to replay a filter")
