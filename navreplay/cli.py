@@ -538,7 +538,8 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
 
     _check_outputs(force, [config], _out(keep, "--keep", directory=True),
                    _viz_out(save, no_viz, spawn or serve or bool(connect)),
-                   _out(summary, "--summary"))
+                   _out(summary, "--summary"), _out(export, "--export", directory=True),
+                   _out(report, "--report"))
     scenario_items = [p.partition(".")[2] for p in params if p.startswith("scenario.")]
     filter_items = [p for p in params if not p.startswith("scenario.")]
     cfg = _load_config(config, "scenario", "filter")

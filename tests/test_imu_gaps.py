@@ -4,6 +4,7 @@ line; never exit 0 with an inconsistent result."""
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -185,3 +186,26 @@ def test_campaign_rows_say_which_runs_were_salvaged(gap_files, tmp_path, monkeyp
     rows = json.loads(summary.read_text())["runs"]
     assert rows[0]["salvaged"] is False and rows[0]["coverage"] == 1.0
     assert rows[1]["salvaged"] is True and 0.2 < rows[1]["coverage"] < 0.9
+
+
+@pytest.mark.parametrize("option", ["--report", "--export"])
+def test_montecarlo_result_outputs_are_checked_before_the_work(tmp_path, option):
+    """--report and --export of montecarlo go through the same output checks as --summary:
+    never onto an input (the config), never into an unwritable directory, before any run."""
+    config = tmp_path / "c.toml"
+    config.write_text("[filter.ins]\n")
+    base = ["montecarlo", "stationary", "ins", "--runs", "1", "--duration", "5", "--no-viz",
+            "--config", config]
+    if option == "--report":
+        one_line_error(invoke(*base, option, config, "--force"), option)  # onto the input
+        assert config.read_text() == "[filter.ins]\n"
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if os.access(locked, os.W_OK):
+            pytest.skip("running as a user who can write anywhere")
+        one_line_error(invoke(*base, option, locked / "out" if option == "--export"
+                              else locked / "r.html"), option)
+    finally:
+        locked.chmod(0o700)

@@ -122,9 +122,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from navreplay import strapdown
+from navreplay.filters import imu_gap, kalman
 from navreplay.filters import ins_error as ie
 from navreplay.filters import ins_time_update as itu
-from navreplay.filters import imu_gap, kalman
 from navreplay.filters.base import (
     Estimate,
     Filter,
