@@ -23,6 +23,11 @@ with r in metres N, E, D (converted to the position states by
 :func:`navreplay.filters.ins_error.position_scale`) and ``diag(q) T`` the filter's own process
 noise (sensor noise and bias random walks). The first IMU sample after the gap is then
 integrated over one nominal interval only.
+
+:func:`motion_noise` is eqs. (3)-(4) alone, for a filter that carries its own motion through
+the gap (rpm-aided-ins holds the last IMU sample, :func:`held_samples`, through its own
+mechanization and error model, and adds the covariance of an unknown *change* of motion);
+:func:`held_variance` is the variance growth itself, for filters with other state layouts.
 """
 
 from __future__ import annotations
