@@ -208,6 +208,12 @@ def _result_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
                              "(several recordings, montecarlo) into DIR.")(fn)
 
 
+_max_imu_gap = click.option(
+    "--max-imu-gap", type=float, metavar="S",
+    help="Longest IMU gap [s] a filter bridges; a longer one, or any gap for a filter that "
+         "cannot bridge, stops the run (default: 6 s).")
+
+
 # --------------------------------------------------------------------------------------------
 # the group
 
@@ -444,9 +450,7 @@ def _looks_like_recording(arg: str) -> bool:
 @click.option("--no-frame-check", is_flag=True,
               help="Skip the gravity and magnetic-dip checks of the frames.")
 @_result_flags
-@click.option("--max-imu-gap", type=float, metavar="S",
-              help="Longest IMU gap [s] a filter bridges; a longer one stops the run "
-                   "(default: 6 s).")
+@_max_imu_gap
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
@@ -532,11 +536,13 @@ def _finish(report: Any) -> None:
 @click.option("--summary", "summary", type=click.Path(dir_okay=False), metavar="OUT.json",
               help="Write per-run and ensemble figures as JSON.")
 @_result_flags
+@_max_imu_gap
 def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, workers: int,
                executor: str, refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
                spawn: bool, connect: str | None, serve: bool, no_viz: bool,
-               summary: str | None, export: str | None, report: str | None) -> None:
+               summary: str | None, export: str | None, report: str | None,
+               max_imu_gap: float | None) -> None:
     """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
 
     Prints per-filter ensemble statistics (RMS error vs mean filter sigma, NEES with its
@@ -551,7 +557,8 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
 
     _check_outputs(force, [config], _out(keep, "--keep", directory=True),
                    _viz_out(save, no_viz, spawn or serve or bool(connect)),
-                   _out(summary, "--summary"))
+                   _out(summary, "--summary"), _out(export, "--export", directory=True),
+                   _out(report, "--report"))
     scenario_items = [p.partition(".")[2] for p in params if p.startswith("scenario.")]
     filter_items = [p for p in params if not p.startswith("scenario.")]
     cfg = _load_config(config, "scenario", "filter")
@@ -566,6 +573,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         summary_path=Path(summary) if summary else None,
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None,
+        max_imu_gap=max_imu_gap,
     )
     with _Progress(f"montecarlo {scenario}") as progress:
         report = jobs.montecarlo(job, progress)

@@ -12,9 +12,13 @@ goes through this module:
   the target, renamed onto it only when complete (:func:`atomic_path` does both). Live
   temporaries are registered so that :func:`remove_temporaries` (called by the signal handlers of
   :mod:`navreplay.lifecycle`) deletes them when the process is told to stop.
-* A run killed outright (``kill -9``, power loss) cannot clean up; the PID in the name lets the
-  next write into the same directory recognise the leftovers of a process that no longer exists
-  and delete them (:func:`clean_stale`, reported as a warning).
+* A run killed outright (``kill -9``, power loss) cannot clean up; the PID and host in the name
+  let the next write into the same directory recognise the leftovers of a process of this
+  machine that no longer exists and delete them (:func:`clean_stale`, reported as a warning).
+  Limits (docs/architecture.md, "Files and signals"): a PID reused by a new process keeps a
+  leftover until that process ends; another machine's leftovers on a shared file system are
+  never removed; a target created by someone else between the check and the rename is
+  replaced.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import dataclasses
 import os
 import re
 import secrets
+import socket
 import threading
 import warnings
 from collections.abc import Iterable, Iterator
@@ -122,8 +127,11 @@ def _check_directory(label: str, directory: Path) -> None:
 # --------------------------------------------------------------------------------------------
 # temporaries
 
-_PART = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.part$")
-"""Name of a temporary: ``.NAME.PID.XXXXXXXX.part``."""
+_PART = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)(@(?P<host>[A-Za-z0-9_-]+))?\.[0-9a-f]{8}\.part$")
+"""Name of a temporary: ``.NAME.PID@HOST.XXXXXXXX.part`` (``@HOST`` absent in older ones)."""
+_HOST = re.sub(r"[^A-Za-z0-9_-]", "-", socket.gethostname())[:64] or "localhost"
+"""This machine, in temporary names: on a shared file system the PID of another machine's
+temporary says nothing here, so only this machine's leftovers are ever judged stale."""
 
 _LIVE: set[Path] = set()
 _LOCK = threading.Lock()
@@ -133,13 +141,13 @@ def temporary_path(target: str | os.PathLike[str]) -> Path:
     """A fresh temporary beside ``target``, registered for removal on a signal.
 
     Creates the target's directory, removes stale temporaries in it (:func:`clean_stale`) and
-    returns ``.NAME.PID.XXXXXXXX.part``; release it with :func:`release` once renamed or
+    returns ``.NAME.PID@HOST.XXXXXXXX.part``; release it with :func:`release` once renamed or
     abandoned.
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     clean_stale(target.parent)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.part")
+    tmp = target.with_name(f".{target.name}.{os.getpid()}@{_HOST}.{secrets.token_hex(4)}.part")
     with _LOCK:
         _LIVE.add(tmp)
     return tmp
@@ -173,9 +181,19 @@ def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
     tmp = temporary_path(target)
     try:
         yield tmp
+        _fsync(tmp)  # the data on disk before the name: a power loss leaves old or new
         os.replace(tmp, target)
     finally:
         release(tmp)
+
+
+def _fsync(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def _pid_of(path: Path) -> int | None:
@@ -206,7 +224,7 @@ def stale_temporaries(directory: str | os.PathLike[str]) -> list[Path]:
     out = []
     for name in names:
         m = _PART.match(name)
-        if m and not _alive(int(m["pid"])):
+        if m and m["host"] in (None, _HOST) and not _alive(int(m["pid"])):
             out.append(Path(directory) / name)
     return sorted(out)
 

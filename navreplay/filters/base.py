@@ -326,6 +326,17 @@ class Filter(abc.ABC):
     scored_extras : tuple[State, ...]
         Declarations of ``Estimate.extras`` keys scored against a truth (``name`` is the key;
         a ``TruthColumn`` with ``index=()`` compares the whole extra with the column row).
+
+    Optional method
+    ---------------
+    bridge_imu_gap(t: float, since: float) -> None
+        Called when the IMU stream has a gap (an interval longer than a few nominal ones,
+        :mod:`navreplay.replay.gaps`): bring the state to time ``t`` [s] without IMU samples
+        since ``since`` [s], with a covariance that honestly covers the unknown motion. The
+        engine calls it up to each aiding sample inside the gap (before ``update``) and up to
+        one nominal interval before the first sample after it, which ``propagate`` then gets
+        as usual. Not defined on this base class on purpose: a filter without it cannot be
+        replayed over a gap, and the run stops with one line naming the filter and the gap.
     """
 
     name: ClassVar[str]

@@ -23,6 +23,11 @@ with r in metres N, E, D (converted to the position states by
 :func:`navreplay.filters.ins_error.position_scale`) and ``diag(q) T`` the filter's own process
 noise (sensor noise and bias random walks). The first IMU sample after the gap is then
 integrated over one nominal interval only.
+
+:func:`motion_noise` is eqs. (3)-(4) alone, for a filter that carries its own motion through
+the gap (rpm-aided-ins holds the last IMU sample, :func:`held_samples`, through its own
+mechanization and error model, and adds the covariance of an unknown *change* of motion);
+:func:`held_variance` is the variance growth itself, for filters with other state layouts.
 """
 
 from __future__ import annotations
@@ -34,6 +39,30 @@ import numpy as np
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
 from navreplay.geo import earth
+
+
+def held_variance(sigma: float, tau: tuple[float, float]) -> float:
+    """Growth of the variance of the integral of an unknown rate held over a gap, from tau_1
+    to tau_2 seconds into it: ``sigma^2 (tau_2^2 - tau_1^2)`` (eqs. 3 and 4; the pieces of a gap
+    add up to ``(sigma tau)^2``).
+
+    Parameters
+    ----------
+    sigma : float
+        1-sigma of the held rate per axis (an acceleration [m/s^2] for a velocity, a body rate
+        [rad/s] for an attitude).
+    tau : (float, float)
+        Start and end of the piece, seconds since the start of the gap, 0 <= tau_1 <= tau_2.
+
+    Examples
+    --------
+    >>> held_variance(0.1, (0.0, 1.0)) + held_variance(0.1, (1.0, 2.0)) == (0.1 * 2.0) ** 2
+    True
+    """
+    t1, t2 = float(tau[0]), float(tau[1])
+    if not (0.0 <= t1 <= t2 and math.isfinite(t2)):
+        raise ValueError(f"a gap piece needs 0 <= tau_1 <= tau_2, got {tau}")
+    return sigma * sigma * (t2 * t2 - t1 * t1)
 
 
 def bridge(
@@ -79,17 +108,62 @@ def bridge(
     nav[strapdown.POS] = (lat + v_n[0] * T / (float(R_M) + h),
                           lon + v_n[1] * T / ((float(R_N) + h) * math.cos(lat)),
                           h - v_n[2] * T)  # (1)
-    per_metre = 1.0 / ie.position_scale(np.array([lat, lon, h]), vertical)
     n = P.shape[0]
     Phi = np.eye(n)
-    Phi[ie.POS, ie.VEL] = np.diag(per_metre * T)  # (2)
+    Phi[ie.POS, ie.VEL] = np.diag(_per_metre(nav, vertical) * T)  # (2)
     Q = np.diag(np.asarray(q, dtype=np.float64) * T)
-    q_a = accel_sigma * accel_sigma * (t1 + t2)
-    Q[ie.VEL, ie.VEL] += np.eye(3) * q_a * T  # (3)
-    cross = np.diag(per_metre * q_a * T * T / 2.0)
-    Q[ie.POS, ie.VEL] += cross
-    Q[ie.VEL, ie.POS] += cross
-    Q[ie.POS, ie.POS] += np.diag(per_metre**2 * q_a * T**3 / 3.0)
-    Q[ie.ATT, ie.ATT] += np.eye(3) * rate_sigma**2 * (t2 * t2 - t1 * t1)  # (4)
+    Q += motion_noise(nav, n, (t1, t2), accel_sigma, rate_sigma, vertical)  # (3), (4)
     P = Phi @ P @ Phi.T + Q  # (5)
     return nav, 0.5 * (P + P.T)
+
+
+def _per_metre(nav: np.ndarray, vertical: ie.Vertical) -> np.ndarray:
+    return 1.0 / ie.position_scale(np.asarray(nav[strapdown.POS], dtype=np.float64), vertical)
+
+
+def motion_noise(
+    nav: np.ndarray,
+    n: int,
+    tau: tuple[float, float],
+    accel_sigma: float,
+    rate_sigma: float,
+    vertical: ie.Vertical = ie.Vertical.HEIGHT,
+) -> np.ndarray:
+    """The covariance of the unknown motion over a piece of a gap (eqs. 3 and 4).
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+        Navigation vector (for the metres-to-position-state scale).
+    n : int
+        Number of states (the 15 of ``ins_error`` first), n >= 15.
+    tau : (float, float)
+        Start and end of the piece, seconds since the start of the gap, 0 <= tau_1 <= tau_2.
+    accel_sigma, rate_sigma : float
+        1-sigma of the unknown acceleration per NED axis [m/s^2] and body rate per axis [rad/s].
+    vertical : Vertical
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    t1, t2 = float(tau[0]), float(tau[1])
+    T = t2 - t1
+    per_metre = _per_metre(nav, vertical)
+    q_a = accel_sigma * accel_sigma * (t1 + t2)
+    Q = np.zeros((n, n))
+    Q[ie.VEL, ie.VEL] = np.eye(3) * held_variance(accel_sigma, (t1, t2))  # (3): q_a T
+    cross = np.diag(per_metre * q_a * T * T / 2.0)
+    Q[ie.POS, ie.VEL] = cross
+    Q[ie.VEL, ie.POS] = cross
+    Q[ie.POS, ie.POS] = np.diag(per_metre**2 * q_a * T**3 / 3.0)
+    Q[ie.ATT, ie.ATT] = np.eye(3) * held_variance(rate_sigma, (t1, t2))  # (4)
+    return Q
+
+
+def held_samples(t0: float, t: float, step: float) -> np.ndarray:
+    """Times of the samples that carry the last IMU sample from t0 to t [s]: every ``step``
+    seconds, the last one at t (a bridge that holds the last measured rate and specific force
+    integrates them with the filter's own mechanization and error model)."""
+    k = max(1, math.ceil((t - t0) / step - 1e-9))
+    return t0 + (t - t0) * np.arange(1, k + 1) / k

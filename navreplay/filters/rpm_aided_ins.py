@@ -126,9 +126,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from navreplay import strapdown
+from navreplay.filters import imu_gap, kalman
 from navreplay.filters import ins_error as ie
 from navreplay.filters import ins_time_update as itu
-from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
     Filter,
@@ -265,6 +265,13 @@ class RpmAidedInsParams(FilterParams):
     """Covariance propagation step T [s] (cut short at updates and outputs)."""
     curvature_derivatives: bool = True
     """Keep the dR_M/dL, dR_N/dL terms of F (their effect is below 1 %)."""
+    gap_accel_sigma: float = 1.0
+    """Unknown change of acceleration during an IMU gap, 1-sigma per NED axis [m/s^2]
+    (:mod:`navreplay.filters.imu_gap`): the centripetal 0.7 m/s^2 of a 3 deg/s turn at
+    13 m/s starting or ending, or a speed change."""
+    gap_rate_sigma: float = 0.05
+    """Unknown change of body rate during an IMU gap, 1-sigma per axis [rad/s] (a 3 deg/s
+    turn starting or ending)."""
 
     def __post_init__(self) -> None:
         try:
@@ -276,7 +283,8 @@ class RpmAidedInsParams(FilterParams):
         for name in ("accel_noise", "gyro_noise", "current_noise", "accel_bias_sigma",
                      "gyro_bias_sigma", "rpm_scale_factor_sigma", "rpm_misalignment_sigma",
                      "current_sigma", "init_vel_sigma", "init_level_sigma",
-                     "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor"):
+                     "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor",
+                     "gap_accel_sigma", "gap_rate_sigma"):
             check_number(self, name)
         for name in ("rpm_sigma", "constraint_sigma", "depth_sigma", "speed_per_rpm"):
             check_number(self, name, positive=True)
@@ -477,6 +485,7 @@ class RpmAidedIns(Filter):
         q[ATT] = p.gyro_noise**2
         if estimate_current:
             q[CURRENT] = p.current_noise**2
+        self._held: tuple[np.ndarray, np.ndarray, float] | None = None
         self._time_update = itu.TimeUpdate(
             itu.ProcessNoise(q), p.cov_step, vertical=ie.Vertical.DEPTH,
             curvature_derivatives=p.curvature_derivatives,
@@ -498,6 +507,8 @@ class RpmAidedIns(Filter):
                                            imu["f_b"], self.b_a, self.b_g)  # (1), (2), (21)-(23)
         if step is None:
             return
+        self._held = (imu["omega_ib_b"][-1], imu["f_b"][-1], step[2] - (
+            t[-2] if len(t) > 1 else self.t))  # the last sample and interval, for a gap
         self.nav, self.P, self.t = step
         if self.t >= self._next_check:  # full symmetry / PSD check once per second
             kalman.check_covariance(self.P, t=self.t)
@@ -538,6 +549,28 @@ class RpmAidedIns(Filter):
         self.P = c.P
         self._feedback(c.x)
         return [c.innovation(name, t)]
+
+    def bridge_imu_gap(self, t: float, since: float) -> None:
+        """No IMU samples from ``since`` until after ``t`` [s]. A submarine's motion is smooth:
+        the bridge holds the last body rate and specific force (a turn or a speed change goes
+        on), integrates them with the filter's own mechanization and error model, and adds the
+        covariance of the unknown change of that motion
+        (:func:`navreplay.filters.imu_gap.motion_noise`, depth form). The RPM and depth updates
+        inside the gap correct it as usual."""
+        if t <= self.t or self._held is None:
+            return
+        p = self.params
+        tau = (self.t - since, t - since)
+        omega, f_b, step = self._held
+        times = imu_gap.held_samples(self.t, t, step)
+        k = len(times)
+        self.propagate(times, {"omega_ib_b": np.tile(omega, (k, 1)),
+                               "f_b": np.tile(f_b, (k, 1))})
+        self._sync_covariance()
+        self.P = self.P + imu_gap.motion_noise(self.nav, N_STATES, tau, p.gap_accel_sigma,
+                                               p.gap_rate_sigma, ie.Vertical.DEPTH)
+        self._time_update.prev[:] = 0.0  # no coning/sculling across the gap
+        kalman.check_covariance(self.P, t=self.t)
 
     def estimate(self) -> Estimate:
         self._sync_covariance()

@@ -613,6 +613,7 @@ class VectorMatchingFilter(Filter):
         self._diag = np.zeros(3)
         self._estimate: Estimate | None = None
         self._pending: list[Innovation] = []  # of an epoch completed by propagate()
+        self._in_gap = False  # an IMU gap is being bridged
 
     # -- engine callbacks
 
@@ -620,7 +621,16 @@ class VectorMatchingFilter(Filter):
         # Gyro-free: the attitude is not propagated; keep the accelerometer samples for the
         # epoch they belong to.
         self._f = (np.asarray(t, dtype=float), np.asarray(imu["f_b"], dtype=float))
+        self._in_gap = False
         self._pending += self._try_epoch()
+
+    def bridge_imu_gap(self, t: float, since: float) -> None:
+        """No accelerometer samples from ``since`` until after ``t`` [s]. The attitude is held
+        between epochs anyway, its covariance grown by the process model that stands in for
+        the gyros; the epochs inside the gap (magnetometer and GNSS without an accelerometer)
+        only carry the covariance and the GNSS velocity forward, so that the first epoch after
+        the gap differences the GNSS velocity over one epoch (eq. 13), not over the gap."""
+        self._in_gap = True
 
     def update(
         self, kind: StreamKind, t: float, sample: Mapping[str, Any]
@@ -670,6 +680,8 @@ class VectorMatchingFilter(Filter):
         t_f, f_b = self._f
         j = np.flatnonzero(np.abs(t_f - t) <= tol)
         if j.size == 0:
+            if self._in_gap and self._prev is not None:
+                self._coast(EpochSample(t, self._prev.f_b, self._m[1], self._v[1], self._v[2]))
             return []
         cur = EpochSample(t, f_b[j[-1]], self._m[1], self._v[1], self._v[2])
         if self._prev is None:
@@ -680,6 +692,16 @@ class VectorMatchingFilter(Filter):
     def _initialise(self, cur: EpochSample) -> None:
         self.q_nb = triad(cur.f_b, cur.m_b, self.ref.g_n, self.ref.h_n)
         self.P = self.params.p0_sigma**2 * np.eye(N_STATES)
+        self.t = float(cur.t)
+        self._prev = cur
+        self._estimate = None
+
+    def _coast(self, cur: EpochSample) -> None:
+        """An epoch without an accelerometer sample (IMU gap): predict only."""
+        p = self.params
+        phi, qd = process_noise(float(cur.t) - float(self._prev.t), p.tau, p.q_w)  # (16)-(18)
+        _, self.P = kalman.predict(np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
+                                   float(qd) * np.eye(N_STATES), t=cur.t)
         self.t = float(cur.t)
         self._prev = cur
         self._estimate = None

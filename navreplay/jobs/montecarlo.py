@@ -43,6 +43,8 @@ class MonteCarloJob:
     executor : str
         ``process``, ``dask`` or ``dask://HOST:PORT``
         (:func:`navreplay.replay.ensemble.make_executor`).
+    max_imu_gap : float, optional
+        Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
     """
 
     scenario: str
@@ -59,6 +61,7 @@ class MonteCarloJob:
     export_dir: Path | None = None
     report_path: Path | None = None
     executor: str = "process"
+    max_imu_gap: float | None = None
 
 
 def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunReport:
@@ -90,4 +93,5 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
              f"{job.runs} runs, seeds {job.seed}..{job.seed + job.runs - 1}")
     return campaign(tasks, job.filters, job.viz, DEFAULT_OUT / f"montecarlo-{job.scenario}.rrd",
                      job.summary_path, job.workers, progress, title, job.output_rate,
-                     per_run_table=False, outputs=outputs_of(job), executor=job.executor)
+                     per_run_table=False, outputs=outputs_of(job), executor=job.executor,
+                     max_imu_gap=job.max_imu_gap)

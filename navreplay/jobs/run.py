@@ -43,6 +43,12 @@ def campaign_extract(
     return PerRun(scored, {label: m.summary() for label, m in scored.items()})
 
 
+def salvaged_note(source: str, covered: float | None) -> str:
+    """The note of a run over a recording salvaged from a damaged file."""
+    part = "an unknown part" if covered is None else f"{100 * covered:.1f} %"
+    return f"SALVAGED: {source} is damaged; replayed {part} of it"
+
+
 @dataclasses.dataclass(frozen=True)
 class RunJob:
     """``navreplay run``.
@@ -123,7 +129,8 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
     return campaign(tasks, job.filters, job.viz, default, job.summary_path, job.workers,
                      progress, title, job.output_rate, per_run_table=True,
-                     outputs=outputs_of(job), executor=job.executor)
+                     outputs=outputs_of(job), executor=job.executor,
+                     max_imu_gap=job.max_imu_gap)
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
@@ -175,8 +182,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
                "filters": summaries}
     notes = list(prepared.notes)
     if prepared.salvaged:
-        notes.append(f"SALVAGED: {path} is damaged; replayed "
-                     f"{'an unknown part' if covered is None else f'{100 * covered:.1f} %'} of it")
+        notes.append(salvaged_note(str(path), covered))
     notes += outputs.write_run(recording, summaries, source=str(path),
                                title=f"{', '.join(s.label for s in job.filters)} over {path.name}")
     if job.summary_path is not None:
@@ -205,11 +211,19 @@ def campaign(
     per_run_table: bool,
     outputs: Outputs | None = None,
     executor: str = "process",
+    max_imu_gap: float | None = None,
 ) -> RunReport:
     from navreplay import metrics
+    from navreplay.replay.gaps import check_max_gap
 
     outputs = outputs or Outputs()
     outputs.check([spec.label for spec in filters], ensemble=True)
+    try:
+        check_max_gap(max_imu_gap)
+    except ValueError as e:
+        raise _params.ParamError(str(e)) from None
+    if max_imu_gap is not None:
+        tasks = [dataclasses.replace(t, max_imu_gap=max_imu_gap) for t in tasks]
 
     stats: dict[str, Any] = {spec.label: metrics.EnsembleStats(spec.label) for spec in filters}
     rows: list[dict[str, Any]] = []
@@ -222,7 +236,10 @@ def campaign(
         if tasks[out.index].keep:
             drill[out.index + 1] = per.metrics
         rows.append({"run": out.index + 1, "recording": out.source, "seed": out.seed,
-                     "seconds": out.seconds, "filters": per.summaries})
+                     "seconds": out.seconds, "coverage": out.coverage,
+                     "salvaged": out.salvaged, "filters": per.summaries})
+        if out.salvaged:
+            notes.append(salvaged_note(out.source, out.coverage))
         for label, m in per.metrics.items():
             if label in stats:
                 try:

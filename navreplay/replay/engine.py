@@ -765,13 +765,14 @@ def _imu_feeder(filt: Filter, imu_t: np.ndarray, imu_cols: list[tuple[str, np.nd
     """The IMU block feeder of a replay; refuses IMU streams too short or with too long gaps."""
     where = f"{source}: stream {StreamKind.IMU}"
     gaps, nominal = np.zeros(0, np.int64), 0.0
+    bridge = getattr(filt, "bridge_imu_gap", None)
     if required or len(imu_t) >= MIN_IMU_SAMPLES:
         try:
-            gaps, nominal = find_gaps(imu_t, max_gap, where)
+            gaps, nominal = find_gaps(imu_t, max_gap, where,
+                                      None if callable(bridge) else type(filt).name)
         except ValueError as e:
             raise ReplayError(str(e)) from None
-    return ImuFeeder(filt.propagate, getattr(filt, "bridge_imu_gap", None), imu_t, imu_cols,
-                     gaps, nominal)
+    return ImuFeeder(filt.propagate, bridge, imu_t, imu_cols, gaps, nominal)
 
 
 PSD_TOLERANCE = 1e-6

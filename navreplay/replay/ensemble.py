@@ -106,6 +106,8 @@ class RunTask:
         Overwrite ``keep`` if it exists.
     log : LogOptions, optional
         Topics, frames, time source, initialisation and reference applied to ``path``.
+    max_imu_gap : float, optional
+        Longest IMU gap a filter bridges [s] (``--max-imu-gap``, :mod:`navreplay.replay.gaps`).
     """
 
     index: int
@@ -117,6 +119,7 @@ class RunTask:
     force: bool = False
     log: Any = None
     """How to read a log from elsewhere (:class:`navreplay.logs.options.LogOptions`)."""
+    max_imu_gap: float | None = None
 
     @property
     def source(self) -> str:
@@ -181,6 +184,10 @@ class RunOutput:
         The extractor's value.
     seconds : float
         Wall time of the run in the worker (load or simulate, replay, extract) [s].
+    salvaged : bool
+        The recording was salvaged from a damaged file.
+    coverage : float or None
+        Fraction of the recording replayed (:func:`navreplay.io.integrity.coverage`).
     """
 
     index: int
@@ -188,14 +195,22 @@ class RunOutput:
     seed: int | None
     metrics: Any
     seconds: float
+    salvaged: bool = False
+    coverage: float | None = 1.0
 
 
 def load_task(task: RunTask) -> Recording:
     """Read or simulate the task's recording (writing it to ``task.keep`` if asked)."""
+    return _load_task(task)[0]
+
+
+def _load_task(task: RunTask) -> tuple[Recording, bool]:
+    """The task's recording and whether it was salvaged from a damaged file."""
     if task.path is not None:
         from navreplay.logs.prepare import open_log
 
-        return open_log(task.path, task.log).recording
+        prepared = open_log(task.path, task.log)
+        return prepared.recording, prepared.salvaged
     if task.scenario is None:
         raise ValueError(f"run {task.index}: neither a recording path nor a scenario")
     from navreplay.sim.scenario import simulate
@@ -206,7 +221,7 @@ def load_task(task: RunTask) -> Recording:
 
         Path(task.keep).parent.mkdir(parents=True, exist_ok=True)
         write_recording(task.keep, recording, force=task.force)
-    return recording
+    return recording, False
 
 
 def replay_filters(
@@ -216,6 +231,7 @@ def replay_filters(
     source: str,
     output_rate: float | None = 10.0,
     validate: bool = True,
+    max_imu_gap: float | None = None,
 ) -> dict[str, RunResult]:
     """Replay each filter over one recording; results by label.
 
@@ -229,7 +245,7 @@ def replay_filters(
     for spec, cls in zip(filters, classes, strict=True):
         results[spec.label] = replay(
             recording, cls, spec.params, label=spec.label, source=source,
-            output_rate=output_rate, validate=validate,
+            output_rate=output_rate, validate=validate, max_imu_gap=max_imu_gap,
         )
         validate = False  # once per recording is enough
     return results
@@ -243,13 +259,17 @@ def run_task(
 ) -> RunOutput:
     """Load or simulate one recording, replay the filters, extract the metrics."""
     t0 = time.perf_counter()
-    recording = load_task(task)
+    from navreplay.io.integrity import coverage
+
+    recording, salvaged = _load_task(task)
     results = replay_filters(
         recording, filters, source=task.source, output_rate=output_rate,
         validate=task.path is None,  # files are validated by the reader
+        max_imu_gap=task.max_imu_gap,
     )
     metrics = extract(recording, results, task)
-    return RunOutput(task.index, task.source, task.seed, metrics, time.perf_counter() - t0)
+    return RunOutput(task.index, task.source, task.seed, metrics, time.perf_counter() - t0,
+                     salvaged, coverage(recording, salvaged))
 
 
 def default_extract(

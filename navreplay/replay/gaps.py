@@ -6,8 +6,10 @@ integrate the first of them over the whole gap: it asks the filter to *bridge* t
 (``filter.bridge_imu_gap(t, since)``: bring the state to time ``t`` without IMU samples since
 ``since``, with a covariance that covers the unknown motion) up to each aiding sample inside the gap and up to one
 nominal interval before the next IMU sample, which is then integrated as usual. A filter without
-that method gets the samples as they come. A gap longer than ``max_gap`` stops the run with one
-line naming the recording, the topic and the time; so does an IMU stream too short to replay.
+that method cannot be replayed over a gap: any gap stops the run with one line naming the
+filter, the recording, the gap and its time. A gap longer than ``max_gap`` stops the run with
+one line naming the recording, the topic and the time; so does an IMU stream too short to
+replay.
 """
 
 from __future__ import annotations
@@ -27,8 +29,17 @@ MIN_IMU_SAMPLES = 10
 """Fewer IMU samples give no usable rate or motion: the recording is refused."""
 
 
+def check_max_gap(max_gap: float | None) -> float:
+    """The longest IMU gap allowed [s] (None: :data:`MAX_IMU_GAP`); ``ValueError`` unless a
+    positive number."""
+    limit = MAX_IMU_GAP if max_gap is None else float(max_gap)
+    if not limit > 0.0:
+        raise ValueError(f"--max-imu-gap must be a positive number of seconds, got {max_gap}")
+    return limit
+
+
 def find_gaps(
-    t: np.ndarray, max_gap: float | None, where: str
+    t: np.ndarray, max_gap: float | None, where: str, unbridged: str | None = None
 ) -> tuple[np.ndarray, float]:
     """Indices of the IMU samples that follow a gap, and the nominal (median) interval [s].
 
@@ -40,15 +51,17 @@ def find_gaps(
         Longest gap allowed [s] (None: :data:`MAX_IMU_GAP`).
     where : str
         Recording and topic, for messages.
+    unbridged : str, optional
+        Name of a filter that cannot bridge a gap (it has no ``bridge_imu_gap``): any gap is
+        refused.
 
     Raises
     ------
     ValueError
-        Too few samples, or a gap longer than ``max_gap`` (one line naming ``where`` and the time).
+        Too few samples, a gap longer than ``max_gap``, or any gap for an ``unbridged`` filter
+        (one line naming ``where`` and the time).
     """
-    limit = MAX_IMU_GAP if max_gap is None else float(max_gap)
-    if not limit > 0.0:
-        raise ValueError(f"--max-imu-gap must be a positive number of seconds, got {max_gap}")
+    limit = check_max_gap(max_gap)
     if len(t) < MIN_IMU_SAMPLES:
         raise ValueError(f"{where}: only {len(t)} IMU sample(s); at least {MIN_IMU_SAMPLES} "
                          "are needed to replay a filter")
@@ -58,6 +71,12 @@ def find_gaps(
     if gaps.size:
         worst = int(gaps[np.argmax(dt[gaps - 1])])
         length = float(dt[worst - 1])
+        if unbridged is not None:
+            raise ValueError(
+                f"{where}: no IMU sample for {length:.3f} s after t = {t[worst - 1]:.3f} s, "
+                f"and filter {unbridged!r} cannot bridge an IMU gap (it has no bridge_imu_gap;"
+                " --max-imu-gap applies to filters that have)"
+            )
         if length > limit:
             raise ValueError(
                 f"{where}: no IMU sample for {length:.3f} s after t = {t[worst - 1]:.3f} s, "
@@ -74,7 +93,7 @@ class ImuFeeder:
     propagate : callable
         ``propagate(t, columns)`` of the filter.
     bridge : callable or None
-        ``bridge_imu_gap(t, since)`` of the filter; None: gaps are not bridged.
+        ``bridge_imu_gap(t, since)`` of the filter (None only when there is no gap).
     t : ndarray, shape (k,)
         Sample times [s].
     columns : sequence of (name, ndarray)
@@ -97,7 +116,7 @@ class ImuFeeder:
         self._bridge = bridge
         self._t = t
         self._columns = columns
-        self._gaps = gaps.tolist() if bridge is not None else []
+        self._gaps = gaps.tolist()
         self._nominal = nominal
         self._g = 0
         self.start = 0
