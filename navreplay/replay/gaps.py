@@ -28,7 +28,7 @@ MIN_IMU_SAMPLES = 10
 
 
 def find_gaps(
-    t: np.ndarray, max_gap: float | None, where: str
+    t: np.ndarray, max_gap: float | None, where: str, nominal: float | None = None
 ) -> tuple[np.ndarray, float]:
     """Indices of the IMU samples that follow a gap, and the nominal (median) interval [s].
 
@@ -40,6 +40,9 @@ def find_gaps(
         Longest gap allowed [s] (None: :data:`MAX_IMU_GAP`).
     where : str
         Recording and topic, for messages.
+    nominal : float, optional
+        The nominal interval when already known (a later window of a streamed replay); the
+        samples need not then be many.
 
     Raises
     ------
@@ -49,11 +52,11 @@ def find_gaps(
     limit = MAX_IMU_GAP if max_gap is None else float(max_gap)
     if not limit > 0.0:
         raise ValueError(f"--max-imu-gap must be a positive number of seconds, got {max_gap}")
-    if len(t) < MIN_IMU_SAMPLES:
+    if nominal is None and len(t) < MIN_IMU_SAMPLES:
         raise ValueError(f"{where}: only {len(t)} IMU sample(s); at least {MIN_IMU_SAMPLES} "
                          "are needed to replay a filter")
     dt = np.diff(t)
-    nominal = float(np.median(dt))
+    nominal = float(np.median(dt)) if nominal is None else nominal
     gaps = np.flatnonzero(dt > GAP_FACTOR * nominal) + 1
     if gaps.size:
         worst = int(gaps[np.argmax(dt[gaps - 1])])
