@@ -74,3 +74,52 @@ def test_a_window_without_samples_applies_nothing(drive: Recording) -> None:
     assert session.feed(imu.slice(500, 500)).t.size == 0
     rest = session.feed(imu.slice(500, len(imu)), final=True)
     assert rest.t[0] > first.t[-1]
+
+
+def test_run_on_a_file_streams_and_scores_as_the_whole_run(
+    drive: Recording, tmp_path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import importlib
+
+    from navreplay.io import windows
+    from navreplay.io.writer import write_recording
+    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.viz.options import VizMode, VizOptions
+
+    run = importlib.import_module("navreplay.jobs.run")
+    path = tmp_path / "drive.mcap"
+    write_recording(path, drive)
+    job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(path,),
+                     viz=VizOptions(mode=VizMode.NONE))
+    read = []
+    real = windows.read_windows
+
+    def counted(*a, **kw):
+        for w in real(*a, **kw):
+            read.append(len(w[StreamKind.IMU]) if StreamKind.IMU in w else 0)
+            yield w
+
+    monkeypatch.setattr(windows, "WINDOW_MESSAGES", 700)
+    monkeypatch.setattr(windows, "read_windows", counted)
+    streamed = run._run_streamed(job, None)
+    assert streamed is not None and len(read) >= 3 and max(read) < 2500  # chunk by chunk
+    whole = run._run_one(job, None).summary["filters"]["gps-ins"]
+    got = streamed.summary["filters"]["gps-ins"]
+    assert got.keys() == whole.keys() and {"pos_rms_h", "nees_mean", "distance"} <= got.keys()
+    for k, v in whole.items():
+        assert got[k] == pytest.approx(v, rel=1e-12, abs=1e-12), k
+
+
+def test_views_and_exports_read_the_whole_file(drive: Recording, tmp_path) -> None:
+    import importlib
+
+    from navreplay.io.writer import write_recording
+    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.viz.options import VizMode, VizOptions
+
+    run = importlib.import_module("navreplay.jobs.run")
+    path = tmp_path / "drive.mcap"
+    write_recording(path, drive)
+    job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(path,),
+                     viz=VizOptions(mode=VizMode.SAVE))
+    assert run._run_streamed(job, None) is None

@@ -20,8 +20,16 @@ from pathlib import Path
 from navreplay.io.checks import when
 from navreplay.io.convert import AuxColumn, Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.mcapfile import FileContents, walk
-from navreplay.io.reader import _metadata, _Plan, _Topic, build_stream, sample_times, topic_map
+from navreplay.io.mcapfile import FileContents, probe, walk
+from navreplay.io.reader import (
+    TopicSource,
+    _metadata,
+    _Plan,
+    _Topic,
+    build_stream,
+    sample_times,
+    topic_map,
+)
 from navreplay.io.schemas import SPECS
 from navreplay.streams import Stream, StreamKind
 
@@ -36,6 +44,16 @@ class NotStreamable(Exception):
     """The file cannot be read in windows (no summary or chunk index): read it whole."""
 
 
+def streamable(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is an MCAP file that ends with a summary (cheap: reads its ends)."""
+    try:
+        with open(path, "rb") as f:
+            tail = probe(f, os.fstat(f.fileno()).st_size, str(path))
+    except (OSError, RecordingError):
+        return False
+    return tail is not None and tail.summary_start > 0
+
+
 def read_windows(
     path: str | os.PathLike[str],
     kinds: Iterable[StreamKind],
@@ -44,7 +62,8 @@ def read_windows(
     frames: Mapping[StreamKind | str, Convention | str] | None = None,
     time: str = "header",
     validate: bool = True,
-    window: int = WINDOW_MESSAGES,
+    window: int | None = None,
+    sources: dict[StreamKind, TopicSource] | None = None,
 ) -> Iterator[dict[StreamKind, Stream]]:
     """Yield the streams ``kinds`` of an MCAP file window by window.
 
@@ -56,8 +75,10 @@ def read_windows(
         Streams to read (those the file lacks are left out of the windows).
     topics, frames, time, validate
         As for :func:`navreplay.io.reader.read_streams`.
-    window : int
-        Decoded messages of a kind that close a window.
+    window : int, optional
+        Decoded messages of a kind that close a window (default :data:`WINDOW_MESSAGES`).
+    sources : dict, optional
+        Filled with the topic, frame and convention of each kind, as it first appears.
 
     Yields
     ------
@@ -75,6 +96,7 @@ def read_windows(
     """
     path = Path(path)
     where = str(path)
+    window = WINDOW_MESSAGES if window is None else int(window)
     plan = _Plan(where, {StreamKind(k) for k in kinds}, topic_map(topics))
     declared = {StreamKind(k): Convention(str(v).lower()) for k, v in (frames or {}).items()}
     with open(path, "rb") as f:
@@ -90,20 +112,21 @@ def read_windows(
                 _, t0_ns, aux = _metadata(contents, where)
             plan.feed(contents, block)
             if any(t.rows() >= window for t in chosen.values()):
-                yield _window(chosen, last, frame, declared, aux, t0_ns, time, validate)
+                yield _window(chosen, last, frame, declared, aux, t0_ns, time, validate,
+                              sources)
         if chosen is None:  # no chunk holds a streamed kind
             if not contents.intact:
                 raise NotStreamable(f"{where}: no summary to read the file in windows")
             return
-        out = _window(chosen, last, frame, declared, aux, t0_ns, time, validate)
+        out = _window(chosen, last, frame, declared, aux, t0_ns, time, validate, sources)
         if out:
             yield out
 
 
 def _window(chosen: Mapping[StreamKind, _Topic], last: dict[StreamKind, int],
             frame: dict[StreamKind, str], declared: Mapping[StreamKind, Convention],
-            aux: list[AuxColumn], t0_ns: int, time: str, validate: bool
-            ) -> dict[StreamKind, Stream]:
+            aux: list[AuxColumn], t0_ns: int, time: str, validate: bool,
+            sources: dict[StreamKind, TopicSource] | None) -> dict[StreamKind, Stream]:
     out: dict[StreamKind, Stream] = {}
     for kind, topic in chosen.items():
         if not topic.rows():
@@ -111,8 +134,10 @@ def _window(chosen: Mapping[StreamKind, _Topic], last: dict[StreamKind, int],
         fields = topic.drain()
         fields["t_ns"] = sample_times(fields["t_ns"], topic.log_ns, time, topic.label)
         frame.setdefault(kind, topic.first_frame_id or SPECS[kind].frame_id)
-        stream, _ = build_stream(kind, fields, frame[kind], topic.label, aux, t0_ns, validate,
-                                 declared.get(kind), topic.channel.topic)
+        stream, source = build_stream(kind, fields, frame[kind], topic.label, aux, t0_ns,
+                                      validate, declared.get(kind), topic.channel.topic)
+        if sources is not None:
+            sources.setdefault(kind, source)
         if not len(stream):
             continue
         if kind in last and int(stream.t_ns[0]) <= last[kind]:
