@@ -53,8 +53,8 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy import special
 
+from navreplay import chi2
 from navreplay.filters.base import Nav, NavError, State, TrueConstant, TruthColumn
 from navreplay.geo import earth
 from navreplay.geo.rotations import (
@@ -99,9 +99,8 @@ def chi2_bounds(dof: int, runs: int = 1, probability: float = 0.95) -> tuple[flo
     if dof < 1 or runs < 1:
         raise ValueError(f"dof and runs must be >= 1, got {dof}, {runs}")
     a = 0.5 * (1.0 - probability)
-    # chi2.ppf(p, k) = 2 gammaincinv(k / 2, p): scipy.special, not the heavy scipy.stats
-    lo, hi = 2.0 * special.gammaincinv(0.5 * runs * dof, [a, 1.0 - a]) / runs
-    return float(lo), float(hi)
+    k = runs * dof
+    return chi2.ppf(a, k) / runs, chi2.ppf(1.0 - a, k) / runs
 
 
 def rms(a: np.ndarray, axis: int | tuple[int, ...] | None = 0) -> np.ndarray:

@@ -143,6 +143,18 @@ class _Topic:
         else:
             self.log_times.append(log_time)
 
+    def drain(self) -> dict[str, np.ndarray]:
+        """:meth:`finish` the rows so far and start afresh (a time window of the topic)."""
+        out = self.finish()
+        self.ordinals.clear()
+        self.log_times.clear()
+        self.in_order = True
+        return out
+
+    def rows(self) -> int:
+        """Rows decoded and not yet finished."""
+        return sum(len(p["t_ns"]) for p in self.parts)
+
     def finish(self) -> dict[str, np.ndarray]:
         """Concatenated fields in log-time order (file order among equal log times)."""
         if not self.parts:
@@ -373,6 +385,7 @@ def read_streams(
     topics: Mapping[StreamKind | str, str] | None = None,
     frames: Mapping[StreamKind | str, Convention | str] | None = None,
     time: str = "header",
+    skip: Iterable[StreamKind] = (),
 ) -> tuple[Recording, dict[StreamKind, TopicSource]]:
     """Read a recording into columnar streams.
 
@@ -398,6 +411,8 @@ def read_streams(
         Sample times: the messages' ``header.stamp`` (falling back to the log times, with a
         warning, for a topic whose stamps are zero or do not increase), or the log (receive)
         times (:func:`sample_times`).
+    skip : iterable of StreamKind
+        Streams not to read (read in time windows by :mod:`navreplay.io.windows`).
 
     Returns
     -------
@@ -426,6 +441,7 @@ def read_streams(
     where = str(path)
     explicit = kinds is not None
     wanted = set(SPECS) if kinds is None else {StreamKind(k) for k in kinds}
+    wanted -= set(skip)
     topic_kinds = topic_map(topics)
     declared = {StreamKind(k): Convention(str(v).lower()) for k, v in (frames or {}).items()}
     if is_rosbag(path):

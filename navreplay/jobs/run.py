@@ -121,7 +121,7 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     if not (0 < job.output_rate < math.inf):
         raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
     if len(job.recordings) == 1:
-        return _run_one(job, progress)
+        return _run_streamed(job, progress) or _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
@@ -131,6 +131,76 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
                      progress, title, job.output_rate, per_run_table=True,
                      outputs=outputs_of(job), executor=job.executor,
                      max_imu_gap=job.max_imu_gap)
+
+
+def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
+    """Replay one intact MCAP file window by window (memory flat in its length); None when the
+    run needs the whole recording (a view, exports, a report, a reference, paced replay, a
+    rosbag2 folder or a damaged file): :func:`_run_one` then reads it whole."""
+    from navreplay.io.integrity import salvage_watch
+    from navreplay.io.reader import is_rosbag, read_streams
+    from navreplay.io.windows import STREAMED, NotStreamable, read_windows, streamable
+    from navreplay.logs.options import LogOptions
+    from navreplay.logs.prepare import make_ready
+    from navreplay.replay.engine import ReplaySession
+    from navreplay.replay.streaming import RunningSummary
+
+    path = Path(job.recordings[0])
+    options = job.log or LogOptions()
+    if (job.viz.mode is not VizMode.NONE or job.export_dir is not None
+            or job.report_path is not None or job.pacing is not None
+            or options.reference is not None or is_rosbag(path) or not streamable(path)):
+        return None
+    classes = [spec.load() for spec in job.filters]
+    with salvage_watch() as lost:
+        aiding, sources = read_streams(path, topics=options.topics,
+                                       frames=options.stream_frames, time=options.time,
+                                       skip=STREAMED)
+    if lost[0]:
+        return None
+    windows = read_windows(path, STREAMED, topics=options.topics, frames=options.stream_frames,
+                           time=options.time, sources=sources)
+    try:
+        window = next(windows, {})
+    except NotStreamable:
+        return None
+    aiding.metadata.extra.setdefault("source", str(path))
+    head = Recording({**aiding.streams, **window}, aiding.metadata, aiding.t0_ns)
+    notes = make_ready(head, sources, options)
+    has_truth = StreamKind.TRUTH in head
+    sessions = [ReplaySession(head, cls, spec.params, label=spec.label, source=str(path),
+                              output_rate=job.output_rate, validate=False,
+                              max_imu_gap=job.max_imu_gap)
+                for spec, cls in zip(job.filters, classes, strict=True)]
+    scores = [RunningSummary(spec.label, head.t0_ns, head.metadata.true_errors, has_truth)
+              for spec in job.filters]
+    del head
+    duration = float(aiding.metadata.params.get("duration") or 0.0)
+    while True:
+        following = next(windows, None)
+        final = following is None
+        imu = window.get(StreamKind.IMU)
+        for session, score in zip(sessions, scores, strict=True):
+            score.add(session.feed(imu, final=final))
+            score.add_truth(window.get(StreamKind.TRUTH), final=final)
+        if progress is not None and imu is not None and len(imu) and duration > 0:
+            done = (int(imu.t_ns[-1]) - aiding.t0_ns) * 1e-9
+            progress(min(int(done), int(duration)), int(duration))
+        if final:
+            break
+        window = following
+    summaries = {spec.label: score.summary()
+                 for spec, score in zip(job.filters, scores, strict=True)}
+    summary = {"recording": str(path), "coverage": 1.0, "salvaged": False,
+               "filters": summaries}
+    if job.summary_path is not None:
+        write_json(job.summary_path, summary)
+        notes.append(f"Summary written to {job.summary_path}")
+    table = tables.format_summaries(summaries)
+    if not has_truth:
+        table = "(no truth or reference: innovation statistics only)\n\n" + table
+    return RunReport(title=f"{', '.join(s.label for s in job.filters)} over {path}",
+                     table=table, summary=summary, viz="", notes=notes)
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:

@@ -52,6 +52,15 @@ def open_log(path: str | Path, options: LogOptions | None = None) -> PreparedLog
         stream, note = reference_stream(ref, recording, options.initial)
         recording.streams[StreamKind.TRUTH] = stream
         notes.append(note)
+    notes += make_ready(recording, sources, options)
+    return PreparedLog(recording, sources, notes, salvaged=lost[0])
+
+
+def make_ready(recording: Recording, sources: dict[StreamKind, TopicSource],
+               options: LogOptions) -> list[str]:
+    """Check the frames and set the initial solution (``metadata.initial_nav``) of a log read
+    (for a log read in windows: its aiding streams and first window); one note per line."""
+    notes: list[str] = []
     if options.check_frames and StreamKind.IMU in recording:
         notes += check_frames(recording, sources, _position(recording, options))
     nav, note = initial_nav(options.init, recording, options.initial)
@@ -59,7 +68,7 @@ def open_log(path: str | Path, options: LogOptions | None = None) -> PreparedLog
         recording.metadata.initial_nav = nav
     if note:
         notes.append(note)
-    return PreparedLog(recording, sources, notes, salvaged=lost[0])
+    return notes
 
 
 def _position(recording: Recording, options: LogOptions) -> np.ndarray | None:

@@ -265,6 +265,16 @@ def plan_events(
     -------
     EventPlan
     """
+    imu = recording.streams.get(StreamKind.IMU)
+    imu_t = imu.t_ns if imu is not None else np.zeros(0, np.int64)
+    return window_plan(merge_aiding(recording, consumes), imu_t, recording.t0_ns, output_rate,
+                       first_imu_ns=int(imu_t[0]) if len(imu_t) else None)
+
+
+def merge_aiding(recording: Recording, consumes: Iterable[StreamKind] | None = None
+                 ) -> EventPlan:
+    """The aiding samples of a recording merged by (time, priority, row), without output
+    ticks (``imu_end`` empty)."""
     kinds = aiding_kinds(recording, consumes)
     streams = [recording[k] for k in kinds]
     t_all = np.concatenate([s.t_ns for s in streams] + [np.zeros(0, np.int64)])
@@ -276,23 +286,47 @@ def plan_events(
     # concatenated in priority order, rows increasing: a stable sort by time gives
     # (time, priority, row) order
     order = np.argsort(t_all, kind="stable")
-    t_all, code, row = t_all[order], code[order], row[order]
+    return EventPlan(kinds, t_all[order], code[order], row[order], np.zeros(0, np.int64))
 
-    imu = recording.streams.get(StreamKind.IMU)
-    imu_t = imu.t_ns if imu is not None else np.zeros(0, np.int64)
-    if output_rate and len(imu_t):
-        ticks = _ticks(imu_t[0], imu_t[-1], recording.t0_ns, float(output_rate))
-        period = ticks[1] - ticks[0] if len(ticks) > 1 else np.int64(round(1e9 / output_rate))
+
+def window_plan(
+    merged: EventPlan,
+    imu_t: np.ndarray,
+    t0_ns: int,
+    output_rate: float | None,
+    *,
+    lo: int | None = None,
+    hi: int | None = None,
+    first_imu_ns: int | None = None,
+) -> EventPlan:
+    """The events with ``lo < t <= hi`` [ns] (open ends when None): the merged aiding samples
+    and the output ticks on the grid between ``first_imu_ns`` and the last of ``imu_t`` (the
+    IMU samples at hand, ordered), with ``imu_end`` counted in ``imu_t``."""
+    t_all, code, row = merged.t_ns, merged.code, merged.row
+    a = 0 if lo is None else int(np.searchsorted(t_all, lo, side="right"))
+    b = len(t_all) if hi is None else int(np.searchsorted(t_all, hi, side="right"))
+    t_ev, code, row = t_all[a:b], code[a:b], row[a:b]
+    if output_rate and len(imu_t) and first_imu_ns is not None:
+        last = int(imu_t[-1]) if hi is None else min(int(hi), int(imu_t[-1]))
+        period_ns = round(1e9 / float(output_rate))
+        first = first_imu_ns if lo is None else max(first_imu_ns, int(lo) - 2 * period_ns)
+        ticks = _ticks(first, last, t0_ns, float(output_rate))
+        if lo is not None:
+            ticks = ticks[ticks > lo]
+        grid = ticks if lo is None else _ticks(first_imu_ns, first_imu_ns + 3 * period_ns,
+                                               t0_ns, float(output_rate))
+        period = grid[1] - grid[0] if len(grid) > 1 else np.int64(period_ns)
+        # ticks only in intervals without an aiding sample (of the whole recording)
         before = np.searchsorted(t_all, ticks - period, side="right")
         upto = np.searchsorted(t_all, ticks, side="right")
         ticks = ticks[upto == before]
-        t_all = np.concatenate([t_all, ticks])
+        t_ev = np.concatenate([t_ev, ticks])
         code = np.concatenate([code, np.full(len(ticks), TICK, np.int64)])
         row = np.concatenate([row, np.zeros(len(ticks), np.int64)])
-        order = np.argsort(t_all, kind="stable")
-        t_all, code, row = t_all[order], code[order], row[order]
-    imu_end = np.searchsorted(imu_t, t_all, side="right").astype(np.int64)
-    return EventPlan(kinds, t_all, code, row, imu_end)
+        order = np.argsort(t_ev, kind="stable")
+        t_ev, code, row = t_ev[order], code[order], row[order]
+    imu_end = np.searchsorted(imu_t, t_ev, side="right").astype(np.int64)
+    return EventPlan(merged.kinds, t_ev, code, row, imu_end)
 
 
 def _ticks(first_ns: int, last_ns: int, t0_ns: int, rate: float) -> np.ndarray:
@@ -544,177 +578,335 @@ def replay(
         The filter raised it, a linear-algebra error, or produced a non-finite estimate; the
         message names the filter, the recording and the time.
     """
-    label = label or filter_cls.name
-    source = source or recording_name(recording)
-    check_streams(recording, filter_cls, source)
-    if validate:
-        validate_recording(recording, source)
-    p = build_params(filter_cls, params)
-    context = FilterContext(
-        metadata=recording.metadata,
-        t0_ns=recording.t0_ns,
-        streams=frozenset(recording.kinds()),
+    session = ReplaySession(
+        recording, filter_cls, params, label=label, source=source, output_rate=output_rate,
+        pacing=pacing, validate=validate, progress=progress, observer=observer,
+        observe_interval=observe_interval, max_imu_gap=max_imu_gap,
     )
-    try:
-        filt = filter_cls(p, context)
-    except Exception as e:
-        raise FilterInitError(
-            f"filter {label!r} cannot start on {source}: {_one_line(e)}"
-        ) from e
-    states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
-    names = tuple(st.name for st in states)
-    scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
-    plan = plan_events(recording, output_rate, consumed_streams(filter_cls))
-    t0_ns = recording.t0_ns
+    return session.feed(recording.streams.get(StreamKind.IMU), final=True)
 
-    # per-stream inputs, converted once
-    imu = recording.streams.get(StreamKind.IMU)
-    if imu is not None:
-        imu_t = (imu.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9
-        imu_cols = list(imu.columns.items())
-        n_imu = len(imu)
-    else:
-        imu_t = np.zeros(0)
-        imu_cols = []
-        n_imu = 0
-    feeder = _imu_feeder(filt, imu_t, imu_cols, max_imu_gap, source,
-                         StreamKind.IMU in filter_cls.requires)
-    aiding: list[Stream] = [recording[k] for k in plan.kinds]
-    sample_cols = [list(s.columns.items()) for s in aiding]
-    ev_t = ((plan.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9).tolist()
-    ev_code = plan.code.tolist()
-    ev_row = plan.row.tolist()
-    ev_end = plan.imu_end.tolist()
-    # one estimate per distinct time: samples sharing a timestamp are all applied first
-    ev_record = np.append(plan.t_ns[1:] != plan.t_ns[:-1], True).tolist()
-    kinds = plan.kinds
 
-    update = filt.update
-    estimate = filt.estimate
-    innovations: dict[str, list[tuple[float, np.ndarray, np.ndarray]]] = {}
-    columns: _Columns | None = None
-    checked = 0
-    n_events = len(ev_t)
-    upper = n_events + 1
-    meta = dict(
-        filter_name=filter_cls.name,
-        label=label,
-        recording=source,
-        t0_ns=t0_ns,
-        states=states,
-        scored_extras=scored_extras,
-    )
+class ReplaySession:
+    """One filter replayed over a recording whose IMU arrives in time windows.
 
-    wall0 = time.perf_counter()
-    t_first = ev_t[0] if ev_t else 0.0
-    next_observe = wall0 + observe_interval
-    slow = pacing is not None or observer is not None or progress is not None
+    :func:`replay` feeds the whole IMU stream at once; a streaming replay
+    (:mod:`navreplay.replay.streaming`) feeds it window by window, and each :meth:`feed`
+    returns the estimates and innovations of the events it could apply. The filter sees exactly
+    the calls of a replay of the whole recording: an event is applied once every IMU sample up to
+    its time is at hand, and the samples after a window's last event wait for the next window,
+    so they reach the filter in the same blocks.
 
-    batch = None if pacing is not None else _batch_hook(filt)
-    tick_run_end = _tick_runs(plan.code).tolist() if batch is not None else []
-    i = -1
-    t_now = 0.0
-    try:
-        while i < n_events:
-            i += 1
-            if batch is not None and i < n_events and ev_code[i] == TICK:
-                j = tick_run_end[i]
-                if feeder.clean(ev_end[j - 1]):  # outputs of a run of ticks in one call
+    ``recording`` holds the aiding streams whole (they are small) and the metadata; its IMU
+    stream, if any, is only checked for its columns (the samples come through :meth:`feed`).
+    The parameters are those of :func:`replay`.
+    """
+
+    def __init__(
+        self,
+        recording: Recording,
+        filter_cls: type[Filter],
+        params: FilterParams | Mapping[str, Any] | None = None,
+        *,
+        label: str | None = None,
+        source: str | None = None,
+        output_rate: float | None = 10.0,
+        pacing: float | None = None,
+        validate: bool = True,
+        progress: Progress | None = None,
+        observer: Observer | None = None,
+        observe_interval: float = 0.25,
+        max_imu_gap: float | None = None,
+    ) -> None:
+        label = label or filter_cls.name
+        source = source or recording_name(recording)
+        check_streams(recording, filter_cls, source)
+        if validate:
+            validate_recording(recording, source)
+        p = build_params(filter_cls, params)
+        context = FilterContext(
+            metadata=recording.metadata,
+            t0_ns=recording.t0_ns,
+            streams=frozenset(recording.kinds()),
+        )
+        try:
+            filt = filter_cls(p, context)
+        except Exception as e:
+            raise FilterInitError(
+                f"filter {label!r} cannot start on {source}: {_one_line(e)}"
+            ) from e
+        self.filter = filt
+        self.states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
+        self.label, self.source = label, source
+        self._names = tuple(st.name for st in self.states)
+        scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
+        self._merged = merge_aiding(recording, consumed_streams(filter_cls))
+        self._aiding: list[Stream] = [recording[k] for k in self._merged.kinds]
+        self._output_rate = output_rate
+        self._t0_ns = recording.t0_ns
+        self._max_imu_gap = max_imu_gap
+        self._imu_required = StreamKind.IMU in filter_cls.requires
+        self._pacing, self._progress, self._observer = pacing, progress, observer
+        self._observe_interval = observe_interval
+        self._meta = dict(
+            filter_name=filter_cls.name,
+            label=label,
+            recording=source,
+            t0_ns=recording.t0_ns,
+            states=self.states,
+            scored_extras=scored_extras,
+        )
+        self._batch = None if pacing is not None else _batch_hook(filt)
+        # IMU state between windows: samples not yet handed over, the last one handed over,
+        # the tick range and the nominal sample interval
+        self._pending: tuple[np.ndarray, dict[str, np.ndarray]] | None = None
+        self._last: tuple[np.ndarray, dict[str, np.ndarray]] | None = None
+        self._first_imu_ns: int | None = None
+        self._nominal: float | None = None
+        self._done_to_ns: int | None = None  # events up to this time are applied
+        self._events = 0
+        self._wall0 = time.perf_counter()
+        self._t_first: float | None = None
+        self.finished = False
+
+    # -- windows -----------------------------------------------------------------------------
+
+    def _window_imu(self, imu: Stream | None
+                    ) -> tuple[np.ndarray, dict[str, np.ndarray], int]:
+        """IMU samples of a window: the last one handed over (if any), those still pending,
+        then the new ones; and the index of the first not handed over."""
+        parts_t: list[np.ndarray] = []
+        parts_c: list[dict[str, np.ndarray]] = []
+        for part in (self._last, self._pending):
+            if part is not None:
+                parts_t.append(part[0])
+                parts_c.append(part[1])
+        if imu is not None and len(imu):
+            parts_t.append(imu.t_ns)
+            parts_c.append(imu.columns)
+        start = 0 if self._last is None else 1
+        if not parts_t:
+            return np.zeros(0, np.int64), {}, start
+        if len(parts_t) == 1:
+            return parts_t[0], parts_c[0], start
+        t_ns = np.concatenate(parts_t)
+        cols = {k: np.concatenate([c[k] for c in parts_c]) for k in parts_c[-1]}
+        if len(t_ns) > 1 and np.any(t_ns[1:] <= t_ns[:-1]):
+            k = int(np.argmax(t_ns[1:] <= t_ns[:-1])) + 1
+            raise InvalidRecordingError(
+                f"{self.source}: stream {StreamKind.IMU}: timestamp {int(t_ns[k])} ns does not "
+                f"follow {int(t_ns[k - 1])} ns"
+            )
+        return t_ns, cols, start
+
+    def _feeder(self, imu_t: np.ndarray, imu_cols: list[tuple[str, np.ndarray]],
+                start: int) -> ImuFeeder:
+        """The IMU block feeder of a window; refuses IMU streams too short or with too long
+        gaps (the nominal interval is that of the first window)."""
+        where = f"{self.source}: stream {StreamKind.IMU}"
+        gaps, nominal = np.zeros(0, np.int64), 0.0
+        filt = self.filter
+        bridge = getattr(filt, "bridge_imu_gap", None)
+        if self._nominal is not None or self._imu_required or len(imu_t) >= MIN_IMU_SAMPLES:
+            try:
+                gaps, nominal = find_gaps(imu_t, self._max_imu_gap, where,
+                                          None if callable(bridge) else type(filt).name,
+                                          nominal=self._nominal)
+            except ValueError as e:
+                raise ReplayError(str(e)) from None
+            self._nominal = nominal
+        feeder = ImuFeeder(filt.propagate, bridge, imu_t, imu_cols, gaps, nominal)
+        feeder.start = start
+        return feeder
+
+    def feed(self, imu: Stream | None, final: bool = False) -> RunResult:
+        """Apply the events up to the last IMU sample at hand (all of them when ``final``).
+
+        Parameters
+        ----------
+        imu : Stream or None
+            The next IMU samples (later than those fed before).
+        final : bool
+            No IMU samples follow: apply every remaining event and hand over the remaining
+            samples before a last estimate.
+
+        Returns
+        -------
+        RunResult
+            The estimates and innovations of the events applied by this call.
+        """
+        if self.finished:
+            raise ReplayError(f"{self.source}: the replay of {self.label!r} is finished")
+        t0_ns = self._t0_ns
+        imu_t_ns, imu_columns, start = self._window_imu(imu)
+        if self._first_imu_ns is None and len(imu_t_ns):
+            self._first_imu_ns = int(imu_t_ns[0])
+        hi = None if final else (int(imu_t_ns[-1]) if len(imu_t_ns) > start else None)
+        if not final and hi is None:  # nothing new: nothing to apply
+            return self._empty_block()
+        plan = window_plan(self._merged, imu_t_ns, t0_ns, self._output_rate,
+                           lo=self._done_to_ns, hi=hi, first_imu_ns=self._first_imu_ns)
+        imu_t = (imu_t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9
+        imu_cols = list(imu_columns.items())
+        feeder = self._feeder(imu_t, imu_cols, start)
+        block = self._run(plan, feeder, imu_t, final)
+        self._done_to_ns = hi
+        if final:
+            self.finished = True
+            self._pending = self._last = None
+        elif len(imu_t_ns):
+            s = feeder.start
+            self._last = (imu_t_ns[s - 1:s], {k: v[s - 1:s] for k, v in imu_columns.items()}) \
+                if s > 0 else self._last
+            self._pending = ((imu_t_ns[s:], {k: v[s:] for k, v in imu_columns.items()})
+                             if s < len(imu_t_ns) else None)
+        return block
+
+    def _empty_block(self) -> RunResult:
+        n = len(self.states)
+        return RunResult(t=np.zeros(0), x=np.zeros((0, n)), P=np.zeros((0, n, n)),
+                         **self._meta)
+
+    # -- the loop ----------------------------------------------------------------------------
+
+    def _run(self, plan: EventPlan, feeder: ImuFeeder, imu_t: np.ndarray,
+             final: bool) -> RunResult:
+        label, source, states, names = self.label, self.source, self.states, self._names
+        meta = self._meta
+        pacing, progress, observer = self._pacing, self._progress, self._observer
+        observe_interval = self._observe_interval
+        n_imu = len(imu_t)
+        aiding = self._aiding
+        sample_cols = [list(s.columns.items()) for s in aiding]
+        ev_t = ((plan.t_ns - np.int64(self._t0_ns)).astype(np.float64) * 1e-9).tolist()
+        ev_code = plan.code.tolist()
+        ev_row = plan.row.tolist()
+        ev_end = plan.imu_end.tolist()
+        # one estimate per distinct time: samples sharing a timestamp are all applied first
+        ev_record = np.append(plan.t_ns[1:] != plan.t_ns[:-1], True).tolist()
+        kinds = plan.kinds
+
+        filt = self.filter
+        update = filt.update
+        estimate = filt.estimate
+        innovations: dict[str, list[tuple[float, np.ndarray, np.ndarray]]] = {}
+        columns: _Columns | None = None
+        checked = 0
+        n_events = len(ev_t)
+        n_loop = n_events if final else n_events - 1  # the last step hands over the rest
+        upper = n_events + 1
+        done0 = self._events
+
+        wall0 = self._wall0
+        if self._t_first is None and ev_t:
+            self._t_first = ev_t[0]
+        t_first = self._t_first if self._t_first is not None else 0.0
+        next_observe = time.perf_counter() + observe_interval
+        slow = pacing is not None or observer is not None or progress is not None
+
+        batch = self._batch
+        tick_run_end = _tick_runs(plan.code).tolist() if batch is not None else []
+        i = -1
+        t_now = 0.0
+        try:
+            while i < n_loop:
+                i += 1
+                if batch is not None and i < n_events and ev_code[i] == TICK:
+                    j = tick_run_end[i]
+                    if feeder.clean(ev_end[j - 1]):  # outputs of a run of ticks in one call
+                        t_now = ev_t[i]
+                        block = feeder.take(ev_end[j - 1])
+                        ends = plan.imu_end[i:j] - block[2]
+                        rows = batch(block[0], block[1], ends)
+                        if columns is None:
+                            columns = _Columns(_first_estimate(rows, len(states), names), upper)
+                        columns.add_rows(*rows)
+                        t_now = ev_t[j - 1]
+                        i = j - 1
+                        if columns.m - checked >= _CHECK_EVERY:
+                            _check_finite(columns, checked, label, source, names)
+                            checked = columns.m
+                        if observer is not None and time.perf_counter() >= next_observe:
+                            observer(columns.view(**meta))
+                            next_observe = time.perf_counter() + observe_interval
+                        if progress is not None:
+                            progress(done0 + min(i + 1, n_events), done0 + n_events)
+                        continue
+                if i < n_events:
                     t_now = ev_t[i]
-                    block = feeder.take(ev_end[j - 1])
-                    ends = plan.imu_end[i:j] - block[2]
-                    rows = batch(block[0], block[1], ends)
+                    end = ev_end[i]
+                    c = ev_code[i]
+                else:  # the IMU samples after the last event, then a last estimate
+                    end = n_imu
+                    c = TICK
+                    if end == feeder.start:
+                        break
+                    t_now = float(imu_t[end - 1])
+                feeder.advance(end, t_now)
+                if c != TICK:
+                    r = ev_row[i]
+                    inn = update(kinds[c], t_now, {k: v[r] for k, v in sample_cols[c]})
+                    if inn:
+                        for it in inn:
+                            innovations.setdefault(it.name, []).append((it.t, it.nu, it.S))
+                est = estimate() if i == n_events or ev_record[i] else None
+                if est is not None:
                     if columns is None:
-                        columns = _Columns(_first_estimate(rows, len(states), names), upper)
-                    columns.add_rows(*rows)
-                    t_now = ev_t[j - 1]
-                    i = j - 1
+                        if np.shape(est.x) != (len(states),):
+                            raise _BadOutput(
+                                f"x has shape {np.shape(est.x)}; the filter declares "
+                                f"{len(states)} states ({', '.join(names) or 'none'}; set "
+                                "Filter.states)"
+                            )
+                        columns = _Columns(est, upper)
+                    columns.add(est)
                     if columns.m - checked >= _CHECK_EVERY:
                         _check_finite(columns, checked, label, source, names)
                         checked = columns.m
-                    if observer is not None and time.perf_counter() >= next_observe:
-                        observer(columns.view(**meta))
-                        next_observe = time.perf_counter() + observe_interval
-                    if progress is not None:
-                        progress(min(i + 1, n_events), n_events)
-                    continue
-            if i < n_events:
-                t_now = ev_t[i]
-                end = ev_end[i]
-                c = ev_code[i]
-            else:  # the IMU samples after the last event, then a last estimate
-                end = n_imu
-                c = TICK
-                if end == feeder.start:
-                    break
-                t_now = float(imu_t[end - 1])
-            feeder.advance(end, t_now)
-            if c != TICK:
-                r = ev_row[i]
-                inn = update(kinds[c], t_now, {k: v[r] for k, v in sample_cols[c]})
-                if inn:
-                    for it in inn:
-                        innovations.setdefault(it.name, []).append((it.t, it.nu, it.S))
-            est = estimate() if i == n_events or ev_record[i] else None
-            if est is not None:
-                if columns is None:
-                    if np.shape(est.x) != (len(states),):
-                        raise _BadOutput(
-                            f"x has shape {np.shape(est.x)}; the filter declares "
-                            f"{len(states)} states ({', '.join(names) or 'none'}; set "
-                            "Filter.states)"
-                        )
-                    columns = _Columns(est, upper)
-                columns.add(est)
-                if columns.m - checked >= _CHECK_EVERY:
-                    _check_finite(columns, checked, label, source, names)
-                    checked = columns.m
-            if slow:
-                if pacing is not None:
-                    delay = (t_now - t_first) / pacing - (time.perf_counter() - wall0)
-                    if delay > 0:
-                        time.sleep(delay)
-                if observer is not None and columns is not None:
-                    now = time.perf_counter()
-                    if now >= next_observe:
-                        observer(columns.view(**meta))
-                        next_observe = now + observe_interval
-                if progress is not None and i % _CHECK_EVERY == 0:
-                    progress(min(i + 1, n_events), n_events)
-    except FilterDivergedError as e:
-        raise _diverged(label, source, e.t if e.t is not None else t_now, str(e)) from e
-    except (np.linalg.LinAlgError, FloatingPointError) as e:
-        raise _diverged(label, source, t_now, f"{type(e).__name__}: {e}") from e
-    except FilterOutputError:
-        raise
-    except _BadOutput as e:
-        raise _invalid(label, source, t_now, str(e)) from None
-    except Exception as e:
-        raise FilterFailedError(
-            f"filter {label!r} failed on {source} at t = {t_now:.3f} s: {_one_line(e)}"
-        ) from e
+                if slow:
+                    if pacing is not None:
+                        delay = (t_now - t_first) / pacing - (time.perf_counter() - wall0)
+                        if delay > 0:
+                            time.sleep(delay)
+                    if observer is not None and columns is not None:
+                        now = time.perf_counter()
+                        if now >= next_observe:
+                            observer(columns.view(**meta))
+                            next_observe = now + observe_interval
+                    if progress is not None and i % _CHECK_EVERY == 0:
+                        progress(done0 + min(i + 1, n_events), done0 + n_events)
+        except FilterDivergedError as e:
+            raise _diverged(label, source, e.t if e.t is not None else t_now, str(e)) from e
+        except (np.linalg.LinAlgError, FloatingPointError) as e:
+            raise _diverged(label, source, t_now, f"{type(e).__name__}: {e}") from e
+        except FilterOutputError:
+            raise
+        except _BadOutput as e:
+            raise _invalid(label, source, t_now, str(e)) from None
+        except Exception as e:
+            raise FilterFailedError(
+                f"filter {label!r} failed on {source} at t = {t_now:.3f} s: {_one_line(e)}"
+            ) from e
+        self._events = done0 + n_events
 
-    if columns is not None:
-        _check_finite(columns, checked, label, source, names)
-    if observer is not None and columns is not None:
-        observer(columns.view(**meta))
-    if progress is not None:
-        progress(n_events, n_events)
+        if columns is not None:
+            _check_finite(columns, checked, label, source, names)
+        if observer is not None and columns is not None:
+            observer(columns.view(**meta))
+        if progress is not None:
+            progress(self._events, self._events)
 
-    inn_series = {}
-    for name, items in innovations.items():
-        series, bad = _innovation_series(items)
-        if bad is not None:
-            raise _invalid(label, source, float(series.t[bad[0]]),
-                           f"innovation {name!r}: {bad[1]}")
-        inn_series[name] = series
-    if columns is None:
-        n = len(states)
-        return RunResult(
-            t=np.zeros(0), x=np.zeros((0, n)), P=np.zeros((0, n, n)),
-            innovations=inn_series, **meta,
-        )
-    return columns.result(innovations=inn_series, **meta)
+        inn_series = {}
+        for name, items in innovations.items():
+            series, bad = _innovation_series(items)
+            if bad is not None:
+                raise _invalid(label, source, float(series.t[bad[0]]),
+                               f"innovation {name!r}: {bad[1]}")
+            inn_series[name] = series
+        if columns is None:
+            block = self._empty_block()
+            block.innovations = inn_series
+            return block
+        return columns.result(innovations=inn_series, **meta)
 
 
 def _batch_hook(filt: Filter) -> Callable[..., tuple[np.ndarray, ...]] | None:
@@ -758,21 +950,6 @@ def _first_estimate(rows: tuple[np.ndarray, ...], n_states: int,
             f"({', '.join(names) or 'none'}; set Filter.states)"
         )
     return Estimate(float(t[0]), x[0], P[0], NavSolution.from_vector(nav[0]))
-
-
-def _imu_feeder(filt: Filter, imu_t: np.ndarray, imu_cols: list[tuple[str, np.ndarray]],
-                max_gap: float | None, source: str, required: bool) -> ImuFeeder:
-    """The IMU block feeder of a replay; refuses IMU streams too short or with too long gaps."""
-    where = f"{source}: stream {StreamKind.IMU}"
-    gaps, nominal = np.zeros(0, np.int64), 0.0
-    bridge = getattr(filt, "bridge_imu_gap", None)
-    if required or len(imu_t) >= MIN_IMU_SAMPLES:
-        try:
-            gaps, nominal = find_gaps(imu_t, max_gap, where,
-                                      None if callable(bridge) else type(filt).name)
-        except ValueError as e:
-            raise ReplayError(str(e)) from None
-    return ImuFeeder(filt.propagate, bridge, imu_t, imu_cols, gaps, nominal)
 
 
 PSD_TOLERANCE = 1e-6

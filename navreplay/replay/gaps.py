@@ -39,7 +39,8 @@ def check_max_gap(max_gap: float | None) -> float:
 
 
 def find_gaps(
-    t: np.ndarray, max_gap: float | None, where: str, unbridged: str | None = None
+    t: np.ndarray, max_gap: float | None, where: str, unbridged: str | None = None,
+    nominal: float | None = None,
 ) -> tuple[np.ndarray, float]:
     """Indices of the IMU samples that follow a gap, and the nominal (median) interval [s].
 
@@ -54,6 +55,9 @@ def find_gaps(
     unbridged : str, optional
         Name of a filter that cannot bridge a gap (it has no ``bridge_imu_gap``): any gap is
         refused.
+    nominal : float, optional
+        The nominal interval when already known (a later window of a streamed replay); the
+        samples need not then be many.
 
     Raises
     ------
@@ -62,11 +66,11 @@ def find_gaps(
         (one line naming ``where`` and the time).
     """
     limit = check_max_gap(max_gap)
-    if len(t) < MIN_IMU_SAMPLES:
+    if nominal is None and len(t) < MIN_IMU_SAMPLES:
         raise ValueError(f"{where}: only {len(t)} IMU sample(s); at least {MIN_IMU_SAMPLES} "
                          "are needed to replay a filter")
     dt = np.diff(t)
-    nominal = float(np.median(dt))
+    nominal = float(np.median(dt)) if nominal is None else nominal
     gaps = np.flatnonzero(dt > GAP_FACTOR * nominal) + 1
     if gaps.size:
         worst = int(gaps[np.argmax(dt[gaps - 1])])

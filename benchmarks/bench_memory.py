@@ -1,0 +1,91 @@
+"""Peak memory of ``navreplay run gps-ins REC --no-viz`` against the length of the log.
+
+Each figure is the ``VmHWM`` of a fresh interpreter (:func:`benchmarks.peak_rss`) that runs
+the command on a simulated ``vehicle-drive`` recording of the given length (100 Hz IMU and
+truth; simulated once into ``--dir`` and reused). ``streamed`` is the command as shipped (the
+file is read in windows); ``whole`` reads the recording whole and keeps every estimate, as a
+replay in memory does, for comparison in the same run.
+
+Usage::
+
+    python -m benchmarks.bench_memory [--hours 1 4 24] [--modes streamed whole] [--dir DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from benchmarks import peak_rss
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def recording(hours: float, directory: Path) -> Path:
+    """The simulated recording of ``hours`` (made when missing)."""
+    path = directory / f"drive_{hours:g}h.mcap"
+    if not path.exists():
+        subprocess.run(
+            [sys.executable, "-m", "navreplay", "simulate", "vehicle-drive", "-o", str(path),
+             "--duration", str(hours * 3600.0), "--seed", "1"],
+            check=True, cwd=ROOT, capture_output=True,
+        )
+    return path
+
+
+def _child(mode: str, path: str) -> None:
+    """Subprocess entry: run the command, print JSON with peak RSS [MiB] and seconds."""
+    import importlib
+    from pathlib import Path as _Path
+
+    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.viz.options import VizMode, VizOptions
+
+    run = importlib.import_module("navreplay.jobs.run")
+    start = time.perf_counter()
+    job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(_Path(path),),
+                     viz=VizOptions(mode=VizMode.NONE))
+    report = run.run(job) if mode == "streamed" else run._run_one(job, None)
+    seconds = time.perf_counter() - start
+    summary = report.summary["filters"]["gps-ins"]
+    print(json.dumps({"peak_mib": peak_rss() / 2**20, "seconds": seconds,
+                      "pos_rms_h": summary.get("pos_rms_h")}))
+
+
+def measure(mode: str, path: Path) -> dict[str, float]:
+    out = subprocess.run(
+        [sys.executable, "-m", "benchmarks.bench_memory", "--child", mode, str(path)],
+        check=True, capture_output=True, text=True, cwd=ROOT,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_memory")
+    parser.add_argument("--hours", type=float, nargs="+", default=[1.0, 4.0])
+    parser.add_argument("--modes", nargs="+", default=["streamed", "whole"],
+                        choices=["streamed", "whole"])
+    parser.add_argument("--dir", type=Path, default=Path("bench-data"))
+    parser.add_argument("--child", nargs=2, metavar=("MODE", "PATH"), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.child:
+        _child(*args.child)
+        return
+    args.dir.mkdir(parents=True, exist_ok=True)
+    base: dict[str, float] = {}
+    print(f"{'log':>6} {'mode':>9} {'peak RSS':>10} {'vs first':>9} {'seconds':>8}")
+    for hours in args.hours:
+        path = recording(hours, args.dir.resolve())
+        for mode in args.modes:
+            r = measure(mode, path)
+            base.setdefault(mode, r["peak_mib"])
+            print(f"{hours:>5g}h {mode:>9} {r['peak_mib']:>7.0f} MiB {r['peak_mib'] / base[mode]:>8.2f}x"
+                  f" {r['seconds']:>8.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
