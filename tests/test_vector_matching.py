@@ -33,7 +33,6 @@ from navreplay.filters.vector_matching import (
     triad,
 )
 from navreplay.geo.earth import gravity
-from navreplay.metrics import chi2_bounds
 from navreplay.geo.rotations import (
     dcm_to_euler,
     euler_to_dcm,
@@ -43,6 +42,7 @@ from navreplay.geo.rotations import (
     quat_to_dcm,
     skew,
 )
+from navreplay.metrics import chi2_bounds
 from navreplay.params import ParamError
 from navreplay.replay.engine import FilterInitError, MissingStreamError, replay
 from navreplay.reproduce import get as get_reproduction
