@@ -49,7 +49,8 @@ alignment error is the small-angle vector phi [rad] in n with
 (:func:`navreplay.geo.attitude_error`): phi_N, phi_E are the level errors, phi_D the azimuth
 error, and a positive phi_D means the estimated heading is smaller than the true one. The
 filter's predicted covariance of phi is ``Sigma_phi = 4 R^T P_qq R`` (extras
-``attitude_sigma_n``). The filter never sees the truth; metrics compute phi against it.
+``attitude_sigma_n``, with the consider terms of :func:`consider_sigma` added in quadrature).
+The filter never sees the truth; metrics compute phi against it.
 
 Process model, eqs. (1), (2), (9), (14)
 ---------------------------------------
@@ -157,7 +158,7 @@ from navreplay.filters.base import (
 from navreplay.filters.registry import register_filter
 from navreplay.geo import earth, kernels
 from navreplay.streams import StreamKind
-from navreplay.units import ARCMIN, DEG, FOOT
+from navreplay.units import ARCMIN, DEG, FOOT, G0, MICRO_G
 
 
 class Match(enum.StrEnum):
@@ -232,8 +233,20 @@ class TransferAlignmentParams(FilterParams):
     flexure rate wanders in the meantime (:func:`flexure_rate_sigma`; 0.0133 for the
     scenario's default flexure at 100 Hz, 0 without flexure)."""
 
+    accel_bias_sigma: float = 250.0 * MICRO_G
+    """SDINS accelerometer bias, 1 sigma per axis [m/s^2] (Table 2): not a state; a consider
+    term of the reported attitude sigma (0: the paper's sigma, from P alone)."""
+    accel_misalignment_sigma: float = 1.0 * ARCMIN
+    """SDINS accelerometer misalignment, 1 sigma per off-diagonal term [rad] (Table 2):
+    consider term of the level sigma."""
+    gins_heading_sigma: float = math.hypot(5.0 * ARCMIN, 3.0 * ARCMIN)
+    """Constant error of the GINS heading, 1 sigma [rad]: platform tilt eps_D (5 arcmin) and
+    synchro yaw bias (3 arcmin). Consider term of the azimuth sigma of quaternion matching."""
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "match", Match(self.match))
+        for name in ("accel_bias_sigma", "accel_misalignment_sigma", "gins_heading_sigma"):
+            check_number(self, name, positive=False)
         for name in ("accel_noise", "gyro_noise", "misalignment_noise", "vel_sigma",
                      "quat_sigma", "init_vel_sigma", "init_misalignment", "init_q0_sigma"):
             check_number(self, name, positive=True)
@@ -620,6 +633,22 @@ def feedback(nav, q_rb, dx, P, s, u, q_m, v_r, pos, w_now, w_in, lever_arm_r):
     return attitude_sigma(q, P)
 
 
+def consider_sigma(params: TransferAlignmentParams, matched: bool) -> np.ndarray:
+    """1 sigma of the attitude errors that constant errors outside the state leave [rad], (3,).
+
+    The filter cannot tell a horizontal accelerometer error from a level error (velocity
+    matching aligns the level axes to the accelerometers), nor, with quaternion matching, the
+    GINS heading error from an azimuth error: once converged, phi_N, phi_E carry
+    ``sqrt(b_a^2 + (g m_a)^2) / g`` (bias and the misalignment that tilts the vertical specific
+    force into the horizontal) and phi_D the GINS heading error. These are the consider
+    (Schmidt) terms of the unobservable constants; the reported sigma adds them to
+    ``4 R^T P_qq R`` in quadrature. Without quaternion matching (``matched`` False) the azimuth
+    does not come from the GINS heading, and its term is 0.
+    """
+    level = math.hypot(params.accel_bias_sigma, G0 * params.accel_misalignment_sigma) / G0
+    return np.array([level, level, params.gins_heading_sigma if matched else 0.0])
+
+
 @numba.njit(cache=True)
 def attitude_sigma(q_bn, P):
     """Predicted 1 sigma of phi N, E, D [rad], (3,): phi = -2 R(Q_bn)^T dQ_bn, so
@@ -761,6 +790,7 @@ class TransferAlignment(Filter):
         self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])
         self.P = np.zeros((self.n, self.n))
         self.sigma_phi = np.zeros(3)
+        self._consider = consider_sigma(params, len(self.s) > 0)
         # IMU bookkeeping: last sample time, last two rates, the increments of the last sample
         # (coning and sculling of the next) and the sums [omega, f] for the means of eq. (14)
         self._t_imu: float | None = None
@@ -853,7 +883,7 @@ class TransferAlignment(Filter):
             math.sin(0.5 * p.init_misalignment) ** 2,
         )
         kalman.check_covariance(self.P, name="P0", t=t)
-        self.sigma_phi = attitude_sigma(q_m, self.P)
+        self.sigma_phi = np.hypot(attitude_sigma(q_m, self.P), self._consider)
         self.t = t
         self._reset_sums()
 
@@ -878,7 +908,7 @@ class TransferAlignment(Filter):
         sigma_phi = feedback(self.nav, self.q_rb, c.x, c.P, self.s, self.u, q_m, v_r, pos,
                              w_now, w_in, self.lever_arm_r)
         self.P = c.P
-        self.sigma_phi = sigma_phi
+        self.sigma_phi = np.hypot(sigma_phi, self._consider)
         self.t = t
         self._reset_sums()
         out = [c.innovation("velocity", t, ZV)]

@@ -155,7 +155,7 @@ from navreplay.geo.rotations import (
     skew,
 )
 from navreplay.streams import StreamKind
-from navreplay.units import DEG, GAUSS, MICRO_G_PER_SQRT_HZ
+from navreplay.units import DEG, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 
 # --------------------------------------------------------------------------------------------
 # indices
@@ -186,6 +186,21 @@ ACCEL_NOISE_SIGMA = ACCEL_NOISE_DENSITY * math.sqrt(0.5 * SENSOR_RATE)
 """Per-sample accelerometer sigma at 4 Hz, Nyquist bandwidth: 113.1 ug = 1.109e-3 m/s^2."""
 MAG_NOISE_SIGMA = MAG_NOISE_DENSITY * math.sqrt(0.5 * SENSOR_RATE)
 """Per-sample magnetometer sigma at 4 Hz, Nyquist bandwidth: 141.4 uG = 14.14 nT."""
+
+
+ACCEL_BIAS_SIGMA = 2.0 * MILLI_G
+"""Accelerometer initial bias of Table 1, 1-sigma per axis: 2 mg [m/s^2]."""
+MAG_BIAS_SIGMA = 0.003 * GAUSS
+"""Magnetometer initial bias of Table 1, 1-sigma per axis: 0.003 G = 300 nT [T]."""
+SCALE_FACTOR_SIGMA = 1e-3
+"""Accelerometer and magnetometer scale-factor error of Table 1, 1-sigma per axis: 0.1 %."""
+CONSIDER_PARAMS = ("accel_bias_sigma", "accel_scale_factor_sigma", "mag_bias_sigma",
+                   "mag_scale_factor_sigma")
+"""Parameters of the sensor errors that R can carry as consider terms (all 0 in the paper)."""
+CONSISTENT = {"accel_bias_sigma": ACCEL_BIAS_SIGMA, "accel_scale_factor_sigma": SCALE_FACTOR_SIGMA,
+              "mag_bias_sigma": MAG_BIAS_SIGMA, "mag_scale_factor_sigma": SCALE_FACTOR_SIGMA}
+"""The consider terms at the Table 1 values: the variant whose covariance and innovations
+are consistent with the simulated sensors (``VectorMatchingParams(**CONSISTENT)``)."""
 
 
 class MatchModel(enum.StrEnum):
@@ -223,6 +238,16 @@ class VectorMatchingParams(FilterParams):
     """Accelerometer white noise, 1-sigma per sample and axis [m/s^2] (s_f of eq. 15)."""
     mag_noise_sigma: float = MAG_NOISE_SIGMA
     """Magnetometer white noise, 1-sigma per sample and axis [T] (s_h of eq. 11)."""
+    accel_bias_sigma: float = 0.0
+    """Accelerometer bias, 1-sigma per axis, carried in R_g as a consider term [m/s^2]; 0: the
+    paper's R (sensor noise only). The paper's Table 1 value is :data:`ACCEL_BIAS_SIGMA`."""
+    accel_scale_factor_sigma: float = 0.0
+    """Accelerometer scale-factor error, 1-sigma per axis, consider term in R_g [-]."""
+    mag_bias_sigma: float = 0.0
+    """Magnetometer (hard-iron) bias, 1-sigma per axis, consider term in R_h [T]; 0: the paper's
+    R. Table 1: :data:`MAG_BIAS_SIGMA`."""
+    mag_scale_factor_sigma: float = 0.0
+    """Magnetometer scale-factor error, 1-sigma per axis, consider term in R_h [-]."""
     p0_sigma: float = 0.5 * DEG
     """Initial 1-sigma of each q_ev component after TRIAD [-] (half of 1 deg in rad)."""
     earth_field_n: tuple[float, float, float] | None = None
@@ -239,6 +264,10 @@ class VectorMatchingParams(FilterParams):
                      "sync_tolerance"):
             check_number(self, name, positive=True)
         check_number(self, "q_w")
+        for name in CONSIDER_PARAMS:
+            check_number(self, name)
+            if getattr(self, name) < 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if self.earth_field_n is not None:
             h = np.asarray(self.earth_field_n, dtype=float)
             if h.shape != (3,) or not np.all(np.isfinite(h)) or not np.any(h):
@@ -410,6 +439,49 @@ def measurement_noise(
     return R
 
 
+def sensor_error_noise(
+    params: VectorMatchingParams, C_nb_hat: np.ndarray, f_b: np.ndarray, m_b: np.ndarray
+) -> np.ndarray:
+    """Covariance that the accelerometer and magnetometer biases and scale factors add to z,
+    as consider terms (they are not states).
+
+    A bias b and a scale-factor error s of a sensor reading u_b enter the residuals (14) and
+    (10) as ``C_nb_hat (b + diag(s) u_b)``, so::
+
+        R_g += s_ba^2 I3 + s_sa^2 C_nb_hat diag(f_b^2) C_nb_hat^T
+        R_h += s_bm^2 I3 + s_sm^2 C_nb_hat diag(m_b^2) C_nb_hat^T
+
+    Treating these constants as white is close to exact here: the process noise that stands
+    in for the gyros (about 5.6 deg per 0.25 s step at the default tuning) leaves the prior
+    far wider than one epoch's measurement, so each epoch's attitude is nearly that epoch's
+    own fix and the errors of successive epochs are not averaged.
+
+    Parameters
+    ----------
+    params : VectorMatchingParams
+        Its ``accel_bias_sigma``, ``accel_scale_factor_sigma``, ``mag_bias_sigma``,
+        ``mag_scale_factor_sigma``.
+    C_nb_hat : ndarray, shape (..., 3, 3)
+    f_b, m_b : ndarray, shape (..., 3)
+        Accelerometer [m/s^2] and magnetometer [T] readings.
+
+    Returns
+    -------
+    ndarray, shape (..., 6, 6)
+        Block diagonal, [(m/s^2)^2] and [T^2].
+    """
+    shape = np.broadcast_shapes(C_nb_hat.shape[:-2], f_b.shape[:-1], m_b.shape[:-1])
+    R = np.zeros(shape + (N_MEAS, N_MEAS))
+    CT = np.swapaxes(C_nb_hat, -1, -2)
+    for rows, u_b, bias, scale in ((Z_G, f_b, params.accel_bias_sigma,
+                                    params.accel_scale_factor_sigma),
+                                   (Z_H, m_b, params.mag_bias_sigma,
+                                    params.mag_scale_factor_sigma)):
+        R[..., rows, rows] = (bias**2 * np.eye(3)
+                              + scale**2 * (C_nb_hat * (u_b**2)[..., None, :]) @ CT)
+    return R
+
+
 def epoch_measurement(
     params: VectorMatchingParams,
     ref: Reference,
@@ -444,6 +516,8 @@ def epoch_measurement(
     z, H = measurement(params.model, C_nb_hat, f_b, m_b, a_n, ref.g_n, ref.h_n)
     R = measurement_noise(vel_sigma, vel_sigma_prev, dt, params.accel_noise_sigma,
                           params.mag_noise_sigma)
+    if any(getattr(params, name) for name in CONSIDER_PARAMS):
+        R = sensor_error_noise(params, C_nb_hat, f_b, m_b) + R[..., None] * np.eye(N_MEAS)
     return kalman.Measurement(z, H, R), a_n
 
 
