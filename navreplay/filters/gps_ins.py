@@ -94,7 +94,6 @@ import numpy as np
 
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
-from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     FilterContext,
@@ -102,35 +101,19 @@ from navreplay.filters.base import (
     Innovation,
     Quantity,
     State,
-    TrueConstant,
     check_number,
-    state_names,
 )
 from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.registry import register_filter
 from navreplay.geo import kernels
 from navreplay.geo.rotations import skew, wrap_angle
 from navreplay.streams import StreamKind
-from navreplay.units import PPM
 
 LEVER = slice(15, 18)
 """Lever-arm error states (present with ``estimate_lever_arm``)."""
 LEVER_STATES: tuple[State, ...] = tuple(
     State(f"l_{a}", "m", Quantity.LEVER_ARM) for a in "xyz")
 """Lever-arm estimates (``estimate_lever_arm``), body [m]; the truth is the parameter's."""
-GYRO_Z_STATES: tuple[State, ...] = (
-    State("m_g_xz", "rad", Quantity.GYRO_MISALIGNMENT,
-          TrueConstant("imu.gyro_misalignment", (0, 2))),
-    State("m_g_yz", "rad", Quantity.GYRO_MISALIGNMENT,
-          TrueConstant("imu.gyro_misalignment", (1, 2))),
-    State("s_g_z", "-", Quantity.GYRO_SCALE_FACTOR, TrueConstant("imu.gyro_scale_factor", (2,))),
-)
-"""The gyro z-rate states (``gyro_misalignment_states``): misalignments M[0, 2], M[1, 2] and
-scale factor S[2, 2] of :mod:`navreplay.sensors.imu`, scored against the constants in
-``metadata.true_errors["imu"]``."""
-GYRO_Z_NAMES: tuple[str, ...] = state_names(GYRO_Z_STATES)
-
-
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GpsInsParams(InsParams):
     """Parameters of ``gps-ins``: the INS error model of ``ins`` plus the GPS measurements."""
@@ -155,14 +138,6 @@ class GpsInsParams(InsParams):
     sqrt((300 ppm)^2 + 2 (0.5 mrad)^2) / sqrt(3) = 0.46e-3 |a|; 0.4e-3 is the value that keeps
     the vehicle-drive ensembles consistent (the white-noise form with tau = ``sf_mis_time``
     slightly overstates a constant error)."""
-    gyro_misalignment_states: bool = True
-    """Estimate the gyro errors driven by the z (yaw) rate, misalignments m_xz, m_yz and scale
-    factor s_z, as random constants (eq. 2a); the motion noise of ``gyro_sf_mis`` is then off."""
-    gyro_misalignment_sigma: float = 0.5e-3
-    """Initial 1-sigma of m_xz and m_yz [rad] (``tactical`` grade: 0.5 mrad)."""
-    gyro_scale_factor_sigma: float = 100.0 * PPM
-    """Initial 1-sigma of s_z [-] (``tactical`` grade: 100 ppm)."""
-
     def __post_init__(self) -> None:
         super().__post_init__()
         lever = tuple(float(v) for v in self.lever_arm_b)
@@ -172,8 +147,6 @@ class GpsInsParams(InsParams):
             raise ValueError(f"lever_arm_b must be within 100 m per axis, got {lever!r}")
         object.__setattr__(self, "lever_arm_b", lever)
         check_number(self, "lever_arm_sigma")
-        check_number(self, "gyro_misalignment_sigma")
-        check_number(self, "gyro_scale_factor_sigma")
         for name in ("gps_pos_sigma_scale", "gps_vel_sigma_scale"):
             check_number(self, name, positive=True)
 
@@ -304,42 +277,19 @@ class GpsInsFilter(InsFilter):
 
     def __init__(self, params: GpsInsParams, context: FilterContext) -> None:
         self.lever_arm_b = np.array(params.lever_arm_b, dtype=float)
-        self.gyro_z = np.zeros(3)  # estimates of m_xz, m_yz, s_z
-        gz = ie.N_STATES + (3 if params.estimate_lever_arm else 0)
-        self._gz = slice(gz, gz + ie.N_GYRO_Z) if params.gyro_misalignment_states else None
         super().__init__(params, context)
 
     # -- extra states ----------------------------------------------------------------------
 
     def _extra_declarations(self) -> tuple[State, ...]:
-        return ((LEVER_STATES if self.params.estimate_lever_arm else ())
-                + (GYRO_Z_STATES if self._gz is not None else ()))
+        return LEVER_STATES if self.params.estimate_lever_arm else ()
 
     def _init_extra(self) -> None:
-        p = self.params
-        if p.estimate_lever_arm:
-            self.P[LEVER, LEVER] = np.eye(3) * p.lever_arm_sigma**2
-        if self._gz is not None:
-            self.P[self._gz, self._gz] = np.diag(np.array(
-                [p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
-                 p.gyro_scale_factor_sigma]) ** 2)
+        if self.params.estimate_lever_arm:
+            self.P[LEVER, LEVER] = np.eye(3) * self.params.lever_arm_sigma**2
 
     def _extra_values(self) -> np.ndarray:
-        if not self.params.estimate_lever_arm:
-            return self.gyro_z if self._gz is not None else np.zeros(0)
-        if self._gz is None:
-            return self.lever_arm_b
-        return np.concatenate((self.lever_arm_b, self.gyro_z))
-
-    def _process_noise(self, n: int) -> itu.ProcessNoise:
-        noise = super()._process_noise(n)
-        if self._gz is None:
-            return noise
-        # (2a): the z-rate errors are states; the motion noise of the gyro is off
-        return dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start)
-
-    def _gyro_z_estimates(self) -> np.ndarray | None:
-        return self.gyro_z if self._gz is not None else None
+        return self.lever_arm_b if self.params.estimate_lever_arm else np.zeros(0)
 
     # -- updates ---------------------------------------------------------------------------
 
@@ -378,6 +328,4 @@ class GpsInsFilter(InsFilter):
         super()._feedback(dx)
         if self.params.estimate_lever_arm:
             self.lever_arm_b = self.lever_arm_b - dx[LEVER]
-        if self._gz is not None:
-            self.gyro_z = self.gyro_z - dx[self._gz]
 
