@@ -138,6 +138,10 @@ class GpsInsParams(InsParams):
     sqrt((300 ppm)^2 + 2 (0.5 mrad)^2) / sqrt(3) = 0.46e-3 |a|; 0.4e-3 is the value that keeps
     the vehicle-drive ensembles consistent (the white-noise form with tau = ``sf_mis_time``
     slightly overstates a constant error)."""
+    accel_motion_states: bool = True
+    """Estimate the accelerometer errors driven by the x and y specific force (the columns x
+    and y of S_a + M_a) as six random constants (ins eq. 5c; ``accel_sf_mis`` is then off)."""
+
     def __post_init__(self) -> None:
         super().__post_init__()
         lever = tuple(float(v) for v in self.lever_arm_b)

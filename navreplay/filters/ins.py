@@ -172,6 +172,15 @@ class InsParams(FilterParams):
     gyro_sf_mis: float = 0.5e-3
     """Unmodelled gyro scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off); used only
     without ``gyro_misalignment_states``."""
+    accel_motion_states: bool = False
+    """Carry the accelerometer errors driven by the x and y specific force (the columns x and
+    y of S_a + M_a) as six random-constant states (eq. 5c); the motion noise of
+    ``accel_sf_mis`` is then off. Off in ``ins``: they change its tilt and velocity sigma by
+    less than 1 %; on in ``gps-ins``."""
+    accel_scale_factor_sigma: float = 300.0 * PPM
+    """Initial 1-sigma of s_a_x, s_a_y [-] (``tactical`` grade: 300 ppm)."""
+    accel_misalignment_sigma: float = 0.5e-3
+    """Initial 1-sigma of m_a_yx, m_a_zx, m_a_xy, m_a_zy [rad] (``tactical``: 0.5 mrad)."""
     sf_mis_time: float = 30.0
     """Correlation time tau of eq. (5a) [s]: a manoeuvre and the time its error persists."""
     cov_step: float = 0.1
@@ -187,7 +196,8 @@ class InsParams(FilterParams):
                      "gyro_bias_sigma",
                      "accel_bias_rw", "gyro_bias_rw", "init_pos_sigma", "init_vel_sigma",
                      "init_att_sigma", "accel_sf_mis", "gyro_misalignment_sigma",
-                     "gyro_scale_factor_sigma", "gyro_sf_mis", "sf_mis_time",
+                     "gyro_scale_factor_sigma", "gyro_sf_mis", "accel_scale_factor_sigma",
+                     "accel_misalignment_sigma", "sf_mis_time",
                      "gap_accel_sigma", "gap_rate_sigma"):
             check_number(self, name)
         check_number(self, "cov_step", positive=True, upper=10.0)
@@ -304,6 +314,15 @@ GYRO_Z_STATES: tuple[State, ...] = (
 scale factor S[2, 2] of :mod:`navreplay.sensors.imu`, scored against the constants in
 ``metadata.true_errors["imu"]``."""
 GYRO_Z_NAMES: tuple[str, ...] = state_names(GYRO_Z_STATES)
+ACCEL_MOTION_STATES: tuple[State, ...] = tuple(
+    State(f"s_a_{a}", "-", Quantity.ACCEL_SCALE_FACTOR,
+          TrueConstant("imu.accel_scale_factor", (i,))) if i == j else
+    State(f"m_a_{a}{b}", "rad", Quantity.ACCEL_MISALIGNMENT,
+          TrueConstant("imu.accel_misalignment", (i, j)))
+    for j, b in enumerate("xy") for i, a in enumerate("xyz"))
+"""The accelerometer states (``accel_motion_states``): the columns x and y of S_a + M_a of
+:mod:`navreplay.sensors.imu` (s_a_x, m_a_yx, m_a_zx, m_a_xy, s_a_y, m_a_zy), scored against the
+constants in ``metadata.true_errors["imu"]``."""
 
 
 @register_filter
@@ -339,7 +358,11 @@ class InsFilter(Filter):
         gz = ie.N_STATES + len(extra)
         self._gz = slice(gz, gz + ie.N_GYRO_Z) if p.gyro_misalignment_states else None
         self.gyro_z = np.zeros(3)  # estimates of m_xz, m_yz, s_z
-        self.states = NAV_STATES + extra + (GYRO_Z_STATES if self._gz is not None else ())
+        ga = gz + (ie.N_GYRO_Z if self._gz is not None else 0)
+        self._ga = slice(ga, ga + ie.N_ACCEL_HF) if p.accel_motion_states else None
+        self.accel_k = np.zeros(ie.N_ACCEL_HF)  # estimates of the columns x, y of S_a + M_a
+        self.states = (NAV_STATES + extra + (GYRO_Z_STATES if self._gz is not None else ())
+                       + (ACCEL_MOTION_STATES if self._ga is not None else ()))
         n = len(self.states)
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
@@ -347,6 +370,9 @@ class InsFilter(Filter):
             self.P[self._gz, self._gz] = np.diag(np.array(
                 [p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
                  p.gyro_scale_factor_sigma]) ** 2)
+        if self._ga is not None:
+            s_a, m_a = p.accel_scale_factor_sigma, p.accel_misalignment_sigma
+            self.P[self._ga, self._ga] = np.diag(np.array([s_a, m_a, m_a, m_a, s_a, m_a]) ** 2)
         self._noise = self._process_noise(n)
         self._time_update = itu.TimeUpdate(self._noise, p.cov_step)
         self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
@@ -368,16 +394,31 @@ class InsFilter(Filter):
 
     def _process_noise(self, n: int) -> itu.ProcessNoise:
         """The process noise (and model options) of the time update for n states: with the
-        gyro z-rate states (eq. 5b) the gyro motion noise of eq. (5a) is off."""
+        gyro z-rate states (eq. 5b) the gyro motion noise of eq. (5a) is off, with the
+        accelerometer states (eq. 5c) its accelerometer motion noise."""
         noise = self.params.process_noise(n)
-        if self._gz is None:
-            return noise
-        return dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start)
+        if self._gz is not None:
+            noise = dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start)
+        if self._ga is not None:
+            noise = dataclasses.replace(noise, k_acc=0.0, accel_states=self._ga.start)
+        return noise
 
     def _gyro_z_estimates(self) -> np.ndarray | None:
         """Estimates of the gyro z-rate errors (m_xz, m_yz, s_z) of ins_error eq. (22) that
         the IMU is compensated for, or None without the states."""
         return self.gyro_z if self._gz is not None else None
+
+    def _accel_estimates(self) -> np.ndarray | None:
+        """Estimates of the accelerometer errors of ins_error eq. (23), or None."""
+        return self.accel_k if self._ga is not None else None
+
+    def _compensate_accel(self, f_b: np.ndarray) -> np.ndarray:
+        """Raw accelerometer samples (k, 3) compensated for the errors of eq. (23), if any
+        (the time update subtracts the bias estimate)."""
+        k_a = self._accel_estimates()
+        if k_a is None or not k_a.any():
+            return f_b
+        return itu.compensate_accel(f_b, self.b_a, k_a)
 
     def _compensate_gyro(self, omega_ib_b: np.ndarray) -> np.ndarray:
         """Raw gyro samples (k, 3) with the compensations other than the bias applied (the
@@ -396,14 +437,17 @@ class InsFilter(Filter):
         x[ie.N_STATES:ie.N_STATES + extra.shape[0]] = extra
         if self._gz is not None:
             x[self._gz] = self.gyro_z
+        if self._ga is not None:
+            x[self._ga] = self.accel_k
         return x
 
     # -- the Filter interface --------------------------------------------------------------
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
         omega = self._compensate_gyro(imu["omega_ib_b"])
-        step = self._time_update.propagate(self.nav, self.P, self.t, t, omega, imu["f_b"],
-                                           self.b_a, self.b_g)  # (1)-(5a)
+        step = self._time_update.propagate(self.nav, self.P, self.t, t, omega,
+                                           self._compensate_accel(imu["f_b"]), self.b_a,
+                                           self.b_g)  # (1)-(5c)
         if step is None:
             return
         self.nav, self.P, self.t = step
@@ -443,7 +487,7 @@ class InsFilter(Filter):
         output ticks); returns the estimates' columns (t, x, P, nav vectors)."""
         t_out, nav_out, P_out, w_last = self._time_update.propagate_outputs(
             self.nav, self.P, self.t, t, imu["omega_ib_b"], imu["f_b"], self.b_a, self.b_g,
-            ends, self._gyro_z_estimates(),
+            ends, self._gyro_z_estimates(), self._accel_estimates(),
         )
         self.nav = nav_out[-1].copy()
         self.P = P_out[-1].copy()
@@ -468,4 +512,6 @@ class InsFilter(Filter):
         self.b_g = self.b_g - dx[ie.BG]
         if self._gz is not None:
             self.gyro_z = self.gyro_z - dx[self._gz]
+        if self._ga is not None:
+            self.accel_k = self.accel_k - dx[self._ga]
 
