@@ -51,6 +51,8 @@ Models
     gyro z-rate states k = (m_xz, m_yz, s_z), random constants (F = 0, Q = 0 for them):
       omega_hat = omega_meas - b_g_hat - k_hat (omega_meas_z - b_g_hat_z)
       F[phi, k_j] = +C_nb_hat[:, j] omega_hat_z   (ins_error eq. 22); s_g = 0 in (5a)      (5b)
+    accelerometer states (accel_motion_states, off here, on in gps-ins): the columns x, y
+      of S_a + M_a, F[v, k_j[i]] = -C_nb_hat[:, i] f_hat_j (ins_error eq. 23); s_a = 0    (5c)
     P0  = diag(sigma_N^2/(R_M+h)^2, sigma_E^2/((R_N+h) cos lat)^2, sigma_D^2,
                sigma_v^2, sigma_phi^2, sigma_ba^2, sigma_bg^2,
                sigma_m^2, sigma_m^2, sigma_s^2)                                            (6)
@@ -76,8 +78,10 @@ White noise of the same size (5a) would instead add about 1 mrad (in quadrature)
 of every attitude axis with each 90-deg turn: it made ``ins`` about twice under-confident in
 tilt after ten minutes of driving (docs/methods/ins.md). The other scale-factor and
 misalignment errors act only under roll and pitch rates, or as ``(S_a + M_a) a`` while the
-vehicle accelerates or turns, about a tenth of the effective bias on a drive; ``accel_sf_mis`` and, without the states, ``gyro_sf_mis`` enter
-them as the white motion noise (5a) (ins_error eq. 21) with a correlation time tau.
+vehicle accelerates or turns, about a tenth of the effective bias on a drive: ``gps-ins``
+carries the latter as states (5c); ``ins`` leaves them out (they change its sigma by less than
+1 %), and ``accel_sf_mis`` and, without the states, ``gyro_sf_mis`` enter them as the white
+motion noise (5a) (ins_error eq. 21) with a correlation time tau.
 
 Scoring (:mod:`navreplay.metrics`): the navigation error states are scored by the errors of the
 navigation solution (``nav:`` truth keys), the biases by the truth stream's effective biases
