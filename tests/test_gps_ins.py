@@ -195,10 +195,9 @@ def test_params_validated():
 
 @pytest.mark.slow
 def test_consistency_over_a_larger_ensemble():
-    # 30 runs of 10 minutes: the run-averaged 15-state NEES stays near its dof; the share of
-    # epochs inside the (tight, 30-run) band is below the nominal 95 % because the
-    # accelerometer scale factor / misalignment under motion is white noise in the model
-    # (about 83 % with the gyro z-rate states)
+    # 30 runs of 10 minutes: the run-averaged 15-state NEES (navigation errors and effective
+    # biases) stays near its dof; the share of epochs inside the (tight, 30-run) band was about
+    # 83 % with the white accelerometer motion noise in place of the accelerometer states
     runs = 30
     stats = metrics.EnsembleStats()
     for seed in range(100, 100 + runs):
