@@ -181,6 +181,62 @@ def test_gyro_z_rate_block_matches_the_strapdown():
     assert np.all(np.sign(np.diag(num)) == np.sign(np.diag(F)))
 
 
+@pytest.mark.parametrize("gz", [15, -1])
+def test_propagate_covariance_with_accel_states_equals_the_dense_prediction(gz):
+    # eq. (23): six more non-zero columns of F in the velocity rows, after the gyro z-rate
+    # states (or right after the 15)
+    rng = np.random.default_rng(5)
+    ga = 18 if gz >= 0 else 15
+    n, k = ga + 6, 4
+    A = rng.normal(size=(n, n)) * 1e-3
+    P = A @ A.T + np.diag(np.r_[np.full(3, 1e-12), np.full(12, 1e-4), np.full(n - 15, 1e-6)])
+    nav = np.zeros((k, 10))
+    nav[:, 0] = 0.6
+    nav[:, 3:6] = [12.0, 4.0, -0.1]
+    nav[:, 6:10] = rotations.euler_to_quat(np.c_[np.full(k, 0.01), np.full(k, 0.03),
+                                                 -0.4 * np.arange(k)])
+    f_b = np.c_[np.linspace(-1.0, 1.2, k), np.linspace(2.0, -0.5, k), np.full(k, -9.8)]
+    w_b = np.tile([0.003, 0.01, -0.2], (k, 1))
+    dt = np.full(k, 0.1)
+    q = np.r_[np.zeros(3), np.full(3, 1e-6), np.full(3, 1e-10), np.full(6, 1e-14),
+              np.zeros(n - 15)]
+    noise = itu.ProcessNoise(q, gyro_z_states=gz, accel_states=ga)
+    P_ref = P.copy()
+    for i in range(k):
+        F = np.zeros((n, n))
+        C = rotations.quat_to_dcm(nav[i, 6:])
+        ie.system_matrix(nav[i, :3], nav[i, 3:6], C, f_b[i], out=F)
+        if gz >= 0:
+            F[ie.ATT, gz:gz + 3] = ie.gyro_z_rate_matrix(C, w_b[i, 2])
+        F[ie.VEL, ga:ga + 6] = ie.accel_motion_matrix(C, f_b[i])
+        _, P_ref = kalman.predict(np.zeros(n), P_ref, kalman.discretize(F, dt[i]),
+                                  np.diag(q * dt[i]))
+    np.testing.assert_allclose(itu.propagate_covariance(P, nav, f_b, w_b, dt, noise), P_ref,
+                               rtol=1e-10, atol=1e-24)
+    with pytest.raises(ValueError, match="accel_states"):
+        itu.ProcessNoise(q, accel_states=n - 5)
+
+
+def test_accel_motion_block_matches_the_strapdown():
+    # eq. (23): compensating f with k_hat = k + dk leaves df = -dk_x f_x - dk_y f_y; the
+    # velocity error it causes over a short interval, against F[v, ga:] T
+    nav0 = strapdown.nav_vector([np.deg2rad(40.0), 0.5, 120.0], [18.0, -9.0, 0.4],
+                                rotations.euler_to_quat([0.05, -0.03, 2.4]))
+    k, dt = 10, 0.01
+    f_b = np.tile([1.4, -2.1, -9.7], (k, 1))
+    w_b = np.tile([0.004, -0.003, 0.05], (k, 1))
+    nav_T = strapdown.propagate(nav0, w_b, f_b, dt)
+    b_a = np.zeros(3)
+
+    def dv_after(dk):
+        est_T = strapdown.propagate(nav0, w_b, itu.compensate_accel(f_b, b_a, dk), dt)
+        return ie.nav_error(est_T, nav_T)[3:6]
+
+    num = np.array([(dv_after(e) - dv_after(-e)) / 2e-4 for e in np.eye(6) * 1e-4]).T
+    F = ie.accel_motion_matrix(ie.nav_dcm(nav0), f_b[0])
+    np.testing.assert_allclose(num / (k * dt), F, rtol=0.01, atol=0.01)
+
+
 def test_accumulate_covariance_steps_and_carries_the_open_step():
     k = 25
     hist = np.zeros((k + 1, 10))

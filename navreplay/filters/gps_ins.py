@@ -4,8 +4,9 @@ The strapdown INS of :class:`navreplay.filters.ins.InsFilter` (initial solution 
 ``metadata.initial_nav``, IMU compensated with the bias estimates) is corrected by GPS position
 fixes and, when the recording has them, GPS NED velocities. The filter estimates the errors of
 the navigation solution, of the IMU biases, of the gyro errors driven by the yaw rate (two
-misalignments and the z scale factor; ``gyro_misalignment_states``, on by default) and
-optionally of the GPS antenna lever arm, feeds them back into the solution and the IMU
+misalignments and the z scale factor; ``gyro_misalignment_states``, on by default), of the
+accelerometer errors driven by the forward and lateral specific force (``accel_motion_states``,
+on by default) and optionally of the GPS antenna lever arm, feeds them back into the solution and the IMU
 compensation after every update, and so keeps its error state at 0.
 
 States
@@ -25,14 +26,19 @@ g     m_g_xz               b (FRD)   rad          gyro misalignment M[0, 2] erro
 g+1   m_g_yz               b (FRD)   rad          gyro misalignment M[1, 2] error (z rate into
                                                   y); x holds the estimate
 g+2   s_g_z                b (FRD)   -            gyro z scale-factor error; x holds the estimate
+a-a+2 s_a_x, m_a_yx, m_a_zx b (FRD)  -, rad, rad  column x of S_a + M_a (errors of f_x into x, y,
+                                                  z); x holds the estimates
+a+3-5 m_a_xy, s_a_y, m_a_zy b (FRD)  rad, -, rad  column y of S_a + M_a; x holds the estimates
 ===== ==================== ========= ============ =============================================
 
 The gyro z-rate states (``gyro_misalignment_states``) follow the lever arm when it is
-estimated: g = 18 with ``estimate_lever_arm``, else 15. Scoring (declared ``states``): the
-navigation states and biases as ``ins``; m_g_xz, m_g_yz, s_g_z against the constants
-``metadata.true_errors["imu"]["gyro_misalignment"][0][2]``, ``[1][2]`` and
-``["gyro_scale_factor"][2]`` (the M and S of :mod:`navreplay.sensors.imu`,
-``omega_meas = (I + S + M) omega + b``).
+estimated: g = 18 with ``estimate_lever_arm``, else 15; the accelerometer states follow them
+(a = g + 3). Scoring (declared ``states``): the navigation states and biases as ``ins``; m_g_xz,
+m_g_yz, s_g_z against the constants ``metadata.true_errors["imu"]["gyro_misalignment"][0][2]``,
+``[1][2]`` and ``["gyro_scale_factor"][2]`` (the M and S of :mod:`navreplay.sensors.imu`,
+``omega_meas = (I + S + M) omega + b``), the accelerometer states against
+``["accel_scale_factor"][j]`` and ``["accel_misalignment"][i][j]``. Why these states and the
+ensemble consistency: docs/methods/ins.md.
 
 Errors (signs)
 --------------
@@ -52,8 +58,12 @@ Process (continuous, :mod:`navreplay.filters.ins_error`)::
       omega_hat = omega_meas - b_g_hat - k_hat (omega_meas_z - b_g_hat_z)
       F[phi, k_j] = +C_nb_hat[:, j] omega_hat_z     (ins_error eq. 22)                 (2a)
       P0 = diag(gyro_misalignment_sigma^2 (2), gyro_scale_factor_sigma^2)
-    Phi = I + F T + (F T)^2 / 2,  Qd = G Qc G^T T (+ the motion terms of ins eq. 5a;
-    with (2a) the gyro term s_g is off, the accelerometer term s_a = accel_sf_mis on),
+    accelerometer states k_j = (S_a + M_a)[:, j], j = x, y, random constants:
+      f_hat = f_meas - b_a_hat - k_x_hat (f_x - b_a_x) - k_y_hat (f_y - b_a_y)
+      F[v, k_j[i]] = -C_nb_hat[:, i] f_hat_j          (ins_error eq. 23)               (2b)
+      P0 = diag of accel_scale_factor_sigma^2 (s) and accel_misalignment_sigma^2 (m)
+    Phi = I + F T + (F T)^2 / 2,  Qd = G Qc G^T T (the motion terms of ins eq. 5a are
+    off with (2a) and (2b)),
     T = cov_step (0.1 s), cut short at updates and outputs                                (3)
 
 GPS position (antenna at ``l_b`` from the IMU, body frame), residual in NED metres::
@@ -94,7 +104,6 @@ import numpy as np
 
 from navreplay import strapdown
 from navreplay.filters import ins_error as ie
-from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     FilterContext,
@@ -102,35 +111,19 @@ from navreplay.filters.base import (
     Innovation,
     Quantity,
     State,
-    TrueConstant,
     check_number,
-    state_names,
 )
 from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.registry import register_filter
 from navreplay.geo import kernels
 from navreplay.geo.rotations import skew, wrap_angle
 from navreplay.streams import StreamKind
-from navreplay.units import PPM
 
 LEVER = slice(15, 18)
 """Lever-arm error states (present with ``estimate_lever_arm``)."""
 LEVER_STATES: tuple[State, ...] = tuple(
     State(f"l_{a}", "m", Quantity.LEVER_ARM) for a in "xyz")
 """Lever-arm estimates (``estimate_lever_arm``), body [m]; the truth is the parameter's."""
-GYRO_Z_STATES: tuple[State, ...] = (
-    State("m_g_xz", "rad", Quantity.GYRO_MISALIGNMENT,
-          TrueConstant("imu.gyro_misalignment", (0, 2))),
-    State("m_g_yz", "rad", Quantity.GYRO_MISALIGNMENT,
-          TrueConstant("imu.gyro_misalignment", (1, 2))),
-    State("s_g_z", "-", Quantity.GYRO_SCALE_FACTOR, TrueConstant("imu.gyro_scale_factor", (2,))),
-)
-"""The gyro z-rate states (``gyro_misalignment_states``): misalignments M[0, 2], M[1, 2] and
-scale factor S[2, 2] of :mod:`navreplay.sensors.imu`, scored against the constants in
-``metadata.true_errors["imu"]``."""
-GYRO_Z_NAMES: tuple[str, ...] = state_names(GYRO_Z_STATES)
-
-
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GpsInsParams(InsParams):
     """Parameters of ``gps-ins``: the INS error model of ``ins`` plus the GPS measurements."""
@@ -148,20 +141,14 @@ class GpsInsParams(InsParams):
     use_gps_vel: bool = True
     """Use the ``gps_vel`` stream when the recording has it."""
     accel_sf_mis: float = 0.4e-3
-    """Accelerometer scale-factor / misalignment under motion, 1-sigma [-] (ins eq. 5a). On in
-    ``gps-ins`` (``ins``: off): once the gyro's motion errors are states, the accelerometer's
-    ``(S_a + M_a) a`` is the largest unmodelled error left under the turns and speed changes
-    of a drive. For the ``tactical`` grade (300 ppm, 0.5 mrad) its per-axis RMS is
-    sqrt((300 ppm)^2 + 2 (0.5 mrad)^2) / sqrt(3) = 0.46e-3 |a|; 0.4e-3 is the value that keeps
-    the vehicle-drive ensembles consistent (the white-noise form with tau = ``sf_mis_time``
-    slightly overstates a constant error)."""
-    gyro_misalignment_states: bool = True
-    """Estimate the gyro errors driven by the z (yaw) rate, misalignments m_xz, m_yz and scale
-    factor s_z, as random constants (eq. 2a); the motion noise of ``gyro_sf_mis`` is then off."""
-    gyro_misalignment_sigma: float = 0.5e-3
-    """Initial 1-sigma of m_xz and m_yz [rad] (``tactical`` grade: 0.5 mrad)."""
-    gyro_scale_factor_sigma: float = 100.0 * PPM
-    """Initial 1-sigma of s_z [-] (``tactical`` grade: 100 ppm)."""
+    """Accelerometer scale-factor / misalignment under motion, 1-sigma [-] (ins eq. 5a), used
+    only without ``accel_motion_states``: for the ``tactical`` grade (300 ppm, 0.5 mrad) the
+    per-axis RMS of ``(S_a + M_a) a`` is sqrt((300 ppm)^2 + 2 (0.5 mrad)^2) / sqrt(3) =
+    0.46e-3 |a|; the white-noise form with tau = ``sf_mis_time`` slightly overstates a
+    constant error."""
+    accel_motion_states: bool = True
+    """Estimate the accelerometer errors driven by the x and y specific force (the columns x
+    and y of S_a + M_a) as six random constants (ins eq. 5c; ``accel_sf_mis`` is then off)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -172,8 +159,6 @@ class GpsInsParams(InsParams):
             raise ValueError(f"lever_arm_b must be within 100 m per axis, got {lever!r}")
         object.__setattr__(self, "lever_arm_b", lever)
         check_number(self, "lever_arm_sigma")
-        check_number(self, "gyro_misalignment_sigma")
-        check_number(self, "gyro_scale_factor_sigma")
         for name in ("gps_pos_sigma_scale", "gps_vel_sigma_scale"):
             check_number(self, name, positive=True)
 
@@ -304,42 +289,19 @@ class GpsInsFilter(InsFilter):
 
     def __init__(self, params: GpsInsParams, context: FilterContext) -> None:
         self.lever_arm_b = np.array(params.lever_arm_b, dtype=float)
-        self.gyro_z = np.zeros(3)  # estimates of m_xz, m_yz, s_z
-        gz = ie.N_STATES + (3 if params.estimate_lever_arm else 0)
-        self._gz = slice(gz, gz + ie.N_GYRO_Z) if params.gyro_misalignment_states else None
         super().__init__(params, context)
 
     # -- extra states ----------------------------------------------------------------------
 
     def _extra_declarations(self) -> tuple[State, ...]:
-        return ((LEVER_STATES if self.params.estimate_lever_arm else ())
-                + (GYRO_Z_STATES if self._gz is not None else ()))
+        return LEVER_STATES if self.params.estimate_lever_arm else ()
 
     def _init_extra(self) -> None:
-        p = self.params
-        if p.estimate_lever_arm:
-            self.P[LEVER, LEVER] = np.eye(3) * p.lever_arm_sigma**2
-        if self._gz is not None:
-            self.P[self._gz, self._gz] = np.diag(np.array(
-                [p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
-                 p.gyro_scale_factor_sigma]) ** 2)
+        if self.params.estimate_lever_arm:
+            self.P[LEVER, LEVER] = np.eye(3) * self.params.lever_arm_sigma**2
 
     def _extra_values(self) -> np.ndarray:
-        if not self.params.estimate_lever_arm:
-            return self.gyro_z if self._gz is not None else np.zeros(0)
-        if self._gz is None:
-            return self.lever_arm_b
-        return np.concatenate((self.lever_arm_b, self.gyro_z))
-
-    def _process_noise(self, n: int) -> itu.ProcessNoise:
-        noise = super()._process_noise(n)
-        if self._gz is None:
-            return noise
-        # (2a): the z-rate errors are states; the motion noise of the gyro is off
-        return dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start)
-
-    def _gyro_z_estimates(self) -> np.ndarray | None:
-        return self.gyro_z if self._gz is not None else None
+        return self.lever_arm_b if self.params.estimate_lever_arm else np.zeros(0)
 
     # -- updates ---------------------------------------------------------------------------
 
@@ -378,6 +340,4 @@ class GpsInsFilter(InsFilter):
         super()._feedback(dx)
         if self.params.estimate_lever_arm:
             self.lever_arm_b = self.lever_arm_b - dx[LEVER]
-        if self._gz is not None:
-            self.gyro_z = self.gyro_z - dx[self._gz]
 

@@ -3,7 +3,8 @@
 The baseline every aided filter is compared to. It integrates the IMU with
 :mod:`navreplay.strapdown` from the initial solution in ``metadata.initial_nav`` and
 propagates the covariance of the 15 navigation error states of
-:mod:`navreplay.filters.ins_error` with the IMU error model, both by
+:mod:`navreplay.filters.ins_error` and of the three gyro errors the yaw rate drives with the IMU
+error model, both by
 :class:`navreplay.filters.ins_time_update.TimeUpdate`. It makes no measurement update. The class is
 the base of :class:`navreplay.filters.gps_ins.GpsInsFilter` (feedback of estimated errors,
 extra states); the module's :func:`initial_solution`, :func:`initial_sigma` and
@@ -19,11 +20,17 @@ index name                   frame     unit       value in ``Estimate.x``
 6-8   phi_N, phi_E, phi_D    n         rad        attitude error estimate (0)
 9-11  b_a_x, b_a_y, b_a_z    b (FRD)   m/s^2      accelerometer bias estimate (total)
 12-14 b_g_x, b_g_y, b_g_z    b (FRD)   rad/s      gyro bias estimate (total)
+g     m_g_xz                 b (FRD)   rad        gyro misalignment M[0, 2] (z rate into x)
+g+1   m_g_yz                 b (FRD)   rad        gyro misalignment M[1, 2] (z rate into y)
+g+2   s_g_z                  b (FRD)   -          gyro z scale-factor error
 ===== ====================== ========= ========== ==========================================
 
-``Estimate.P`` is the covariance of the errors of the navigation solution and of the bias
-estimates in these units. A free INS has nothing to feed back: its navigation error states stay
-0 and its bias estimates stay at their initial value (0).
+The gyro z-rate states (``gyro_misalignment_states``, on by default) follow the 15 (g = 15;
+in ``gps-ins`` after its lever-arm states when it estimates them).
+
+``Estimate.P`` is the covariance of the errors of the navigation solution and of the bias and
+z-rate estimates in these units. A free INS has nothing to feed back: its navigation error
+states stay 0 and its bias and z-rate estimates stay at their initial value (0).
 
 Errors (signs)
 --------------
@@ -41,8 +48,14 @@ Models
     Phi = I + F T + (F T)^2 / 2,  Qd = diag(q) T + motion terms every T = cov_step        (4)
     q   = [0, 0, 0, VRW^2 I3, ARW^2 I3, q_ba I3, q_bg I3]       per second                 (5)
     motion terms: Qd[v] += s_a^2 tau |a_n|^2 T, Qd[phi] += s_g^2 tau |omega|^2 T          (5a)
+    gyro z-rate states k = (m_xz, m_yz, s_z), random constants (F = 0, Q = 0 for them):
+      omega_hat = omega_meas - b_g_hat - k_hat (omega_meas_z - b_g_hat_z)
+      F[phi, k_j] = +C_nb_hat[:, j] omega_hat_z   (ins_error eq. 22); s_g = 0 in (5a)      (5b)
+    accelerometer states (accel_motion_states, off here, on in gps-ins): the columns x, y
+      of S_a + M_a, F[v, k_j[i]] = -C_nb_hat[:, i] f_hat_j (ins_error eq. 23); s_a = 0    (5c)
     P0  = diag(sigma_N^2/(R_M+h)^2, sigma_E^2/((R_N+h) cos lat)^2, sigma_D^2,
-               sigma_v^2, sigma_phi^2, sigma_ba^2, sigma_bg^2)                             (6)
+               sigma_v^2, sigma_phi^2, sigma_ba^2, sigma_bg^2,
+               sigma_m^2, sigma_m^2, sigma_s^2)                                            (6)
 
 The covariance step (4) uses F at the navigation solution at the start of the step and the mean
 compensated specific force over the step; a step is cut short at an update or an output so
@@ -51,23 +64,32 @@ random walk whose density covers the bias instability: for a first-order Gauss-M
 instability of sigma and correlation time tau, ``q_b = 2 sigma^2 / tau`` (the initial slope of
 its variance).
 
-The model has no scale-factor, misalignment or g-sensitivity states. At a roughly level
-attitude the accelerometer scale factor and misalignment times gravity, and the gyro
-g-sensitivity times gravity, act as constant biases: the bias states estimate these
+At a roughly level attitude the accelerometer scale factor and misalignment times gravity, and
+the gyro g-sensitivity times gravity, act as constant biases: the bias states estimate these
 *effective* biases, and the default bias sigmas are the effective values for the ``tactical``
 IMU grade of :func:`navreplay.sensors.imu_grade`: level accelerometer axes 0.3 mg bias + 0.5 mrad
 misalignment x g + 0.05 mg instability (0.58 mg); the z axis sees gravity through its 300 ppm
 scale factor instead (0.42 mg, ``accel_bias_sigma_z``; it drives the free-inertial vertical
-channel); gyros 1 deg/h bias + 1 deg/h/g x g + 0.3 deg/h instability. Under motion, the
-scale-factor and misalignment errors (s_a, s_g, 1-sigma) enter as the motion-dependent noise
-(5a) (ins_error eq. 21), white over a correlation time tau. ``gps-ins`` replaces the gyro part
-of (5a) by states for the errors the yaw rate drives (ins_error eq. 22).
+channel); gyros 1 deg/h bias + 1 deg/h/g x g + 0.3 deg/h instability. Under motion, the gyro
+errors a land vehicle's yaw rate drives, ``(m_xz, m_yz, s_z) omega_z``, are the states (5b):
+a constant misalignment turns with the body, so over a turn of angle dpsi it adds the bounded
+tilt ``m (sin psi - sin psi_0, cos psi_0 - cos psi)``, and s_z adds ``s_z dpsi`` of heading.
+White noise of the same size (5a) would instead add about 1 mrad (in quadrature) to the sigma
+of every attitude axis with each 90-deg turn: it made ``ins`` about twice under-confident in
+tilt after ten minutes of driving (docs/methods/ins.md). The other scale-factor and
+misalignment errors act only under roll and pitch rates, or as ``(S_a + M_a) a`` while the
+vehicle accelerates or turns, about a tenth of the effective bias on a drive: ``gps-ins``
+carries the latter as states (5c); ``ins`` leaves them out (they change its sigma by less than
+1 %), and ``accel_sf_mis`` and, without the states, ``gyro_sf_mis`` enter them as the white
+motion noise (5a) (ins_error eq. 21) with a correlation time tau.
 
 Scoring (:mod:`navreplay.metrics`): the navigation error states are scored by the errors of the
 navigation solution (``nav:`` truth keys), the biases by the truth stream's effective biases
 ``accel_bias_eff`` and ``gyro_bias_eff`` (the total bias plus the scale-factor, misalignment and
-g-sensitivity errors at rest, :func:`navreplay.sensors.imu.effective_biases`); the default NEES
-block (``nees_states``) is the nine navigation errors.
+g-sensitivity errors at rest, :func:`navreplay.sensors.imu.effective_biases`), the z-rate
+states against ``metadata.true_errors["imu"]`` (``gyro_misalignment[0][2]``, ``[1][2]``,
+``gyro_scale_factor[2]``); the default NEES block (``nees_states``) is the nine navigation
+errors.
 """
 
 from __future__ import annotations
@@ -90,7 +112,9 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     NavSolution,
+    Quantity,
     State,
+    TrueConstant,
     check_number,
     state_names,
 )
@@ -101,6 +125,7 @@ from navreplay.units import (
     DEG_PER_SQRT_HOUR,
     MICRO_G,
     MICRO_G_PER_SQRT_HZ,
+    PPM,
 )
 
 
@@ -140,8 +165,26 @@ class InsParams(FilterParams):
     """Unmodelled accelerometer scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off).
     Off by default: under the accelerations of a land vehicle these errors act mostly as a
     slowly changing bias (their gravity part is in the effective bias)."""
+    gyro_misalignment_states: bool = True
+    """Carry the gyro errors driven by the z (yaw) rate, misalignments m_xz, m_yz and scale
+    factor s_z, as random-constant states (eq. 5b); the motion noise of ``gyro_sf_mis`` is
+    then off."""
+    gyro_misalignment_sigma: float = 0.5e-3
+    """Initial 1-sigma of m_xz and m_yz [rad] (``tactical`` grade: 0.5 mrad)."""
+    gyro_scale_factor_sigma: float = 100.0 * PPM
+    """Initial 1-sigma of s_z [-] (``tactical`` grade: 100 ppm)."""
     gyro_sf_mis: float = 0.5e-3
-    """Unmodelled gyro scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off)."""
+    """Unmodelled gyro scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off); used only
+    without ``gyro_misalignment_states``."""
+    accel_motion_states: bool = False
+    """Carry the accelerometer errors driven by the x and y specific force (the columns x and
+    y of S_a + M_a) as six random-constant states (eq. 5c); the motion noise of
+    ``accel_sf_mis`` is then off. Off in ``ins``: they change its tilt and velocity sigma by
+    less than 1 %; on in ``gps-ins``."""
+    accel_scale_factor_sigma: float = 300.0 * PPM
+    """Initial 1-sigma of s_a_x, s_a_y [-] (``tactical`` grade: 300 ppm)."""
+    accel_misalignment_sigma: float = 0.5e-3
+    """Initial 1-sigma of m_a_yx, m_a_zx, m_a_xy, m_a_zy [rad] (``tactical``: 0.5 mrad)."""
     sf_mis_time: float = 30.0
     """Correlation time tau of eq. (5a) [s]: a manoeuvre and the time its error persists."""
     cov_step: float = 0.1
@@ -156,7 +199,9 @@ class InsParams(FilterParams):
         for name in ("accel_vrw", "gyro_arw", "accel_bias_sigma", "accel_bias_sigma_z",
                      "gyro_bias_sigma",
                      "accel_bias_rw", "gyro_bias_rw", "init_pos_sigma", "init_vel_sigma",
-                     "init_att_sigma", "accel_sf_mis", "gyro_sf_mis", "sf_mis_time",
+                     "init_att_sigma", "accel_sf_mis", "gyro_misalignment_sigma",
+                     "gyro_scale_factor_sigma", "gyro_sf_mis", "accel_scale_factor_sigma",
+                     "accel_misalignment_sigma", "sf_mis_time",
                      "gap_accel_sigma", "gap_rate_sigma"):
             check_number(self, name)
         check_number(self, "cov_step", positive=True, upper=10.0)
@@ -262,6 +307,26 @@ def initial_sigma(
 NAV_STATES: tuple[State, ...] = ie.nav_states(ie.Vertical.HEIGHT)
 """Declarations of the 15 entries of ``Estimate.x`` (biases as total estimates)."""
 NAV_STATE_NAMES: tuple[str, ...] = state_names(NAV_STATES)
+GYRO_Z_STATES: tuple[State, ...] = (
+    State("m_g_xz", "rad", Quantity.GYRO_MISALIGNMENT,
+          TrueConstant("imu.gyro_misalignment", (0, 2))),
+    State("m_g_yz", "rad", Quantity.GYRO_MISALIGNMENT,
+          TrueConstant("imu.gyro_misalignment", (1, 2))),
+    State("s_g_z", "-", Quantity.GYRO_SCALE_FACTOR, TrueConstant("imu.gyro_scale_factor", (2,))),
+)
+"""The gyro z-rate states (``gyro_misalignment_states``): misalignments M[0, 2], M[1, 2] and
+scale factor S[2, 2] of :mod:`navreplay.sensors.imu`, scored against the constants in
+``metadata.true_errors["imu"]``."""
+GYRO_Z_NAMES: tuple[str, ...] = state_names(GYRO_Z_STATES)
+ACCEL_MOTION_STATES: tuple[State, ...] = tuple(
+    State(f"s_a_{a}", "-", Quantity.ACCEL_SCALE_FACTOR,
+          TrueConstant("imu.accel_scale_factor", (i,))) if i == j else
+    State(f"m_a_{a}{b}", "rad", Quantity.ACCEL_MISALIGNMENT,
+          TrueConstant("imu.accel_misalignment", (i, j)))
+    for j, b in enumerate("xy") for i, a in enumerate("xyz"))
+"""The accelerometer states (``accel_motion_states``): the columns x and y of S_a + M_a of
+:mod:`navreplay.sensors.imu` (s_a_x, m_a_yx, m_a_zx, m_a_xy, s_a_y, m_a_zy), scored against the
+constants in ``metadata.true_errors["imu"]``."""
 
 
 @register_filter
@@ -271,6 +336,7 @@ class InsFilter(Filter):
     name: ClassVar[str] = "ins"
     summary: ClassVar[str] = (
         "free-inertial strapdown INS from metadata.initial_nav, 15-state error covariance"
+        " with the gyro z-rate misalignment and scale-factor states"
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     Params: ClassVar[type[FilterParams]] = InsParams
@@ -292,10 +358,25 @@ class InsFilter(Filter):
             p.accel_bias_sigmas(),
             p.gyro_bias_sigma,
         )
-        self.states = NAV_STATES + self._extra_declarations()
+        extra = self._extra_declarations()
+        gz = ie.N_STATES + len(extra)
+        self._gz = slice(gz, gz + ie.N_GYRO_Z) if p.gyro_misalignment_states else None
+        self.gyro_z = np.zeros(3)  # estimates of m_xz, m_yz, s_z
+        ga = gz + (ie.N_GYRO_Z if self._gz is not None else 0)
+        self._ga = slice(ga, ga + ie.N_ACCEL_HF) if p.accel_motion_states else None
+        self.accel_k = np.zeros(ie.N_ACCEL_HF)  # estimates of the columns x, y of S_a + M_a
+        self.states = (NAV_STATES + extra + (GYRO_Z_STATES if self._gz is not None else ())
+                       + (ACCEL_MOTION_STATES if self._ga is not None else ()))
         n = len(self.states)
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
+        if self._gz is not None:
+            self.P[self._gz, self._gz] = np.diag(np.array(
+                [p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
+                 p.gyro_scale_factor_sigma]) ** 2)
+        if self._ga is not None:
+            s_a, m_a = p.accel_scale_factor_sigma, p.accel_misalignment_sigma
+            self.P[self._ga, self._ga] = np.diag(np.array([s_a, m_a, m_a, m_a, s_a, m_a]) ** 2)
         self._noise = self._process_noise(n)
         self._time_update = itu.TimeUpdate(self._noise, p.cov_step)
         self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
@@ -305,7 +386,8 @@ class InsFilter(Filter):
     # -- hooks for filters with more states ----------------------------------------------
 
     def _extra_declarations(self) -> tuple[State, ...]:
-        """Declarations of the states after the 15 (random constants; F = 0, Q = 0 for them)."""
+        """Declarations of the states after the 15 and before the gyro z-rate states (random
+        constants; F = 0, Q = 0 for them)."""
         return ()
 
     def _init_extra(self) -> None:
@@ -315,13 +397,32 @@ class InsFilter(Filter):
         return np.zeros(0)
 
     def _process_noise(self, n: int) -> itu.ProcessNoise:
-        """The process noise (and model options) of the time update for n states."""
-        return self.params.process_noise(n)
+        """The process noise (and model options) of the time update for n states: with the
+        gyro z-rate states (eq. 5b) the gyro motion noise of eq. (5a) is off, with the
+        accelerometer states (eq. 5c) its accelerometer motion noise."""
+        noise = self.params.process_noise(n)
+        if self._gz is not None:
+            noise = dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start)
+        if self._ga is not None:
+            noise = dataclasses.replace(noise, k_acc=0.0, accel_states=self._ga.start)
+        return noise
 
     def _gyro_z_estimates(self) -> np.ndarray | None:
         """Estimates of the gyro z-rate errors (m_xz, m_yz, s_z) of ins_error eq. (22) that
-        the IMU is compensated for, or None; none here."""
-        return None
+        the IMU is compensated for, or None without the states."""
+        return self.gyro_z if self._gz is not None else None
+
+    def _accel_estimates(self) -> np.ndarray | None:
+        """Estimates of the accelerometer errors of ins_error eq. (23), or None."""
+        return self.accel_k if self._ga is not None else None
+
+    def _compensate_accel(self, f_b: np.ndarray) -> np.ndarray:
+        """Raw accelerometer samples (k, 3) compensated for the errors of eq. (23), if any
+        (the time update subtracts the bias estimate)."""
+        k_a = self._accel_estimates()
+        if k_a is None or not k_a.any():
+            return f_b
+        return itu.compensate_accel(f_b, self.b_a, k_a)
 
     def _compensate_gyro(self, omega_ib_b: np.ndarray) -> np.ndarray:
         """Raw gyro samples (k, 3) with the compensations other than the bias applied (the
@@ -336,15 +437,21 @@ class InsFilter(Filter):
         x = np.zeros(self.P.shape[0])
         x[ie.BA] = self.b_a
         x[ie.BG] = self.b_g
-        x[ie.N_STATES:] = self._extra_values()
+        extra = self._extra_values()
+        x[ie.N_STATES:ie.N_STATES + extra.shape[0]] = extra
+        if self._gz is not None:
+            x[self._gz] = self.gyro_z
+        if self._ga is not None:
+            x[self._ga] = self.accel_k
         return x
 
     # -- the Filter interface --------------------------------------------------------------
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
         omega = self._compensate_gyro(imu["omega_ib_b"])
-        step = self._time_update.propagate(self.nav, self.P, self.t, t, omega, imu["f_b"],
-                                           self.b_a, self.b_g)  # (1)-(5a)
+        step = self._time_update.propagate(self.nav, self.P, self.t, t, omega,
+                                           self._compensate_accel(imu["f_b"]), self.b_a,
+                                           self.b_g)  # (1)-(5c)
         if step is None:
             return
         self.nav, self.P, self.t = step
@@ -384,7 +491,7 @@ class InsFilter(Filter):
         output ticks); returns the estimates' columns (t, x, P, nav vectors)."""
         t_out, nav_out, P_out, w_last = self._time_update.propagate_outputs(
             self.nav, self.P, self.t, t, imu["omega_ib_b"], imu["f_b"], self.b_a, self.b_g,
-            ends, self._gyro_z_estimates(),
+            ends, self._gyro_z_estimates(), self._accel_estimates(),
         )
         self.nav = nav_out[-1].copy()
         self.P = P_out[-1].copy()
@@ -407,4 +514,8 @@ class InsFilter(Filter):
         self.nav = ie.apply_correction(self.nav, dx)
         self.b_a = self.b_a - dx[ie.BA]
         self.b_g = self.b_g - dx[ie.BG]
+        if self._gz is not None:
+            self.gyro_z = self.gyro_z - dx[self._gz]
+        if self._ga is not None:
+            self.accel_k = self.accel_k - dx[self._ga]
 

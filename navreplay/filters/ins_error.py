@@ -101,6 +101,20 @@ constant sign per turn, which white noise (21) cannot represent. A filter may es
 with omega_z the mean compensated z rate of the step. The other six terms (scale factors of x
 and y, misalignments on the x and y rates) act only under roll and pitch rates.
 
+Accelerometer errors driven by the horizontal specific force (optional,
+``ProcessNoise.accel_states``). The accelerometer measures ``f_meas = (I + S_a + M_a) f + b``;
+of ``S_a + M_a`` the column z meets gravity, constant while the vehicle is level and part of the
+effective bias, while the columns x and y, ``k_x = (s_x, m_yx, m_zx)`` and
+``k_y = (m_xy, s_y, m_zy)`` (``k_j[i] = (S_a + M_a)[i, j]``), act on the accelerations and
+turns of the vehicle: an error in a fixed direction of the body at each speed change and
+turn. A filter may estimate them as random constants (six states from index ``ga``, k_x then
+k_y) and compensate ``f_hat = f_meas - b_a_hat - k_x_hat (f_x - b_a_x) - k_y_hat (f_y -
+b_a_y)``. With ``dk = k_hat - k``, ``df_b = -db_a - dk_x f_x - dk_y f_y`` and so::
+
+    F[v, ga + 3 j + i] = -C_nb_hat[:, i] f_j,   j = 0, 1 (x, y), i = 0, 1, 2             (23)
+
+with f the mean compensated specific force of the step.
+
 Every block was checked against central finite differences of (2)-(4) and of
 :func:`navreplay.strapdown.propagate` (tests/test_ins_filter.py).
 
@@ -141,6 +155,8 @@ NAV = slice(0, 9)
 N_STATES = 15
 N_GYRO_Z = 3
 """Gyro z-rate error states of eq. (22): misalignments m_xz, m_yz and scale factor s_z."""
+N_ACCEL_HF = 6
+"""Accelerometer error states of eq. (23): the columns x and y of S_a + M_a."""
 
 # -- noise layout (columns of G) --------------------------------------------------------------
 
@@ -329,6 +345,18 @@ def gyro_z_rate_matrix(C_nb: np.ndarray, omega_z: float) -> np.ndarray:
     axis j (m_xz, m_yz, s_z) at the body rate ``omega_z`` [rad/s].
     """
     return np.asarray(C_nb, dtype=float) * float(omega_z)
+
+
+def accel_motion_matrix(C_nb: np.ndarray, f_b: np.ndarray) -> np.ndarray:
+    """``F[v, dk] = -C_nb_hat[:, i] f_j`` for the six states ``dk_j[i]`` (j = x, y), eq. (23),
+    shape (3, 6).
+
+    Column ``3 j + i`` is the velocity-error rate per unit error of the coefficient
+    ``(S_a + M_a)[i, j]`` at the specific force ``f_b`` [m/s^2].
+    """
+    C = np.asarray(C_nb, dtype=float)
+    f = np.asarray(f_b, dtype=float)
+    return np.hstack((-C * f[0], -C * f[1]))
 
 
 def noise_matrix(C_nb: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:

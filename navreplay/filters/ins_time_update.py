@@ -21,7 +21,13 @@ import numpy as np
 
 from navreplay import strapdown
 from navreplay.filters import kalman
-from navreplay.filters.ins_error import N_GYRO_Z, N_STATES, Vertical, fill_system_matrix
+from navreplay.filters.ins_error import (
+    N_ACCEL_HF,
+    N_GYRO_Z,
+    N_STATES,
+    Vertical,
+    fill_system_matrix,
+)
 from navreplay.filters.kalman import (
     DEFAULT_RTOL,
     FilterDivergedError,
@@ -39,27 +45,35 @@ _TIME_TOL = 1e-9
 @numba.njit(cache=True)
 def _covariance_step(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
     F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
 ) -> np.ndarray:
-    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19), (22) and Qd from (20),
-    (21); returns a new P.
+    """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19), (22), (23) and Qd from
+    (20), (21); returns a new P.
 
     F has non-zero rows only for position, velocity and attitude and non-zero columns only for
-    the 15 navigation states and, with ``gz >= 0``, the three gyro z-rate states at
-    ``gz, gz + 1, gz + 2`` (eq. 22), listed in ``cols``: Phi is the identity but for its first
+    the 15 navigation states, with ``gz >= 0`` the three gyro z-rate states at
+    ``gz .. gz + 2`` (eq. 22) and with ``ga >= 0`` the six accelerometer states at
+    ``ga .. ga + 5`` (eq. 23), listed in ``cols``: Phi is the identity but for its first
     9 rows, and :func:`navreplay.filters.kalman.predict_rows_kernel` propagates P.
-    F (15, nc), M (9, nc), T (9, n) and Q (n, n, diagonal) are scratch (nc = 15, or 18 with
-    ``gz >= 0``).
+    F (15, nc), M (9, nc), T (9, n) and Q (n, n, diagonal) are scratch (nc = 15, + 3 with
+    ``gz >= 0``, + 6 with ``ga >= 0``).
     """
     n = P.shape[0]
     F[:, :] = 0.0
     C = kernels.quat_to_dcm(nav[6:10])
     fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], C, f_b, depth, curvature, F)
+    c = N_STATES
     if gz >= 0:  # (22): F[phi, (dm_xz, dm_yz, ds_z)] = C_nb_hat[:, j] omega_z
         for i in range(3):
             for j in range(3):
-                F[6 + i, N_STATES + j] = C[i, j] * omega_b[2]
+                F[6 + i, c + j] = C[i, j] * omega_b[2]
+        c += N_GYRO_Z
+    if ga >= 0:  # (23): F[v, dk_ij] = -C_nb_hat[:, i] f_j, j = x, y
+        for j in range(2):
+            for i in range(3):
+                for r in range(3):
+                    F[3 + r, c + 3 * j + i] = -C[r, i] * f_b[j]
     kalman.transition_rows_kernel(F, N_NAV, dt, M)  # kalman (3)
     for i in range(n):
         Q[i, i] = q[i] * dt  # kalman (4), diagonal (20)
@@ -81,14 +95,23 @@ def _covariance_step(
 
 
 @numba.njit(cache=True)
-def _scratch(n: int, gz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                       np.ndarray, np.ndarray]:
+def _scratch(n: int, gz: int, ga: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                np.ndarray, np.ndarray, np.ndarray]:
     """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro z-rate states at
-    ``gz``, or none for -1) and the means of :func:`_close_step`."""
-    nc = N_STATES + (N_GYRO_Z if gz >= 0 else 0)
+    ``gz``, accelerometer states at ``ga``, or none for -1) and the means of
+    :func:`_close_step`."""
+    nc = N_STATES + (N_GYRO_Z if gz >= 0 else 0) + (N_ACCEL_HF if ga >= 0 else 0)
     cols = np.empty(nc, dtype=np.int64)
-    for k in range(nc):
-        cols[k] = k if k < N_STATES else gz + k - N_STATES
+    for k in range(N_STATES):
+        cols[k] = k
+    c = N_STATES
+    if gz >= 0:
+        for k in range(N_GYRO_Z):
+            cols[c + k] = gz + k
+        c += N_GYRO_Z
+    if ga >= 0:
+        for k in range(N_ACCEL_HF):
+            cols[c + k] = ga + k
     return (np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
             np.zeros((n, n)), cols, np.zeros((2, 3)))
 
@@ -96,19 +119,19 @@ def _scratch(n: int, gz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
 @numba.njit(cache=True)
 def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
 ) -> np.ndarray:
-    F, M, T, Q, cols, _ = _scratch(P.shape[0], gz)
+    F, M, T, Q, cols, _ = _scratch(P.shape[0], gz, ga)
     for k in range(dt.shape[0]):
         P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
-                             curvature, gz, F, M, T, Q, cols)
+                             curvature, gz, ga, F, M, T, Q, cols)
     return P
 
 
 @numba.njit(cache=True)
 def _close_step(
     P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
+    gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
     T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray,
 ) -> np.ndarray:
     """P propagated over the open step, with F at its start and the mean specific force and
@@ -120,7 +143,7 @@ def _close_step(
         mean[0, j] = open_sums[1 + j] / dt
         mean[1, j] = open_sums[4 + j] / dt
     P = _covariance_step(P, open_nav, mean[0], mean[1], dt, q, k_acc, k_gyro, depth, curvature,
-                         gz, F, M, T, Q, cols)
+                         gz, ga, F, M, T, Q, cols)
     open_sums[:] = 0.0
     return P
 
@@ -129,9 +152,9 @@ def _close_step(
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, open_nav: np.ndarray, open_sums: np.ndarray,
+    gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray,
 ) -> np.ndarray:
-    F, M, T, Q, cols, mean = _scratch(P.shape[0], gz)
+    F, M, T, Q, cols, mean = _scratch(P.shape[0], gz, ga)
     for k in range(dt.shape[0]):
         if open_sums[0] == 0.0:
             open_nav[:] = hist[k]
@@ -140,8 +163,8 @@ def _accumulate_covariance(
             open_sums[1 + j] += f_b[k, j] * dt[k]
             open_sums[4 + j] += omega_b[k, j] * dt[k]
         if open_sums[0] >= step - 1e-9:
-            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, open_nav, open_sums, F, M,
-                            T, Q, cols, mean)
+            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav, open_sums,
+                            F, M, T, Q, cols, mean)
     return P
 
 
@@ -149,7 +172,7 @@ def _accumulate_covariance(
 def _propagate_block(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
     f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, prev: np.ndarray, step: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
     open_nav: np.ndarray, open_sums: np.ndarray,
 ) -> tuple[int, int, np.ndarray, np.ndarray]:
     """Bias compensation, strapdown and the covariance steps over the samples of a block after
@@ -187,7 +210,7 @@ def _propagate_block(
         prev[j] = w[k - 1, j] * dt[k - 1]
         prev[3 + j] = fc[k - 1, j] * dt[k - 1]
     P = _accumulate_covariance(P, hist, fc, w, dt, step, q, k_acc, k_gyro, depth, curvature,
-                               gz, open_nav, open_sums)
+                               gz, ga, open_nav, open_sums)
     for i in range(P.shape[0]):
         if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
             return -3, first, nav, P
@@ -204,6 +227,20 @@ def compensate_gyro_z(omega: np.ndarray, b_g: np.ndarray, k_z: np.ndarray) -> np
         w_z = omega[i, 2] - b_g[2]
         for c in range(3):
             out[i, c] = omega[i, c] - w_z * k_z[c]
+    return out
+
+
+@numba.njit(cache=True)
+def compensate_accel(f: np.ndarray, b_a: np.ndarray, k_a: np.ndarray) -> np.ndarray:
+    """Accelerometer samples (k, 3) compensated for the errors k_a = (k_x (3), k_y (3)) of
+    ins_error eq. (23) that the x and y specific force drives: ``f - k_x (f_x - b_a_x) - k_y
+    (f_y - b_a_y)`` (the bias itself is subtracted by the time update)."""
+    out = np.empty(f.shape)
+    for i in range(f.shape[0]):
+        fx = f[i, 0] - b_a[0]
+        fy = f[i, 1] - b_a[1]
+        for c in range(3):
+            out[i, c] = f[i, c] - fx * k_a[c] - fy * k_a[3 + c]
     return out
 
 
@@ -228,6 +265,9 @@ class ProcessNoise:
     gyro_z_states: int = -1
     """Index of the first of the three gyro z-rate error states (dm_xz, dm_yz, ds_z) of
     eq. (22), which a larger filter places after the 15; -1: none."""
+    accel_states: int = -1
+    """Index of the first of the six accelerometer error states of eq. (23) (the columns x and
+    y of S_a + M_a), after the 15 and the gyro z-rate states; -1: none."""
 
     def __post_init__(self) -> None:
         q = np.ascontiguousarray(self.q, dtype=np.float64)
@@ -240,6 +280,13 @@ class ProcessNoise:
                 f"states within the {q.shape[0]}), got {gz!r}"
             )
         object.__setattr__(self, "gyro_z_states", int(gz))
+        ga = self.accel_states
+        if not (ga == -1 or N_STATES <= ga <= q.shape[0] - N_ACCEL_HF):
+            raise ValueError(
+                f"accel_states must be -1 or an index in 15..{q.shape[0] - N_ACCEL_HF} (six "
+                f"states within the {q.shape[0]}), got {ga!r}"
+            )
+        object.__setattr__(self, "accel_states", int(ga))
         for name in ("k_acc", "k_gyro"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
@@ -277,7 +324,7 @@ class OpenStep:
 
 def _model_args(
     shape: tuple[int, ...], noise: ProcessNoise, vertical: Vertical, curvature_derivatives: bool
-) -> tuple[np.ndarray, float, float, bool, bool, int]:
+) -> tuple[np.ndarray, float, float, bool, bool, int, int]:
     """Check the shape of P against the model; the arguments the compiled kernels take."""
     n = noise.q.shape[0]
     if shape != (n, n) or n < N_STATES:
@@ -285,7 +332,7 @@ def _model_args(
             f"P must be (n, n) with n >= 15 the length of the process noise ({n}), got {shape}"
         )
     return (noise.q, noise.k_acc, noise.k_gyro, vertical is Vertical.DEPTH,
-            bool(curvature_derivatives), noise.gyro_z_states)
+            bool(curvature_derivatives), noise.gyro_z_states, noise.accel_states)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
@@ -307,8 +354,10 @@ def propagate_covariance(
 
     The same as k calls of ``kalman.predict`` with ``Phi = kalman.discretize(F, dt)``
     (``F = system_matrix(...)`` in the top-left block, ``gyro_z_rate_matrix(C_nb, omega_z)``
-    in the attitude rows of the gyro z-rate states when ``noise.gyro_z_states`` is set, 0
-    elsewhere: extra states are random constants or random walks) and ``Qd`` of eqs.
+    in the attitude rows of the gyro z-rate states when ``noise.gyro_z_states`` is set,
+    ``accel_motion_matrix(C_nb, f_b)`` in the velocity rows of the accelerometer states when
+    ``noise.accel_states`` is set, 0 elsewhere: extra states are random constants or random
+    walks) and ``Qd`` of eqs.
     (20)-(21), compiled into one loop that
     exploits the structure of F (only the rows and columns of the 9 navigation errors change).
     The result is symmetric but not checked: check it with ``kalman.check_covariance``.
@@ -390,8 +439,8 @@ def accumulate_covariance(
     P : ndarray, shape (n, n)
         Symmetric, not checked.
     """
-    q, k_acc, k_gyro, depth, curvature, gz = _model_args(P.shape, noise, vertical,
-                                                         curvature_derivatives)
+    q, k_acc, k_gyro, depth, curvature, gz, ga = _model_args(P.shape, noise, vertical,
+                                                             curvature_derivatives)
     k = dt.shape[0]
     if hist.shape != (k + 1, 10) or f_b.shape != (k, 3) or omega_b.shape != (k, 3):
         raise ValueError(
@@ -400,7 +449,7 @@ def accumulate_covariance(
         )
     return _accumulate_covariance(
         _f64(P), _f64(hist), _f64(f_b), _f64(omega_b), _f64(dt), float(step), q, k_acc, k_gyro,
-        depth, curvature, gz, open_step.nav, open_step.sums,
+        depth, curvature, gz, ga, open_step.nav, open_step.sums,
     )
 
 
@@ -411,7 +460,7 @@ def close_step(
     """Propagate P over the open step (if any) and clear it; P at the last sample's time."""
     model = _model_args(P.shape, noise, vertical, curvature_derivatives)
     return _close_step(_f64(P), *model, open_step.nav, open_step.sums,
-                       *_scratch(P.shape[0], noise.gyro_z_states))
+                       *_scratch(P.shape[0], noise.gyro_z_states, noise.accel_states))
 
 
 class TimeUpdate:
@@ -442,7 +491,7 @@ class TimeUpdate:
         n = noise.q.shape[0]
         self._shape = (n, n)
         self._model = _model_args(self._shape, noise, vertical, curvature_derivatives)
-        self._work = _scratch(n, noise.gyro_z_states)  # of the compiled close
+        self._work = _scratch(n, noise.gyro_z_states, noise.accel_states)  # compiled close
         self.step = float(step)
         self.prev = np.zeros(6)
         """Increments [dtheta, dv] of the last sample [rad, m/s]."""
@@ -512,13 +561,14 @@ class TimeUpdate:
     def propagate_outputs(
         self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
         omega_ib_b: np.ndarray, f_b: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
-        ends: np.ndarray, gyro_z: np.ndarray | None = None,
+        ends: np.ndarray, gyro_z: np.ndarray | None = None, accel_k: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`propagate` over each segment ``[ends[j-1], ends[j])`` of a block followed by
         :meth:`close`, in one compiled call; the state after each segment is an output.
 
         The same arithmetic as the calls one by one (the gyro compensated first for the
-        z-rate error estimates ``gyro_z`` (m_xz, m_yz, s_z) of eq. (22), if given).
+        z-rate error estimates ``gyro_z`` (m_xz, m_yz, s_z) of eq. (22), the accelerometer for
+        the estimates ``accel_k`` (6,) of eq. (23), if given).
 
         Returns
         -------
@@ -540,8 +590,9 @@ class TimeUpdate:
         P_out = np.empty((m, *self._shape))
         w_last = np.full(3, np.nan)
         k_z = np.zeros(3) if gyro_z is None else _f64(gyro_z)
+        k_a = np.zeros(N_ACCEL_HF) if accel_k is None else _f64(accel_k)
         code, j, first, nav_j, P_j, t_j = _propagate_outputs(
-            nav, P, t, t_nav, omega_ib_b, f_b, b_a, b_g, k_z, self.prev, self.step,
+            nav, P, t, t_nav, omega_ib_b, f_b, b_a, b_g, k_z, k_a, self.prev, self.step,
             *self._model, self.open_step.nav, self.open_step.sums, *self._work, ends,
             DEFAULT_RTOL, t_out, nav_out, P_out, w_last,
         )
@@ -571,9 +622,10 @@ class TimeUpdate:
 @numba.njit(cache=True)
 def _propagate_outputs(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
-    f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, k_z: np.ndarray, prev: np.ndarray,
+    f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, k_z: np.ndarray, k_a: np.ndarray,
+    prev: np.ndarray,
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
+    gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
     T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray, ends: np.ndarray,
     rtol: float, t_out: np.ndarray,
     nav_out: np.ndarray, P_out: np.ndarray, w_last: np.ndarray,
@@ -582,7 +634,8 @@ def _propagate_outputs(
     followed by :func:`_close_step` and the output of (t, nav, P) into row j.
 
     The gyro samples are compensated first for the z-rate errors ``k_z`` (eq. 22):
-    ``omega - k_z (omega_z - b_g_z)``. Returns (code, j, first, nav, P, t_nav): code -1 when
+    ``omega - k_z (omega_z - b_g_z)``, the accelerometer samples for the errors ``k_a`` (eq. 23)
+    (:func:`compensate_accel`). Returns (code, j, first, nav, P, t_nav): code -1 when
     all went well; else the code of :func:`_propagate_block` of segment j (``first`` its first
     sample used), -6 when P after it fails the check of
     :func:`navreplay.filters.kalman.check_covariance`, -7 when P after the close fails it (P
@@ -592,13 +645,17 @@ def _propagate_outputs(
     w = omega
     if k_z[0] != 0.0 or k_z[1] != 0.0 or k_z[2] != 0.0:
         w = compensate_gyro_z(omega, b_g, k_z)
+    for c in range(k_a.shape[0]):
+        if k_a[c] != 0.0:
+            f = compensate_accel(f, b_a, k_a)
+            break
     a = 0
     for j in range(ends.shape[0]):
         b = ends[j]
         if b > a:
             code, first, nav_b, P_b = _propagate_block(
                 nav, P, t[a:b], t_nav, w[a:b], f[a:b], b_a, b_g, prev, step, q, k_acc,
-                k_gyro, depth, curvature, gz, open_nav, open_sums)
+                k_gyro, depth, curvature, gz, ga, open_nav, open_sums)
             if code == -1:
                 nav, P, t_nav = nav_b, P_b, t[b - 1]
                 for c in range(3):
@@ -609,8 +666,8 @@ def _propagate_outputs(
                 return code, j, a + first, nav, P_b, t_nav
             a = b
         if open_sums[0] > 0.0:
-            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, open_nav, open_sums, F,
-                            M, T, Q, cols, mean)
+            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav, open_sums,
+                            F, M, T, Q, cols, mean)
             if not _covariance_ok(P, rtol):
                 return -7, j, a, nav, P, t_nav
         t_out[j] = t_nav
