@@ -3,12 +3,13 @@
 Each figure is the ``VmHWM`` of a fresh interpreter (:func:`benchmarks.peak_rss`) that runs
 the command on a simulated ``vehicle-drive`` recording of the given length (100 Hz IMU and
 truth; simulated once into ``--dir`` and reused). ``streamed`` is the command as shipped (the
-file is read in windows); ``whole`` reads the recording whole and keeps every estimate, as a
-replay in memory does, for comparison in the same run.
+file is read in windows); ``rrd`` is the default ``navreplay run gps-ins REC`` that also saves
+the .rrd (written block by block); ``whole`` reads the recording whole and keeps every
+estimate, as a replay in memory does, for comparison in the same run.
 
 Usage::
 
-    python -m benchmarks.bench_memory [--hours 1 4 24] [--modes streamed whole] [--dir DIR]
+    python -m benchmarks.bench_memory [--hours 1 4 24] [--modes streamed rrd whole] [--dir DIR]
 """
 
 from __future__ import annotations
@@ -47,9 +48,10 @@ def _child(mode: str, path: str) -> None:
 
     run = importlib.import_module("navreplay.jobs.run")
     start = time.perf_counter()
-    job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(_Path(path),),
-                     viz=VizOptions(mode=VizMode.NONE))
-    report = run.run(job) if mode == "streamed" else run._run_one(job, None)
+    viz = (VizOptions(mode=VizMode.SAVE, path=_Path(path).with_suffix(".rrd")) if mode == "rrd"
+           else VizOptions(mode=VizMode.NONE))
+    job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(_Path(path),), viz=viz)
+    report = run._run_one(job, None) if mode == "whole" else run.run(job)
     seconds = time.perf_counter() - start
     summary = report.summary["filters"]["gps-ins"]
     print(json.dumps({"peak_mib": peak_rss() / 2**20, "seconds": seconds,
@@ -67,8 +69,8 @@ def measure(mode: str, path: Path) -> dict[str, float]:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_memory")
     parser.add_argument("--hours", type=float, nargs="+", default=[1.0, 4.0])
-    parser.add_argument("--modes", nargs="+", default=["streamed", "whole"],
-                        choices=["streamed", "whole"])
+    parser.add_argument("--modes", nargs="+", default=["streamed", "rrd", "whole"],
+                        choices=["streamed", "rrd", "whole"])
     parser.add_argument("--dir", type=Path, default=Path("bench-data"))
     parser.add_argument("--child", nargs=2, metavar=("MODE", "PATH"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)

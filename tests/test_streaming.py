@@ -110,7 +110,7 @@ def test_run_on_a_file_streams_and_scores_as_the_whole_run(
         assert got[k] == pytest.approx(v, rel=1e-12, abs=1e-12), k
 
 
-def test_views_and_exports_read_the_whole_file(drive: Recording, tmp_path) -> None:
+def test_live_views_and_exports_read_the_whole_file(drive: Recording, tmp_path) -> None:
     import importlib
 
     from navreplay.io.writer import write_recording
@@ -121,5 +121,8 @@ def test_views_and_exports_read_the_whole_file(drive: Recording, tmp_path) -> No
     path = tmp_path / "drive.mcap"
     write_recording(path, drive)
     job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(path,),
-                     viz=VizOptions(mode=VizMode.SAVE))
+                     viz=VizOptions(mode=VizMode.SPAWN))
     assert run._run_streamed(job, None) is None
+    exports = dataclasses.replace(job, viz=VizOptions(mode=VizMode.SAVE, path=tmp_path / "a.rrd"),
+                                  export_dir=tmp_path / "csv")
+    assert run._run_streamed(exports, None) is None

@@ -134,9 +134,11 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
 
 
 def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
-    """Replay one intact MCAP file window by window (memory flat in its length); None when the
-    run needs the whole recording (a view, exports, a report, a reference, paced replay, a
-    rosbag2 folder or a damaged file): :func:`_run_one` then reads it whole."""
+    """Replay one intact MCAP file window by window (memory flat in its length), its .rrd
+    written block by block; None when the run needs the whole recording (a live view, exports,
+    a report, a reference, paced replay, a rosbag2 folder or a damaged file): :func:`_run_one`
+    then reads it whole."""
+    from navreplay.filters.base import TruthColumn
     from navreplay.io.integrity import salvage_watch
     from navreplay.io.reader import is_rosbag, read_streams
     from navreplay.io.windows import STREAMED, NotStreamable, read_windows, streamable
@@ -147,7 +149,7 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
 
     path = Path(job.recordings[0])
     options = job.log or LogOptions()
-    if (job.viz.mode is not VizMode.NONE or job.export_dir is not None
+    if (job.viz.mode not in (VizMode.NONE, VizMode.SAVE) or job.export_dir is not None
             or job.report_path is not None or job.pacing is not None
             or options.reference is not None or is_rosbag(path) or not streamable(path)):
         return None
@@ -172,25 +174,42 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
                               output_rate=job.output_rate, validate=False,
                               max_imu_gap=job.max_imu_gap)
                 for spec, cls in zip(job.filters, classes, strict=True)]
-    scores = [RunningSummary(spec.label, head.t0_ns, head.metadata.true_errors, has_truth)
-              for spec in job.filters]
+    t0_ns = head.t0_ns
     del head
+    sink = open_output(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
+    scored = None if sink is None else sink.log_block
+    scores = [RunningSummary(spec.label, t0_ns, aiding.metadata.true_errors, has_truth,
+                             scored=scored)
+              for spec in job.filters]
+    columns = {st.truth.column: st.unit for session in sessions for st in session.states
+               if isinstance(st.truth, TruthColumn)}
     duration = float(aiding.metadata.params.get("duration") or 0.0)
-    while True:
-        following = next(windows, None)
-        final = following is None
-        imu = window.get(StreamKind.IMU)
-        for session, score in zip(sessions, scores, strict=True):
-            score.add(session.feed(imu, final=final))
-            score.add_truth(window.get(StreamKind.TRUTH), final=final)
-        if progress is not None and imu is not None and len(imu) and duration > 0:
-            done = (int(imu.t_ns[-1]) - aiding.t0_ns) * 1e-9
-            progress(min(int(done), int(duration)), int(duration))
-        if final:
-            break
-        window = following
-    summaries = {spec.label: score.summary()
-                 for spec, score in zip(job.filters, scores, strict=True)}
+    try:
+        while True:
+            following = next(windows, None)
+            final = following is None
+            imu, truth = window.get(StreamKind.IMU), window.get(StreamKind.TRUTH)
+            if sink is not None and truth is not None and len(truth):
+                sink.log_truth_window(truth, t0_ns, columns)
+            for session, score in zip(sessions, scores, strict=True):
+                block = session.feed(imu, final=final)
+                if sink is not None:
+                    sink.log_innovations(block)
+                score.add(block)
+                score.add_truth(truth, final=final)
+            if progress is not None and imu is not None and len(imu) and duration > 0:
+                done = (int(imu.t_ns[-1]) - aiding.t0_ns) * 1e-9
+                progress(min(int(done), int(duration)), int(duration))
+            if final:
+                break
+            window = following
+        summaries = {spec.label: score.summary()
+                     for spec, score in zip(job.filters, scores, strict=True)}
+        hint = close_output(sink, job.viz)
+    except BaseException:
+        if sink is not None:
+            sink.abort()
+        raise
     summary = {"recording": str(path), "coverage": 1.0, "salvaged": False,
                "filters": summaries}
     if job.summary_path is not None:
@@ -200,7 +219,7 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     if not has_truth:
         table = "(no truth or reference: innovation statistics only)\n\n" + table
     return RunReport(title=f"{', '.join(s.label for s in job.filters)} over {path}",
-                     table=table, summary=summary, viz="", notes=notes)
+                     table=table, summary=summary, viz=hint, notes=notes)
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:

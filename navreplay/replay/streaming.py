@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -137,11 +137,18 @@ class RunningSummary:
         Whether a truth stream follows (else: innovation statistics only).
     probability : float
         Of the chi-square bounds.
+    scored : callable, optional
+        Called with each block of rows as it is scored, its metrics
+        (:func:`navreplay.metrics.run_metrics`; None without truth) and the truth rows around
+        it (None without truth): what a Rerun sink logs block by block.
     """
 
     def __init__(self, label: str, t0_ns: int, true_errors: Mapping[str, Any],
-                 has_truth: bool, probability: float = 0.95) -> None:
+                 has_truth: bool, probability: float = 0.95,
+                 scored: Callable[[RunResult, metrics.RunMetrics | None, Stream | None], None]
+                 | None = None) -> None:
         self.label = label
+        self.scored = scored
         self.t0_ns = t0_ns
         self.true_errors = true_errors
         self.has_truth = has_truth
@@ -201,9 +208,13 @@ class RunningSummary:
         self._t = (t[0] if self.rows == 0 else self._t[0], t[-1])
         self.rows += t.shape[0]
         if not self.has_truth or self._truth is None:
+            if self.scored is not None:
+                self.scored(rows, None, None)
             return
         ref = metrics.Reference(self._truth, self.t0_ns, self.true_errors)
         m = metrics.run_metrics(rows, ref)
+        if self.scored is not None:
+            self.scored(rows, m, self._truth)
         self._distance = self._offset + float(m.distance[-1])
         if m.nav is not None:
             p = m.nav.pos_ned

@@ -153,6 +153,48 @@ def dimmer(color: tuple[int, ...], f: float) -> tuple[int, int, int]:
 # the sink
 
 
+class _Track:
+    """The points of a trajectory's static lines (3D strip, map track), collected as its rows
+    come: the first row of each time slot, the slot doubled whenever more than twice
+    :data:`MAX_STRIP_POINTS` are held. Memory is bounded, and the points kept do not depend on
+    how the rows were split (a coarser slot's first row is the first row of a finer slot)."""
+
+    def __init__(self) -> None:
+        self.rate = WORLD_RATE_HZ
+        self.last = -np.inf
+        self.t = np.empty(0)
+        self.ned = np.empty((0, 3))
+        self.pos = np.empty((0, 3))
+        self.logged = False
+
+    def add(self, t: np.ndarray, ned: np.ndarray, pos: np.ndarray) -> None:
+        """Rows later than those before: times [s], local NED [m], lat/lon [rad], h."""
+        if not t.shape[0]:
+            return
+        k = convert.decimate(t, self.rate, after=self.last)
+        self.last = float(t[-1])
+        self.t = np.concatenate([self.t, t[k]])
+        self.ned = np.concatenate([self.ned, ned[k]])
+        self.pos = np.concatenate([self.pos, pos[k]])
+        while self.t.shape[0] > 2 * MAX_STRIP_POINTS:
+            self.rate /= 2.0
+            k = convert.decimate(self.t, self.rate)
+            self.t, self.ned, self.pos = self.t[k], self.ned[k], self.pos[k]
+
+
+@dataclasses.dataclass
+class _TruthLog:
+    """Progress of the truth logged so far (whole, or window by window)."""
+
+    root: str
+    t0_ns: int
+    rate_hz: float | None
+    last: float = -np.inf  # time of the last truth row seen [s]
+    yaw: tuple[float, float] | None = None  # last raw and unwrapped yaw [rad]
+    track: _Track = dataclasses.field(default_factory=lambda: _Track())
+    axes: bool = False
+
+
 @dataclasses.dataclass
 class _Run:
     """Logging state of one filter label."""
@@ -168,6 +210,8 @@ class _Run:
     axes: bool = False
     yaw: float | None = None
     finished: bool = False
+    geo_t: float = -np.inf
+    track: _Track = dataclasses.field(default_factory=lambda: _Track())
 
 
 Truth = Recording | Stream
@@ -225,8 +269,15 @@ class Sink:
         self._styled: set[str] = set()
         self._ref: np.ndarray | None = None
         self._extent = 0.0
+        self._box: tuple[np.ndarray, np.ndarray] | None = None  # NED extremes of the truth
         self._truth: convert.NavColumns | None = None
-        self._truth_yaw: np.ndarray | None = None
+        self._truth_yaw: tuple[np.ndarray, np.ndarray] | None = None  # t [s], unwrapped yaw
+        self._truth_log: _TruthLog | None = None
+        # extent of the true track up to each time (ellipsoid caps): times [s], extents [m]
+        self._extent_curve: tuple[np.ndarray, np.ndarray] | None = None
+        self._extent_box: tuple[np.ndarray, np.ndarray] | None = None  # up to the last block
+        self._streamed = False
+        self._truth_wanted: dict[str, str] = {}
         self._truth_stream: Stream | None = None
         self._truth_keep: tuple[np.ndarray, int, str] | None = None
         self._truth_columns: set[str] = set()
@@ -273,14 +324,15 @@ class Sink:
         if plan:
             saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
                      self._extent, self._truth, self._truth_yaw, self._truth_stream,
-                     self._world_coords, set(self._truth_columns))
+                     self._world_coords, set(self._truth_columns), self._box,
+                     copy.deepcopy(self._truth_log), self._extent_box)
             self._rec = _NullStream()  # type: ignore[assignment]
             try:
                 log()
             finally:
                 (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
                  self._truth_yaw, self._truth_stream, self._world_coords,
-                 self._truth_columns) = saved
+                 self._truth_columns, self._box, self._truth_log, self._extent_box) = saved
             if self.catalog.signature() != self._sent:
                 self.send_blueprint()
         log()
@@ -398,26 +450,16 @@ class Sink:
         pos: np.ndarray,
         t0_ns: int,
         color: tuple[int, int, int],
-        *,
-        track: bool,
-        width: float = 3.0,
+        after: float = -np.inf,
     ) -> None:
-        """Latitude/longitude for the map view: the track (static, once) and the position at
-        :data:`COVARIANCE_RATE_HZ` over time."""
+        """Latitude/longitude for the map view at :data:`COVARIANCE_RATE_HZ` over time (rows
+        later than ``after`` [s])."""
         ok = np.isfinite(pos[:, :2]).all(axis=1)
         if not ok.any():
             return
         deg = np.degrees(pos[ok, :2])
         root = entity_path("map", label)
-        if track and deg.shape[0] >= 2:
-            self._rec.log(
-                f"{root}/track",
-                rr.GeoLineStrings(
-                    lat_lon=[_thin(deg)], colors=[color], radii=rr.Radius.ui_points(width / 2)
-                ),
-                static=True,
-            )
-        k = convert.decimate(t[ok], COVARIANCE_RATE_HZ)
+        k = convert.decimate(t[ok], COVARIANCE_RATE_HZ, after=after)
         if k.shape[0]:
             self._rec.send_columns(
                 f"{root}/position",
@@ -432,6 +474,23 @@ class Sink:
                     static=True,
                 )
         self.catalog.geo = True
+
+    def _log_track(self, label: str, track: _Track, color: tuple[int, int, int],
+                   width: float, map_width: float) -> None:
+        """The static lines of a trajectory: the 3D strip and the map track (once)."""
+        if track.logged:
+            return
+        track.logged = True
+        self._strip(entity_path("world", label, "trajectory"), track.ned, color, width=width)
+        ok = np.isfinite(track.pos[:, :2]).all(axis=1)
+        if ok.sum() >= 2:
+            self._rec.log(
+                f"{entity_path('map', label)}/track",
+                rr.GeoLineStrings(lat_lon=[_thin(np.degrees(track.pos[ok, :2]))], colors=[color],
+                                  radii=rr.Radius.ui_points(map_width / 2)),
+                static=True,
+            )
+            self.catalog.geo = True
 
     # -- truth ---------------------------------------------------------------------------
 
@@ -458,29 +517,50 @@ class Sink:
             Decimate the time series to this rate [Hz]; None keeps every row. Errors are always
             computed against the full-rate truth.
         """
-        if self._truth_stream is not None:
+        if self._truth_stream is not None or self._truth_log is not None:
             raise ValueError("truth is already logged in this sink (one recording per sink)")
-        self._layout_first(lambda: self._log_truth(truth, t0_ns, entity, rate_hz))
 
-    def _log_truth(
-        self, truth: Truth, t0_ns: int | None, entity: str, rate_hz: float | None
-    ) -> None:
-        stream, t0 = _truth_stream(truth, t0_ns)
+        def log() -> None:
+            stream, t0 = _truth_stream(truth, t0_ns)
+            self._truth_stream = stream
+            keep = self._log_truth_rows(stream, t0, entity, rate_hz)
+            self._truth = _truth_nav(stream, t0)
+            self._extent_curve = self._track_extent(self._truth)[:2]
+            self._truth_keep = (keep, t0, "/" + entity.strip("/"))
+            self._finish_truth()
+
+        self._layout_first(log)
+
+    def _log_truth_rows(
+        self, stream: Stream, t0: int, entity: str, rate_hz: float | None
+    ) -> np.ndarray:
+        """Log truth rows later than those before; returns the indices of the rows kept in the
+        time series."""
+        root = "/" + entity.strip("/")
+        log = self._truth_log
+        if log is None:
+            log = self._truth_log = _TruthLog(root, t0, rate_hz)
         nav = _truth_nav(stream, t0)
-        self._truth = nav
-        self._truth_stream = stream
         if self._ref is None and nav.t.shape[0]:
             self._ref = nav.pos[0].copy()
         ned = convert.local_ned(nav.pos, self._ref)
         finite = ned[np.isfinite(ned).all(axis=1)]
         if finite.shape[0]:
-            self._extent = max(self._extent, float(np.max(np.ptp(finite, axis=0))))
+            lo, hi = finite.min(axis=0), finite.max(axis=0)
+            if self._box is not None:
+                lo, hi = np.minimum(self._box[0], lo), np.maximum(self._box[1], hi)
+            self._box = (lo, hi)
+            self._extent = max(self._extent, float(np.max(hi - lo)))
         values = convert.nav_values(nav, self._ref)
-        self._truth_yaw = values["yaw"] = np.unwrap(values["yaw"])
-        keep = convert.decimate(nav.t, rate_hz) if rate_hz else np.arange(nav.t.shape[0])
-        self._truth_keep = (keep, t0, "/" + entity.strip("/"))
+        raw = values["yaw"]
+        values["yaw"] = _unwrap_after(raw, log.yaw)
+        if raw.shape[0]:
+            log.yaw = (float(raw[-1]), float(values["yaw"][-1]))
+        if self._truth_yaw is None:
+            self._truth_yaw = (nav.t, values["yaw"])
+        keep = (convert.decimate(nav.t, rate_hz, after=log.last) if rate_hz
+                else np.flatnonzero(nav.t > log.last))
         idx = self._indexes(nav.t[keep], t0)
-        root = "/" + entity.strip("/")
         for name, v in values.items():
             u = display_unit(NAV_UNITS[name])
             path = f"{root}/nav/{name}"
@@ -490,39 +570,61 @@ class Sink:
                              rank=_RANK_NAV)
         # 3D and map
         world = f"/world{root}"
-        self._strip(f"{world}/trajectory", ned, TRUTH_COLOR, width=1.5)
-        w = convert.decimate(nav.t, WORLD_RATE_HZ)
+        w = convert.decimate(nav.t, WORLD_RATE_HZ, after=log.last)
         if w.shape[0]:
             self._rec.send_columns(
                 f"{world}/body",
                 indexes=self._indexes(nav.t[w], t0),
                 columns=rr.Transform3D.columns(translation=ned[w], quaternion=_xyzw(nav.q_nb[w])),
             )
+        log.track.add(nav.t, ned, nav.pos)
+        self._geo(root.strip("/"), nav.t, nav.pos, t0, TRUTH_COLOR, after=log.last)
+        if nav.t.shape[0]:
+            log.last = float(nav.t[-1])
+        return keep
+
+    def _finish_truth(self) -> None:
+        """The static parts of the truth: trajectory, map track and body axes."""
+        log = self._truth_log
+        if log is None or log.track.logged:
+            return
+        world = f"/world{log.root}"
+        if log.track.t.shape[0]:
             self._axes(f"{world}/body/axes", _axis_size(self._extent))
-        self._geo(root.strip("/"), nav.t, nav.pos, t0, TRUTH_COLOR, track=True, width=1.5)
+        self._log_track(log.root.strip("/"), log.track, TRUTH_COLOR, 1.5, 1.5)
 
     def _truth_column(self, column: str, unit: str) -> str | None:
         """Entity of a truth column (all components, in the display unit of ``unit``), logged
         on first use; None when the truth lacks it or has more than 3 components."""
+        if column in self._truth_columns and self._truth_log is not None:
+            return f"{self._truth_log.root}/extra/{entity_path(column)[1:]}"
         stream = self._truth_stream
-        if stream is None or self._truth_keep is None or column not in stream.columns:
+        if stream is None or self._truth_keep is None:
             return None
         keep, t0, root = self._truth_keep
-        path = f"{root}/extra/{entity_path(column)[1:]}"
-        if column in self._truth_columns:
-            return path
+        if not self._truth_column_rows(stream, keep, t0, root, column, unit):
+            return None
+        self._truth_columns.add(column)
+        return f"{root}/extra/{entity_path(column)[1:]}"
+
+    def _truth_column_rows(self, stream: Stream, keep: np.ndarray, t0: int, root: str,
+                           column: str, unit: str) -> bool:
+        """Log the rows ``keep`` of a truth column; False when the stream lacks it or it has
+        more than 3 components."""
+        if column not in stream.columns:
+            return False
         values = stream.columns[column][keep]
         flat = values.reshape(keep.shape[0], int(np.prod(values.shape[1:], dtype=np.int64)))
         if flat.shape[1] > 3:
-            return None
+            return False
         k = flat.shape[1]
+        path = f"{root}/extra/{entity_path(column)[1:]}"
         names = ["truth"] if k == 1 else [f"truth {column}[{j}]" for j in range(k)]
         self._style(path, names, [lighter(TRUTH_COLOR, 0.3 * j) for j in range(k)], [2.0] * k)
         u = display_unit(unit)
         t = (stream.t_ns[keep] - np.int64(t0)).astype(np.float64) * 1e-9
         self._scalars(path, self._indexes(t, t0), flat * u.scale)
-        self._truth_columns.add(column)
-        return path
+        return True
 
     def _ensure_truth(self, truth: Truth, t0_ns: int) -> None:
         """Log ``truth`` unless this sink already holds it; refuse a different recording's."""
@@ -622,13 +724,126 @@ class Sink:
             if nees is not None:
                 self._log_nees(r, result, *nees)
             self._log_innovations(r, result)
-            if result.nav_pos is not None and self._ref is not None:
-                ned = convert.local_ned(result.nav_pos, self._ref)
-                self._strip(entity_path("world", r.label, "trajectory"), ned, r.color)
-                self._geo(r.label, result.t, result.nav_pos, result.t0_ns, r.color, track=True)
+            self._finish_run(r)
 
         self._layout_first(log)
         run.finished = True
+
+    # -- streamed runs -------------------------------------------------------------------
+
+    def log_truth_window(self, truth: Stream, t0_ns: int,
+                         columns: Mapping[str, str] | None = None) -> None:
+        """Log a window of the truth stream (rows later than those logged before), for a run
+        logged block by block (:meth:`log_block`); the trajectory and map track follow on
+        :meth:`close`.
+
+        Parameters
+        ----------
+        truth : Stream
+            Truth rows (columns ``pos``, ``v_n``, ``q_nb``).
+        t0_ns : int
+            Recording start [ns].
+        columns : mapping, optional
+            Truth columns that declared states are scored against (column -> SI unit), logged
+            alongside (those with up to 3 components).
+        """
+        if self._truth_stream is not None:
+            raise ValueError("truth is already logged whole in this sink")
+        self._streamed = True
+
+        def log() -> None:
+            keep = self._log_truth_rows(truth, t0_ns, "/truth", TRUTH_RATE_HZ)
+            root = self._truth_log.root if self._truth_log is not None else "/truth"
+            for column, unit in (columns or {}).items():
+                if self._truth_column_rows(truth, keep, t0_ns, root, column, unit):
+                    self._truth_columns.add(column)
+
+        self._layout_first(log, plan=self._truth_log is None)
+
+    def log_block(self, rows: RunResult, metrics: RunMetrics | None = None,
+                  truth: Stream | None = None) -> None:
+        """Log a block of one run's estimates, later than its blocks before (a run streamed
+        block by block: the same entities as :meth:`log_run` of the whole run).
+
+        Parameters
+        ----------
+        rows : RunResult
+            The block's rows (its innovations go to :meth:`log_innovations`).
+        metrics : RunMetrics, optional
+            The scores of these rows (:func:`navreplay.metrics.run_metrics`).
+        truth : Stream, optional
+            Truth rows around the block (for the navigation errors).
+        """
+        self._streamed = True
+        run = self._run(rows.label, None)
+        if run.finished:
+            raise ValueError(f"run {rows.label!r} is already logged in this sink")
+        errors, nees = _from_run_metrics(rows, metrics) if metrics is not None else ({}, None)
+
+        def log() -> None:
+            r = self._runs[rows.label]
+            self._truth = None if truth is None else _truth_nav(truth, rows.t0_ns)
+            box = self._extent_box
+            if self._truth is not None and rows.t.shape[0]:
+                t, ext, lo, hi = self._track_extent(self._truth, box)
+                self._extent_curve = (t, ext)
+                k = int(np.searchsorted(t, rows.t[-1], side="right")) - 1
+                if k >= 0:
+                    box = (lo[k], hi[k])
+            self._log_rows(r, rows, 0, rows.t.shape[0])
+            self._extent_box = box
+            self._log_errors(r, rows, errors)
+            if nees is not None:
+                self._log_nees(r, rows, *nees)
+
+        self._layout_first(log, plan=run.rows == 0)
+
+    def log_innovations(self, block: RunResult) -> None:
+        """Log the innovations of a block of a run streamed block by block."""
+        self._streamed = True
+        run = self._run(block.label, None)
+        if run.finished:
+            raise ValueError(f"run {block.label!r} is already logged in this sink")
+        if any(s.t.shape[0] for s in block.innovations.values()):
+            self._layout_first(lambda: self._log_innovations(self._runs[block.label], block))
+
+    def _finish_run(self, run: _Run) -> None:
+        """The static parts of a run: trajectory, map track (and body axes when streamed)."""
+        if run.track.logged:
+            return
+        if not run.axes and run.track.t.shape[0]:
+            ned = run.track.ned[np.isfinite(run.track.ned).all(axis=1)]
+            if ned.shape[0]:
+                extent = self._extent or float(np.max(np.ptp(ned, axis=0)))
+                self._axes(entity_path("world", run.label, "body", "axes"), _axis_size(extent))
+                run.axes = True
+        self._log_track(run.label, run.track, run.color, 2.5, 3.0)
+
+    def _track_extent(
+        self, truth: convert.NavColumns, box: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Extent of the true track [m] up to each of its rows (the NED box grown from
+        ``box``): times, extents, and the box's low and high corners row by row."""
+        ned = convert.local_ned(truth.pos, self._ref) if self._ref is not None else truth.pos
+        ok = np.isfinite(ned).all(axis=1)[:, None]
+        lo = np.where(ok, ned, np.inf)
+        hi = np.where(ok, ned, -np.inf)
+        if box is not None and lo.shape[0]:
+            lo[0], hi[0] = np.minimum(lo[0], box[0]), np.maximum(hi[0], box[1])
+        lo = np.minimum.accumulate(lo, axis=0)
+        hi = np.maximum.accumulate(hi, axis=0)
+        with np.errstate(invalid="ignore"):
+            ext = np.max(hi - lo, axis=1) if lo.shape[0] else np.empty(0)
+        return truth.t, np.where(np.isfinite(ext), ext, 0.0), lo, hi
+
+    def _extent_at(self, t: np.ndarray) -> np.ndarray | float:
+        """Extent of the true track up to times ``t`` [m] (ellipsoids are capped relative to
+        the track drawn so far); the whole extent without a truth."""
+        if self._extent_curve is None or not self._extent_curve[0].shape[0]:
+            return self._extent
+        tt, ext = self._extent_curve
+        k = np.searchsorted(tt, t, side="right") - 1
+        return np.where(k >= 0, ext[np.clip(k, 0, None)], 0.0)
 
     def _declare(self, run: _Run, result: RunResult) -> None:
         run.states = {s.name: s for s in (*result.states, *result.scored_extras)}
@@ -778,6 +993,10 @@ class Sink:
                              f"{L}: {title(n, u, 'error')}{bounds}", path,
                              rank=_RANK_ERROR + run.order, legend=False)
         self._log_world(run, result, nav, a, b, values)
+        run.track.add(t, np.stack([values["p_N"], values["p_E"], values["p_D"]], axis=1),
+                      nav.pos)
+        self._geo(L, t, nav.pos, result.t0_ns, run.color, after=run.geo_t)
+        run.geo_t = float(t[-1])
 
     def _unwrap_yaw(self, run: _Run, t: np.ndarray, yaw: np.ndarray) -> np.ndarray:
         """Yaw without +-180 deg jumps, continuing the previous rows, on the truth's branch."""
@@ -789,8 +1008,8 @@ class Sink:
         first = out[ok][0]
         if run.yaw is not None:
             target = run.yaw
-        elif self._truth is not None and self._truth_yaw is not None and self._truth.t.size:
-            target = float(np.interp(t[ok][0], self._truth.t, self._truth_yaw))
+        elif self._truth_yaw is not None and self._truth_yaw[0].size:
+            target = float(np.interp(t[ok][0], *self._truth_yaw))
         else:
             target = first
         out += 2.0 * np.pi * np.round((target - first) / (2.0 * np.pi))
@@ -819,7 +1038,7 @@ class Sink:
                 columns=rr.Transform3D.columns(translation=ned[w], quaternion=_xyzw(nav.q_nb[w])),
             )
             run.world_t = float(nav.t[w[-1]])
-            if not run.axes:
+            if not run.axes and not self._streamed:
                 extent = self._extent or float(np.max(np.ptp(ned[w], axis=0)))
                 self._axes(entity_path("world", L, "body", "axes"), _axis_size(extent))
                 run.axes = True
@@ -831,7 +1050,7 @@ class Sink:
         if not c.shape[0]:
             return
         half, q = convert.ellipsoids(P_ned[c], N_SIGMA)
-        cap = ELLIPSOID_CAP * max(self._extent, 10.0)
+        cap = ELLIPSOID_CAP * np.maximum(self._extent_at(nav.t[c]), 10.0)
         factor = np.minimum(1.0, cap / np.maximum(half.max(axis=1), 1e-12))
         labels = ["" if f >= 1.0 else f"{L} 3σ drawn × {f:.2g}" for f in factor]
         cov_path = entity_path("world", L, "covariance")
@@ -1051,6 +1270,9 @@ class Sink:
         if self._closed:
             return self.path or self.url
         try:
+            self._finish_truth()
+            for run in self._runs.values():
+                self._finish_run(run)
             self.send_blueprint()
             self.flush(timeout)
             if not self._keep_alive:  # a served stream keeps its server up for late browsers
@@ -1143,6 +1365,14 @@ def _truth_nav(stream: Stream, t0_ns: int) -> convert.NavColumns:
         raise ValueError(f"truth stream lacks columns {missing} (has {sorted(stream.columns)})")
     t = (stream.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9
     return convert.NavColumns(t, stream["pos"], stream["v_n"], stream["q_nb"])
+
+
+def _unwrap_after(yaw: np.ndarray, previous: tuple[float, float] | None) -> np.ndarray:
+    """``yaw`` unwrapped, continuing rows whose last raw and unwrapped values are
+    ``previous``."""
+    if previous is None:
+        return np.unwrap(yaw)
+    return np.unwrap(np.concatenate([[previous[0]], yaw]))[1:] + (previous[1] - previous[0])
 
 
 def _xyzw(q_nb: np.ndarray) -> np.ndarray:
