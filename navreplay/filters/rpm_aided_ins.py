@@ -253,6 +253,9 @@ class RpmAidedInsParams(FilterParams):
     constraint_sigma: float = 0.002
     """Noise of the no-sideslip and no-heave rows of the RPM update [m/s]: the vehicle's
     lateral and vertical water-relative velocity in the RPM frame."""
+    second_order: bool = True
+    """Add the covariance of the products of error states in the RPM residual to its R
+    (:func:`rpm_second_order`)."""
     depth_sigma: float = 0.1
     """Depth measurement noise [m]."""
     depth_aiding: bool = True
@@ -391,6 +394,63 @@ def rpm_noise_covariance(m_hat: np.ndarray, k_hat: float, speed_sigma: float,
     a, _ = rpm_axis(float(m_hat[0]), float(m_hat[1]))
     aa = np.outer(a, a)
     return (speed_sigma / (1.0 + k_hat)) ** 2 * aa + constraint_sigma**2 * (np.eye(3) - aa)
+
+
+_SECOND_ORDER = np.r_[3:9, 15:20]
+"""The states of the bilinear terms of the RPM residual: dv, phi, k, m, v_c."""
+
+
+def rpm_second_order(nav: np.ndarray, u_hat: float, k_hat: float, m_hat: np.ndarray,
+                     v_c_hat: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance of the second-order terms of the RPM residual (25) (Gaussian
+    second-order filter, docs/methods/rpm-aided-ins.md §4.4).
+
+    Beyond ``H dx`` the residual holds products of error states as large as its across-axis
+    part: the attitude error turning the velocity and current errors, ``C_bn [phi x] (dv -
+    dv_c)`` (a 3 mil heading error times a 0.2 m/s velocity error is 0.6 mm/s), and the
+    scale-factor error scaling the misalignment, ``u_hat dk / (1 + k_hat) (da/dm) dm`` (2 % of
+    0.1 deg at 14 m/s is 0.5 mm/s); the squares ``C_bn [phi x]^2 w / 2``, ``-a u_hat dk^2 /
+    (1 + k_hat)^2`` and ``-u_hat (d^2 a / dm^2) dm dm / 2`` complete the second order. Each row
+    is a quadratic form ``z2_i = dx^T S_i dx`` (S_i symmetric, half the Hessian); for
+    dx ~ N(0, P)::
+
+        E[z2_i] = tr(S_i P),   Cov(z2_i, z2_j) = 2 tr(S_i P S_j P)
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+    u_hat : float
+        Corrected RPM speed [m/s].
+    k_hat : float
+    m_hat, v_c_hat : ndarray, shape (2,)
+    P : ndarray, shape (24, 24)
+
+    Returns
+    -------
+    mean : ndarray, shape (3,) [m/s]
+    cov : ndarray, shape (3, 3) [(m/s)^2]
+    """
+    C_bn = ie.nav_dcm(nav).T
+    a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
+    w = nav[3:6].copy()
+    w[:2] -= v_c_hat
+    s = u_hat / (1.0 + k_hat)
+    S = np.zeros((3, 11, 11))  # local order: dv 0-2, phi 3-5, k 6, m 7-8, v_c 9-10
+    for i in range(3):
+        c = C_bn[i]
+        L = -0.5 * skew(c)  # c . (phi x dw) = -phi^T [c x] dw, half in each triangle
+        S[i, 3:6, 0:3] = L
+        S[i, 3:6, 9:11] = -L[:, 0:2]
+        S[i, 6, 7:9] = 0.5 * s * da[i]
+        S[i] += S[i].T
+        S[i, 3:6, 3:6] = 0.25 * (np.outer(c, w) + np.outer(w, c)) - 0.5 * (c @ w) * np.eye(3)
+        S[i, 6, 6] = -a[i] * s / (1.0 + k_hat)
+        S[i, 7:9, 7:9] = 0.5 * u_hat * a[0] * (i == 0) * np.eye(2)  # exp([m x]) e_x at m_x = 0
+    Ps = P[np.ix_(_SECOND_ORDER, _SECOND_ORDER)]
+    SP = S @ Ps
+    mean = np.trace(SP, axis1=1, axis2=2)
+    cov = 2.0 * np.einsum("iab,jba->ij", SP, SP)
+    return mean, cov
 
 
 def depth_measurement(nav: np.ndarray, depth: float, sigma: float) -> kalman.Measurement:
@@ -542,6 +602,11 @@ class RpmAidedIns(Filter):
         if not (np.isfinite(z).all() and np.isfinite(H).all()):
             raise ValueError(f"{name} measurement at t = {t:.6f} s is not finite: z = {z}")
         self._sync_covariance()
+        if name == "rpm" and self.params.second_order:
+            u_hat = self.speed_per_rpm * float(sample["rpm"]) / (1.0 + self.k_rpm)
+            v_c = self.v_c if self.mode is Mode.RPM_CURRENT else np.zeros(2)
+            _, cov = rpm_second_order(self.nav, u_hat, self.k_rpm, self.m_rpm, v_c, self.P)
+            measurement = kalman.Measurement(z, H, measurement.R + cov)
         # shapes are fixed by construction and R by the parameters; P is checked below
         c = kalman.correct(np.zeros(N_STATES), self.P, *measurement, frozen=self._frozen, t=t,
                            check=False)
