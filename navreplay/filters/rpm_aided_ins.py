@@ -1,9 +1,9 @@
 """RPM velocity-aided underwater INS with sea-current estimation ("rpm-aided-ins").
 
-An indirect feedback Kalman filter with 24 error states (Choi, JANT 23(3), 2019; method
-docs/methods/rpm-aided-ins.md §4). The NED strapdown mechanization of :mod:`navreplay.strapdown`
-runs on the bias-compensated IMU at the IMU rate; every ``cov_step`` (0.1 s) the error
-covariance is propagated with the 24-state error model; at ``update_rate`` (1 Hz) the
+An indirect feedback Kalman filter with the 24 error states of Choi (JANT 23(3), 2019) and three
+gyro z-rate states (method docs/methods/rpm-aided-ins.md §4). The NED strapdown mechanization of
+:mod:`navreplay.strapdown` runs on the compensated IMU at the IMU rate; every ``cov_step``
+(0.1 s) the error covariance is propagated with the 27-state error model; at ``update_rate`` (1 Hz) the
 propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
 back. Besides the navigation errors and the IMU biases the filter estimates the RPM scale
 factor, the RPM-axis misalignment and the horizontal sea current, which removes the drift a
@@ -26,7 +26,14 @@ index name (Estimate.x)   frame     unit     error state dx (``Estimate.x`` hold
 18-19 vc_N, vc_E          n (NED)   m/s      sea-current velocity error (current estimate)
 20-22 mu_x, mu_y, mu_z    b         rad      mounting misalignment (transfer alignment; inert)
 23    dT                  -         s        master data delay (transfer alignment; inert)
+24-25 m_g_xz, m_g_yz      b (FRD)   rad      gyro misalignment of the z rate into x, y (estimate)
+26    s_g_z               b (FRD)   -        gyro z scale-factor error (estimate)
 ===== =================== ========= ======== ===============================================
+
+States 24-26 are navreplay's addition (docs/methods/rpm-aided-ins.md §4.1): the gyro z-rate
+errors of :mod:`navreplay.filters.ins_error` eq. (22), shared with ``gps-ins``. They act only
+in the turns (``F[phi, 24:27] = C_nb_hat omega_z``), where white gyro noise has the wrong
+shape; the gyro samples are compensated as ``omega - k_z (omega_z - b_g_z)``.
 
 In navigation mode the transfer-alignment states 20-23 are inert: zero rows in F, zero Q, zero
 columns in H, zero P0; they keep the layout of the paper's unified filter.
@@ -98,7 +105,7 @@ of frozen states forced to 0: the inert states always, the current in the ``rpm`
 
 Variants (§5, parameter ``mode``): ``pure`` (free inertial, no updates, P still
 propagated for the sigma plots), ``rpm`` (current frozen at 0: P0 = 0, Q = 0, K rows 0) and
-``rpm_current`` (all 24 states). One code path: the mode only sets P0, Q, the frozen mask and
+``rpm_current`` (all 27 states). One code path: the mode only sets P0, Q, the frozen mask and
 whether updates run.
 
 Initial covariance (§4.6): position, velocity and attitude sigmas from
@@ -112,7 +119,7 @@ Examples
 >>> rec = simulate("underwater-rpm", {"duration": 10.0}, seed=0)
 >>> res = replay(rec, RpmAidedIns, {"mode": "rpm_current"})
 >>> res.x.shape[1], sorted(res.innovations)
-(24, ['depth', 'rpm'])
+(27, ['depth', 'rpm'])
 """
 
 from __future__ import annotations
@@ -143,11 +150,12 @@ from navreplay.filters.base import (
     check_number,
     state_names,
 )
+from navreplay.filters.gps_ins import GYRO_Z_STATES
 from navreplay.filters.ins import initial_covariance, initial_sigma, initial_solution
 from navreplay.filters.registry import register_filter
 from navreplay.geo.rotations import skew
 from navreplay.streams import StreamKind
-from navreplay.units import DEG, DEG_PER_HOUR, MICRO_G
+from navreplay.units import ARCSEC, DEG, DEG_PER_HOUR, MICRO_G, PPM
 
 # -- state layout (eq. 20) -------------------------------------------------------------------
 
@@ -173,7 +181,9 @@ DELAY = slice(23, 24)
 """Master data time delay [s] (transfer-alignment mode only; inert)."""
 INERT = slice(20, 24)
 """States without dynamics, noise or measurement in navigation mode."""
-N_STATES = 24
+GYRO_Z = slice(24, 27)
+"""Gyro z-rate errors: misalignments of the z rate into x and y, z scale factor [rad, -]."""
+N_STATES = 27
 _CHECK_INTERVAL = 1.0
 """Filter time between full symmetry / PSD checks of the propagated P [s] (every correction
 is checked, and every propagation step checks the variances)."""
@@ -188,6 +198,7 @@ STATES: tuple[State, ...] = (
     State("vc_E", "m/s", Quantity.CURRENT, TruthColumn("current_n", (1,))),
     *(State(f"mu_{a}", "rad", Quantity.MISALIGNMENT) for a in "xyz"),
     State("dT", "s", Quantity.CLOCK),
+    *GYRO_Z_STATES,
 )
 """Declarations of the entries of ``Estimate.x``. Only the horizontal position errors count
 in the NEES: the consistency band of docs/methods/rpm-aided-ins.md §6 is on horizontal
@@ -219,8 +230,16 @@ class RpmAidedInsParams(FilterParams):
     """sqrt(q_a): velocity process noise density [(m/s)/sqrt(s)] (about 2 x the VRW, covering
     the unmodelled accelerometer scale factor and misalignment)."""
     gyro_noise: float = 5e-6
-    """sqrt(q_g): attitude process noise density [rad/sqrt(s)] (about 1.7 x the ARW, covering
-    the gyro scale factor during turns)."""
+    """sqrt(q_g): attitude process noise density [rad/sqrt(s)] (about 1.7 x the ARW: the gyro
+    and accelerometer scale-factor and misalignment errors that are not states; at the ARW
+    the tilt comes out 12 % optimistic in sigma)."""
+    gyro_z_states: bool = True
+    """Estimate the gyro z-rate errors (states 24-26: misalignments m_g_xz, m_g_yz and scale
+    factor s_g_z), which act only in the turns; False freezes them at 0."""
+    gyro_misalignment_sigma: float = 5.0 * ARCSEC
+    """Initial 1-sigma of m_g_xz and m_g_yz [rad] (5 arcsec)."""
+    gyro_scale_factor_sigma: float = 100.0 * PPM
+    """Initial 1-sigma of s_g_z [-] (100 ppm)."""
     current_noise: float = 0.0
     """sqrt(q_c): sea-current random-walk density [(m/s)/sqrt(s)] (``rpm_current`` only). 0:
     the current is a random constant, as in ``underwater-rpm``; a current that changes over
@@ -285,7 +304,8 @@ class RpmAidedInsParams(FilterParams):
             ) from None
         for name in ("accel_noise", "gyro_noise", "current_noise", "accel_bias_sigma",
                      "gyro_bias_sigma", "rpm_scale_factor_sigma", "rpm_misalignment_sigma",
-                     "current_sigma", "init_vel_sigma", "init_level_sigma",
+                     "current_sigma", "gyro_misalignment_sigma", "gyro_scale_factor_sigma",
+                     "init_vel_sigma", "init_level_sigma",
                      "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor",
                      "gap_accel_sigma", "gap_rate_sigma"):
             check_number(self, name)
@@ -423,7 +443,7 @@ def rpm_second_order(nav: np.ndarray, u_hat: float, k_hat: float, m_hat: np.ndar
         Corrected RPM speed [m/s].
     k_hat : float
     m_hat, v_c_hat : ndarray, shape (2,)
-    P : ndarray, shape (24, 24)
+    P : ndarray, shape (27, 27)
 
     Returns
     -------
@@ -484,7 +504,7 @@ class _Schedule:
 
 @register_filter
 class RpmAidedIns(Filter):
-    """24-state RPM velocity-aided INS with sea-current estimation (see the module docstring)."""
+    """27-state RPM velocity-aided INS with sea-current estimation (see the module docstring)."""
 
     name: ClassVar[str] = "rpm-aided-ins"
     summary: ClassVar[str] = (
@@ -519,6 +539,7 @@ class RpmAidedIns(Filter):
         self.k_rpm = 0.0
         self.m_rpm = np.zeros(2)
         self.v_c = np.zeros(2)
+        self.gyro_z = np.zeros(3)  # estimates of m_g_xz, m_g_yz, s_g_z
 
         # P0, §4.6 of the method
         init = context.metadata.initial_nav
@@ -532,6 +553,9 @@ class RpmAidedIns(Filter):
         sig[K_RPM] = p.rpm_scale_factor_sigma
         sig[M_RPM] = p.rpm_misalignment_sigma
         sig[CURRENT] = p.current_sigma if estimate_current else 0.0
+        if p.gyro_z_states:
+            sig[GYRO_Z] = (p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
+                           p.gyro_scale_factor_sigma)
         self.P = np.diag(sig**2)
         self.P[: ie.N_STATES, : ie.N_STATES] = initial_covariance(
             self.nav[strapdown.POS], np.maximum(pos_sigma, p.pos_sigma_floor),
@@ -547,13 +571,15 @@ class RpmAidedIns(Filter):
             q[CURRENT] = p.current_noise**2
         self._held: tuple[np.ndarray, np.ndarray, float] | None = None
         self._time_update = itu.TimeUpdate(
-            itu.ProcessNoise(q), p.cov_step, vertical=ie.Vertical.DEPTH,
+            itu.ProcessNoise(q, gyro_z_states=GYRO_Z.start), p.cov_step, vertical=ie.Vertical.DEPTH,
             curvature_derivatives=p.curvature_derivatives,
         )
         self._frozen = np.zeros(N_STATES, dtype=bool)
         self._frozen[INERT] = True
         if not estimate_current:
             self._frozen[CURRENT] = True
+        if not p.gyro_z_states:
+            self._frozen[GYRO_Z] = True
         self._rpm_schedule = _Schedule(p.update_rate)
         self._depth_schedule = _Schedule(p.update_rate)
         self._next_check = self.t + _CHECK_INTERVAL
@@ -563,7 +589,8 @@ class RpmAidedIns(Filter):
     # -- the Filter interface ----------------------------------------------------------------
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
-        step = self._time_update.propagate(self.nav, self.P, self.t, t, imu["omega_ib_b"],
+        omega = itu.compensate_gyro_z(imu["omega_ib_b"], self.b_g, self.gyro_z)
+        step = self._time_update.propagate(self.nav, self.P, self.t, t, omega,
                                            imu["f_b"], self.b_a, self.b_g)  # (1), (2), (21)-(23)
         if step is None:
             return
@@ -659,6 +686,7 @@ class RpmAidedIns(Filter):
         self.k_rpm -= float(dx[15])
         self.m_rpm = self.m_rpm - dx[M_RPM]
         self.v_c = self.v_c - dx[CURRENT]
+        self.gyro_z = self.gyro_z - dx[GYRO_Z]
         self._x = self._state_vector()
 
     def _state_vector(self) -> np.ndarray:
@@ -669,4 +697,5 @@ class RpmAidedIns(Filter):
         x[15] = self.k_rpm
         x[M_RPM] = self.m_rpm
         x[CURRENT] = self.v_c
+        x[GYRO_Z] = self.gyro_z
         return x
