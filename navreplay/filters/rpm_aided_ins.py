@@ -1,10 +1,10 @@
 """RPM velocity-aided underwater INS with sea-current estimation ("rpm-aided-ins").
 
-An indirect feedback Kalman filter with the 24 error states of Choi (JANT 23(3), 2019) and three
-gyro z-rate states (method docs/methods/rpm-aided-ins.md §4). The NED strapdown mechanization of
-:mod:`navreplay.strapdown` runs on the compensated IMU at the IMU rate; every ``cov_step``
-(0.1 s) the error covariance is propagated with the 27-state error model; at ``update_rate`` (1 Hz) the
-propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
+An indirect feedback Kalman filter with the 24 error states of Choi (JANT 23(3), 2019) and
+three gyro z-rate states (method docs/methods/rpm-aided-ins.md §4). The NED strapdown
+mechanization of :mod:`navreplay.strapdown` runs on the compensated IMU at the IMU rate; every
+``cov_step`` (0.1 s) the error covariance is propagated with the 27-state error model; at
+``update_rate`` (1 Hz) the propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
 back. Besides the navigation errors and the IMU biases the filter estimates the RPM scale
 factor, the RPM-axis misalignment and the horizontal sea current, which removes the drift a
 current causes when water-relative speed is used as ground speed.
@@ -380,7 +380,7 @@ def rpm_measurement(
     -------
     kalman.Measurement
         z (3,): ``C_nb_hat^T (v_hat - v_c_hat) - C_bv_hat [u_hat, 0, 0]`` [m/s], body axes;
-        H (3, 24): ``z ~ H dx`` to first order; R (3, 3) [(m/s)^2].
+        H (3, 27): ``z ~ H dx`` to first order; R (3, 3) [(m/s)^2].
     """
     C_bn = ie.nav_dcm(nav).T
     a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
@@ -474,7 +474,7 @@ def rpm_second_order(nav: np.ndarray, u_hat: float, k_hat: float, m_hat: np.ndar
 
 
 def depth_measurement(nav: np.ndarray, depth: float, sigma: float) -> kalman.Measurement:
-    """Depth residual ``d_hat - d_meas`` [m], shape (1,), H (1, 24) and R (1,) of the 1-sigma
+    """Depth residual ``d_hat - d_meas`` [m], shape (1,), H (1, 27) and R (1,) of the 1-sigma
     ``sigma`` [m] (docs/methods/rpm-aided-ins.md §4.5)."""
     H = np.zeros((1, N_STATES))
     H[0, 2] = 1.0
@@ -571,8 +571,8 @@ class RpmAidedIns(Filter):
             q[CURRENT] = p.current_noise**2
         self._held: tuple[np.ndarray, np.ndarray, float] | None = None
         self._time_update = itu.TimeUpdate(
-            itu.ProcessNoise(q, gyro_z_states=GYRO_Z.start), p.cov_step, vertical=ie.Vertical.DEPTH,
-            curvature_derivatives=p.curvature_derivatives,
+            itu.ProcessNoise(q, gyro_z_states=GYRO_Z.start), p.cov_step,
+            vertical=ie.Vertical.DEPTH, curvature_derivatives=p.curvature_derivatives,
         )
         self._frozen = np.zeros(N_STATES, dtype=bool)
         self._frozen[INERT] = True

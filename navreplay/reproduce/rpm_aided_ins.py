@@ -84,8 +84,6 @@ T_CURRENT = 90.0
 T_NEES = 30.0
 """The NEES band is evaluated from this time on [s] (before it the horizontal position
 error is still far below the 1-m conditioning sigma of P0)."""
-NEES_DOF = 2
-"""Horizontal position: the states the filter declares for the NEES."""
 UPDATE_RATE = 1.0
 """Rate of the evaluation epochs [Hz] (the filter's update rate)."""
 
@@ -225,19 +223,20 @@ def nees_inside(r: EnsembleResult, t_from: float = T_NEES) -> tuple[float, float
     return float(np.mean(inside)), float(np.mean(v))
 
 
-def nees_check(mean: float, runs: int, what: str) -> Check:
+def nees_check(mean: float, runs: int, dof: int, what: str) -> Check:
     """The position-consistency check (docs/methods/consistency.md): the mean over ``runs``
-    runs of each run's time-averaged 2-dof NEES inside the band of ``runs`` chi-square(2)
-    draws at the false-alarm probability :data:`navreplay.consistency.CHECK_FALSE_ALARM`."""
-    lo, hi = consistency.mean_band(NEES_DOF, runs)
-    return Check(f"{what}: 2-dof position NEES, mean over runs and t >= {T_NEES:g} s "
+    runs of each run's time-averaged ``dof``-dof NEES inside the band of ``runs``
+    chi-square(dof) draws at the false-alarm probability
+    :data:`navreplay.consistency.CHECK_FALSE_ALARM`."""
+    lo, hi = consistency.mean_band(dof, runs)
+    return Check(f"{what}: {dof}-dof position NEES, mean over runs and t >= {T_NEES:g} s "
                  f"({runs} runs as {runs} chi-square samples, false alarm "
                  f"{consistency.CHECK_FALSE_ALARM:g})",
                  mean, f"{lo:.2f} to {hi:.2f}", bool(lo <= mean <= hi))
 
 
 def run_nees(recording: Recording, results: dict[str, RunResult], task: RunTask) -> float:
-    """Extractor: the time-averaged 2-dof position NEES of one ``rpm-current`` run over the
+    """Extractor: the time-averaged position NEES of one ``rpm-current`` run over the
     update epochs from :data:`T_NEES`."""
     m = run_metrics(at_update_epochs(results["rpm-current"]), recording)
     return float(np.nanmean(m.nees[m.t >= T_NEES - 1e-9]))
@@ -285,7 +284,7 @@ def acceptance(stats: Mapping[str, EnsembleResult], per_axis: bool = False) -> l
         checks.append(Check(f"rpm-current: max RMS current error {axis} for t >= 90 s [m/s]",
                              v, "<= 0.15", v <= 0.15))
     frac, mean = nees_inside(r)
-    checks.append(nees_check(mean, int(np.max(r.nees_count)),
+    checks.append(nees_check(mean, int(np.max(r.nees_count)), r.nees_dof,
                              f"rpm-current ({frac:.0%} of epochs in the pointwise 95 % band)"))
     return checks
 
