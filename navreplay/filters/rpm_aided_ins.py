@@ -508,8 +508,9 @@ class RpmAidedIns(Filter):
 
     name: ClassVar[str] = "rpm-aided-ins"
     summary: ClassVar[str] = (
-        "underwater INS aided by propeller-RPM speed and depth, 24-state feedback KF with RPM"
-        " scale factor, misalignment and sea current (Choi 2019); mode=pure|rpm|rpm_current"
+        "underwater INS aided by propeller-RPM speed and depth, 27-state feedback KF with RPM"
+        " scale factor, misalignment, sea current and gyro z-rate errors (Choi 2019);"
+        " mode=pure|rpm|rpm_current"
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.SPEED_LOG, StreamKind.DEPTH)
