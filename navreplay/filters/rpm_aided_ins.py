@@ -1,10 +1,10 @@
 """RPM velocity-aided underwater INS with sea-current estimation ("rpm-aided-ins").
 
-An indirect feedback Kalman filter with 24 error states (Choi, JANT 23(3), 2019; method
-docs/methods/rpm-aided-ins.md §4). The NED strapdown mechanization of :mod:`navreplay.strapdown`
-runs on the bias-compensated IMU at the IMU rate; every ``cov_step`` (0.1 s) the error
-covariance is propagated with the 24-state error model; at ``update_rate`` (1 Hz) the
-propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
+An indirect feedback Kalman filter with the 24 error states of Choi (JANT 23(3), 2019) and
+three gyro z-rate states (method docs/methods/rpm-aided-ins.md §4). The NED strapdown
+mechanization of :mod:`navreplay.strapdown` runs on the compensated IMU at the IMU rate; every
+``cov_step`` (0.1 s) the error covariance is propagated with the 27-state error model; at
+``update_rate`` (1 Hz) the propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
 back. Besides the navigation errors and the IMU biases the filter estimates the RPM scale
 factor, the RPM-axis misalignment and the horizontal sea current, which removes the drift a
 current causes when water-relative speed is used as ground speed.
@@ -26,7 +26,14 @@ index name (Estimate.x)   frame     unit     error state dx (``Estimate.x`` hold
 18-19 vc_N, vc_E          n (NED)   m/s      sea-current velocity error (current estimate)
 20-22 mu_x, mu_y, mu_z    b         rad      mounting misalignment (transfer alignment; inert)
 23    dT                  -         s        master data delay (transfer alignment; inert)
+24-25 m_g_xz, m_g_yz      b (FRD)   rad      gyro misalignment of the z rate into x, y (estimate)
+26    s_g_z               b (FRD)   -        gyro z scale-factor error (estimate)
 ===== =================== ========= ======== ===============================================
+
+States 24-26 are navreplay's addition (docs/methods/rpm-aided-ins.md §4.1): the gyro z-rate
+errors of :mod:`navreplay.filters.ins_error` eq. (22), shared with ``gps-ins``. They act only
+in the turns (``F[phi, 24:27] = C_nb_hat omega_z``), where white gyro noise has the wrong
+shape; the gyro samples are compensated as ``omega - k_z (omega_z - b_g_z)``.
 
 In navigation mode the transfer-alignment states 20-23 are inert: zero rows in F, zero Q, zero
 columns in H, zero P0; they keep the layout of the paper's unified filter.
@@ -98,7 +105,7 @@ of frozen states forced to 0: the inert states always, the current in the ``rpm`
 
 Variants (§5, parameter ``mode``): ``pure`` (free inertial, no updates, P still
 propagated for the sigma plots), ``rpm`` (current frozen at 0: P0 = 0, Q = 0, K rows 0) and
-``rpm_current`` (all 24 states). One code path: the mode only sets P0, Q, the frozen mask and
+``rpm_current`` (all 27 states). One code path: the mode only sets P0, Q, the frozen mask and
 whether updates run.
 
 Initial covariance (§4.6): position, velocity and attitude sigmas from
@@ -112,7 +119,7 @@ Examples
 >>> rec = simulate("underwater-rpm", {"duration": 10.0}, seed=0)
 >>> res = replay(rec, RpmAidedIns, {"mode": "rpm_current"})
 >>> res.x.shape[1], sorted(res.innovations)
-(24, ['depth', 'rpm'])
+(27, ['depth', 'rpm'])
 """
 
 from __future__ import annotations
@@ -143,11 +150,11 @@ from navreplay.filters.base import (
     check_number,
     state_names,
 )
-from navreplay.filters.ins import initial_covariance, initial_sigma, initial_solution
+from navreplay.filters.ins import GYRO_Z_STATES, initial_covariance, initial_sigma, initial_solution
 from navreplay.filters.registry import register_filter
 from navreplay.geo.rotations import skew
 from navreplay.streams import StreamKind
-from navreplay.units import DEG, DEG_PER_HOUR, MICRO_G
+from navreplay.units import ARCSEC, DEG, DEG_PER_HOUR, MICRO_G, PPM
 
 # -- state layout (eq. 20) -------------------------------------------------------------------
 
@@ -173,7 +180,9 @@ DELAY = slice(23, 24)
 """Master data time delay [s] (transfer-alignment mode only; inert)."""
 INERT = slice(20, 24)
 """States without dynamics, noise or measurement in navigation mode."""
-N_STATES = 24
+GYRO_Z = slice(24, 27)
+"""Gyro z-rate errors: misalignments of the z rate into x and y, z scale factor [rad, -]."""
+N_STATES = 27
 _CHECK_INTERVAL = 1.0
 """Filter time between full symmetry / PSD checks of the propagated P [s] (every correction
 is checked, and every propagation step checks the variances)."""
@@ -188,6 +197,7 @@ STATES: tuple[State, ...] = (
     State("vc_E", "m/s", Quantity.CURRENT, TruthColumn("current_n", (1,))),
     *(State(f"mu_{a}", "rad", Quantity.MISALIGNMENT) for a in "xyz"),
     State("dT", "s", Quantity.CLOCK),
+    *GYRO_Z_STATES,
 )
 """Declarations of the entries of ``Estimate.x``. Only the horizontal position errors count
 in the NEES: the consistency band of docs/methods/rpm-aided-ins.md §6 is on horizontal
@@ -219,8 +229,16 @@ class RpmAidedInsParams(FilterParams):
     """sqrt(q_a): velocity process noise density [(m/s)/sqrt(s)] (about 2 x the VRW, covering
     the unmodelled accelerometer scale factor and misalignment)."""
     gyro_noise: float = 5e-6
-    """sqrt(q_g): attitude process noise density [rad/sqrt(s)] (about 1.7 x the ARW, covering
-    the gyro scale factor during turns)."""
+    """sqrt(q_g): attitude process noise density [rad/sqrt(s)] (about 1.7 x the ARW: the gyro
+    and accelerometer scale-factor and misalignment errors that are not states; at the ARW
+    the tilt comes out 12 % optimistic in sigma)."""
+    gyro_z_states: bool = True
+    """Estimate the gyro z-rate errors (states 24-26: misalignments m_g_xz, m_g_yz and scale
+    factor s_g_z), which act only in the turns; False freezes them at 0."""
+    gyro_misalignment_sigma: float = 5.0 * ARCSEC
+    """Initial 1-sigma of m_g_xz and m_g_yz [rad] (5 arcsec)."""
+    gyro_scale_factor_sigma: float = 100.0 * PPM
+    """Initial 1-sigma of s_g_z [-] (100 ppm)."""
     current_noise: float = 0.0
     """sqrt(q_c): sea-current random-walk density [(m/s)/sqrt(s)] (``rpm_current`` only). 0:
     the current is a random constant, as in ``underwater-rpm``; a current that changes over
@@ -253,6 +271,9 @@ class RpmAidedInsParams(FilterParams):
     constraint_sigma: float = 0.002
     """Noise of the no-sideslip and no-heave rows of the RPM update [m/s]: the vehicle's
     lateral and vertical water-relative velocity in the RPM frame."""
+    second_order: bool = True
+    """Add the covariance of the products of error states in the RPM residual to its R
+    (:func:`rpm_second_order`)."""
     depth_sigma: float = 0.1
     """Depth measurement noise [m]."""
     depth_aiding: bool = True
@@ -282,7 +303,8 @@ class RpmAidedInsParams(FilterParams):
             ) from None
         for name in ("accel_noise", "gyro_noise", "current_noise", "accel_bias_sigma",
                      "gyro_bias_sigma", "rpm_scale_factor_sigma", "rpm_misalignment_sigma",
-                     "current_sigma", "init_vel_sigma", "init_level_sigma",
+                     "current_sigma", "gyro_misalignment_sigma", "gyro_scale_factor_sigma",
+                     "init_vel_sigma", "init_level_sigma",
                      "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor",
                      "gap_accel_sigma", "gap_rate_sigma"):
             check_number(self, name)
@@ -357,7 +379,7 @@ def rpm_measurement(
     -------
     kalman.Measurement
         z (3,): ``C_nb_hat^T (v_hat - v_c_hat) - C_bv_hat [u_hat, 0, 0]`` [m/s], body axes;
-        H (3, 24): ``z ~ H dx`` to first order; R (3, 3) [(m/s)^2].
+        H (3, 27): ``z ~ H dx`` to first order; R (3, 3) [(m/s)^2].
     """
     C_bn = ie.nav_dcm(nav).T
     a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
@@ -393,8 +415,65 @@ def rpm_noise_covariance(m_hat: np.ndarray, k_hat: float, speed_sigma: float,
     return (speed_sigma / (1.0 + k_hat)) ** 2 * aa + constraint_sigma**2 * (np.eye(3) - aa)
 
 
+_SECOND_ORDER = np.r_[3:9, 15:20]
+"""The states of the bilinear terms of the RPM residual: dv, phi, k, m, v_c."""
+
+
+def rpm_second_order(nav: np.ndarray, u_hat: float, k_hat: float, m_hat: np.ndarray,
+                     v_c_hat: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance of the second-order terms of the RPM residual (25) (Gaussian
+    second-order filter, docs/methods/rpm-aided-ins.md §4.4).
+
+    Beyond ``H dx`` the residual holds products of error states as large as its across-axis
+    part: the attitude error turning the velocity and current errors, ``C_bn [phi x] (dv -
+    dv_c)`` (a 3 mil heading error times a 0.2 m/s velocity error is 0.6 mm/s), and the
+    scale-factor error scaling the misalignment, ``u_hat dk / (1 + k_hat) (da/dm) dm`` (2 % of
+    0.1 deg at 14 m/s is 0.5 mm/s); the squares ``C_bn [phi x]^2 w / 2``, ``-a u_hat dk^2 /
+    (1 + k_hat)^2`` and ``-u_hat (d^2 a / dm^2) dm dm / 2`` complete the second order. Each row
+    is a quadratic form ``z2_i = dx^T S_i dx`` (S_i symmetric, half the Hessian); for
+    dx ~ N(0, P)::
+
+        E[z2_i] = tr(S_i P),   Cov(z2_i, z2_j) = 2 tr(S_i P S_j P)
+
+    Parameters
+    ----------
+    nav : ndarray, shape (10,)
+    u_hat : float
+        Corrected RPM speed [m/s].
+    k_hat : float
+    m_hat, v_c_hat : ndarray, shape (2,)
+    P : ndarray, shape (27, 27)
+
+    Returns
+    -------
+    mean : ndarray, shape (3,) [m/s]
+    cov : ndarray, shape (3, 3) [(m/s)^2]
+    """
+    C_bn = ie.nav_dcm(nav).T
+    a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
+    w = nav[3:6].copy()
+    w[:2] -= v_c_hat
+    s = u_hat / (1.0 + k_hat)
+    S = np.zeros((3, 11, 11))  # local order: dv 0-2, phi 3-5, k 6, m 7-8, v_c 9-10
+    for i in range(3):
+        c = C_bn[i]
+        L = -0.5 * skew(c)  # c . (phi x dw) = -phi^T [c x] dw, half in each triangle
+        S[i, 3:6, 0:3] = L
+        S[i, 3:6, 9:11] = -L[:, 0:2]
+        S[i, 6, 7:9] = 0.5 * s * da[i]
+        S[i] += S[i].T
+        S[i, 3:6, 3:6] = 0.25 * (np.outer(c, w) + np.outer(w, c)) - 0.5 * (c @ w) * np.eye(3)
+        S[i, 6, 6] = -a[i] * s / (1.0 + k_hat)
+        S[i, 7:9, 7:9] = 0.5 * u_hat * a[0] * (i == 0) * np.eye(2)  # exp([m x]) e_x at m_x = 0
+    Ps = P[np.ix_(_SECOND_ORDER, _SECOND_ORDER)]
+    SP = S @ Ps
+    mean = np.trace(SP, axis1=1, axis2=2)
+    cov = 2.0 * np.einsum("iab,jba->ij", SP, SP)
+    return mean, cov
+
+
 def depth_measurement(nav: np.ndarray, depth: float, sigma: float) -> kalman.Measurement:
-    """Depth residual ``d_hat - d_meas`` [m], shape (1,), H (1, 24) and R (1,) of the 1-sigma
+    """Depth residual ``d_hat - d_meas`` [m], shape (1,), H (1, 27) and R (1,) of the 1-sigma
     ``sigma`` [m] (docs/methods/rpm-aided-ins.md §4.5)."""
     H = np.zeros((1, N_STATES))
     H[0, 2] = 1.0
@@ -424,12 +503,13 @@ class _Schedule:
 
 @register_filter
 class RpmAidedIns(Filter):
-    """24-state RPM velocity-aided INS with sea-current estimation (see the module docstring)."""
+    """27-state RPM velocity-aided INS with sea-current estimation (see the module docstring)."""
 
     name: ClassVar[str] = "rpm-aided-ins"
     summary: ClassVar[str] = (
-        "underwater INS aided by propeller-RPM speed and depth, 24-state feedback KF with RPM"
-        " scale factor, misalignment and sea current (Choi 2019); mode=pure|rpm|rpm_current"
+        "underwater INS aided by propeller-RPM speed and depth, 27-state feedback KF with RPM"
+        " scale factor, misalignment, sea current and gyro z-rate errors (Choi 2019);"
+        " mode=pure|rpm|rpm_current"
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.SPEED_LOG, StreamKind.DEPTH)
@@ -459,6 +539,7 @@ class RpmAidedIns(Filter):
         self.k_rpm = 0.0
         self.m_rpm = np.zeros(2)
         self.v_c = np.zeros(2)
+        self.gyro_z = np.zeros(3)  # estimates of m_g_xz, m_g_yz, s_g_z
 
         # P0, §4.6 of the method
         init = context.metadata.initial_nav
@@ -472,6 +553,9 @@ class RpmAidedIns(Filter):
         sig[K_RPM] = p.rpm_scale_factor_sigma
         sig[M_RPM] = p.rpm_misalignment_sigma
         sig[CURRENT] = p.current_sigma if estimate_current else 0.0
+        if p.gyro_z_states:
+            sig[GYRO_Z] = (p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
+                           p.gyro_scale_factor_sigma)
         self.P = np.diag(sig**2)
         self.P[: ie.N_STATES, : ie.N_STATES] = initial_covariance(
             self.nav[strapdown.POS], np.maximum(pos_sigma, p.pos_sigma_floor),
@@ -487,13 +571,15 @@ class RpmAidedIns(Filter):
             q[CURRENT] = p.current_noise**2
         self._held: tuple[np.ndarray, np.ndarray, float] | None = None
         self._time_update = itu.TimeUpdate(
-            itu.ProcessNoise(q), p.cov_step, vertical=ie.Vertical.DEPTH,
-            curvature_derivatives=p.curvature_derivatives,
+            itu.ProcessNoise(q, gyro_z_states=GYRO_Z.start), p.cov_step,
+            vertical=ie.Vertical.DEPTH, curvature_derivatives=p.curvature_derivatives,
         )
         self._frozen = np.zeros(N_STATES, dtype=bool)
         self._frozen[INERT] = True
         if not estimate_current:
             self._frozen[CURRENT] = True
+        if not p.gyro_z_states:
+            self._frozen[GYRO_Z] = True
         self._rpm_schedule = _Schedule(p.update_rate)
         self._depth_schedule = _Schedule(p.update_rate)
         self._next_check = self.t + _CHECK_INTERVAL
@@ -503,7 +589,8 @@ class RpmAidedIns(Filter):
     # -- the Filter interface ----------------------------------------------------------------
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
-        step = self._time_update.propagate(self.nav, self.P, self.t, t, imu["omega_ib_b"],
+        omega = itu.compensate_gyro_z(imu["omega_ib_b"], self.b_g, self.gyro_z)
+        step = self._time_update.propagate(self.nav, self.P, self.t, t, omega,
                                            imu["f_b"], self.b_a, self.b_g)  # (1), (2), (21)-(23)
         if step is None:
             return
@@ -542,6 +629,11 @@ class RpmAidedIns(Filter):
         if not (np.isfinite(z).all() and np.isfinite(H).all()):
             raise ValueError(f"{name} measurement at t = {t:.6f} s is not finite: z = {z}")
         self._sync_covariance()
+        if name == "rpm" and self.params.second_order:
+            u_hat = self.speed_per_rpm * float(sample["rpm"]) / (1.0 + self.k_rpm)
+            v_c = self.v_c if self.mode is Mode.RPM_CURRENT else np.zeros(2)
+            _, cov = rpm_second_order(self.nav, u_hat, self.k_rpm, self.m_rpm, v_c, self.P)
+            measurement = kalman.Measurement(z, H, measurement.R + cov)
         # shapes are fixed by construction and R by the parameters; P is checked below
         c = kalman.correct(np.zeros(N_STATES), self.P, *measurement, frozen=self._frozen, t=t,
                            check=False)
@@ -594,6 +686,7 @@ class RpmAidedIns(Filter):
         self.k_rpm -= float(dx[15])
         self.m_rpm = self.m_rpm - dx[M_RPM]
         self.v_c = self.v_c - dx[CURRENT]
+        self.gyro_z = self.gyro_z - dx[GYRO_Z]
         self._x = self._state_vector()
 
     def _state_vector(self) -> np.ndarray:
@@ -604,4 +697,5 @@ class RpmAidedIns(Filter):
         x[15] = self.k_rpm
         x[M_RPM] = self.m_rpm
         x[CURRENT] = self.v_c
+        x[GYRO_Z] = self.gyro_z
         return x
