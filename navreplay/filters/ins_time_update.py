@@ -128,7 +128,7 @@ def _propagate_covariance(
     return P
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _close_step(
     P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
     gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
@@ -148,7 +148,7 @@ def _close_step(
     return P
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
