@@ -301,12 +301,14 @@ def propagate_kernel(nav, omega, f, dt, prev, out):
         return bad
     ptx, pty, ptz, pax, pay, paz = prev[0], prev[1], prev[2], prev[3], prev[4], prev[5]
     tmp = np.empty(NAV_SIZE)
-    out[:] = nav
+    for i in range(NAV_SIZE):  # (loops: array assignment compiles a formatted shape error)
+        out[i] = nav[i]
     for k in range(dt.shape[0]):
         d = dt[k]
         tx, ty, tz = omega[k, 0] * d, omega[k, 1] * d, omega[k, 2] * d
         ax, ay, az = f[k, 0] * d, f[k, 1] * d, f[k, 2] * d
-        tmp[:] = out
+        for i in range(NAV_SIZE):
+            tmp[i] = out[i]
         _step(tmp, out, tx, ty, tz, ax, ay, az, ptx, pty, ptz, pax, pay, paz, d)
         ptx, pty, ptz, pax, pay, paz = tx, ty, tz, ax, ay, az
     return -1
@@ -320,7 +322,8 @@ def integrate_kernel(nav0, omega, f, dt, prev, hist):
     if bad != -1:
         return bad
     ptx, pty, ptz, pax, pay, paz = prev[0], prev[1], prev[2], prev[3], prev[4], prev[5]
-    hist[0, :] = nav0
+    for i in range(NAV_SIZE):  # (loops: array assignment compiles a formatted shape error)
+        hist[0, i] = nav0[i]
     for k in range(dt.shape[0]):
         d = dt[k]
         tx, ty, tz = omega[k, 0] * d, omega[k, 1] * d, omega[k, 2] * d

@@ -209,7 +209,7 @@ def nav_states(vertical: Vertical = Vertical.HEIGHT) -> tuple[State, ...]:
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _set_skew(M: np.ndarray, r: int, c: int, x: float, y: float, z: float, k: float) -> None:
     """M[r:r+3, c:c+3] += k [v x] with v = (x, y, z)."""
     M[r, c + 1] -= k * z

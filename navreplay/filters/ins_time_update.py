@@ -128,7 +128,7 @@ def _propagate_covariance(
     return P
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _close_step(
     P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
     gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
@@ -148,7 +148,7 @@ def _close_step(
     return P
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
@@ -157,7 +157,8 @@ def _accumulate_covariance(
     F, M, T, Q, cols, mean = _scratch(P.shape[0], gz, ga)
     for k in range(dt.shape[0]):
         if open_sums[0] == 0.0:
-            open_nav[:] = hist[k]
+            for j in range(open_nav.shape[0]):  # (loops: array assignment compiles a
+                open_nav[j] = hist[k, j]  # formatted shape error)
         open_sums[0] += dt[k]
         for j in range(3):
             open_sums[1 + j] += f_b[k, j] * dt[k]
@@ -671,6 +672,9 @@ def _propagate_outputs(
             if not _covariance_ok(P, rtol):
                 return -7, j, a, nav, P, t_nav
         t_out[j] = t_nav
-        nav_out[j] = nav
-        P_out[j] = P
+        for c in range(nav.shape[0]):  # (loops: array assignment compiles a formatted shape
+            nav_out[j, c] = nav[c]  # error)
+        for r in range(P.shape[0]):
+            for c in range(P.shape[1]):
+                P_out[j, r, c] = P[r, c]
     return -1, ends.shape[0], 0, nav, P, t_nav

@@ -1,0 +1,83 @@
+"""CPU time of a first run after install (numba compiles its kernels) against a warm run, and
+the fixed cost of starting the command.
+
+Every figure is the user + system CPU time (and the wall time) of a fresh interpreter:
+
+- ``first run``: ``navreplay run gps-ins REC --no-viz`` with ``NUMBA_CACHE_DIR`` pointing at a
+  new, empty directory, as after ``pip install``: every kernel the run needs is compiled;
+- ``warm run``: the same command again, the kernels loaded from that cache;
+- ``start-up``: ``navreplay --help`` (imports and the command line, no replay), against a bare
+  ``python -c pass`` measured in the same run.
+
+``compile`` is the first run minus the warm run. Medians over ``--repeat`` runs (each first run
+with its own empty cache).
+
+Usage::
+
+    python -m benchmarks.bench_startup [--recording REC] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RECORDING = ROOT / "recordings" / "golden" / "vehicle-drive.mcap"
+
+
+def _measure(cmd: list[str], env: dict[str, str], cwd: str) -> tuple[float, float]:
+    """(CPU [s], wall [s]) of a child process running ``cmd`` to its end."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    subprocess.run(cmd, env=env, cwd=cwd, check=True, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return cpu, wall
+
+
+def measure(recording: Path, repeat: int) -> dict[str, tuple[float, float]]:
+    """Medians of (CPU, wall) [s] of the first run, the warm run, start-up and a bare
+    interpreter."""
+    navreplay = [sys.executable, "-m", "navreplay"]
+    run = [*navreplay, "run", "gps-ins", str(recording), "--no-viz"]
+    rows: dict[str, list[tuple[float, float]]] = {
+        "first run": [], "warm run": [], "start-up": [], "python": []}
+    for _ in range(repeat):
+        with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as cwd:
+            env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+            rows["first run"].append(_measure(run, env, cwd))
+            rows["warm run"].append(_measure(run, env, cwd))
+            rows["start-up"].append(_measure([*navreplay, "--help"], env, cwd))
+            rows["python"].append(_measure([sys.executable, "-c", "pass"], env, cwd))
+    return {k: (statistics.median(c for c, _ in v), statistics.median(w for _, w in v))
+            for k, v in rows.items()}
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--recording", type=Path, default=RECORDING)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args([] if argv is None else argv)
+    m = measure(args.recording, args.repeat)
+    print(f"navreplay run gps-ins {args.recording.name} --no-viz, fresh interpreters, medians "
+          f"of {args.repeat}; load average {os.getloadavg()[0]:.2f}")
+    for name, (cpu, wall) in m.items():
+        print(f"  {name:10s} {cpu:6.2f} s CPU  {wall:6.2f} s wall")
+    first, warm = m["first run"][0], m["warm run"][0]
+    print(f"  compile (first - warm)  {first - warm:6.2f} s CPU")
+    print(f"  first run / warm run    {first / warm:6.2f}x CPU")
+    print(f"  start-up - python       {m['start-up'][0] - m['python'][0]:6.2f} s CPU")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
