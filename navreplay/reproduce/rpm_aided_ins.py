@@ -83,7 +83,7 @@ T_CURRENT = 90.0
 """The current-estimate band holds from the end of the first turn [s]."""
 T_NEES = 30.0
 """The NEES band is evaluated from this time on [s] (before it the horizontal position
-error is still far below the 1-m conditioning sigma of P0)."""
+error is still dominated by the 1-cm launch sigma of P0, not by the current)."""
 UPDATE_RATE = 1.0
 """Rate of the evaluation epochs [Hz] (the filter's update rate)."""
 
