@@ -181,13 +181,15 @@ def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
     tmp = temporary_path(target)
     try:
         yield tmp
-        _fsync(tmp)  # the data on disk before the name: a power loss leaves old or new
+        fsync_path(tmp)  # the data on disk before the name: a power loss leaves old or new
         os.replace(tmp, target)
     finally:
         release(tmp)
 
 
-def _fsync(path: Path) -> None:
+def fsync_path(path: Path) -> None:
+    """Flush a file's data, or a directory's entries, to disk (best effort: file systems that
+    cannot are left alone)."""
     with contextlib.suppress(OSError):
         fd = os.open(path, os.O_RDONLY)
         try:

@@ -9,7 +9,6 @@ only once complete, so the target name never shows a partial file.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import os
 from pathlib import Path
@@ -32,7 +31,7 @@ from navreplay.io.schemas import (
     SPECS,
     TopicSpec,
 )
-from navreplay.outputs import release, temporary_path
+from navreplay.outputs import fsync_path, release, temporary_path
 from navreplay.streams import Recording, Stream, StreamKind
 
 WINDOW = 16_384
@@ -207,7 +206,7 @@ def write_recording(
         _commit(tmp, target, force)
     finally:
         release(tmp)
-    _fsync_dir(target.parent)
+    fsync_path(target.parent)
     return target
 
 
@@ -230,12 +229,3 @@ def _commit(tmp: Path, target: Path, force: bool) -> None:
         os.replace(tmp, target)
         return
     tmp.unlink()
-
-
-def _fsync_dir(directory: Path) -> None:
-    with contextlib.suppress(OSError):
-        fd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
