@@ -4,7 +4,6 @@ line; never exit 0 with an inconsistent result."""
 from __future__ import annotations
 
 import json
-import os
 
 import numpy as np
 import pytest
@@ -199,13 +198,11 @@ def test_montecarlo_result_outputs_are_checked_before_the_work(tmp_path, option)
     if option == "--report":
         one_line_error(invoke(*base, option, config, "--force"), option)  # onto the input
         assert config.read_text() == "[filter.ins]\n"
-    locked = tmp_path / "locked"
-    locked.mkdir()
-    locked.chmod(0o500)
-    try:
-        if os.access(locked, os.W_OK):
-            pytest.skip("running as a user who can write anywhere")
-        one_line_error(invoke(*base, option, locked / "out" if option == "--export"
-                              else locked / "r.html"), option)
-    finally:
-        locked.chmod(0o700)
+    # a directory that cannot be made (its parent is a file): refused before any run, even for
+    # a user who may write anywhere
+    blocker = tmp_path / "blocker"
+    blocker.write_text("not a directory\n")
+    res = invoke(*base, option, blocker / "out" if option == "--export" else blocker / "r.html")
+    one_line_error(res, option)
+    assert blocker.read_text() == "not a directory\n"
+    assert not list(tmp_path.glob("**/*.part"))
