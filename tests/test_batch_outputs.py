@@ -99,3 +99,11 @@ def test_a_failing_event_in_a_run_is_named_by_the_one_by_one_path(drive: Recordi
     t_bad = (int(gps.t_ns[40]) - rec.t0_ns) * 1e-9
     with pytest.raises(FilterDivergedError, match=rf"at t = {t_bad:.3f} s: .*z has non-finite"):
         replay(rec, GpsInsFilter, validate=False)
+
+
+def test_live_views_see_event_runs_as_they_come(drive: Recording) -> None:
+    seen: list[int] = []
+    result = replay(drive, GpsInsFilter, output_rate=20.0, observe_interval=0.0,
+                    observer=lambda rows: seen.append(len(rows.t)))
+    assert len(seen) >= 3 and seen == sorted(seen) and seen[-1] == len(result.t)
+    assert seen[0] < len(result.t)  # not only the end: runs of at most 1024 events

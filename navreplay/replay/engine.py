@@ -813,13 +813,15 @@ class ReplaySession:
             ev_record_arr = np.asarray(ev_record, dtype=np.bool_)
             samples = [s.columns for s in aiding]
         slow_at = -1  # an event the hook undid: applied one by one
+        # live views and progress reports between runs of at most this many events
+        run_cap = _CHECK_EVERY if observer is not None or progress is not None else n_events
         i = -1
         t_now = 0.0
         try:
             while i < n_loop:
                 i += 1
                 if events is not None and i < n_events and i != slow_at:
-                    j = _clean_run(feeder, ev_end, i, n_events)
+                    j = _clean_run(feeder, ev_end, i, min(n_events, i + run_cap))
                     if j > i:  # events [i, j) in one call of the filter
                         if columns is None:
                             columns = _Columns(None, upper, len(states))
@@ -987,7 +989,8 @@ def _events_hook(filt: Filter) -> Callable[..., tuple[int, int, dict]] | None:
 
 
 def _clean_run(feeder: ImuFeeder, ev_end: list[int], i: int, n_events: int) -> int:
-    """The end j of the run of events from i whose IMU samples hold no gap to bridge."""
+    """The end j <= n_events of the run of events from i whose IMU samples hold no gap to
+    bridge."""
     if feeder.clean(ev_end[n_events - 1]):
         return n_events
     lo, hi = i, n_events  # clean(ev_end[lo - 1]) holds (or lo == i), clean(ev_end[hi - 1]) not
