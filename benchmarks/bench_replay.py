@@ -177,10 +177,9 @@ def _throughput(path: Path) -> tuple[Any, Any, float]:
 
 def _rerun_cost(result: Any, recording: Any, t_filt: float, rrd: Path) -> None:
     from navreplay import metrics
-    from navreplay.jobs.run import state_errors
     from navreplay.viz import Save, open_sink
 
-    errors = state_errors(metrics.run_metrics(result, recording))
+    errors = metrics.run_metrics(result, recording)
 
     def log() -> None:  # what `navreplay run` does
         with open_sink(Save(rrd), recording_name="drive.mcap") as sink:

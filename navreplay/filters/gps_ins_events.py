@@ -106,7 +106,10 @@ def run_events(
                 nav, P, t_nav = nav_b, P_b, t[b - 1]
                 for c in range(3):
                     w_last[c] = w[w.shape[0] - 1, c] - b_g[c]
-                ok = _covariance_ok(P, rtol)
+                closes = open_sums[0] > 0.0 and (record[e] or (
+                    codes[e] != TICK and not t_ev[e] < t_nav - 1e-6))
+                if not closes:  # else P is checked after the close that follows
+                    ok = _covariance_ok(P, rtol)
             elif code != -4:
                 ok = False
         kind = codes[e]
