@@ -83,9 +83,11 @@ GPS velocity, with ``w = omega_ib_b_hat`` (last compensated gyro sample) and
     H[:, k] = C [l x] w_z                                       (gyro z-rate states)
     R = diag(vel_sigma^2) * gps_vel_sigma_scale^2                                          (11)
 
-Update (shared :func:`navreplay.filters.kalman.correct`, Cholesky + Joseph form) of the error
-state dx = 0, then feedback (12). Each update returns its innovation ``nu = z`` and ``S`` for
-NIS statistics (``"gps_pos"`` [m], ``"gps_vel"`` [m/s]).
+Update (the compiled kernel of :func:`navreplay.filters.kalman.correct`, Cholesky + Joseph
+form, with its checks) of the error state dx = 0, then feedback (12); the models, update and
+feedback are compiled together in :mod:`navreplay.filters.gnss_models`, and the replay engine
+hands whole runs of events to :meth:`GpsInsFilter.replay_events`. Each update returns its
+innovation ``nu = z`` and ``S`` for NIS statistics (``"gps_pos"`` [m], ``"gps_vel"`` [m/s]).
 
 (10) omits the derivatives of w_in with respect to position and velocity in the lever-arm term
 (below 1e-8 m/s for metre-level errors); everything else in (6) and (10) was checked against

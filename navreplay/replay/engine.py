@@ -23,7 +23,9 @@ For each event at time ``t_e`` the engine
    the filter returns None).
 
 IMU samples after the last event are handed over at the end, followed by a last estimate. Every
-IMU sample is thus delivered exactly once and in order. The work per event is slicing views and
+IMU sample is thus delivered exactly once and in order. A filter may take runs of output ticks
+(``propagate_outputs``) or runs of events (``replay_events``) in one call that does the same
+(:func:`_batch_hook`, :func:`_events_hook`). The work per event is slicing views and
 one call per step; everything else (planning, innovation statistics, checks) is vectorised.
 
 Examples
@@ -993,7 +995,7 @@ def _clean_run(feeder: ImuFeeder, ev_end: list[int], i: int, n_events: int) -> i
     bridge."""
     if feeder.clean(ev_end[n_events - 1]):
         return n_events
-    lo, hi = i, n_events  # clean(ev_end[lo - 1]) holds (or lo == i), clean(ev_end[hi - 1]) not
+    lo, hi = i, n_events  # clean() holds before lo and fails at hi - 1 (it only turns false)
     while lo < hi:
         mid = (lo + hi) // 2
         if feeder.clean(ev_end[mid]):
@@ -1004,7 +1006,8 @@ def _clean_run(feeder: ImuFeeder, ev_end: list[int], i: int, n_events: int) -> i
 
 
 def _apply_run(hook: Callable[..., tuple[int, int, dict]], columns: _Columns,
-               feeder: ImuFeeder, plan: EventPlan, ev_t: np.ndarray, record: np.ndarray, samples: list[Mapping[str, np.ndarray]],
+               feeder: ImuFeeder, plan: EventPlan, ev_t: np.ndarray, record: np.ndarray,
+               samples: list[Mapping[str, np.ndarray]],
                innovations: dict[str, list[tuple[float, np.ndarray, np.ndarray]]],
                i: int, j: int) -> int:
     """Events [i, j) through the filter's ``replay_events``; the estimates go straight into
