@@ -4,14 +4,26 @@ workers, measured in one run.
 - cost per run: many very short runs (``stationary``, 1 s, ``ins``), so the time is the
   executor's own per-run cost (pickling, scheduling, moving the compact metrics back); it sets
   how finely a large campaign can be cut into tasks;
-- speed-up: a Monte Carlo of ``gps-ins`` on 300 s ``vehicle-drive`` runs on 2 workers against 1
-  (wall time, workers started and warm; their start-up is printed apart).
+- speed-up: the wall time of one Monte Carlo of ``gps-ins`` on 300 s ``vehicle-drive`` runs
+  on one process divided by that of the same tasks on 2 workers (workers started and warm;
+  their start-up is printed apart).
+
+What the speed-up measures, and how: the wall time of a 2-worker campaign depends on what
+else the two cores do, so a single pair of timings taken minutes apart measures the
+neighbours as much as the executor. Each repeat therefore times the same campaign on one
+process and on each executor back to back (a pair, in alternating order), the ratio is taken
+within the pair, and the median over the repeats is reported with the range. The campaign has
+many more runs than workers (default 40 on 2), so that the last, unbalanced round of tasks is a
+small part of the wall time; the load average before and after is printed: a speed-up near
+2x needs two idle cores.
 
     python -m benchmarks campaign
 """
 
 from __future__ import annotations
 
+import os
+import statistics
 import time
 from typing import Any
 
@@ -30,7 +42,13 @@ def _campaign(scenario: str, filt: str, runs: int, duration: float, executor: An
     return time.perf_counter() - start
 
 
-def main(short_runs: int = 60, runs: int = 16) -> None:
+def _load() -> str:
+    one, five, _ = os.getloadavg()
+    return f"load average {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} cores"
+
+
+def main(short_runs: int = 60, runs: int = 40, repeats: int = 3) -> None:
+    print(_load())
     executors = {"one process": make_executor(1)}
     for name, spec in (("process pool, 2 workers", "process"), ("Dask LocalCluster, 2", "dask")):
         start = time.perf_counter()
@@ -44,12 +62,25 @@ def main(short_runs: int = 60, runs: int = 16) -> None:
         t = _campaign("stationary", "ins", short_runs, 1.0, ex)
         print(f"  {name:24s} {t / short_runs * 1e3:7.1f} ms per run")
     print(f"Monte Carlo ({runs} runs of 300 s 'vehicle-drive' with 'gps-ins'; workers started), "
-          "wall:")
-    one = _campaign("vehicle-drive", "gps-ins", runs, 300.0, executors["one process"])
-    print(f"  one process              {one:6.1f} s")
-    for name, ex in list(executors.items())[1:]:
-        t = _campaign("vehicle-drive", "gps-ins", runs, 300.0, ex)
-        print(f"  {name:24s} {t:6.1f} s = {one / t:.2f}x one process (target 1.8x)")
+          f"wall, {repeats} paired repeats:")
+    one_times: list[float] = []
+    ratios: dict[str, list[float]] = {name: [] for name in list(executors)[1:]}
+    for r in range(repeats):
+        for name in ratios:
+            pair = {}
+            order = ("one process", name) if r % 2 == 0 else (name, "one process")
+            for who in order:
+                pair[who] = _campaign("vehicle-drive", "gps-ins", runs, 300.0, executors[who])
+            one_times.append(pair["one process"])
+            ratios[name].append(pair["one process"] / pair[name])
+            print(f"  repeat {r + 1}: one process {pair['one process']:6.1f} s, {name} "
+                  f"{pair[name]:6.1f} s = {ratios[name][-1]:.2f}x")
+    print(f"  one process: median {statistics.median(one_times):.1f} s "
+          f"({min(one_times):.1f}-{max(one_times):.1f})")
+    for name, values in ratios.items():
+        print(f"  {name:24s} speed-up median {statistics.median(values):.2f}x "
+              f"(range {min(values):.2f}-{max(values):.2f}; target 1.8x)")
+    print(_load())
     for ex in executors.values():
         ex.shutdown()
 

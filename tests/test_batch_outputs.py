@@ -1,6 +1,8 @@
-"""Runs of output ticks handed to a filter at once (``propagate_outputs``) give the same bits
-as the same ticks one by one, with and without IMU gaps, and only to filters whose hook
-belongs with their ``propagate`` and ``estimate``."""
+"""Runs of output ticks handed to a filter at once (``propagate_outputs``) and runs of events
+handed to ``gps-ins`` at once (``replay_events``) give the same bits as the same events one by
+one, with and without IMU gaps, and only to filters whose hook belongs with their
+``propagate``, ``update`` and ``estimate``; an event that fails inside a run is undone and
+applied one by one, which names it."""
 
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ def drive() -> Recording:
 def _one_by_one(monkeypatch: pytest.MonkeyPatch, *args: Any, **kw: Any) -> Any:
     with monkeypatch.context() as m:
         m.setattr(engine, "_batch_hook", lambda filt: None)
+        m.setattr(engine, "_events_hook", lambda filt: None)
         return replay(*args, **kw)
 
 
@@ -71,3 +74,36 @@ def test_no_batch_for_a_subclass_that_changes_estimate() -> None:
 
     assert engine._batch_hook(Changed.__new__(Changed)) is None
     assert engine._batch_hook(InsFilter.__new__(InsFilter)) is not None
+
+
+@pytest.mark.parametrize("params", [{}, {"estimate_lever_arm": True, "use_gps_vel": False}])
+def test_event_runs_are_bitwise_the_events_one_by_one(
+    drive: Recording, monkeypatch: pytest.MonkeyPatch, params: dict,
+) -> None:
+    assert engine._events_hook(GpsInsFilter.__new__(GpsInsFilter)) is not None
+    assert engine._events_hook(InsFilter.__new__(InsFilter)) is None  # no update of its own
+    fast = replay(drive, GpsInsFilter, params)
+    slow = _one_by_one(monkeypatch, drive, GpsInsFilter, params)
+    _assert_same(fast, slow)
+    assert ("gps_vel" in fast.innovations) is not ("use_gps_vel" in params)
+
+
+def test_a_failing_event_in_a_run_is_named_by_the_one_by_one_path(drive: Recording) -> None:
+    from navreplay.filters.kalman import FilterDivergedError
+
+    gps = drive[StreamKind.GPS]
+    pos = gps.columns["pos"].copy()
+    pos[40, 0] = np.nan  # a fix the kernel refuses: the engine replays it one by one
+    bad = dataclasses.replace(gps, columns={**gps.columns, "pos": pos})
+    rec = Recording({**drive.streams, StreamKind.GPS: bad}, drive.metadata)
+    t_bad = (int(gps.t_ns[40]) - rec.t0_ns) * 1e-9
+    with pytest.raises(FilterDivergedError, match=rf"at t = {t_bad:.3f} s: .*z has non-finite"):
+        replay(rec, GpsInsFilter, validate=False)
+
+
+def test_live_views_see_event_runs_as_they_come(drive: Recording) -> None:
+    seen: list[int] = []
+    result = replay(drive, GpsInsFilter, output_rate=20.0, observe_interval=0.0,
+                    observer=lambda rows: seen.append(len(rows.t)))
+    assert len(seen) >= 3 and seen == sorted(seen) and seen[-1] == len(result.t)
+    assert seen[0] < len(result.t)  # not only the end: runs of at most 1024 events

@@ -83,9 +83,11 @@ GPS velocity, with ``w = omega_ib_b_hat`` (last compensated gyro sample) and
     H[:, k] = C [l x] w_z                                       (gyro z-rate states)
     R = diag(vel_sigma^2) * gps_vel_sigma_scale^2                                          (11)
 
-Update (shared :func:`navreplay.filters.kalman.correct`, Cholesky + Joseph form) of the error
-state dx = 0, then feedback (12). Each update returns its innovation ``nu = z`` and ``S`` for
-NIS statistics (``"gps_pos"`` [m], ``"gps_vel"`` [m/s]).
+Update (the compiled kernel of :func:`navreplay.filters.kalman.correct`, Cholesky + Joseph
+form, with its checks) of the error state dx = 0, then feedback (12); the models, update and
+feedback are compiled together in :mod:`navreplay.filters.gnss_models`, and the replay engine
+hands whole runs of events to :meth:`GpsInsFilter.replay_events`. Each update returns its
+innovation ``nu = z`` and ``S`` for NIS statistics (``"gps_pos"`` [m], ``"gps_vel"`` [m/s]).
 
 (10) omits the derivatives of w_in with respect to position and velocity in the lever-arm term
 (below 1e-8 m/s for metre-level errors); everything else in (6) and (10) was checked against
@@ -102,8 +104,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from navreplay import strapdown
-from navreplay.filters import ins_error as ie
+from navreplay.filters import gnss_models as gnss
+from navreplay.filters import gps_ins_events as ev
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     FilterContext,
@@ -115,8 +117,6 @@ from navreplay.filters.base import (
 )
 from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.registry import register_filter
-from navreplay.geo import kernels
-from navreplay.geo.rotations import skew, wrap_angle
 from navreplay.streams import StreamKind
 
 LEVER = slice(15, 18)
@@ -200,19 +200,8 @@ def gps_position_model(
     R : ndarray, shape (3,)
         Diagonal of R [m^2].
     """
-    pos = nav[strapdown.POS]
-    D = ie.position_scale(pos)
-    C = ie.nav_dcm(nav)
-    l_n = C @ lever_arm_b
-    d = pos - pos_gps
-    d[1] = wrap_angle(d[1])
-    z = D * d + l_n + nav[strapdown.VEL] * lag  # (4), (5)
-    H = np.zeros((3, n_states))  # (6)
-    H[:, ie.POS] = np.diag(D)
-    H[:, ie.ATT] = skew(l_n)
-    if lever_states:
-        H[:, LEVER] = C
-    return kalman.Measurement(z, H, np.asarray(pos_sigma, dtype=float) ** 2)  # (7)
+    return _measurement(gnss.POSITION, nav, lever_arm_b, pos_gps, pos_sigma, n_states,
+                        lag=lag, lever_states=lever_states)
 
 
 def gps_velocity_model(
@@ -252,24 +241,27 @@ def gps_velocity_model(
     R : ndarray, shape (3,)
         Diagonal of R [(m/s)^2].
     """
-    lat, h = float(nav[0]), float(nav[2])
-    v = nav[strapdown.VEL]
-    C = ie.nav_dcm(nav)
-    w_in = np.add(kernels.earth_rate(lat), kernels.transport_rate(lat, h, v[0], v[1]))
-    W_in = skew(w_in)
-    L_b = skew(lever_arm_b)
-    l_n = C @ lever_arm_b
-    rot_n = C @ (-L_b @ omega_ib_b)  # C (w x l)
-    z = v + rot_n - W_in @ l_n - v_gps  # (8), (9)
-    H = np.zeros((3, n_states))  # (10)
-    H[:, ie.VEL] = np.eye(3)
-    H[:, ie.ATT] = skew(rot_n) - W_in @ skew(l_n)
-    H[:, ie.BG] = C @ L_b
-    if gyro_z_states is not None:  # domega = -db_g - dk omega_z
-        H[:, gyro_z_states:gyro_z_states + ie.N_GYRO_Z] = C @ L_b * omega_ib_b[2]
-    if lever_states:
-        H[:, LEVER] = C @ skew(omega_ib_b) - W_in @ C
-    return kalman.Measurement(z, H, np.asarray(vel_sigma, dtype=float) ** 2)  # (11)
+    return _measurement(gnss.VELOCITY, nav, lever_arm_b, v_gps, vel_sigma, n_states,
+                        omega_ib_b=omega_ib_b, lever_states=lever_states,
+                        gz=-1 if gyro_z_states is None else gyro_z_states)
+
+
+def _measurement(kind: int, nav: np.ndarray, lever_arm_b: np.ndarray, sample: np.ndarray,
+                 sigma: np.ndarray, n_states: int, *, lag: float = 0.0,
+                 omega_ib_b: np.ndarray | None = None, lever_states: bool = False,
+                 gz: int = -1) -> kalman.Measurement:
+    """z, H, R of a GPS measurement by the compiled models of
+    :mod:`navreplay.filters.gnss_models`."""
+    f64 = np.ascontiguousarray
+    nav, lever = f64(nav, dtype=float), f64(lever_arm_b, dtype=float)
+    sample, sigma = f64(sample, dtype=float), f64(sigma, dtype=float)
+    z, H, R = np.empty(3), np.empty((3, n_states)), np.empty((3, 3))
+    if kind == gnss.POSITION:
+        gnss.position_model(nav, lever, sample, sigma, 1.0, float(lag), lever_states, z, H, R)
+    else:
+        omega = f64(omega_ib_b, dtype=float)
+        gnss.velocity_model(nav, lever, omega, sample, sigma, 1.0, lever_states, gz, z, H, R)
+    return kalman.Measurement(z, H, np.diagonal(R).copy())
 
 
 @register_filter
@@ -290,6 +282,8 @@ class GpsInsFilter(InsFilter):
     def __init__(self, params: GpsInsParams, context: FilterContext) -> None:
         self.lever_arm_b = np.array(params.lever_arm_b, dtype=float)
         super().__init__(params, context)
+        # updated in place by the compiled feedback: arrays of their own
+        self.b_a, self.b_g = self.b_a.copy(), self.b_g.copy()
 
     # -- extra states ----------------------------------------------------------------------
 
@@ -310,34 +304,100 @@ class GpsInsFilter(InsFilter):
     ) -> list[Innovation] | None:
         if t < self.t - 1e-6:
             return None  # before the initial solution
-        n = self.P.shape[0]
-        lever_states = self.params.estimate_lever_arm
+        p = self.params
         if kind is StreamKind.GPS:
-            lag = max(t - self.t, 0.0)
-            measurement = gps_position_model(
-                self.nav, self.lever_arm_b, np.asarray(sample["pos"]),
-                np.asarray(sample["pos_sigma"]) * self.params.gps_pos_sigma_scale, n,
-                lag=lag, lever_states=lever_states,
-            )
-            name = "gps_pos"
-        elif kind is StreamKind.GPS_VEL and self.params.use_gps_vel:
-            measurement = gps_velocity_model(
-                self.nav, self.lever_arm_b, self.omega_ib_b, np.asarray(sample["v_n"]),
-                np.asarray(sample["vel_sigma"]) * self.params.gps_vel_sigma_scale, n,
-                lever_states=lever_states,
-                gyro_z_states=None if self._gz is None else self._gz.start,
-            )
-            name = "gps_vel"
+            code, name, lag = gnss.POSITION, "gps_pos", max(t - self.t, 0.0)
+            value, sigma, scale = sample["pos"], sample["pos_sigma"], p.gps_pos_sigma_scale
+        elif kind is StreamKind.GPS_VEL and p.use_gps_vel:
+            code, name, lag = gnss.VELOCITY, "gps_vel", 0.0
+            value, sigma, scale = sample["v_n"], sample["vel_sigma"], p.gps_vel_sigma_scale
         else:
             return None
         self._sync_covariance()
-        c = kalman.correct(np.zeros(n), self.P, *measurement, t=t)  # (12)
-        self.P = c.P
-        self._feedback(c.x)
-        return [c.innovation(name, t)]
+        f64 = np.ascontiguousarray
+        value, sigma = f64(value, dtype=float), f64(sigma, dtype=float)
+        ok, nav, P, nu, S = gnss.gps_update(
+            code, self.nav, self.P, value, sigma, scale, lag, self.omega_ib_b, self.b_a,
+            self.b_g, self.lever_arm_b, p.estimate_lever_arm, self.gyro_z,
+            -1 if self._gz is None else self._gz.start, self.accel_k,
+            -1 if self._ga is None else self._ga.start, kalman.DEFAULT_RTOL)  # (4)-(12)
+        if not ok:  # the checked path names what is wrong
+            c = kalman.correct(np.zeros(self.P.shape[0]), self.P, *self._measurement(
+                code, value, sigma * scale, lag), t=t)
+            self.P = c.P
+            self._feedback(c.x)
+            return [c.innovation(name, t)]
+        self.nav, self.P = nav, P
+        return [Innovation(name, t, nu, S)]
+
+    def _measurement(self, code: int, value: np.ndarray, sigma: np.ndarray,
+                     lag: float) -> kalman.Measurement:
+        n = self.P.shape[0]
+        lever_states = self.params.estimate_lever_arm
+        if code == gnss.POSITION:
+            return gps_position_model(self.nav, self.lever_arm_b, value, sigma, n, lag=lag,
+                                      lever_states=lever_states)
+        return gps_velocity_model(self.nav, self.lever_arm_b, self.omega_ib_b, value, sigma, n,
+                                  lever_states=lever_states,
+                                  gyro_z_states=None if self._gz is None else self._gz.start)
 
     def _feedback(self, dx: np.ndarray) -> None:
         super()._feedback(dx)
         if self.params.estimate_lever_arm:
             self.lever_arm_b = self.lever_arm_b - dx[LEVER]
 
+
+    def replay_events(
+        self, t: np.ndarray, imu: Mapping[str, np.ndarray], ends: np.ndarray,
+        kinds: tuple[StreamKind, ...], codes: np.ndarray, rows: np.ndarray, t_ev: np.ndarray,
+        record: np.ndarray, samples: list[Mapping[str, np.ndarray]],
+        out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    ) -> tuple[int, int, dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+        """A run of replay events in one compiled call
+        (:func:`navreplay.filters.gps_ins_events.run_events`): for each event e, propagate
+        over the IMU segment ``[ends[e-1], ends[e])`` of the block, apply the sample of row
+        ``rows[e]`` of stream ``kinds[codes[e]]`` (code -1: none), and when ``record[e]``
+        write an estimate into the next row of ``out`` = (t, x, P, nav vectors).
+
+        Returns (events applied, estimates written, innovations by name as (t, nu, S)
+        arrays); the events after those applied (the first of them failed a check and was
+        undone) are for :meth:`propagate`, :meth:`update` and :meth:`estimate`.
+        """
+        p = self.params
+        local = np.zeros(len(kinds) + 1, np.int64)  # code + 1 -> event code of the kernel
+        empty = np.zeros((0, 3))
+        cols = {gnss.POSITION: (empty, empty), gnss.VELOCITY: (empty, empty)}
+        for c, kind in enumerate(kinds):
+            if kind is StreamKind.GPS:
+                local[c + 1] = gnss.POSITION
+                cols[gnss.POSITION] = (samples[c]["pos"], samples[c]["pos_sigma"])
+            elif kind is StreamKind.GPS_VEL and p.use_gps_vel:
+                local[c + 1] = gnss.VELOCITY
+                cols[gnss.VELOCITY] = (samples[c]["v_n"], samples[c]["vel_sigma"])
+        s = np.zeros(ev.PACKED)
+        tu = self._time_update
+        state = {"prev": tu.prev, "open_nav": tu.open_step.nav, "open_sums": tu.open_step.sums,
+                 "b_a": self.b_a, "b_g": self.b_g, "k_z": self.gyro_z, "k_a": self.accel_k,
+                 "lever": self.lever_arm_b, "omega": self.omega_ib_b}
+        for key, (a, b) in ev.LAYOUT.items():
+            s[a:b] = state[key]
+        n_inn = int(np.count_nonzero(local[codes + 1]))
+        inn_code = np.zeros(n_inn, np.int64)
+        inn_t, inn_nu, inn_S = np.empty(n_inn), np.empty((n_inn, 3)), np.empty((n_inn, 3, 3))
+        f64 = np.ascontiguousarray
+        done, m, k, self.nav, self.P, self.t = ev.run_events(
+            self.nav, self.P, self.t, s, t, f64(imu["omega_ib_b"], dtype=float),
+            f64(imu["f_b"], dtype=float), ends, local[codes + 1], rows, t_ev, record,
+            *(f64(a, dtype=float) for a in cols[gnss.POSITION]),
+            *(f64(a, dtype=float) for a in cols[gnss.VELOCITY]),
+            p.gps_pos_sigma_scale, p.gps_vel_sigma_scale, p.estimate_lever_arm,
+            self._gz is not None, self._ga is not None, tu.step, *tu._model, *tu._work,
+            kalman.DEFAULT_RTOL, *out, inn_code, inn_t, inn_nu, inn_S)
+        for key, (a, b) in ev.LAYOUT.items():  # the filter's arrays are updated in place
+            state[key][:] = s[a:b]
+        innovations = {}
+        for code, name in ((gnss.POSITION, "gps_pos"), (gnss.VELOCITY, "gps_vel")):
+            sel = inn_code[:k] == code
+            if sel.any():
+                innovations[name] = (inn_t[:k][sel], inn_nu[:k][sel], inn_S[:k][sel])
+        return done, m, innovations

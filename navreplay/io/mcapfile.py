@@ -22,6 +22,7 @@ from collections.abc import Callable, Iterator
 from io import BytesIO
 from typing import BinaryIO
 
+import numba
 import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, McapError, RecordLengthLimitExceeded
@@ -219,6 +220,37 @@ class MessageBlock:
         return self.data[s : s + int(self.length[i])]
 
 
+@numba.njit(cache=True)
+def _walk_records(u8: np.ndarray, message: int, schema: int,
+                  channel: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Walk the records (opcode u8, length u64 little-endian, body) of a decompressed chunk:
+    the offsets of the Message records, those of the Schema and Channel records, and where
+    the walk ended (the length of the data unless a record is malformed)."""
+    n = u8.shape[0]
+    offsets = np.empty(n // _MESSAGE_HEADER + 1, dtype=np.int64)
+    others = np.empty(n // 9 + 1, dtype=np.int64)
+    k = 0
+    o = 0
+    pos = 0
+    while pos < n:
+        if pos + 9 > n:
+            return offsets[:k], others[:o], n + 1
+        length = 0
+        for b in range(7, -1, -1):
+            length = (length << 8) | np.int64(u8[pos + 1 + b])
+        if length < 0 or length > n - pos - 9:
+            return offsets[:k], others[:o], n + 1
+        op = u8[pos]
+        if op == message:
+            offsets[k] = pos
+            k += 1
+        elif op == schema or op == channel:
+            others[o] = pos
+            o += 1
+        pos += 9 + length
+    return offsets[:k], others[:o], pos
+
+
 def scan_chunk(
     data: bytes, on_record: Callable[[int, bytes], None], where: str, offset: int
 ) -> MessageBlock:
@@ -233,25 +265,15 @@ def scan_chunk(
     where, offset
         File and chunk offset for error messages.
     """
-    offsets: list[int] = []
-    pos, n = 0, len(data)
-    unpack = _RECORD.unpack_from
-    append = offsets.append
-    message = Opcode.MESSAGE
-    try:
-        while pos < n:
-            opcode, length = unpack(data, pos)
-            if opcode == message:
-                append(pos)
-            elif opcode == Opcode.SCHEMA or opcode == Opcode.CHANNEL:
-                on_record(opcode, data[pos + 9 : pos + 9 + length])
-            pos += 9 + length
-    except struct.error:
-        pos = n + 1
+    n = len(data)
+    u8 = np.frombuffer(data, dtype=np.uint8)
+    idx, others, pos = _walk_records(u8, int(Opcode.MESSAGE), int(Opcode.SCHEMA),
+                                     int(Opcode.CHANNEL))
+    for p in others.tolist():
+        opcode, length = _RECORD.unpack_from(data, p)
+        on_record(opcode, data[p + 9 : p + 9 + length])
     if pos != n:
         raise RecordingError(f"{where}: chunk at byte {offset} has a malformed record")
-    u8 = np.frombuffer(data, dtype=np.uint8)
-    idx = np.asarray(offsets, dtype=np.int64)
     if idx.size:
         if idx[-1] + _MESSAGE_HEADER > n:
             raise RecordingError(f"{where}: chunk at byte {offset} has a malformed message")

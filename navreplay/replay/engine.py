@@ -23,7 +23,9 @@ For each event at time ``t_e`` the engine
    the filter returns None).
 
 IMU samples after the last event are handed over at the end, followed by a last estimate. Every
-IMU sample is thus delivered exactly once and in order. The work per event is slicing views and
+IMU sample is thus delivered exactly once and in order. A filter may take runs of output ticks
+(``propagate_outputs``) or runs of events (``replay_events``) in one call that does the same
+(:func:`_batch_hook`, :func:`_events_hook`). The work per event is slicing views and
 one call per step; everything else (planning, innovation statistics, checks) is vectorised.
 
 Examples
@@ -348,20 +350,21 @@ class _Columns:
     """Estimate columns allocated at a known upper bound of rows (the operating system backs
     only the rows written with memory, so they are neither grown nor copied)."""
 
-    def __init__(self, first: Estimate, upper: int) -> None:
+    def __init__(self, first: Estimate | None, upper: int, n: int = 0) -> None:
         self.upper = max(upper, 1)
         self.cap = self.upper
         self.m = 0
-        n = first.x.shape[0]
+        n = first.x.shape[0] if first is not None else n
         self.t = np.empty(self.cap)
         self.x = np.empty((self.cap, n))
         self.P = np.empty((self.cap, n, n))
-        self.has_nav = first.nav is not None
+        self.has_nav = first is None or first.nav is not None
         if self.has_nav:
             self.pos = np.empty((self.cap, 3))
             self.v_n = np.empty((self.cap, 3))
             self.q_nb = np.empty((self.cap, 4))
-        self.extras = {k: np.empty((self.cap, *np.shape(v))) for k, v in first.extras.items()}
+        extras = first.extras.items() if first is not None else ()
+        self.extras = {k: np.empty((self.cap, *np.shape(v))) for k, v in extras}
 
     def _grow(self) -> None:
         cap = min(self.upper, 2 * self.cap)
@@ -656,6 +659,7 @@ class ReplaySession:
             scored_extras=scored_extras,
         )
         self._batch = None if pacing is not None else _batch_hook(filt)
+        self._events_hook = None if pacing is not None else _events_hook(filt)
         # IMU state between windows: samples not yet handed over, the last one handed over,
         # the tick range and the nominal sample interval
         self._pending: tuple[np.ndarray, dict[str, np.ndarray]] | None = None
@@ -805,11 +809,40 @@ class ReplaySession:
 
         batch = self._batch
         tick_run_end = _tick_runs(plan.code).tolist() if batch is not None else []
+        events = self._events_hook
+        if events is not None:
+            ev_t_arr = np.asarray(ev_t, dtype=np.float64)
+            ev_record_arr = np.asarray(ev_record, dtype=np.bool_)
+            samples = [s.columns for s in aiding]
+        slow_at = -1  # an event the hook undid: applied one by one
+        # live views and progress reports between runs of at most this many events
+        run_cap = _CHECK_EVERY if observer is not None or progress is not None else n_events
         i = -1
         t_now = 0.0
         try:
             while i < n_loop:
                 i += 1
+                if events is not None and i < n_events and i != slow_at:
+                    j = _clean_run(feeder, ev_end, i, min(n_events, i + run_cap))
+                    if j > i:  # events [i, j) in one call of the filter
+                        if columns is None:
+                            columns = _Columns(None, upper, len(states))
+                        m0 = columns.m
+                        done = _apply_run(events, columns, feeder, plan, ev_t_arr,
+                                          ev_record_arr, samples, innovations, i, j)
+                        if checked == m0:  # the hook's kernel checked its estimates
+                            checked = columns.m
+                        if done:
+                            t_now = ev_t[i + done - 1]
+                        if done < j - i:
+                            slow_at = i + done
+                        i += done - 1
+                        if observer is not None and time.perf_counter() >= next_observe:
+                            observer(columns.view(**meta))
+                            next_observe = time.perf_counter() + observe_interval
+                        if progress is not None:
+                            progress(done0 + min(i + 1, n_events), done0 + n_events)
+                        continue
                 if batch is not None and i < n_events and ev_code[i] == TICK:
                     j = tick_run_end[i]
                     if feeder.clean(ev_end[j - 1]):  # outputs of a run of ticks in one call
@@ -929,6 +962,76 @@ def _batch_hook(filt: Filter) -> Callable[..., tuple[np.ndarray, ...]] | None:
     if all(issubclass(hook, owner(n)) for n in ("propagate", "estimate")):
         return filt.propagate_outputs  # type: ignore[attr-defined]
     return None
+
+
+def _events_hook(filt: Filter) -> Callable[..., tuple[int, int, dict]] | None:
+    """The filter's ``replay_events``, when it belongs with its ``propagate``, ``update``
+    and ``estimate`` (defined by the same class or a subclass of theirs).
+
+    ``replay_events(t, imu, ends, kinds, codes, rows, t_ev, record, samples, out)`` applies
+    a run of events without IMU gaps as the calls one by one would (propagate over the IMU
+    segment ``[ends[e-1], ends[e])`` of the block, update with row ``rows[e]`` of
+    ``samples[codes[e]]`` unless ``codes[e]`` is :data:`TICK`, and when ``record[e]`` an
+    estimate into the next rows of ``out = (t, x, P, nav vectors)``), checks every estimate
+    as :func:`navreplay.filters.kalman.check_covariance` does, and returns (events applied,
+    estimates written, ``{name: (t, nu, S)}``); it stops before an event that fails, which
+    the engine then applies one by one (and so names the problem).
+    """
+    cls = type(filt)
+    if getattr(cls, "replay_events", None) is None:
+        return None
+
+    def owner(name: str) -> type:
+        return next(c for c in cls.__mro__ if name in c.__dict__)
+
+    hook = owner("replay_events")
+    if all(issubclass(hook, owner(n)) for n in ("propagate", "update", "estimate")):
+        return filt.replay_events  # type: ignore[attr-defined]
+    return None
+
+
+def _clean_run(feeder: ImuFeeder, ev_end: list[int], i: int, n_events: int) -> int:
+    """The end j <= n_events of the run of events from i whose IMU samples hold no gap to
+    bridge."""
+    if feeder.clean(ev_end[n_events - 1]):
+        return n_events
+    lo, hi = i, n_events  # clean() holds before lo and fails at hi - 1 (it only turns false)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if feeder.clean(ev_end[mid]):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+def _apply_run(hook: Callable[..., tuple[int, int, dict]], columns: _Columns,
+               feeder: ImuFeeder, plan: EventPlan, ev_t: np.ndarray, record: np.ndarray,
+               samples: list[Mapping[str, np.ndarray]],
+               innovations: dict[str, list[tuple[float, np.ndarray, np.ndarray]]],
+               i: int, j: int) -> int:
+    """Events [i, j) through the filter's ``replay_events``; the estimates go straight into
+    the columns. Returns the number of events applied."""
+    a = feeder.start
+    end = int(plan.imu_end[j - 1])
+    ends = np.maximum(plan.imu_end[i:j] - a, 0)
+    while columns.m + (j - i) > columns.cap:
+        columns._grow()
+    m0 = columns.m
+    nav = np.empty((j - i, 10))
+    out = (columns.t[m0:], columns.x[m0:], columns.P[m0:], nav)
+    block = feeder.take(end)  # handed over: those the hook did not use are given back
+    done, m, inn = hook(block[0], block[1], ends, plan.kinds, plan.code[i:j], plan.row[i:j],
+                        ev_t[i:j], record[i:j], samples, out)
+    if columns.has_nav:
+        columns.pos[m0:m0 + m] = nav[:m, 0:3]
+        columns.v_n[m0:m0 + m] = nav[:m, 3:6]
+        columns.q_nb[m0:m0 + m] = nav[:m, 6:10]
+    columns.m = m0 + m
+    feeder.start = a + int(ends[done - 1]) if done else a
+    for name, (t, nu, S) in inn.items():
+        innovations.setdefault(name, []).extend(zip(t.tolist(), nu, S, strict=True))
+    return done
 
 
 def _tick_runs(code: np.ndarray) -> np.ndarray:

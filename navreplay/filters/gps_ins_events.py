@@ -1,0 +1,170 @@
+"""A run of replay events of ``gps-ins`` in one compiled call.
+
+:func:`run_events` does for each event what the replay engine's one-by-one path does through
+:meth:`~navreplay.filters.gps_ins.GpsInsFilter.propagate`,
+:meth:`~navreplay.filters.gps_ins.GpsInsFilter.update` and
+:meth:`~navreplay.filters.gps_ins.GpsInsFilter.estimate`, with the same kernels in the same
+order (so the same bits): the IMU segment up to the event (bias, z-rate and accelerometer
+compensation, strapdown, covariance steps), the GPS update
+(:func:`navreplay.filters.gnss_models.gps_update`), the estimate when the event is the last of
+its time. The first event that fails any check is undone and the call returns: the engine
+replays that event one by one, which names the problem.
+
+The small state that carries over between events is packed into one vector (:data:`LAYOUT`)
+so that an event is undone by copying it back.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from navreplay.filters import gnss_models as gnss
+from navreplay.filters.ins_time_update import (
+    _close_step,
+    _propagate_block,
+    compensate_accel,
+    compensate_gyro_z,
+)
+from navreplay.filters.kalman import _covariance_ok
+
+TICK = 0
+"""Event code: no measurement (an output tick or a stream the filter does not use)."""
+
+LAYOUT = {"prev": (0, 6), "open_nav": (6, 16), "open_sums": (16, 23), "b_a": (23, 26),
+          "b_g": (26, 29), "k_z": (29, 32), "k_a": (32, 38), "lever": (38, 41),
+          "omega": (41, 44)}
+"""Slices of the packed state: coning/sculling increments, the open covariance step, the
+bias, z-rate, accelerometer and lever-arm estimates, the last compensated body rate."""
+PACKED = 44
+
+
+@numba.njit(cache=True)
+def _any(a: np.ndarray) -> bool:
+    for v in a:
+        if v != 0.0:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def run_events(
+    nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray,
+    t: np.ndarray, omega: np.ndarray, f: np.ndarray,
+    ends: np.ndarray, codes: np.ndarray, rows: np.ndarray, t_ev: np.ndarray,
+    record: np.ndarray,
+    gps_pos: np.ndarray, gps_pos_sigma: np.ndarray, gps_vel: np.ndarray,
+    gps_vel_sigma: np.ndarray, pos_scale: float, vel_scale: float,
+    lever_states: bool, has_gz: bool, has_ga: bool,
+    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
+    gz: int, ga: int, F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray,
+    cols: np.ndarray, mean: np.ndarray, rtol: float,
+    t_out: np.ndarray, x_out: np.ndarray, P_out: np.ndarray, nav_out: np.ndarray,
+    inn_code: np.ndarray, inn_t: np.ndarray, inn_nu: np.ndarray, inn_S: np.ndarray,
+) -> tuple[int, int, int, np.ndarray, np.ndarray, float]:
+    """Apply events ``0 .. len(codes) - 1`` (see the module docstring).
+
+    ``ends[e]`` is the end of the IMU segment handed over before event e (indices into t,
+    omega, f); ``codes[e]`` :data:`TICK`, ``gnss.POSITION`` or ``gnss.VELOCITY`` with the
+    sample in row ``rows[e]`` of its columns; ``record[e]`` asks for an estimate after it.
+    Estimates go to rows of ``t_out, x_out, P_out, nav_out``, innovations to ``inn_*``.
+
+    Returns (done, estimates, innovations, nav, P, t_nav): the events applied (all, or up to
+    the first that failed, undone), the rows written and the state after them; ``s`` holds
+    the packed state after them.
+    """
+    n = P.shape[0]
+    prev = s[0:6]
+    open_nav = s[6:16]
+    open_sums = s[16:23]
+    b_a = s[23:26]
+    b_g = s[26:29]
+    k_z = s[29:32]
+    k_a = s[32:38]
+    lever = s[38:41]
+    w_last = s[41:44]
+    snap = np.empty(s.shape[0])
+    m = 0
+    k = 0
+    a = 0
+    for e in range(codes.shape[0]):
+        snap[:] = s
+        nav0, P0, t0, k0 = nav, P, t_nav, k
+        ok = True
+        b = ends[e]
+        if b > a:
+            w = omega[a:b]
+            if has_gz and _any(k_z):
+                w = compensate_gyro_z(w, b_g, k_z)
+            fb = f[a:b]
+            if has_ga and _any(k_a):
+                fb = compensate_accel(fb, b_a, k_a)
+            code, _, nav_b, P_b = _propagate_block(
+                nav, P, t[a:b], t_nav, w, fb, b_a, b_g, prev, step, q, k_acc, k_gyro, depth,
+                curvature, gz, ga, open_nav, open_sums)
+            if code == -1:
+                nav, P, t_nav = nav_b, P_b, t[b - 1]
+                for c in range(3):
+                    w_last[c] = w[w.shape[0] - 1, c] - b_g[c]
+                closes = open_sums[0] > 0.0 and (record[e] or (
+                    codes[e] != TICK and not t_ev[e] < t_nav - 1e-6))
+                if not closes:  # else P is checked after the close that follows
+                    ok = _covariance_ok(P, rtol)
+            elif code != -4:
+                ok = False
+        kind = codes[e]
+        if ok and kind != TICK and not t_ev[e] < t_nav - 1e-6:
+            if open_sums[0] > 0.0:
+                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav,
+                                open_sums, F, M, T, Q, cols, mean)
+                ok = _covariance_ok(P, rtol)
+            if ok:
+                r = rows[e]
+                if kind == gnss.POSITION:
+                    lag = max(t_ev[e] - t_nav, 0.0)
+                    ok, nav, P, nu, S = gnss.gps_update(
+                        kind, nav, P, gps_pos[r], gps_pos_sigma[r], pos_scale, lag, w_last,
+                        b_a, b_g, lever, lever_states, k_z, gz, k_a, ga, rtol)
+                else:
+                    ok, nav, P, nu, S = gnss.gps_update(
+                        kind, nav, P, gps_vel[r], gps_vel_sigma[r], vel_scale, 0.0, w_last,
+                        b_a, b_g, lever, lever_states, k_z, gz, k_a, ga, rtol)
+                if ok:
+                    inn_code[k] = kind
+                    inn_t[k] = t_ev[e]
+                    for i in range(3):
+                        inn_nu[k, i] = nu[i]
+                        for j in range(3):
+                            inn_S[k, i, j] = S[i, j]
+                    k += 1
+        if ok and record[e]:
+            if open_sums[0] > 0.0:
+                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav,
+                                open_sums, F, M, T, Q, cols, mean)
+                ok = _covariance_ok(P, rtol)
+            if ok:
+                t_out[m] = t_nav
+                for c in range(n):
+                    x_out[m, c] = 0.0
+                for c in range(3):
+                    x_out[m, 9 + c] = b_a[c]
+                    x_out[m, 12 + c] = b_g[c]
+                    if lever_states:
+                        x_out[m, 15 + c] = lever[c]
+                if has_gz:
+                    for c in range(3):
+                        x_out[m, gz + c] = k_z[c]
+                if has_ga:
+                    for c in range(6):
+                        x_out[m, ga + c] = k_a[c]
+                for r in range(n):
+                    for c in range(n):
+                        P_out[m, r, c] = P[r, c]
+                for c in range(nav.shape[0]):
+                    nav_out[m, c] = nav[c]
+                m += 1
+        if not ok:  # undo the event: the engine replays it one by one
+            s[:] = snap
+            return e, m, k0, nav0, P0, t0
+        a = b
+    return codes.shape[0], m, k, nav, P, t_nav
