@@ -23,7 +23,16 @@ index symbol                frame  unit  meaning
 0-1   dV_n, dV_e            n      m/s   SDINS north and east velocity error
 2-5   dq_bn0 .. dq_bn3      b -> n -     additive error of the SDINS quaternion Q_bn
 6-8   dq_br0, dq_br1, dq_br3 b -> r -    additive error of the matched components of Q_br
+9-10  theta_f, theta_f'     r      rad   flexure about the ship's Y axis, its rate (rad/s)
 ===== ===================== ====== ===== ================================================
+
+States 9-10 (not in the paper; ``flexure_sigma > 0``, the default;
+docs/methods/transfer-alignment.md §4.9) follow the second-order Markov model of eq. (19),
+discretised exactly;
+they enter the quaternion rows through the misalignment bent by the estimate,
+``Ry(theta_f) (x) Q_br`` (:func:`flexed`), and the velocity rows through the lever arm bent
+with the SDINS. ``vel_only`` has no row they enter and carries none; ``flexure_sigma = 0``
+gives the paper's filters.
 
 Variants (parameter ``match``, :class:`Match`) differ only in the index set s of matched
 quaternion components; one code path serves all three:
@@ -33,7 +42,9 @@ quaternion components; one code path serves all three:
 - ``vel_only``: s = {}, 6 states, 2 measurements (azimuth unobservable without manoeuvres).
 
 ``Estimate.x`` holds the *total* quantities whose errors are the states:
-``[v_N, v_E, q_nb0..3, q_rb[s]]``, and ``Estimate.P`` the covariance of those errors.
+``[v_N, v_E, q_nb0..3, q_rb[s], theta_f, theta_f']``, and ``Estimate.P`` the covariance of those
+errors. The extras ``q_rb`` and ``misalignment_euler`` are Q_br as the attitudes show it now
+(bent by the flexure estimate).
 
 Error definitions (signs)
 -------------------------
@@ -229,9 +240,10 @@ class TransferAlignmentParams(FilterParams):
     """Initial 1 sigma of the scalar part of dQ_br, sqrt(p0) [-]."""
     flexure_sigma: float = 0.5 * DEG
     """Steady-state 1 sigma of the ship's Y-axis flexure angle theta_f [rad], modelled as two
-    states (theta_f, theta_f'), the second-order Markov process of eq. (19); they enter the
-    matched quaternion rows (:func:`predict_and_measure`). 0: no flexure states (the paper's
-    filters). Only with quaternion matching (``vel_only`` has no row they enter)."""
+    states (theta_f, theta_f'), the second-order Markov process of eq. (19); they bend the
+    misalignment in the quaternion rows and the lever arm in the velocity rows
+    (:func:`predict_and_measure`). 0: no flexure states (the paper's filters). Only with
+    quaternion matching (``vel_only`` carries none)."""
     flexure_zeta: float = 0.7
     """Damping ratio of the flexure model [-]."""
     flexure_wn: float = 2.0 * math.pi
@@ -587,7 +599,10 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     z : ndarray, shape (2 + len(s),)
         Measurement (3), (5).
     H : ndarray, shape (2 + len(s), n)
-        Measurement matrix (15).
+        Measurement matrix (15), with the flexure column.
+    R2 : ndarray, shape (len(s), len(s))
+        Second-order term of the flexure in the quaternion rows, added to their R (zero
+        without flexure states).
     q_m : ndarray, shape (4,)
         Q_m with the sign of docs/methods/transfer-alignment.md §2.2.
     w_now : ndarray, shape (3,)
@@ -628,7 +643,6 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
         Qd[i, i] += q_br * dt
     Phi = kalman.discretize(A, dt)
     k = n - nf  # the flexure block, exact (wn dt is not small)
-    H = np.zeros((2 + ns, n))
     for i in range(nf):
         for j in range(nf):
             Phi[k + i, k + j] = phi_f[i, j]
@@ -636,7 +650,7 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     P = kalman.predict_kernel(P, Phi, Qd)  # kalman (3), (6)
 
     # measurement: (3), (6) velocity; (5) quaternion rows s; H of (15)
-    k = n - nf
+    H = np.zeros((2 + ns, n))
     arm = lever_arm_r.copy()
     if nf > 0:  # the lever arm bent with the SDINS: L + theta (e_Y x L)
         arm[0] += theta * lever_arm_r[2]
@@ -672,7 +686,7 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
         for i in range(ns):
             c, g = _BENT_BY[s[i]], _BENT_SIGN[s[i]]
             bent = ns == 4 or s[i] == 1 or s[i] == 3  # as in flexed()
-            if bent and c != 0:  # q_br0 ~ 1 is known: no product error
+            if bent and c != 0:  # row 2 of full matching multiplies q_br0 ~ 1: no product
                 for j in range(ns):
                     if s[j] == c:
                         col[i], sgn[i] = 6 + j, g
