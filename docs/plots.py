@@ -108,6 +108,8 @@ TA_VARIANTS = {
     "vel_quat_partial": ("tab:blue", "velocity + partial quaternion (proposed)"),
     "vel_quat_full": ("tab:red", "velocity + full quaternion"),
     "vel_only": ("tab:gray", "velocity only"),
+    "vel_quat_partial+flexure": ("tab:cyan", "partial, with the flexure states"),
+    "vel_quat_full+flexure": ("tab:green", "full, with the flexure states"),
 }
 
 

@@ -101,3 +101,30 @@ def van_loan(
     Phi = E[n:, n:].T
     Qd = Phi @ E[:n, n:]
     return Phi, 0.5 * (Qd + Qd.T)
+
+
+def second_order_markov(
+    sigma: float, zeta: float, wn: float, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact (Phi, Qd) of the stationary second-order Markov process ``s = [theta, theta']``::
+
+        theta'' + 2 zeta wn theta' + wn^2 theta = w,   E[w w] = 4 zeta wn^3 sigma^2 delta
+
+    whose steady-state covariance is ``diag(sigma^2, (wn sigma)^2)`` (e.g. hull flexure).
+
+    Parameters
+    ----------
+    sigma : float
+        Steady-state 1 sigma of theta.
+    zeta, wn : float
+        Damping ratio [-] and natural frequency [rad/s].
+    dt : float
+        Step [s].
+
+    Returns
+    -------
+    Phi, Qd : ndarray, shape (2, 2)
+    """
+    F = np.array([[0.0, 1.0], [-wn * wn, -2.0 * zeta * wn]])
+    G = np.array([[0.0], [1.0]])
+    return van_loan(F, G, np.array([4.0 * zeta * wn**3 * sigma * sigma]), dt)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from campaign_seeds import SLOW_SEEDS
 
-from navreplay import strapdown
+from navreplay import consistency, strapdown
 from navreplay.filters import kalman
 from navreplay.filters import transfer_alignment as ta
 from navreplay.filters.registry import load_filter
@@ -24,7 +24,8 @@ from navreplay.geo.rotations import (
     quat_to_dcm,
     quat_to_euler,
 )
-from navreplay.metrics import chi2_bounds, position_error_ned, truth_at
+from navreplay.lti import second_order_markov
+from navreplay.metrics import position_error_ned, truth_at
 from navreplay.replay.engine import FilterInitError, replay
 from navreplay.reproduce import get as get_reproduction
 from navreplay.reproduce import transfer_alignment as rep
@@ -228,8 +229,10 @@ def test_prediction_and_measurement_match_the_shared_kalman_math():
     lever, dt = np.array([45.7, 15.2, 12.2]), 0.1
     qc = np.r_[[5e-4**2] * 3, [3e-5**2] * 3]
     v_r = np.array([4.3, 2.5, 0.0])
-    P, z, H_, q_m2, w_now, w_in = ta.predict_and_measure(
-        nav, q_rb, P0, s, -q_m, v_r, sums, 10, w_last, w_prev, lever, dt, qc, 1e-12)
+    P, z, H_, R2, q_m2, w_now, w_in = ta.predict_and_measure(
+        nav, q_rb, P0, s, -q_m, v_r, sums, 10, w_last, w_prev, lever, dt, qc, 1e-12,
+        0, 0.0, np.eye(2), np.zeros((2, 2)))
+    assert not R2.any()  # no flexure states: the paper's R
     np.testing.assert_allclose(q_m2, q_m, atol=0)  # the sign of §2.2
     R, w_in_ref = ta.earth_terms(LAT, H, nav[3:6])
     A, G = ta.system_matrix(nav[6:], nav[3:6], LAT, R, sums[:3] / 10, w_in_ref, sums[3:] / 10, n)
@@ -244,6 +247,68 @@ def test_prediction_and_measurement_match_the_shared_kalman_math():
     np.testing.assert_allclose(z[2:], (Lc @ nav[6:])[s] - q_rb[s], atol=1e-16)
     lever_v = ta.lever_velocity(nav[6:], q_m, w_now, w_in, lever)
     np.testing.assert_allclose(z[:2], (nav[3:6] - v_r - lever_v)[:2], atol=1e-14)
+
+
+@pytest.mark.parametrize("s", [[0, 1, 3], [0, 1, 2, 3]])
+def test_flexure_states_bend_the_predicted_misalignment(s):
+    # the flexure states (theta, theta'): exact second-order Markov block in Phi and Qd, and in
+    # the quaternion rows the misalignment bent by theta (partial matching: q_br1 and q_br3
+    # only, q_br0 and q_br2 hold it through eqs. 10-11), with its derivative as H
+    rng = np.random.default_rng(11)
+    q_m = unit(rng)
+    s = np.array(s)
+    ns, n = len(s), 8 + len(s)
+    sigma, wn = 0.5 * DEG, 2.0 * math.pi
+    P0 = ta.initial_covariance(q_m, s, 0.0625, 2.25e-6, 6.9e-4, (sigma, wn))
+    assert P0.shape == (n, n) and P0[-2, -2] == sigma**2 and P0[-1, -1] == (wn * sigma) ** 2
+    q_bn = quat_mult(q_m, [0.9996, 0.02, 0.01, -0.015])
+    nav = np.r_[LAT, 2.2, H, 4.4, 2.6, 0.3, q_bn / np.linalg.norm(q_bn)]
+    q_rb = np.array([0.9995, 0.02, 0.012, -0.018])
+    q_rb /= np.linalg.norm(q_rb)
+    theta, dt = 0.004, 0.1
+    phi_f, qd_f = second_order_markov(sigma, 0.7, wn, dt)
+    args = (nav, q_rb, P0, s, q_m, np.array([4.3, 2.5, 0.0]), np.r_[0.1, 0.2, 0.0, 0.0, 0.0, -98.0],
+            10, np.zeros(3), np.zeros(3), np.array([45.7, 15.2, 12.2]), dt,
+            np.r_[[5e-4**2] * 3, [3e-5**2] * 3], 1e-12, 2)
+    P, z, H_, R2, *_ = ta.predict_and_measure(*args, theta, phi_f, qd_f)
+    np.testing.assert_allclose(P[-2:, -2:], phi_f @ P0[-2:, -2:] @ phi_f.T + qd_f, rtol=1e-12)
+    assert not P[-2:, :-2].any()  # no coupling before the first update
+    recovered = ns < 4
+    q_pred = ta.flexed(q_rb, theta, recovered)[1]
+    Lc = quat_left_matrix(quat_conj(q_m))
+    np.testing.assert_allclose(z[2:], (Lc @ nav[6:])[s] - q_pred[s], atol=1e-15)
+    h = 1e-6
+    dz = (ta.flexed(q_rb, theta + h, recovered)[1] - ta.flexed(q_rb, theta - h, recovered)[1]) / (2 * h)
+    np.testing.assert_allclose(H_[2:, -2], -dz[s], atol=1e-9)
+    assert not H_[2:, -1].any()
+    if recovered:  # q_br0, q_br2 are not bent: rows 0 (and 2) carry no theta
+        assert H_[2, -2] == 0.0 and q_pred[0] == q_rb[0]
+    # second-order term: theta times the bent component, both uncertain
+    bent = {1: 3, 3: 1} if recovered else {0: 2, 1: 3, 3: 1}
+    i = list(s).index(1)
+    j = 6 + list(s).index(bent[1])
+    assert R2[i, i] == pytest.approx(0.25 * (P[-2, -2] * P[j, j] + P[-2, j] ** 2), rel=1e-12)
+
+
+def test_flexure_states_remove_the_flexure_from_full_matching():
+    """Error-free sensors, a 3 deg mounting with a large yaw part: the paper's filters under
+    flexure. Full matching with the flexure as states aligns as without flexure; the paper's
+    partial matching keeps an azimuth error that scales with the flexure variance (a
+    second-order effect of the flexure leaking into q_br1, q_br3 through the mounting
+    misalignment: docs/methods/transfer-alignment.md §4.9)."""
+    clean = {**NO_ERRORS, "duration": 100.0}
+    err = {}
+    for name, values, params in (
+        ("full+flexure", {}, {"match": "vel_quat_full"}),
+        ("partial", {}, {"flexure_sigma": 0.0}),
+        ("partial, half sigma", {"flexure_sigma": 0.25 * DEG}, {"flexure_sigma": 0.0}),
+    ):
+        rec = simulate(SCENARIO, {**clean, **values}, seed=503)
+        res = replay(rec, FILTER, params)
+        err[name] = abs(rep.alignment_errors(res, rec).phi[-1, 2])
+    assert err["full+flexure"] < 0.1e-3, err
+    assert err["partial"] > 0.5e-3, err
+    assert err["partial"] / err["partial, half sigma"] > 3.0, err  # 4 for a variance
 
 
 @pytest.mark.parametrize(
@@ -342,14 +407,20 @@ def test_scenario_rejects_bad_parameters():
 
 def test_variants_share_one_code_path_with_their_dimensions():
     rec = simulate(SCENARIO, {"duration": 3.0}, seed=5)
+    # the paper's filters (no flexure states), then with the two flexure states (the default;
+    # none for vel_only, which has no quaternion row they enter)
     dims = {"vel_quat_partial": (9, 5), "vel_quat_full": (10, 6), "vel_only": (6, 2)}
-    for match, (n, m) in dims.items():
-        res = replay(rec, FILTER, {"match": match})
-        assert res.x.shape[1] == n and res.P.shape[1:] == (n, n)
-        m_q = sum(s.nu.shape[1] for s in res.innovations.values())
-        assert m_q == m
-        assert res.t[0] == pytest.approx(0.1)  # the first GINS sample after an IMU sample
-        assert res.extras["misalignment_euler"].shape[1] == 3
+    for flexure, extra in ((0.0, 0), (0.5 * DEG, 2)):
+        for match, (n, m) in dims.items():
+            n += extra if match != "vel_only" else 0
+            res = replay(rec, FILTER, {"match": match, "flexure_sigma": flexure})
+            assert res.x.shape[1] == n and res.P.shape[1:] == (n, n)
+            m_q = sum(s.nu.shape[1] for s in res.innovations.values())
+            assert m_q == m
+            assert res.t[0] == pytest.approx(0.1)  # the first GINS sample after an IMU sample
+            assert res.extras["misalignment_euler"].shape[1] == 3
+            if match == "vel_quat_partial" and extra:
+                assert res.state_names[-3:] == ("q_rb3", "theta_f", "theta_f_rate")
     assert res.state_names == ("v_N", "v_E", "q_nb0", "q_nb1", "q_nb2", "q_nb3")
 
 
@@ -420,30 +491,31 @@ def test_replay_is_block_size_independent():
 # reproduction
 
 
-@pytest.mark.parametrize("values, rate_sigma", [
-    ({}, ta.TransferAlignmentParams().flexure_rate_sigma),
-    ({"flexure_sigma": 0.0}, 0.0),
+@pytest.mark.parametrize("values, params", [
+    ({}, {}),  # flexure, partial matching with the flexure states (the default)
+    ({}, {"match": "vel_quat_full"}),  # flexure, full matching with the flexure states
+    ({"flexure_sigma": 0.0}, {"flexure_sigma": 0.0, "flexure_rate_sigma": 0.0}),  # the paper's
 ])
-def test_innovations_are_consistent_with_their_covariance(values, rate_sigma):
-    # the flexure turns the lever arm with the SDINS and the velocity R carries the flexure
-    # rate the lever-arm term misses: the run-averaged NIS of both measurements stays inside
-    # its 95 % chi-square band (8 runs of 30 s, seeds never used for tuning)
+def test_innovations_are_consistent_with_their_covariance(values, params):
+    """The NIS of every measurement row, 8 runs of 20 s at seeds never used for tuning, every
+    update from 2 s on (1440 per row): the velocity (2 dof) within 12 % of its dof, each
+    quaternion row that a rotation moves (q_br1, q_br3; q_br2 with full matching) within -12 %
+    and +20 % (measured 1.07-1.09; q_br2 of full matching 1.19, the residual of the estimated
+    flexure). The scalar row q_br0 moves only to second order under the GINS noise, and the
+    paper's R (the same 0.5 arcmin as the others) overstates it: its NIS is near 0
+    (docs/methods/transfer-alignment.md §4.4)."""
     runs = 8
-    nis = {"velocity": [], "quaternion": []}
+    vel, rows = [], []
     for i in range(runs):
-        rec = simulate(SCENARIO, {**values, "duration": 30.0}, seed=9100 + i)
-        res = replay(rec, FILTER, {"flexure_rate_sigma": rate_sigma})
-        for name in nis:
-            nis[name].append(res.innovations[name].nis)
-    for name, dof in (("velocity", 2), ("quaternion", 3)):
-        mean = np.mean(nis[name], axis=0)[20:]  # from 2 s on
-        lo, hi = chi2_bounds(dof, runs)
-        assert lo < mean.mean() < hi, (name, mean.mean())
-    # per epoch for the velocity (the quaternion rows run high while the 3 deg initial
-    # misalignment is being removed under flexure: docs/reproduction.md)
-    mean = np.mean(nis["velocity"], axis=0)[20:]
-    lo, hi = chi2_bounds(2, runs)
-    assert np.mean((mean >= lo) & (mean <= hi)) >= 0.9
+        rec = simulate(SCENARIO, {**values, "duration": 20.0}, seed=9100 + i)
+        res = replay(rec, FILTER, params)
+        vel.append(res.innovations["velocity"].nis[20:])
+        q = res.innovations["quaternion"]
+        rows.append(q.nu[20:] ** 2 / np.diagonal(q.S[20:], axis1=1, axis2=2))
+    assert 0.88 < np.mean(vel) / 2.0 < 1.12, np.mean(vel)
+    per_row = np.mean(np.concatenate(rows), axis=0)
+    assert np.all((per_row[1:] > 0.88) & (per_row[1:] < 1.2)), per_row
+    assert per_row[0] < 0.3, per_row
 
 
 def test_flexure_rate_sigma_matches_the_simulated_flexure():
@@ -500,7 +572,7 @@ def test_quick_report_and_rerun_view(tmp_path):
 @pytest.mark.parametrize("seed", SLOW_SEEDS)
 def test_full_campaign_meets_every_acceptance_band(seed):
     report = rep.REPRODUCTION.run(runs=36, seed=seed, workers=2)
-    assert report.figures["timing"]["filter_runs"] == 36 * 7
+    assert report.figures["timing"]["filter_runs"] == 36 * 9
     names = [c.name for c in report.checks]
     assert len(names) == 8
     failed = [f"{c.name}: {c.value:.4g} (band {c.band})" for c in report.checks if not c.passed]
@@ -529,3 +601,30 @@ def test_attitude_sigma_with_the_consider_terms_is_honest():
     assert np.all(ratio_p > 2.0), ratio_p
     consider = ta.consider_sigma(ta.TransferAlignmentParams(), matched=True)
     np.testing.assert_allclose(consider, [0.39e-3, 0.39e-3, 1.70e-3], rtol=0.02)
+
+
+@pytest.mark.slow
+def test_flexure_states_make_the_azimuth_sigma_honest_over_the_seed_list():
+    """36 runs under flexure at every seed of the list, pooled (108 runs, one sample each at
+    100 s): full matching with the flexure states has RMS within 20 % of its predicted sigma on
+    every axis, and its normalised squared errors pass the chi-square check of
+    docs/methods/consistency.md (3 dof, false alarm 0.001). Partial matching with the states
+    keeps part of the second-order flexure bias (§4.9) but less than the paper's filter."""
+    cond = dataclasses.replace(rep.CONDITIONS[0],
+                               variants=(rep.PARTIAL, rep.PARTIAL_FLEX, rep.FULL_FLEX))
+    phi, sigma = {}, {}
+    for seed in SLOW_SEEDS:
+        stats, _ = rep.run_campaign(36, seed=seed, workers=2, conditions=(cond,))
+        for label in cond.variants:
+            st = stats[(label, "flexure")]
+            k = st.index(100.0)
+            phi.setdefault(label, []).append(st.phi[:, k])
+            sigma.setdefault(label, []).append(st.sigma[:, k])
+    e, s = (np.concatenate(phi[rep.FULL_FLEX]), np.concatenate(sigma[rep.FULL_FLEX]))
+    ratio = np.sqrt(np.mean(e**2, axis=0) / np.mean(s**2, axis=0))
+    assert np.all((ratio > 0.8) & (ratio < 1.2)), ratio
+    nees = np.sum((e / s) ** 2, axis=1)
+    assert consistency.inside(float(np.mean(nees)), 3, len(nees)), np.mean(nees)
+    rms_d = {label: np.sqrt(np.mean(np.concatenate(phi[label])[:, 2] ** 2))
+             for label in (rep.PARTIAL, rep.PARTIAL_FLEX)}
+    assert rms_d[rep.PARTIAL_FLEX] < rms_d[rep.PARTIAL], rms_d

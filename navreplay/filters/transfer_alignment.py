@@ -23,7 +23,16 @@ index symbol                frame  unit  meaning
 0-1   dV_n, dV_e            n      m/s   SDINS north and east velocity error
 2-5   dq_bn0 .. dq_bn3      b -> n -     additive error of the SDINS quaternion Q_bn
 6-8   dq_br0, dq_br1, dq_br3 b -> r -    additive error of the matched components of Q_br
+9-10  theta_f, theta_f'     r      rad   flexure about the ship's Y axis, its rate (rad/s)
 ===== ===================== ====== ===== ================================================
+
+States 9-10 (not in the paper; ``flexure_sigma > 0``, the default;
+docs/methods/transfer-alignment.md §4.9) follow the second-order Markov model of eq. (19),
+discretised exactly;
+they enter the quaternion rows through the misalignment bent by the estimate,
+``Ry(theta_f) (x) Q_br`` (:func:`flexed`), and the velocity rows through the lever arm bent
+with the SDINS. ``vel_only`` has no row they enter and carries none; ``flexure_sigma = 0``
+gives the paper's filters.
 
 Variants (parameter ``match``, :class:`Match`) differ only in the index set s of matched
 quaternion components; one code path serves all three:
@@ -33,7 +42,9 @@ quaternion components; one code path serves all three:
 - ``vel_only``: s = {}, 6 states, 2 measurements (azimuth unobservable without manoeuvres).
 
 ``Estimate.x`` holds the *total* quantities whose errors are the states:
-``[v_N, v_E, q_nb0..3, q_rb[s]]``, and ``Estimate.P`` the covariance of those errors.
+``[v_N, v_E, q_nb0..3, q_rb[s], theta_f, theta_f']``, and ``Estimate.P`` the covariance of those
+errors. The extras ``q_rb`` and ``misalignment_euler`` are Q_br as the attitudes show it now
+(bent by the flexure estimate).
 
 Error definitions (signs)
 -------------------------
@@ -157,6 +168,7 @@ from navreplay.filters.base import (
 )
 from navreplay.filters.registry import register_filter
 from navreplay.geo import earth, kernels
+from navreplay.lti import second_order_markov
 from navreplay.streams import StreamKind
 from navreplay.units import ARCMIN, DEG, FOOT, G0, MICRO_G
 
@@ -188,10 +200,9 @@ DV = slice(0, 2)
 """dV_n, dV_e [m/s]."""
 DQ_BN = slice(2, 6)
 """dq_bn0..3 [-]."""
-DQ_BR = slice(6, None)
-"""dq_br[s] [-]."""
 N_NAV = 6
-"""States before the dQ_br block."""
+"""States before the dQ_br block dq_br[s] [-], which the flexure states (theta_f [rad],
+theta_f' [rad/s]) follow when modelled."""
 
 # measurement layout, eq. (15)
 ZV = slice(0, 2)
@@ -227,6 +238,16 @@ class TransferAlignmentParams(FilterParams):
     """Initial mounting misalignment per axis [rad]; p1 = sin(init_misalignment / 2)^2."""
     init_q0_sigma: float = 1.5e-3
     """Initial 1 sigma of the scalar part of dQ_br, sqrt(p0) [-]."""
+    flexure_sigma: float = 0.5 * DEG
+    """Steady-state 1 sigma of the ship's Y-axis flexure angle theta_f [rad], modelled as two
+    states (theta_f, theta_f'), the second-order Markov process of eq. (19); they bend the
+    misalignment in the quaternion rows and the lever arm in the velocity rows
+    (:func:`predict_and_measure`). 0: no flexure states (the paper's filters). Only with
+    quaternion matching (``vel_only`` carries none)."""
+    flexure_zeta: float = 0.7
+    """Damping ratio of the flexure model [-]."""
+    flexure_wn: float = 2.0 * math.pi
+    """Natural frequency of the flexure model [rad/s]."""
     flexure_rate_sigma: float = 0.0133
     """1 sigma of the flexure rate about the ship's Y axis that the lever-arm term misses at
     the GINS time [rad/s]: the body rate is extrapolated from the last IMU samples, and the
@@ -250,7 +271,10 @@ class TransferAlignmentParams(FilterParams):
         for name in ("accel_noise", "gyro_noise", "misalignment_noise", "vel_sigma",
                      "quat_sigma", "init_vel_sigma", "init_misalignment", "init_q0_sigma"):
             check_number(self, name, positive=True)
-        check_number(self, "flexure_rate_sigma", positive=False)
+        for name in ("flexure_rate_sigma", "flexure_sigma"):
+            check_number(self, name, positive=False)
+        for name in ("flexure_zeta", "flexure_wn"):
+            check_number(self, name, positive=True)
         if self.init_misalignment >= math.pi:
             raise ValueError(f"init_misalignment must be < pi rad, got {self.init_misalignment}")
         if self.lever_arm_r is not None:
@@ -425,6 +449,45 @@ def system_matrix(q_bn, v_n, lat, R, w_ib_b, w_in_n, f_b, n):
     return A, G
 
 
+_BENT_BY = np.array([2, 3, 0, 1])
+"""The component of Q_br that the flexure angle multiplies in each component of
+``[0, e_Y] (x) Q_br = [-q2, q3, q0, -q1]``, and its sign (_BENT_SIGN)."""
+_BENT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0])
+
+
+@numba.njit(cache=True)
+def flexed(q_rb, theta, recovered):
+    """Q_br as the GINS and SDINS attitudes show it when the hull is bent by theta [rad] about
+    the ship's Y axis: ``Ry(theta) (x) Q_br``, its matrix in the estimated components and its
+    derivative in theta.
+
+    With partial matching (``recovered`` True) q_br2 is recovered from the attitudes after
+    every update (eq. 11) and so already holds the flexure, and the normalisation (eq. 10)
+    puts the flexure's share in the scalar q_br0: only q_br1 and q_br3 are bent here. With
+    full matching every component is a state of the unbent mounting and all four are bent.
+
+    Returns
+    -------
+    Lf : ndarray, shape (4, 4)
+        ``q_pred = Lf q_rb`` (the left product by Ry(theta), rows 0 and 2 the identity's when
+        ``recovered``).
+    q_pred : ndarray, shape (4,)
+    dq_theta : ndarray, shape (4,)
+        ``d q_pred / d theta``: ``1/2 [0, e_Y] (x) q_pred`` in the bent components.
+    """
+    Lf = kernels.quat_left_matrix(np.array([math.cos(0.5 * theta), 0.0,
+                                            math.sin(0.5 * theta), 0.0]))
+    q_pred = _mv(Lf, q_rb)
+    dq_theta = np.array([-0.5 * q_pred[2], 0.5 * q_pred[3], 0.5 * q_pred[0], -0.5 * q_pred[1]])
+    if recovered:
+        for r in (0, 2):
+            for j in range(4):
+                Lf[r, j] = 1.0 if r == j else 0.0
+            q_pred[r] = q_rb[r]
+            dq_theta[r] = 0.0
+    return Lf, q_pred, dq_theta
+
+
 @numba.njit(cache=True)
 def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
     """(6): ``C_nb (w_nb^b x L^b)`` with ``L^b = C_nb^T C(Q_m) L^r``, NED [m/s], (3,).
@@ -489,7 +552,7 @@ def lever_position(pos, q_m, lever_arm_r):
 
 @numba.njit(cache=True)
 def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, lever_arm_r,
-                        dt, qc, q_br):
+                        dt, qc, q_br, nf, theta, phi_f, qd_f):
     """Steps 2-3 of a cycle up to the correction: the predicted P, z and H.
 
     Parameters
@@ -521,6 +584,13 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
         Noise densities squared [q_a x3, q_g x3].
     q_br : float
         Density squared of the dQ_br states [1/s].
+    nf : int
+        Number of flexure states (0, or 2: theta_f, theta_f' last in the state).
+    theta : float
+        Flexure angle estimate at the GINS time [rad] (0 without flexure states).
+    phi_f, qd_f : ndarray, shape (2, 2)
+        Exact transition and process noise of the flexure states over dt
+        (:func:`navreplay.lti.second_order_markov`; unused without flexure states).
 
     Returns
     -------
@@ -529,7 +599,10 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     z : ndarray, shape (2 + len(s),)
         Measurement (3), (5).
     H : ndarray, shape (2 + len(s), n)
-        Measurement matrix (15).
+        Measurement matrix (15), with the flexure column.
+    R2 : ndarray, shape (len(s), len(s))
+        Second-order term of the flexure in the quaternion rows, added to their R (zero
+        without flexure states).
     q_m : ndarray, shape (4,)
         Q_m with the sign of docs/methods/transfer-alignment.md §2.2.
     w_now : ndarray, shape (3,)
@@ -566,24 +639,63 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
         for j in range(6):
             Gq[i, j] = G[i, j] * qc[j] * dt
     Qd = _mmt(Gq, G)
-    for i in range(6, n):
+    for i in range(6, 6 + ns):
         Qd[i, i] += q_br * dt
-    P = kalman.predict_kernel(P, kalman.discretize(A, dt), Qd)  # kalman (3), (6)
+    Phi = kalman.discretize(A, dt)
+    k = n - nf  # the flexure block, exact (wn dt is not small)
+    for i in range(nf):
+        for j in range(nf):
+            Phi[k + i, k + j] = phi_f[i, j]
+            Qd[k + i, k + j] += qd_f[i, j]
+    P = kalman.predict_kernel(P, Phi, Qd)  # kalman (3), (6)
 
     # measurement: (3), (6) velocity; (5) quaternion rows s; H of (15)
-    lever_v = lever_velocity(q_bn, q_m, w_now, w_in, lever_arm_r)
-    z = np.empty(2 + ns)
     H = np.zeros((2 + ns, n))
+    arm = lever_arm_r.copy()
+    if nf > 0:  # the lever arm bent with the SDINS: L + theta (e_Y x L)
+        arm[0] += theta * lever_arm_r[2]
+        arm[2] -= theta * lever_arm_r[0]
+    lever_v = lever_velocity(q_bn, q_m, w_now, w_in, arm)
+    if nf > 0:
+        d_arm = np.array([lever_arm_r[2], 0.0, -lever_arm_r[0]])
+        dv = lever_velocity(q_bn, q_m, w_now, w_in, d_arm)
+        H[0, k] = -dv[0]
+        H[1, k] = -dv[1]
+    z = np.empty(2 + ns)
     z[0] = nav[3] - v_r[0] - lever_v[0]
     z[1] = nav[4] - v_r[1] - lever_v[1]
     H[0, 0] = 1.0
     H[1, 1] = 1.0
+    # predicted Q_br: the mounting misalignment bent by the flexure (flexed())
+    Lf, q_pred, dq_theta = flexed(q_rb, theta, ns < 4)
     for i in range(ns):
-        z[2 + i] = q_br_meas[s[i]] - q_rb[s[i]]
+        z[2 + i] = q_br_meas[s[i]] - q_pred[s[i]]
         for j in range(4):
             H[2 + i, 2 + j] = Lc[s[i], j]
-        H[2 + i, 6 + i] = -1.0
-    return P, z, H, q_m, w_now, w_in
+        for j in range(ns):
+            H[2 + i, 6 + j] = -Lf[s[i], s[j]]
+        if nf > 0:
+            H[2 + i, k] = -dq_theta[s[i]]
+    # second-order term of the bent components: dq_theta is bilinear in theta and Q_br, so
+    # the product of their errors adds 1/4 (P_tt P_ab + P_ta P_tb) (signed) to R; it matters
+    # while the 3 deg mounting misalignment is being removed and then vanishes
+    R2 = np.zeros((ns, ns))
+    if nf > 0:
+        col = np.full(ns, -1)  # state index of the component each bent row multiplies
+        sgn = np.zeros(ns)
+        for i in range(ns):
+            c, g = _BENT_BY[s[i]], _BENT_SIGN[s[i]]
+            bent = ns == 4 or s[i] == 1 or s[i] == 3  # as in flexed()
+            if bent and c != 0:  # row 2 of full matching multiplies q_br0 ~ 1: no product
+                for j in range(ns):
+                    if s[j] == c:
+                        col[i], sgn[i] = 6 + j, g
+        for i in range(ns):
+            for j in range(ns):
+                if col[i] >= 0 and col[j] >= 0:
+                    R2[i, j] = 0.25 * sgn[i] * sgn[j] * (P[k, k] * P[col[i], col[j]]
+                                                         + P[k, col[i]] * P[k, col[j]])
+    return P, z, H, R2, q_m, w_now, w_in
 
 
 @numba.njit(cache=True)
@@ -631,6 +743,14 @@ def feedback(nav, q_rb, dx, P, s, u, q_m, v_r, pos, w_now, w_in, lever_arm_r):
     nav[5] = v_r[2] + lever_velocity(q, q_m, w_now, w_in, lever_arm_r)[2]
     nav[0:3] = lever_position(pos, q_m, lever_arm_r)
     return attitude_sigma(q, P)
+
+
+FLEXURE_STATES = (
+    State("theta_f", "rad", Quantity.MISALIGNMENT, TruthColumn("theta_f")),
+    State("theta_f_rate", "rad/s", Quantity.MISALIGNMENT, TruthColumn("theta_f_rate")),
+)
+"""The flexure states: angle and rate of the hull bending about the ship's Y axis."""
+_NO_FLEXURE = (np.eye(2), np.zeros((2, 2)))
 
 
 def consider_sigma(params: TransferAlignmentParams, matched: bool) -> np.ndarray:
@@ -708,9 +828,10 @@ def block_intervals(t, t_prev, omega_ib_b, f_b, sums, last):
 
 
 def initial_covariance(
-    q_m: np.ndarray, s: np.ndarray, vel_var: float, p0: float, p1: float
+    q_m: np.ndarray, s: np.ndarray, vel_var: float, p0: float, p1: float,
+    flexure: tuple[float, float] | None = None,
 ) -> np.ndarray:
-    """P0 of eq. (17) for the matched index set s.
+    """P0 of eq. (17) for the matched index set s, and of the flexure states.
 
     Parameters
     ----------
@@ -722,20 +843,29 @@ def initial_covariance(
         Initial velocity error variance per axis [(m/s)^2].
     p0, p1 : float
         Variances of the scalar and of each vector component of dQ_br [-].
+    flexure : (sigma, wn) or None
+        Flexure states last, at their stationary covariance ``diag(sigma^2, (wn sigma)^2)``
+        [rad], [rad/s]; None: no flexure states.
 
     Returns
     -------
-    ndarray, shape (6 + len(s), 6 + len(s))
+    ndarray, shape (n, n), n = 6 + len(s) (+ 2 with the flexure states)
     """
-    n = N_NAV + len(s)
+    ns = len(s)
+    n = N_NAV + ns + (2 if flexure is not None else 0)
+    br = slice(N_NAV, N_NAV + ns)
     P_hat = np.diag([p0, p1, p1, p1])
     Lm = kernels.quat_left_matrix(q_m)
     P = np.zeros((n, n))
     P[DV, DV] = vel_var * np.eye(2)
     P[DQ_BN, DQ_BN] = Lm @ P_hat @ Lm.T  # (16): dQ_bn = L(Q_m) dQ_br
-    P[DQ_BN, DQ_BR] = Lm @ P_hat[:, s]
-    P[DQ_BR, DQ_BN] = P[DQ_BN, DQ_BR].T
-    P[DQ_BR, DQ_BR] = P_hat[np.ix_(s, s)]
+    P[DQ_BN, br] = Lm @ P_hat[:, s]
+    P[br, DQ_BN] = P[DQ_BN, br].T
+    P[br, br] = P_hat[np.ix_(s, s)]
+    if flexure is not None:
+        sigma, wn = flexure
+        P[n - 2, n - 2] = sigma**2
+        P[n - 1, n - 1] = (wn * sigma) ** 2
     return P
 
 
@@ -773,13 +903,18 @@ class TransferAlignment(Filter):
             raise ValueError(f"transfer-alignment: lever arm needs three finite values, got {arm!r}")
         self.s = np.array(p.match.components, dtype=np.int64)
         self.u = np.array([i for i in range(4) if i not in p.match.components], dtype=np.int64)
-        self.n = N_NAV + len(self.s)
+        # the flexure states enter only the quaternion rows
+        self.nf = 2 if p.flexure_sigma > 0.0 and len(self.s) else 0
+        self.n = N_NAV + len(self.s) + self.nf
         self.states = (
             State("v_N", "m/s", Quantity.VELOCITY),
             State("v_E", "m/s", Quantity.VELOCITY),
             *(State(f"q_nb{i}", "-", Quantity.ATTITUDE) for i in range(4)),
             *(State(f"q_rb{i}", "-", Quantity.MISALIGNMENT) for i in self.s),
+            *FLEXURE_STATES[: self.nf],
         )
+        self.flex = np.zeros(2)  # theta_f, theta_f' estimates [rad, rad/s]
+        self._flex_model: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._qc = np.array([p.accel_noise**2] * 3 + [p.gyro_noise**2] * 3)
         self._q_br = p.misalignment_noise**2
         self._r = np.array([p.vel_sigma**2] * 2 + [p.quat_sigma**2] * len(self.s))
@@ -787,7 +922,7 @@ class TransferAlignment(Filter):
 
         self.t = 0.0
         self.nav: np.ndarray | None = None  # [lat, lon, h, v_n, q_nb], strapdown layout
-        self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])
+        self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])  # Q_br, the matched part unbent (flexed())
         self.P = np.zeros((self.n, self.n))
         self.sigma_phi = np.zeros(3)
         self._consider = consider_sigma(params, len(self.s) > 0)
@@ -853,14 +988,15 @@ class TransferAlignment(Filter):
         if self.nav is None:
             return None
         nav = self.nav
+        q_rb = flexed(self.q_rb, self.flex[0], len(self.s) < 4)[1]  # bent by the flexure
         return Estimate(
             t=self.t,
-            x=np.concatenate((nav[3:5], nav[6:10], self.q_rb[self.s])),
+            x=np.concatenate((nav[3:5], nav[6:10], self.q_rb[self.s], self.flex[: self.nf])),
             P=self.P.copy(),
             nav=NavSolution.from_vector(nav.copy()),  # nav is corrected in place
             extras={
-                "q_rb": self.q_rb.copy(),
-                "misalignment_euler": kernels.quat_to_euler(self.q_rb),
+                "q_rb": q_rb,
+                "misalignment_euler": kernels.quat_to_euler(q_rb),
                 "attitude_sigma_n": self.sigma_phi.copy(),
             },
         )
@@ -878,14 +1014,28 @@ class TransferAlignment(Filter):
         v_b = v_r + lever_velocity(q_m, q_m, w_now, w_in, self.lever_arm_r)
         self.nav = np.concatenate((lever_position(pos, q_m, self.lever_arm_r), v_b, q_m))
         self.q_rb = np.array([1.0, 0.0, 0.0, 0.0])
+        self.flex = np.zeros(2)  # the mean of the stationary flexure
         self.P = initial_covariance(
             q_m, self.s, p.init_vel_sigma**2, p.init_q0_sigma**2,
             math.sin(0.5 * p.init_misalignment) ** 2,
+            (p.flexure_sigma, p.flexure_wn) if self.nf else None,
         )
         kalman.check_covariance(self.P, name="P0", t=t)
         self.sigma_phi = np.hypot(attitude_sigma(q_m, self.P), self._consider)
         self.t = t
         self._reset_sums()
+
+    def _flexure_model(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Exact transition and process noise of the flexure states over dt (the identity and
+        zero without them); cached per interval in nanoseconds."""
+        if not self.nf:
+            return _NO_FLEXURE
+        key = round(dt * 1e9)
+        if key not in self._flex_model:
+            p = self.params
+            self._flex_model[key] = second_order_markov(p.flexure_sigma, p.flexure_zeta,
+                                                        p.flexure_wn, dt)
+        return self._flex_model[key]
 
     def _reset_sums(self) -> None:
         self._sums[:] = 0.0
@@ -897,14 +1047,20 @@ class TransferAlignment(Filter):
         dt = t - self.t
         if not dt > 0.0:
             raise ValueError(f"master_ins time does not increase: {t} s after {self.t} s")
-        P, z, H, q_m, w_now, w_in = predict_and_measure(
+        phi_f, qd_f = self._flexure_model(dt)
+        self.flex = phi_f @ self.flex
+        P, z, H, R2, q_m, w_now, w_in = predict_and_measure(
             self.nav, self.q_rb, self.P, self.s, q_m, v_r, self._sums, self._count,
             self._w_last, self._w_prev, self.lever_arm_r, dt, self._qc, self._q_br,
+            self.nf, self.flex[0], phi_f, qd_f,
         )
         R = np.diag(self._r)
+        R[ZQ, ZQ] += R2
         R[ZV, ZV] = velocity_noise(q_m, self.lever_arm_r, self.params.vel_sigma,
                                    self.params.flexure_rate_sigma)
         c = kalman.correct(self._x0, P, z, H, R, t=t)  # also step 7's check of P
+        if self.nf:
+            self.flex -= c.x[self.n - 2:]
         sigma_phi = feedback(self.nav, self.q_rb, c.x, c.P, self.s, self.u, q_m, v_r, pos,
                              w_now, w_in, self.lever_arm_r)
         self.P = c.P

@@ -56,7 +56,7 @@ from scipy.signal import lfilter, lfiltic
 
 from navreplay.geo.earth import ned_offset_to_lla
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_to_dcm, quat_to_euler
-from navreplay.lti import van_loan
+from navreplay.lti import second_order_markov
 from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.master_ins import MasterInsModel
@@ -278,9 +278,7 @@ def flexure_state(
     theta_rate : ndarray, shape (n,)
         [rad/s].
     """
-    F = np.array([[0.0, 1.0], [-wn * wn, -2.0 * zeta * wn]])
-    G = np.array([[0.0], [1.0]])
-    Phi, Qd = van_loan(F, G, np.array([4.0 * zeta * wn**3]), dt)  # unit sigma, scaled below
+    Phi, Qd = second_order_markov(1.0, zeta, wn, dt)  # unit sigma, scaled below
     Lq = np.linalg.cholesky(Qd)
     s0 = normals[0] * np.array([1.0, wn])
     w = normals[1:n] @ Lq.T  # w_0 .. w_n-2
@@ -424,6 +422,7 @@ class ShipTransferAlignment(Scenario):
                 "pos_r": pos_r,
                 "v_r_n": np.tile(v_r_n, (n + 1, 1)),
                 "theta_f": theta_f,
+                "theta_f_rate": theta_rate,
                 "q_rb": q_rb,
                 "misalignment_euler": quat_to_euler(q_rb),
             },
@@ -466,6 +465,7 @@ class ShipTransferAlignment(Scenario):
                     "pos_r": "GINS position [rad, rad, m]",
                     "v_r_n": "GINS velocity V_R NED [m/s]",
                     "theta_f": "Y-axis flexure angle [rad]",
+                    "theta_f_rate": "Y-axis flexure rate [rad/s]",
                     "q_rb": "true misalignment b -> r, Ry(theta_f) C_mis",
                     "misalignment_euler": "ZYX Euler angles of C_rb [rad]",
                 },
