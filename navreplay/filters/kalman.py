@@ -253,7 +253,7 @@ def _finite(a: np.ndarray, name: str, t: float | None) -> None:
 # predict / correct
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def transition_rows_kernel(F: np.ndarray, r: int, dt: float, M: np.ndarray) -> None:
     """Eq. (3) compiled for an F that is zero outside its first r rows: those rows of Phi.
 
@@ -295,7 +295,7 @@ def predict_kernel(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> np.ndarray
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def predict_rows_kernel(
     P: np.ndarray, M: np.ndarray, cols: np.ndarray, Qd: np.ndarray, T: np.ndarray
 ) -> np.ndarray:
