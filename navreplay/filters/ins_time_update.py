@@ -439,7 +439,7 @@ class TimeUpdate:
         n = noise.q.shape[0]
         self._shape = (n, n)
         self._model = _model_args(self._shape, noise, vertical, curvature_derivatives)
-        self._work = _scratch(n, noise.gyro_z_states, noise.accel_states)  # compiled close
+        self._work = _scratch(n, noise.gyro_z_states, noise.accel_states)
         self.step = float(step)
         self.prev = np.zeros(6)
         """Increments [dtheta, dv] of the last sample [rad, m/s]."""
