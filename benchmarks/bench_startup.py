@@ -3,8 +3,9 @@ the fixed cost of starting the command.
 
 Every figure is the user + system CPU time (and the wall time) of a fresh interpreter:
 
-- ``first run``: ``navreplay run gps-ins REC --no-viz`` with ``NUMBA_CACHE_DIR`` pointing at a
-  new, empty directory, as after ``pip install``: every kernel the run needs is compiled;
+- ``first run``: ``navreplay run FILTER REC --no-viz`` (gps-ins unless ``--filter``) with
+  ``NUMBA_CACHE_DIR`` pointing at a new, empty directory, as after ``pip install``: every
+  kernel the run needs is compiled;
 - ``warm run``: the same command again, the kernels loaded from that cache;
 - ``start-up``: ``navreplay --help`` (imports and the command line, no replay), against a bare
   ``python -c pass`` measured in the same run.
@@ -14,7 +15,7 @@ with its own empty cache).
 
 Usage::
 
-    python -m benchmarks.bench_startup [--recording REC] [--repeat 3]
+    python -m benchmarks.bench_startup [--filter gps-ins] [--recording REC] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -45,11 +46,11 @@ def _measure(cmd: list[str], env: dict[str, str], cwd: str) -> tuple[float, floa
     return cpu, wall
 
 
-def measure(recording: Path, repeat: int) -> dict[str, tuple[float, float]]:
+def measure(recording: Path, repeat: int, filt: str = "gps-ins") -> dict[str, tuple[float, float]]:
     """Medians of (CPU, wall) [s] of the first run, the warm run, start-up and a bare
     interpreter."""
     navreplay = [sys.executable, "-m", "navreplay"]
-    run = [*navreplay, "run", "gps-ins", str(recording), "--no-viz"]
+    run = [*navreplay, "run", filt, str(recording), "--no-viz"]
     rows: dict[str, list[tuple[float, float]]] = {
         "first run": [], "warm run": [], "start-up": [], "python": []}
     for _ in range(repeat):
@@ -65,11 +66,12 @@ def measure(recording: Path, repeat: int) -> dict[str, tuple[float, float]]:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--filter", default="gps-ins", help="filter to run (default gps-ins)")
     ap.add_argument("--recording", type=Path, default=RECORDING)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args([] if argv is None else argv)
-    m = measure(args.recording, args.repeat)
-    print(f"navreplay run gps-ins {args.recording.name} --no-viz, fresh interpreters, medians "
+    m = measure(args.recording, args.repeat, args.filter)
+    print(f"navreplay run {args.filter} {args.recording.name} --no-viz, fresh interpreters, medians "
           f"of {args.repeat}; load average {os.getloadavg()[0]:.2f}")
     for name, (cpu, wall) in m.items():
         print(f"  {name:10s} {cpu:6.2f} s CPU  {wall:6.2f} s wall")

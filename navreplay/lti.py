@@ -14,6 +14,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from navreplay import jit  # noqa: F401  (the collector rests while numba compiles)
+
 
 @numba.njit(cache=True)
 def discretize(F: np.ndarray, dt: float) -> np.ndarray:

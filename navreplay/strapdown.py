@@ -141,7 +141,7 @@ def nav_vector(pos: ArrayLike, v_n: ArrayLike, q_nb: ArrayLike) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _solve_skew(ax, ay, az, bx, by, bz):
     """x with (I + [a x]) x = b: x = (b - a x b + (a.b) a) / (1 + |a|^2)."""
     cx, cy, cz = kernels.cross(ax, ay, az, bx, by, bz)
@@ -150,7 +150,7 @@ def _solve_skew(ax, ay, az, bx, by, bz):
     return (bx - cx + d * ax) * s, (by - cy + d * ay) * s, (bz - cz + d * az) * s
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _position_step(lat0, lon0, h0, vn, ve, vd, dt):
     """Eqs. (7)-(9) with the interval-mean velocity (vn, ve, vd); returns lat, lon, h."""
     h1 = h0 - vd * dt  # (7)
@@ -169,7 +169,7 @@ def _position_step(lat0, lon0, h0, vn, ve, vd, dt):
     return lat1, lon1, h1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _mid_terms(lat_m, h_m, vn, ve, vd, dt):
     """Eq. (1) and the non-inertial terms of (6) at the mid-point.
 
@@ -184,7 +184,7 @@ def _mid_terms(lat_m, h_m, vn, ve, vd, dt):
     return (ie_n + en_n) * dt, en_e * dt, (ie_d + en_d) * dt, -cx, -cy, g - cz
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _step(nav, out, tx, ty, tz, ax, ay, az, ptx, pty, ptz, pax, pay, paz, dt):
     """One update, eqs. (1)-(9): ``nav`` (10,) at t_{k-1} -> ``out`` (10,) at t_k.
 
@@ -255,7 +255,7 @@ def _step(nav, out, tx, ty, tz, ax, ay, az, ptx, pty, ptz, pax, pay, paz, dt):
     out[9] = p3 * norm
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _first_bad(nav, omega, f, dt, prev):
     """Index of the first non-finite sample or non-positive dt; -1 if all are valid,
     -2 for a non-finite state or ``prev``."""

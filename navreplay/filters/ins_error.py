@@ -220,7 +220,7 @@ def _set_skew(M: np.ndarray, r: int, c: int, x: float, y: float, z: float, k: fl
     M[r + 2, c + 1] += k * x
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def fill_system_matrix(
     lat: float, h: float, vN: float, vE: float, vD: float,
     C: np.ndarray, f_b: np.ndarray, depth: bool, curvature: bool, F: np.ndarray,

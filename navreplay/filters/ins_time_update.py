@@ -74,7 +74,7 @@ def _covariance_step(
             for i in range(3):
                 for r in range(3):
                     F[3 + r, c + 3 * j + i] = -C[r, i] * f_b[j]
-    kalman.transition_rows_kernel(F, N_NAV, dt, M)  # kalman (3)
+    kalman.transition_rows_kernel(F, M.shape[0], dt, M)  # kalman (3)
     for i in range(n):
         Q[i, i] = q[i] * dt  # kalman (4), diagonal (20)
     if k_acc > 0.0:  # (21): |a_n|^2 = |C f_b + g_n|^2, g on the ellipsoid
@@ -94,24 +94,17 @@ def _covariance_step(
     return kalman.predict_rows_kernel(P, M, cols, Q, T)  # kalman (6)
 
 
-@numba.njit(cache=True)
 def _scratch(n: int, gz: int, ga: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                 np.ndarray, np.ndarray, np.ndarray]:
     """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro z-rate states at
     ``gz``, accelerometer states at ``ga``, or none for -1) and the means of
     :func:`_close_step`."""
-    nc = N_STATES + (N_GYRO_Z if gz >= 0 else 0) + (N_ACCEL_HF if ga >= 0 else 0)
-    cols = np.empty(nc, dtype=np.int64)
-    for k in range(N_STATES):
-        cols[k] = k
-    c = N_STATES
+    cols = np.arange(N_STATES, dtype=np.int64)
     if gz >= 0:
-        for k in range(N_GYRO_Z):
-            cols[c + k] = gz + k
-        c += N_GYRO_Z
+        cols = np.concatenate([cols, np.arange(gz, gz + N_GYRO_Z, dtype=np.int64)])
     if ga >= 0:
-        for k in range(N_ACCEL_HF):
-            cols[c + k] = ga + k
+        cols = np.concatenate([cols, np.arange(ga, ga + N_ACCEL_HF, dtype=np.int64)])
+    nc = cols.shape[0]
     return (np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
             np.zeros((n, n)), cols, np.zeros((2, 3)))
 
@@ -120,8 +113,8 @@ def _scratch(n: int, gz: int, ga: int) -> tuple[np.ndarray, np.ndarray, np.ndarr
 def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
+    F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
 ) -> np.ndarray:
-    F, M, T, Q, cols, _ = _scratch(P.shape[0], gz, ga)
     for k in range(dt.shape[0]):
         P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
                              curvature, gz, ga, F, M, T, Q, cols)
@@ -144,7 +137,8 @@ def _close_step(
         mean[1, j] = open_sums[4 + j] / dt
     P = _covariance_step(P, open_nav, mean[0], mean[1], dt, q, k_acc, k_gyro, depth, curvature,
                          gz, ga, F, M, T, Q, cols)
-    open_sums[:] = 0.0
+    for j in range(open_sums.shape[0]):
+        open_sums[j] = 0.0
     return P
 
 
@@ -152,9 +146,9 @@ def _close_step(
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray,
+    gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
+    T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray,
 ) -> np.ndarray:
-    F, M, T, Q, cols, mean = _scratch(P.shape[0], gz, ga)
     for k in range(dt.shape[0]):
         if open_sums[0] == 0.0:
             for j in range(open_nav.shape[0]):  # (loops: array assignment compiles a
@@ -167,55 +161,6 @@ def _accumulate_covariance(
             P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav, open_sums,
                             F, M, T, Q, cols, mean)
     return P
-
-
-@numba.njit(cache=True)
-def _propagate_block(
-    nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
-    f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, prev: np.ndarray, step: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
-    open_nav: np.ndarray, open_sums: np.ndarray,
-) -> tuple[int, int, np.ndarray, np.ndarray]:
-    """Bias compensation, strapdown and the covariance steps over the samples of a block after
-    ``t_nav`` (the time of ``nav``).
-
-    Returns (code, first, nav, P) with ``first`` the index of the first sample used and code -1
-    when all went well; -4 when no sample is after ``t_nav``; -5 when P is not (n, n) with n
-    the length of q; the strapdown's codes (the index of the first invalid sample from
-    ``first`` on, -2 for a non-finite state) with nav and P unchanged; -3 when the propagated P
-    (returned for the message) has a negative or non-finite variance.
-    """
-    if P.shape[0] != q.shape[0] or P.shape[1] != q.shape[0]:
-        return -5, 0, nav, P
-    first = 0
-    while first < t.shape[0] and t[first] <= t_nav + _TIME_TOL:
-        first += 1
-    k = t.shape[0] - first
-    if k == 0:
-        return -4, first, nav, P
-    dt = np.empty(k)
-    w = np.empty((k, 3))
-    fc = np.empty((k, 3))
-    t_prev = t_nav
-    for i in range(k):
-        dt[i] = t[first + i] - t_prev
-        t_prev = t[first + i]
-        for j in range(3):
-            w[i, j] = omega[first + i, j] - b_g[j]
-            fc[i, j] = f[first + i, j] - b_a[j]
-    hist = np.empty((k + 1, strapdown.NAV_SIZE))
-    code = strapdown.integrate_kernel(nav, w, fc, dt, prev, hist)
-    if code != -1:
-        return code, first, nav, P
-    for j in range(3):  # the last sample's increments: coning and sculling of the next block
-        prev[j] = w[k - 1, j] * dt[k - 1]
-        prev[3 + j] = fc[k - 1, j] * dt[k - 1]
-    P = _accumulate_covariance(P, hist, fc, w, dt, step, q, k_acc, k_gyro, depth, curvature,
-                               gz, ga, open_nav, open_sums)
-    for i in range(P.shape[0]):
-        if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
-            return -3, first, nav, P
-    return code, first, hist[k].copy(), P
 
 
 @numba.njit(cache=True)
@@ -391,7 +336,9 @@ def propagate_covariance(
             f"nav must be ({k}, 10), f_b and omega_b ({k}, 3) for {k} steps; got {nav.shape}, "
             f"{f_b.shape}, {omega_b.shape}"
         )
-    return _propagate_covariance(_f64(P), _f64(nav), _f64(f_b), _f64(omega_b), _f64(dt), *args)
+    F, M, T, Q, cols, _ = _scratch(P.shape[0], args[5], args[6])
+    return _propagate_covariance(_f64(P), _f64(nav), _f64(f_b), _f64(omega_b), _f64(dt), *args,
+                                 F, M, T, Q, cols)
 
 
 def accumulate_covariance(
@@ -450,7 +397,7 @@ def accumulate_covariance(
         )
     return _accumulate_covariance(
         _f64(P), _f64(hist), _f64(f_b), _f64(omega_b), _f64(dt), float(step), q, k_acc, k_gyro,
-        depth, curvature, gz, ga, open_step.nav, open_step.sums,
+        depth, curvature, gz, ga, open_step.nav, open_step.sums, *_scratch(P.shape[0], gz, ga),
     )
 
 
@@ -492,7 +439,7 @@ class TimeUpdate:
         n = noise.q.shape[0]
         self._shape = (n, n)
         self._model = _model_args(self._shape, noise, vertical, curvature_derivatives)
-        self._work = _scratch(n, noise.gyro_z_states, noise.accel_states)  # compiled close
+        self._work = _scratch(n, noise.gyro_z_states, noise.accel_states)
         self.step = float(step)
         self.prev = np.zeros(6)
         """Increments [dtheta, dv] of the last sample [rad, m/s]."""
@@ -531,20 +478,16 @@ class TimeUpdate:
         FilterDivergedError
             A non-finite navigation state or a negative or non-finite variance.
         """
-        code, first, nav, P = _propagate_block(
-            nav, P, t, t_nav, omega_ib_b, f_b, b_a, b_g, self.prev, self.step, *self._model,
-            self.open_step.nav, self.open_step.sums,
-        )
-        if code == -1:
-            return nav, P, float(t[-1])
-        if code == -4:
+        t_out, nav_out, P_out, _ = self._run(nav, P, t_nav, t, omega_ib_b, f_b, b_a, b_g,
+                                             np.array([t.shape[0]]), None, None, False, -1.0)
+        if t_out[0] == t_nav:  # no sample after t_nav
             return None
-        self._fail(code, first, t, t_nav, omega_ib_b, f_b, P)
-        return None
+        return nav_out[0], P_out[0], float(t_out[0])
 
     def _fail(self, code: int, first: int, t: np.ndarray, t_nav: float, omega_ib_b: np.ndarray,
               f_b: np.ndarray, P: np.ndarray) -> None:
-        """Raise the error of a failed :func:`_propagate_block` (code, first sample used)."""
+        """Raise the error of a failed segment of :func:`_propagate_outputs` (its code, the
+        first sample used)."""
         if code == -5:
             raise ValueError(f"P must be {self._shape} as the process noise, got {P.shape}")
         if code == -3:
@@ -585,17 +528,43 @@ class TimeUpdate:
         ------
         as :meth:`propagate` and :meth:`close`.
         """
+        return self._run(nav, P, t_nav, t, omega_ib_b, f_b, b_a, b_g, ends, gyro_z, accel_k,
+                         True, DEFAULT_RTOL)
+
+    def close(self, P: np.ndarray, t: float) -> np.ndarray:
+        """P at the time t [s] of the last sample: propagated over the open covariance step,
+        which is then cleared, and checked (:func:`navreplay.filters.kalman.check_covariance`);
+        P itself when no step is open."""
+        if self.open_step.sums[0] <= 0.0:
+            return P
+        if P.shape != self._shape:
+            raise ValueError(f"P must be {self._shape} as the process noise, got {P.shape}")
+        _, _, P_out, _ = self._run(np.zeros(10), P, t, _NO_TIMES, _NO_SAMPLES, _NO_SAMPLES,
+                                   _ZERO3, _ZERO3, _NO_ENDS, None, None, True,
+                                   DEFAULT_RTOL)
+        return P_out[0]
+
+    def _run(
+        self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
+        omega_ib_b: np.ndarray, f_b: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
+        ends: np.ndarray, gyro_z: np.ndarray | None, accel_k: np.ndarray | None, close: bool,
+        rtol: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`_propagate_outputs` with the arrays it takes (one compiled signature for
+        every caller); raises the error of a failed segment."""
         m = ends.shape[0]
         t_out = np.empty(m)
-        nav_out = np.empty((m, nav.shape[0]))
+        nav_out = np.empty((m, 10))
         P_out = np.empty((m, *self._shape))
         w_last = np.full(3, np.nan)
-        k_z = np.zeros(3) if gyro_z is None else _f64(gyro_z)
-        k_a = np.zeros(N_ACCEL_HF) if accel_k is None else _f64(accel_k)
-        code, j, first, nav_j, P_j, t_j = _propagate_outputs(
-            nav, P, t, t_nav, omega_ib_b, f_b, b_a, b_g, k_z, k_a, self.prev, self.step,
-            *self._model, self.open_step.nav, self.open_step.sums, *self._work, ends,
-            DEFAULT_RTOL, t_out, nav_out, P_out, w_last,
+        k_z = _NO_GYRO_Z if gyro_z is None else _f64(gyro_z)
+        k_a = _NO_ACCEL if accel_k is None else _f64(accel_k)
+        t_nav = float(t_nav)
+        code, j, first, _, P_j, t_j = _propagate_outputs(
+            _f64(nav), _f64(P), _f64(t), t_nav, _f64(omega_ib_b), _f64(f_b), _f64(b_a),
+            _f64(b_g), k_z, k_a, self.prev, self.step, *self._model, self.open_step.nav,
+            self.open_step.sums, *self._work, np.ascontiguousarray(ends, dtype=np.int64),
+            close, rtol, t_out, nav_out, P_out, w_last,
         )
         if code == -1:
             return t_out, nav_out, P_out, w_last
@@ -607,42 +576,47 @@ class TimeUpdate:
                    P_j)
         raise AssertionError("unreachable")
 
-    def close(self, P: np.ndarray, t: float) -> np.ndarray:
-        """P at the time t [s] of the last sample: propagated over the open covariance step,
-        which is then cleared, and checked (:func:`navreplay.filters.kalman.check_covariance`);
-        P itself when no step is open."""
-        if self.open_step.sums[0] <= 0.0:
-            return P
-        if P.shape != self._shape:
-            raise ValueError(f"P must be {self._shape} as the process noise, got {P.shape}")
-        P = _close_step(P, *self._model, self.open_step.nav, self.open_step.sums, *self._work)
-        check_covariance(P, t=t)
-        return P
+
+_NO_TIMES = np.zeros(0)
+_NO_SAMPLES = np.zeros((0, 3))
+_NO_ENDS = np.zeros(1, dtype=np.int64)
+_NO_GYRO_Z = np.zeros(N_GYRO_Z)
+_ZERO3 = _NO_GYRO_Z
+_NO_ACCEL = np.zeros(N_ACCEL_HF)
 
 
 @numba.njit(cache=True)
 def _propagate_outputs(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
     f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, k_z: np.ndarray, k_a: np.ndarray,
-    prev: np.ndarray,
-    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
-    T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray, ends: np.ndarray,
-    rtol: float, t_out: np.ndarray,
+    prev: np.ndarray, step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool,
+    curvature: bool, gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray,
+    F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
+    mean: np.ndarray, ends: np.ndarray, close: bool, rtol: float, t_out: np.ndarray,
     nav_out: np.ndarray, P_out: np.ndarray, w_last: np.ndarray,
 ) -> tuple[int, int, int, np.ndarray, np.ndarray, float]:
-    """:func:`_propagate_block` over the segments ``[ends[j-1], ends[j])`` of a block, each
-    followed by :func:`_close_step` and the output of (t, nav, P) into row j.
+    """The whole time update of a block in one compiled call: bias compensation, strapdown
+    and the covariance steps over the samples of each segment ``[ends[j-1], ends[j])`` after
+    ``t_nav`` (the time of ``nav``), then, with ``close``, the open covariance step closed
+    (:func:`_close_step`), and (t, nav, P) written into row j of the outputs.
 
     The gyro samples are compensated first for the z-rate errors ``k_z`` (eq. 22):
-    ``omega - k_z (omega_z - b_g_z)``, the accelerometer samples for the errors ``k_a`` (eq. 23)
-    (:func:`compensate_accel`). Returns (code, j, first, nav, P, t_nav): code -1 when
-    all went well; else the code of :func:`_propagate_block` of segment j (``first`` its first
-    sample used), -6 when P after it fails the check of
-    :func:`navreplay.filters.kalman.check_covariance`, -7 when P after the close fails it (P
-    is checked once per segment, after the close when a covariance step was open).
-    ``w_last`` receives the last compensated body rate.
+    ``omega - k_z (omega_z - b_g_z)``, the accelerometer samples for the errors ``k_a``
+    (eq. 23) (:func:`compensate_accel`); then the biases are subtracted. Returns
+    (code, j, first, nav, P, t_nav) with ``first`` the index of the first sample of segment j
+    after ``t_nav``; code -1 when all went well, else for segment j: -5 when P is not (n, n)
+    with n the length of q; the strapdown's codes (the index of the first invalid sample from
+    ``first`` on, -2 for a non-finite state) with nav and P unchanged; -3 when the propagated
+    P (returned for the message) has a negative or non-finite variance; with ``rtol >= 0``,
+    -6 when P after the segment fails the check of
+    :func:`navreplay.filters.kalman.check_covariance`, -7 when P after the close fails it
+    (P is checked once per segment, after the close when a covariance step was open).
+    ``w_last`` receives the last compensated body rate. A segment with no sample after
+    ``t_nav`` leaves the state as it is (its row repeats the previous one).
     """
+    n = q.shape[0]
+    if P.shape[0] != n or P.shape[1] != n:
+        return -5, 0, 0, nav, P, t_nav
     w = omega
     if k_z[0] != 0.0 or k_z[1] != 0.0 or k_z[2] != 0.0:
         w = compensate_gyro_z(omega, b_g, k_z)
@@ -653,28 +627,50 @@ def _propagate_outputs(
     a = 0
     for j in range(ends.shape[0]):
         b = ends[j]
-        if b > a:
-            code, first, nav_b, P_b = _propagate_block(
-                nav, P, t[a:b], t_nav, w[a:b], f[a:b], b_a, b_g, prev, step, q, k_acc,
-                k_gyro, depth, curvature, gz, ga, open_nav, open_sums)
-            if code == -1:
-                nav, P, t_nav = nav_b, P_b, t[b - 1]
+        first = a
+        while first < b and t[first] <= t_nav + _TIME_TOL:
+            first += 1
+        k = b - first
+        if k > 0:
+            dt = np.empty(k)
+            wc = np.empty((k, 3))
+            fc = np.empty((k, 3))
+            t_prev = t_nav
+            for i in range(k):
+                dt[i] = t[first + i] - t_prev
+                t_prev = t[first + i]
                 for c in range(3):
-                    w_last[c] = w[b - 1, c] - b_g[c]
-                if open_sums[0] <= 0.0 and not _covariance_ok(P, rtol):  # else checked below
-                    return -6, j, a + first, nav, P, t_nav
-            elif code != -4:
-                return code, j, a + first, nav, P_b, t_nav
-            a = b
-        if open_sums[0] > 0.0:
+                    wc[i, c] = w[first + i, c] - b_g[c]
+                    fc[i, c] = f[first + i, c] - b_a[c]
+            hist = np.empty((k + 1, strapdown.NAV_SIZE))
+            code = strapdown.integrate_kernel(nav, wc, fc, dt, prev, hist)
+            if code != -1:
+                return code, j, first, nav, P, t_nav
+            for c in range(3):  # the last sample's increments: coning and sculling of the next
+                prev[c] = wc[k - 1, c] * dt[k - 1]
+                prev[3 + c] = fc[k - 1, c] * dt[k - 1]
+            P = _accumulate_covariance(P, hist, fc, wc, dt, step, q, k_acc, k_gyro, depth,
+                                       curvature, gz, ga, open_nav, open_sums, F, M, T, Q, cols,
+                                       mean)
+            for i in range(n):
+                if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
+                    return -3, j, first, nav, P, t_nav
+            nav = hist[k]
+            t_nav = t[b - 1]
+            for c in range(3):
+                w_last[c] = wc[k - 1, c]
+            if rtol >= 0.0 and open_sums[0] <= 0.0 and not _covariance_ok(P, rtol):
+                return -6, j, first, nav, P, t_nav  # (else checked below)
+        a = max(a, b)
+        if close and open_sums[0] > 0.0:
             P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav, open_sums,
                             F, M, T, Q, cols, mean)
-            if not _covariance_ok(P, rtol):
+            if rtol >= 0.0 and not _covariance_ok(P, rtol):
                 return -7, j, a, nav, P, t_nav
         t_out[j] = t_nav
         for c in range(nav.shape[0]):  # (loops: array assignment compiles a formatted shape
             nav_out[j, c] = nav[c]  # error)
-        for r in range(P.shape[0]):
-            for c in range(P.shape[1]):
+        for r in range(n):
+            for c in range(n):
                 P_out[j, r, c] = P[r, c]
     return -1, ends.shape[0], 0, nav, P, t_nav

@@ -232,20 +232,12 @@ def _check_matrix(a: np.ndarray, shape: tuple[int, ...], name: str) -> None:
         raise ValueError(f"{name} must have shape {shape}, got {a.shape}")
 
 
-@numba.njit(cache=True)
-def _all_finite(a: np.ndarray) -> bool:
-    for v in a.flat:
-        if not np.isfinite(v):
-            return False
-    return True
-
-
 def _f64(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def _finite(a: np.ndarray, name: str, t: float | None) -> None:
-    if not (_all_finite(a) if a.dtype == np.float64 else np.all(np.isfinite(a))):
+    if not np.isfinite(a).all():
         raise FilterDivergedError(f"{name} has non-finite entries", t)
 
 
@@ -253,7 +245,7 @@ def _finite(a: np.ndarray, name: str, t: float | None) -> None:
 # predict / correct
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def transition_rows_kernel(F: np.ndarray, r: int, dt: float, M: np.ndarray) -> None:
     """Eq. (3) compiled for an F that is zero outside its first r rows: those rows of Phi.
 
@@ -295,7 +287,7 @@ def predict_kernel(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> np.ndarray
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def predict_rows_kernel(
     P: np.ndarray, M: np.ndarray, cols: np.ndarray, Qd: np.ndarray, T: np.ndarray
 ) -> np.ndarray:
@@ -390,17 +382,21 @@ def _correct_kernel(
     n = x.shape[0]
     m = z.shape[0]
     nu = np.empty(m)
+    nu_w = np.empty(m)  # L^-1 nu, below
     HP = np.empty((m, n))
+    W = np.empty((m, n))  # L^-1 H P, then K^T, below
     for i in range(m):  # (7) nu = z - H x, and H P
         acc = z[i]
         for k in range(n):
             acc -= H[i, k] * x[k]
         nu[i] = acc
+        nu_w[i] = acc
         for j in range(n):
             acc = 0.0
             for k in range(n):
                 acc += H[i, k] * P[k, j]
             HP[i, j] = acc
+            W[i, j] = acc
     S = np.empty((m, m))
     for i in range(m):  # (8) S = H P H^T + R, symmetrised
         for j in range(i + 1):
@@ -425,8 +421,6 @@ def _correct_kernel(
             else:
                 L[i, j] = c / L[j, j]
     # (9), (13): W = L^-1 [nu, H P] by forward substitution
-    nu_w = nu.copy()
-    W = HP.copy()
     for i in range(m):
         for k in range(i):
             nu_w[i] -= L[i, k] * nu_w[k]

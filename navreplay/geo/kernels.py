@@ -54,6 +54,7 @@ import math
 import numba
 import numpy as np
 
+from navreplay import jit  # noqa: F401  (the collector rests while numba compiles)
 from navreplay.geo import earth
 
 __all__ = [
@@ -89,7 +90,7 @@ _M_GRAV = earth.M_GRAV
 # earth model (geo.earth)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def radii(lat):
     """Meridian and transverse radii ``(R_M, R_N)`` [m] at latitude ``lat`` [rad]."""
     s = math.sin(lat)
@@ -106,7 +107,7 @@ def radii_derivatives(lat):
     return 3.0 * _A * (1.0 - _E2) * _E2 * s * c / w**2.5, _A * _E2 * s * c / w**1.5
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def gravity(lat, h):
     """Normal gravity [m/s^2]: Somigliana with the second-order height term (h [m])."""
     s = math.sin(lat)
@@ -136,13 +137,13 @@ def gravity_derivatives(lat, h):
     return dg0 * hfac + g0 * dhfac_dlat, g0 * dhfac_dh
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def earth_rate(lat):
     """Earth rate in NED ``(w_N, w_E, w_D)`` [rad/s]; w_E is 0."""
     return _W * math.cos(lat), 0.0, -_W * math.sin(lat)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def transport_rate(lat, h, v_N, v_E):
     """Transport rate w_en in NED ``(w_N, w_E, w_D)`` [rad/s] at height h [m], velocity [m/s]."""
     R_M, R_N = radii(lat)
@@ -157,13 +158,13 @@ def transport_rate(lat, h, v_N, v_E):
 # rotations, scalar forms (geo.rotations)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def cross(ax, ay, az, bx, by, bz):
     """``a x b``."""
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def quat_mult(p0, p1, p2, p3, q0, q1, q2, q3):
     """Hamilton product ``p (x) q``."""
     return (
@@ -174,7 +175,7 @@ def quat_mult(p0, p1, p2, p3, q0, q1, q2, q3):
     )
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _dcm(q0, q1, q2, q3):
     """The nine entries of C(q), row by row."""
     return (
@@ -190,7 +191,7 @@ def _dcm(q0, q1, q2, q3):
     )
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def rotate(q0, q1, q2, q3, x, y, z):
     """``C(q) v`` for v = (x, y, z)."""
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _dcm(q0, q1, q2, q3)
@@ -207,7 +208,7 @@ def rotate_inverse(q0, q1, q2, q3, x, y, z):
     return rotate(q0, -q1, -q2, -q3, x, y, z)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def rotvec_to_quat(x, y, z):
     """Quaternion of the rotation vector (x, y, z) [rad]."""
     a = math.sqrt(x * x + y * y + z * z)
