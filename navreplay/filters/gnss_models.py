@@ -19,7 +19,7 @@ import math
 import numba
 import numpy as np
 
-from navreplay.filters.kalman import _all_finite, _correct_kernel, _covariance_ok
+from navreplay.filters.kalman import _correct_kernel, _covariance_ok
 from navreplay.geo import kernels
 
 POSITION = 1
@@ -28,6 +28,14 @@ VELOCITY = 2
 """Kind code of a GPS NED velocity."""
 
 _TWO_PI = 2.0 * math.pi
+
+
+@numba.njit(cache=True, inline="always")
+def _all_finite(a: np.ndarray) -> bool:
+    for v in a.flat:
+        if not math.isfinite(v):
+            return False
+    return True
 
 
 @numba.njit(cache=True, inline="always")

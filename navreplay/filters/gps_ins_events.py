@@ -21,8 +21,9 @@ import numpy as np
 
 from navreplay.filters import gnss_models as gnss
 from navreplay.filters.ins_time_update import (
+    _TIME_TOL,
     _close_step,
-    _propagate_block,
+    _propagate_segment,
     compensate_accel,
     compensate_gyro_z,
 )
@@ -99,19 +100,22 @@ def run_events(
             fb = f[a:b]
             if has_ga and _any(k_a):
                 fb = compensate_accel(fb, b_a, k_a)
-            code, _, nav_b, P_b = _propagate_block(
-                nav, P, t[a:b], t_nav, w, fb, b_a, b_g, prev, step, q, k_acc, k_gyro, depth,
-                curvature, gz, ga, open_nav, open_sums)
-            if code == -1:
-                nav, P, t_nav = nav_b, P_b, t[b - 1]
-                for c in range(3):
-                    w_last[c] = w[w.shape[0] - 1, c] - b_g[c]
-                closes = open_sums[0] > 0.0 and (record[e] or (
-                    codes[e] != TICK and not t_ev[e] < t_nav - 1e-6))
-                if not closes:  # else P is checked after the close that follows
-                    ok = _covariance_ok(P, rtol)
-            elif code != -4:
-                ok = False
+            first = 0
+            while first < b - a and t[a + first] <= t_nav + _TIME_TOL:
+                first += 1
+            if first < b - a:
+                code, nav_b, P_b = _propagate_segment(
+                    nav, P, t[a:b], t_nav, w, fb, b_a, b_g, first, b - a, prev, step, q, k_acc,
+                    k_gyro, depth, curvature, gz, ga, open_nav, open_sums, F, M, T, Q, cols,
+                    mean, w_last)
+                if code == -1:
+                    nav, P, t_nav = nav_b, P_b, t[b - 1]
+                    closes = open_sums[0] > 0.0 and (record[e] or (
+                        codes[e] != TICK and not t_ev[e] < t_nav - 1e-6))
+                    if not closes:  # else P is checked after the close that follows
+                        ok = _covariance_ok(P, rtol)
+                else:
+                    ok = False
         kind = codes[e]
         if ok and kind != TICK and not t_ev[e] < t_nav - 1e-6:
             if open_sums[0] > 0.0:

@@ -585,6 +585,52 @@ _ZERO3 = _NO_GYRO_Z
 _NO_ACCEL = np.zeros(N_ACCEL_HF)
 
 
+@numba.njit(cache=True, inline="always")
+def _propagate_segment(
+    nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, w: np.ndarray, f: np.ndarray,
+    b_a: np.ndarray, b_g: np.ndarray, first: int, b: int, prev: np.ndarray, step: float,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
+    open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray, T: np.ndarray,
+    Q: np.ndarray, cols: np.ndarray, mean: np.ndarray, w_last: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """Strapdown and the covariance steps over the samples ``first .. b - 1`` (all after
+    ``t_nav``, at least one) of the compensated rates ``w`` and specific forces ``f``, the
+    biases subtracted; the one segment step of every compiled time update.
+
+    Returns (code, nav, P): code -1 when all went well; the strapdown's codes (the index of the
+    first invalid sample from ``first`` on, -2 for a non-finite state) with nav and P
+    unchanged; -3 when the propagated P (returned for the message) has a negative or
+    non-finite variance. ``prev`` receives the last sample's increments and ``w_last`` its
+    compensated body rate.
+    """
+    k = b - first
+    dt = np.empty(k)
+    wc = np.empty((k, 3))
+    fc = np.empty((k, 3))
+    t_prev = t_nav
+    for i in range(k):
+        dt[i] = t[first + i] - t_prev
+        t_prev = t[first + i]
+        for c in range(3):
+            wc[i, c] = w[first + i, c] - b_g[c]
+            fc[i, c] = f[first + i, c] - b_a[c]
+    hist = np.empty((k + 1, strapdown.NAV_SIZE))
+    code = strapdown.integrate_kernel(nav, wc, fc, dt, prev, hist)
+    if code != -1:
+        return code, nav, P
+    for c in range(3):  # the last sample's increments: coning and sculling of the next
+        prev[c] = wc[k - 1, c] * dt[k - 1]
+        prev[3 + c] = fc[k - 1, c] * dt[k - 1]
+    P = _accumulate_covariance(P, hist, fc, wc, dt, step, q, k_acc, k_gyro, depth, curvature,
+                               gz, ga, open_nav, open_sums, F, M, T, Q, cols, mean)
+    for i in range(P.shape[0]):
+        if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
+            return -3, nav, P
+    for c in range(3):
+        w_last[c] = wc[k - 1, c]
+    return -1, hist[k], P
+
+
 @numba.njit(cache=True)
 def _propagate_outputs(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
@@ -630,35 +676,14 @@ def _propagate_outputs(
         first = a
         while first < b and t[first] <= t_nav + _TIME_TOL:
             first += 1
-        k = b - first
-        if k > 0:
-            dt = np.empty(k)
-            wc = np.empty((k, 3))
-            fc = np.empty((k, 3))
-            t_prev = t_nav
-            for i in range(k):
-                dt[i] = t[first + i] - t_prev
-                t_prev = t[first + i]
-                for c in range(3):
-                    wc[i, c] = w[first + i, c] - b_g[c]
-                    fc[i, c] = f[first + i, c] - b_a[c]
-            hist = np.empty((k + 1, strapdown.NAV_SIZE))
-            code = strapdown.integrate_kernel(nav, wc, fc, dt, prev, hist)
+        if first < b:
+            code, nav_b, P = _propagate_segment(
+                nav, P, t, t_nav, w, f, b_a, b_g, first, b, prev, step, q, k_acc, k_gyro, depth,
+                curvature, gz, ga, open_nav, open_sums, F, M, T, Q, cols, mean, w_last)
             if code != -1:
                 return code, j, first, nav, P, t_nav
-            for c in range(3):  # the last sample's increments: coning and sculling of the next
-                prev[c] = wc[k - 1, c] * dt[k - 1]
-                prev[3 + c] = fc[k - 1, c] * dt[k - 1]
-            P = _accumulate_covariance(P, hist, fc, wc, dt, step, q, k_acc, k_gyro, depth,
-                                       curvature, gz, ga, open_nav, open_sums, F, M, T, Q, cols,
-                                       mean)
-            for i in range(n):
-                if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
-                    return -3, j, first, nav, P, t_nav
-            nav = hist[k]
+            nav = nav_b
             t_nav = t[b - 1]
-            for c in range(3):
-                w_last[c] = wc[k - 1, c]
             if rtol >= 0.0 and open_sums[0] <= 0.0 and not _covariance_ok(P, rtol):
                 return -6, j, first, nav, P, t_nav  # (else checked below)
         a = max(a, b)
