@@ -659,26 +659,30 @@ class _OdometryWriter:
 
     def _write(self, limit: int | None) -> None:
         """Write the queued messages earlier than ``limit`` (all with None)."""
-        times, recs, cids = [], [], []
+        times, rows = [], []  # per message: time; (queued piece, row in it)
+        pieces: list[np.ndarray] = []
         for topic, queue in self._queue.items():
-            if not queue:
-                continue
-            t = np.concatenate([q[0] for q in queue])
-            r = np.concatenate([q[1] for q in queue])
-            n = t.shape[0] if limit is None else int(np.searchsorted(t, limit, side="left"))
-            times.append(t[:n])
-            recs.append(r[:n])
-            cids.append(np.full(n, self._ids[topic]))
-            self._queue[topic] = [(t[n:], r[n:])] if n < t.shape[0] else []
+            cid = self._ids[topic]
+            kept = []
+            for t, rec in queue:
+                n = t.shape[0] if limit is None else int(np.searchsorted(t, limit, side="left"))
+                if n:
+                    times.append(t[:n])
+                    rows.append(np.stack([np.full(n, len(pieces)), np.arange(n),
+                                          np.full(n, cid)], axis=1))
+                    pieces.append(rec)
+                if n < t.shape[0]:
+                    kept.append((t[n:], rec[n:]))
+            self._queue[topic] = kept
         if not times:
             return
-        t, c = np.concatenate(times), np.concatenate(cids)
-        r = np.concatenate(recs)
-        buf, size = r.tobytes(), r.shape[1]
+        t = np.concatenate(times)
+        where = np.concatenate(rows)
         add = self._w.add_message
         for i in np.argsort(t, kind="stable").tolist():
             ti = int(t[i])
-            add(int(c[i]), ti, buf[i * size:(i + 1) * size], ti)
+            k, j, cid = where[i].tolist()
+            add(cid, ti, pieces[k][j].tobytes(), ti)
 
     def finish(self) -> None:
         self._write(None)
@@ -938,8 +942,9 @@ class RunExport:
         self._tmp.clear()
 
 
-_REFERENCE_ROWS = 20_000
-"""Reference rows converted at once (the 9x9 covariances of a window are not all held)."""
+_REFERENCE_ROWS = 5_000
+"""Reference rows converted and queued at once (a window's 9x9 covariances and messages are
+not all held)."""
 
 
 # --------------------------------------------------------------------------------------------

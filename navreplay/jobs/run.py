@@ -198,10 +198,8 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             following = next(windows, None)
             final = following is None
             imu, truth = window.get(StreamKind.IMU), window.get(StreamKind.TRUTH)
-            if truth is not None and len(truth):
-                if sink is not None:
-                    sink.log_truth_window(truth, t0_ns, columns)
-                outputs.truth(truth)
+            if sink is not None and truth is not None and len(truth):
+                sink.log_truth_window(truth, t0_ns, columns)
             for session, score in zip(sessions, scores, strict=True):
                 block = session.feed(imu, final=final)
                 if sink is not None:
@@ -211,6 +209,8 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
                 score.add_truth(truth, final=final)
                 if final and not score.rows:  # no estimate at all: the files' headers
                     outputs.rows(dataclasses.replace(block, innovations={}))
+            if truth is not None and len(truth):  # after the estimates it covers: written
+                outputs.truth(truth)              # at once, not queued behind them
             if progress is not None and imu is not None and len(imu) and duration > 0:
                 done = (int(imu.t_ns[-1]) - aiding.t0_ns) * 1e-9
                 progress(min(int(done), int(duration)), int(duration))
