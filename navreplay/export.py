@@ -389,11 +389,6 @@ def tum_lines(poses: Poses) -> str:
                                            poses.q_xyzw.tolist(), strict=True))
 
 
-def tum_text(poses: Poses) -> str:
-    """A whole TUM file: :data:`TUM_HEADER` then :func:`tum_lines`."""
-    return TUM_HEADER + tum_lines(poses)
-
-
 # --------------------------------------------------------------------------------------------
 # CSV
 
@@ -636,7 +631,6 @@ class _OdometryWriter:
         from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
         from navreplay.io.writer import LIBRARY
 
-        self.path = path
         self._file = open(path, "wb")  # noqa: SIM115 (closed by finish or close)
         self._w = Writer(self._file, compression=CompressionType.ZSTD, enable_crcs=True)
         self._w.start(profile=PROFILE, library=LIBRARY)

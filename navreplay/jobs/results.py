@@ -66,11 +66,9 @@ class Outputs:
         if self._export is not None:
             self._export.add_reference(truth)
 
-    def rows(self, rows: Any, metrics: Any = None, truth: Any = None) -> None:
+    def rows(self, rows: Any, metrics: Any = None) -> None:
         """A block of one filter's estimates (a RunResult, later than its blocks before) with
-        its metrics (None without a reference); innovations it carries are drawn too.
-        ``truth`` is not needed (the signature of a :class:`RunningSummary` callback)."""
-        del truth
+        its metrics (None without a reference); innovations it carries are drawn too."""
         if not self.wanted:
             return
         out = export.filter_output(rows, metrics=metrics)
