@@ -149,7 +149,8 @@ def test_an_interrupted_export_publishes_nothing(drive, tmp_path, monkeypatch) -
     real = streaming.RunningSummary.add
 
     def failing(self, block):
-        calls.append(sorted(p.name for p in out.glob(".*.part")))
+        calls.append({".".join(p.name.split(".")[1:3]): p.stat().st_size
+                      for p in out.glob(".*.part")})
         if len(calls) == 3:  # the files are being written: interrupt
             raise KeyboardInterrupt
         return real(self, block)
@@ -160,7 +161,10 @@ def test_an_interrupted_export_publishes_nothing(drive, tmp_path, monkeypatch) -
                      viz=VizOptions(mode=VizMode.NONE), export_dir=out, force=True)
     with pytest.raises(KeyboardInterrupt):
         run._run_streamed(job, None)
-    assert len(calls) == 3 and len(calls[-1]) == 4  # CSV, TUM, reference TUM, MCAP
+    # the files were being written as the rows came: CSV, TUM, reference TUM, MCAP
+    assert len(calls) == 3 and sorted(calls[-1]) == ["estimates.mcap", "gps-ins.csv",
+                                                      "gps-ins.tum", "reference.tum"]
+    assert all(size > 1000 for size in calls[-1].values()), calls[-1]
     assert [p.name for p in out.iterdir()] == ["gps-ins.csv"]  # no temporaries, no new files
     assert (out / "gps-ins.csv").read_text() == "kept\n"
 
