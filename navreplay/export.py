@@ -824,7 +824,9 @@ class RunExport:
             self._odometry = _OdometryWriter(tmp, topics)
             self._tmp[target] = (tmp, self._odometry)
         held, self._held = self._held, []
-        for kind, item in held:
+        # estimates first: the reference then goes out piece by piece instead of queueing
+        # behind them (the files do not depend on the order of the topics' pieces)
+        for kind, item in sorted(held, key=lambda h: h[0] == "ref"):
             self._write(kind, item)
 
     def _write(self, kind: str, item: Any) -> None:
