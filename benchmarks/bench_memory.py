@@ -4,12 +4,16 @@ Each figure is the ``VmHWM`` of a fresh interpreter (:func:`benchmarks.peak_rss`
 the command on a simulated ``vehicle-drive`` recording of the given length (100 Hz IMU and
 truth; simulated once into ``--dir`` and reused). ``streamed`` is the command as shipped (the
 file is read in windows); ``rrd`` is the default ``navreplay run gps-ins REC`` that also saves
-the .rrd (written block by block); ``whole`` reads the recording whole and keeps every
-estimate, as a replay in memory does, for comparison in the same run.
+the .rrd (written block by block); ``outputs`` is ``navreplay run gps-ins REC --no-viz
+--export DIR --report r.html`` (CSV, TUM and Odometry MCAP written and the report's series kept
+block by block; the files go to a temporary directory, removed afterwards); ``whole`` reads
+the recording whole and keeps every estimate, as a replay in memory does, for comparison in
+the same run.
 
 Usage::
 
-    python -m benchmarks.bench_memory [--hours 1 4 24] [--modes streamed rrd whole] [--dir DIR]
+    python -m benchmarks.bench_memory [--hours 1 4 24] [--modes streamed rrd outputs whole]
+                                      [--dir DIR]
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import argparse
 import json
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -50,8 +55,12 @@ def _child(mode: str, path: str) -> None:
     start = time.perf_counter()
     viz = (VizOptions(mode=VizMode.SAVE, path=_Path(path).with_suffix(".rrd")) if mode == "rrd"
            else VizOptions(mode=VizMode.NONE))
-    job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(_Path(path),), viz=viz)
-    report = run._run_one(job, None) if mode == "whole" else run.run(job)
+    with tempfile.TemporaryDirectory(dir=_Path(path).parent) as out:
+        files = ({"export_dir": _Path(out) / "export", "report_path": _Path(out) / "r.html"}
+                 if mode == "outputs" else {})
+        job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(_Path(path),),
+                         viz=viz, **files)
+        report = run._run_one(job, None) if mode == "whole" else run.run(job)
     seconds = time.perf_counter() - start
     summary = report.summary["filters"]["gps-ins"]
     print(json.dumps({"peak_mib": peak_rss() / 2**20, "seconds": seconds,
@@ -69,8 +78,8 @@ def measure(mode: str, path: Path) -> dict[str, float]:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_memory")
     parser.add_argument("--hours", type=float, nargs="+", default=[1.0, 4.0])
-    parser.add_argument("--modes", nargs="+", default=["streamed", "rrd", "whole"],
-                        choices=["streamed", "rrd", "whole"])
+    parser.add_argument("--modes", nargs="+", default=["streamed", "rrd", "outputs", "whole"],
+                        choices=["streamed", "rrd", "outputs", "whole"])
     parser.add_argument("--dir", type=Path, default=Path("bench-data"))
     parser.add_argument("--child", nargs=2, metavar=("MODE", "PATH"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)

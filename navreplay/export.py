@@ -44,6 +44,7 @@ Everything is read from the run through :func:`filter_output`, the one adapter b
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import io
@@ -62,7 +63,7 @@ from navreplay.geo import earth
 from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, quat_to_euler, skew
 from navreplay.outputs import Output, atomic_path, check_outputs
 from navreplay.replay.result import RunResult
-from navreplay.streams import Recording, StreamKind
+from navreplay.streams import Recording, Stream, StreamKind
 
 MANIFEST = "manifest.json"
 ODOMETRY_FILE = "estimates.mcap"
@@ -301,7 +302,8 @@ class LocalFrame:
         """ENU position [m] (M, 3) of lat, lon, h (M, 3)."""
         dr = earth.lla_to_ecef(pos[:, 0], pos[:, 1], pos[:, 2]) - earth.lla_to_ecef(
             self.lat, self.lon, self.h)
-        return dr @ self.C_enu_e.T
+        C = self.C_enu_e  # row by row (the same bits whatever the number of rows)
+        return dr[:, 0:1] * C[:, 0] + dr[:, 1:2] * C[:, 1] + dr[:, 2:3] * C[:, 2]
 
     def rotation(self, pos: np.ndarray) -> np.ndarray:
         """``R = C_enu0<-ned``, (M, 3, 3), the local NED frame at each position to ENU."""
@@ -310,19 +312,6 @@ class LocalFrame:
     def to_json(self) -> dict[str, Any]:
         return {"lat_deg": math.degrees(self.lat), "lon_deg": math.degrees(self.lon),
                 "h_m": self.h, "source": self.source}
-
-
-def local_frame(outputs: Sequence[FilterOutput], recording: Recording | None) -> LocalFrame | None:
-    """The export frame's origin (None when neither a reference nor a solution exists)."""
-    if recording is not None and StreamKind.TRUTH in recording:
-        p = recording[StreamKind.TRUTH]["pos"][0]
-        return LocalFrame(float(p[0]), float(p[1]), float(p[2]), "first reference sample")
-    for out in outputs:
-        if out.has_nav and len(out.t):
-            p = out.nav_pos[0]
-            return LocalFrame(float(p[0]), float(p[1]), float(p[2]),
-                              f"first navigation estimate of {out.label}")
-    return None
 
 
 @dataclasses.dataclass
@@ -361,7 +350,7 @@ def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np
     twist_cov[:, 3:, 3:] = np.full((M, 3, 3), np.nan)  # angular rate: not estimated
     return Poses(np.asarray(stamps_ns, dtype=np.int64), frame.position(pos),
                  np.concatenate([q[:, 1:], q[:, :1]], axis=1), _mark_unknown(pose_cov),
-                 v_b @ F_FRD_FLU, _mark_unknown(twist_cov))
+                 v_b * np.diagonal(F_FRD_FLU), _mark_unknown(twist_cov))
 
 
 def _mark_unknown(cov: np.ndarray) -> np.ndarray:
@@ -375,8 +364,7 @@ def _mark_unknown(cov: np.ndarray) -> np.ndarray:
     return cov
 
 
-def _reference_poses(frame: LocalFrame, recording: Recording) -> Poses:
-    truth = recording[StreamKind.TRUTH]
+def _reference_poses(frame: LocalFrame, truth: Stream) -> Poses:
     zero = np.zeros((len(truth), 9, 9))
     return ros_poses(frame, truth.t_ns, truth["pos"], truth["v_n"], truth["q_nb"], zero)
 
@@ -385,18 +373,20 @@ def _reference_poses(frame: LocalFrame, recording: Recording) -> Poses:
 # TUM
 
 
-def tum_text(poses: Poses) -> str:
+TUM_HEADER = ("# timestamp tx ty tz qx qy qz qw\n"
+              f"# position [m] in the local ENU frame '{WORLD_FRAME}' (see manifest.json);"
+              f" orientation of '{BODY_FRAME}' (FLU) in it\n")
+"""The comment lines that open a TUM file."""
+
+
+def tum_lines(poses: Poses) -> str:
     """evo's TUM format: one ``timestamp tx ty tz qx qy qz qw`` line per pose, single spaces,
-    no trailing delimiter; ``#`` comment lines first. Timestamps are absolute seconds with
-    nanosecond digits."""
-    lines = ["# timestamp tx ty tz qx qy qz qw",
-             f"# position [m] in the local ENU frame '{WORLD_FRAME}' (see manifest.json);"
-             f" orientation of '{BODY_FRAME}' (FLU) in it"]
+    no trailing delimiter. Timestamps are absolute seconds with nanosecond digits."""
     s, ns = np.divmod(poses.stamps_ns, 1_000_000_000)
-    for si, ni, p, q in zip(s.tolist(), ns.tolist(), poses.p_enu, poses.q_xyzw, strict=True):
-        lines.append(f"{si}.{ni:09d} {p[0]:.6f} {p[1]:.6f} {p[2]:.6f} "
-                     f"{q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}")
-    return "\n".join(lines) + "\n"
+    return "".join(f"{si}.{ni:09d} {p[0]:.6f} {p[1]:.6f} {p[2]:.6f} "
+                   f"{q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}\n"
+                   for si, ni, p, q in zip(s.tolist(), ns.tolist(), poses.p_enu.tolist(),
+                                           poses.q_xyzw.tolist(), strict=True))
 
 
 # --------------------------------------------------------------------------------------------
@@ -476,16 +466,25 @@ def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
     return cols
 
 
-def csv_text(cols: Sequence[Column]) -> str:
-    """Comma-separated values with a one-line header ``name [unit],...``."""
+def csv_header(cols: Sequence[Column]) -> str:
+    """The header line of a CSV: ``name [unit],...``."""
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow([c.header for c in cols])
+    return buf.getvalue()
+
+
+def csv_rows(cols: Sequence[Column]) -> str:
+    """The rows of the columns' values, comma-separated."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow([c.header for c in cols])
-    n = len(cols[0].values) if cols else 0
     rows = [[c.fmt % v for v in np.asarray(c.values).tolist()] for c in cols]
-    for i in range(n):
-        w.writerow([r[i] for r in rows])
+    w.writerows(zip(*rows, strict=True))
     return buf.getvalue()
+
+
+def csv_text(cols: Sequence[Column]) -> str:
+    """Comma-separated values with a one-line header ``name [unit],...``."""
+    return csv_header(cols) + (csv_rows(cols) if cols else "")
 
 
 def ensemble_columns(ens: Any) -> list[Column]:
@@ -618,32 +617,330 @@ def encode_odometry(poses: Poses, frame_id: str = WORLD_FRAME,
     return rec
 
 
-def write_odometry(path: Path, topics: Mapping[str, Poses]) -> None:
-    """One MCAP (ROS 2 profile) with a nav_msgs/msg/Odometry topic per entry, atomically."""
-    from mcap.writer import CompressionType, Writer
+class _OdometryWriter:
+    """The Odometry MCAP, written as the poses come: messages of all topics in time order (ties
+    in the order the topics were registered), each topic's poses handed over in time order.
 
-    from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
-    from navreplay.io.writer import LIBRARY
+    A message is written once every topic has poses later than it; the rest wait (a window's
+    worth), :meth:`finish` writes them all.
+    """
 
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        w = Writer(f, compression=CompressionType.ZSTD, enable_crcs=True)
-        w.start(profile=PROFILE, library=LIBRARY)
-        sid = w.register_schema(ODOMETRY_TYPE, SCHEMA_ENCODING, _ODOMETRY_SCHEMA.encode())
-        times, cids, payloads = [], [], []
-        for topic, poses in topics.items():
-            cid = w.register_channel(topic, MESSAGE_ENCODING, sid)
-            rec = encode_odometry(poses)
-            buf, size = rec.tobytes(), rec.dtype.itemsize
-            payloads += [buf[i:i + size] for i in range(0, len(buf), size)]
-            times.append(poses.stamps_ns)
-            cids.append(np.full(len(rec), cid))
-        if times:
-            t, c = np.concatenate(times), np.concatenate(cids)
-            for i in np.argsort(t, kind="stable").tolist():
-                w.add_message(int(c[i]), int(t[i]), payloads[i], int(t[i]))
-        w.finish()
-        f.flush()
-        os.fsync(f.fileno())
+    def __init__(self, path: Path, topics: Sequence[str]) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
+        from navreplay.io.writer import LIBRARY
+
+        self._file = open(path, "wb")  # noqa: SIM115 (closed by finish or close)
+        self._w = Writer(self._file, compression=CompressionType.ZSTD, enable_crcs=True)
+        self._w.start(profile=PROFILE, library=LIBRARY)
+        sid = self._w.register_schema(ODOMETRY_TYPE, SCHEMA_ENCODING, _ODOMETRY_SCHEMA.encode())
+        self._ids = {topic: self._w.register_channel(topic, MESSAGE_ENCODING, sid)
+                     for topic in topics}
+        # per topic: (stamps, CDR messages as rows of bytes) not yet written
+        self._queue: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {t: [] for t in topics}
+        self._last: dict[str, int | None] = dict.fromkeys(topics)
+
+    def add(self, topic: str, poses: Poses) -> None:
+        if not len(poses.stamps_ns):
+            return
+        rec = encode_odometry(poses)  # as rows of bytes (concatenating records repacks them)
+        self._queue[topic].append((poses.stamps_ns,
+                                   rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)))
+        self._last[topic] = int(poses.stamps_ns[-1])
+        if all(v is not None for v in self._last.values()):
+            self._write(min(self._last.values()))
+
+    def _write(self, limit: int | None) -> None:
+        """Write the queued messages earlier than ``limit`` (all with None)."""
+        times, rows = [], []  # per message: time; (queued piece, row in it)
+        pieces: list[np.ndarray] = []
+        for topic, queue in self._queue.items():
+            cid = self._ids[topic]
+            kept = []
+            for t, rec in queue:
+                n = t.shape[0] if limit is None else int(np.searchsorted(t, limit, side="left"))
+                if n:
+                    times.append(t[:n])
+                    rows.append(np.stack([np.full(n, len(pieces)), np.arange(n),
+                                          np.full(n, cid)], axis=1))
+                    pieces.append(rec)
+                if n < t.shape[0]:
+                    kept.append((t[n:], rec[n:]))
+            self._queue[topic] = kept
+        if not times:
+            return
+        t = np.concatenate(times)
+        where = np.concatenate(rows)
+        add = self._w.add_message
+        for i in np.argsort(t, kind="stable").tolist():
+            ti = int(t[i])
+            k, j, cid = where[i].tolist()
+            add(cid, ti, pieces[k][j].tobytes(), ti)
+
+    def finish(self) -> None:
+        self._write(None)
+        self._w.finish()
+        self._file.close()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+class RunExport:
+    """``--export DIR`` of one run, written as the estimates come (see the module docstring
+    for the files).
+
+    Feed it the truth window by window (:meth:`add_reference`) and each filter's estimates
+    block by block (:meth:`add`, blocks of one label in time order), then :meth:`close`; or
+    :meth:`abort`. Every file goes to a temporary beside its target, renamed when complete, so
+    an interrupted run leaves the directory as it was. The files are those of one call with the
+    whole run: what is written depends on the rows, not on how they were split into blocks.
+
+    The first rows are held until the export frame's origin (the reference's first sample, else
+    the first filter's first navigation estimate) and which filters have a navigation solution
+    are known (usually the first window).
+
+    Parameters
+    ----------
+    out_dir : Path
+    labels : sequence of str
+        The filters' labels, in the command's order.
+    has_reference : bool
+        A truth / reference stream follows.
+    source : str
+        The recording, for the manifest.
+    force : bool
+        Overwrite existing files (checked here, before anything is written).
+    """
+
+    def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
+                 source: str = "", force: bool = False) -> None:
+        self.out_dir = Path(out_dir)
+        self.labels = tuple(labels)
+        self.has_reference = has_reference
+        self.source = source
+        check_targets(run_targets(self.out_dir, self.labels, has_reference), force)
+        self._stems = _stems(self.labels)
+        self._frame: LocalFrame | None = None
+        self._started = False
+        self._held: list[tuple[str, Any]] = []  # ("ref", Stream) / ("out", FilterOutput)
+        self._nav: dict[str, bool] = {}  # label -> has a navigation solution (from its rows)
+        self._empty: dict[str, FilterOutput] = {}  # a block without rows per label
+        self._tmp: dict[Path, tuple[Path, Any]] = {}  # target -> (temporary, open file)
+        self._entries: dict[str, dict[str, Any]] = {}
+        self._odometry: _OdometryWriter | None = None
+        self._topics: dict[str, str] = {}  # label (or the reference) -> odometry topic
+        self._done = False
+
+    # -- feeding -------------------------------------------------------------------------
+
+    def add_reference(self, truth: Stream) -> None:
+        """A window of the truth stream (``pos``, ``v_n``, ``q_nb``), later than before."""
+        if not len(truth):
+            return
+        if self._frame is None:
+            p = truth["pos"][0]
+            self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
+                                     "first reference sample")
+        self._feed("ref", truth)
+
+    def add(self, out: FilterOutput) -> None:
+        """A block of one filter's estimates (:func:`filter_output` of its rows)."""
+        if out.label not in self._stems:
+            raise ValueError(f"{out.label!r} is not one of the exported filters")
+        if not len(out.t):
+            self._empty.setdefault(out.label, out)
+            return
+        self._nav.setdefault(out.label, out.has_nav)
+        if (self._frame is None and not self.has_reference and out.has_nav
+                and self._first_nav() == out.label):
+            p = out.nav_pos[0]
+            self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
+                                     f"first navigation estimate of {out.label}")
+        self._feed("out", out)
+
+    def _first_nav(self) -> str | None:
+        """The first label (in order) whose rows may carry a navigation solution."""
+        for label in self.labels:
+            if self._nav.get(label, True):
+                return label
+        return None
+
+    def _held_frame(self) -> LocalFrame | None:
+        """At the end, before anything is written: the frame of the first filter (in order)
+        with a navigation solution, when the filters before it never had an estimate."""
+        firsts = {out.label: out for kind, out in reversed(self._held) if kind == "out"}
+        for label in self.labels:
+            out = firsts.get(label)
+            if out is not None and out.has_nav:
+                p = out.nav_pos[0]
+                return LocalFrame(float(p[0]), float(p[1]), float(p[2]),
+                                  f"first navigation estimate of {label}")
+        return None
+
+    def _feed(self, kind: str, item: Any) -> None:
+        if not self._started:
+            self._held.append((kind, item))
+            if len(self._nav) == len(self.labels) and (
+                    self._frame is not None or self._first_nav() is None):
+                self._start()
+            return
+        self._write(kind, item)
+
+    # -- writing -------------------------------------------------------------------------
+
+    def _open(self, name: str) -> Any:
+        from navreplay.outputs import temporary_path
+
+        target = self.out_dir / name
+        tmp = temporary_path(target)
+        f = open(tmp, "w", encoding="utf-8", newline="")  # noqa: SIM115 (closed on close/abort)
+        self._tmp[target] = (tmp, f)
+        return f
+
+    def _start(self) -> None:
+        """The frame and the filters' solutions are known: open the files, write the rows held."""
+        from navreplay.outputs import temporary_path
+
+        self._started = True
+        topics = []
+        for label in self.labels:
+            entry: dict[str, Any] = {"csv": f"{self._stems[label]}.csv"}
+            if self._nav.get(label) and self._frame is not None:
+                entry["tum"] = f"{self._stems[label]}.tum"
+                entry["odometry_topic"] = f"/estimates/{topic_name(label)}/odom"
+                self._open(entry["tum"]).write(TUM_HEADER)
+                topics.append(entry["odometry_topic"])
+                self._topics[label] = entry["odometry_topic"]
+            self._entries[label] = entry
+        if self.has_reference and self._frame is not None:
+            self._open(f"{REFERENCE_LABEL}.tum").write(TUM_HEADER)
+            topics.append("/reference/odom")
+            self._topics[REFERENCE_LABEL] = "/reference/odom"
+        if topics:
+            target = self.out_dir / ODOMETRY_FILE
+            tmp = temporary_path(target)
+            self._odometry = _OdometryWriter(tmp, topics)
+            self._tmp[target] = (tmp, self._odometry)
+        held, self._held = self._held, []
+        # estimates first: the reference then goes out piece by piece instead of queueing
+        # behind them (the files do not depend on the order of the topics' pieces)
+        for kind, item in sorted(held, key=lambda h: h[0] == "ref"):
+            self._write(kind, item)
+
+    def _write(self, kind: str, item: Any) -> None:
+        frame = self._frame
+        if kind == "ref":
+            if frame is None:
+                return
+            for a in range(0, len(item), _REFERENCE_ROWS):  # bounded temporaries
+                truth = item.slice(a, min(a + _REFERENCE_ROWS, len(item)))
+                poses = _reference_poses(frame, truth)
+                self._file(f"{REFERENCE_LABEL}.tum").write(tum_lines(poses))
+                self._odometry.add(self._topics[REFERENCE_LABEL], poses)
+            return
+        out: FilterOutput = item
+        entry = self._entries[out.label]
+        cols = run_columns(out, frame)
+        if "columns" not in entry:
+            entry["columns"] = [c.to_json() for c in cols]
+            self._open(entry["csv"]).write(csv_header(cols))
+        self._file(entry["csv"]).write(csv_rows(cols))
+        if "tum" in entry and out.has_nav:
+            poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
+                              out.nav_cov)
+            self._file(entry["tum"]).write(tum_lines(poses))
+            self._odometry.add(entry["odometry_topic"], poses)
+
+    def _file(self, name: str) -> Any:
+        return self._tmp[self.out_dir / name][1]
+
+    # -- finishing -----------------------------------------------------------------------
+
+    def close(self) -> list[Path]:
+        """Write what is held, finish every file and rename it onto its target; returns the
+        files written (the manifest last)."""
+        from navreplay.outputs import fsync_path, release
+
+        if self._done:
+            raise ValueError("the export is already closed")
+        try:
+            if not self._started:
+                if self._frame is None and not self.has_reference:
+                    self._frame = self._held_frame()
+                self._start()
+            for label in self.labels:  # filters without a single estimate: a header
+                entry = self._entries[label]
+                if "columns" not in entry:
+                    empty = self._empty.get(label)
+                    cols = run_columns(empty, self._frame) if empty is not None else [
+                        Column("stamp", "ns", "absolute estimate time", np.zeros(0, np.int64),
+                               "%d"),
+                        Column("t", "s", "time since the recording start", np.zeros(0))]
+                    entry["columns"] = [c.to_json() for c in cols]
+                    self._open(entry["csv"]).write(csv_header(cols))
+            if self._odometry is not None:
+                self._odometry.finish()
+            for _, f in self._tmp.values():
+                f.close()
+        except BaseException:
+            self.abort()
+            raise
+        self._done = True
+        written = []
+        order = [self.out_dir / e[k] for e in self._entries.values() for k in ("csv", "tum")
+                 if k in e]
+        order += [p for p in self._tmp if p not in order]
+        for target in order:
+            tmp, _ = self._tmp[target]
+            fsync_path(tmp)
+            os.replace(tmp, target)
+            release(tmp, remove=False)
+            written.append(target)
+        manifest = self._manifest()
+        write_text(self.out_dir / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+        written.append(self.out_dir / MANIFEST)
+        return written
+
+    def _manifest(self) -> dict[str, Any]:
+        manifest: dict[str, Any] = {
+            "recording": self.source,
+            "frames": {
+                "map": "local ENU (east, north, up) about the origin, metres (REP-103/105); "
+                       "TUM positions and Odometry poses",
+                "base_link": "vehicle body FLU (forward, left, up); Odometry twist",
+                "nav": "navreplay's NED / FRD: CSV velocities, attitudes and errors",
+            },
+            "origin": self._frame.to_json() if self._frame is not None else None,
+            "filters": {label: {k: e[k] for k in ("csv", "columns", "tum", "odometry_topic")
+                                if k in e}
+                        for label, e in self._entries.items()},
+        }
+        if REFERENCE_LABEL in self._topics:
+            manifest["reference"] = {"tum": f"{REFERENCE_LABEL}.tum",
+                                     "odometry_topic": "/reference/odom"}
+        if self._topics:
+            manifest["odometry"] = {"file": ODOMETRY_FILE, "type": ODOMETRY_TYPE,
+                                    "frame_id": WORLD_FRAME, "child_frame_id": BODY_FRAME,
+                                    "topics": sorted(self._topics.values())}
+        return manifest
+
+    def abort(self) -> None:
+        """Stop without publishing: the temporaries are deleted, the targets untouched."""
+        from navreplay.outputs import release
+
+        self._done = True
+        for tmp, f in self._tmp.values():
+            with contextlib.suppress(OSError):
+                f.close()
+            release(tmp)
+        self._tmp.clear()
+
+
+_REFERENCE_ROWS = 5_000
+"""Reference rows converted and queued at once (a window's 9x9 covariances and messages are
+not all held)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -652,61 +949,24 @@ def write_odometry(path: Path, topics: Mapping[str, Poses]) -> None:
 
 def export_run(out_dir: Path, outputs: Sequence[FilterOutput], recording: Recording | None,
                *, source: str = "", force: bool = False) -> list[Path]:
-    """Write the CSV and TUM files of every filter, the Odometry MCAP and the manifest.
+    """Write the CSV and TUM files of every filter, the Odometry MCAP and the manifest from
+    whole runs (:class:`RunExport` fed at once).
 
     Returns the written files. Refuses to overwrite any of them unless ``force`` (checked
     before the first one is written).
     """
-    out_dir = Path(out_dir)
     has_ref = recording is not None and StreamKind.TRUTH in recording
-    check_targets(run_targets(out_dir, [o.label for o in outputs], has_ref), force)
-    stems = _stems([o.label for o in outputs])
-    frame = local_frame(outputs, recording)
-    written: list[Path] = []
-    manifest: dict[str, Any] = {
-        "recording": source,
-        "frames": {
-            "map": "local ENU (east, north, up) about the origin, metres (REP-103/105); "
-                   "TUM positions and Odometry poses",
-            "base_link": "vehicle body FLU (forward, left, up); Odometry twist",
-            "nav": "navreplay's NED / FRD: CSV velocities, attitudes and errors",
-        },
-        "origin": frame.to_json() if frame is not None else None,
-        "filters": {},
-    }
-    odometry: dict[str, Poses] = {}
-    for out in outputs:
-        stem = stems[out.label]
-        cols = run_columns(out, frame)
-        entry: dict[str, Any] = {"csv": f"{stem}.csv",
-                                 "columns": [c.to_json() for c in cols]}
-        write_text(out_dir / entry["csv"], csv_text(cols))
-        written.append(out_dir / entry["csv"])
-        if out.has_nav and frame is not None:
-            poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
-                              out.nav_cov)
-            entry["tum"] = f"{stem}.tum"
-            write_text(out_dir / entry["tum"], tum_text(poses))
-            written.append(out_dir / entry["tum"])
-            entry["odometry_topic"] = f"/estimates/{topic_name(out.label)}/odom"
-            odometry[entry["odometry_topic"]] = poses
-        manifest["filters"][out.label] = entry
-    if has_ref and frame is not None:
-        ref = _reference_poses(frame, recording)
-        write_text(out_dir / f"{REFERENCE_LABEL}.tum", tum_text(ref))
-        written.append(out_dir / f"{REFERENCE_LABEL}.tum")
-        manifest["reference"] = {"tum": f"{REFERENCE_LABEL}.tum",
-                                 "odometry_topic": "/reference/odom"}
-        odometry["/reference/odom"] = ref
-    if odometry:
-        write_odometry(out_dir / ODOMETRY_FILE, odometry)
-        written.append(out_dir / ODOMETRY_FILE)
-        manifest["odometry"] = {"file": ODOMETRY_FILE, "type": ODOMETRY_TYPE,
-                                "frame_id": WORLD_FRAME, "child_frame_id": BODY_FRAME,
-                                "topics": sorted(odometry)}
-    write_text(out_dir / MANIFEST, json.dumps(manifest, indent=2) + "\n")
-    written.append(out_dir / MANIFEST)
-    return written
+    writer = RunExport(out_dir, [o.label for o in outputs], has_reference=has_ref,
+                       source=source, force=force)
+    try:
+        if has_ref:
+            writer.add_reference(recording[StreamKind.TRUTH])
+        for out in outputs:
+            writer.add(out)
+    except BaseException:
+        writer.abort()
+        raise
+    return writer.close()
 
 
 def export_ensemble(out_dir: Path, ensembles: Mapping[str, Any], *, title: str = "",

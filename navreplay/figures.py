@@ -54,6 +54,11 @@ class Panel:
         1-sigma (bounded_errors), mean predicted sigma (rms_vs_sigma).
     band : tuple of ndarray (M,) or None
         Lower and upper chi-square bounds (consistency).
+    bound_t : ndarray or None
+        Times of ``bound`` when they are not ``t`` (decimated series).
+    inside : float or None
+        Fraction of the values inside ``band``, when ``value`` does not hold them all
+        (decimated series); computed from ``value`` otherwise.
     """
 
     title: str
@@ -62,6 +67,13 @@ class Panel:
     value: np.ndarray
     bound: np.ndarray | None = None
     band: tuple[np.ndarray, np.ndarray] | None = None
+    bound_t: np.ndarray | None = None
+    inside: float | None = None
+
+    @property
+    def tb(self) -> np.ndarray:
+        """The times of ``bound``."""
+        return self.t if self.bound_t is None else self.bound_t
 
 
 def _grid(n: int, cols: int, title: str) -> tuple[plt.Figure, list[plt.Axes]]:
@@ -93,9 +105,9 @@ def bounded_errors(title: str, panels: Sequence[Panel], color: str = COLORS[0],
     for k, (ax, p) in enumerate(zip(axes, panels, strict=True)):
         if p.bound is not None and np.isfinite(p.bound).any():
             b = 3.0 * p.bound
-            ax.fill_between(p.t, -b, b, color=color, alpha=0.15, linewidth=0, label="±3σ")
-            ax.plot(p.t, b, color=color, linewidth=0.6, alpha=0.6)
-            ax.plot(p.t, -b, color=color, linewidth=0.6, alpha=0.6)
+            ax.fill_between(p.tb, -b, b, color=color, alpha=0.15, linewidth=0, label="±3σ")
+            ax.plot(p.tb, b, color=color, linewidth=0.6, alpha=0.6)
+            ax.plot(p.tb, -b, color=color, linewidth=0.6, alpha=0.6)
         ax.plot(p.t, p.value, color=color, linewidth=1.1, label="error")
         ax.axhline(0.0, color="0.5", linewidth=0.6)
         _style(ax, p, k >= len(panels) - cols)
@@ -119,7 +131,8 @@ def consistency(title: str, panels: Sequence[Panel], color: str = COLORS[0]) -> 
         ax.set_yscale("log")
         _style(ax, p, k == len(panels) - 1)
         if p.band is not None:
-            inside = np.mean((p.value >= p.band[0]) & (p.value <= p.band[1]))
+            inside = p.inside if p.inside is not None else np.mean(
+                (p.value >= p.band[0]) & (p.value <= p.band[1]))
             ax.set_title(f"{p.title}: {100 * inside:.0f} % inside the band", fontsize=10)
         ax.legend(loc="upper right", fontsize=8, frameon=False)
     return fig
@@ -132,7 +145,7 @@ def rms_vs_sigma(title: str, panels: Sequence[Panel], color: str = COLORS[0],
     for k, (ax, p) in enumerate(zip(axes, panels, strict=True)):
         ax.plot(p.t, p.value, color=color, linewidth=1.3, label="RMS")
         if p.bound is not None and np.isfinite(p.bound).any():
-            ax.plot(p.t, p.bound, color=color, linewidth=1.3, linestyle="--", label="σ")
+            ax.plot(p.tb, p.bound, color=color, linewidth=1.3, linestyle="--", label="σ")
         ax.set_ylim(bottom=0.0)
         _style(ax, p, k >= len(panels) - cols)
     if axes:

@@ -8,12 +8,15 @@ paper, drawn by :mod:`navreplay.figures` and embedded as base64 PNG:
 * a campaign: RMS error vs mean predicted sigma per filter, NEES and NIS averaged over the runs
   with their bands.
 
-The run's estimates are read through :func:`navreplay.export.filter_output`.
+The run's estimates are read through :func:`navreplay.export.filter_output`, block by block
+as a streamed run produces them, into :class:`RunSeries`: min/max envelopes of every plotted
+series, so the report of a day-long log takes the memory of a short one.
 """
 
 from __future__ import annotations
 
 import base64
+import dataclasses
 import html
 import math
 from collections.abc import Mapping, Sequence
@@ -23,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from navreplay import __version__
+from navreplay.envelope import Envelope
 from navreplay.export import FilterOutput, check_targets, write_text
 from navreplay.metrics import chi2_bounds, chi2_bounds_per_count
 from navreplay.tables import summary_unit
@@ -72,16 +76,12 @@ def summary_table(summaries: Mapping[str, Mapping[str, Any]]) -> str:
     return f"<table><tr><th>filter</th>{head}</tr>{''.join(rows)}</table>"
 
 
-def _state_panel(name: str, unit: str, t: np.ndarray, value: np.ndarray,
-                 sigma: np.ndarray) -> Any:
-    """A state's panel in the unit an engineer reads (deg, deg/h, mg; SI otherwise)."""
-    from navreplay import figures
+def _display(unit: str) -> tuple[str, float]:
+    """The unit an engineer reads a state in (deg, deg/h, mg; SI otherwise) and its scale."""
     from navreplay.viz.naming import display_unit
 
     u = display_unit(unit)
-    if u.label == "SI":
-        return figures.Panel(name, unit, t, value, sigma)
-    return figures.Panel(name, u.label, t, value * u.scale, sigma * u.scale)
+    return (unit, 1.0) if u.label == "SI" else (u.label, u.scale)
 
 
 def _figure(fig: Any, caption: str) -> str:
@@ -113,56 +113,137 @@ def _write(path: Path, text: str, force: bool) -> Path:
 # a run
 
 
-def run_figures(out: FilterOutput, color: str) -> list[str]:
-    """The HTML figures of one filter run."""
+@dataclasses.dataclass
+class _Trace:
+    """One panel of a run's figure: an error (or NEES, NIS) and its 1-sigma, as envelopes."""
+
+    title: str
+    unit: str
+    scale: float
+    value: Envelope = dataclasses.field(default_factory=Envelope)
+    sigma: Envelope | None = None
+
+    def panel(self, band: tuple[float, float] | None = None,
+              inside: float | None = None) -> Any:
+        from navreplay import figures
+
+        t, v = self.value.points()
+        bound_t = bound = None
+        if self.sigma is not None:
+            bound_t, bound = self.sigma.points()
+            bound = bound * self.scale
+        lohi = None if band is None else (np.full_like(t, band[0]), np.full_like(t, band[1]))
+        return figures.Panel(self.title, self.unit, t, v * self.scale, bound, lohi,
+                             bound_t=bound_t, inside=inside)
+
+
+class RunSeries:
+    """What the report draws of one filter run, kept block by block in memory independent of
+    the run's length: each error, sigma, NEES and NIS series as a min/max envelope
+    (:class:`navreplay.envelope.Envelope`, at most a few thousand points per panel).
+
+    Feed it :meth:`add` with :func:`navreplay.export.filter_output` of each block of rows (with
+    its metrics) and :meth:`add_nis` with each block's innovations; :meth:`of` takes a whole run.
+    The numbers on the figures (the fraction inside a chi-square band) are the summary's.
+    """
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.nav: list[_Trace] = []
+        self.states: list[_Trace] = []
+        self.nees: _Trace | None = None
+        self.nees_dof = 0
+        self.nis: dict[str, tuple[_Trace, int]] = {}
+
+    @classmethod
+    def of(cls, out: FilterOutput) -> RunSeries:
+        """The series of a whole run."""
+        series = cls(out.label)
+        series.add(out)
+        return series
+
+    def add(self, out: FilterOutput) -> None:
+        """A block of rows (later than before) with its metrics, and its NIS if it has any."""
+        for name, (t, nis, dof) in out.nis.items():
+            self.add_nis(name, t, nis, dof)
+        m = out.metrics
+        if m is None or not len(m.t):
+            return
+        if m.nav is not None:
+            if not self.nav:
+                self.nav = [_Trace(f"{title} {a}", unit, scale, sigma=Envelope())
+                            for _, title, axes, unit, scale, _ in _NAV for a in axes]
+            sig = (np.sqrt(np.clip(np.diagonal(out.nav_cov, axis1=1, axis2=2), 0.0, None))
+                   if out.nav_cov is not None else np.full((len(m.t), 9), np.nan))
+            k = 0
+            for key, _, axes, _, _, row in _NAV:
+                for i in range(len(axes)):
+                    self.nav[k].value.add(m.t, getattr(m.nav, key)[:, i])
+                    self.nav[k].sigma.add(m.t, sig[:, row + i])
+                    k += 1
+        others = [(j, name) for j, name in enumerate(m.state_names) if name not in out.nav_states]
+        if not self.states and others:
+            units = dict(zip(out.state_names, out.state_units, strict=True))
+            self.states = [_Trace(name, *_display(units.get(name, "-")), sigma=Envelope())
+                           for _, name in others]
+        for trace, (j, _) in zip(self.states, others, strict=True):
+            trace.value.add(m.t, m.state_error[:, j])
+            trace.sigma.add(m.t, np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
+        if m.nees_states:
+            if self.nees is None:
+                self.nees_dof = len(m.nees_states)
+                self.nees = _Trace(f"NEES ({self.nees_dof} dof)", "-", 1.0)
+            self.nees.value.add(m.t, m.nees)
+
+    def add_nis(self, name: str, t: np.ndarray, nis: np.ndarray, dof: int) -> None:
+        """NIS of one measurement at its update times [s] (later than before)."""
+        if name not in self.nis:
+            self.nis[name] = (_Trace(f"NIS {name} ({dof} dof)", "-", 1.0), dof)
+        self.nis[name][0].value.add(t, nis)
+
+
+def run_figures(series: RunSeries, color: str,
+                summary: Mapping[str, Any] | None = None) -> list[str]:
+    """The HTML figures of one filter run; ``summary`` (its scores) gives the fractions inside
+    the chi-square bands."""
     from navreplay import figures
 
+    summary = summary or {}
+    label = series.label
     parts = []
-    m = out.metrics
-    if m is not None and m.nav is not None:
-        sig = (np.sqrt(np.clip(np.diagonal(out.nav_cov, axis1=1, axis2=2), 0.0, None))
-               if out.nav_cov is not None else np.full((len(m.t), 9), np.nan))
-        panels = [figures.Panel(f"{title} {a}", unit, m.t, getattr(m.nav, key)[:, i] * scale,
-                                sig[:, row + i] * scale)
-                  for key, title, axes, unit, scale, row in _NAV for i, a in enumerate(axes)]
+    if series.nav and series.nav[0].value.count:
         parts.append(_figure(
-            figures.bounded_errors(f"{out.label}: navigation errors", panels, color),
-            f"{out.label}: navigation errors (estimate minus reference) and their predicted "
+            figures.bounded_errors(f"{label}: navigation errors",
+                                   [tr.panel() for tr in series.nav], color),
+            f"{label}: navigation errors (estimate minus reference) and their predicted "
             "±3σ. Position north/east/down, velocity NED, attitude error φ (NED)."))
-    if m is not None:
-        units = dict(zip(out.state_names, out.state_units, strict=True))
-        panels = [_state_panel(name, units.get(name, "-"), m.t, m.state_error[:, j],
-                               np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
-                  for j, name in enumerate(m.state_names) if name not in out.nav_states]
-        if panels:
-            parts.append(_figure(
-                figures.bounded_errors(f"{out.label}: state errors", panels, color),
-                f"{out.label}: estimation errors of the other scored states and their ±3σ."))
+    if series.states:
+        parts.append(_figure(
+            figures.bounded_errors(f"{label}: state errors",
+                                   [tr.panel() for tr in series.states], color),
+            f"{label}: estimation errors of the other scored states and their ±3σ."))
     cons = []
-    if m is not None and m.nees_states and np.isfinite(m.nees).any():
-        dof = len(m.nees_states)
-        lo, hi = chi2_bounds(dof)
-        cons.append(figures.Panel(f"NEES ({dof} dof)", "-", m.t, m.nees,
-                                  band=(np.full_like(m.t, lo), np.full_like(m.t, hi))))
-    for name, (t, nis, dof) in out.nis.items():
-        if len(t):
-            lo, hi = chi2_bounds(dof)
-            cons.append(figures.Panel(f"NIS {name} ({dof} dof)", "-", t, nis,
-                                      band=(np.full_like(t, lo), np.full_like(t, hi))))
+    if series.nees is not None and series.nees.value.count:
+        cons.append(series.nees.panel(chi2_bounds(series.nees_dof),
+                                      summary.get("nees_in_bounds")))
+    for name, (trace, dof) in series.nis.items():
+        if trace.value.count:
+            cons.append(trace.panel(chi2_bounds(dof), summary.get(f"nis_in_bounds_{name}")))
     if cons:
         parts.append(_figure(
-            figures.consistency(f"{out.label}: consistency", cons, color),
-            f"{out.label}: NEES and NIS per epoch with the 95 % chi-square band of one sample."))
+            figures.consistency(f"{label}: consistency", cons, color),
+            f"{label}: NEES and NIS per epoch with the 95 % chi-square band of one sample."))
     if not parts:
         parts.append("<p class='note'>No reference and no measurement updates: nothing to "
                      "plot.</p>")
     return parts
 
 
-def write_run_report(path: Path, outputs: Sequence[FilterOutput],
+def write_run_report(path: Path, runs: Sequence[RunSeries | FilterOutput],
                      summaries: Mapping[str, Mapping[str, Any]], *, title: str,
                      force: bool = False) -> Path:
-    """Write the HTML report of filters replayed over one recording."""
+    """Write the HTML report of filters replayed over one recording (their series, or whole
+    runs)."""
     from navreplay import figures
 
     check_targets([Path(path)], force, "--report")
@@ -172,9 +253,10 @@ def write_run_report(path: Path, outputs: Sequence[FilterOutput],
     else:
         body.append("<p class='note'>The recording has no reference: no errors to score; "
                     "the NIS below needs none.</p>")
-    for i, out in enumerate(outputs):
-        body.append(f"<h2>{html.escape(out.label)}</h2>")
-        body += run_figures(out, figures.filter_color(i))
+    for i, run in enumerate(runs):
+        series = run if isinstance(run, RunSeries) else RunSeries.of(run)
+        body.append(f"<h2>{html.escape(series.label)}</h2>")
+        body += run_figures(series, figures.filter_color(i), summaries.get(series.label))
     return _write(path, _page(title, "filter run report", body), force)
 
 
@@ -195,9 +277,11 @@ def ensemble_figures(ens: Any, color: str) -> list[str]:
                             ens.sigma[key][:, i] * scale)
               for key, title, axes, unit, scale, _ in _NAV if key in ens.rms
               for i, a in enumerate(axes)]
-    panels += [_state_panel(name, units.get(name, "-"), ens.t, ens.state_rms[:, j],
-                            ens.state_sigma[:, j])
-               for j, name in enumerate(ens.state_names) if name not in nav_states]
+    for j, name in enumerate(ens.state_names):
+        if name not in nav_states:
+            unit, scale = _display(units.get(name, "-"))
+            panels.append(figures.Panel(name, unit, ens.t, ens.state_rms[:, j] * scale,
+                                        ens.state_sigma[:, j] * scale))
     if panels:
         parts.append(_figure(
             figures.rms_vs_sigma(f"{ens.label}: RMS over {runs} vs predicted σ", panels, color),

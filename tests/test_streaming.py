@@ -110,7 +110,8 @@ def test_run_on_a_file_streams_and_scores_as_the_whole_run(
         assert got[k] == pytest.approx(v, rel=1e-12, abs=1e-12), k
 
 
-def test_live_views_and_exports_read_the_whole_file(drive: Recording, tmp_path) -> None:
+def test_paced_replay_reads_the_whole_file(drive: Recording, tmp_path) -> None:
+    """Live views and exports stream (tests/test_streamed_outputs.py); a paced replay does not."""
     import importlib
 
     from navreplay.io.writer import write_recording
@@ -121,8 +122,5 @@ def test_live_views_and_exports_read_the_whole_file(drive: Recording, tmp_path) 
     path = tmp_path / "drive.mcap"
     write_recording(path, drive)
     job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(path,),
-                     viz=VizOptions(mode=VizMode.SPAWN))
+                     viz=VizOptions(mode=VizMode.NONE), pacing=100.0)
     assert run._run_streamed(job, None) is None
-    exports = dataclasses.replace(job, viz=VizOptions(mode=VizMode.SAVE, path=tmp_path / "a.rrd"),
-                                  export_dir=tmp_path / "csv")
-    assert run._run_streamed(exports, None) is None

@@ -1,9 +1,13 @@
 """``--export DIR`` and ``--report FILE.html`` of ``navreplay run`` and ``navreplay montecarlo``.
 
 The jobs call :meth:`Outputs.check` before any work (existing files are refused unless
-``force``, so a long run does not end in a refusal), :meth:`Outputs.collect` per filter run,
-then :meth:`Outputs.write_run` or :meth:`Outputs.write_ensemble`, which return the lines to
-print. matplotlib is imported only when a report is asked for.
+``force``, so a long run does not end in a refusal). A run over one recording then calls
+:meth:`Outputs.start_run`, hands over the truth window by window and each filter's estimates
+and innovations block by block as they come (:meth:`Outputs.truth`, :meth:`Outputs.rows`,
+:meth:`Outputs.innovations`: the exports are written as they go, the report keeps envelopes),
+and ends with :meth:`Outputs.write_run` (or :meth:`Outputs.abort`); a campaign calls
+:meth:`Outputs.write_ensemble`. Both return the lines to print. matplotlib is imported only
+when a report is asked for.
 """
 
 from __future__ import annotations
@@ -31,7 +35,8 @@ class Outputs:
     export_dir: Path | None = None
     report_path: Path | None = None
     force: bool = False
-    _runs: list[export.FilterOutput] = dataclasses.field(default_factory=list)
+    _export: export.RunExport | None = None
+    _series: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
     def wanted(self) -> bool:
@@ -45,27 +50,61 @@ class Outputs:
                       else export.run_targets(self.export_dir, labels, has_reference))
         export.check_targets(paths, self.force)
 
-    def collect(self, result: Any, recording: Any, metrics: Any = None) -> None:
-        """Keep one filter run (a RunResult) for the exports and the report."""
-        if self.wanted:
-            self._runs.append(export.filter_output(result, recording, metrics))
-
-    def write_run(self, recording: Any, summaries: Mapping[str, Mapping[str, Any]], *,
-                  title: str, source: str) -> list[str]:
-        """Write the exports and the report of filters replayed over one recording."""
-        notes = []
+    def start_run(self, labels: Sequence[str], *, has_reference: bool, source: str) -> None:
+        """Open the exports and the report's series of filters replayed over one recording."""
         if self.export_dir is not None:
-            written = export.export_run(self.export_dir, self._runs, recording, source=source,
-                                        force=self.force)
+            self._export = export.RunExport(self.export_dir, labels,
+                                            has_reference=has_reference, source=source,
+                                            force=self.force)
+        if self.report_path is not None:
+            from navreplay.report import RunSeries
+
+            self._series = {label: RunSeries(label) for label in labels}
+
+    def truth(self, truth: Any) -> None:
+        """A window of the truth stream (later than before)."""
+        if self._export is not None:
+            self._export.add_reference(truth)
+
+    def rows(self, rows: Any, metrics: Any = None) -> None:
+        """A block of one filter's estimates (a RunResult, later than its blocks before) with
+        its metrics (None without a reference); innovations it carries are drawn too."""
+        if not self.wanted:
+            return
+        out = export.filter_output(rows, metrics=metrics)
+        if self._export is not None:
+            self._export.add(out)
+        if rows.label in self._series:
+            self._series[rows.label].add(out)
+
+    def innovations(self, block: Any) -> None:
+        """The innovations of a block of one filter's run (a RunResult)."""
+        series = self._series.get(block.label)
+        if series is not None:
+            for name, s in block.innovations.items():
+                series.add_nis(name, s.t, s.nis, int(s.nu.shape[1]))
+
+    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str) -> list[str]:
+        """Finish the exports and write the report of filters replayed over one recording."""
+        notes = []
+        if self._export is not None:
+            written = self._export.close()
+            self._export = None
             notes.append(f"Exported {len(written)} files to {self.export_dir} "
                          f"(see {self.export_dir / export.MANIFEST})")
         if self.report_path is not None:
             from navreplay import report
 
-            report.write_run_report(self.report_path, self._runs, summaries, title=title,
-                                    force=self.force)
+            report.write_run_report(self.report_path, list(self._series.values()), summaries,
+                                    title=title, force=self.force)
             notes.append(f"Report written to {self.report_path}")
         return notes
+
+    def abort(self) -> None:
+        """Stop: the exports' temporaries are deleted, nothing is published."""
+        if self._export is not None:
+            self._export.abort()
+            self._export = None
 
     def write_ensemble(self, ensembles: Mapping[str, Any], summaries: Mapping[str, Any], *,
                        title: str) -> list[str]:

@@ -134,10 +134,10 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
 
 
 def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
-    """Replay one intact MCAP file window by window (memory flat in its length), its .rrd
-    written block by block; None when the run needs the whole recording (a live view, exports,
-    a report, a reference, paced replay, a rosbag2 folder or a damaged file): :func:`_run_one`
-    then reads it whole."""
+    """Replay one intact MCAP file window by window (memory flat in its length): the .rrd or
+    the live view logged, the exports written and the report's series kept block by block;
+    None when the run needs the whole recording (a reference, paced replay, a rosbag2 folder
+    or a damaged file): :func:`_run_one` then reads it whole."""
     from navreplay.filters.base import TruthColumn
     from navreplay.io.integrity import salvage_watch
     from navreplay.io.reader import is_rosbag, read_streams
@@ -149,9 +149,8 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
 
     path = Path(job.recordings[0])
     options = job.log or LogOptions()
-    if (job.viz.mode not in (VizMode.NONE, VizMode.SAVE) or job.export_dir is not None
-            or job.report_path is not None or job.pacing is not None
-            or options.reference is not None or is_rosbag(path) or not streamable(path)):
+    if (job.pacing is not None or options.reference is not None or is_rosbag(path)
+            or not streamable(path)):
         return None
     classes = [spec.load() for spec in job.filters]
     with salvage_watch() as lost:
@@ -170,6 +169,9 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     head = Recording({**aiding.streams, **window}, aiding.metadata, aiding.t0_ns)
     notes = make_ready(head, sources, options)
     has_truth = StreamKind.TRUTH in head
+    labels = [spec.label for spec in job.filters]
+    outputs = outputs_of(job)
+    outputs.check(labels, ensemble=False, has_reference=has_truth)
     sessions = [ReplaySession(head, cls, spec.params, label=spec.label, source=str(path),
                               output_rate=job.output_rate, validate=False,
                               max_imu_gap=job.max_imu_gap)
@@ -177,14 +179,21 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     t0_ns = head.t0_ns
     del head
     sink = open_output(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
-    scored = None if sink is None else sink.log_block
+
+    def scored(rows: RunResult, m: Any, truth: Any) -> None:
+        if sink is not None:
+            sink.log_block(rows, m, truth)
+        outputs.rows(rows, m)
+
     scores = [RunningSummary(spec.label, t0_ns, aiding.metadata.true_errors, has_truth,
                              scored=scored)
               for spec in job.filters]
     columns = {st.truth.column: st.unit for session in sessions for st in session.states
                if isinstance(st.truth, TruthColumn)}
     duration = float(aiding.metadata.params.get("duration") or 0.0)
+    title = f"{', '.join(labels)} over {path.name}"
     try:
+        outputs.start_run(labels, has_reference=has_truth, source=str(path))
         while True:
             following = next(windows, None)
             final = following is None
@@ -195,8 +204,13 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
                 block = session.feed(imu, final=final)
                 if sink is not None:
                     sink.log_innovations(block)
+                outputs.innovations(block)
                 score.add(block)
                 score.add_truth(truth, final=final)
+                if final and not score.rows:  # no estimate at all: the files' headers
+                    outputs.rows(dataclasses.replace(block, innovations={}))
+            if truth is not None and len(truth):  # after the estimates it covers: written
+                outputs.truth(truth)              # at once, not queued behind them
             if progress is not None and imu is not None and len(imu) and duration > 0:
                 done = (int(imu.t_ns[-1]) - aiding.t0_ns) * 1e-9
                 progress(min(int(done), int(duration)), int(duration))
@@ -205,8 +219,10 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             window = following
         summaries = {spec.label: score.summary()
                      for spec, score in zip(job.filters, scores, strict=True)}
+        notes += outputs.write_run(summaries, title=title)
         hint = close_output(sink, job.viz)
     except BaseException:
+        outputs.abort()
         if sink is not None:
             sink.abort()
         raise
@@ -218,8 +234,8 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     table = tables.format_summaries(summaries)
     if not has_truth:
         table = "(no truth or reference: innovation statistics only)\n\n" + table
-    return RunReport(title=f"{', '.join(s.label for s in job.filters)} over {path}",
-                     table=table, summary=summary, viz=hint, notes=notes)
+    return RunReport(title=f"{', '.join(labels)} over {path}", table=table, summary=summary,
+                     viz=hint, notes=notes, sink=sink if job.viz.mode is VizMode.SERVE else None)
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
@@ -240,6 +256,10 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     summaries: dict[str, dict[str, Any]] = {}
     sink = open_output(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
     try:
+        outputs.start_run([s.label for s in job.filters], has_reference=has_truth,
+                          source=str(path))
+        if has_truth:
+            outputs.truth(recording[StreamKind.TRUTH])
         if sink is not None and has_truth:
             sink.log_truth(recording)
         for k, (spec, cls) in enumerate(zip(job.filters, classes, strict=True)):
@@ -257,12 +277,13 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             )
             scored = metrics.run_metrics(result, recording)  # NIS only without a reference
             summaries[spec.label] = scored.summary()
-            outputs.collect(result, recording, scored if has_truth else None)
+            outputs.rows(result, scored if has_truth else None)  # with its innovations
             if sink is not None:
                 sink.log_run(result, truth=recording if has_truth else None,
                              metrics=scored if has_truth else None)
         hint = close_output(sink, job.viz)
     except BaseException:
+        outputs.abort()
         if sink is not None:
             sink.abort()
         raise
@@ -272,7 +293,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     notes = list(prepared.notes)
     if prepared.salvaged:
         notes.append(salvaged_note(str(path), covered))
-    notes += outputs.write_run(recording, summaries, source=str(path),
+    notes += outputs.write_run(summaries,
                                title=f"{', '.join(s.label for s in job.filters)} over {path.name}")
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
