@@ -556,8 +556,8 @@ class RpmAidedIns(Filter):
     name: ClassVar[str] = "rpm-aided-ins"
     summary: ClassVar[str] = (
         "underwater INS aided by propeller-RPM speed and depth, 33-state feedback KF with RPM"
-        " scale factor, misalignment, sea current, gyro z-rate and accelerometer errors (Choi 2019);"
-        " mode=pure|rpm|rpm_current"
+        " scale factor, misalignment, sea current, gyro z-rate and accelerometer errors"
+        " (Choi 2019); mode=pure|rpm|rpm_current"
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.SPEED_LOG, StreamKind.DEPTH)
