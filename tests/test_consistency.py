@@ -113,10 +113,10 @@ def rpm_runs():
 
 def test_rpm_aided_ins_nis_of_depth_and_of_each_rpm_row(rpm_runs):
     """Depth (1 dof) and the RPM forward row (1 dof) inside their bands. The no-sideslip and
-    no-heave rows are not: their noise (constraint_sigma, 2 mm/s) stands for a real vehicle's
-    sideslip and heave, which the simulated vehicle does not have; even without that noise
-    their residual is smaller than the filter's own covariance predicts (the filter is
-    pessimistic across the RPM axis, docs/methods/rpm-aided-ins.md §6)."""
+    no-heave rows are not yet: their NIS is 0.1-0.2 (0.02-0.03 with the former 2 mm/s
+    constraint noise, gyro noise 1.7 x ARW and no accelerometer states), still pessimistic
+    (docs/methods/rpm-aided-ins.md §6). The check fails if they fall back below 0.1 or reach
+    their band without this docstring being revised."""
     nis, dof = _nis_samples(rpm_runs, "depth")
     assert dof == 1
     lo, hi = consistency.mean_band(1, nis.size)
@@ -126,7 +126,5 @@ def test_rpm_aided_ins_nis_of_depth_and_of_each_rpm_row(rpm_runs):
     row = nu**2 / np.diagonal(S, 0, 1, 2)
     lo, hi = consistency.mean_band(1, len(nu))
     assert lo <= row[:, 0].mean() <= hi, ("forward", row[:, 0].mean(), lo, hi)
-    c2 = rai.RpmAidedInsParams().constraint_sigma ** 2
-    own = nu[:, 1:] ** 2 / (np.diagonal(S, 0, 1, 2)[:, 1:] - c2)
-    assert np.all(row[:, 1:].mean(axis=0) < 0.1)
-    assert np.all(own.mean(axis=0) < lo)
+    across = row[:, 1:].mean(axis=0)
+    assert np.all((across > 0.1) & (across < lo)), across

@@ -1,9 +1,9 @@
 """RPM velocity-aided underwater INS with sea-current estimation ("rpm-aided-ins").
 
 An indirect feedback Kalman filter with the 24 error states of Choi (JANT 23(3), 2019) and
-three gyro z-rate states (method docs/methods/rpm-aided-ins.md §4). The NED strapdown
+three gyro z-rate and six accelerometer scale-factor / misalignment states (method docs/methods/rpm-aided-ins.md §4). The NED strapdown
 mechanization of :mod:`navreplay.strapdown` runs on the compensated IMU at the IMU rate; every
-``cov_step`` (0.1 s) the error covariance is propagated with the 27-state error model; at
+``cov_step`` (0.1 s) the error covariance is propagated with the 33-state error model; at
 ``update_rate`` (1 Hz) the propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
 back. Besides the navigation errors and the IMU biases the filter estimates the RPM scale
 factor, the RPM-axis misalignment and the horizontal sea current, which removes the drift a
@@ -28,12 +28,16 @@ index name (Estimate.x)   frame     unit     error state dx (``Estimate.x`` hold
 23    dT                  -         s        master data delay (transfer alignment; inert)
 24-25 m_g_xz, m_g_yz      b (FRD)   rad      gyro misalignment of the z rate into x, y (estimate)
 26    s_g_z               b (FRD)   -        gyro z scale-factor error (estimate)
+27-32 s_a_x, m_a_yx, ...  b (FRD)   -, rad   accelerometer columns x, y of S_a + M_a (estimate)
 ===== =================== ========= ======== ===============================================
 
 States 24-26 are navreplay's addition (docs/methods/rpm-aided-ins.md §4.1): the gyro z-rate
 errors of :mod:`navreplay.filters.ins_error` eq. (22), shared with ``gps-ins``. They act only
 in the turns (``F[phi, 24:27] = C_nb_hat omega_z``), where white gyro noise has the wrong
-shape; the gyro samples are compensated as ``omega - k_z (omega_z - b_g_z)``.
+shape; the gyro samples are compensated as ``omega - k_z (omega_z - b_g_z)``. States 27-32
+are the accelerometer errors of eq. (23) that the forward and lateral specific force drives
+(``F[v, 27 + 3 j + i] = -C_nb_hat[:, i] f_j``, j = x, y), also shared with ``gps-ins``; with
+both sets the process noise is the sensors' own ARW and VRW.
 
 In navigation mode the transfer-alignment states 20-23 are inert: zero rows in F, zero Q, zero
 columns in H, zero P0; they keep the layout of the paper's unified filter.
@@ -81,7 +85,7 @@ speed ``u_hat = c_rpm rpm / (1 + k_hat)``, ``w = v_hat - v_c_hat`` (``v_c_hat = 
 
     z_rpm = C_nb_hat^T w - C_bv_hat [u_hat, 0, 0]^T                       (3,)  [m/s]   (25)
     H_rpm[:, dv]    = C_nb_hat^T                                                       (27)
-    H_rpm[:, phi]   = -C_nb_hat^T [w x]
+    H_rpm[:, phi]   = -C_nb_hat^T [w_0 x]   (w_0: w at the first estimates, below)
     H_rpm[:, k]     = C_bv_hat e_x u_hat / (1 + k_hat)               = [u_hat, 0, 0]^T (*)
     H_rpm[:, m_y,z] = u_hat [(C_bv_hat e_x) x] J(m_hat)[:, 1:3]      = [0, 0, u_hat]^T,
                                                                        [0, -u_hat, 0]^T (*)
@@ -95,6 +99,11 @@ through the water: :func:`rpm_noise_covariance`)
 (*) the printed forms of §4.4 are the values at k_hat = m_hat = 0; the ones used here are
 the exact first derivatives (J is the left Jacobian of SO(3)), equal to first order.
 
+w_0 is ``v_hat - v_c_hat`` with all velocity and current corrections of the updates undone
+(first-estimates Jacobian, :meth:`RpmAidedIns._water_velocity_first_estimate`): a heading
+error with its matching current error is unobservable by the RPM update, and a Jacobian at
+the corrected estimates would feed the filter heading information the data do not hold.
+
 Depth (§4.5)::
 
     z_d = d_hat - d_meas,  H_d = e_2^T,  R_d = depth_sigma^2                            (§4.5)
@@ -105,7 +114,7 @@ of frozen states forced to 0: the inert states always, the current in the ``rpm`
 
 Variants (§5, parameter ``mode``): ``pure`` (free inertial, no updates, P still
 propagated for the sigma plots), ``rpm`` (current frozen at 0: P0 = 0, Q = 0, K rows 0) and
-``rpm_current`` (all 27 states). One code path: the mode only sets P0, Q, the frozen mask and
+``rpm_current`` (all 33 states). One code path: the mode only sets P0, Q, the frozen mask and
 whether updates run.
 
 Initial covariance (§4.6): position, velocity and attitude sigmas from
@@ -119,7 +128,7 @@ Examples
 >>> rec = simulate("underwater-rpm", {"duration": 10.0}, seed=0)
 >>> res = replay(rec, RpmAidedIns, {"mode": "rpm_current"})
 >>> res.x.shape[1], sorted(res.innovations)
-(27, ['depth', 'rpm'])
+(33, ['depth', 'rpm'])
 """
 
 from __future__ import annotations
@@ -150,11 +159,25 @@ from navreplay.filters.base import (
     check_number,
     state_names,
 )
-from navreplay.filters.ins import GYRO_Z_STATES, initial_covariance, initial_sigma, initial_solution
+from navreplay.filters.ins import (
+    ACCEL_MOTION_STATES,
+    GYRO_Z_STATES,
+    initial_covariance,
+    initial_sigma,
+    initial_solution,
+)
 from navreplay.filters.registry import register_filter
 from navreplay.geo.rotations import skew
 from navreplay.streams import StreamKind
-from navreplay.units import ARCSEC, DEG, DEG_PER_HOUR, MICRO_G, PPM
+from navreplay.units import (
+    ARCSEC,
+    DEG,
+    DEG_PER_HOUR,
+    DEG_PER_SQRT_HOUR,
+    MICRO_G,
+    MICRO_G_PER_SQRT_HZ,
+    PPM,
+)
 
 # -- state layout (eq. 20) -------------------------------------------------------------------
 
@@ -182,7 +205,10 @@ INERT = slice(20, 24)
 """States without dynamics, noise or measurement in navigation mode."""
 GYRO_Z = slice(24, 27)
 """Gyro z-rate errors: misalignments of the z rate into x and y, z scale factor [rad, -]."""
-N_STATES = 27
+ACCEL = slice(27, 33)
+"""Accelerometer errors driven by the x and y specific force: the columns x and y of
+S_a + M_a (s_a_x, m_a_yx, m_a_zx, m_a_xy, s_a_y, m_a_zy) [-, rad]."""
+N_STATES = 33
 _CHECK_INTERVAL = 1.0
 """Filter time between full symmetry / PSD checks of the propagated P [s] (every correction
 is checked, and every propagation step checks the variances)."""
@@ -198,6 +224,7 @@ STATES: tuple[State, ...] = (
     *(State(f"mu_{a}", "rad", Quantity.MISALIGNMENT) for a in "xyz"),
     State("dT", "s", Quantity.CLOCK),
     *GYRO_Z_STATES,
+    *ACCEL_MOTION_STATES,
 )
 """Declarations of the entries of ``Estimate.x``. Only the horizontal position errors count
 in the NEES: the consistency band of docs/methods/rpm-aided-ins.md §6 is on horizontal
@@ -225,13 +252,14 @@ class RpmAidedInsParams(FilterParams):
 
     mode: Mode = Mode.RPM_CURRENT
     """Variant: pure | rpm | rpm_current (docs/methods/rpm-aided-ins.md §5)."""
-    accel_noise: float = 2e-5
-    """sqrt(q_a): velocity process noise density [(m/s)/sqrt(s)] (about 2 x the VRW, covering
-    the unmodelled accelerometer scale factor and misalignment)."""
-    gyro_noise: float = 5e-6
-    """sqrt(q_g): attitude process noise density [rad/sqrt(s)] (about 1.7 x the ARW: the gyro
-    and accelerometer scale-factor and misalignment errors that are not states; at the ARW
-    the tilt comes out 12 % optimistic in sigma)."""
+    accel_noise: float = 1.0 * MICRO_G_PER_SQRT_HZ
+    """sqrt(q_a): velocity process noise density [(m/s)/sqrt(s)]: the accelerometer VRW (the
+    scale factors and misalignments that the motion drives are states 27-32)."""
+    gyro_noise: float = 0.01 * DEG_PER_SQRT_HOUR
+    """sqrt(q_g): attitude process noise density [rad/sqrt(s)]: the gyro ARW (the z-rate
+    scale factor and misalignments are states 24-26). A larger white noise standing in for
+    the scale-factor and misalignment errors overstates the growth of the attitude error
+    between updates in straight runs, where those errors do nothing."""
     gyro_z_states: bool = True
     """Estimate the gyro z-rate errors (states 24-26: misalignments m_g_xz, m_g_yz and scale
     factor s_g_z), which act only in the turns; False freezes them at 0."""
@@ -239,6 +267,14 @@ class RpmAidedInsParams(FilterParams):
     """Initial 1-sigma of m_g_xz and m_g_yz [rad] (5 arcsec)."""
     gyro_scale_factor_sigma: float = 100.0 * PPM
     """Initial 1-sigma of s_g_z [-] (100 ppm)."""
+    accel_states: bool = True
+    """Estimate the accelerometer errors that the x and y specific force drives (states
+    27-32: scale factors s_a_x, s_a_y and misalignments of the columns x, y of S_a + M_a);
+    False freezes them at 0."""
+    accel_misalignment_sigma: float = 5.0 * ARCSEC
+    """Initial 1-sigma of the accelerometer misalignments [rad] (5 arcsec)."""
+    accel_scale_factor_sigma: float = 100.0 * PPM
+    """Initial 1-sigma of the accelerometer scale factors s_a_x, s_a_y [-] (100 ppm)."""
     current_noise: float = 0.0
     """sqrt(q_c): sea-current random-walk density [(m/s)/sqrt(s)] (``rpm_current`` only). 0:
     the current is a random constant, as in ``underwater-rpm``; a current that changes over
@@ -268,12 +304,19 @@ class RpmAidedInsParams(FilterParams):
     known launch point has sigma 0)."""
     rpm_sigma: float = 0.05
     """RPM speed noise along the RPM axis [m/s] (the forward row of the RPM update)."""
-    constraint_sigma: float = 0.002
+    constraint_sigma: float = 0.0003
     """Noise of the no-sideslip and no-heave rows of the RPM update [m/s]: the vehicle's
-    lateral and vertical water-relative velocity in the RPM frame."""
+    lateral and vertical water-relative velocity in the RPM frame (0.3 mm/s; the simulated
+    vehicle has none, docs/methods/rpm-aided-ins.md §4.4)."""
     second_order: bool = True
     """Add the covariance of the products of error states in the RPM residual to its R
     (:func:`rpm_second_order`)."""
+    first_estimate_jacobian: bool = True
+    """Evaluate the attitude columns of the RPM Jacobian at the first-estimate water velocity
+    (:meth:`RpmAidedIns._water_velocity_first_estimate`), which keeps the heading / current
+    direction the RPM update cannot observe unobservable (docs/methods/rpm-aided-ins.md §4.4);
+    False: at the current estimate (heading 3-4 times over-confident in sigma at a tight
+    ``constraint_sigma``)."""
     depth_sigma: float = 0.1
     """Depth measurement noise [m]."""
     depth_aiding: bool = True
@@ -304,6 +347,7 @@ class RpmAidedInsParams(FilterParams):
         for name in ("accel_noise", "gyro_noise", "current_noise", "accel_bias_sigma",
                      "gyro_bias_sigma", "rpm_scale_factor_sigma", "rpm_misalignment_sigma",
                      "current_sigma", "gyro_misalignment_sigma", "gyro_scale_factor_sigma",
+                     "accel_misalignment_sigma", "accel_scale_factor_sigma",
                      "init_vel_sigma", "init_level_sigma",
                      "init_azimuth_sigma", "init_depth_sigma", "pos_sigma_floor",
                      "gap_accel_sigma", "gap_rate_sigma"):
@@ -356,6 +400,7 @@ def rpm_measurement(
     v_c_hat: np.ndarray,
     speed_sigma: float,
     constraint_sigma: float,
+    w_lin: np.ndarray | None = None,
 ) -> kalman.Measurement:
     """RPM water-velocity residual, its Jacobian and noise, eqs. (25)-(27).
 
@@ -374,12 +419,15 @@ def rpm_measurement(
     speed_sigma, constraint_sigma : float
         1-sigma of the RPM speed and of the water-relative sideslip and heave [m/s]
         (:func:`rpm_noise_covariance`).
+    w_lin : ndarray, shape (3,), optional
+        Water-relative velocity NED [m/s] at which the attitude columns of H are evaluated
+        (the first-estimates Jacobian); None: ``v_hat - v_c_hat``.
 
     Returns
     -------
     kalman.Measurement
         z (3,): ``C_nb_hat^T (v_hat - v_c_hat) - C_bv_hat [u_hat, 0, 0]`` [m/s], body axes;
-        H (3, 27): ``z ~ H dx`` to first order; R (3, 3) [(m/s)^2].
+        H (3, 33): ``z ~ H dx`` to first order; R (3, 3) [(m/s)^2].
     """
     C_bn = ie.nav_dcm(nav).T
     a, da = rpm_axis(float(m_hat[0]), float(m_hat[1]))
@@ -390,7 +438,7 @@ def rpm_measurement(
     z = C_bn @ w - a * u  # (25)
     H = np.zeros((3, N_STATES))  # (27)
     H[:, VEL] = C_bn
-    H[:, ATT] = -C_bn @ skew(w)
+    H[:, ATT] = -C_bn @ skew(w if w_lin is None else w_lin)
     H[:, 15] = a * (u / (1.0 + k_hat))
     H[:, M_RPM] = -u * da
     H[:, CURRENT] = -C_bn[:, 0:2]
@@ -442,7 +490,7 @@ def rpm_second_order(nav: np.ndarray, u_hat: float, k_hat: float, m_hat: np.ndar
         Corrected RPM speed [m/s].
     k_hat : float
     m_hat, v_c_hat : ndarray, shape (2,)
-    P : ndarray, shape (27, 27)
+    P : ndarray, shape (33, 33)
 
     Returns
     -------
@@ -503,13 +551,13 @@ class _Schedule:
 
 @register_filter
 class RpmAidedIns(Filter):
-    """27-state RPM velocity-aided INS with sea-current estimation (see the module docstring)."""
+    """33-state RPM velocity-aided INS with sea-current estimation (see the module docstring)."""
 
     name: ClassVar[str] = "rpm-aided-ins"
     summary: ClassVar[str] = (
-        "underwater INS aided by propeller-RPM speed and depth, 27-state feedback KF with RPM"
-        " scale factor, misalignment, sea current and gyro z-rate errors (Choi 2019);"
-        " mode=pure|rpm|rpm_current"
+        "underwater INS aided by propeller-RPM speed and depth, 33-state feedback KF with RPM"
+        " scale factor, misalignment, sea current, gyro z-rate and accelerometer errors"
+        " (Choi 2019); mode=pure|rpm|rpm_current"
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.SPEED_LOG, StreamKind.DEPTH)
@@ -540,6 +588,8 @@ class RpmAidedIns(Filter):
         self.m_rpm = np.zeros(2)
         self.v_c = np.zeros(2)
         self.gyro_z = np.zeros(3)  # estimates of m_g_xz, m_g_yz, s_g_z
+        self.accel_k = np.zeros(6)  # estimates of the columns x, y of S_a + M_a
+        self._w_correction = np.zeros(3)  # sum of the velocity minus current feedback
 
         # P0, §4.6 of the method
         init = context.metadata.initial_nav
@@ -556,6 +606,9 @@ class RpmAidedIns(Filter):
         if p.gyro_z_states:
             sig[GYRO_Z] = (p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
                            p.gyro_scale_factor_sigma)
+        if p.accel_states:
+            s_a, m_a = p.accel_scale_factor_sigma, p.accel_misalignment_sigma
+            sig[ACCEL] = (s_a, m_a, m_a, m_a, s_a, m_a)
         self.P = np.diag(sig**2)
         self.P[: ie.N_STATES, : ie.N_STATES] = initial_covariance(
             self.nav[strapdown.POS], np.maximum(pos_sigma, p.pos_sigma_floor),
@@ -571,7 +624,7 @@ class RpmAidedIns(Filter):
             q[CURRENT] = p.current_noise**2
         self._held: tuple[np.ndarray, np.ndarray, float] | None = None
         self._time_update = itu.TimeUpdate(
-            itu.ProcessNoise(q, gyro_z_states=GYRO_Z.start), p.cov_step,
+            itu.ProcessNoise(q, gyro_z_states=GYRO_Z.start, accel_states=ACCEL.start), p.cov_step,
             vertical=ie.Vertical.DEPTH, curvature_derivatives=p.curvature_derivatives,
         )
         self._frozen = np.zeros(N_STATES, dtype=bool)
@@ -580,6 +633,8 @@ class RpmAidedIns(Filter):
             self._frozen[CURRENT] = True
         if not p.gyro_z_states:
             self._frozen[GYRO_Z] = True
+        if not p.accel_states:
+            self._frozen[ACCEL] = True
         self._rpm_schedule = _Schedule(p.update_rate)
         self._depth_schedule = _Schedule(p.update_rate)
         self._next_check = self.t + _CHECK_INTERVAL
@@ -590,8 +645,11 @@ class RpmAidedIns(Filter):
 
     def propagate(self, t: np.ndarray, imu: Mapping[str, np.ndarray]) -> None:
         omega = itu.compensate_gyro_z(imu["omega_ib_b"], self.b_g, self.gyro_z)
+        f_b = imu["f_b"]
+        if self.accel_k.any():
+            f_b = itu.compensate_accel(f_b, self.b_a, self.accel_k)
         step = self._time_update.propagate(self.nav, self.P, self.t, t, omega,
-                                           imu["f_b"], self.b_a, self.b_g)  # (1), (2), (21)-(23)
+                                           f_b, self.b_a, self.b_g)  # (1), (2), (21)-(23)
         if step is None:
             return
         self._held = (imu["omega_ib_b"][-1], imu["f_b"][-1], step[2] - (
@@ -615,7 +673,9 @@ class RpmAidedIns(Filter):
             v_c = self.v_c if self.mode is Mode.RPM_CURRENT else np.zeros(2)
             measurement = rpm_measurement(self.nav, self.speed_per_rpm * float(sample["rpm"]),
                                           self.k_rpm, self.m_rpm, v_c, self.params.rpm_sigma,
-                                          self.params.constraint_sigma)
+                                          self.params.constraint_sigma,
+                                          self._water_velocity_first_estimate(v_c)
+                                          if self.params.first_estimate_jacobian else None)
             name = "rpm"
         elif kind is StreamKind.DEPTH and self.params.depth_aiding:
             if not self._depth_schedule.due(t):
@@ -686,8 +746,29 @@ class RpmAidedIns(Filter):
         self.k_rpm -= float(dx[15])
         self.m_rpm = self.m_rpm - dx[M_RPM]
         self.v_c = self.v_c - dx[CURRENT]
+        self._w_correction += dx[VEL]
+        self._w_correction[:2] -= dx[CURRENT]
         self.gyro_z = self.gyro_z - dx[GYRO_Z]
+        self.accel_k = self.accel_k - dx[ACCEL]
         self._x = self._state_vector()
+
+    def _water_velocity_first_estimate(self, v_c_hat: np.ndarray) -> np.ndarray:
+        """Water-relative velocity, NED [m/s], at which the attitude columns of H_rpm are
+        evaluated: the estimate ``v_hat - v_c_hat`` with every velocity and current
+        correction of the updates undone, i.e. the first estimates of the initial velocity
+        and the current plus the INS's own velocity change since.
+
+        A heading error phi_D, with a current error ``phi_D e_z x (v_0 - v_c)``, leaves the
+        RPM residual unchanged at every time (the INS turns its velocity change by phi_D as
+        it turns the body axes): that direction is unobservable but for the slow
+        gyrocompassing through the earth rate. H evaluated at the corrected estimates moves
+        that direction from update to update by the corrections (0.1-0.2 m/s of 12-14 m/s),
+        and the filter gains heading information the data do not hold; at the first
+        estimates the direction stays in H's null space (first-estimates Jacobian, as in
+        EKF SLAM's heading consistency)."""
+        w = self.nav[3:6] + self._w_correction
+        w[:2] -= v_c_hat
+        return w
 
     def _state_vector(self) -> np.ndarray:
         """``Estimate.x``: error states 0 (after feedback), sensor errors as total estimates."""
@@ -698,4 +779,5 @@ class RpmAidedIns(Filter):
         x[M_RPM] = self.m_rpm
         x[CURRENT] = self.v_c
         x[GYRO_Z] = self.gyro_z
+        x[ACCEL] = self.accel_k
         return x

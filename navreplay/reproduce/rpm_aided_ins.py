@@ -12,7 +12,7 @@ label           filter ``mode``         paper
 ==============  ======================  ==============================================
 pure            ``pure``                "Pure navigation" (free inertial)
 rpm             ``rpm``                 "Aided Navi." (RPM + depth, no current)
-rpm-current     ``rpm_current``         "Aided Navi. est Current" (27 states)
+rpm-current     ``rpm_current``         "Aided Navi. est Current" (33 states)
 ==============  ======================  ==============================================
 
 Metrics (eqs. 28-30, :mod:`navreplay.metrics`), at the 1-Hz update epochs (the estimate after
