@@ -174,3 +174,69 @@ def test_truncation_anywhere_gives_a_prefix_or_a_recording_error(
         assert caught, "a truncated file must warn"
     else:
         assert read == sum(len(s) for s in rec.streams.values())
+
+
+def _rewritten(src: Path, dst: Path, data_crc: bool) -> None:
+    """``src`` rewritten in uncompressed chunks with chunk CRCs, with or without the
+    data-section CRC."""
+    from mcap.writer import CompressionType, Writer
+
+    with src.open("rb") as f, dst.open("wb") as out:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        w = Writer(out, compression=CompressionType.NONE, enable_crcs=True,
+                   enable_data_crcs=data_crc, chunk_size=SMALL_CHUNK)
+        w.start(profile=reader.get_header().profile, library="test")
+        for m in reader.iter_metadata():
+            w.add_metadata(m.name, m.metadata)
+        ids = {sid: w.register_schema(s.name, s.encoding, s.data)
+               for sid, s in summary.schemas.items()}
+        cids = {cid: w.register_channel(c.topic, c.message_encoding, ids[c.schema_id])
+                for cid, c in summary.channels.items()}
+        for _, channel, msg in reader.iter_messages(log_time_order=False):
+            w.add_message(cids[channel.id], msg.log_time, msg.data, msg.publish_time)
+        w.finish()
+
+
+@pytest.mark.parametrize("data_crc", [True, False])
+def test_flipped_payload_byte_is_caught_by_one_crc_or_the_other(
+    original: tuple[Recording, Path], tmp_path: Path, data_crc: bool
+) -> None:
+    """Chunks skip their own CRC only when the data-section CRC has covered them: a flipped
+    payload byte in an uncompressed chunk is reported by whichever CRC the file stores."""
+    rec, path = original
+    good = tmp_path / "plain.mcap"
+    _rewritten(path, good, data_crc)
+    assert assert_prefix(read_recording(good), rec) == sum(len(s) for s in rec.streams.values())
+    data = bytearray(good.read_bytes())
+    data[_chunk_offsets(good)[3] + 400] ^= 0x04
+    bad = tmp_path / "flipped.mcap"
+    bad.write_bytes(bytes(data))
+    which = "data section CRC mismatch" if data_crc else r"chunk at byte \d+: CRC mismatch"
+    with pytest.raises(RecordingError, match=rf"{bad}: {which}"):
+        read_recording(bad)
+
+
+def test_chunk_walk_columns_and_malformed_records() -> None:
+    """The compiled walk of a chunk's records: message columns, and one clear line for a
+    record that overruns the chunk or a message too short for its header."""
+    import struct
+
+    from navreplay.io.mcapfile import scan_chunk
+
+    def message(channel: int, log_time: int, payload: bytes) -> bytes:
+        body = struct.pack("<HIQQ", channel, 7, log_time, log_time + 1) + payload
+        return struct.pack("<BQ", 0x05, len(body)) + body
+
+    other = struct.pack("<BQ", 0x0F, 3) + b"abc"  # an unrelated record is stepped over
+    data = message(3, 10, b"xy") + other + message(65535, 2**62, b"")
+    block = scan_chunk(data, lambda *_: None, "f.mcap", 100)
+    assert block.channel.tolist() == [3, 65535]
+    assert block.log_time.tolist() == [10, 2**62]
+    assert block.length.tolist() == [2, 0]
+    assert block.payload(0) == b"xy" and block.payload(1) == b""
+    with pytest.raises(RecordingError, match=r"^f.mcap: chunk at byte 100 has a malformed record"):
+        scan_chunk(data[:-1], lambda *_: None, "f.mcap", 100)
+    short = struct.pack("<BQ", 0x05, 4) + b"\0" * 4
+    with pytest.raises(RecordingError, match=r"^f.mcap: chunk at byte 100 has a malformed message"):
+        scan_chunk(short, lambda *_: None, "f.mcap", 100)

@@ -190,7 +190,9 @@ def records_to_fields(rec: np.ndarray, message: MessageType) -> dict[str, np.nda
 
 def _frame_ids(raw: np.ndarray) -> np.ndarray:
     out = np.empty(len(raw), dtype=object)
-    if len(raw):
+    if len(raw) and (raw == raw[0]).all():  # one frame id throughout: no sort
+        out[:] = raw[0].decode("utf-8", "replace")
+    elif len(raw):
         uniq, inverse = np.unique(raw, return_inverse=True)
         out[:] = np.array([u.decode("utf-8", "replace") for u in uniq], dtype=object)[inverse]
     return out

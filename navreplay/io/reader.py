@@ -73,6 +73,11 @@ class _Topic:
         ordinal = self._count + np.arange(len(index), dtype=np.int64)
         self._count += len(index)
         lengths = block.length[index]
+        if not lengths.size:
+            return
+        if lengths.min() == lengths.max():  # the usual case: one fixed layout
+            self._add_equal(block, index, ordinal, int(lengths[0]))
+            return
         for width in np.unique(lengths):
             sel = np.flatnonzero(lengths == width)
             self._add_equal(block, index[sel], ordinal[sel], int(width))
@@ -122,7 +127,10 @@ class _Topic:
         if len(frames):
             if self.first_frame_id is None or ordinal[0] < self._first_ordinal:
                 self.first_frame_id, self._first_ordinal = str(frames[0]), int(ordinal[0])
-            self.frame_ids.update(set(frames.tolist()))
+            if (frames == frames[0]).all():
+                self.frame_ids.add(frames[0])
+            else:
+                self.frame_ids.update(frames.tolist())
         t_ns = np.asarray(fields["t_ns"], dtype=np.int64)
         part = {"t_ns": t_ns}
         for name, columns in self.reduce.items():
