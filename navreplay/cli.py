@@ -662,6 +662,23 @@ def demo(out: str, no_reproductions: bool, workers: int, view: bool | None,
         _checks_failed(report.failed_checks)
 
 
+
+@cli.command("warm-up")
+@click.argument("filters", nargs=-1)
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Processes at once (default: one per core).")
+def warm_up(filters: tuple[str, ...], workers: int | None) -> None:
+    """Compile the built-in filters' kernels into numba's cache (all, or FILTERS), so that
+    the first run is as fast as the next ones; `make install` runs it."""
+    from navreplay import warmup
+
+    try:
+        wall = warmup.warm_up(filters or None, workers,
+                              lambda name, cpu: click.echo(f"{name:<20} {cpu:6.1f} s CPU"))
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
+    click.echo(f"numba cache warm ({wall:.1f} s)")
+
 def main(argv: Sequence[str] | None = None) -> None:
     """Console-script entry point."""
     cli.main(args=list(argv) if argv is not None else None, prog_name="navreplay")

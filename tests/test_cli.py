@@ -339,3 +339,17 @@ def test_readme_commands_exist_and_their_options_parse():
         cmd = cli.commands[args[0]]
         ctx = cmd.make_context(args[0], args[1:], resilient_parsing=False)
         assert ctx.params is not None, line
+
+
+def test_warm_up_covers_every_built_in_filter_and_rejects_others():
+    """`navreplay warm-up` has a recording for each built-in filter, and an unknown name is
+    one line and exit 1 (nothing compiled)."""
+    from navreplay import warmup
+    from navreplay.cli import cli
+    from navreplay.filters.registry import filters
+
+    builtin = {n for n, c in filters().items() if c.__module__.startswith("navreplay.")}
+    assert set(warmup.PLAN) == builtin
+    res = CliRunner().invoke(cli, ["warm-up", "no-such-filter"])
+    assert res.exit_code == 1
+    assert "no warm-up for no-such-filter" in res.output

@@ -255,12 +255,16 @@ def transition_rows_kernel(F: np.ndarray, r: int, dt: float, M: np.ndarray) -> N
     """
     nc = F.shape[1]
     h = 0.5 * dt * dt
-    for i in range(r):  # (F dt)^2 [0:r, :] = F[0:r, 0:r] F[0:r, :] dt^2
+    for i in range(r):  # (F dt)^2 [0:r, :] = F[0:r, 0:r] F[0:r, :] dt^2, row i summed over k
+        for j in range(nc):  # in M[i] (exact zeros of F skipped: the same sums)
+            M[i, j] = 0.0
+        for k in range(r):
+            a = F[i, k]
+            if a != 0.0:
+                for j in range(nc):
+                    M[i, j] += a * F[k, j]
         for j in range(nc):
-            s = 0.0
-            for k in range(r):
-                s += F[i, k] * F[k, j]
-            M[i, j] = F[i, j] * dt + h * s
+            M[i, j] = F[i, j] * dt + h * M[i, j]
         M[i, i] += 1.0
 
 
@@ -296,25 +300,31 @@ def predict_rows_kernel(
     ``Phi[0:r, cols] = M`` (r, nc) and ``Phi[0:r, other columns] = 0``, with ``cols[:r]`` =
     0..r-1 (the diagonal); rows r.. of Phi are those of the identity (random constants and
     random walks). Then only rows and columns 0..r-1 of ``Phi P Phi^T`` differ from P:
-    ``T = M P[cols, :]`` gives them and ``T[:, cols] M^T`` their r x r block, about
-    ``r nc (n + r)`` products instead of ``2 n^3``. T (r, n) is scratch. Returns a new
-    ``P = Phi P Phi^T + Qd``, symmetric; no checks.
+    ``T = M P[cols, :]`` gives them and ``T[:, cols] M^T`` their r x r block, at most
+    ``r nc (n + r)`` products instead of ``2 n^3``: the products with an exact zero of M (the
+    zero blocks of an error model) are skipped, which leaves every sum as it was for finite
+    P. T (r, n) is scratch. Returns a new ``P = Phi P Phi^T + Qd``, symmetric; no checks.
     """
     n = P.shape[0]
     r, nc = M.shape
-    for i in range(r):
+    for i in range(r):  # T = M P[cols, :], row i summed over k; exact zeros of M skipped
         for j in range(n):
-            s = 0.0
-            for k in range(nc):
-                s += M[i, k] * P[cols[k], j]
-            T[i, j] = s
+            T[i, j] = 0.0
+        for k in range(nc):
+            a = M[i, k]
+            if a != 0.0:
+                p = cols[k]
+                for j in range(n):
+                    T[i, j] += a * P[p, j]
     out = np.empty((n, n))
     for i in range(n):
         for j in range(i + 1):
             if i < r:  # row block: j < i < r
                 s = 0.0
                 for k in range(nc):
-                    s += T[i, cols[k]] * M[j, k]
+                    b = M[j, k]
+                    if b != 0.0:
+                        s += T[i, cols[k]] * b
             elif j < r:
                 s = T[j, i]
             else:
