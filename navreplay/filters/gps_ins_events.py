@@ -89,7 +89,8 @@ def run_events(
     k = 0
     a = 0
     for e in range(codes.shape[0]):
-        snap[:] = s
+        for c in range(s.shape[0]):  # (loops: an array assignment compiles numba's
+            snap[c] = s[c]  # formatted shape error)
         nav0, P0, t0, k0 = nav, P, t_nav, k
         ok = True
         b = ends[e]
@@ -168,7 +169,8 @@ def run_events(
                     nav_out[m, c] = nav[c]
                 m += 1
         if not ok:  # undo the event: the engine replays it one by one
-            s[:] = snap
+            for c in range(s.shape[0]):
+                s[c] = snap[c]
             return e, m, k0, nav0, P0, t0
         a = b
     return codes.shape[0], m, k, nav, P, t_nav
