@@ -39,6 +39,22 @@ None
 
 A reference without the column a state needs (a real log with only positions, say) leaves
 that state unscored instead of failing.
+
+Declared measurements
+---------------------
+The innovations a filter returns from ``update`` are declared the same way, once, as data: a
+:class:`MeasurementKind` per measurement names its rows and gives each row's SI unit::
+
+    measurements = (
+        MeasurementKind("gps_pos", ("N", "E", "D"), "m"),
+        MeasurementKind("rpm", ("forward", "lateral", "vertical"), "m/s"),
+    )
+
+The engine copies them into the run result and checks that every returned
+:class:`Innovation` names a declared measurement and has its number of rows; the Rerun view,
+the report and the summary take the units and row names from there. A filter that declares
+nothing (``measurements = None``, the default of this base class) is still replayed: its
+innovations are not checked against a declaration and their units are guessed from their names.
 """
 
 from __future__ import annotations
@@ -163,6 +179,65 @@ class State:
                             f"TrueConstant or None, got {self.truth!r}")
         if self.nees and self.truth is None:
             raise ValueError(f"state {self.name}: nees=True needs a truth to score against")
+
+
+@dataclasses.dataclass(frozen=True)
+class MeasurementKind:
+    """Declaration of one measurement a filter updates with: the rows of its innovation.
+
+    Attributes
+    ----------
+    name : str
+        :attr:`Innovation.name` of its updates, e.g. ``"gps_pos"``; unique within the filter.
+    rows : tuple[str, ...]
+        Name of each row of ``nu``, in order: the axis (``"N"``, ``"E"``, ``"D"``;
+        ``"forward"``, ``"lateral"``, ``"vertical"``) or component (``"q0"``).
+    units : tuple[str, ...]
+        SI unit of each row, as for :attr:`State.unit`; one string stands for every row.
+    """
+
+    name: str
+    rows: tuple[str, ...]
+    units: tuple[str, ...] | str
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"measurement name must be a non-empty string, got {self.name!r}")
+        if isinstance(self.rows, str) or not all(isinstance(r, str) and r for r in self.rows):
+            raise TypeError(f"measurement {self.name}: rows must be a tuple of non-empty "
+                            f"strings, got {self.rows!r}")
+        rows = tuple(self.rows)
+        if not rows or len(set(rows)) != len(rows):
+            raise ValueError(f"measurement {self.name}: rows must be at least one, each named "
+                             f"once, got {rows!r}")
+        units = (self.units,) * len(rows) if isinstance(self.units, str) else tuple(self.units)
+        if len(units) != len(rows) or not all(isinstance(u, str) and u for u in units):
+            raise ValueError(f"measurement {self.name}: units must be one non-empty unit string "
+                             f"or one per row ({len(rows)}), got {self.units!r}")
+        object.__setattr__(self, "rows", rows)
+        object.__setattr__(self, "units", units)
+
+    @property
+    def dim(self) -> int:
+        """Number of rows of the innovation."""
+        return len(self.rows)
+
+
+def check_measurements(measurements: object, what: str = "measurements"
+                       ) -> tuple[MeasurementKind, ...] | None:
+    """``measurements`` as a tuple of :class:`MeasurementKind` with unique names (None stays
+    None: nothing declared), or ``TypeError`` / ``ValueError`` naming what is wrong."""
+    if measurements is None:
+        return None
+    if not isinstance(measurements, tuple | list) or not all(
+            isinstance(m, MeasurementKind) for m in measurements):
+        raise TypeError(f"{what} must be a tuple of navreplay.filters.base.MeasurementKind, "
+                        f"got {measurements!r}")
+    names = [m.name for m in measurements]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise ValueError(f"{what}: names declared twice: {', '.join(dupes)}")
+    return tuple(measurements)
 
 
 def check_states(states: object, what: str = "states") -> tuple[State, ...]:
@@ -292,7 +367,8 @@ class Estimate:
 class Innovation:
     """One measurement update: innovation ``nu = z - H x`` and its covariance ``S``.
 
-    ``name`` identifies the measurement (e.g. ``"gps_pos"``); ``nu`` has shape (m,), ``S`` (m, m).
+    ``name`` identifies the measurement (e.g. ``"gps_pos"``), one of the filter's declared
+    ``measurements``; ``nu`` has shape (m,) with m its rows, ``S`` (m, m).
     """
 
     name: str
@@ -326,6 +402,10 @@ class Filter(abc.ABC):
     scored_extras : tuple[State, ...]
         Declarations of ``Estimate.extras`` keys scored against a truth (``name`` is the key;
         a ``TruthColumn`` with ``index=()`` compares the whole extra with the column row).
+    measurements : tuple[MeasurementKind, ...] or None
+        One declaration per measurement whose innovations ``update`` returns: its rows and
+        their units (class or instance attribute, as ``states``); ``()`` for a filter without
+        updates. None (the default): not declared, innovations unchecked, units guessed.
 
     Optional method
     ---------------
@@ -348,6 +428,7 @@ class Filter(abc.ABC):
 
     states: tuple[State, ...] = ()
     scored_extras: tuple[State, ...] = ()
+    measurements: tuple[MeasurementKind, ...] | None = None
 
     @property
     def state_names(self) -> tuple[str, ...]:

@@ -111,6 +111,7 @@ from navreplay.filters.base import (
     FilterContext,
     FilterParams,
     Innovation,
+    MeasurementKind,
     Quantity,
     State,
     check_number,
@@ -276,6 +277,10 @@ class GpsInsFilter(InsFilter):
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU, StreamKind.GPS)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.GPS_VEL,)
     Params: ClassVar[type[FilterParams]] = GpsInsParams
+    measurements: tuple[MeasurementKind, ...] | None = (
+        MeasurementKind("gps_pos", ("N", "E", "D"), "m"),
+        MeasurementKind("gps_vel", ("N", "E", "D"), "m/s"),
+    )
 
     params: GpsInsParams
 

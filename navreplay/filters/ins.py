@@ -111,6 +111,7 @@ from navreplay.filters.base import (
     FilterContext,
     FilterParams,
     Innovation,
+    MeasurementKind,
     NavSolution,
     Quantity,
     State,
@@ -340,6 +341,7 @@ class InsFilter(Filter):
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     Params: ClassVar[type[FilterParams]] = InsParams
+    measurements: tuple[MeasurementKind, ...] | None = ()  # no measurement update
 
     params: InsParams
 

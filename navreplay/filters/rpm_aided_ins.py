@@ -151,6 +151,7 @@ from navreplay.filters.base import (
     FilterContext,
     FilterParams,
     Innovation,
+    MeasurementKind,
     NavSolution,
     Quantity,
     State,
@@ -563,6 +564,10 @@ class RpmAidedIns(Filter):
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.SPEED_LOG, StreamKind.DEPTH)
     Params: ClassVar[type[FilterParams]] = RpmAidedInsParams
     states: tuple[State, ...] = STATES
+    measurements: tuple[MeasurementKind, ...] | None = (
+        MeasurementKind("rpm", ("forward", "lateral", "vertical"), "m/s"),  # body axes, (25)
+        MeasurementKind("depth", ("D",), "m"),
+    )
 
     params: RpmAidedInsParams
 

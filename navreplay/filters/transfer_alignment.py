@@ -160,6 +160,7 @@ from navreplay.filters.base import (
     FilterContext,
     FilterParams,
     Innovation,
+    MeasurementKind,
     NavSolution,
     Quantity,
     State,
@@ -913,6 +914,9 @@ class TransferAlignment(Filter):
             *(State(f"q_rb{i}", "-", Quantity.MISALIGNMENT) for i in self.s),
             *FLEXURE_STATES[: self.nf],
         )
+        self.measurements = (MeasurementKind("velocity", ("N", "E"), "m/s"),) + (
+            (MeasurementKind("quaternion", tuple(f"q{i}" for i in self.s), "-"),)
+            if len(self.s) else ())  # eq. (15): rows ZV, ZQ
         self.flex = np.zeros(2)  # theta_f, theta_f' estimates [rad, rad/s]
         self._flex_model: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._qc = np.array([p.accel_noise**2] * 3 + [p.gyro_noise**2] * 3)

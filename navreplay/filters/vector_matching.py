@@ -140,6 +140,7 @@ from navreplay.filters.base import (
     FilterContext,
     FilterParams,
     Innovation,
+    MeasurementKind,
     Quantity,
     State,
     check_number,
@@ -672,6 +673,8 @@ class VectorMatchingFilter(Filter):
     required_columns = {StreamKind.IMU: ("f_b",)}  # an accelerometer: no gyro column needed
     Params = VectorMatchingParams
     states = STATES
+    measurements = (MeasurementKind("vector", ("g_N", "g_E", "g_D", "h_N", "h_E", "h_D"),
+                                    ("m/s^2",) * 3 + ("T",) * 3),)  # [z_g; z_h], (10), (14)
 
     def __init__(self, params: VectorMatchingParams, context: FilterContext) -> None:
         super().__init__(params, context)

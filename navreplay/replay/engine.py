@@ -73,6 +73,7 @@ from navreplay.filters.base import (
     FilterParams,
     NavSolution,
     State,
+    check_measurements,
     check_states,
 )
 from navreplay.filters.kalman import FilterDivergedError
@@ -461,6 +462,23 @@ class _Columns:
         )
 
 
+def _undeclared(name: str, items: list[tuple[float, np.ndarray, np.ndarray]],
+                rows_of: Mapping[str, int] | None) -> tuple[float, str] | None:
+    """The first update of measurement ``name`` that its declaration (``rows_of``: rows by
+    declared name; None when the filter declares nothing) does not allow, as (t, why)."""
+    if rows_of is None:
+        return None
+    if name not in rows_of:
+        return items[0][0], (f"innovation {name!r} is not a declared measurement (declared: "
+                             f"{', '.join(rows_of) or 'none'}; set Filter.measurements)")
+    m = rows_of[name]
+    k = next((k for k, it in enumerate(items) if np.shape(it[1]) != (m,)), None)
+    if k is None:
+        return None
+    return items[k][0], (f"innovation {name!r} has shape {np.shape(items[k][1])}; the filter "
+                         f"declares {m} rows")
+
+
 def _innovation_series(
     items: list[tuple[float, np.ndarray, np.ndarray]],
 ) -> tuple[InnovationSeries, tuple[int, str] | None]:
@@ -642,6 +660,8 @@ class ReplaySession:
         self.label, self.source = label, source
         self._names = tuple(st.name for st in self.states)
         scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
+        measurements = check_measurements(filt.measurements, f"filter {label!r}: measurements")
+        self._rows_of = None if measurements is None else {m.name: m.dim for m in measurements}
         self._merged = merge_aiding(recording, consumed_streams(filter_cls))
         self._aiding: list[Stream] = [recording[k] for k in self._merged.kinds]
         self._output_rate = output_rate
@@ -657,6 +677,7 @@ class ReplaySession:
             t0_ns=recording.t0_ns,
             states=self.states,
             scored_extras=scored_extras,
+            measurements=measurements or (),
         )
         self._batch = None if pacing is not None else _batch_hook(filt)
         self._events_hook = None if pacing is not None else _events_hook(filt)
@@ -930,6 +951,9 @@ class ReplaySession:
 
         inn_series = {}
         for name, items in innovations.items():
+            undeclared = _undeclared(name, items, self._rows_of)
+            if undeclared is not None:
+                raise _invalid(label, source, undeclared[0], undeclared[1])
             series, bad = _innovation_series(items)
             if bad is not None:
                 raise _invalid(label, source, float(series.t[bad[0]]),

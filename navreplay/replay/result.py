@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from navreplay.filters.base import State, check_states
+from navreplay.filters.base import MeasurementKind, State, check_measurements, check_states
 
 
 @dataclasses.dataclass
@@ -45,6 +45,9 @@ class RunResult:
     innovations : dict[str, InnovationSeries]
     scored_extras : tuple[State, ...]
         Declarations of the ``extras`` that are scored.
+    measurements : tuple[MeasurementKind, ...]
+        The filter's declarations of its measurements (rows and units of each innovation);
+        empty when the filter declares none (:meth:`measurement` is then None).
     """
 
     filter_name: str
@@ -61,10 +64,17 @@ class RunResult:
     extras: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     innovations: dict[str, InnovationSeries] = dataclasses.field(default_factory=dict)
     scored_extras: tuple[State, ...] = ()
+    measurements: tuple[MeasurementKind, ...] = ()
 
     def __post_init__(self) -> None:
         self.states = check_states(self.states, f"{self.label}: states")
         self.scored_extras = check_states(self.scored_extras, f"{self.label}: scored_extras")
+        self.measurements = check_measurements(self.measurements,
+                                               f"{self.label}: measurements") or ()
+
+    def measurement(self, name: str) -> MeasurementKind | None:
+        """The declaration of measurement ``name``, or None when the filter declares none."""
+        return next((m for m in self.measurements if m.name == name), None)
 
     @property
     def state_names(self) -> tuple[str, ...]:

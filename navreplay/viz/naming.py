@@ -3,8 +3,10 @@
 Values are SI inside navreplay; plots show them in the units a navigation engineer reads
 (degrees, deg/h, mg). States and scored extras carry their SI unit and quantity in their
 declarations (:class:`navreplay.filters.base.State`): :func:`tab_of` maps a quantity to its tab.
-Only for what is not declared (other extras, measurement names, truth columns) the unit comes
-from the caller (``units={"dk": "-"}``) or, failing that, from the naming conventions of the
+Measurements carry the rows and units of their innovations in theirs
+(:class:`navreplay.filters.base.MeasurementKind`, :func:`innovation_rows`). Only for what is
+not declared (other extras, the measurements of a filter that declares none, truth columns) the
+unit comes from the caller (``units={"dk": "-"}``) or, failing that, from the naming conventions of the
 project's filters (``dlat``, ``dv_N``, ``phi_D``, ``db_a_x``, ...); an unknown name is plotted
 unscaled and titled ``[-]``.
 
@@ -25,6 +27,7 @@ import enum
 import re
 from collections.abc import Mapping
 
+from navreplay.filters.base import MeasurementKind
 from navreplay.filters.base import Quantity as StateQuantity
 from navreplay.units import DEG, DEG_PER_HOUR, MILLI_G
 
@@ -54,6 +57,7 @@ SI_TO_DISPLAY: dict[str, DisplayUnit] = {
     "m": DisplayUnit("m", 1.0),
     "m/s": DisplayUnit("m/s", 1.0),
     "s": DisplayUnit("s", 1.0),
+    "T": DisplayUnit("nT", 1e9),
     "-": DisplayUnit("-", 1.0),
 }
 """Display unit for each SI unit string; other strings are shown as given, unscaled."""
@@ -177,6 +181,25 @@ def resolve_unit(name: str, units: Mapping[str, str] | None = None) -> DisplayUn
     if units is not None and name in units:
         return display_unit(units[name])
     return display_unit(guess_si_unit(name))
+
+
+def innovation_rows(name: str, dim: int, declared: MeasurementKind | None = None,
+                    units: Mapping[str, str] | None = None) -> list[tuple[str, DisplayUnit]]:
+    """Row name and display unit of each of the ``dim`` rows of measurement ``name``'s
+    innovation: from its declaration; for a filter that declares none (or a declaration of
+    another size), rows ``N, E, D`` (three rows) or ``0, 1, ...`` and the unit of
+    :func:`resolve_unit` (the caller's, else guessed from the name).
+
+    >>> from navreplay.filters.base import MeasurementKind
+    >>> innovation_rows("rpm", 3, MeasurementKind("rpm", ("forward", "lateral", "vertical"), "m/s"))[1]
+    ('lateral', DisplayUnit(label='m/s', scale=1.0))
+    >>> innovation_rows("gps_pos", 3)[2]
+    ('D', DisplayUnit(label='m', scale=1.0))
+    """
+    if declared is not None and declared.dim == dim:
+        return [(r, display_unit(u)) for r, u in zip(declared.rows, declared.units, strict=True)]
+    u = resolve_unit(name, units)
+    return [("NED"[i] if dim == 3 else str(i), u) for i in range(dim)]
 
 
 def entity_path(*parts: str) -> str:

@@ -77,6 +77,7 @@ from navreplay.viz.naming import (
     display_unit,
     entity_path,
     group_of,
+    innovation_rows,
     quantity_of,
     resolve_unit,
     tab_of,
@@ -1135,13 +1136,13 @@ class Sink:
                 )
             )
             idx = self._indexes(s.t, result.t0_ns)
-            u = resolve_unit(meas, run.units)
-            for i in range(dim):
+            rows = innovation_rows(meas, dim, result.measurement(meas), run.units)
+            for i, (row, u) in enumerate(rows):
                 path = entity_path(L, "innovation", meas, str(i))
                 self._bounded(path, idx, nu[:, i] * u.scale, sd[:, i] * u.scale, L, run.color)
                 self.catalog.add(
                     "innovation", f"nu:{meas}:{i}@{L}",
-                    f"{L}: {meas} innovation {_component(i, dim)}, ±3√S [{u.label}]", path,
+                    f"{L}: {meas} innovation {row}, ±3√S [{u.label}]", path,
                     rank=run.order, legend=False,
                 )
             lo, hi = convert.chi2_bounds(dim)
@@ -1324,10 +1325,6 @@ class _NullStream:
 
     def log(self, *args: Any, **kwargs: Any) -> None:
         pass
-
-
-def _component(i: int, dim: int) -> str:
-    return "NED"[i] if dim == 3 else str(i)
 
 
 def _thin(pts: np.ndarray) -> np.ndarray:

@@ -50,6 +50,7 @@ from navreplay.filters.base import (
     Filter,
     FilterParams,
     Innovation,
+    MeasurementKind,
     NavSolution,
     Quantity,
     State,
@@ -97,6 +98,7 @@ class GpsConstantVelocity(Filter):
         *(State(f"v_{a}", "m/s", Quantity.VELOCITY, TruthColumn("v_n", (i,)), nees=True)
           for i, a in enumerate("NED")),
     )
+    measurements = (MeasurementKind("gps_pos", ("N", "E", "D"), "m"),)  # z of (5), (6)
 
     def __init__(self, params: GpsCvParams, context: Any) -> None:
         super().__init__(params, context)
