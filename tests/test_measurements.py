@@ -214,3 +214,22 @@ def test_built_in_declarations_match_what_they_emit(recordings, name, rec, param
     for m in res.measurements:
         s = res.innovations[m.name]
         assert s.t.size > 0 and s.nu.shape[1] == m.dim
+
+
+def test_a_declaration_refused_at_class_definition_stops_with_one_line(drive, tmp_path,
+                                                                        monkeypatch):
+    (tmp_path / "repeated_rows.py").write_text(textwrap.dedent("""
+        from navreplay.filters.base import MeasurementKind
+        from navreplay.filters.gps_ins import GpsInsFilter
+
+        class Repeated(GpsInsFilter):
+            measurements = (MeasurementKind("gps_pos", ("N", "E", "N"), "m"),)
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    res = CliRunner().invoke(cli, ["run", "--filter", "repeated_rows:Repeated", str(drive),
+                                   "--no-viz"])
+    assert res.exit_code == 1
+    assert "Traceback" not in res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("Error:")]
+    assert len(errors) == 1, res.output
+    assert "'repeated_rows'" in errors[0] and "each named once" in errors[0]

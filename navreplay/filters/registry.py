@@ -69,6 +69,9 @@ def load_filter(ref: str) -> type[Filter]:
             mod = importlib.import_module(mod_name)
         except ImportError as e:
             raise FilterLoadError(f"cannot import filter module {mod_name!r}: {e}") from None
+        except Exception as e:  # e.g. a declaration of its filter refused at class definition
+            raise FilterLoadError(
+                f"cannot import filter module {mod_name!r}: {type(e).__name__}: {e}") from e
         cls = getattr(mod, attr, None)
         if not (isinstance(cls, type) and issubclass(cls, Filter)):
             raise FilterLoadError(f"{ref!r} is not a navreplay Filter class")
