@@ -169,7 +169,9 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     empty = {k: Stream(k, np.zeros(0, np.int64),
                        {c: np.zeros((0, *f.shape)) for c, f in FIELDS.get(k, {}).items()})
              for k in window.present}
-    head = Recording({**empty, **window}, metadata, window.t0_ns)
+    merged = {**empty, **window}
+    head = Recording({k: merged[k] for k in StreamKind if k in merged}, metadata,
+                     window.t0_ns)
     notes = make_ready(head, sources, options)
     has_truth = StreamKind.TRUTH in head
     labels = [spec.label for spec in job.filters]
