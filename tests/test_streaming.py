@@ -124,3 +124,83 @@ def test_paced_replay_reads_the_whole_file(drive: Recording, tmp_path) -> None:
     job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(path,),
                      viz=VizOptions(mode=VizMode.NONE), pacing=100.0)
     assert run._run_streamed(job, None) is None
+
+
+# --------------------------------------------------------------------------------------------
+# aiding streams in windows too (one pass over the file)
+
+
+def _head(rec: Recording) -> Recording:
+    """The recording with every stream emptied (its columns kept): what a session starts on
+    when the samples come window by window."""
+    return Recording({k: s.slice(0, 0) for k, s in rec.streams.items()}, rec.metadata,
+                     rec.t0_ns)
+
+
+def _time_windows(rec: Recording, cls: type, ends_ns: list[int], **kw) -> RunResult:
+    """Every stream fed in the windows (previous end, end] of time, each aiding kind known up
+    to its last sample so far (complete once all of it is fed), as read_windows hands them."""
+    from navreplay.io.windows import COMPLETE
+
+    session = ReplaySession(_head(rec), cls, {}, **kw)
+    blocks, lo = [], None
+    for k, hi in enumerate(ends_ns):
+        final = k == len(ends_ns) - 1
+        part, known = {}, {}
+        for kind, s in rec.streams.items():
+            a = 0 if lo is None else int(np.searchsorted(s.t_ns, lo, side="right"))
+            b = len(s) if final else int(np.searchsorted(s.t_ns, hi, side="right"))
+            part[kind] = s.slice(a, b)
+            known[kind] = (COMPLETE if b == len(s) else
+                           int(s.t_ns[b - 1]) if b else -COMPLETE)
+        imu = part.pop(StreamKind.IMU)
+        blocks.append(session.feed(imu, final=final, aiding=part, known=known))
+        lo = hi
+    return concat_results(blocks)
+
+
+def _ends(rec: Recording, seconds: list[float]) -> list[int]:
+    return [rec.t0_ns + round(s * 1e9) for s in seconds] + [rec.t0_ns + 10**12]
+
+
+@pytest.mark.parametrize("filter_cls", [GpsInsFilter, InsFilter])
+def test_aiding_in_windows_gives_the_bits_of_the_whole_replay(drive: Recording,
+                                                             filter_cls: type) -> None:
+    whole = replay(drive, filter_cls, {}, output_rate=10.0)
+    rng = np.random.default_rng(2)
+    cuts = np.cumsum(rng.uniform(0.003, 4.0, size=60))  # 3 ms to 4 s windows, odd boundaries
+    got = _time_windows(drive, filter_cls, _ends(drive, list(cuts[cuts < 59.0])),
+                        output_rate=10.0)
+    _assert_same(got, whole)
+    if filter_cls is GpsInsFilter:  # GPS updates were applied
+        assert sum(len(s.t) for s in got.innovations.values()) > 50
+
+
+def test_a_window_boundary_between_an_imu_sample_and_a_gps_fix(drive: Recording) -> None:
+    """Fixes 1 ns after and 1 ns before an IMU sample that ends a window: the fix after it
+    waits for the next window, the IMU samples after the one before it wait too."""
+    imu, gps = drive[StreamKind.IMU], drive[StreamKind.GPS]
+    t_gps = gps.t_ns.copy()
+    k1, k2 = 10, 20
+    j1 = int(np.searchsorted(imu.t_ns, t_gps[k1]))
+    j2 = int(np.searchsorted(imu.t_ns, t_gps[k2]))
+    t_gps[k1] = imu.t_ns[j1] + 1
+    t_gps[k2] = imu.t_ns[j2] - 1
+    moved = dataclasses.replace(gps, t_ns=t_gps)
+    rec = Recording({**drive.streams, StreamKind.GPS: moved}, drive.metadata, drive.t0_ns)
+    whole = replay(rec, GpsInsFilter, {}, output_rate=10.0)
+    ends = [int(imu.t_ns[j1]), int(imu.t_ns[j1]) + 1, int(t_gps[k2]),
+            int(imu.t_ns[j2]) - 2, int(imu.t_ns[j2]), rec.t0_ns + 10**12]
+    ends = sorted(set(ends))
+    got = _time_windows(rec, GpsInsFilter, ends, output_rate=10.0)
+    _assert_same(got, whole)
+
+
+def test_an_aiding_stream_that_starts_late(drive: Recording) -> None:
+    gps = drive[StreamKind.GPS]
+    late = gps.slice(int(np.searchsorted(gps.t_ns, drive.t0_ns + 25 * 10**9)), len(gps))
+    rec = Recording({**drive.streams, StreamKind.GPS: late}, drive.metadata, drive.t0_ns)
+    whole = replay(rec, GpsInsFilter, {}, output_rate=10.0)
+    got = _time_windows(rec, GpsInsFilter, _ends(rec, [3.0, 7.5, 24.999, 25.0, 40.0, 55.5]),
+                        output_rate=10.0)
+    _assert_same(got, whole)

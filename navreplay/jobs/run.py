@@ -9,6 +9,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from navreplay import params as _params
 from navreplay import tables
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
@@ -139,13 +141,13 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     None when the run needs the whole recording (a reference, paced replay, a rosbag2 folder
     or a damaged file): :func:`_run_one` then reads it whole."""
     from navreplay.filters.base import TruthColumn
-    from navreplay.io.integrity import salvage_watch
-    from navreplay.io.reader import is_rosbag, read_streams
-    from navreplay.io.windows import STREAMED, NotStreamable, read_windows, streamable
+    from navreplay.io.reader import is_rosbag
+    from navreplay.io.windows import COMPLETE, NotStreamable, Window, read_windows, streamable
     from navreplay.logs.options import LogOptions
     from navreplay.logs.prepare import make_ready
     from navreplay.replay.engine import ReplaySession
     from navreplay.replay.streaming import RunningSummary
+    from navreplay.streams import FIELDS, Stream
 
     path = Path(job.recordings[0])
     options = job.log or LogOptions()
@@ -153,20 +155,23 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             or not streamable(path)):
         return None
     classes = [spec.load() for spec in job.filters]
-    with salvage_watch() as lost:
-        aiding, sources = read_streams(path, topics=options.topics,
-                                       frames=options.stream_frames, time=options.time,
-                                       skip=STREAMED)
-    if lost[0]:
-        return None
-    windows = read_windows(path, STREAMED, topics=options.topics, frames=options.stream_frames,
-                           time=options.time, sources=sources)
+    sources: dict[StreamKind, Any] = {}
+    windows = read_windows(path, decoded_kinds(classes, options), topics=options.topics,
+                           frames=options.stream_frames, time=options.time, sources=sources)
     try:
-        window = next(windows, {})
+        window: Window = next(windows)
     except NotStreamable:
         return None
-    aiding.metadata.extra.setdefault("source", str(path))
-    head = Recording({**aiding.streams, **window}, aiding.metadata, aiding.t0_ns)
+    metadata = window.metadata
+    metadata.extra.setdefault("source", str(path))
+    # every kind the file holds (empty if not decoded or not in the first window): the filters
+    # see the streams of the whole recording
+    empty = {k: Stream(k, np.zeros(0, np.int64),
+                       {c: np.zeros((0, *f.shape)) for c, f in FIELDS.get(k, {}).items()})
+             for k in window.present}
+    merged = {**empty, **window}
+    head = Recording({k: merged[k] for k in StreamKind if k in merged}, metadata,
+                     window.t0_ns)
     notes = make_ready(head, sources, options)
     has_truth = StreamKind.TRUTH in head
     labels = [spec.label for spec in job.filters]
@@ -185,23 +190,25 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             sink.log_block(rows, m, truth)
         outputs.rows(rows, m)
 
-    scores = [RunningSummary(spec.label, t0_ns, aiding.metadata.true_errors, has_truth,
+    scores = [RunningSummary(spec.label, t0_ns, metadata.true_errors, has_truth,
                              scored=scored)
               for spec in job.filters]
     columns = {st.truth.column: st.unit for session in sessions for st in session.states
                if isinstance(st.truth, TruthColumn)}
-    duration = float(aiding.metadata.params.get("duration") or 0.0)
+    duration = float(metadata.params.get("duration") or 0.0)
     title = f"{', '.join(labels)} over {path.name}"
     try:
         outputs.start_run(labels, has_reference=has_truth, source=str(path))
+        aiding: dict[StreamKind, Stream] = {}  # the first window's are in the sessions
         while True:
             following = next(windows, None)
             final = following is None
             imu, truth = window.get(StreamKind.IMU), window.get(StreamKind.TRUTH)
+            known = {k: (COMPLETE if final else t) for k, t in window.known.items()}
             if sink is not None and truth is not None and len(truth):
                 sink.log_truth_window(truth, t0_ns, columns)
             for session, score in zip(sessions, scores, strict=True):
-                block = session.feed(imu, final=final)
+                block = session.feed(imu, final=final, aiding=aiding, known=known)
                 if sink is not None:
                     sink.log_innovations(block)
                 outputs.innovations(block)
@@ -212,11 +219,12 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             if truth is not None and len(truth):  # after the estimates it covers: written
                 outputs.truth(truth)              # at once, not queued behind them
             if progress is not None and imu is not None and len(imu) and duration > 0:
-                done = (int(imu.t_ns[-1]) - aiding.t0_ns) * 1e-9
+                done = (int(imu.t_ns[-1]) - t0_ns) * 1e-9
                 progress(min(int(done), int(duration)), int(duration))
             if final:
                 break
             window = following
+            aiding = window
         summaries = {spec.label: score.summary()
                      for spec, score in zip(job.filters, scores, strict=True)}
         notes += outputs.write_run(summaries, title=title)
@@ -236,6 +244,20 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
         table = "(no truth or reference: innovation statistics only)\n\n" + table
     return RunReport(title=f"{', '.join(labels)} over {path}", table=table, summary=summary,
                      viz=hint, notes=notes, sink=sink if job.viz.mode is VizMode.SERVE else None)
+
+
+def decoded_kinds(classes: Sequence[type], options: Any) -> set[StreamKind]:
+    """The streams a streamed run decodes: IMU and truth, those the filters consume (all for
+    a filter that declares none) and those the frame checks and the initialisation read."""
+    from navreplay.replay.engine import consumed_streams
+
+    kinds = {StreamKind.IMU, StreamKind.TRUTH}
+    for cls in classes:
+        consumed = consumed_streams(cls)
+        kinds |= set(StreamKind) if consumed is None else set(consumed)
+    if options.check_frames or options.init is not None or options.initial:
+        kinds |= {StreamKind.GPS, StreamKind.GPS_VEL, StreamKind.MAG}
+    return kinds
 
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:

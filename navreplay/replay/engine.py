@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -279,7 +279,11 @@ def merge_aiding(recording: Recording, consumes: Iterable[StreamKind] | None = N
     """The aiding samples of a recording merged by (time, priority, row), without output
     ticks (``imu_end`` empty)."""
     kinds = aiding_kinds(recording, consumes)
-    streams = [recording[k] for k in kinds]
+    return merge_streams(kinds, [recording[k] for k in kinds])
+
+
+def merge_streams(kinds: tuple[StreamKind, ...], streams: Sequence[Stream]) -> EventPlan:
+    """Aiding streams (in priority order ``kinds``) merged by (time, priority, row)."""
     t_all = np.concatenate([s.t_ns for s in streams] + [np.zeros(0, np.int64)])
     code = np.concatenate(
         [np.full(len(s), i, np.int64) for i, s in enumerate(streams)] + [np.zeros(0, np.int64)]
@@ -341,6 +345,20 @@ def _ticks(first_ns: int, last_ns: int, t0_ns: int, rate: float) -> np.ndarray:
     k1 = int(np.floor((int(last_ns) - int(t0_ns)) * 1e-9 / period_s + 1e-9))
     k = np.arange(k0, k1 + 1, dtype=np.int64)
     return np.int64(t0_ns) + np.rint(k * (period_s * 1e9)).astype(np.int64)
+
+
+KNOWN_ALL = np.iinfo(np.int64).max
+"""The time [ns] a complete aiding stream is known up to (:meth:`ReplaySession.feed`)."""
+
+
+def _join(a: Stream, b: Stream) -> Stream:
+    """Stream ``a`` followed by the later samples ``b`` (columns of ``a``)."""
+    if not len(a):
+        return b
+    return dataclasses.replace(
+        a, t_ns=np.concatenate([a.t_ns, b.t_ns]),
+        columns={k: np.concatenate([a.columns[k], b.columns[k]]) for k in a.columns},
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -664,6 +682,10 @@ class ReplaySession:
         self._rows_of = None if measurements is None else {m.name: m.dim for m in measurements}
         self._merged = merge_aiding(recording, consumed_streams(filter_cls))
         self._aiding: list[Stream] = [recording[k] for k in self._merged.kinds]
+        # aiding samples that arrive in windows (feed(aiding=...)): each kind is known up to
+        # a time; events wait until every kind is known up to theirs
+        self._known: dict[StreamKind, int] = {}
+        self._windowed = False
         self._output_rate = output_rate
         self._t0_ns = recording.t0_ns
         self._max_imu_gap = max_imu_gap
@@ -743,16 +765,26 @@ class ReplaySession:
         feeder.start = start
         return feeder
 
-    def feed(self, imu: Stream | None, final: bool = False) -> RunResult:
-        """Apply the events up to the last IMU sample at hand (all of them when ``final``).
+    def feed(self, imu: Stream | None, final: bool = False, *,
+             aiding: Mapping[StreamKind, Stream] | None = None,
+             known: Mapping[StreamKind, int] | None = None) -> RunResult:
+        """Apply the events up to the last IMU sample at hand and up to the time every aiding
+        stream is known to (all of them when ``final``).
 
         Parameters
         ----------
         imu : Stream or None
             The next IMU samples (later than those fed before).
         final : bool
-            No IMU samples follow: apply every remaining event and hand over the remaining
-            samples before a last estimate.
+            No samples follow: apply every remaining event and hand over the remaining
+            IMU samples before a last estimate.
+        aiding : mapping, optional
+            The next samples of aiding streams (later than those of the kind before; kinds the
+            filter does not consume are ignored). Without it, the recording's aiding streams
+            are whole.
+        known : mapping, optional
+            Time [ns] up to which each aiding kind is complete (every sample at or before it
+            has been fed); a kind left out is complete.
 
         Returns
         -------
@@ -762,11 +794,20 @@ class ReplaySession:
         if self.finished:
             raise ReplayError(f"{self.source}: the replay of {self.label!r} is finished")
         t0_ns = self._t0_ns
+        if aiding is not None or known is not None:
+            self._add_aiding(aiding or {}, known or {})
         imu_t_ns, imu_columns, start = self._window_imu(imu)
         if self._first_imu_ns is None and len(imu_t_ns):
             self._first_imu_ns = int(imu_t_ns[0])
         hi = None if final else (int(imu_t_ns[-1]) if len(imu_t_ns) > start else None)
-        if not final and hi is None:  # nothing new: nothing to apply
+        if hi is not None and self._known:
+            hi = min(hi, *self._known.values())
+            if self._done_to_ns is not None and hi <= self._done_to_ns:
+                hi = None
+        if not final and hi is None:  # nothing to apply yet: the IMU samples wait
+            if len(imu_t_ns) > start:
+                self._pending = (imu_t_ns[start:],
+                                 {k: v[start:] for k, v in imu_columns.items()})
             return self._empty_block()
         plan = window_plan(self._merged, imu_t_ns, t0_ns, self._output_rate,
                            lo=self._done_to_ns, hi=hi, first_imu_ns=self._first_imu_ns)
@@ -775,6 +816,8 @@ class ReplaySession:
         feeder = self._feeder(imu_t, imu_cols, start)
         block = self._run(plan, feeder, imu_t, final)
         self._done_to_ns = hi
+        if self._windowed and hi is not None:
+            self._drop_aiding(hi)
         if final:
             self.finished = True
             self._pending = self._last = None
@@ -785,6 +828,29 @@ class ReplaySession:
             self._pending = ((imu_t_ns[s:], {k: v[s:] for k, v in imu_columns.items()})
                              if s < len(imu_t_ns) else None)
         return block
+
+    def _add_aiding(self, aiding: Mapping[StreamKind, Stream],
+                    known: Mapping[StreamKind, int]) -> None:
+        """Append the samples of a window to the aiding streams and note how far each kind
+        is known."""
+        kinds = self._merged.kinds
+        self._windowed = True
+        for c, kind in enumerate(kinds):
+            self._known[kind] = int(known.get(kind, KNOWN_ALL))
+            new = aiding.get(kind)
+            if new is not None and len(new):
+                self._aiding[c] = _join(self._aiding[c], new)
+        self._known = {k: t for k, t in self._known.items() if t < KNOWN_ALL}
+        self._merged = merge_streams(kinds, self._aiding)
+
+    def _drop_aiding(self, done_ns: int) -> None:
+        """Forget the aiding samples applied before ``done_ns``, but those within two output
+        periods of it (they decide which later output ticks fall)."""
+        margin = 2 * round(1e9 / self._output_rate) if self._output_rate else 0
+        cut = done_ns - margin
+        self._aiding = [s.slice(int(np.searchsorted(s.t_ns, cut, side="right")), len(s))
+                        for s in self._aiding]
+        self._merged = merge_streams(self._merged.kinds, self._aiding)
 
     def _empty_block(self) -> RunResult:
         n = len(self.states)
