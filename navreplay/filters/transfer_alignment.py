@@ -524,17 +524,13 @@ def lever_attitude_jacobian(q_bn, q_m, w_ib_b, lever_arm_r):
     """
     wn = _mv(kernels.quat_to_dcm(q_bn), w_ib_b)
     b = _mv(kernels.quat_to_dcm(q_m), lever_arm_r)
-    Wx = np.zeros((3, 3))
-    Wx[0, 1], Wx[0, 2], Wx[1, 0], Wx[1, 2], Wx[2, 0], Wx[2, 1] = (
-        -wn[2], wn[1], wn[2], -wn[0], -wn[1], wn[0])
-    Bx = np.zeros((3, 3))
-    Bx[0, 1], Bx[0, 2], Bx[1, 0], Bx[1, 2], Bx[2, 0], Bx[2, 1] = (
-        -b[2], b[1], b[2], -b[0], -b[1], b[0])
-    M = _mm(Bx, Wx)
-    out = _mmt(M, rmat(q_bn))
-    for i in range(3):
-        for j in range(4):
-            out[i, j] *= -2.0
+    Rq = rmat(q_bn)
+    bw = b[0] * wn[0] + b[1] * wn[1] + b[2] * wn[2]
+    out = np.empty((3, 4))
+    for j in range(4):  # -2 b x (w x r_j), r_j row j of R: b x (w x r) = w (b.r) - r (b.w)
+        br = b[0] * Rq[j, 0] + b[1] * Rq[j, 1] + b[2] * Rq[j, 2]
+        for i in range(3):
+            out[i, j] = -2.0 * (wn[i] * br - Rq[j, i] * bw)
     return out
 
 
