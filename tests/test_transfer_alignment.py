@@ -247,6 +247,44 @@ def test_prediction_and_measurement_match_the_shared_kalman_math():
     np.testing.assert_allclose(z[2:], (Lc @ nav[6:])[s] - q_rb[s], atol=1e-16)
     lever_v = ta.lever_velocity(nav[6:], q_m, w_now, w_in, lever)
     np.testing.assert_allclose(z[:2], (nav[3:6] - v_r - lever_v)[:2], atol=1e-14)
+    # the velocity rows' attitude columns: the lever-arm term turns with an attitude error
+    # (finite differences of z along rotations of the SDINS attitude, phi = -2 R^T dQ)
+    rq = ta.rmat(nav[6:])
+    for k in range(3):
+        phi = np.zeros(3)
+        phi[k] = 1e-6
+        dq = -0.5 * rq @ phi  # the dQ_bn of a small phi (R^T R = I)
+        up = ta.lever_velocity(nav[6:] + dq, q_m, w_now, w_in, lever)
+        down = ta.lever_velocity(nav[6:] - dq, q_m, w_now, w_in, lever)
+        np.testing.assert_allclose(H_[:2, 2:6] @ dq, -(up - down)[:2] / 2, rtol=1e-6,
+                                   atol=1e-14)
+
+
+def test_initial_covariance_holds_the_noise_of_the_starting_attitude():
+    # the SDINS starts from the measured Q_m: dQ_bn = L(Q_m) dQ_br + T(Q_m) n, where n is the
+    # GINS attitude noise per quaternion component (half the rotation), shared with nothing
+    rng = np.random.default_rng(5)
+    q_m = unit(rng)
+    s = np.array([0, 1, 3])
+    var = (0.5 * ARCMIN) ** 2
+    P0 = ta.initial_covariance(q_m, s, 0.0625, 2.25e-6, 6.9e-4, None, var)
+    paper = ta.initial_covariance(q_m, s, 0.0625, 2.25e-6, 6.9e-4)
+    A = np.zeros((4, 9))  # dQ_bn - L(Q_m)[:, s] dQ_br[s]: eq. (17) leaves only the unmatched
+    A[:, 2:6] = np.eye(4)  # q_br2's share in it, the start adds the noise
+    A[:, 6:] = -quat_left_matrix(q_m)[:, s]
+    Lu = quat_left_matrix(q_m)[:, 2]
+    Tm = ta.tmat(q_m)
+    np.testing.assert_allclose(A @ paper @ A.T, 6.9e-4 * np.outer(Lu, Lu), atol=1e-18)
+    np.testing.assert_allclose(A @ (P0 - paper) @ A.T, var * Tm @ Tm.T, atol=1e-20)
+    assert not (P0 - paper)[6:].any() and not (P0 - paper)[:2].any()
+    # the physics: a start from Q_m (x) [1, n] with n ~ N(0, var I3) against the true Q_m
+    n = rng.standard_normal((20_000, 3)) * math.sqrt(var)
+    q_meas = quat_mult(q_m, np.column_stack([np.sqrt(1.0 - np.sum(n**2, axis=1)), n]))
+    cov = np.cov((q_meas - q_m).T)
+    np.testing.assert_allclose(cov, var * Tm @ Tm.T, atol=0.05 * var)
+    # the attitude sigma at the start: 2 x 0.5 arcmin per axis on top of the paper's
+    extra = ta.attitude_sigma(q_m, P0) ** 2 - ta.attitude_sigma(q_m, paper) ** 2
+    np.testing.assert_allclose(extra, [ARCMIN**2] * 3, rtol=1e-9)
 
 
 @pytest.mark.parametrize("s", [[0, 1, 3], [0, 1, 2, 3]])
@@ -498,10 +536,13 @@ def test_replay_is_block_size_independent():
 ])
 def test_innovations_are_consistent_with_their_covariance(values, params):
     """The NIS of every measurement row, 8 runs of 20 s at seeds never used for tuning, every
-    update from 2 s on (1440 per row): the velocity (2 dof) within 12 % of its dof, each
-    quaternion row that a rotation moves (q_br1, q_br3; q_br2 with full matching) within -12 %
-    and +20 % (measured 1.07-1.09; q_br2 of full matching 1.19, the residual of the estimated
-    flexure). The scalar row q_br0 moves only to second order under the GINS noise, and the
+    update from 2 s on (1440 per row; the NIS of a consistent filter is white, so each is a
+    sample): the velocity (2 dof) and each quaternion row that a rotation moves (q_br1, q_br3;
+    1 dof each) inside the chi-square band of docs/methods/consistency.md (false alarm 0.001).
+    Before P0 carried the GINS noise of the starting attitude (§4.5) the velocity NIS was
+    2.10-2.14 and the rows 1.05-1.09, in the first 10-20 s above all. q_br2 of full matching
+    under flexure carries the residual of the estimated flexure (1.16 over 64 runs) and keeps
+    +20 %. The scalar row q_br0 moves only to second order under the GINS noise, and the
     paper's R (the same 0.5 arcmin as the others) overstates it: its NIS is near 0
     (docs/methods/transfer-alignment.md §4.4)."""
     runs = 8
@@ -512,10 +553,18 @@ def test_innovations_are_consistent_with_their_covariance(values, params):
         vel.append(res.innovations["velocity"].nis[20:])
         q = res.innovations["quaternion"]
         rows.append(q.nu[20:] ** 2 / np.diagonal(q.S[20:], axis1=1, axis2=2))
-    assert 0.88 < np.mean(vel) / 2.0 < 1.12, np.mean(vel)
-    per_row = np.mean(np.concatenate(rows), axis=0)
-    assert np.all((per_row[1:] > 0.88) & (per_row[1:] < 1.2)), per_row
-    assert per_row[0] < 0.3, per_row
+    vel = np.concatenate(vel)
+    assert consistency.inside(float(np.mean(vel)), 2, vel.size), np.mean(vel)
+    rows = np.concatenate(rows)
+    per_row = np.mean(rows, axis=0)
+    components = ta.Match(params.get("match", ta.Match.VEL_QUAT_PARTIAL)).components
+    for j, c in enumerate(components):
+        if c == 0:
+            assert per_row[j] < 0.3, per_row
+        elif c == 2 and values.get("flexure_sigma", 1.0) > 0.0:
+            assert 0.88 < per_row[j] < 1.2, per_row
+        else:
+            assert consistency.inside(float(per_row[j]), 1, len(rows)), per_row
 
 
 def test_flexure_rate_sigma_matches_the_simulated_flexure():

@@ -92,8 +92,10 @@ Measurement model, eqs. (3), (5), (6), (15)
           with w_nb_hat^b = w_ib^b - C_nb_hat^T w_in^n and L^b = C_nb_hat^T C(Q_m) L^r_nom,
           i.e. the lever-arm velocity (C_nb_hat w_ib^b - w_in^n) x (C(Q_m) L^r_nom)
     Z_Q = [ Q_m* (x) Q_bn_hat - Q_br_hat ]_s                                 (5)
-    H   = [[ I2  0             0      ],
+    H   = [[ I2  H_vq          0      ],
            [ 0   L(Q_m*)[s,:]  -I_s   ]]                                     (15)
+    H_vq = -2 [L^n x] [w^n x] R(Q_bn)^T, w^n = C_nb_hat w_ib^b, L^n = C(Q_m) L^r_nom
+          (the lever-arm term turns with the attitude error; not in the paper's eq. 15)
 
 The rate w_ib^b of the lever-arm term is extrapolated to the GINS time from the last two IMU
 samples (each a mean over its interval, half a sample old). R = diag(r_v I2, r_q I_s).
@@ -125,6 +127,9 @@ At the first GINS sample after an IMU sample: ``Q_bn_hat = Q_m``, ``Q_br_hat = [
     P0 = [[ r_V I2   0                   0               ],
           [ 0        L P_hat L^T         L P_hat[:, s]   ],
           [ 0        P_hat[s, :] L^T     P_hat[s, s]     ]],   L = L(Q_m(0))
+
+plus ``quat_sigma^2 T(Q_m) T(Q_m)^T`` on the dQ_bn block: the start holds the GINS noise of
+that one sample, which Q_br does not share (:func:`initial_covariance`).
 
 Lever arm
 ---------
@@ -506,6 +511,30 @@ def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
     return out
 
 
+@numba.njit(cache=True)
+def lever_attitude_jacobian(q_bn, q_m, w_ib_b, lever_arm_r):
+    """d z_V / d dQ_bn of the lever-arm velocity term, (3, 4).
+
+    The term rotates the body rate into n with the estimated attitude, so an attitude error
+    phi (``C_nb_hat = (I - [phi x]) C_nb``, ``phi = -2 R(Q_bn)^T dQ_bn``) moves it by
+    ``-(phi x w_nb^n) x L^n``; z_V subtracts it::
+
+        d z_V / d dQ_bn = -2 [L^n x] [w^n x] R(Q_bn)^T,   w^n = C_nb_hat w_ib^b, L^n = C(Q_m) L^r
+
+    (the earth rate w_in^n is not rotated by the SDINS attitude and does not enter).
+    """
+    wn = _mv(kernels.quat_to_dcm(q_bn), w_ib_b)
+    b = _mv(kernels.quat_to_dcm(q_m), lever_arm_r)
+    Rq = rmat(q_bn)
+    bw = b[0] * wn[0] + b[1] * wn[1] + b[2] * wn[2]
+    out = np.empty((3, 4))
+    for j in range(4):  # -2 b x (w x r_j), r_j row j of R: b x (w x r) = w (b.r) - r (b.w)
+        br = b[0] * Rq[j, 0] + b[1] * Rq[j, 1] + b[2] * Rq[j, 2]
+        for i in range(3):
+            out[i, j] = -2.0 * (wn[i] * br - Rq[j, i] * bw)
+    return out
+
+
 def flexure_rate_sigma(sigma: float, zeta: float, wn: float, imu_rate: float) -> float:
     """Flexure rate the lever-arm term misses at the GINS time, 1 sigma [rad/s].
 
@@ -667,6 +696,8 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     z[1] = nav[4] - v_r[1] - lever_v[1]
     H[0, 0] = 1.0
     H[1, 1] = 1.0
+    # the lever-arm velocity turns with the SDINS attitude error: its dQ_bn columns
+    _put(H, 0, 2, lever_attitude_jacobian(q_bn, q_m, w_now, arm)[0:2], 1.0)
     # predicted Q_br: the mounting misalignment bent by the flexure (flexed())
     Lf, q_pred, dq_theta = flexed(q_rb, theta, ns < 4)
     for i in range(ns):
@@ -830,9 +861,10 @@ def block_intervals(t, t_prev, omega_ib_b, f_b, sums, last):
 
 def initial_covariance(
     q_m: np.ndarray, s: np.ndarray, vel_var: float, p0: float, p1: float,
-    flexure: tuple[float, float] | None = None,
+    flexure: tuple[float, float] | None = None, quat_var: float = 0.0,
 ) -> np.ndarray:
-    """P0 of eq. (17) for the matched index set s, and of the flexure states.
+    """P0 of eq. (17) for the matched index set s, of the flexure states, and the GINS
+    attitude noise the SDINS starts with.
 
     Parameters
     ----------
@@ -847,6 +879,13 @@ def initial_covariance(
     flexure : (sigma, wn) or None
         Flexure states last, at their stationary covariance ``diag(sigma^2, (wn sigma)^2)``
         [rad], [rad/s]; None: no flexure states.
+    quat_var : float
+        Variance of the GINS white attitude noise per quaternion component [-] (``quat_sigma``
+        squared). The SDINS starts from the *measured* Q_m, so its attitude error holds that
+        sample's noise, which Q_br does not share: ``dQ_bn = L(Q_m) dQ_br + T(Q_m) n``,
+        ``n ~ N(0, quat_var I3)``. Without it eq. (17) declares ``dQ_bn - L(Q_m) dQ_br``
+        exactly zero, a constraint that only the ship's rolling and pitching can relax: the
+        filter stays optimistic in attitude, and so in velocity, for the first 10-20 s.
 
     Returns
     -------
@@ -859,7 +898,8 @@ def initial_covariance(
     Lm = kernels.quat_left_matrix(q_m)
     P = np.zeros((n, n))
     P[DV, DV] = vel_var * np.eye(2)
-    P[DQ_BN, DQ_BN] = Lm @ P_hat @ Lm.T  # (16): dQ_bn = L(Q_m) dQ_br
+    Tm = Lm[:, 1:]  # T(Q_m): the start's own noise, a rotation of Q_m
+    P[DQ_BN, DQ_BN] = Lm @ P_hat @ Lm.T + quat_var * Tm @ Tm.T  # (16): dQ_bn = L(Q_m) dQ_br
     P[DQ_BN, br] = Lm @ P_hat[:, s]
     P[br, DQ_BN] = P[DQ_BN, br].T
     P[br, br] = P_hat[np.ix_(s, s)]
@@ -1023,6 +1063,7 @@ class TransferAlignment(Filter):
             q_m, self.s, p.init_vel_sigma**2, p.init_q0_sigma**2,
             math.sin(0.5 * p.init_misalignment) ** 2,
             (p.flexure_sigma, p.flexure_wn) if self.nf else None,
+            p.quat_sigma**2,
         )
         kalman.check_covariance(self.P, name="P0", t=t)
         self.sigma_phi = np.hypot(attitude_sigma(q_m, self.P), self._consider)

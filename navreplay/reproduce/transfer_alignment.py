@@ -365,7 +365,7 @@ def figures(stats: Mapping[tuple[str, str], VariantStats]) -> dict[str, Any]:
 
     Fig. 2: RMS level errors phi_N, phi_E of every variant under flexure with the partial
     filter's predicted sigma. Fig. 3: RMS azimuth error phi_D of partial and full matching with
-    their predicted sigma, one plot per condition. vel_only's azimuth (> 100 mrad) has its own.
+    their predicted sigma, one plot per condition. vel_only's azimuth (tens of mrad) has its own.
     """
     part = stats[(PARTIAL, "flexure")]
     plots: dict[str, dict[str, np.ndarray]] = {}
