@@ -141,29 +141,37 @@ class Correction(NamedTuple):
 def _covariance_ok(P: np.ndarray, rtol: float) -> bool:
     """Fast path of :func:`check_covariance`: True when all its checks pass."""
     n = P.shape[0]
+    if rtol < 0.0:  # no asymmetry is within a negative tolerance
+        return n == 0
     s = np.empty(n)
     for i in range(n):
         d = P[i, i]
         if not (np.isfinite(d) and d >= 0.0):
             return False
         s[i] = np.sqrt(d) if d > 0.0 else 1.0
-    # Cholesky of the correlation form plus rtol I, checking symmetry on the way
-    L = np.zeros((n, n))
+    # Cholesky of the correlation form plus rtol I column by column, checking symmetry on
+    # the way (the diagonal and an entry equal to its mirror need no second division)
+    L = np.empty((n, n))  # (only its lower triangle, written before it is read)
     for j in range(n):
-        for i in range(j, n):
-            c = P[i, j] / (s[i] * s[j])
-            if not np.isfinite(c) or abs(c - P[j, i] / (s[i] * s[j])) > rtol:
+        sj = s[j]
+        c = P[j, j] / (sj * sj)
+        if not np.isfinite(c):
+            return False
+        c += rtol
+        for k in range(j):
+            c -= L[j, k] * L[j, k]
+        if c <= 0.0:
+            return False
+        ljj = np.sqrt(c)
+        L[j, j] = ljj
+        for i in range(j + 1, n):
+            d = s[i] * sj
+            c = P[i, j] / d
+            if not np.isfinite(c) or (P[j, i] != P[i, j] and abs(c - P[j, i] / d) > rtol):
                 return False
-            if i == j:
-                c += rtol
             for k in range(j):
                 c -= L[i, k] * L[j, k]
-            if i == j:
-                if c <= 0.0:
-                    return False
-                L[j, j] = np.sqrt(c)
-            else:
-                L[i, j] = c / L[j, j]
+            L[i, j] = c / ljj
     return True
 
 
@@ -401,12 +409,27 @@ def _correct_kernel(
             acc -= H[i, k] * x[k]
         nu[i] = acc
         nu_w[i] = acc
-        for j in range(n):
-            acc = 0.0
-            for k in range(n):
-                acc += H[i, k] * P[k, j]
-            HP[i, j] = acc
-            W[i, j] = acc
+        j = 0
+        while j < n:  # (each sum over k in order, four of them at a time)
+            if j + 4 <= n:
+                a0 = a1 = a2 = a3 = 0.0
+                for k in range(n):
+                    h = H[i, k]
+                    a0 += h * P[k, j]
+                    a1 += h * P[k, j + 1]
+                    a2 += h * P[k, j + 2]
+                    a3 += h * P[k, j + 3]
+                HP[i, j] = W[i, j] = a0
+                HP[i, j + 1] = W[i, j + 1] = a1
+                HP[i, j + 2] = W[i, j + 2] = a2
+                HP[i, j + 3] = W[i, j + 3] = a3
+                j += 4
+            else:
+                acc = 0.0
+                for k in range(n):
+                    acc += H[i, k] * P[k, j]
+                HP[i, j] = W[i, j] = acc
+                j += 1
     S = np.empty((m, m))
     for i in range(m):  # (8) S = H P H^T + R, symmetrised
         for j in range(i + 1):
@@ -466,11 +489,31 @@ def _correct_kernel(
                 acc -= W[k, i] * HP[k, j]
             AP[i, j] = acc
     G = np.empty((n, m))  # (A P) H^T - K R
+    for k in range(m):
+        i = 0
+        while i < n:  # (each sum over j in order, four of them at a time)
+            if i + 4 <= n:
+                a0 = a1 = a2 = a3 = 0.0
+                for j in range(n):
+                    h = H[k, j]
+                    a0 += AP[i, j] * h
+                    a1 += AP[i + 1, j] * h
+                    a2 += AP[i + 2, j] * h
+                    a3 += AP[i + 3, j] * h
+                G[i, k] = a0
+                G[i + 1, k] = a1
+                G[i + 2, k] = a2
+                G[i + 3, k] = a3
+                i += 4
+            else:
+                acc = 0.0
+                for j in range(n):
+                    acc += AP[i, j] * H[k, j]
+                G[i, k] = acc
+                i += 1
     for i in range(n):
         for k in range(m):
-            acc = 0.0
-            for j in range(n):
-                acc += AP[i, j] * H[k, j]
+            acc = G[i, k]
             for j in range(m):
                 acc -= W[j, i] * R[j, k]
             G[i, k] = acc
