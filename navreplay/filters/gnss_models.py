@@ -178,15 +178,8 @@ def feedback(nav: np.ndarray, dx: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
     out[2] -= dx[2]
     for i in range(3):
         out[3 + i] -= dx[3 + i]
-    r0, r1, r2, r3 = kernels.quat_mult(1.0, 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8],
-                                       out[6], out[7], out[8], out[9])
-    k = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
-    if r0 < 0.0:
-        k = -k
-    out[6] = r0 * k
-    out[7] = r1 * k
-    out[8] = r2 * k
-    out[9] = r3 * k
+    out[6], out[7], out[8], out[9] = kernels.correct_quat(
+        0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8], out[6], out[7], out[8], out[9])
     for i in range(3):
         b_a[i] -= dx[9 + i]
         b_g[i] -= dx[12 + i]

@@ -484,14 +484,7 @@ def apply_correction(
     out[2] -= dx[2] if vertical is Vertical.HEIGHT else -dx[2]
     out[NAV_VEL] -= dx[VEL]
     a, b, c = (0.5 * dx[ATT]).tolist()
-    r0, r1, r2, r3 = kernels.quat_mult(1.0, a, b, c, *out[NAV_Q].tolist())  # [1, phi/2] (x) q
-    k = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
-    if r0 < 0.0:
-        k = -k
-    out[6] = r0 * k
-    out[7] = r1 * k
-    out[8] = r2 * k
-    out[9] = r3 * k
+    out[NAV_Q] = kernels.correct_quat(a, b, c, *out[NAV_Q].tolist())  # [1, phi/2] (x) q
     return out
 
 

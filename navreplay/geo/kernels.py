@@ -176,6 +176,17 @@ def quat_mult(p0, p1, p2, p3, q0, q1, q2, q3):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
+def correct_quat(a, b, c, q0, q1, q2, q3):
+    """Attitude feedback of a small error phi = 2 (a, b, c): ``[1, a, b, c] (x) q``
+    normalised, its scalar part made non-negative."""
+    r0, r1, r2, r3 = quat_mult(1.0, a, b, c, q0, q1, q2, q3)
+    k = 1.0 / math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    if r0 < 0.0:
+        k = -k
+    return r0 * k, r1 * k, r2 * k, r3 * k
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _dcm(q0, q1, q2, q3):
     """The nine entries of C(q), row by row."""
     return (
