@@ -378,7 +378,8 @@ def test_params_validation_and_model_spelling():
         VectorMatchingParams(tau=0.0)
     # the variants' values for what is left unset; explicit values win
     d, paper = VectorMatchingParams(), VectorMatchingParams(variant="paper")
-    assert d.variant is Variant.CONSISTENT and math.isinf(d.tau) and d.mag_bias_sigma == pytest.approx(300e-9)
+    assert d.variant is Variant.CONSISTENT and math.isinf(d.tau)
+    assert d.mag_bias_sigma == pytest.approx(300e-9)
     assert d.manoeuvre_threshold == pytest.approx(38.26, abs=0.01)  # chi-square(6), 1e-6
     assert paper.tau == 10.0 and paper.mag_bias_sigma == 0.0 and paper.manoeuvre_threshold == 0
     assert VectorMatchingParams(variant="paper", tau=5.0).tau == 5.0
@@ -673,7 +674,8 @@ def test_paper_model_trusts_the_magnetometer_twenty_times_too_much():
 def test_manoeuvre_test_adds_the_process_noise_only_in_the_turns():
     """At rest the attitude is held (no process noise: the sigma shrinks epoch by epoch); in
     the yaw turns each epoch's NIS without process noise rejects "no rotation" and the epoch
-    gets it: the predicted field residual widens from about 300 nT (the bias) to 4000 nT there only."""
+    gets it: the predicted field residual widens from about 300 nT (the bias) to 4000 nT there
+    only."""
     rec = simulate("gimpo-accel-yaw", {"case": "x"}, seed=5)
     res = replay(rec, VectorMatchingFilter, {})
     k = last_per_epoch(res.t)

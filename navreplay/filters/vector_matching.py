@@ -118,9 +118,10 @@ Two code paths, one model
 -------------------------
 :class:`VectorMatchingFilter` is the reference: it runs through the replay engine, one epoch at
 a time, with the shared :func:`navreplay.filters.kalman.correct`. :func:`run_batch` runs the
-same epochs of the ``paper`` variant (the reproduction's) for many synchronous runs at once (arrays with a leading run axis) for Monte Carlo
-campaigns; it calls the same model functions (:func:`process_noise`, :func:`gps_acceleration`,
-:func:`measurement`, :func:`triad`, :func:`feedback`) and differs only in doing the Kalman
+same epochs of the ``paper`` variant (the reproduction's) for many synchronous runs at once
+(arrays with a leading run axis) for Monte Carlo campaigns; it calls the same model functions
+(:func:`process_noise`, :func:`gps_acceleration`, :func:`measurement`, :func:`triad`,
+:func:`feedback`) and differs only in doing the Kalman
 prediction and correction for a stack of runs (:func:`navreplay.filters.kalman.predict_batch`
 and :func:`navreplay.filters.kalman.correct_batch`, the same equations as
 :func:`navreplay.filters.kalman.predict` and :func:`navreplay.filters.kalman.correct`).
@@ -225,10 +226,9 @@ SCALE_FACTOR_SIGMA = 1e-3
 """Accelerometer and magnetometer scale-factor error of Table 1, 1-sigma per axis: 0.1 %."""
 
 # consider states of the consistent variant (module docstring)
-BA, SA, BM, SM = slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
-"""Accelerometer bias and scale factor, magnetometer bias and scale factor."""
 SENSOR = slice(3, 15)
-"""The twelve sensor constants."""
+"""The twelve sensor constants: accelerometer bias and scale factor, magnetometer bias and
+scale factor (3 each, body frame)."""
 W_PREV = slice(15, 18)
 """GNSS velocity error of the previous epoch."""
 N_CONSISTENT = 18
