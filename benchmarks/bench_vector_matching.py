@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from navreplay.filters.vector_matching import (
+    Variant,
     VectorMatchingFilter,
     VectorMatchingParams,
     reference,
@@ -46,8 +47,8 @@ def reference_path(name: str, values: dict, seeds: range) -> dict[str, float]:
         t0 = time.perf_counter()
         rec = simulate(name, values, seed)
         t1 = time.perf_counter()
-        results = [replay(rec, VectorMatchingFilter, {"model": str(m)}, output_rate=None)
-                   for m in MODELS]
+        results = [replay(rec, VectorMatchingFilter, {"variant": "paper", "model": str(m)},
+                          output_rate=None) for m in MODELS]
         t2 = time.perf_counter()
         q_true = rec["truth"]["q_nb"]
         for res in results:
@@ -74,7 +75,7 @@ def fast_path(name: str, values: dict, seeds: range) -> dict[str, float]:
     t1 = time.perf_counter()
     estimates = []
     for m in MODELS:
-        fp = VectorMatchingParams(model=m)
+        fp = VectorMatchingParams(variant=Variant.PAPER, model=m)
         ref = reference(fp, {"earth_field_n": truth.h_n}, {"pos": [p.lat, p.lon, p.height]})
         estimates.append(run_batch(fp, ref, truth.t, data.f_b, data.m_b, data.v_n,
                                    data.vel_sigma))

@@ -57,7 +57,7 @@ E8): the conventional model drops ``+2[a_n x] q_ev``. Eq. (29) is the same updat
 matrix throughout (never z_g with H_f: E6). The residual, the noise, the process model and the
 initialisation are the same for both models: the model only chooses u_n.
 
-Noise (11), (15), E3, E5, E10::
+Noise (11), (15), E3, E5, E10, variant ``paper``::
 
     R_g = diag(s_v(k)^2 + s_v(k-1)^2) / dt^2 + s_f^2 I3     (= (2/dt^2) s_v^2 + s_f^2 for constant s_v)
     R_h = C_nb_hat (s_h^2 I3) C_nb_hat^T = s_h^2 I3
@@ -76,8 +76,34 @@ Update and feedback (docs/methods/vector-matching.md §4.4)
 
 C_nb_hat is the one from before the correction; no iterations (plain EKF).
 
+Variant ``consistent`` (the default; docs/methods/vector-matching.md §4.6)
+-------------------------------------------------------------------------
+The same attitude states, residual and feedback, with each sensor error modelled as what it is.
+The covariance carries 15 more states that the update never corrects (Schmidt consider states:
+their rows of K are 0)::
+
+    index  symbol     unit    meaning (body frame; constant over a run)
+    3-5    b_a        m/s^2   accelerometer bias
+    6-8    s_a        -       accelerometer scale-factor error
+    9-11   b_m        T       magnetometer (hard-iron) bias
+    12-14  s_m        -       magnetometer scale-factor error
+    15-17  w_v(k-1)   m/s     GNSS velocity error of the previous epoch (white from epoch to epoch)
+
+    z_g = -2[u_n x] q_ev + C_nb_hat (b_a + diag(f_b) s_a) + (w_v(k-1) - w_v(k)) / dt + n_f
+    z_h = -2[h_n x] q_ev - C_nb_hat (b_m + diag(m_b) s_m) + n_h
+    R   = blkdiag(s_f^2 I3, s_h^2 I3)
+
+w_v(k) joins the state for the update (variance vel_sigma(k)^2) and replaces w_v(k-1) after it:
+the backward difference (13) shares each GNSS error between two epochs. The nominal attitude is
+held, so its error does not decay: tau = inf, Phi = I, Q_d = q_w dt I3 (a random walk). Q_d is
+added only at an epoch whose NIS without it rejects "no rotation since the last epoch" at the
+false-alarm probability ``manoeuvre_false_alarm``; the epoch is then updated again with it. The
+initial fix is the TRIAD attitude corrected by the first epoch's measurement (at rest: a_n = 0)
+from a prior of p0_sigma, which gives P its correlation with the sensor constants.
+
 Initialisation (navreplay's choice): TRIAD at the first complete epoch, which must be at rest:
-primary pair (-g_n/|g_n|, f_b/|f_b|), secondary pair (h_n, m_b); P0 = p0_sigma^2 I3.
+primary pair (-g_n/|g_n|, f_b/|f_b|), secondary pair (h_n, m_b); variant ``paper``:
+P0 = p0_sigma^2 I3.
 
 Model-induced error diagnostic, eqs. (23)-(25) with E7 (gravity model only)::
 
@@ -85,23 +111,25 @@ Model-induced error diagnostic, eqs. (23)-(25) with E7 (gravity model only)::
 
 reported as the angle ``2 (dq_conv - dq_true)`` [rad].
 
-Dimensions: x 3, Phi and Q_d 3x3, z 6, H 6x3, R 6x6, K 3x6, P 3x3.
+Dimensions (paper): x 3, Phi and Q_d 3x3, z 6, H 6x3, R 6x6, K 3x6, P 3x3. Consistent: P 18x18
+(21x21 during the update, with H 6x21); the attitude block of P is the output.
 
 Two code paths, one model
 -------------------------
 :class:`VectorMatchingFilter` is the reference: it runs through the replay engine, one epoch at
 a time, with the shared :func:`navreplay.filters.kalman.correct`. :func:`run_batch` runs the
-same epochs for many synchronous runs at once (arrays with a leading run axis) for Monte Carlo
-campaigns; it calls the same model functions (:func:`process_noise`, :func:`gps_acceleration`,
-:func:`measurement`, :func:`triad`, :func:`feedback`) and differs only in doing the Kalman
+same epochs of the ``paper`` variant (the reproduction's) for many synchronous runs at once
+(arrays with a leading run axis) for Monte Carlo campaigns; it calls the same model functions
+(:func:`process_noise`, :func:`gps_acceleration`, :func:`measurement`, :func:`triad`,
+:func:`feedback`) and differs only in doing the Kalman
 prediction and correction for a stack of runs (:func:`navreplay.filters.kalman.predict_batch`
 and :func:`navreplay.filters.kalman.correct_batch`, the same equations as
 :func:`navreplay.filters.kalman.predict` and :func:`navreplay.filters.kalman.correct`).
 
 Outputs (:meth:`VectorMatchingFilter.estimate`)
 -----------------------------------------------
-``x`` is the error state after feedback (zero), ``P`` its covariance; ``nav`` is None (the
-filter estimates attitude only); extras:
+``x`` is the attitude error state after feedback (zero), ``P`` its covariance (3x3; the consider
+states stay inside the filter); ``nav`` is None (the filter estimates attitude only); extras:
 
 - ``q_nb`` (4,): attitude estimate, Hamilton scalar first;
 - ``euler`` (3,) [rad]: roll, pitch, yaw of ``q_nb``;
@@ -133,6 +161,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from navreplay import chi2
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
@@ -195,13 +224,45 @@ MAG_BIAS_SIGMA = 0.003 * GAUSS
 """Magnetometer initial bias of Table 1, 1-sigma per axis: 0.003 G = 300 nT [T]."""
 SCALE_FACTOR_SIGMA = 1e-3
 """Accelerometer and magnetometer scale-factor error of Table 1, 1-sigma per axis: 0.1 %."""
-CONSIDER_PARAMS = ("accel_bias_sigma", "accel_scale_factor_sigma", "mag_bias_sigma",
-                   "mag_scale_factor_sigma")
-"""Parameters of the sensor errors that R can carry as consider terms (all 0 in the paper)."""
-CONSISTENT = {"accel_bias_sigma": ACCEL_BIAS_SIGMA, "accel_scale_factor_sigma": SCALE_FACTOR_SIGMA,
-              "mag_bias_sigma": MAG_BIAS_SIGMA, "mag_scale_factor_sigma": SCALE_FACTOR_SIGMA}
-"""The consider terms at the Table 1 values: the variant whose covariance and innovations
-are consistent with the simulated sensors (``VectorMatchingParams(**CONSISTENT)``)."""
+
+# consider states of the consistent variant (module docstring)
+SENSOR = slice(3, 15)
+"""The twelve sensor constants: accelerometer bias and scale factor, magnetometer bias and
+scale factor (3 each, body frame)."""
+W_PREV = slice(15, 18)
+"""GNSS velocity error of the previous epoch."""
+N_CONSISTENT = 18
+"""States of the consistent variant between updates (21 during one: w_v(k) appended)."""
+FIX_ITERATIONS = 2
+"""Relinearisations of a fix from a wide prior (consistent variant): a 5 deg prior error leaves
+a second-order residual of ~160 nT in z_h, ten times the magnetometer noise."""
+
+
+class Variant(enum.StrEnum):
+    """Noise and process model of the filter (docs/methods/vector-matching.md §4.6)."""
+
+    CONSISTENT = "consistent"
+    """Sensor constants and GNSS velocity errors as consider states, attitude held unless the
+    innovation shows a rotation: the covariance and innovations are consistent."""
+    PAPER = "paper"
+    """The paper's model: 3 states, white-noise R, Gauss-Markov process noise at every epoch
+    (the reproduction's)."""
+
+
+VARIANT_DEFAULTS = {
+    Variant.CONSISTENT: {"tau": math.inf, "manoeuvre_false_alarm": 1e-6, "p0_sigma": 5.0 * DEG,
+                         "accel_bias_sigma": ACCEL_BIAS_SIGMA,
+                         "accel_scale_factor_sigma": SCALE_FACTOR_SIGMA,
+                         "mag_bias_sigma": MAG_BIAS_SIGMA,
+                         "mag_scale_factor_sigma": SCALE_FACTOR_SIGMA},
+    Variant.PAPER: {"tau": 10.0, "manoeuvre_false_alarm": 0.0, "p0_sigma": 0.5 * DEG,
+                    "accel_bias_sigma": 0.0, "accel_scale_factor_sigma": 0.0,
+                    "mag_bias_sigma": 0.0, "mag_scale_factor_sigma": 0.0},
+}
+"""Values of the parameters left unset (None), per variant."""
+SENSOR_PARAMS = ("accel_bias_sigma", "accel_scale_factor_sigma", "mag_bias_sigma",
+                 "mag_scale_factor_sigma")
+"""The sensor-constant sigmas of the consider states (variant ``consistent`` only)."""
 
 
 class MatchModel(enum.StrEnum):
@@ -225,32 +286,44 @@ class MatchModel(enum.StrEnum):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class VectorMatchingParams(FilterParams):
-    """Parameters of :class:`VectorMatchingFilter` (SI)."""
+    """Parameters of :class:`VectorMatchingFilter` (SI). Those left None take the value of the
+    variant (:data:`VARIANT_DEFAULTS`)."""
 
+    variant: Variant = Variant.CONSISTENT
+    """``consistent`` (sensor errors as consider states, attitude held between manoeuvres) or
+    ``paper`` (the published model, as reproduced)."""
     model: MatchModel = MatchModel.SPECIFIC_FORCE
     """Acceleration measurement model: ``gravity`` (conventional) or ``specific-force``."""
-    tau: float = 10.0
-    """Correlation time of the attitude-error Gauss-Markov process [s] (navreplay's choice; the
-    paper gives none)."""
+    tau: float | None = None
+    """Correlation time of the attitude-error Gauss-Markov process [s]; inf: a random walk.
+    Paper: 10 s (navreplay's choice; the paper gives none); consistent: inf (the nominal
+    attitude is held, so nothing pulls its error back)."""
     q_w: float = 0.01
-    """Power spectral density of the Gauss-Markov driving noise [1/s] (navreplay's choice; the
-    paper gives none)."""
+    """Power spectral density of the attitude-error driving noise [1/s]: the unknown rotation
+    of the vehicle (navreplay's choice; the paper gives none)."""
+    manoeuvre_false_alarm: float | None = None
+    """0: add the process noise at every epoch (paper). > 0: add it only where the NIS without
+    it rejects "no rotation since the last epoch" at this false-alarm probability (consistent:
+    1e-6)."""
     accel_noise_sigma: float = ACCEL_NOISE_SIGMA
     """Accelerometer white noise, 1-sigma per sample and axis [m/s^2] (s_f of eq. 15)."""
     mag_noise_sigma: float = MAG_NOISE_SIGMA
     """Magnetometer white noise, 1-sigma per sample and axis [T] (s_h of eq. 11)."""
-    accel_bias_sigma: float = 0.0
-    """Accelerometer bias, 1-sigma per axis, carried in R_g as a consider term [m/s^2]; 0: the
-    paper's R (sensor noise only). The paper's Table 1 value is :data:`ACCEL_BIAS_SIGMA`."""
-    accel_scale_factor_sigma: float = 0.0
-    """Accelerometer scale-factor error, 1-sigma per axis, consider term in R_g [-]."""
-    mag_bias_sigma: float = 0.0
-    """Magnetometer (hard-iron) bias, 1-sigma per axis, consider term in R_h [T]; 0: the paper's
-    R. Table 1: :data:`MAG_BIAS_SIGMA`."""
-    mag_scale_factor_sigma: float = 0.0
-    """Magnetometer scale-factor error, 1-sigma per axis, consider term in R_h [-]."""
-    p0_sigma: float = 0.5 * DEG
-    """Initial 1-sigma of each q_ev component after TRIAD [-] (half of 1 deg in rad)."""
+    accel_bias_sigma: float | None = None
+    """Accelerometer bias, 1-sigma per axis, a consider state [m/s^2] (consistent: the Table 1
+    value :data:`ACCEL_BIAS_SIGMA`; paper: 0, not modelled)."""
+    accel_scale_factor_sigma: float | None = None
+    """Accelerometer scale-factor error, 1-sigma per axis, a consider state [-] (consistent:
+    :data:`SCALE_FACTOR_SIGMA`)."""
+    mag_bias_sigma: float | None = None
+    """Magnetometer (hard-iron) bias, 1-sigma per axis, a consider state [T] (consistent:
+    :data:`MAG_BIAS_SIGMA`)."""
+    mag_scale_factor_sigma: float | None = None
+    """Magnetometer scale-factor error, 1-sigma per axis, a consider state [-] (consistent:
+    :data:`SCALE_FACTOR_SIGMA`)."""
+    p0_sigma: float | None = None
+    """Paper: initial 1-sigma of each q_ev component after TRIAD [-] (0.5 deg in rad: 1 deg of
+    angle). Consistent: the prior of the initial fix (5 deg: 10 deg of angle)."""
     earth_field_n: tuple[float, float, float] | None = None
     """Reference geomagnetic field N, E, D [T]; None: the recording's
     ``metadata.extra["earth_field_n"]`` (the field model the recording was made with)."""
@@ -261,14 +334,23 @@ class VectorMatchingParams(FilterParams):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "model", MatchModel(self.model))
-        for name in ("tau", "accel_noise_sigma", "mag_noise_sigma", "p0_sigma",
-                     "sync_tolerance"):
+        object.__setattr__(self, "variant", Variant(self.variant))
+        if self.variant is Variant.PAPER:
+            for name in SENSOR_PARAMS:
+                if getattr(self, name):
+                    raise ValueError(f"{name} is a consider state of variant=consistent; "
+                                     f"variant=paper has none")
+        for name, value in VARIANT_DEFAULTS[self.variant].items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
+        if not (isinstance(self.tau, (int, float)) and self.tau > 0.0
+                and not math.isnan(self.tau)):
+            raise ValueError(f"tau must be > 0 (inf: a random walk), got {self.tau!r}")
+        for name in ("accel_noise_sigma", "mag_noise_sigma", "p0_sigma", "sync_tolerance"):
             check_number(self, name, positive=True)
-        check_number(self, "q_w")
-        for name in CONSIDER_PARAMS:
+        for name in (*SENSOR_PARAMS, "q_w"):
             check_number(self, name)
-            if getattr(self, name) < 0.0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        check_number(self, "manoeuvre_false_alarm", upper=1.0)
         if self.earth_field_n is not None:
             h = np.asarray(self.earth_field_n, dtype=float)
             if h.shape != (3,) or not np.all(np.isfinite(h)) or not np.any(h):
@@ -278,6 +360,12 @@ class VectorMatchingParams(FilterParams):
                 )
             object.__setattr__(self, "earth_field_n", tuple(float(v) for v in h))
         check_number(self, "gravity", positive=True)
+
+    @property
+    def manoeuvre_threshold(self) -> float:
+        """NIS above which an epoch gets the process noise (inf: never; 0: always)."""
+        a = self.manoeuvre_false_alarm
+        return 0.0 if a == 0.0 else (math.inf if a >= 1.0 else chi2.ppf(1.0 - a, N_MEAS))
 
 
 class Reference(NamedTuple):
@@ -325,7 +413,7 @@ def process_noise(dt: float | np.ndarray, tau: float, q_w: float) -> tuple[Any, 
     dt : float or ndarray
         Step [s].
     tau : float
-        Correlation time [s].
+        Correlation time [s]; inf: a random walk (``phi = 1``, ``qd = q_w dt``).
     q_w : float
         Driving-noise power spectral density [1/s].
 
@@ -340,8 +428,11 @@ def process_noise(dt: float | np.ndarray, tau: float, q_w: float) -> tuple[Any, 
     >>> round(float(qd), 7)
     0.0024385
     """
-    phi = np.exp(-np.asarray(dt, dtype=float) / tau)
-    qd = 0.5 * q_w * tau * -np.expm1(-2.0 * np.asarray(dt, dtype=float) / tau)
+    dt = np.asarray(dt, dtype=float)
+    if math.isinf(tau):  # random walk
+        return np.ones_like(dt), q_w * dt
+    phi = np.exp(-dt / tau)
+    qd = 0.5 * q_w * tau * -np.expm1(-2.0 * dt / tau)
     return phi, qd
 
 
@@ -440,47 +531,56 @@ def measurement_noise(
     return R
 
 
-def sensor_error_noise(
-    params: VectorMatchingParams, C_nb_hat: np.ndarray, f_b: np.ndarray, m_b: np.ndarray
+def consider_columns(
+    C_nb_hat: np.ndarray, f_b: np.ndarray, m_b: np.ndarray, dt: Any
 ) -> np.ndarray:
-    """Covariance that the accelerometer and magnetometer biases and scale factors add to z,
-    as consider terms (they are not states).
+    """Columns of H for the consider states of the consistent variant, states 3-20.
 
-    A bias b and a scale-factor error s of a sensor reading u_b enter the residuals (14) and
-    (10) as ``C_nb_hat (b + diag(s) u_b)``, so::
-
-        R_g += s_ba^2 I3 + s_sa^2 C_nb_hat diag(f_b^2) C_nb_hat^T
-        R_h += s_bm^2 I3 + s_sm^2 C_nb_hat diag(m_b^2) C_nb_hat^T
-
-    Treating these constants as white is close to exact here: the process noise that stands
-    in for the gyros (about 5.6 deg per 0.25 s step at the default tuning) leaves the prior
-    far wider than one epoch's measurement, so each epoch's attitude is nearly that epoch's
-    own fix and the errors of successive epochs are not averaged.
+    A bias b and a scale-factor error s of a reading u_b enter the residuals (14) and (10) as
+    ``+C_nb_hat (b + diag(s) u_b)`` (accelerometer) and ``-C_nb_hat (b + diag(s) u_b)``
+    (magnetometer); the GNSS velocity errors w_v enter a_hat_n of eq. (13), so z_g, as
+    ``(w_v(k-1) - w_v(k)) / dt``.
 
     Parameters
     ----------
-    params : VectorMatchingParams
-        Its ``accel_bias_sigma``, ``accel_scale_factor_sigma``, ``mag_bias_sigma``,
-        ``mag_scale_factor_sigma``.
-    C_nb_hat : ndarray, shape (..., 3, 3)
-    f_b, m_b : ndarray, shape (..., 3)
+    C_nb_hat : ndarray, shape (3, 3)
+    f_b, m_b : ndarray, shape (3,)
         Accelerometer [m/s^2] and magnetometer [T] readings.
+    dt : float
+        t_k - t_k-1 [s]; 0: the first epoch, with no GNSS difference.
 
     Returns
     -------
-    ndarray, shape (..., 6, 6)
-        Block diagonal, [(m/s^2)^2] and [T^2].
+    ndarray, shape (6, 18)
+        d z / d [b_a, s_a, b_m, s_m, w_v(k-1), w_v(k)].
     """
-    shape = np.broadcast_shapes(C_nb_hat.shape[:-2], f_b.shape[:-1], m_b.shape[:-1])
-    R = np.zeros(shape + (N_MEAS, N_MEAS))
-    CT = np.swapaxes(C_nb_hat, -1, -2)
-    for rows, u_b, bias, scale in ((Z_G, f_b, params.accel_bias_sigma,
-                                    params.accel_scale_factor_sigma),
-                                   (Z_H, m_b, params.mag_bias_sigma,
-                                    params.mag_scale_factor_sigma)):
-        R[..., rows, rows] = (bias**2 * np.eye(3)
-                              + scale**2 * (C_nb_hat * (u_b**2)[..., None, :]) @ CT)
-    return R
+    H = np.zeros((N_MEAS, 18))  # 12 sensor constants, w_v(k-1), w_v(k)
+    H[Z_G, 0:3] = C_nb_hat
+    H[Z_G, 3:6] = C_nb_hat * f_b
+    H[Z_H, 6:9] = -C_nb_hat
+    H[Z_H, 9:12] = -C_nb_hat * m_b
+    if dt:
+        H[Z_G, 12:15] = np.eye(3) / dt
+        H[Z_G, 15:18] = -np.eye(3) / dt
+    return H
+
+
+def held_prediction(P: np.ndarray, phi: float, qd: float) -> np.ndarray:
+    """Prediction of the consistent variant's covariance: the attitude rows and columns scaled
+    by ``phi`` (1 for the random walk), ``qd I3`` added to the attitude block; the consider
+    states are constant."""
+    P = P.copy()
+    P[QE, :] *= phi
+    P[:, QE] *= phi
+    P[QE, QE] += qd * np.eye(3)
+    return P
+
+
+def consider_covariance(params: VectorMatchingParams) -> np.ndarray:
+    """Covariance of the twelve sensor constants (diagonal), shape (12, 12)."""
+    sig = np.repeat([params.accel_bias_sigma, params.accel_scale_factor_sigma,
+                     params.mag_bias_sigma, params.mag_scale_factor_sigma], 3)
+    return np.diag(sig**2)
 
 
 def epoch_measurement(
@@ -495,8 +595,8 @@ def epoch_measurement(
     vel_sigma_prev: np.ndarray,
     dt: float,
 ) -> tuple[kalman.Measurement, np.ndarray]:
-    """The measurement of an epoch, eqs. (10)-(15), (28): ``(z, H, R)`` and the GNSS
-    acceleration a_n of eq. (13) it used; leading axes (...) for a stack of runs.
+    """The measurement of an epoch of the paper variant, eqs. (10)-(15), (28): ``(z, H, R)``
+    and the GNSS acceleration a_n of eq. (13) it used; leading axes (...) for a stack of runs.
 
     Parameters
     ----------
@@ -517,8 +617,6 @@ def epoch_measurement(
     z, H = measurement(params.model, C_nb_hat, f_b, m_b, a_n, ref.g_n, ref.h_n)
     R = measurement_noise(vel_sigma, vel_sigma_prev, dt, params.accel_noise_sigma,
                           params.mag_noise_sigma)
-    if any(getattr(params, name) for name in CONSIDER_PARAMS):
-        R = sensor_error_noise(params, C_nb_hat, f_b, m_b) + R[..., None] * np.eye(N_MEAS)
     return kalman.Measurement(z, H, R), a_n
 
 
@@ -738,11 +836,11 @@ class VectorMatchingFilter(Filter):
         extras = {
             "q_nb": self.q_nb.copy(),
             "euler": euler,
-            "euler_sigma": euler_sigma(euler, self.P),
+            "euler_sigma": euler_sigma(euler, self.P[QE, QE]),
         }
         if self.params.model is MatchModel.GRAVITY:
             extras["model_induced_phi"] = self._diag.copy()
-        return Estimate(self.t, np.zeros(N_STATES), self.P.copy(), None, extras)
+        return Estimate(self.t, np.zeros(N_STATES), self.P[QE, QE].copy(), None, extras)
 
     # -- epochs
 
@@ -767,8 +865,18 @@ class VectorMatchingFilter(Filter):
         return [self._epoch(cur)]
 
     def _initialise(self, cur: EpochSample) -> None:
+        p = self.params
         self.q_nb = triad(cur.f_b, cur.m_b, self.ref.g_n, self.ref.h_n)
-        self.P = self.params.p0_sigma**2 * np.eye(N_STATES)
+        if p.variant is Variant.PAPER:
+            self.P = p.p0_sigma**2 * np.eye(N_STATES)
+        else:
+            # the first fix: TRIAD corrected by this epoch's measurement from a wide prior, at
+            # rest (a_n = 0, no GNSS difference): P learns its correlation with the constants
+            P = np.zeros((N_CONSISTENT, N_CONSISTENT))
+            P[QE, QE] = p.p0_sigma**2 * np.eye(3)
+            P[SENSOR, SENSOR] = consider_covariance(p)
+            P[W_PREV, W_PREV] = np.diag(cur.vel_sigma**2)
+            self._consider_update(P, cur, np.zeros(3), 0.0, None)
         self.t = float(cur.t)
         self._prev = cur
         self._estimate = None
@@ -777,8 +885,16 @@ class VectorMatchingFilter(Filter):
         """An epoch without an accelerometer sample (IMU gap): predict only."""
         p = self.params
         phi, qd = process_noise(float(cur.t) - float(self._prev.t), p.tau, p.q_w)  # (16)-(18)
-        _, self.P = kalman.predict(np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
-                                   float(qd) * np.eye(N_STATES), t=cur.t)
+        if p.variant is Variant.PAPER:
+            _, self.P = kalman.predict(np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
+                                       float(qd) * np.eye(N_STATES), t=cur.t)
+        else:
+            # no measurement tests the rotation over a gap: the process noise applies; this
+            # epoch's GNSS velocity becomes the previous one, with a fresh error
+            self.P = held_prediction(self.P, float(phi), float(qd))
+            self.P[W_PREV, :] = 0.0
+            self.P[:, W_PREV] = 0.0
+            self.P[W_PREV, W_PREV] = np.diag(cur.vel_sigma**2)
         self.t = float(cur.t)
         self._prev = cur
         self._estimate = None
@@ -789,21 +905,69 @@ class VectorMatchingFilter(Filter):
         assert prev is not None and self.q_nb is not None
         dt = float(cur.t) - float(prev.t)
         phi, qd = process_noise(dt, p.tau, p.q_w)  # (16)-(18)
-        _, P = kalman.predict(
-            np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
-            float(qd) * np.eye(N_STATES), t=cur.t,
-        )
-        m, a_n = epoch_measurement(p, self.ref, quat_to_dcm(self.q_nb), cur.f_b, cur.m_b,
-                                   cur.v_n, prev.v_n, cur.vel_sigma, prev.vel_sigma, dt)
-        c = kalman.correct(np.zeros(N_STATES), P, *m, t=cur.t)
-        self.q_nb = feedback(self.q_nb, c.x[QE])  # x_hat <- 0
-        self.P = c.P
-        if p.model is MatchModel.GRAVITY:
-            self._diag = model_induced_error(m.z, a_n, self.ref.g_n, self.ref.h_n)
+        if p.variant is Variant.CONSISTENT:
+            a_n = gps_acceleration(cur.v_n, prev.v_n, dt)  # (13)
+            c = self._consider_update(held_prediction(self.P, float(phi), 0.0), cur, a_n, dt,
+                                      float(qd))
+        else:
+            _, P = kalman.predict(
+                np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
+                float(qd) * np.eye(N_STATES), t=cur.t,
+            )
+            m, a_n = epoch_measurement(p, self.ref, quat_to_dcm(self.q_nb), cur.f_b, cur.m_b,
+                                       cur.v_n, prev.v_n, cur.vel_sigma, prev.vel_sigma, dt)
+            c = kalman.correct(np.zeros(N_STATES), P, *m, t=cur.t)
+            self.q_nb = feedback(self.q_nb, c.x[QE])  # x_hat <- 0
+            self.P = c.P
+            if p.model is MatchModel.GRAVITY:
+                self._diag = model_induced_error(m.z, a_n, self.ref.g_n, self.ref.h_n)
         self.t = float(cur.t)
         self._prev = cur
         self._estimate = None
         return c.innovation("vector", self.t)
+
+    def _consider_update(self, P: np.ndarray, cur: EpochSample, a_n: np.ndarray, dt: float,
+                         qd: float | None) -> kalman.Correction:
+        """Update of the consistent variant (module docstring): P (18x18) predicted without
+        process noise; ``qd`` is added (and the update redone) when the NIS rejects "no
+        rotation" (None: never, the initial fix). A fix from a wide prior (a manoeuvre, the
+        initial fix) is iterated: the residual is relinearised at the corrected attitude
+        (:data:`FIX_ITERATIONS` times). Sets q_nb, P and the diagnostic; returns the
+        correction whose innovation is that of the prior."""
+        p = self.params
+        assert self.q_nb is not None
+        R = np.r_[np.full(3, p.accel_noise_sigma**2), np.full(3, p.mag_noise_sigma**2)]
+        Pa = np.zeros((N_CONSISTENT + 3, N_CONSISTENT + 3))
+        Pa[:N_CONSISTENT, :N_CONSISTENT] = P
+        Pa[N_CONSISTENT:, N_CONSISTENT:] = np.diag(cur.vel_sigma**2)  # w_v(k)
+        frozen = np.arange(N_CONSISTENT + 3) >= 3
+        x = np.zeros(N_CONSISTENT + 3)
+
+        def correct(q_nb: np.ndarray) -> kalman.Correction:
+            C = quat_to_dcm(q_nb)
+            z, H_q = measurement(p.model, C, cur.f_b, cur.m_b, a_n, self.ref.g_n, self.ref.h_n)
+            H = np.concatenate([H_q, consider_columns(C, cur.f_b, cur.m_b, dt)], axis=1)
+            return kalman.correct(x, Pa, z, H, R, frozen=frozen, t=cur.t)
+
+        c = correct(self.q_nb) if qd is None or p.manoeuvre_threshold > 0.0 else None
+        wide = qd is None
+        if qd is not None and (c is None or c.nis > p.manoeuvre_threshold):
+            Pa[QE, QE] += qd * np.eye(3)  # the vehicle turned: unknown rotation since k-1
+            c = correct(self.q_nb)
+            wide = p.manoeuvre_threshold > 0.0
+        first = c
+        self.q_nb = feedback(self.q_nb, c.x[QE])  # x_hat <- 0
+        if wide:
+            x[QE] = -c.x[QE]  # the prior attitude, seen from the corrected one
+            for _ in range(FIX_ITERATIONS):
+                c = correct(self.q_nb)
+                self.q_nb = feedback(self.q_nb, c.x[QE])
+                x[QE] -= c.x[QE]
+        keep = np.r_[0:W_PREV.start, N_CONSISTENT:N_CONSISTENT + 3]  # w_v(k) -> w_v(k-1)
+        self.P = c.P[np.ix_(keep, keep)]
+        if p.model is MatchModel.GRAVITY:
+            self._diag = model_induced_error(first.nu, a_n, self.ref.g_n, self.ref.h_n)
+        return first
 
 
 def reference(
@@ -888,7 +1052,7 @@ def run_batch(
     """Run the filter over B synchronous recordings at once (the Monte Carlo fast path).
 
     Epoch 0 initialises by TRIAD; epochs 1..K-1 propagate and update exactly as
-    :class:`VectorMatchingFilter` does.
+    :class:`VectorMatchingFilter` does with ``variant=paper``.
 
     Parameters
     ----------
@@ -905,7 +1069,15 @@ def run_batch(
     Returns
     -------
     BatchEstimates
+
+    Raises
+    ------
+    ValueError
+        Inconsistent shapes, or ``params.variant`` is not ``paper``.
     """
+    if params.variant is not Variant.PAPER:
+        raise ValueError("run_batch runs variant=paper (the reproduction's model); the "
+                         "consistent variant runs in VectorMatchingFilter")
     t = np.asarray(t, dtype=float)
     B, K = f_b.shape[:2]
     for name, a in (("f_b", f_b), ("m_b", m_b), ("v_n", v_n), ("vel_sigma", vel_sigma)):

@@ -44,6 +44,7 @@ import numpy as np
 
 from navreplay.filters.vector_matching import (
     MatchModel,
+    Variant,
     VectorMatchingParams,
     reference,
     run_batch,
@@ -154,7 +155,7 @@ class YawCaseResult:
 
 
 def _filter_params() -> list[VectorMatchingParams]:
-    return [VectorMatchingParams(model=m) for m in MODELS]
+    return [VectorMatchingParams(variant=Variant.PAPER, model=m) for m in MODELS]
 
 
 def run_sweep_axis(axis: str, runs: int, seed: int) -> SweepAxisResult:
