@@ -260,3 +260,24 @@ def test_a_paused_aiding_stream_holds_no_imu_and_gives_the_whole_bits(paused) ->
     _assert_same(_streamed(path, held, output_rate=10.0), whole)
     per_window = max(np.diff(_imu_window_ends(path))) / 1e7  # IMU samples (100 Hz)
     assert max(held) <= per_window + 1  # not the 4000 samples of the pause
+
+
+# --------------------------------------------------------------------------------------------
+# frame checks: they say which span they averaged
+
+
+def test_frame_check_notes_name_the_span_they_averaged(drive, boundary) -> None:
+    """A streamed run checks the frames on its first window, a whole run on the whole log:
+    each note says which."""
+    path = boundary[0]
+    first_end = (_imu_window_ends(path)[0] - drive.t0_ns) * 1e-9
+    spans = []
+    for fn in (run._run_streamed, run._run_one):
+        (note,) = [n for n in fn(_job(path), None).notes
+                   if "magnetometer dip sign agrees with the WMM" in n]
+        found = re.search(r"averaged over t = ([\d.]+) to ([\d.]+) s\)", note)
+        assert found is not None, note
+        spans.append((float(found.group(1)), float(found.group(2))))
+    assert spans[0][0] == spans[1][0] < 0.2
+    assert spans[0][1] < first_end + 0.2 < 10.0  # the first window's magnetometer samples
+    assert spans[1][1] == pytest.approx(60.0, abs=0.2)  # all of them
