@@ -181,6 +181,11 @@ class RunningSummary:
             if acc is None:
                 acc = self._nis[name] = _Chi2(int(s.nu.shape[1]), self.probability)
             acc.add(s.nis)
+            for row, v in metrics.row_nis(block, name).items():
+                acc = self._nis.get(f"{name}.{row}")
+                if acc is None:
+                    acc = self._nis[f"{name}.{row}"] = _Chi2(1, self.probability)
+                acc.add(v)
         if block.t.size:
             self._pending.append(block)
             self._score()
