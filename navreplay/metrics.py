@@ -772,6 +772,9 @@ class EnsembleResult:
     nees_dof : int
     nees_bounds : tuple of ndarray (M,)
     nis_mean : dict[str, tuple[ndarray (K,) t, ndarray (K,) mean, ndarray (K,) count, int dof]]
+    nis_rows_mean : dict[str, dict[str, ndarray (K,)]]
+        Per measurement of several rows: each row's NIS (:func:`row_nis`) averaged over the
+        runs (the counts of ``nis_mean``).
     cep50 : ndarray, shape (M,)
         ``0.5887 (LatRMS + LongRMS)`` [m].
     distance : ndarray, shape (M,)
@@ -796,6 +799,7 @@ class EnsembleResult:
     nis_mean: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, int]]
     cep50: np.ndarray
     distance: np.ndarray
+    nis_rows_mean: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
 
     @property
     def dt_cep50(self) -> np.ndarray:
@@ -826,6 +830,8 @@ class EnsembleResult:
                       probability)
         for name, (_, m, c, dof) in self.nis_mean.items():
             _chi2_summary(out, "nis", f"_{name}", m, c, dof, probability)
+            for row, v in self.nis_rows_mean.get(name, {}).items():
+                _chi2_summary(out, "nis", f"_{name}.{row}", v, c, 1, probability)
         return out
 
 
@@ -857,6 +863,7 @@ class EnsembleStats:
         self._nees = _Acc()
         self._dist = _Acc()
         self._nis: dict[str, tuple[_Acc, list, int]] = {}
+        self._nis_rows: dict[str, dict[str, _Acc]] = {}
         self._state_names: tuple[str, ...] | None = None
         self._nees_states: tuple[str, ...] | None = None
         self._states: tuple[State, ...] = ()
@@ -894,6 +901,8 @@ class EnsembleStats:
             if t.shape[0] > tref[0].shape[0]:
                 tref[0] = t.copy()
             acc.add(v)
+            for row, w in m.nis_rows.get(name, {}).items():
+                self._nis_rows.setdefault(name, {}).setdefault(row, _Acc()).add(w)
         self.runs += 1
 
     def result(self) -> EnsembleResult:
@@ -939,4 +948,6 @@ class EnsembleStats:
                       for name, (acc, tref, d) in self._nis.items()},
             cep50=c50,
             distance=self._dist.mean(),
+            nis_rows_mean={name: {row: acc.mean() for row, acc in rows.items()}
+                           for name, rows in self._nis_rows.items()},
         )

@@ -77,3 +77,28 @@ def test_rows_scored_block_by_block_are_those_scored_whole() -> None:
     assert len(rows) == 9 and rows <= got.keys()
     for k in rows | {"nis_mean_gps_pos"}:
         assert got[k] == pytest.approx(want[k], rel=1e-12), k
+
+
+def test_rows_averaged_over_runs_in_the_ensemble_and_its_csv() -> None:
+    from navreplay.export import nis_columns
+
+    rng = np.random.default_rng(9)
+    K, runs = 200, 20
+    S = np.tile(np.diag([1.0, 1.0, 4.0]), (K, 1, 1))
+    stats = metrics.EnsembleStats()
+    for _ in range(runs):  # down row twice the filter's sigma
+        nu = rng.normal(size=(K, 3)) * [1.0, 1.0, 4.0]
+        stats.add(metrics.run_metrics(_result(nu, S), None))
+    ens = stats.result()
+    t, mean, count, dof = ens.nis_mean["gps_pos"]
+    rows = ens.nis_rows_mean["gps_pos"]
+    assert list(rows) == ["N", "E", "D"] and np.all(count == runs)
+    np.testing.assert_allclose(rows["N"] + rows["E"] + rows["D"], mean)  # S is diagonal
+    lo, hi = metrics.chi2_bounds(1, runs * K)
+    assert lo < rows["N"].mean() < hi and rows["D"].mean() == pytest.approx(4.0, rel=0.05)
+    s = ens.summary()
+    assert s["nis_dof_gps_pos.D"] == 1 and s["nis_in_bounds_gps_pos.D"] < 0.2
+    assert s["nis_in_bounds_gps_pos.E"] > 0.85
+    names = [c.name for c in nis_columns(t, mean, count, dof, rows)]
+    assert names[:5] == ["t", "nis_mean", "nis_lo", "nis_hi", "nis_runs"]
+    assert names[5:] == ["nis_mean.N", "nis_mean.E", "nis_mean.D", "nis_row_lo", "nis_row_hi"]
