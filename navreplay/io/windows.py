@@ -295,8 +295,7 @@ class _State:
         for kind, gaps in self.gaps.items():
             line = gaps.line(self.t0_ns)
             if line:
-                self.warnings.seen.setdefault(
-                    f"gaps {kind}", [f"{self.chosen[kind].label}: {line}", 1, -1])
+                self.warnings.add(f"{self.chosen[kind].label}: {line}", self.windows)
         self.warnings.emit()
 
 
