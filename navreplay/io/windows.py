@@ -296,7 +296,7 @@ class _State:
             line = gaps.line(self.t0_ns)
             if line:
                 self.warnings.add(f"{self.chosen[kind].label}: {line}", self.windows)
-        self.warnings.emit()
+        self.warnings.emit(self.windows)
 
 
 class _Gaps:
@@ -355,10 +355,12 @@ class _Warnings:
             entry[1] += 1
             entry[2] = window
 
-    def emit(self) -> None:
+    def emit(self, windows: int) -> None:
+        """Warn once per line; ``windows``: how many the read had."""
         for message, count, _ in self.seen.values():
             if count > 1:
-                message += f" (the same in {count} windows of the read; the first is shown)"
+                message += (f" (the same in {count} of the {windows} windows of the read; "
+                            "the first is shown)")
             warnings.warn(RecordingWarning(message), stacklevel=4)
         self.seen.clear()
 
