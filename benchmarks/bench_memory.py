@@ -8,12 +8,14 @@ the .rrd (written block by block); ``outputs`` is ``navreplay run gps-ins REC --
 --export DIR --report r.html`` (CSV, TUM and Odometry MCAP written and the report's series kept
 block by block; the files go to a temporary directory, removed afterwards); ``whole`` reads
 the recording whole and keeps every estimate, as a replay in memory does, for comparison in
-the same run.
+the same run. With ``--gps-pause SECONDS`` the recording has no GPS fix (position and
+velocity) for that long from ten minutes in: the streamed replay must not hold the IMU
+samples of the pause (the reader knows the stream up to its next fix from the chunk index).
 
 Usage::
 
     python -m benchmarks.bench_memory [--hours 1 4 24] [--modes streamed rrd outputs whole]
-                                      [--dir DIR]
+                                      [--dir DIR] [--gps-pause 3600]
 """
 
 from __future__ import annotations
@@ -40,6 +42,33 @@ def recording(hours: float, directory: Path) -> Path:
              "--duration", str(hours * 3600.0), "--seed", "1"],
             check=True, cwd=ROOT, capture_output=True,
         )
+    return path
+
+
+PAUSE_START = 600.0
+"""Start of the GPS pause of ``--gps-pause`` [s after the recording's start]."""
+
+
+def paused_recording(hours: float, pause: float, directory: Path) -> Path:
+    """The recording of ``hours`` without GPS fixes for ``pause`` seconds from
+    :data:`PAUSE_START` (made when missing)."""
+    import dataclasses
+
+    from navreplay.io.reader import read_recording
+    from navreplay.io.writer import write_recording
+    from navreplay.streams import Recording, StreamKind
+
+    path = directory / f"drive_{hours:g}h_gps_pause_{pause:g}s.mcap"
+    if not path.exists():
+        rec = read_recording(recording(hours, directory))
+        streams = dict(rec.streams)
+        for kind in (StreamKind.GPS, StreamKind.GPS_VEL):
+            s = streams[kind]
+            t = (s.t_ns - rec.t0_ns) * 1e-9
+            keep = (t < PAUSE_START) | (t > PAUSE_START + pause)
+            streams[kind] = dataclasses.replace(
+                s, t_ns=s.t_ns[keep], columns={k: v[keep] for k, v in s.columns.items()})
+        write_recording(path, Recording(streams, rec.metadata, rec.t0_ns))
     return path
 
 
@@ -81,6 +110,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--modes", nargs="+", default=["streamed", "rrd", "outputs", "whole"],
                         choices=["streamed", "rrd", "outputs", "whole"])
     parser.add_argument("--dir", type=Path, default=Path("bench-data"))
+    parser.add_argument("--gps-pause", type=float, default=0.0, metavar="SECONDS",
+                        help="no GPS fix for this long from ten minutes in")
     parser.add_argument("--child", nargs=2, metavar=("MODE", "PATH"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
@@ -90,7 +121,8 @@ def main(argv: list[str] | None = None) -> None:
     base: dict[str, float] = {}
     print(f"{'log':>6} {'mode':>9} {'peak RSS':>10} {'vs first':>9} {'seconds':>8}")
     for hours in args.hours:
-        path = recording(hours, args.dir.resolve())
+        path = (paused_recording(hours, args.gps_pause, args.dir.resolve()) if args.gps_pause
+                else recording(hours, args.dir.resolve()))
         for mode in args.modes:
             r = measure(mode, path)
             base.setdefault(mode, r["peak_mib"])

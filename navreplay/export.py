@@ -522,17 +522,26 @@ def ensemble_columns(ens: Any) -> list[Column]:
     return cols
 
 
-def nis_columns(t: np.ndarray, mean: np.ndarray, count: np.ndarray, dof: int) -> list[Column]:
-    """Columns of a run-averaged NIS series with its 95 % chi-square bounds."""
+def nis_columns(t: np.ndarray, mean: np.ndarray, count: np.ndarray, dof: int,
+                rows: Mapping[str, np.ndarray] | None = None) -> list[Column]:
+    """Columns of a run-averaged NIS series with its 95 % chi-square bounds, and of the NIS of
+    each row of the measurement (``rows``, by row name) with theirs (one dof)."""
     from navreplay.metrics import chi2_bounds_per_count
 
     n = mean.shape[0]
     lo, hi = chi2_bounds_per_count(dof, count[:n])
-    return [Column("t", "s", "update time since the recording start", t[:n]),
+    cols = [Column("t", "s", "update time since the recording start", t[:n]),
             Column("nis_mean", "-", f"NIS averaged over runs ({dof} dof)", mean),
             Column("nis_lo", "-", "lower 95 % chi-square bound of the mean", lo),
             Column("nis_hi", "-", "upper 95 % chi-square bound of the mean", hi),
             Column("nis_runs", "-", "runs with this update", count[:n], "%d")]
+    if rows:
+        cols += [Column(f"nis_mean.{row}", "-", f"NIS of row {row} (nu^2 / S of the row) "
+                        "averaged over runs (1 dof)", v[:n]) for row, v in rows.items()]
+        lo, hi = chi2_bounds_per_count(1, count[:n])
+        cols += [Column("nis_row_lo", "-", "lower 95 % chi-square bound of a row's mean", lo),
+                 Column("nis_row_hi", "-", "upper 95 % chi-square bound of a row's mean", hi)]
+    return cols
 
 
 # --------------------------------------------------------------------------------------------
@@ -989,7 +998,7 @@ def export_ensemble(out_dir: Path, ensembles: Mapping[str, Any], *, title: str =
         entry: dict[str, Any] = {"runs": ens.runs, "csv": path.name,
                                  "columns": [c.to_json() for c in cols], "nis": {}}
         for meas, (t, mean, count, dof) in ens.nis_mean.items():
-            ncols = nis_columns(t, mean, count, dof)
+            ncols = nis_columns(t, mean, count, dof, ens.nis_rows_mean.get(meas))
             p = nis_paths[(label, meas)]
             write_text(p, csv_text(ncols))
             written.append(p)

@@ -523,6 +523,9 @@ class RunMetrics:
     nees_states : tuple of str
     nis : dict[str, tuple[ndarray (K,), ndarray (K,), int]]
         Per measurement: update times [s], NIS, dof.
+    nis_rows : dict[str, dict[str, ndarray (K,)]]
+        Per measurement of several rows: the NIS of each row by its declared name
+        (:func:`row_nis`).
     distance : ndarray, shape (M,)
         True distance travelled up to each estimate [m].
     extra_error : dict[str, ndarray (M, ...)]
@@ -545,6 +548,7 @@ class RunMetrics:
     distance: np.ndarray
     extra_error: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     states: tuple[State, ...] = ()
+    nis_rows: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
         """Scalar scores (SI; see :data:`SUMMARY_UNITS`) for tables and JSON."""
@@ -571,7 +575,26 @@ class RunMetrics:
                       len(self.nees_states), probability)
         for name, (_, v, dof) in self.nis.items():
             _chi2_summary(out, "nis", f"_{name}", v, np.ones(v.shape, int), dof, probability)
+            for row, w in self.nis_rows.get(name, {}).items():
+                _chi2_summary(out, "nis", f"_{name}.{row}", w, np.ones(w.shape, int), 1,
+                              probability)
         return out
+
+
+def row_nis(result: RunResult, name: str) -> dict[str, np.ndarray]:
+    """The normalised innovation squared of each row of measurement ``name``,
+    ``nu_i^2 / S_ii`` (chi-square of one degree of freedom for a consistent filter), by the
+    row names the filter declares (else ``"0"``, ``"1"``, ...); empty for a measurement of one
+    row (its NIS is that of the row). Which row of a measurement is inconsistent."""
+    s = result.innovations[name]
+    m = s.nu.shape[1]
+    if m < 2:
+        return {}
+    declared = result.measurement(name)
+    rows = declared.rows if declared is not None else tuple(str(i) for i in range(m))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = np.square(s.nu) / np.diagonal(s.S, axis1=1, axis2=2)
+    return {row: v[:, i] for i, row in enumerate(rows)}
 
 
 def _chi2_summary(out: dict, kind: str, suffix: str, values: np.ndarray, count: np.ndarray,
@@ -638,6 +661,7 @@ def run_metrics(
     """
     nis = {name: (s.t.copy(), s.nis.copy(), int(s.nu.shape[1]))
            for name, s in result.innovations.items()}
+    nis_rows = {name: rows for name in result.innovations if (rows := row_nis(result, name))}
     M = result.t.shape[0]
     if reference is None or (isinstance(reference, Recording)
                              and StreamKind.TRUTH not in reference):
@@ -645,6 +669,7 @@ def run_metrics(
             label=result.label, t=result.t.copy(), nav=None, nav_sigma=nav_sigma(result),
             state_names=(), state_error=np.zeros((M, 0)), state_var=np.zeros((M, 0)),
             nees=np.full(M, np.nan), nees_states=(), nis=nis, distance=np.full(M, np.nan),
+            nis_rows=nis_rows,
         )
     ref = Reference.of(reference)
     states = result.states if states is None else states
@@ -674,6 +699,7 @@ def run_metrics(
         nees=nees_v,
         nees_states=tuple(names[i] for i in sel),
         nis=nis,
+        nis_rows=nis_rows,
         distance=np.asarray(ref.distance(result.t)),
         states=tuple(by_name[n] for n in names),
         extra_error=extra_errors(result, truth, ref.true_errors),
@@ -746,6 +772,9 @@ class EnsembleResult:
     nees_dof : int
     nees_bounds : tuple of ndarray (M,)
     nis_mean : dict[str, tuple[ndarray (K,) t, ndarray (K,) mean, ndarray (K,) count, int dof]]
+    nis_rows_mean : dict[str, dict[str, ndarray (K,)]]
+        Per measurement of several rows: each row's NIS (:func:`row_nis`) averaged over the
+        runs (the counts of ``nis_mean``).
     cep50 : ndarray, shape (M,)
         ``0.5887 (LatRMS + LongRMS)`` [m].
     distance : ndarray, shape (M,)
@@ -770,6 +799,7 @@ class EnsembleResult:
     nis_mean: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, int]]
     cep50: np.ndarray
     distance: np.ndarray
+    nis_rows_mean: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
 
     @property
     def dt_cep50(self) -> np.ndarray:
@@ -800,6 +830,8 @@ class EnsembleResult:
                       probability)
         for name, (_, m, c, dof) in self.nis_mean.items():
             _chi2_summary(out, "nis", f"_{name}", m, c, dof, probability)
+            for row, v in self.nis_rows_mean.get(name, {}).items():
+                _chi2_summary(out, "nis", f"_{name}.{row}", v, c, 1, probability)
         return out
 
 
@@ -831,6 +863,7 @@ class EnsembleStats:
         self._nees = _Acc()
         self._dist = _Acc()
         self._nis: dict[str, tuple[_Acc, list, int]] = {}
+        self._nis_rows: dict[str, dict[str, _Acc]] = {}
         self._state_names: tuple[str, ...] | None = None
         self._nees_states: tuple[str, ...] | None = None
         self._states: tuple[State, ...] = ()
@@ -868,6 +901,8 @@ class EnsembleStats:
             if t.shape[0] > tref[0].shape[0]:
                 tref[0] = t.copy()
             acc.add(v)
+            for row, w in m.nis_rows.get(name, {}).items():
+                self._nis_rows.setdefault(name, {}).setdefault(row, _Acc()).add(w)
         self.runs += 1
 
     def result(self) -> EnsembleResult:
@@ -913,4 +948,6 @@ class EnsembleStats:
                       for name, (acc, tref, d) in self._nis.items()},
             cep50=c50,
             distance=self._dist.mean(),
+            nis_rows_mean={name: {row: acc.mean() for row, acc in rows.items()}
+                           for name, rows in self._nis_rows.items()},
         )

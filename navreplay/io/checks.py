@@ -66,7 +66,13 @@ def gap_report(stream: Stream, t0_ns: int, factor: float = GAP_FACTOR) -> str | 
     if not gaps.size:
         return None
     worst = int(gaps[np.argmax(step[gaps])])
+    return gap_text(gaps.size, median, int(step[worst]), int(stream.t_ns[worst]), t0_ns, factor)
+
+
+def gap_text(count: int, median_ns: float, longest_ns: int, start_ns: int, t0_ns: int,
+             factor: float = GAP_FACTOR) -> str:
+    """The line of :func:`gap_report`: how many gaps, the median interval, the longest."""
     return (
-        f"{gaps.size} gap(s) longer than {factor:g} x the median interval ({median * 1e-9:.6g} s); "
-        f"the longest, {step[worst] * 1e-9:.6g} s, starts at {when(stream.t_ns[worst], t0_ns)}"
+        f"{count} gap(s) longer than {factor:g} x the median interval ({median_ns * 1e-9:.6g} s); "
+        f"the longest, {longest_ns * 1e-9:.6g} s, starts at {when(start_ns, t0_ns)}"
     )

@@ -33,6 +33,7 @@ from mcap.reader import SeekingReader
 from mcap.records import (
     Channel,
     Chunk,
+    ChunkIndex,
     DataEnd,
     Footer,
     Header,
@@ -418,6 +419,11 @@ class FileContents:
         Extremes of the log times of the messages read (all topics).
     message_count : int
         Messages read (all topics).
+    chunk_indexes : list of ChunkIndex
+        On the intact path: the summary's chunk indexes in file order.
+    chunks_walked : int
+        On the intact path: how many of ``chunk_indexes`` have been read or skipped (the
+        chunks from there on are still to come).
     """
 
     size: int
@@ -432,6 +438,8 @@ class FileContents:
     first_log_time: int | None = None
     last_log_time: int | None = None
     message_count: int = 0
+    chunk_indexes: list[ChunkIndex] = dataclasses.field(default_factory=list)
+    chunks_walked: int = 0
 
     def on_record(self, opcode: int, body: bytes) -> None:
         if opcode == Opcode.SCHEMA:
@@ -494,28 +502,37 @@ def walk(
         contents.channels.update(summary.channels)
         contents.statistics = summary.statistics
         contents.metadata.extend(metadata)
-        for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+        contents.chunk_indexes = sorted(summary.chunk_indexes,
+                                        key=lambda c: c.chunk_start_offset)
+        for k, index in enumerate(contents.chunk_indexes):
+            contents.chunks_walked = k + 1
             ids = set(index.message_index_offsets) or set(contents.channels)
             if wanted is not None and index.message_index_offsets and not wanted(contents, ids):
                 continue
-            offset = index.chunk_start_offset
-            f.seek(offset)
-            try:
-                opcode, _ = _RECORD.unpack(f.read(9))
-                if opcode != Opcode.CHUNK:
-                    raise ValueError(f"opcode {opcode:#x}")
-                chunk = Chunk.read(ReadDataStream(f))
-            except DAMAGE_ERRORS as exc:
-                raise RecordingError(
-                    f"{where}: chunk at byte {offset} cannot be read ({exc!r}): the file is corrupt"
-                ) from None
             # the data-section CRC, when stored, has covered this chunk's bytes already
-            data = chunk_bytes(chunk, where, offset, check_crc=not tail.data_crc)
-            block = scan_chunk(data, contents.on_record, where, offset)
+            block = read_chunk(f, index.chunk_start_offset, where, contents.on_record,
+                               check_crc=not tail.data_crc)
             contents.saw(block)
             yield block
         return
     yield from _walk_sequential(f, where, contents, expect_complete=tail is not None)
+
+
+def read_chunk(f: BinaryIO, offset: int, where: str,
+               on_record: Callable[[int, bytes], None], check_crc: bool = True) -> MessageBlock:
+    """The messages of the chunk at byte ``offset`` of an intact file."""
+    f.seek(offset)
+    try:
+        opcode, _ = _RECORD.unpack(f.read(9))
+        if opcode != Opcode.CHUNK:
+            raise ValueError(f"opcode {opcode:#x}")
+        chunk = Chunk.read(ReadDataStream(f))
+    except DAMAGE_ERRORS as exc:
+        raise RecordingError(
+            f"{where}: chunk at byte {offset} cannot be read ({exc!r}): the file is corrupt"
+        ) from None
+    return scan_chunk(chunk_bytes(chunk, where, offset, check_crc=check_crc), on_record, where,
+                      offset)
 
 
 def _walk_sequential(

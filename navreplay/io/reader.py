@@ -594,8 +594,10 @@ def build_stream(
     convention: Convention | None = None,
     topic: str = "",
     others: tuple[str, ...] = (),
+    report_gaps: bool = True,
 ) -> tuple[Stream, TopicSource]:
-    """Decoded message fields of one topic -> a checked stream (conversions reported)."""
+    """Decoded message fields of one topic -> a checked stream (conversions reported; gaps
+    too with ``validate`` and ``report_gaps``)."""
     try:
         decoded = DECODERS[kind](fields, frame_id, aux, convention)
     except (RecordingError, ValueError) as exc:
@@ -612,7 +614,7 @@ def build_stream(
         problem = first_problem(stream, t0_ns)
         if problem:
             raise RecordingError(f"{label}: {problem}")
-        gaps = gap_report(stream, t0_ns)
+        gaps = gap_report(stream, t0_ns) if report_gaps else None
         if gaps:
             _warn(f"{label}: {gaps}")
     source = TopicSource(topic, SPECS[kind].message.name, frame_id, decoded.convention,

@@ -7,6 +7,16 @@ walks the file's chunks in order and hands out the decoded rows of the kinds ask
 :func:`navreplay.io.reader.read_streams`, time increasing across windows) and, per kind, the
 time up to which the kind is complete. Only the topics of the kinds asked for are decoded.
 
+A kind whose next message is far ahead (an aiding stream that pauses) is not left lagging:
+the chunk index says which chunk holds the topic's next message, whose time is read ahead from
+that chunk, so that the kind is known to be complete up to just before it. A replay then need
+not hold the IMU samples of the pause.
+
+The warnings of the reader (header stamps replaced by log times, conversions, gaps) are given
+once per read, when it ends, each with the number of windows it concerns; gaps are counted over
+the whole stream, those between the last sample of a window and the first of the next included,
+against the median interval of the first window: the line of the whole reader.
+
 Only intact files (with a summary and chunk index) are streamed; :class:`NotStreamable` says
 that a file must be read whole (damaged or unfinished files are salvaged by the whole reader).
 """
@@ -14,13 +24,18 @@ that a file must be read whole (damaged or unfinished files are salvaged by the 
 from __future__ import annotations
 
 import os
+import re
+import warnings
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
+from typing import BinaryIO
 
-from navreplay.io.checks import when
+import numpy as np
+
+from navreplay.io.checks import GAP_FACTOR, gap_text, when
 from navreplay.io.convert import AuxColumn, Convention
-from navreplay.io.errors import RecordingError
-from navreplay.io.mcapfile import FileContents, probe, walk
+from navreplay.io.errors import RecordingError, RecordingWarning
+from navreplay.io.mcapfile import FileContents, probe, read_chunk, walk
 from navreplay.io.reader import (
     TopicSource,
     _metadata,
@@ -130,17 +145,21 @@ def read_windows(
     with open(path, "rb") as f:
         contents = FileContents(size=os.fstat(f.fileno()).st_size)
         state: _State | None = None
-        for block in walk(f, where, contents, plan.wants_chunk):
-            if state is None:
+        try:
+            for block in walk(f, where, contents, plan.wants_chunk):
+                if state is None:
+                    state = _State.start(plan, contents, where, topics, declared, time,
+                                         validate, sources, f)
+                plan.feed(contents, block)
+                if any(t.rows() >= window for t in state.chosen.values()):
+                    yield state.window()
+            if state is None:  # no chunk holds a kind asked for
                 state = _State.start(plan, contents, where, topics, declared, time, validate,
-                                     sources)
-            plan.feed(contents, block)
-            if any(t.rows() >= window for t in state.chosen.values()):
-                yield state.window()
-        if state is None:  # no chunk holds a kind asked for
-            state = _State.start(plan, contents, where, topics, declared, time, validate,
-                                 sources)
-        yield state.window()
+                                     sources, f)
+            yield state.window(final=True)
+        finally:
+            if state is not None:
+                state.report()
 
 
 class _State:
@@ -149,18 +168,27 @@ class _State:
     def __init__(self, chosen: dict[StreamKind, _Topic], totals: dict[StreamKind, int | None],
                  present: frozenset[StreamKind], metadata: Metadata, t0_ns: int,
                  aux: list[AuxColumn], declared: Mapping[StreamKind, Convention], time: str,
-                 validate: bool, sources: dict[StreamKind, TopicSource] | None) -> None:
+                 validate: bool, sources: dict[StreamKind, TopicSource] | None,
+                 f: BinaryIO | None = None, contents: FileContents | None = None) -> None:
         self.chosen, self.totals, self.present = chosen, totals, present
         self.metadata, self.t0_ns, self.aux = metadata, t0_ns, aux
         self.declared, self.time, self.validate, self.sources = declared, time, validate, sources
+        self.f, self.contents = f, contents
         self.last: dict[StreamKind, int] = {}
         self.frame: dict[StreamKind, str] = {}
+        self.ahead: dict[StreamKind, tuple[int, int]] = {}  # kind -> (chunk, first time)
+        self.floor: dict[StreamKind, int] = {}  # no sample of the kind may come before
+        self.gaps = {kind: _Gaps() for kind in chosen}
+        self.warnings = _Warnings()
+        self.windows = 0
+        self.newest = -COMPLETE  # the latest sample of any kind in the previous windows
 
     @classmethod
     def start(cls, plan: _Plan, contents: FileContents, where: str,
               topics: Mapping[StreamKind | str, str] | None,
               declared: Mapping[StreamKind, Convention], time: str, validate: bool,
-              sources: dict[StreamKind, TopicSource] | None) -> _State:
+              sources: dict[StreamKind, TopicSource] | None,
+              f: BinaryIO | None = None) -> _State:
         if not contents.intact:
             raise NotStreamable(f"{where}: no summary to read the file in windows")
         chosen = plan.resolve(contents, explicit=False)
@@ -169,23 +197,69 @@ class _State:
         totals = {k: counts.get(t.channel.id) for k, t in chosen.items()}
         metadata, t0_ns, aux = _metadata(contents, where)
         return cls(chosen, totals, frozenset(every), metadata, t0_ns, aux, declared, time,
-                   validate, sources)
+                   validate, sources, f, contents)
 
-    def window(self) -> Window:
+    def window(self, final: bool = False) -> Window:
+        self.windows += 1
         out: dict[StreamKind, Stream] = {}
         for kind, topic in self.chosen.items():
             if topic.rows():
-                stream = self._stream(kind, topic)
+                with self.warnings.collect(self.windows):
+                    stream = self._stream(kind, topic)
                 if len(stream):
                     out[kind] = stream
         known = {}
         for kind, topic in self.chosen.items():
             total = self.totals[kind]
-            if total is not None and topic._count >= total:
+            last = self.last.get(kind, -COMPLETE)
+            if final or (total is not None and topic._count >= total):
                 known[kind] = COMPLETE
+            elif last <= self.newest:  # no sample in this window: where is the next?
+                known[kind] = max(last, self._before_next(kind, topic))
             else:
-                known[kind] = self.last.get(kind, -COMPLETE)
+                known[kind] = last
+        self.newest = max(self.last.values(), default=self.newest)
         return Window(out, known, self.metadata, self.t0_ns, self.present)
+
+    def _before_next(self, kind: StreamKind, topic: _Topic) -> int:
+        """The time just before the kind's next sample, read ahead in the chunk that holds it
+        (the chunk index names it); :data:`COMPLETE` when no chunk to come holds the topic,
+        -:data:`COMPLETE` when the index cannot tell."""
+        contents = self.contents
+        if self.f is None or contents is None or not contents.chunk_indexes:
+            return -COMPLETE
+        cid = topic.channel.id
+        indexes = contents.chunk_indexes
+        k, t = self.ahead.get(kind, (-1, -COMPLETE))
+        if k < contents.chunks_walked:
+            for k in range(contents.chunks_walked, len(indexes)):
+                held = indexes[k].message_index_offsets
+                if not held:
+                    return -COMPLETE  # a chunk without a message index: unknown
+                if cid in held:
+                    break
+            else:
+                return COMPLETE
+            t = self._first_time(topic, indexes[k].chunk_start_offset)
+            self.ahead[kind] = (k, t)
+            self.floor[kind] = t
+        return t - 1
+
+    def _first_time(self, topic: _Topic, offset: int) -> int:
+        """The earliest time a sample of the topic in the chunk at ``offset`` can have: its
+        least log time, or header stamp where those are used."""
+        assert self.f is not None
+        block = read_chunk(self.f, offset, str(topic.where), lambda opcode, body: None)
+        rows = np.flatnonzero(block.channel == topic.channel.id)
+        log = block.log_time[rows]
+        first = int(log.min())
+        if self.time == "header":
+            ahead = _Topic(topic.channel, topic.schema, topic.message, topic.where)
+            ahead.add(block, rows)
+            stamps = ahead.finish()["t_ns"]
+            if stamps.size and stamps.all():
+                first = min(first, int(stamps.min()))
+        return first
 
     def _stream(self, kind: StreamKind, topic: _Topic) -> Stream:
         fields = topic.drain()
@@ -193,15 +267,121 @@ class _State:
         self.frame.setdefault(kind, topic.first_frame_id or SPECS[kind].frame_id)
         stream, source = build_stream(kind, fields, self.frame[kind], topic.label, self.aux,
                                       self.t0_ns, self.validate, self.declared.get(kind),
-                                      topic.channel.topic)
+                                      topic.channel.topic, report_gaps=False)
         if self.sources is not None:
             self.sources.setdefault(kind, source)
         if len(stream):
+            first = int(stream.t_ns[0])
             last = self.last.get(kind)
-            if last is not None and int(stream.t_ns[0]) <= last:
+            if last is not None and first <= last:
                 raise RecordingError(
-                    f"{topic.label}: timestamp at {when(int(stream.t_ns[0]), self.t0_ns)} does "
+                    f"{topic.label}: timestamp at {when(first, self.t0_ns)} does "
                     f"not follow the one at {when(last, self.t0_ns)}"
                 )
+            floor = self.floor.get(kind)
+            if floor is not None and first < floor:
+                raise RecordingError(
+                    f"{topic.label}: timestamp at {when(first, self.t0_ns)} is earlier than "
+                    f"the first of the chunk that follows the previous samples "
+                    f"({when(floor, self.t0_ns)}): the topic's messages are out of order"
+                )
             self.last[kind] = int(stream.t_ns[-1])
+            if self.validate:
+                self.gaps[kind].add(stream.t_ns)
         return stream
+
+    def report(self) -> None:
+        """Give the warnings of the read, each once (gaps over the whole stream)."""
+        for kind, gaps in self.gaps.items():
+            line = gaps.line(self.t0_ns)
+            if line:
+                self.warnings.add(f"{self.chosen[kind].label}: {line}", self.windows)
+        self.warnings.emit(self.windows)
+
+
+class _Gaps:
+    """The gaps of one stream read in windows: counted against the median interval of the
+    first samples (at least three), across window boundaries too."""
+
+    def __init__(self) -> None:
+        self.median = 0.0
+        self.head = np.zeros(0, np.int64)  # samples until the median is known
+        self.prev: int | None = None
+        self.count = 0
+        self.longest = 0
+        self.start = 0
+
+    def add(self, t_ns: np.ndarray) -> None:
+        if not self.median:
+            self.head = np.concatenate([self.head, t_ns])
+            if len(self.head) < 3:
+                return
+            t_ns, self.head = self.head, self.head[:0]
+            self.median = float(np.median(np.diff(t_ns))) or -1.0  # -1: no gap can be told
+        if self.median < 0:
+            return
+        t = t_ns if self.prev is None else np.concatenate([[self.prev], t_ns])
+        self.prev = int(t_ns[-1])
+        step = np.diff(t)
+        gaps = np.flatnonzero(step > GAP_FACTOR * self.median)
+        if gaps.size:
+            self.count += gaps.size
+            worst = int(gaps[np.argmax(step[gaps])])
+            if step[worst] > self.longest:
+                self.longest, self.start = int(step[worst]), int(t[worst])
+
+    def line(self, t0_ns: int) -> str | None:
+        if not self.count:
+            return None
+        return gap_text(self.count, self.median, self.longest, self.start, t0_ns)
+
+
+_NUMBER = re.compile(r"[-+]?\d[\d.]*(?:e[-+]?\d+)?")
+
+
+class _Warnings:
+    """The reader's warnings over the windows of a read, each given once: the first, with the
+    number of windows it came in (numbers aside, the same line)."""
+
+    def __init__(self) -> None:
+        self.seen: dict[str, list] = {}  # key -> [first message, windows, last window]
+
+    def collect(self, window: int) -> _Collect:
+        return _Collect(self, window)
+
+    def add(self, message: str, window: int) -> None:
+        entry = self.seen.setdefault(_NUMBER.sub("#", message), [message, 0, -1])
+        if entry[2] != window:
+            entry[1] += 1
+            entry[2] = window
+
+    def emit(self, windows: int) -> None:
+        """Warn once per line; ``windows``: how many the read had."""
+        for message, count, _ in self.seen.values():
+            if count > 1:
+                message += (f" (the same in {count} of the {windows} windows of the read; "
+                            "the first is shown)")
+            warnings.warn(RecordingWarning(message), stacklevel=4)
+        self.seen.clear()
+
+
+class _Collect(warnings.catch_warnings):
+    """Gather the reader's warnings (:class:`RecordingWarning`) of one window into a
+    :class:`_Warnings`; others pass."""
+
+    def __init__(self, tally: _Warnings, window: int) -> None:
+        super().__init__(record=True)
+        self.tally, self.window = tally, window
+
+    def __enter__(self):  # type: ignore[no-untyped-def]
+        self.caught = super().__enter__()
+        warnings.simplefilter("always")
+        return self.caught
+
+    def __exit__(self, *exc) -> None:  # type: ignore[no-untyped-def]
+        super().__exit__(*exc)
+        for w in self.caught or []:
+            if isinstance(w.message, RecordingWarning):
+                self.tally.add(str(w.message), self.window)
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)

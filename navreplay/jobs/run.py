@@ -230,6 +230,7 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
         notes += outputs.write_run(summaries, title=title)
         hint = close_output(sink, job.viz)
     except BaseException:
+        windows.close()  # the reader's warnings so far, before the error
         outputs.abort()
         if sink is not None:
             sink.abort()

@@ -1,7 +1,10 @@
 """Check a log's data against the frames it is read in, before any replay.
 
+The checks read the samples at hand: the whole log when it is read whole, the first window of
+it (ten minutes) when it is replayed in windows; their notes give the span averaged.
+
 Accelerometer: over the still window at the start (:func:`still_window`), else averaged over the
-whole log, the specific force in FRD must point up, i.e. its z component must be negative
+samples at hand, the specific force in FRD must point up, i.e. its z component must be negative
 (gravity reads -g on a z-down axis), and at rest its magnitude must be gravity within 10 %. An
 FRD IMU read as FLU (its frame named ``imu_link``) shows +g on z: the run stops and says which
 ``--frame`` fixes it. Magnetometer: the component of the field along the accelerometer's down
@@ -72,7 +75,8 @@ def check_accelerometer(recording: Recording, source: TopicSource | None) -> str
     imu = recording[StreamKind.IMU]
     _, stop = still_window(recording)
     window = slice(0, stop) if stop >= 2 else slice(None)
-    what = f"the still start (first {stop} samples)" if stop >= 2 else "the whole log (averaged)"
+    what = (f"the still start (first {stop} samples)" if stop >= 2
+            else f"{span(imu.t_ns, recording.t0_ns)} (averaged)")
     f = imu["f_b"][window].mean(axis=0)
     g = 9.80665
     other = {Convention.FLU: "frd", Convention.FRD: "flu"}.get(
@@ -133,7 +137,15 @@ def check_magnetometer(recording: Recording, source: TopicSource | None,
             f"{recording_where(recording)}: {_where(source, 'magnetometer')}: the field along "
             f"down is {measured * 1e9:+.0f} nT but the World Magnetic Model gives "
             f"{expected * 1e9:+.0f} nT here (dip sign): use --frame mag={other}")
-    return f"magnetometer dip sign agrees with the WMM ({measured * 1e9:+.0f} nT down)"
+    return (f"magnetometer dip sign agrees with the WMM ({measured * 1e9:+.0f} nT down, "
+            f"averaged over {span(recording[StreamKind.MAG].t_ns, recording.t0_ns)})")
+
+
+def span(t_ns: np.ndarray, t0_ns: int) -> str:
+    """``t = a to b s``: the samples a check averaged (a streamed run checks the first window
+    of the log, not all of it)."""
+    a, b = seconds(np.array([t_ns[0], t_ns[-1]]), t0_ns)
+    return f"t = {a:.1f} to {b:.1f} s"
 
 
 def check_frames(recording: Recording, sources: dict[StreamKind, TopicSource],

@@ -1,11 +1,11 @@
 """Replay files in time windows, so that memory stays flat in the length of the log.
 
-:func:`open_streamed` reads a log's aiding streams whole (they are small) and its IMU and truth
-(:data:`navreplay.io.windows.STREAMED`) window by window; each
-:class:`~navreplay.replay.engine.ReplaySession` consumes the IMU windows and hands back the
+``navreplay run`` (:mod:`navreplay.jobs.run`) reads an intact file window by window
+(:func:`navreplay.io.windows.read_windows`: every stream it needs, each known up to a time);
+each :class:`~navreplay.replay.engine.ReplaySession` consumes the windows and hands back the
 estimates of the events it could apply, which go straight to a :class:`RunningSummary` (the
-scalar scores of :meth:`navreplay.metrics.RunMetrics.summary`, accumulated block by block) and
-are then dropped. Nothing grows with the log but the aiding streams.
+scalar scores of :meth:`navreplay.metrics.RunMetrics.summary`, NIS per measurement and per row
+included, accumulated block by block) and are then dropped. Nothing grows with the log.
 
 :func:`navreplay.replay.engine.replay` keeps working on recordings in memory; both make the
 same filter calls, so the estimates are the same bits.
@@ -181,6 +181,11 @@ class RunningSummary:
             if acc is None:
                 acc = self._nis[name] = _Chi2(int(s.nu.shape[1]), self.probability)
             acc.add(s.nis)
+            for row, v in metrics.row_nis(block, name).items():
+                acc = self._nis.get(f"{name}.{row}")
+                if acc is None:
+                    acc = self._nis[f"{name}.{row}"] = _Chi2(1, self.probability)
+                acc.add(v)
         if block.t.size:
             self._pending.append(block)
             self._score()
