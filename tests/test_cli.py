@@ -194,6 +194,39 @@ def test_run_variants_of_one_filter(recs, in_tmp):
     assert a["nis_mean_gps_pos"] > b["nis_mean_gps_pos"]
 
 
+@pytest.mark.parametrize("scenario, duration, name", [
+    ("gimpo-accel-sweep", 10.0, "vector-matching"),
+    ("ship-transfer-alignment", 5.0, "transfer-alignment"),
+    ("underwater-rpm", 10.0, "rpm-aided-ins"),
+])
+def test_each_built_in_filter_runs_on_its_scenario_from_the_command_line(
+        in_tmp, scenario, duration, name):
+    """The run asks a recording only for the parts of the initial solution the filter declares
+    (``Filter.initial``): vector matching starts from TRIAD and needs only the site, transfer
+    alignment starts from the master INS and needs nothing."""
+    ok(invoke("simulate", scenario, "-o", "r.mcap", "--duration", str(duration)))
+    ok(invoke("run", name, "r.mcap", "--no-viz", "--summary", "s.json"))
+    summary = json.loads((in_tmp / "s.json").read_text())["filters"][name]
+    assert any(k.startswith("nis_mean_") for k in summary)
+
+
+def test_initial_parts_are_declared_data():
+    from navreplay.filters import registry
+    from navreplay.filters.base import initial_parts
+
+    get = registry.load_filter
+    assert initial_parts([get("vector-matching")]) == ("pos",)
+    assert initial_parts([get("transfer-alignment")]) == ()
+    assert initial_parts([get("transfer-alignment"), get("gps-ins")]) == ("pos", "v_n", "q_nb")
+
+    class Odd(get("ins")):
+        name = "odd"
+        initial = ("pos", "heading")
+
+    with pytest.raises(ValueError, match="'odd'.*heading"):
+        initial_parts([Odd])
+
+
 def test_run_filter_params_from_toml(recs, in_tmp):
     (in_tmp / "f.toml").write_text('[filter.gps-ins]\ngps_pos_sigma_scale = "x"\n')
     fails(invoke("run", "gps-ins", recs / "drive.mcap", "--config", "f.toml", "--no-viz"),

@@ -63,7 +63,7 @@ import abc
 import dataclasses
 import enum
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -377,6 +377,23 @@ class Innovation:
     S: np.ndarray
 
 
+INITIAL_PARTS = ("pos", "v_n", "q_nb")
+"""The parts of an initial solution, in order (:attr:`Filter.initial`)."""
+
+
+def initial_parts(classes: Sequence[type[Filter]]) -> tuple[str, ...]:
+    """The parts of the initial solution that any of ``classes`` starts from, in the order of
+    :data:`INITIAL_PARTS`; an undeclared part name is refused with the filter's name."""
+    wanted: set[str] = set()
+    for cls in classes:
+        unknown = set(cls.initial) - set(INITIAL_PARTS)
+        if unknown:
+            raise ValueError(f"filter {cls.name!r}: initial names unknown parts "
+                             f"{sorted(unknown)}; use some of {', '.join(INITIAL_PARTS)}")
+        wanted |= set(cls.initial)
+    return tuple(k for k in INITIAL_PARTS if k in wanted)
+
+
 class Filter(abc.ABC):
     """Base class of every filter.
 
@@ -406,6 +423,11 @@ class Filter(abc.ABC):
         One declaration per measurement whose innovations ``update`` returns: its rows and
         their units (class or instance attribute, as ``states``); ``()`` for a filter without
         updates. None (the default): not declared, innovations unchecked, units guessed.
+    initial : tuple[str, ...]
+        The parts of the initial solution ``metadata.initial_nav`` the filter starts from:
+        ``pos``, ``v_n``, ``q_nb`` (all three, the default). ``run`` asks the recording, the
+        ``[initial]`` table or ``--init`` for these only; a filter that initialises itself from
+        its measurements declares fewer (``()``: none).
 
     Optional method
     ---------------
@@ -429,6 +451,7 @@ class Filter(abc.ABC):
     states: tuple[State, ...] = ()
     scored_extras: tuple[State, ...] = ()
     measurements: tuple[MeasurementKind, ...] | None = None
+    initial: ClassVar[tuple[str, ...]] = INITIAL_PARTS
 
     @property
     def state_names(self) -> tuple[str, ...]:

@@ -920,6 +920,7 @@ class TransferAlignment(Filter):
         " match=vel_quat_partial|vel_quat_full|vel_only"
     )
     requires = (StreamKind.IMU, StreamKind.MASTER_INS)
+    initial = ()  # starts from the first master INS sample
     Params = TransferAlignmentParams
     scored_extras = (
         State("misalignment_euler", "rad", Quantity.MISALIGNMENT,

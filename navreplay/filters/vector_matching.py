@@ -769,6 +769,7 @@ class VectorMatchingFilter(Filter):
     )
     requires = (StreamKind.IMU, StreamKind.MAG, StreamKind.GPS_VEL)
     required_columns = {StreamKind.IMU: ("f_b",)}  # an accelerometer: no gyro column needed
+    initial = ("pos",)  # the site (gravity, earth field); the attitude comes from TRIAD
     Params = VectorMatchingParams
     states = STATES
     measurements = (MeasurementKind("vector", ("g_N", "g_E", "g_D", "h_N", "h_E", "h_D"),

@@ -122,6 +122,7 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
         raise _params.ParamError(f"--rate must be positive, got {job.pacing}")
     if not (0 < job.output_rate < math.inf):
         raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
+    job = _with_needs(job)
     if len(job.recordings) == 1:
         return _run_streamed(job, progress) or _run_one(job, progress)
     if job.pacing is not None:
@@ -133,6 +134,15 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
                      progress, title, job.output_rate, per_run_table=True,
                      outputs=outputs_of(job), executor=job.executor,
                      max_imu_gap=job.max_imu_gap)
+
+
+def _with_needs(job: RunJob) -> RunJob:
+    """The job with its log options asking only for the initial solution its filters need."""
+    from navreplay.filters.base import initial_parts
+    from navreplay.logs.options import LogOptions
+
+    needs = initial_parts([spec.load() for spec in job.filters])
+    return dataclasses.replace(job, log=dataclasses.replace(job.log or LogOptions(), needs=needs))
 
 
 def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:

@@ -35,11 +35,12 @@ at the end of the still window: alignment uses the data before it.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from navreplay.filters.base import INITIAL_PARTS
 from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_dcm, euler_to_quat, quat_to_euler, wrap_angle
 from navreplay.io.errors import RecordingError
@@ -106,8 +107,8 @@ def _from_table(nav: dict[str, Any], table: Mapping[str, Any]) -> dict[str, Any]
     return nav
 
 
-def _complete(nav: Mapping[str, Any]) -> list[str]:
-    return [k for k in ("pos", "v_n", "q_nb") if k not in nav]
+def _complete(nav: Mapping[str, Any], needs: Sequence[str] = INITIAL_PARTS) -> list[str]:
+    return [k for k in needs if k not in nav]
 
 
 def _interp_stream(s: Stream, t_ns: int, col: str) -> np.ndarray:
@@ -325,18 +326,20 @@ def _chord(recording: Recording, stop: int, C_lb: np.ndarray
     return ("GNSS track", float(wrap_angle(math.atan2(d[1], d[0]) - 0.5 * turned)), sigma)
 
 
-def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[str, Any]
-                ) -> tuple[dict[str, Any], str]:
+def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[str, Any],
+                needs: Sequence[str] = INITIAL_PARTS) -> tuple[dict[str, Any], str]:
     """The initial solution by ``method`` with ``[initial]`` applied, and a line saying how.
 
     With ``method`` None: the recording's own when it has one, else the ``[initial]`` table when
-    complete, else ``{}`` (a filter that needs a start then says which options give one).
+    it has every part in ``needs``, else ``{}`` (a filter that needs a start then says which
+    options give one). ``needs``: the parts the filters start from
+    (:func:`navreplay.filters.base.initial_parts`); a missing one is an error.
     """
     meta = recording.metadata.initial_nav
     if method is None:
         if meta:
             method = InitMethod.METADATA
-        elif table and not _complete(_from_table({}, table)) and StreamKind.IMU in recording:
+        elif table and not _complete(_from_table({}, table), needs) and StreamKind.IMU in recording:
             method = InitMethod.TABLE
         else:
             return {}, ""
@@ -360,7 +363,7 @@ def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[
         note += " with [initial] values"
     if method is InitMethod.TABLE:
         nav.setdefault("v_n", [0.0, 0.0, 0.0])
-    missing = _complete(nav)
+    missing = _complete(nav, needs)
     if missing:
         names = {"pos": "a position (lat_deg, lon_deg, h)", "v_n": "a velocity (v_n)",
                  "q_nb": "an attitude (roll_deg, pitch_deg, yaw_deg)"}

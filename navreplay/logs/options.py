@@ -69,6 +69,9 @@ class LogOptions:
         Check the data against the frames before replaying.
     time : str
         ``header`` (stamps, falling back to log times when unusable) or ``log`` (``--time``).
+    needs : tuple[str, ...]
+        The parts of the initial solution the filters start from (``pos``, ``v_n``, ``q_nb``;
+        :func:`navreplay.filters.base.initial_parts`).
     """
 
     topics: Mapping[StreamKind, str] = dataclasses.field(default_factory=dict)
@@ -78,6 +81,7 @@ class LogOptions:
     reference: str | None = None
     check_frames: bool = True
     time: str = "header"
+    needs: tuple[str, ...] = ("pos", "v_n", "q_nb")
 
     @property
     def stream_frames(self) -> dict[StreamKind, Convention]:

@@ -63,7 +63,7 @@ def make_ready(recording: Recording, sources: dict[StreamKind, TopicSource],
     notes: list[str] = []
     if options.check_frames and StreamKind.IMU in recording:
         notes += check_frames(recording, sources, _position(recording, options))
-    nav, note = initial_nav(options.init, recording, options.initial)
+    nav, note = initial_nav(options.init, recording, options.initial, options.needs)
     if nav:
         recording.metadata.initial_nav = nav
     if note:
