@@ -20,7 +20,7 @@ Prediction and correction (Joseph form, valid for any gain, hence for frozen sta
     nu  = z - H x                                 innovation                     (7)
     S   = H P H^T + R = L L^T                     Cholesky factor, no inverse    (8)
     K^T = L^-T L^-1 H P                           two triangular solves          (9)
-    K[frozen, :] = 0                              frozen states keep x and P     (10)
+    K[frozen, :] = 0                              frozen states keep x, P block  (10)
     x+  = x + K nu                                                               (11)
     P+  = (I - K H) P (I - K H)^T + K R K^T       Joseph form                    (12)
     NIS = nu^T S^-1 nu = |L^-1 nu|^2,  L^-1 nu is the normalised innovation      (13)
@@ -557,8 +557,9 @@ def correct(
     R : ndarray, shape (m, m) or (m,)
         Measurement noise covariance (a diagonal as a vector).
     frozen : ndarray of bool, shape (n,), optional
-        States that the update must not change: their gain rows are 0, eq. (10), so their
-        estimate and (by the Joseph form) their covariance row stay as they were.
+        States that the update must not change (Schmidt consider states): their gain rows are
+        0, eq. (10), so their estimate and (by the Joseph form) their own covariance block stay
+        as they were; their cross-covariance with the corrected states does change, as it must.
     t : float, optional
         Filter time [s], for error messages.
     check : bool
