@@ -67,8 +67,8 @@ FILTER = "transfer-alignment"
 PARTIAL, FULL, VEL_ONLY = "vel_quat_partial", "vel_quat_full", "vel_only"
 PARTIAL_FLEX, FULL_FLEX = f"{PARTIAL}+flexure", f"{FULL}+flexure"
 VARIANTS = {
-    PARTIAL: {"match": PARTIAL, "flexure_sigma": 0.0},
-    FULL: {"match": FULL, "flexure_sigma": 0.0},
+    PARTIAL: {"match": PARTIAL, "flexure_sigma": 0.0, "quat_model": "paper"},
+    FULL: {"match": FULL, "flexure_sigma": 0.0, "quat_model": "paper"},
     VEL_ONLY: {"match": VEL_ONLY},
     PARTIAL_FLEX: {"match": PARTIAL},
     FULL_FLEX: {"match": FULL},
