@@ -26,6 +26,11 @@ index symbol                frame  unit  meaning
 9-10  theta_f, theta_f'     r      rad   flexure about the ship's Y axis, its rate (rad/s)
 ===== ===================== ====== ===== ================================================
 
+That is the paper's layout (``quat_model=paper``). navreplay's quaternion measurement model
+(``quat_model=gins``, the default, :class:`QuatModel`) matches only the vector components of
+the index set (partial {1, 3}, full {1, 2, 3}), so dq_br0 is not a state and the blocks after
+it move up by one.
+
 States 9-10 (not in the paper; ``flexure_sigma > 0``, the default;
 docs/methods/transfer-alignment.md §4.9) follow the second-order Markov model of eq. (19),
 discretised exactly;
@@ -40,6 +45,9 @@ quaternion components; one code path serves all three:
 - ``vel_quat_partial`` (default): s = {0, 1, 3}, 9 states, 2 + 3 measurements;
 - ``vel_quat_full``: s = {0, 1, 2, 3}, 10 states, 2 + 4 measurements (flexure unmodelled);
 - ``vel_only``: s = {}, 6 states, 2 measurements (azimuth unobservable without manoeuvres).
+
+(The paper's counts, without the flexure states; ``quat_model=gins`` has one state and one
+measurement fewer in the first two.)
 
 ``Estimate.x`` holds the *total* quantities whose errors are the states:
 ``[v_N, v_E, q_nb0..3, q_rb[s], theta_f, theta_f']``, and ``Estimate.P`` the covariance of those
@@ -92,13 +100,21 @@ Measurement model, eqs. (3), (5), (6), (15)
           with w_nb_hat^b = w_ib^b - C_nb_hat^T w_in^n and L^b = C_nb_hat^T C(Q_m) L^r_nom,
           i.e. the lever-arm velocity (C_nb_hat w_ib^b - w_in^n) x (C(Q_m) L^r_nom)
     Z_Q = [ Q_m* (x) Q_bn_hat - Q_br_hat ]_s                                 (5)
+          (the paper's s; quat_model=gins drops the scalar component 0)
     H   = [[ I2  H_vq          0      ],
            [ 0   L(Q_m*)[s,:]  -I_s   ]]                                     (15)
     H_vq = -2 [L^n x] [w^n x] R(Q_bn)^T, w^n = C_nb_hat w_ib^b, L^n = C(Q_m) L^r_nom
           (the lever-arm term turns with the attitude error; not in the paper's eq. 15)
 
 The rate w_ib^b of the lever-arm term is extrapolated to the GINS time from the last two IMU
-samples (each a mean over its interval, half a sample old). R = diag(r_v I2, r_q I_s).
+samples (each a mean over its interval, half a sample old). R of the velocity rows: r_v I2 plus
+the flexure rate the lever-arm term misses (:func:`velocity_noise`). R of the quaternion rows:
+``quat_model=gins``, the GINS Euler-angle noise mapped through the measurement,
+``J Sigma J^T`` with ``J = -1/2 R(Z) E`` (:func:`quaternion_noise`), correlated; the scalar
+part moves only by the misalignment times the noise, and that row, with its true R, would
+over-constrain the additive quaternion error (its norm direction, which the normalisations
+correct without P), so it is not matched: it follows from the vector part. ``quat_model=paper``:
+``quat_sigma^2`` on every row of the paper's s, the scalar row included.
 
 Cycle (at every GINS sample)
 ----------------------------
@@ -108,8 +124,9 @@ Cycle (at every GINS sample)
 3. Predict P with (Phi, Q_d) (:func:`predict_and_measure`); update with the shared Cholesky /
    Joseph-form correction, :func:`navreplay.filters.kalman.correct`.
 4. Feedback: V_ne -= dV; Q_bn -= dQ_bn, normalised; Q_br[s] -= dQ_br.
-5. Recover the unmatched components u of Q_br (q_br2 for partial matching, eq. 11, E8) as
-   component u of ``Q_m* (x) Q_bn_hat``, then normalise Q_br (eq. 10, E10).
+5. Recover the unmatched vector components u of Q_br (q_br2 for partial matching, eq. 11, E8)
+   as component u of ``Q_m* (x) Q_bn_hat``; an unmatched scalar part follows from the vector
+   part, ``sqrt(1 - |q_vec|^2)``; then normalise Q_br (eq. 10, E10).
 6. Slave the SDINS vertical velocity and the position to the GINS (the vertical channel is not
    a state): ``V_d = V_R,d + [lever-arm velocity]_d``, position = the GINS position displaced
    by ``C(Q_m) L^r`` (:func:`lever_position`).
