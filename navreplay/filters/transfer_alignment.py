@@ -978,8 +978,9 @@ def initial_covariance(
     quat_var : float or ndarray, shape (3, 3)
         Covariance of n, the GINS white attitude noise as ``dQ_m = T(Q_m) n`` [-]: a variance
         per component (``quat_sigma`` squared, the paper's R), or ``1/4 E Sigma E^T`` of the
-        Euler-angle noise (:func:`euler_rate_matrix`). The SDINS starts from the *measured* Q_m, so its attitude error holds that
-        sample's noise, which Q_br does not share: ``dQ_bn = L(Q_m) dQ_br + T(Q_m) n``,
+        Euler-angle noise (:func:`euler_rate_matrix`). The SDINS starts from the *measured*
+        Q_m, so its attitude error holds that sample's noise, which Q_br does not share:
+        ``dQ_bn = L(Q_m) dQ_br + T(Q_m) n``,
         ``n ~ N(0, quat_var)``. Without it eq. (17) declares ``dQ_bn - L(Q_m) dQ_br``
         exactly zero, a constraint that only the ship's rolling and pitching can relax: the
         filter stays optimistic in attitude, and so in velocity, for the first 10-20 s.
