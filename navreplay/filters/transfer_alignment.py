@@ -26,6 +26,11 @@ index symbol                frame  unit  meaning
 9-10  theta_f, theta_f'     r      rad   flexure about the ship's Y axis, its rate (rad/s)
 ===== ===================== ====== ===== ================================================
 
+That is the paper's layout (``quat_model=paper``). navreplay's quaternion measurement model
+(``quat_model=gins``, the default, :class:`QuatModel`) matches only the vector components of
+the index set (partial {1, 3}, full {1, 2, 3}), so dq_br0 is not a state and the blocks after
+it move up by one.
+
 States 9-10 (not in the paper; ``flexure_sigma > 0``, the default;
 docs/methods/transfer-alignment.md §4.9) follow the second-order Markov model of eq. (19),
 discretised exactly;
@@ -40,6 +45,9 @@ quaternion components; one code path serves all three:
 - ``vel_quat_partial`` (default): s = {0, 1, 3}, 9 states, 2 + 3 measurements;
 - ``vel_quat_full``: s = {0, 1, 2, 3}, 10 states, 2 + 4 measurements (flexure unmodelled);
 - ``vel_only``: s = {}, 6 states, 2 measurements (azimuth unobservable without manoeuvres).
+
+(The paper's counts, without the flexure states; ``quat_model=gins`` has one state and one
+measurement fewer in the first two.)
 
 ``Estimate.x`` holds the *total* quantities whose errors are the states:
 ``[v_N, v_E, q_nb0..3, q_rb[s], theta_f, theta_f']``, and ``Estimate.P`` the covariance of those
@@ -92,13 +100,21 @@ Measurement model, eqs. (3), (5), (6), (15)
           with w_nb_hat^b = w_ib^b - C_nb_hat^T w_in^n and L^b = C_nb_hat^T C(Q_m) L^r_nom,
           i.e. the lever-arm velocity (C_nb_hat w_ib^b - w_in^n) x (C(Q_m) L^r_nom)
     Z_Q = [ Q_m* (x) Q_bn_hat - Q_br_hat ]_s                                 (5)
+          (the paper's s; quat_model=gins drops the scalar component 0)
     H   = [[ I2  H_vq          0      ],
            [ 0   L(Q_m*)[s,:]  -I_s   ]]                                     (15)
     H_vq = -2 [L^n x] [w^n x] R(Q_bn)^T, w^n = C_nb_hat w_ib^b, L^n = C(Q_m) L^r_nom
           (the lever-arm term turns with the attitude error; not in the paper's eq. 15)
 
 The rate w_ib^b of the lever-arm term is extrapolated to the GINS time from the last two IMU
-samples (each a mean over its interval, half a sample old). R = diag(r_v I2, r_q I_s).
+samples (each a mean over its interval, half a sample old). R of the velocity rows: r_v I2 plus
+the flexure rate the lever-arm term misses (:func:`velocity_noise`). R of the quaternion rows:
+``quat_model=gins``, the GINS Euler-angle noise mapped through the measurement,
+``J Sigma J^T`` with ``J = -1/2 R(Z) E`` (:func:`quaternion_noise`), correlated; the scalar
+part moves only by the misalignment times the noise, and that row, with its true R, would
+over-constrain the additive quaternion error (its norm direction, which the normalisations
+correct without P), so it is not matched: it follows from the vector part. ``quat_model=paper``:
+``quat_sigma^2`` on every row of the paper's s, the scalar row included.
 
 Cycle (at every GINS sample)
 ----------------------------
@@ -108,8 +124,9 @@ Cycle (at every GINS sample)
 3. Predict P with (Phi, Q_d) (:func:`predict_and_measure`); update with the shared Cholesky /
    Joseph-form correction, :func:`navreplay.filters.kalman.correct`.
 4. Feedback: V_ne -= dV; Q_bn -= dQ_bn, normalised; Q_br[s] -= dQ_br.
-5. Recover the unmatched components u of Q_br (q_br2 for partial matching, eq. 11, E8) as
-   component u of ``Q_m* (x) Q_bn_hat``, then normalise Q_br (eq. 10, E10).
+5. Recover the unmatched vector components u of Q_br (q_br2 for partial matching, eq. 11, E8)
+   as component u of ``Q_m* (x) Q_bn_hat``; an unmatched scalar part follows from the vector
+   part, ``sqrt(1 - |q_vec|^2)``; then normalise Q_br (eq. 10, E10).
 6. Slave the SDINS vertical velocity and the position to the GINS (the vertical channel is not
    a state): ``V_d = V_R,d + [lever-arm velocity]_d``, position = the GINS position displaced
    by ``C(Q_m) L^r`` (:func:`lever_position`).
@@ -195,6 +212,18 @@ class Match(enum.StrEnum):
         return _COMPONENTS[self]
 
 
+class QuatModel(enum.StrEnum):
+    """Model of the quaternion measurement (docs/methods/transfer-alignment.md §4.4)."""
+
+    GINS = "gins"
+    """The vector components of the match, with R the GINS Euler-angle noise mapped through
+    the measurement (:func:`quaternion_noise`); the scalar part is not matched: it is a
+    function of the vector part (unit norm), and its row with its true, tiny R over-constrains
+    the additive error model."""
+    PAPER = "paper"
+    """The paper's rows (the scalar q_br0 included) with the same R, ``quat_sigma``, on each."""
+
+
 _COMPONENTS = {
     Match.VEL_QUAT_PARTIAL: (0, 1, 3),
     Match.VEL_QUAT_FULL: (0, 1, 2, 3),
@@ -224,6 +253,9 @@ class TransferAlignmentParams(FilterParams):
 
     match: Match = Match.VEL_QUAT_PARTIAL
     """Matched quantities: vel_quat_partial, vel_quat_full or vel_only."""
+    quat_model: QuatModel = QuatModel.GINS
+    """Quaternion measurement model: gins (vector rows, R from ``gins_euler_noise``) or paper
+    (the paper's rows and R, ``quat_sigma``)."""
     lever_arm_r: tuple[float, float, float] | None = None
     """Surveyed lever arm GINS -> SDINS in the ship frame (X, Y, Z) [m]; None: the recording's
     ``Metadata.params["lever_arm_r_nom"]``."""
@@ -235,9 +267,15 @@ class TransferAlignmentParams(FilterParams):
     """Process noise density of the dQ_br states sqrt(q_br) [1/sqrt(s)]."""
     vel_sigma: float = 0.3 * FOOT
     """Velocity measurement noise, 1 sigma per axis [m/s] (the GINS white velocity noise)."""
+    gins_euler_noise: float = 1.0 * ARCMIN
+    """GINS white noise per Euler angle, 1 sigma [rad] (the synchro noise): the R of the
+    quaternion rows of ``quat_model=gins`` is this noise mapped through the measurement,
+    ``J sigma^2 J^T`` (:func:`quaternion_noise`), correlated across the rows."""
     quat_sigma: float = 0.5 * ARCMIN
-    """Quaternion measurement noise, 1 sigma per component [-]: half the GINS synchro white
-    noise of 1 arcmin per Euler angle (a small rotation phi moves a component by phi / 2)."""
+    """The paper's quaternion measurement noise (``quat_model=paper``), 1 sigma per component
+    [-]: half the GINS synchro white noise of 1 arcmin per Euler angle (a small rotation phi
+    moves a vector component by phi / 2), the scalar row included. It also sets the GINS noise
+    of the starting attitude of that model."""
     init_vel_sigma: float = 0.25
     """Initial velocity error, 1 sigma per axis [m/s]."""
     init_misalignment: float = 3.0 * DEG
@@ -272,10 +310,12 @@ class TransferAlignmentParams(FilterParams):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "match", Match(self.match))
+        object.__setattr__(self, "quat_model", QuatModel(self.quat_model))
         for name in ("accel_bias_sigma", "accel_misalignment_sigma", "gins_heading_sigma"):
             check_number(self, name, positive=False)
         for name in ("accel_noise", "gyro_noise", "misalignment_noise", "vel_sigma",
-                     "quat_sigma", "init_vel_sigma", "init_misalignment", "init_q0_sigma"):
+                     "quat_sigma", "init_vel_sigma", "init_misalignment", "init_q0_sigma",
+                     "gins_euler_noise"):
             check_number(self, name, positive=True)
         for name in ("flexure_rate_sigma", "flexure_sigma"):
             check_number(self, name, positive=False)
@@ -559,6 +599,41 @@ def velocity_noise(q_m: np.ndarray, lever_arm_r: np.ndarray, vel_sigma: float,
 
 
 @numba.njit(cache=True)
+def euler_rate_matrix(euler):
+    """E of ``w = E d(euler)/dt``: the body rate of the ZYX Euler angle rates, (3, 3).
+
+    A small error ``n`` of the Euler angles [roll, pitch, yaw] is the body-frame rotation
+    ``E n``: ``C(euler + n) = C(euler) (I + [E n x])``.
+    """
+    sr, cr = math.sin(euler[0]), math.cos(euler[0])
+    sp, cp = math.sin(euler[1]), math.cos(euler[1])
+    E = np.zeros((3, 3))
+    E[0, 0] = 1.0
+    E[0, 2] = -sp
+    E[1, 1] = cr
+    E[1, 2] = sr * cp
+    E[2, 1] = -sr
+    E[2, 2] = cr * cp
+    return E
+
+
+@numba.njit(cache=True)
+def quaternion_noise(z, euler, sigma):
+    """Covariance of the measured Q_br ``z = Q_m* (x) Q_bn_hat`` under white GINS Euler-angle
+    noise of 1 sigma ``sigma`` [rad] per angle, (4, 4).
+
+    An Euler error n turns Q_m by ``a = E n`` in its body frame (:func:`euler_rate_matrix`),
+    ``dQ_m = 1/2 Q_m (x) [0, a]``, so ``dz = dQ_m* (x) Q_bn_hat = -1/2 [0, a] (x) z
+    = -1/2 R(z) a`` and ``cov(z) = J sigma^2 J^T`` with ``J = -1/2 R(z) E``. The vector rows
+    move by about a / 2; the scalar row only by ``-1/2 z_vec . a``, that is, by the
+    misalignment (|z_vec| = sin of half its angle) times the noise: a unit quaternion's scalar
+    part is second order in a small rotation.
+    """
+    J = _mm(rmat(z), euler_rate_matrix(euler))
+    return _mmt(J, J) * (0.25 * sigma * sigma)
+
+
+@numba.njit(cache=True)
 def lever_position(pos, q_m, lever_arm_r):
     """The GINS position displaced by the lever arm ``C(Q_m) L^r`` (NED, first order), (3,).
 
@@ -582,7 +657,7 @@ def lever_position(pos, q_m, lever_arm_r):
 
 @numba.njit(cache=True)
 def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, lever_arm_r,
-                        dt, qc, q_br, nf, theta, phi_f, qd_f):
+                        dt, qc, q_br, nf, theta, phi_f, qd_f, euler, euler_sigma):
     """Steps 2-3 of a cycle up to the correction: the predicted P, z and H.
 
     Parameters
@@ -621,6 +696,11 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     phi_f, qd_f : ndarray, shape (2, 2)
         Exact transition and process noise of the flexure states over dt
         (:func:`navreplay.lti.second_order_markov`; unused without flexure states).
+    euler : ndarray, shape (3,)
+        GINS Euler angles of the sample [rad].
+    euler_sigma : float
+        GINS white noise per Euler angle [rad]; 0: none in R2 (the caller adds the paper's
+        uniform R).
 
     Returns
     -------
@@ -631,8 +711,9 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     H : ndarray, shape (2 + len(s), n)
         Measurement matrix (15), with the flexure column.
     R2 : ndarray, shape (len(s), len(s))
-        Second-order term of the flexure in the quaternion rows, added to their R (zero
-        without flexure states).
+        R of the quaternion rows: the GINS Euler-angle noise mapped through the measurement
+        (:func:`quaternion_noise`) plus the second-order term of the flexure (zero without
+        flexure states).
     q_m : ndarray, shape (4,)
         Q_m with the sign of docs/methods/transfer-alignment.md §2.2.
     w_now : ndarray, shape (3,)
@@ -699,7 +780,11 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     # the lever-arm velocity turns with the SDINS attitude error: its dQ_bn columns
     _put(H, 0, 2, lever_attitude_jacobian(q_bn, q_m, w_now, arm)[0:2], 1.0)
     # predicted Q_br: the mounting misalignment bent by the flexure (flexed())
-    Lf, q_pred, dq_theta = flexed(q_rb, theta, ns < 4)
+    recovered = True  # q_br2 comes from the attitudes (eq. 11) unless it is matched
+    for i in range(ns):
+        if s[i] == 2:
+            recovered = False
+    Lf, q_pred, dq_theta = flexed(q_rb, theta, recovered)
     for i in range(ns):
         z[2 + i] = q_br_meas[s[i]] - q_pred[s[i]]
         for j in range(4):
@@ -712,12 +797,17 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     # the product of their errors adds 1/4 (P_tt P_ab + P_ta P_tb) (signed) to R; it matters
     # while the 3 deg mounting misalignment is being removed and then vanishes
     R2 = np.zeros((ns, ns))
+    if euler_sigma > 0.0:
+        Rz = quaternion_noise(q_br_meas, euler, euler_sigma)
+        for i in range(ns):
+            for j in range(ns):
+                R2[i, j] = Rz[s[i], s[j]]
     if nf > 0:
         col = np.full(ns, -1)  # state index of the component each bent row multiplies
         sgn = np.zeros(ns)
         for i in range(ns):
             c, g = _BENT_BY[s[i]], _BENT_SIGN[s[i]]
-            bent = ns == 4 or s[i] == 1 or s[i] == 3  # as in flexed()
+            bent = not recovered or s[i] == 1 or s[i] == 3  # as in flexed()
             if bent and c != 0:  # row 2 of full matching multiplies q_br0 ~ 1: no product
                 for j in range(ns):
                     if s[j] == c:
@@ -725,7 +815,7 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
         for i in range(ns):
             for j in range(ns):
                 if col[i] >= 0 and col[j] >= 0:
-                    R2[i, j] = 0.25 * sgn[i] * sgn[j] * (P[k, k] * P[col[i], col[j]]
+                    R2[i, j] += 0.25 * sgn[i] * sgn[j] * (P[k, k] * P[col[i], col[j]]
                                                          + P[k, col[i]] * P[k, col[j]])
     return P, z, H, R2, q_m, w_now, w_in
 
@@ -768,8 +858,14 @@ def feedback(nav, q_rb, dx, P, s, u, q_m, v_r, pos, w_now, w_in, lever_arm_r):
         q_rb[s[i]] -= dx[6 + i]
     # (11), E8: unmatched components (q_br2 for partial matching) of Q_m* (x) Q_bn_hat
     q_br_new = _mv(kernels.quat_left_matrix(np.array([q_m[0], -q_m[1], -q_m[2], -q_m[3]])), q)
+    scalar = False
     for i in u:
-        q_rb[i] = q_br_new[i]
+        if i == 0:  # the scalar part is not matched: it follows from the vector part
+            scalar = True
+        else:
+            q_rb[i] = q_br_new[i]
+    if scalar:
+        q_rb[0] = math.sqrt(max(1.0 - q_rb[1] ** 2 - q_rb[2] ** 2 - q_rb[3] ** 2, 0.0))
     _normalise(q_rb)  # (10), E10
     # the vertical channel and the position are slaved to the GINS (method §4.1)
     nav[5] = v_r[2] + lever_velocity(q, q_m, w_now, w_in, lever_arm_r)[2]
@@ -861,7 +957,7 @@ def block_intervals(t, t_prev, omega_ib_b, f_b, sums, last):
 
 def initial_covariance(
     q_m: np.ndarray, s: np.ndarray, vel_var: float, p0: float, p1: float,
-    flexure: tuple[float, float] | None = None, quat_var: float = 0.0,
+    flexure: tuple[float, float] | None = None, quat_var: float | np.ndarray = 0.0,
 ) -> np.ndarray:
     """P0 of eq. (17) for the matched index set s, of the flexure states, and the GINS
     attitude noise the SDINS starts with.
@@ -879,11 +975,13 @@ def initial_covariance(
     flexure : (sigma, wn) or None
         Flexure states last, at their stationary covariance ``diag(sigma^2, (wn sigma)^2)``
         [rad], [rad/s]; None: no flexure states.
-    quat_var : float
-        Variance of the GINS white attitude noise per quaternion component [-] (``quat_sigma``
-        squared). The SDINS starts from the *measured* Q_m, so its attitude error holds that
-        sample's noise, which Q_br does not share: ``dQ_bn = L(Q_m) dQ_br + T(Q_m) n``,
-        ``n ~ N(0, quat_var I3)``. Without it eq. (17) declares ``dQ_bn - L(Q_m) dQ_br``
+    quat_var : float or ndarray, shape (3, 3)
+        Covariance of n, the GINS white attitude noise as ``dQ_m = T(Q_m) n`` [-]: a variance
+        per component (``quat_sigma`` squared, the paper's R), or ``1/4 E Sigma E^T`` of the
+        Euler-angle noise (:func:`euler_rate_matrix`). The SDINS starts from the *measured*
+        Q_m, so its attitude error holds that sample's noise, which Q_br does not share:
+        ``dQ_bn = L(Q_m) dQ_br + T(Q_m) n``,
+        ``n ~ N(0, quat_var)``. Without it eq. (17) declares ``dQ_bn - L(Q_m) dQ_br``
         exactly zero, a constraint that only the ship's rolling and pitching can relax: the
         filter stays optimistic in attitude, and so in velocity, for the first 10-20 s.
 
@@ -899,7 +997,8 @@ def initial_covariance(
     P = np.zeros((n, n))
     P[DV, DV] = vel_var * np.eye(2)
     Tm = Lm[:, 1:]  # T(Q_m): the start's own noise, a rotation of Q_m
-    P[DQ_BN, DQ_BN] = Lm @ P_hat @ Lm.T + quat_var * Tm @ Tm.T  # (16): dQ_bn = L(Q_m) dQ_br
+    Qn = quat_var * np.eye(3) if np.ndim(quat_var) == 0 else np.asarray(quat_var)
+    P[DQ_BN, DQ_BN] = Lm @ P_hat @ Lm.T + Tm @ Qn @ Tm.T  # (16): dQ_bn = L(Q_m) dQ_br
     P[DQ_BN, br] = Lm @ P_hat[:, s]
     P[br, DQ_BN] = P[DQ_BN, br].T
     P[br, br] = P_hat[np.ix_(s, s)]
@@ -943,7 +1042,8 @@ class TransferAlignment(Filter):
         self.lever_arm_r = np.asarray(arm, dtype=float)
         if self.lever_arm_r.shape != (3,) or not np.all(np.isfinite(self.lever_arm_r)):
             raise ValueError(f"transfer-alignment: lever arm needs three finite values, got {arm!r}")
-        self.s = np.array(p.match.components, dtype=np.int64)
+        paper = p.quat_model == QuatModel.PAPER
+        self.s = np.array([c for c in p.match.components if c or paper], dtype=np.int64)
         self.u = np.array([i for i in range(4) if i not in p.match.components], dtype=np.int64)
         # the flexure states enter only the quaternion rows
         self.nf = 2 if p.flexure_sigma > 0.0 and len(self.s) else 0
@@ -962,7 +1062,9 @@ class TransferAlignment(Filter):
         self._flex_model: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._qc = np.array([p.accel_noise**2] * 3 + [p.gyro_noise**2] * 3)
         self._q_br = p.misalignment_noise**2
-        self._r = np.array([p.vel_sigma**2] * 2 + [p.quat_sigma**2] * len(self.s))
+        # R of the quaternion rows: the paper's, uniform, or the GINS noise mapped
+        self._r_q = p.quat_sigma**2 if paper else 0.0
+        self._euler_noise = 0.0 if paper else p.gins_euler_noise
         self._x0 = np.zeros(self.n)
 
         self.t = 0.0
@@ -1025,15 +1127,15 @@ class TransferAlignment(Filter):
         q_m = kernels.euler_to_quat(euler)
         if self.nav is None:
             if self._w_last is not None:  # the lever-arm velocity needs a body rate
-                self._initialise(t, q_m, v_r, pos)
+                self._initialise(t, q_m, euler, v_r, pos)
             return None
-        return self._step(t, q_m, v_r, pos)
+        return self._step(t, q_m, euler, v_r, pos)
 
     def estimate(self) -> Estimate | None:
         if self.nav is None:
             return None
         nav = self.nav
-        q_rb = flexed(self.q_rb, self.flex[0], len(self.s) < 4)[1]  # bent by the flexure
+        q_rb = flexed(self.q_rb, self.flex[0], 2 not in self.s)[1]  # bent by the flexure
         return Estimate(
             t=self.t,
             x=np.concatenate((nav[3:5], nav[6:10], self.q_rb[self.s], self.flex[: self.nf])),
@@ -1049,8 +1151,17 @@ class TransferAlignment(Filter):
     # ---------------------------------------------------------------------------------------
     # steps
 
+    def _start_noise(self, euler: np.ndarray) -> float | np.ndarray:
+        """Covariance of the GINS white attitude noise in the starting attitude, as the
+        ``quat_var`` of :func:`initial_covariance`."""
+        sigma = self._euler_noise
+        if sigma == 0.0:
+            return self.params.quat_sigma**2
+        E = euler_rate_matrix(euler)
+        return 0.25 * sigma**2 * E @ E.T
+
     def _initialise(
-        self, t: float, q_m: np.ndarray, v_r: np.ndarray, pos: np.ndarray
+        self, t: float, q_m: np.ndarray, euler: np.ndarray, v_r: np.ndarray, pos: np.ndarray
     ) -> None:
         """(16), (17): start from the GINS attitude, lever-arm compensated GINS velocity."""
         p = self.params
@@ -1064,7 +1175,7 @@ class TransferAlignment(Filter):
             q_m, self.s, p.init_vel_sigma**2, p.init_q0_sigma**2,
             math.sin(0.5 * p.init_misalignment) ** 2,
             (p.flexure_sigma, p.flexure_wn) if self.nf else None,
-            p.quat_sigma**2,
+            self._start_noise(euler),
         )
         kalman.check_covariance(self.P, name="P0", t=t)
         self.sigma_phi = np.hypot(attitude_sigma(q_m, self.P), self._consider)
@@ -1088,7 +1199,7 @@ class TransferAlignment(Filter):
         self._count = 0
 
     def _step(
-        self, t: float, q_m: np.ndarray, v_r: np.ndarray, pos: np.ndarray
+        self, t: float, q_m: np.ndarray, euler: np.ndarray, v_r: np.ndarray, pos: np.ndarray
     ) -> list[Innovation]:
         dt = t - self.t
         if not dt > 0.0:
@@ -1098,10 +1209,10 @@ class TransferAlignment(Filter):
         P, z, H, R2, q_m, w_now, w_in = predict_and_measure(
             self.nav, self.q_rb, self.P, self.s, q_m, v_r, self._sums, self._count,
             self._w_last, self._w_prev, self.lever_arm_r, dt, self._qc, self._q_br,
-            self.nf, self.flex[0], phi_f, qd_f,
+            self.nf, self.flex[0], phi_f, qd_f, euler, self._euler_noise,
         )
-        R = np.diag(self._r)
-        R[ZQ, ZQ] += R2
+        R = np.zeros((len(z), len(z)))
+        R[ZQ, ZQ] = R2 + self._r_q * np.eye(len(self.s))
         R[ZV, ZV] = velocity_noise(q_m, self.lever_arm_r, self.params.vel_sigma,
                                    self.params.flexure_rate_sigma)
         c = kalman.correct(self._x0, P, z, H, R, t=t)  # also step 7's check of P

@@ -67,14 +67,16 @@ FILTER = "transfer-alignment"
 PARTIAL, FULL, VEL_ONLY = "vel_quat_partial", "vel_quat_full", "vel_only"
 PARTIAL_FLEX, FULL_FLEX = f"{PARTIAL}+flexure", f"{FULL}+flexure"
 VARIANTS = {
-    PARTIAL: {"match": PARTIAL, "flexure_sigma": 0.0},
-    FULL: {"match": FULL, "flexure_sigma": 0.0},
-    VEL_ONLY: {"match": VEL_ONLY},
+    PARTIAL: {"match": PARTIAL, "flexure_sigma": 0.0, "quat_model": "paper"},
+    FULL: {"match": FULL, "flexure_sigma": 0.0, "quat_model": "paper"},
+    VEL_ONLY: {"match": VEL_ONLY, "quat_model": "paper"},
     PARTIAL_FLEX: {"match": PARTIAL},
     FULL_FLEX: {"match": FULL},
 }
-"""Filter parameters of each variant label: the paper's filters model no flexure; the
-``+flexure`` variants carry the flexure states at the scenario's values (the defaults)."""
+"""Filter parameters of each variant label: the paper's filters model no flexure and keep the
+paper's quaternion rows and R; the ``+flexure`` variants are navreplay's filters (the
+defaults): the flexure states at the scenario's values and the quaternion rows of the GINS
+noise (docs/methods/transfer-alignment.md §4.4, §4.9)."""
 AXES = ("N", "E", "D")
 T_EVAL = (30.0, 100.0)
 """Times of the table [s]."""
