@@ -374,11 +374,18 @@ def test_scenario_sensor_models_and_true_errors(rec):
     assert te["speed_log"]["scale_factor"] == k and set(te["imu"]) >= {"gyro_bias", "accel_bias"}
     truth = rec["truth"]
     np.testing.assert_array_equal(truth["current_n"], np.broadcast_to(v_c, truth["v_n"].shape))
-    # ground velocity = C_nb C_bv [u, 0, 0] + v_c
+    # ground velocity = C_nb (C_bv [u, 0, 0] + [0, s_y, s_z]) + v_c
     C = rotations.quat_to_dcm(truth["q_nb"])
     a = rotations.rotvec_to_dcm(m)[:, 0]
-    np.testing.assert_allclose(truth["v_n"], (C @ a) * truth["speed"][:, None] + v_c,
-                               atol=1e-12)
+    sway = np.c_[np.zeros(len(truth)), truth["sway_heave"]]
+    np.testing.assert_allclose(truth["v_n"], (C @ a) * truth["speed"][:, None] + v_c
+                               + np.einsum("nij,nj->ni", C, sway), atol=1e-12)
+    # sway and heave: 2 mm/s, correlation e^(-t / 0.25 s): 0.67 at the truth's 0.1 s, 0 at 1 s
+    s = truth["sway_heave"]
+    assert s.std(axis=0) == pytest.approx([p.sway_heave_sigma] * 2, rel=0.1)
+    lag = [np.mean(s[j:] * s[: len(s) - j], axis=0) / s.var(axis=0) for j in (1, 10)]
+    assert lag[0] == pytest.approx([math.exp(-0.4)] * 2, abs=0.05)
+    assert np.all(np.abs(lag[1]) < 0.06), lag
     # rpm = (1 + k) u / c_rpm + 5 rpm noise; depth = d + 0.1 m noise
     resid = rec["speed_log"]["rpm"] - (1 + k) * truth["speed"] / p.speed_per_rpm
     assert abs(resid.mean()) < 0.5 and resid.std() == pytest.approx(5.0, rel=0.1)
@@ -474,7 +481,8 @@ def test_perfect_sensors_keep_the_solution_on_the_truth():
     for name in ("accel_bias", "accel_scale_factor", "accel_vrw", "accel_misalignment",
                  "gyro_bias", "gyro_scale_factor", "gyro_arw", "gyro_misalignment",
                  "init_level_error", "init_azimuth_error", "init_vel_error", "init_depth_error",
-                 "rpm_scale_factor", "rpm_misalignment", "rpm_noise", "depth_noise"):
+                 "rpm_scale_factor", "rpm_misalignment", "rpm_noise", "depth_noise",
+                 "sway_heave_sigma"):
         values[name] = 0.0
     perfect = simulate("underwater-rpm", values, seed=0)
     for mode in rai.Mode:
