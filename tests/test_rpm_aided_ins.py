@@ -437,6 +437,8 @@ def test_scenario_is_seeded_and_the_current_direction_is_a_parameter():
     ({"current_speed": -0.1}, "current_speed"),
     ({"depth_error_source": "gauge"}, "depth_error_source"),
     ({"rpm_noise": float("nan")}, "rpm_noise"),
+    ({"sway_heave_sigma": -0.001}, "sway_heave_sigma"),
+    ({"sway_heave_tau": 0.0}, "sway_heave_tau"),
 ])
 def test_scenario_rejects_bad_parameters(values, match):
     with pytest.raises(ParamError, match=match):
