@@ -133,7 +133,7 @@ def test_rpm_aided_ins_nis_of_depth_and_of_each_rpm_row(rpm_runs):
 
 def test_rpm_aided_ins_across_axis_nis_rejects_a_mis_stated_sway_and_heave():
     """The same check has power: with the filter's constraint noise at half or twice the
-    simulated sway and heave the across-axis rows leave their band (NIS 3.4-4.5 and 0.27-0.30)."""
+    simulated sway and heave the across-axis rows leave their band (NIS 3.5-3.8 and 0.25-0.29)."""
     rec = simulate("underwater-rpm", {"duration": 200.0}, seed=900)
     for scale in (0.5, 2.0):
         res = replay(rec, rai.RpmAidedIns, {"mode": "rpm_current",

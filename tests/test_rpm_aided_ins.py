@@ -380,11 +380,12 @@ def test_scenario_sensor_models_and_true_errors(rec):
     sway = np.c_[np.zeros(len(truth)), truth["sway_heave"]]
     np.testing.assert_allclose(truth["v_n"], (C @ a) * truth["speed"][:, None] + v_c
                                + np.einsum("nij,nj->ni", C, sway), atol=1e-12)
-    # sway and heave: 2 mm/s, correlation e^(-t / 0.25 s): 0.67 at the truth's 0.1 s, 0 at 1 s
+    # sway and heave: 2 mm/s, correlation (1 + t/tau) e^(-t/tau), tau = 0.15 s: 0.86 at the
+    # truth's 0.1 s, 0.01 at 1 s
     s = truth["sway_heave"]
     assert s.std(axis=0) == pytest.approx([p.sway_heave_sigma] * 2, rel=0.1)
     lag = [np.mean(s[j:] * s[: len(s) - j], axis=0) / s.var(axis=0) for j in (1, 10)]
-    assert lag[0] == pytest.approx([math.exp(-0.4)] * 2, abs=0.05)
+    assert lag[0] == pytest.approx([(1 + 0.1 / 0.15) * math.exp(-0.1 / 0.15)] * 2, abs=0.03)
     assert np.all(np.abs(lag[1]) < 0.06), lag
     # rpm = (1 + k) u / c_rpm + 5 rpm noise; depth = d + 0.1 m noise
     resid = rec["speed_log"]["rpm"] - (1 + k) * truth["speed"] / p.speed_per_rpm

@@ -17,8 +17,8 @@ Truth (§3.2), with ``C_bv = exp([m x])`` and ``m = [0, m_y, m_z]``::
 
     C_nb = Rz(psi) Ry(theta)                       roll 0
     v_n  = C_nb (C_bv [u, 0, 0] + [0, s_y, s_z]) + v_c_n     ground velocity (sim.trajectory)
-    s_y, s_z: sway and heave through the water, first-order Gauss-Markov, 1-sigma
-              sway_heave_sigma (2 mm/s), correlation time sway_heave_tau (0.25 s)
+    s_y, s_z: sway and heave through the water, second-order Gauss-Markov, 1-sigma
+              sway_heave_sigma (2 mm/s), time constant sway_heave_tau (0.15 s)
     (lat, lon, h) integrated from v_n, IMU = exact inverse of the strapdown mechanization
 
 Sensors (1-sigma random constants per run, Tables 1 and 2 of the paper)::
@@ -77,6 +77,7 @@ import math
 from typing import ClassVar
 
 import numpy as np
+import scipy.linalg
 import scipy.signal
 
 from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
@@ -227,9 +228,10 @@ class UnderwaterRpmParams:
     water, per body axis y and z [m/s]: ambient turbulence and the autopilot's rudder and
     hydroplane action (docs/methods/rpm-aided-ins.md §3.2). 0: the vehicle moves exactly
     along its RPM axis."""
-    sway_heave_tau: float = 0.25
-    """Correlation time of the sway and heave (first-order Gauss-Markov) [s]: far below the
-    1-s update interval, so a filter may treat them as white measurement noise."""
+    sway_heave_tau: float = 0.15
+    """Time constant of the sway and heave (second-order Gauss-Markov, :func:`sway_heave`)
+    [s]: samples 1 s apart are correlated by 0.01, so a filter updating at 1 Hz may treat
+    them as white measurement noise."""
     # sea current
     current_speed: float = 0.25
     """Horizontal sea-current speed [m/s], constant in time and depth."""
@@ -294,19 +296,31 @@ def route_manoeuvres() -> tuple[Manoeuvre, ...]:
 
 def sway_heave(n: int, rate: float, sigma: float, tau: float,
                rng: np.random.Generator) -> np.ndarray:
-    """Sway and heave through the water, body FRD [m/s], shape (n, 3) (x is 0): two
-    independent stationary first-order Gauss-Markov processes of 1-sigma ``sigma`` [m/s] and
-    correlation time ``tau`` [s], sampled exactly at ``rate`` [Hz]::
+    """Sway and heave through the water, body FRD [m/s], shape (n, 3) (x is 0): per axis y
+    and z, an independent stationary second-order Gauss-Markov process, white noise through
+    two first-order lags of time constant ``tau`` [s] (autocorrelation
+    ``(1 + t/tau) e^(-t/tau)``), scaled to the 1-sigma ``sigma`` [m/s] and sampled exactly at
+    ``rate`` [Hz]. Two lags, not one: the vehicle's mass bounds its sway acceleration (about
+    ``sigma / tau`` RMS), where one lag would give a white acceleration::
 
-        s_k+1 = e^(-1/(rate tau)) s_k + sigma sqrt(1 - e^(-2/(rate tau))) n_k,   s_0 ~ N(0, sigma^2)
+        x_k+1 = a x_k + n_k,   s_k+1 = a s_k + (1 - a) x_k,   a = e^(-1/(rate tau))
     """
     out = np.zeros((n, 3))
     if sigma == 0.0 or n == 0:
         return out
     a = math.exp(-1.0 / (rate * tau))
-    drive = rng.standard_normal((n, 2)) * (sigma * math.sqrt(1.0 - a * a))
-    drive[0] = rng.standard_normal(2) * sigma
-    out[:, 1:] = scipy.signal.lfilter([1.0], [1.0, -a], drive, axis=0)
+    A = np.array([[a, 0.0], [1.0 - a, a]])  # state (x, s)
+    B = np.array([1.0, 0.0])
+    P = scipy.linalg.solve_discrete_lyapunov(A, np.outer(B, B))  # stationary, unit drive
+    scale = sigma / math.sqrt(P[1, 1])
+    L = np.linalg.cholesky(P)
+    for axis in (1, 2):
+        drive = rng.standard_normal(n)
+        state = L @ rng.standard_normal(2)
+        x = scipy.signal.lfilter([1.0], [1.0, -a], drive[:-1], zi=[a * state[0]])[0]
+        x = np.r_[state[0], x]
+        s = scipy.signal.lfilter([0.0, 1.0 - a], [1.0, -a], x, zi=[state[1]])[0]
+        out[:, axis] = scale * s
     return out
 
 
