@@ -230,8 +230,8 @@ class UnderwaterRpmParams:
     along its RPM axis."""
     sway_heave_tau: float = 0.15
     """Time constant of the sway and heave (second-order Gauss-Markov, :func:`sway_heave`)
-    [s]: samples 1 s apart are correlated by 0.01, so a filter updating at 1 Hz may treat
-    them as white measurement noise."""
+    [s]. At 0.15 s, samples 1 s apart are correlated by 0.01, so a filter updating at 1 Hz
+    may treat them as white measurement noise."""
     # sea current
     current_speed: float = 0.25
     """Horizontal sea-current speed [m/s], constant in time and depth."""
