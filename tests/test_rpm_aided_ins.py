@@ -374,11 +374,19 @@ def test_scenario_sensor_models_and_true_errors(rec):
     assert te["speed_log"]["scale_factor"] == k and set(te["imu"]) >= {"gyro_bias", "accel_bias"}
     truth = rec["truth"]
     np.testing.assert_array_equal(truth["current_n"], np.broadcast_to(v_c, truth["v_n"].shape))
-    # ground velocity = C_nb C_bv [u, 0, 0] + v_c
+    # ground velocity = C_nb (C_bv [u, 0, 0] + [0, s_y, s_z]) + v_c
     C = rotations.quat_to_dcm(truth["q_nb"])
     a = rotations.rotvec_to_dcm(m)[:, 0]
-    np.testing.assert_allclose(truth["v_n"], (C @ a) * truth["speed"][:, None] + v_c,
-                               atol=1e-12)
+    sway = np.c_[np.zeros(len(truth)), truth["sway_heave"]]
+    np.testing.assert_allclose(truth["v_n"], (C @ a) * truth["speed"][:, None] + v_c
+                               + np.einsum("nij,nj->ni", C, sway), atol=1e-12)
+    # sway and heave: 2 mm/s, correlation (1 + t/tau) e^(-t/tau), tau = 0.15 s: 0.86 at the
+    # truth's 0.1 s, 0.01 at 1 s
+    s = truth["sway_heave"]
+    assert s.std(axis=0) == pytest.approx([p.sway_heave_sigma] * 2, rel=0.1)
+    lag = [np.mean(s[j:] * s[: len(s) - j], axis=0) / s.var(axis=0) for j in (1, 10)]
+    assert lag[0] == pytest.approx([(1 + 0.1 / 0.15) * math.exp(-0.1 / 0.15)] * 2, abs=0.03)
+    assert np.all(np.abs(lag[1]) < 0.06), lag
     # rpm = (1 + k) u / c_rpm + 5 rpm noise; depth = d + 0.1 m noise
     resid = rec["speed_log"]["rpm"] - (1 + k) * truth["speed"] / p.speed_per_rpm
     assert abs(resid.mean()) < 0.5 and resid.std() == pytest.approx(5.0, rel=0.1)
@@ -430,6 +438,8 @@ def test_scenario_is_seeded_and_the_current_direction_is_a_parameter():
     ({"current_speed": -0.1}, "current_speed"),
     ({"depth_error_source": "gauge"}, "depth_error_source"),
     ({"rpm_noise": float("nan")}, "rpm_noise"),
+    ({"sway_heave_sigma": -0.001}, "sway_heave_sigma"),
+    ({"sway_heave_tau": 0.0}, "sway_heave_tau"),
 ])
 def test_scenario_rejects_bad_parameters(values, match):
     with pytest.raises(ParamError, match=match):
@@ -474,7 +484,8 @@ def test_perfect_sensors_keep_the_solution_on_the_truth():
     for name in ("accel_bias", "accel_scale_factor", "accel_vrw", "accel_misalignment",
                  "gyro_bias", "gyro_scale_factor", "gyro_arw", "gyro_misalignment",
                  "init_level_error", "init_azimuth_error", "init_vel_error", "init_depth_error",
-                 "rpm_scale_factor", "rpm_misalignment", "rpm_noise", "depth_noise"):
+                 "rpm_scale_factor", "rpm_misalignment", "rpm_noise", "depth_noise",
+                 "sway_heave_sigma"):
         values[name] = 0.0
     perfect = simulate("underwater-rpm", values, seed=0)
     for mode in rai.Mode:
@@ -541,11 +552,12 @@ def test_gyro_z_rate_states_are_estimated_in_the_turns_or_frozen(rec):
 
 def test_first_estimates_jacobian_keeps_the_heading_unobservable():
     """Before the first turn a heading error with its matching current error leaves the RPM
-    residual unchanged (docs/methods/rpm-aided-ins.md §4.4): at a tight constraint_sigma the
-    heading sigma must stay near its prior (only the earth rate reveals heading). With the
-    Jacobian at the corrected estimates the filter invents heading information and halves
-    the sigma within 30 s while the error does not change."""
-    rec = simulate("underwater-rpm", {"duration": 40.0}, seed=3)
+    residual unchanged (docs/methods/rpm-aided-ins.md §4.4): at a tight constraint_sigma (a
+    vehicle without sway and heave) the heading sigma must stay near its prior (only the
+    earth rate reveals heading). With the Jacobian at the corrected estimates the filter
+    invents heading information and halves the sigma within 30 s while the error does not
+    change."""
+    rec = simulate("underwater-rpm", {"duration": 40.0, "sway_heave_sigma": 0.0}, seed=3)
     ratio = {}
     for fej in (True, False):
         res = replay(rec, rai.RpmAidedIns, {"mode": "rpm_current", "constraint_sigma": 5e-5,

@@ -305,10 +305,11 @@ class RpmAidedInsParams(FilterParams):
     known launch point has sigma 0)."""
     rpm_sigma: float = 0.05
     """RPM speed noise along the RPM axis [m/s] (the forward row of the RPM update)."""
-    constraint_sigma: float = 0.0003
-    """Noise of the no-sideslip and no-heave rows of the RPM update [m/s]: the vehicle's
-    lateral and vertical water-relative velocity in the RPM frame (0.3 mm/s; the simulated
-    vehicle has none, docs/methods/rpm-aided-ins.md §4.4)."""
+    constraint_sigma: float = 0.002
+    """Noise of the no-sideslip and no-heave rows of the RPM update [m/s]: the vehicle's sway
+    and heave through the water across the RPM axis, 1-sigma (2 mm/s, the ``underwater-rpm``
+    default ``sway_heave_sigma``; docs/methods/rpm-aided-ins.md §4.4). A property of the
+    vehicle and its autopilot: set it to what the vehicle does."""
     second_order: bool = True
     """Add the covariance of the products of error states in the RPM residual to its R
     (:func:`rpm_second_order`)."""

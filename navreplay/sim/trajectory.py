@@ -53,6 +53,7 @@ from navreplay.geo.rotations import (
     euler_to_quat,
     quat_mult,
     quat_normalize,
+    quat_to_dcm,
     rotvec_to_dcm,
     rotvec_to_quat,
     wrap_angle,
@@ -413,7 +414,8 @@ def sample_indices(n: int, truth_rate: float, rate: float) -> np.ndarray:
     return np.arange(0, n, k)
 
 
-def generate(route: Route, duration: float, rate: float, *, ideal_imu: bool = True) -> Trajectory:
+def generate(route: Route, duration: float, rate: float, *, ideal_imu: bool = True,
+             body_velocity: np.ndarray | None = None) -> Trajectory:
     """Truth of a route at ``rate`` for ``duration``.
 
     Parameters
@@ -425,6 +427,10 @@ def generate(route: Route, duration: float, rate: float, *, ideal_imu: bool = Tr
         Truth (and ideal IMU) rate [Hz].
     ideal_imu : bool
         Also compute the ideal IMU samples (``omega_ib_b``, ``f_b``).
+    body_velocity : ndarray, shape (N, 3), optional
+        Velocity through the medium added to the route's, body FRD [m/s], one row per sample
+        of the time grid (an underwater vehicle's sway and heave): the ground velocity becomes
+        ``C_nb (C_bv [u, 0, 0] + body_velocity) + v_c_n``, and position and IMU follow it.
 
     Returns
     -------
@@ -434,6 +440,11 @@ def generate(route: Route, duration: float, rate: float, *, ideal_imu: bool = Tr
     speed, euler, _ = route.profile(t)
     v_n = route.velocity_n(speed, euler)
     q_nb = euler_to_quat(euler)
+    if body_velocity is not None:
+        body_velocity = np.asarray(body_velocity, dtype=float)
+        if body_velocity.shape != v_n.shape:
+            raise ValueError(f"body_velocity needs shape {v_n.shape}, got {body_velocity.shape}")
+        v_n = v_n + np.einsum("nij,nj->ni", quat_to_dcm(q_nb), body_velocity)
     pos = kinematics.integrate_position(t, v_n, np.array([route.lat, route.lon, route.h]))
     omega = f = None
     if ideal_imu:

@@ -15,8 +15,10 @@ Models
 ------
 Truth (§3.2), with ``C_bv = exp([m x])`` and ``m = [0, m_y, m_z]``::
 
-    C_nb = Rz(psi) Ry(theta)                       roll 0, no sideslip / heave through the water
-    v_n  = C_nb C_bv [u, 0, 0] + v_c_n             ground velocity (sim.trajectory.Route)
+    C_nb = Rz(psi) Ry(theta)                       roll 0
+    v_n  = C_nb (C_bv [u, 0, 0] + [0, s_y, s_z]) + v_c_n     ground velocity (sim.trajectory)
+    s_y, s_z: sway and heave through the water, second-order Gauss-Markov, 1-sigma
+              sway_heave_sigma (2 mm/s), time constant sway_heave_tau (0.15 s)
     (lat, lon, h) integrated from v_n, IMU = exact inverse of the strapdown mechanization
 
 Sensors (1-sigma random constants per run, Tables 1 and 2 of the paper)::
@@ -52,7 +54,8 @@ Metadata
 path length over the recording, the paper's distance travelled DT [m]).
 
 Truth columns (at ``truth_rate``): ``pos``, ``v_n``, ``q_nb``, ``euler`` (roll, pitch, yaw),
-``speed`` (u, water-relative speed along the RPM axis [m/s]), ``current_n`` [m/s],
+``speed`` (u, water-relative speed along the RPM axis [m/s]), ``sway_heave`` (s_y, s_z
+[m/s]), ``current_n`` [m/s],
 ``gyro_bias`` [rad/s], ``accel_bias`` [m/s^2] (the true total IMU biases).
 ``t0_ns`` is the scenario date (UTC) in UNIX nanoseconds; the streams start there.
 
@@ -74,6 +77,8 @@ import math
 from typing import ClassVar
 
 import numpy as np
+import scipy.linalg
+import scipy.signal
 
 from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
 from navreplay.sensors.depth import DepthModel
@@ -89,6 +94,7 @@ from navreplay.sim.trajectory import (
     initial_nav,
     parse_utc,
     sample_indices,
+    time_grid,
     utc_ns,
 )
 from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
@@ -127,6 +133,7 @@ _TRUTH_COLUMNS = {
     "q_nb": "true attitude quaternion b->n, Hamilton, scalar first",
     "euler": "true roll, pitch, yaw (ZYX) [rad], yaw in [-pi, pi)",
     "speed": "true water-relative speed u along the RPM axis [m/s]",
+    "sway_heave": "true sway and heave: velocity through the water along body y and z [m/s]",
     "current_n": "true sea-current velocity NED [m/s] (constant)",
     "gyro_bias": "true total gyro bias, FRD [rad/s]",
     "accel_bias": "true total accelerometer bias, FRD [m/s^2]",
@@ -215,6 +222,16 @@ class UnderwaterRpmParams:
     """RPM white noise per sample [rev/min]."""
     speed_per_rpm: float = 0.01
     """Nominal propeller law c_rpm [(m/s)/(rev/min)]."""
+    # sway and heave through the water
+    sway_heave_sigma: float = 0.002
+    """1-sigma of the vehicle's lateral (sway) and vertical (heave) velocity through the
+    water, per body axis y and z [m/s]: ambient turbulence and the autopilot's rudder and
+    hydroplane action (docs/methods/rpm-aided-ins.md §3.2). 0: the vehicle moves exactly
+    along its RPM axis."""
+    sway_heave_tau: float = 0.15
+    """Time constant of the sway and heave (second-order Gauss-Markov, :func:`sway_heave`)
+    [s]. At 0.15 s, samples 1 s apart are correlated by 0.01, so a filter updating at 1 Hz
+    may treat them as white measurement noise."""
     # sea current
     current_speed: float = 0.25
     """Horizontal sea-current speed [m/s], constant in time and depth."""
@@ -233,7 +250,8 @@ class UnderwaterRpmParams:
                           "gyro_misalignment", "init_level_error", "init_azimuth_error",
                           "init_vel_error", "init_depth_error", "init_horizontal_error",
                           "rpm_scale_factor", "rpm_misalignment", "rpm_noise", "current_speed",
-                          "depth_noise")
+                          "depth_noise", "sway_heave_sigma")
+        check_positive(self, "sway_heave_tau")
         check_whole_intervals(self, "duration", "imu_rate")
         for slow in ("speed_log_rate", "depth_rate", "truth_rate"):
             check_divides(self, "imu_rate", slow)
@@ -276,6 +294,36 @@ def route_manoeuvres() -> tuple[Manoeuvre, ...]:
     )
 
 
+def sway_heave(n: int, rate: float, sigma: float, tau: float,
+               rng: np.random.Generator) -> np.ndarray:
+    """Sway and heave through the water, body FRD [m/s], shape (n, 3) (x is 0): per axis y
+    and z, an independent stationary second-order Gauss-Markov process, white noise through
+    two first-order lags of time constant ``tau`` [s] (autocorrelation
+    ``(1 + t/tau) e^(-t/tau)``), scaled to the 1-sigma ``sigma`` [m/s] and sampled exactly at
+    ``rate`` [Hz]. Two lags, not one: the vehicle's mass bounds its sway acceleration (about
+    ``sigma / tau`` RMS), where one lag would give a white acceleration::
+
+        x_k+1 = a x_k + n_k,   s_k+1 = a s_k + (1 - a) x_k,   a = e^(-1/(rate tau))
+    """
+    out = np.zeros((n, 3))
+    if sigma == 0.0 or n == 0:
+        return out
+    a = math.exp(-1.0 / (rate * tau))
+    A = np.array([[a, 0.0], [1.0 - a, a]])  # state (x, s)
+    B = np.array([1.0, 0.0])
+    P = scipy.linalg.solve_discrete_lyapunov(A, np.outer(B, B))  # stationary, unit drive
+    scale = sigma / math.sqrt(P[1, 1])
+    L = np.linalg.cholesky(P)
+    for axis in (1, 2):
+        drive = rng.standard_normal(n)
+        state = L @ rng.standard_normal(2)
+        x = scipy.signal.lfilter([1.0], [1.0, -a], drive[:-1], zi=[a * state[0]])[0]
+        x = np.r_[state[0], x]
+        s = scipy.signal.lfilter([0.0, 1.0 - a], [1.0, -a], x, zi=[state[1]])[0]
+        out[:, axis] = scale * s
+    return out
+
+
 def current_velocity(speed: float, direction: float) -> np.ndarray:
     """Horizontal current NED [m/s], shape (3,), flowing towards ``direction`` [rad, clockwise
     from north]."""
@@ -305,7 +353,7 @@ class UnderwaterRpm(Scenario):
     def simulate(self, params: UnderwaterRpmParams, rng: np.random.Generator,
                  seed: int) -> Recording:
         p = params
-        rng_imu, rng_log, rng_depth, rng_init, rng_current = rng.spawn(5)
+        rng_imu, rng_log, rng_depth, rng_init, rng_current, rng_sway = rng.spawn(6)
         start = parse_utc(p.date)
         t0_ns = utc_ns(start)
 
@@ -332,8 +380,9 @@ class UnderwaterRpm(Scenario):
             speed=START_SPEED, manoeuvres=route_manoeuvres(),
             velocity_misalignment=tuple(log_errors.misalignment), current_n=tuple(v_c),
         )
-        traj = generate(route, p.duration, p.imu_rate)
-        n = traj.t.shape[0]
+        n = time_grid(p.duration, p.imu_rate).size
+        v_sway = sway_heave(n, p.imu_rate, p.sway_heave_sigma, p.sway_heave_tau, rng_sway)
+        traj = generate(route, p.duration, p.imu_rate, body_velocity=v_sway)
         imu_meas = imu_model.measure(imu_errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate,
                                      rng_imu)
 
@@ -358,7 +407,7 @@ class UnderwaterRpm(Scenario):
             StreamKind.DEPTH: Stream(StreamKind.DEPTH, nanoseconds(traj.t[di], t0_ns),
                                      depth_cols, "depth"),
             StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, ti, imu_errors,
-                                           speed=traj.speed,
+                                           speed=traj.speed, sway_heave=v_sway[:, 1:],
                                            current_n=np.broadcast_to(v_c, (n, 3))),
         }
         meta = self.metadata(
