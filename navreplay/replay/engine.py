@@ -685,7 +685,10 @@ class ReplaySession:
             ) from e
         self.filter = filt
         self.states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
-        self.navigation = navigation_parts(filter_cls, self.states)
+        try:
+            self.navigation = navigation_parts(filter_cls, self.states)
+        except (TypeError, ValueError) as e:
+            raise FilterInitError(str(e)) from e
         self.label, self.source = label, source
         self._names = tuple(st.name for st in self.states)
         scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
