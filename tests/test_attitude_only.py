@@ -198,7 +198,7 @@ def test_vector_matching_is_scored_on_its_attitude_with_a_consistent_nees(tmp_pa
     ("PositionStateWithoutPosition", "filter 'position-state-without-position': states dlat "
                                      "are errors of parts of the navigation solution it does "
                                      "not declare"),
-    ("NanAttitude", "attitude"),
+    ("NanAttitude", "at t = 20.000 s: non-finite attitude estimate"),
 ])
 def test_a_wrong_navigation_declaration_or_output_stops_with_one_line(plugins, drive, cls,
                                                                      what):
