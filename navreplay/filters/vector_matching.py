@@ -79,7 +79,7 @@ C_nb_hat is the one from before the correction; no iterations (plain EKF).
 Variant ``consistent`` (the default; docs/methods/vector-matching.md §4.6)
 -------------------------------------------------------------------------
 The same attitude states, residual and feedback, with each sensor error modelled as what it is.
-The covariance carries 15 more states that the update never corrects (Schmidt consider states:
+The covariance carries 18 more states that the update never corrects (Schmidt consider states:
 their rows of K are 0)::
 
     index  symbol     unit    meaning (body frame; constant over a run)
@@ -88,6 +88,7 @@ their rows of K are 0)::
     9-11   b_m        T       magnetometer (hard-iron) bias
     12-14  s_m        -       magnetometer scale-factor error
     15-17  w_v(k-1)   m/s     GNSS velocity error of the previous epoch (white from epoch to epoch)
+    18-20  d / e(k-1) -       error of the last step's measured rotation / previous attitude error
 
     z_g = -2[u_n x] q_ev + C_nb_hat (b_a + diag(f_b) s_a) + (w_v(k-1) - w_v(k)) / dt + n_f
     z_h = -2[h_n x] q_ev - C_nb_hat (b_m + diag(m_b) s_m) + n_h
@@ -95,10 +96,19 @@ their rows of K are 0)::
 
 w_v(k) joins the state for the update (variance vel_sigma(k)^2) and replaces w_v(k-1) after it:
 the backward difference (13) shares each GNSS error between two epochs. The nominal attitude is
-held, so its error does not decay: tau = inf, Phi = I, Q_d = q_w dt I3 (a random walk). Q_d is
-added only at an epoch whose NIS without it rejects "no rotation since the last epoch" at the
-false-alarm probability ``manoeuvre_false_alarm``; the epoch is then updated again with it. The
-initial fix is the TRIAD attitude corrected by the first epoch's measurement (at rest: a_n = 0)
+held, so its error does not decay: tau = inf, Phi = I, Q_d = q_w dt I3 (a random walk), unless
+the last step measured a rotation (turn model ``constant-rate``): the rotation of the last step
+``T = q_fix(k-1) (x) q_fix(k-2)^-1`` (significant when ``d^T P_d^-1 d`` of its vector part d
+exceeds the chi-square(3) value of ``manoeuvre_false_alarm``) is predicted to repeat::
+
+    q_nb_hat(k) = T (x) q_fix(k-1),   e(k) = C(T) e(k-1) + d,   d = e(k-1) - C(T) e(k-2)
+    a_n <- a_n + T_v x a_n            (13) turned through half the step: its half-step lag (E11)
+
+with e the attitude error (q_ev) and d the error of the measured rotation, whose covariance
+with e and the consider states P carries (states 18-20: d between epochs, e(k-1) during the
+update). Q_d is added only at an epoch whose NIS without it rejects the prediction ("no rotation
+since the last epoch", or "the same rotation again") at the false-alarm probability
+``manoeuvre_false_alarm``; the epoch is then updated again with it. The initial fix is the TRIAD attitude corrected by the first epoch's measurement (at rest: a_n = 0)
 from a prior of p0_sigma, which gives P its correlation with the sensor constants.
 
 Initialisation (navreplay's choice): TRIAD at the first complete epoch, which must be at rest:
@@ -111,8 +121,8 @@ Model-induced error diagnostic, eqs. (23)-(25) with E7 (gravity model only)::
 
 reported as the angle ``2 (dq_conv - dq_true)`` [rad].
 
-Dimensions (paper): x 3, Phi and Q_d 3x3, z 6, H 6x3, R 6x6, K 3x6, P 3x3. Consistent: P 18x18
-(21x21 during the update, with H 6x21); the attitude block of P is the output.
+Dimensions (paper): x 3, Phi and Q_d 3x3, z 6, H 6x3, R 6x6, K 3x6, P 3x3. Consistent: P 21x21
+(24x24 during the update, with H 6x24); the attitude block of P is the output.
 
 Two code paths, one model
 -------------------------
@@ -557,7 +567,8 @@ def measurement_noise(
 def consider_columns(
     C_nb_hat: np.ndarray, f_b: np.ndarray, m_b: np.ndarray, dt: Any
 ) -> np.ndarray:
-    """Columns of H for the consider states of the consistent variant, states 3-20.
+    """Columns of H for the sensor constants and GNSS velocity errors of the consistent variant
+    (states 3-17 and, during an update, 21-23; the rotation states 18-20 do not enter z).
 
     A bias b and a scale-factor error s of a reading u_b enter the residuals (14) and (10) as
     ``+C_nb_hat (b + diag(s) u_b)`` (accelerometer) and ``-C_nb_hat (b + diag(s) u_b)``
@@ -965,12 +976,14 @@ class VectorMatchingFilter(Filter):
 
     def _consider_update(self, P: np.ndarray, cur: EpochSample, a_n: np.ndarray, dt: float,
                          qd: float | None) -> kalman.Correction:
-        """Update of the consistent variant (module docstring): P (18x18) predicted without
-        process noise; ``qd`` is added (and the update redone) when the NIS rejects "no
-        rotation" (None: never, the initial fix). A fix from a wide prior (a manoeuvre, the
-        initial fix) is iterated: the residual is relinearised at the corrected attitude
-        (:data:`FIX_ITERATIONS` times). Sets q_nb, P and the diagnostic; returns the
-        correction whose innovation is that of the prior."""
+        """Update of the consistent variant (module docstring): P (21x21, states 18-20 the
+        previous attitude error) predicted without process noise; ``qd`` is added (and the
+        update redone) when the NIS rejects the prediction (None: never, the initial fix). A
+        fix from a wide prior (a manoeuvre, the initial fix) is iterated: the residual is
+        relinearised at the corrected attitude (:data:`FIX_ITERATIONS` times). Then the
+        rotation of the step is measured and kept when significant (turn model
+        ``constant-rate``). Sets q_nb, P and the diagnostic; returns the correction whose
+        innovation is that of the prior."""
         p = self.params
         assert self.q_nb is not None
         R = np.r_[np.full(3, p.accel_noise_sigma**2), np.full(3, p.mag_noise_sigma**2)]
