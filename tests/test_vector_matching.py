@@ -381,6 +381,10 @@ def test_params_validation_and_model_spelling():
     assert d.variant is Variant.CONSISTENT and math.isinf(d.tau)
     assert d.mag_bias_sigma == pytest.approx(300e-9)
     assert d.manoeuvre_threshold == pytest.approx(38.26, abs=0.01)  # chi-square(6), 1e-6
+    assert d.turn_model == "constant-rate" and d.turn_threshold == pytest.approx(30.66, abs=0.01)
+    assert math.isinf(VectorMatchingParams(manoeuvre_false_alarm=0.0).turn_threshold)
+    with pytest.raises(ValueError):
+        VectorMatchingParams(turn_model="spin")
     assert paper.tau == 10.0 and paper.mag_bias_sigma == 0.0 and paper.manoeuvre_threshold == 0
     assert VectorMatchingParams(variant="paper", tau=5.0).tau == 5.0
     with pytest.raises(ValueError, match="mag_bias_sigma is a consider state"):
