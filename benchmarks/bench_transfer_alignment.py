@@ -87,7 +87,8 @@ def kf_step(repeat: int) -> dict[str, float]:
 
     def model():
         return ta.predict_and_measure(nav, q_rb, P0, s, q_m, v_r, sums, 10, w, w, lever, 0.1,
-                                      qc, 1e-12, 0, 0.0, np.eye(2), np.zeros((2, 2)))
+                                      qc, 1e-12, 0, 0.0, np.eye(2), np.zeros((2, 2)),
+                                      np.zeros(3), 0.0)
 
     P, z, H, _, qm, w_now, w_in = model()
     c = kalman.correct(np.zeros(9), P, z, H, r, check=False)

@@ -79,7 +79,7 @@ C_nb_hat is the one from before the correction; no iterations (plain EKF).
 Variant ``consistent`` (the default; docs/methods/vector-matching.md §4.6)
 -------------------------------------------------------------------------
 The same attitude states, residual and feedback, with each sensor error modelled as what it is.
-The covariance carries 15 more states that the update never corrects (Schmidt consider states:
+The covariance carries 18 more states that the update never corrects (Schmidt consider states:
 their rows of K are 0)::
 
     index  symbol     unit    meaning (body frame; constant over a run)
@@ -88,6 +88,7 @@ their rows of K are 0)::
     9-11   b_m        T       magnetometer (hard-iron) bias
     12-14  s_m        -       magnetometer scale-factor error
     15-17  w_v(k-1)   m/s     GNSS velocity error of the previous epoch (white from epoch to epoch)
+    18-20  d / e(k-1) -       error of the last step's measured rotation / previous attitude error
 
     z_g = -2[u_n x] q_ev + C_nb_hat (b_a + diag(f_b) s_a) + (w_v(k-1) - w_v(k)) / dt + n_f
     z_h = -2[h_n x] q_ev - C_nb_hat (b_m + diag(m_b) s_m) + n_h
@@ -95,10 +96,19 @@ their rows of K are 0)::
 
 w_v(k) joins the state for the update (variance vel_sigma(k)^2) and replaces w_v(k-1) after it:
 the backward difference (13) shares each GNSS error between two epochs. The nominal attitude is
-held, so its error does not decay: tau = inf, Phi = I, Q_d = q_w dt I3 (a random walk). Q_d is
-added only at an epoch whose NIS without it rejects "no rotation since the last epoch" at the
-false-alarm probability ``manoeuvre_false_alarm``; the epoch is then updated again with it. The
-initial fix is the TRIAD attitude corrected by the first epoch's measurement (at rest: a_n = 0)
+held, so its error does not decay: tau = inf, Phi = I, Q_d = q_w dt I3 (a random walk), unless
+the last step measured a rotation (turn model ``constant-rate``): the rotation of the last step
+``T = q_fix(k-1) (x) q_fix(k-2)^-1`` (significant when ``d^T P_d^-1 d`` of its vector part d
+exceeds the chi-square(3) value of ``manoeuvre_false_alarm``) is predicted to repeat::
+
+    q_nb_hat(k) = T (x) q_fix(k-1),   e(k) = C(T) e(k-1) + d,   d = e(k-1) - C(T) e(k-2)
+    a_n <- a_n + T_v x a_n            (13) turned through half the step: its half-step lag (E11)
+
+with e the attitude error (q_ev) and d the error of the measured rotation, whose covariance
+with e and the consider states P carries (states 18-20: d between epochs, e(k-1) during the
+update). Q_d is added only at an epoch whose NIS without it rejects the prediction ("no rotation
+since the last epoch", or "the same rotation again") at the false-alarm probability
+``manoeuvre_false_alarm``; the epoch is then updated again with it. The initial fix is the TRIAD attitude corrected by the first epoch's measurement (at rest: a_n = 0)
 from a prior of p0_sigma, which gives P its correlation with the sensor constants.
 
 Initialisation (navreplay's choice): TRIAD at the first complete epoch, which must be at rest:
@@ -111,8 +121,8 @@ Model-induced error diagnostic, eqs. (23)-(25) with E7 (gravity model only)::
 
 reported as the angle ``2 (dq_conv - dq_true)`` [rad].
 
-Dimensions (paper): x 3, Phi and Q_d 3x3, z 6, H 6x3, R 6x6, K 3x6, P 3x3. Consistent: P 18x18
-(21x21 during the update, with H 6x21); the attitude block of P is the output.
+Dimensions (paper): x 3, Phi and Q_d 3x3, z 6, H 6x3, R 6x6, K 3x6, P 3x3. Consistent: P 21x21
+(24x24 during the update, with H 6x24); the attitude block of P is the output.
 
 Two code paths, one model
 -------------------------
@@ -238,8 +248,11 @@ SENSOR = slice(3, 15)
 scale factor (3 each, body frame)."""
 W_PREV = slice(15, 18)
 """GNSS velocity error of the previous epoch."""
-N_CONSISTENT = 18
-"""States of the consistent variant between updates (21 during one: w_v(k) appended)."""
+CLONE = slice(18, 21)
+"""Between epochs: the error d of the last measured rotation increment; during an update: the
+attitude error of the previous epoch (turn model ``constant-rate``)."""
+N_CONSISTENT = 21
+"""States of the consistent variant between updates (24 during one: w_v(k) appended)."""
 FIX_ITERATIONS = 2
 """Relinearisations of a fix from a wide prior (consistent variant): a 5 deg prior error leaves
 a second-order residual of ~160 nT in z_h, ten times the magnetometer noise."""
@@ -270,6 +283,15 @@ VARIANT_DEFAULTS = {
 SENSOR_PARAMS = ("accel_bias_sigma", "accel_scale_factor_sigma", "mag_bias_sigma",
                  "mag_scale_factor_sigma")
 """The sensor-constant sigmas of the consider states (variant ``consistent`` only)."""
+
+
+class TurnModel(enum.StrEnum):
+    """How the consistent variant predicts the attitude from one epoch to the next."""
+
+    CONSTANT_RATE = "constant-rate"
+    """Held, unless the last step measured a rotation: then the same rotation again."""
+    HELD = "held"
+    """Always held."""
 
 
 class MatchModel(enum.StrEnum):
@@ -312,6 +334,9 @@ class VectorMatchingParams(FilterParams):
     """0: add the process noise at every epoch (paper). > 0: add it only where the NIS without
     it rejects "no rotation since the last epoch" at this false-alarm probability (consistent:
     1e-6)."""
+    turn_model: TurnModel = TurnModel.CONSTANT_RATE
+    """Prediction of the consistent variant: ``constant-rate`` (the last epoch's rotation, when
+    significant, predicted to continue) or ``held``."""
     accel_noise_sigma: float = ACCEL_NOISE_SIGMA
     """Accelerometer white noise, 1-sigma per sample and axis [m/s^2] (s_f of eq. 15)."""
     mag_noise_sigma: float = MAG_NOISE_SIGMA
@@ -342,6 +367,7 @@ class VectorMatchingParams(FilterParams):
     def __post_init__(self) -> None:
         object.__setattr__(self, "model", MatchModel(self.model))
         object.__setattr__(self, "variant", Variant(self.variant))
+        object.__setattr__(self, "turn_model", TurnModel(self.turn_model))
         if self.variant is Variant.PAPER:
             for name in SENSOR_PARAMS:
                 if getattr(self, name):
@@ -367,6 +393,13 @@ class VectorMatchingParams(FilterParams):
                 )
             object.__setattr__(self, "earth_field_n", tuple(float(v) for v in h))
         check_number(self, "gravity", positive=True)
+
+    @property
+    def turn_threshold(self) -> float:
+        """Chi-square(3) value above which the rotation measured over the last step is
+        significant (inf: never; turn model ``constant-rate`` with a manoeuvre test only)."""
+        a = self.manoeuvre_false_alarm
+        return math.inf if a == 0.0 or a >= 1.0 else chi2.ppf(1.0 - a, 3)
 
     @property
     def manoeuvre_threshold(self) -> float:
@@ -541,7 +574,8 @@ def measurement_noise(
 def consider_columns(
     C_nb_hat: np.ndarray, f_b: np.ndarray, m_b: np.ndarray, dt: Any
 ) -> np.ndarray:
-    """Columns of H for the consider states of the consistent variant, states 3-20.
+    """Columns of H for the sensor constants and GNSS velocity errors of the consistent variant
+    (states 3-17 and, during an update, 21-23; the rotation states 18-20 do not enter z).
 
     A bias b and a scale-factor error s of a reading u_b enter the residuals (14) and (10) as
     ``+C_nb_hat (b + diag(s) u_b)`` (accelerometer) and ``-C_nb_hat (b + diag(s) u_b)``
@@ -798,6 +832,8 @@ class VectorMatchingFilter(Filter):
         self._estimate: Estimate | None = None
         self._pending: list[Innovation] = []  # of an epoch completed by propagate()
         self._in_gap = False  # an IMU gap is being bridged
+        self._turn: np.ndarray | None = None  # the last step's rotation, when significant
+        self._q_fix: np.ndarray | None = None  # attitude after the last update
 
     # -- engine callbacks
 
@@ -906,6 +942,7 @@ class VectorMatchingFilter(Filter):
             self.P[W_PREV, :] = 0.0
             self.P[:, W_PREV] = 0.0
             self.P[W_PREV, W_PREV] = np.diag(cur.vel_sigma**2)
+            self._turn = None
         self.t = float(cur.t)
         self._prev = cur
         self._estimate = None
@@ -918,8 +955,18 @@ class VectorMatchingFilter(Filter):
         phi, qd = process_noise(dt, p.tau, p.q_w)  # (16)-(18)
         if p.variant is Variant.CONSISTENT:
             a_n = gps_acceleration(cur.v_n, prev.v_n, dt)  # (13)
-            c = self._consider_update(held_prediction(self.P, float(phi), 0.0), cur, a_n, dt,
-                                      float(qd))
+            P = held_prediction(self.P, float(phi), 0.0)
+            A = np.eye(N_CONSISTENT)
+            A[CLONE, :] = 0.0
+            A[CLONE, QE] = np.eye(3)  # the clone becomes e(k-1)
+            if self._turn is not None:  # e(k) = R e(k-1) + d(k-1): the same rotation again
+                A[QE, QE] = quat_to_dcm(self._turn)
+                A[QE, CLONE] = np.eye(3)
+                self.q_nb = quat_normalize(quat_mult(self._turn, self.q_nb))
+                # (13) is the step's mean acceleration, half a step old (E11): turned with
+                # the vehicle through half the step's rotation to t_k
+                a_n = a_n + np.cross(self._turn[1:], a_n)
+            c = self._consider_update(A @ P @ A.T, cur, a_n, dt, float(qd))
         else:
             _, P = kalman.predict(
                 np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
@@ -939,12 +986,14 @@ class VectorMatchingFilter(Filter):
 
     def _consider_update(self, P: np.ndarray, cur: EpochSample, a_n: np.ndarray, dt: float,
                          qd: float | None) -> kalman.Correction:
-        """Update of the consistent variant (module docstring): P (18x18) predicted without
-        process noise; ``qd`` is added (and the update redone) when the NIS rejects "no
-        rotation" (None: never, the initial fix). A fix from a wide prior (a manoeuvre, the
-        initial fix) is iterated: the residual is relinearised at the corrected attitude
-        (:data:`FIX_ITERATIONS` times). Sets q_nb, P and the diagnostic; returns the
-        correction whose innovation is that of the prior."""
+        """Update of the consistent variant (module docstring): P (21x21, states 18-20 the
+        previous attitude error) predicted without process noise; ``qd`` is added (and the
+        update redone) when the NIS rejects the prediction (None: never, the initial fix). A
+        fix from a wide prior (a manoeuvre, the initial fix) is iterated: the residual is
+        relinearised at the corrected attitude (:data:`FIX_ITERATIONS` times). Then the
+        rotation of the step is measured and kept when significant (turn model
+        ``constant-rate``). Sets q_nb, P and the diagnostic; returns the correction whose
+        innovation is that of the prior."""
         p = self.params
         assert self.q_nb is not None
         R = np.r_[np.full(3, p.accel_noise_sigma**2), np.full(3, p.mag_noise_sigma**2)]
@@ -957,9 +1006,11 @@ class VectorMatchingFilter(Filter):
         def correct(q_nb: np.ndarray) -> kalman.Correction:
             C = quat_to_dcm(q_nb)
             z, H_q = measurement(p.model, C, cur.f_b, cur.m_b, a_n, self.ref.g_n, self.ref.h_n)
-            H = np.concatenate([H_q, consider_columns(C, cur.f_b, cur.m_b, dt)], axis=1)
+            cc = consider_columns(C, cur.f_b, cur.m_b, dt)
+            H = np.concatenate([H_q, cc[:, :15], np.zeros((N_MEAS, 3)), cc[:, 15:]], axis=1)
             return kalman.correct(x, Pa, z, H, R, frozen=frozen, t=cur.t)
 
+        q_prev = self._q_fix  # the fix of the last epoch
         c = correct(self.q_nb) if qd is None or p.manoeuvre_threshold > 0.0 else None
         wide = qd is None
         if qd is not None and (c is None or c.nis > p.manoeuvre_threshold):
@@ -974,8 +1025,23 @@ class VectorMatchingFilter(Filter):
                 c = correct(self.q_nb)
                 self.q_nb = feedback(self.q_nb, c.x[QE])
                 x[QE] -= c.x[QE]
-        keep = np.r_[0:W_PREV.start, N_CONSISTENT:N_CONSISTENT + 3]  # w_v(k) -> w_v(k-1)
-        self.P = c.P[np.ix_(keep, keep)]
+        keep = np.r_[0:W_PREV.start, N_CONSISTENT:N_CONSISTENT + 3, CLONE]  # w_v(k) -> w_v(k-1)
+        P = c.P[np.ix_(keep, keep)]
+        self._turn = None
+        if qd is not None and p.turn_model is TurnModel.CONSTANT_RATE:
+            # the rotation of this step and its error d = e(k) - R e(k-1); kept for the next
+            # step when significant at the manoeuvre test's false alarm
+            turn = quat_mult(self.q_nb, q_prev * np.array([1.0, -1.0, -1.0, -1.0]))
+            turn *= np.sign(turn[0])
+            A = np.eye(N_CONSISTENT)
+            A[CLONE, QE] = np.eye(3)
+            A[CLONE, CLONE] = -quat_to_dcm(turn)
+            P = A @ P @ A.T
+            d = turn[1:]
+            if d @ np.linalg.solve(P[CLONE, CLONE], d) > p.turn_threshold:
+                self._turn = turn
+        self.P = P
+        self._q_fix = self.q_nb
         if p.model is MatchModel.GRAVITY:
             self._diag = model_induced_error(first.nu, a_n, self.ref.g_n, self.ref.h_n)
         return first
