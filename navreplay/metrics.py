@@ -326,7 +326,7 @@ def position_error_ned(pos_hat: np.ndarray, pos_true: np.ndarray) -> np.ndarray:
 
 def nav_errors(
     pos: np.ndarray, v_n: np.ndarray, q_nb: np.ndarray, truth: Mapping[str, np.ndarray],
-    navigation: tuple[str, ...] = ("pos", "v_n", "q_nb"),
+    navigation: tuple[str, ...] = INITIAL_PARTS,
 ) -> NavErrors:
     """Errors of a navigation solution against the reference at the same times: the one
     navigation-error computation of navreplay (tables, ensembles and the Rerun view).
