@@ -121,6 +121,9 @@ class FilterOutput:
         Per measurement: update times [s], NIS, dof.
     nav_states : tuple of str
         The states that are errors of the navigation solution (they make ``nav_cov``).
+    navigation : tuple of str
+        The parts of the solution the filter outputs (``pos``, ``v_n``, ``q_nb``;
+        ``RunResult.navigation``): the CSV carries their columns only.
     """
 
     label: str
@@ -137,10 +140,16 @@ class FilterOutput:
     metrics: Any
     nis: dict[str, tuple[np.ndarray, np.ndarray, int]]
     nav_states: tuple[str, ...] = ()
+    navigation: tuple[str, ...] = ("pos", "v_n", "q_nb")
+
+    def has(self, part: str) -> bool:
+        """Whether the output holds part ``part`` (``pos``, ``v_n``, ``q_nb``) of a solution."""
+        return part in self.navigation and getattr(self, f"nav_{part}") is not None
 
     @property
     def has_nav(self) -> bool:
-        return self.nav_pos is not None and self.nav_v_n is not None and self.nav_q_nb is not None
+        """A whole navigation solution (a pose: what TUM and odometry need)."""
+        return self.has("pos") and self.has("v_n") and self.has("q_nb")
 
     @property
     def stamps_ns(self) -> np.ndarray:
@@ -180,6 +189,7 @@ def filter_output(result: RunResult, recording: Recording | None = None,
         metrics=metrics,
         nis={name: (s.t, s.nis, int(s.nu.shape[1])) for name, s in result.innovations.items()},
         nav_states=nav_state_names(result.states),
+        navigation=result.navigation,
     )
 
 
@@ -412,14 +422,15 @@ class Column:
 
 
 _RAD_TO_DEG = 180.0 / math.pi
+_NAV_ROW_PART = ("pos", "v_n", "q_nb")
+"""The part of the solution of each block of three :data:`NAV_ROWS`."""
 
 
 def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
     """The columns of one filter's CSV (see docs/exports.md)."""
     cols = [Column("stamp", "ns", "absolute estimate time", out.stamps_ns, "%d"),
             Column("t", "s", "time since the recording start", out.t)]
-    if out.has_nav:
-        euler = quat_to_euler(out.nav_q_nb) * _RAD_TO_DEG
+    if out.has("pos"):
         cols += [Column("lat", "deg", "geodetic latitude (WGS84)", out.nav_pos[:, 0] * _RAD_TO_DEG,
                         "%.10f"),
                  Column("lon", "deg", "longitude", out.nav_pos[:, 1] * _RAD_TO_DEG, "%.10f"),
@@ -428,13 +439,19 @@ def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
             p = frame.position(out.nav_pos)
             cols += [Column(a, "m", f"position {a} in the local ENU frame", p[:, i], "%.4f")
                      for i, a in enumerate(("east", "north", "up"))]
+    if out.has("v_n"):
         cols += [Column(f"v_{a}", "m/s", f"velocity {a} (NED)", out.nav_v_n[:, i])
                  for i, a in enumerate("NED")]
+    if out.has("q_nb"):
+        euler = quat_to_euler(out.nav_q_nb) * _RAD_TO_DEG
         cols += [Column(a, "deg", f"{a} (ZYX Euler angles of body FRD to NED)", euler[:, i])
                  for i, a in enumerate(("roll", "pitch", "yaw"))]
+    if out.nav_cov is not None:
         sig = np.sqrt(np.clip(np.diagonal(out.nav_cov, axis1=1, axis2=2), 0.0, None))
         units = ("m",) * 3 + ("m/s",) * 3 + ("deg",) * 3
         for i, (name, unit) in enumerate(zip(NAV_ROWS, units, strict=True)):
+            if not out.has(_NAV_ROW_PART[i // 3]):
+                continue
             scale = _RAD_TO_DEG if unit == "deg" else 1.0
             cols.append(Column(f"sigma_{name}", unit, f"predicted 1-sigma of the {name} error",
                                sig[:, i] * scale))
@@ -445,13 +462,16 @@ def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
     m = out.metrics
     if m is not None:
         if m.nav is not None:
-            for key, names, unit, scale, what in (
-                ("pos_ned", NAV_AXES, "m", 1.0, "position error"),
-                ("v_n", ("v_N", "v_E", "v_D"), "m/s", 1.0, "velocity error"),
-                ("phi", ("phi_N", "phi_E", "phi_D"), "deg", _RAD_TO_DEG,
+            for key, part, names, unit, scale, what in (
+                ("pos_ned", "pos", NAV_AXES, "m", 1.0, "position error"),
+                ("v_n", "v_n", ("v_N", "v_E", "v_D"), "m/s", 1.0, "velocity error"),
+                ("phi", "q_nb", ("phi_N", "phi_E", "phi_D"), "deg", _RAD_TO_DEG,
                  "attitude error phi (C_hat = (I - [phi x]) C)"),
-                ("euler", ("roll", "pitch", "yaw"), "deg", _RAD_TO_DEG, "Euler angle error"),
+                ("euler", "q_nb", ("roll", "pitch", "yaw"), "deg", _RAD_TO_DEG,
+                 "Euler angle error"),
             ):
+                if not out.has(part):
+                    continue
                 v = getattr(m.nav, key)
                 cols += [Column(f"error_{n}", unit, f"{what} {n}, estimate minus reference",
                                 v[:, i] * scale) for i, n in enumerate(names)]
@@ -791,8 +811,11 @@ class RunExport:
     def _feed(self, kind: str, item: Any) -> None:
         if not self._started:
             self._held.append((kind, item))
+            # the frame comes from the reference when there is one (else from the first
+            # filter with a position): wait for it, whatever the filters output
             if len(self._nav) == len(self.labels) and (
-                    self._frame is not None or self._first_nav() is None):
+                    self._frame is not None
+                    or (self._first_nav() is None and not self.has_reference)):
                 self._start()
             return
         self._write(kind, item)

@@ -55,7 +55,14 @@ from typing import Any
 import numpy as np
 
 from navreplay import chi2
-from navreplay.filters.base import Nav, NavError, State, TrueConstant, TruthColumn
+from navreplay.filters.base import (
+    INITIAL_PARTS,
+    Nav,
+    NavError,
+    State,
+    TrueConstant,
+    TruthColumn,
+)
 from navreplay.geo import earth
 from navreplay.geo.rotations import (
     attitude_error,
@@ -276,7 +283,8 @@ def truth_at(recording: Recording | Reference, t: np.ndarray) -> dict[str, np.nd
 @dataclasses.dataclass
 class NavErrors:
     """Errors of a navigation solution, estimate minus reference, each (M, 3); NaN where the
-    reference lacks the column (``pos``, ``v_n``, ``q_nb``).
+    reference lacks the column (``pos``, ``v_n``, ``q_nb``) or the filter does not output that
+    part of the solution (``RunResult.navigation``).
 
     Attributes
     ----------
@@ -317,7 +325,8 @@ def position_error_ned(pos_hat: np.ndarray, pos_true: np.ndarray) -> np.ndarray:
 
 
 def nav_errors(
-    pos: np.ndarray, v_n: np.ndarray, q_nb: np.ndarray, truth: Mapping[str, np.ndarray]
+    pos: np.ndarray, v_n: np.ndarray, q_nb: np.ndarray, truth: Mapping[str, np.ndarray],
+    navigation: tuple[str, ...] = INITIAL_PARTS,
 ) -> NavErrors:
     """Errors of a navigation solution against the reference at the same times: the one
     navigation-error computation of navreplay (tables, ensembles and the Rerun view).
@@ -329,12 +338,15 @@ def nav_errors(
     truth : mapping
         Any of ``pos``, ``v_n``, ``q_nb`` at the same times (:meth:`Reference.at`); the errors
         of absent columns are NaN.
+    navigation : tuple of str
+        The parts of the solution the filter outputs; the errors of the others are NaN.
 
     Returns
     -------
     NavErrors
     """
     nan = np.full((np.shape(pos)[0], 3), np.nan)
+    truth = {k: v for k, v in truth.items() if k not in INITIAL_PARTS or k in navigation}
     pos_ned = position_error_ned(pos, truth["pos"]) if "pos" in truth else nan
     dv = np.asarray(v_n) - truth["v_n"] if "v_n" in truth else nan
     if "q_nb" in truth:
@@ -359,7 +371,7 @@ def _nav_quantity(q: Nav, result: RunResult, truth: Mapping[str, np.ndarray],
     """Error of the navigation solution in quantity q (units of the state), or None when the
     result has no solution or the reference lacks the column."""
     column, i, sign = _NAV_PART[q]
-    if result.nav_pos is None or column not in truth:
+    if not result.has(column) or column not in truth:
         return None
     if column == "pos":
         d = result.nav_pos[:, i] - truth["pos"][:, i]
@@ -477,7 +489,7 @@ def nav_sigma(result: RunResult, states: tuple[State, ...] | None = None) -> dic
     out = {k: np.full((M, 3), np.nan) for k in ("pos_ned", "v_n", "phi")}
     var = np.diagonal(result.P, axis1=1, axis2=2)
     scale = None
-    if result.nav_pos is not None:
+    if result.has("pos"):
         lat, h = result.nav_pos[:, 0], result.nav_pos[:, 2]
         R_M, R_N = earth.radii(lat)
         scale = {Nav.LAT: R_M + h, Nav.LON: (R_N + h) * np.cos(lat)}
@@ -679,7 +691,8 @@ def run_metrics(
     truth = ref.at(result.t)
     nav = None
     if result.nav_pos is not None:
-        nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth)
+        nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth,
+                         result.navigation)
     nav_for_states = nav if nav is not None else NavErrors(*(np.full((M, 3), np.nan),) * 4)
     names, e, P = state_errors(result, truth, ref.true_errors, states, nav_for_states)
     by_name = {st.name: st for st in states}
@@ -757,7 +770,8 @@ class EnsembleResult:
     runs : int
     t : ndarray, shape (M,)
     rms : dict[str, ndarray (M, 3)]
-        RMS over runs of the ``pos_ned``, ``v_n``, ``phi``, ``euler`` errors.
+        RMS over runs of the ``pos_ned``, ``v_n``, ``phi``, ``euler`` errors (those scored in
+        any run).
     mean : dict[str, ndarray (M, 3)]
         Mean over runs of the same errors.
     sigma : dict[str, ndarray (M, 3)]
@@ -911,8 +925,11 @@ class EnsembleStats:
             raise ValueError("no runs added")
         M = self._t.shape[0]
         nan3 = np.full((M, 3), np.nan)
-        rms_ = {k: a.rms() for k, a in self._nav.items() if a.sum is not None}
-        mean = {k: a.mean() for k, a in self._nav.items() if a.sum is not None}
+        # errors never scored (a part of the solution the filters do not output, a column the
+        # reference lacks) are absent
+        scored = {k: a for k, a in self._nav.items() if a.sum is not None and a.n.any()}
+        rms_ = {k: a.rms() for k, a in scored.items()}
+        mean = {k: a.mean() for k, a in scored.items()}
         sigma = {k: np.sqrt(a.mean()) if a.sum is not None else nan3
                  for k, a in self._var.items()}
         k_states = len(self._state_names or ())

@@ -36,6 +36,11 @@ _NAV = (("pos_ned", "position error", ("N", "E", "D"), "m", 1.0, 0),
         ("v_n", "velocity error", ("N", "E", "D"), "m/s", 1.0, 3),
         ("phi", "attitude error φ", ("N", "E", "D"), "deg", _DEG, 6))
 """Navigation error groups: key, title, axes, unit, scale from SI, first row in nav_cov."""
+_NAV_PART = {"pos_ned": "pos", "v_n": "v_n", "phi": "q_nb"}
+"""The part of the navigation solution each group is an error of (a filter that does not
+output a part has no panels for it)."""
+_NAV_CAPTION = {"pos_ned": "position north/east/down", "v_n": "velocity NED",
+                "phi": "attitude error φ (NED)"}
 
 _CSS = """
 body { font-family: sans-serif; margin: 2em auto; max-width: 1400px; color: #222; }
@@ -150,6 +155,7 @@ class RunSeries:
     def __init__(self, label: str) -> None:
         self.label = label
         self.nav: list[_Trace] = []
+        self.nav_groups: tuple[str, ...] = ()
         self.states: list[_Trace] = []
         self.nees: _Trace | None = None
         self.nees_dof = 0
@@ -169,14 +175,16 @@ class RunSeries:
         m = out.metrics
         if m is None or not len(m.t):
             return
-        if m.nav is not None:
+        groups = [g for g in _NAV if out.has(_NAV_PART[g[0]])]
+        if m.nav is not None and groups:
             if not self.nav:
                 self.nav = [_Trace(f"{title} {a}", unit, scale, sigma=Envelope())
-                            for _, title, axes, unit, scale, _ in _NAV for a in axes]
+                            for _, title, axes, unit, scale, _ in groups for a in axes]
+                self.nav_groups = tuple(g[0] for g in groups)
             sig = (np.sqrt(np.clip(np.diagonal(out.nav_cov, axis1=1, axis2=2), 0.0, None))
                    if out.nav_cov is not None else np.full((len(m.t), 9), np.nan))
             k = 0
-            for key, _, axes, _, _, row in _NAV:
+            for key, _, axes, _, _, row in groups:
                 for i in range(len(axes)):
                     self.nav[k].value.add(m.t, getattr(m.nav, key)[:, i])
                     self.nav[k].sigma.add(m.t, sig[:, row + i])
@@ -216,7 +224,7 @@ def run_figures(series: RunSeries, color: str,
             figures.bounded_errors(f"{label}: navigation errors",
                                    [tr.panel() for tr in series.nav], color),
             f"{label}: navigation errors (estimate minus reference) and their predicted "
-            "±3σ. Position north/east/down, velocity NED, attitude error φ (NED)."))
+            f"±3σ: {', '.join(_NAV_CAPTION[g] for g in series.nav_groups)}."))
     if series.states:
         parts.append(_figure(
             figures.bounded_errors(f"{label}: state errors",

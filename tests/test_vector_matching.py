@@ -498,7 +498,7 @@ def test_fast_path_reproduces_the_reference_path(scenario, values, model):
         k = last_per_epoch(res.t)
         np.testing.assert_allclose(res.t[k], truth.t)
         np.testing.assert_allclose(fast.q_nb[i], res.extras["q_nb"][k], rtol=0, atol=1e-10)
-        np.testing.assert_allclose(fast.P[i], res.P[k], rtol=1e-8, atol=1e-20)
+        np.testing.assert_allclose(4.0 * fast.P[i], res.P[k], rtol=1e-8, atol=1e-20)  # phi = 2 q_ev
         np.testing.assert_allclose(fast.euler_sigma()[i], res.extras["euler_sigma"][k],
                                    rtol=1e-8)
         if model == "gravity":

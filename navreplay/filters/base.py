@@ -378,7 +378,15 @@ class Innovation:
 
 
 INITIAL_PARTS = ("pos", "v_n", "q_nb")
-"""The parts of an initial solution, in order (:attr:`Filter.initial`)."""
+"""The parts of a navigation solution, in order: of the initial solution a filter starts from
+(:attr:`Filter.initial`) and of the solution it outputs (:attr:`Filter.navigation`)."""
+
+NAV_PART: dict[Nav, str] = {
+    Nav.LAT: "pos", Nav.LON: "pos", Nav.H: "pos", Nav.DEPTH: "pos",
+    Nav.V_N: "v_n", Nav.V_E: "v_n", Nav.V_D: "v_n",
+    Nav.PHI_N: "q_nb", Nav.PHI_E: "q_nb", Nav.PHI_D: "q_nb",
+}
+"""The part of the navigation solution each navigation quantity is an error of."""
 
 
 def initial_parts(classes: Sequence[type[Filter]]) -> tuple[str, ...]:
@@ -392,6 +400,28 @@ def initial_parts(classes: Sequence[type[Filter]]) -> tuple[str, ...]:
                              f"{sorted(unknown)}; use some of {', '.join(INITIAL_PARTS)}")
         wanted |= set(cls.initial)
     return tuple(k for k in INITIAL_PARTS if k in wanted)
+
+
+def navigation_parts(cls: type[Filter], states: Sequence[State] = ()) -> tuple[str, ...]:
+    """The parts of the navigation solution ``cls`` outputs (:attr:`Filter.navigation`), in
+    the order of :data:`INITIAL_PARTS`; an unknown or repeated part name, none at all, or a
+    ``NavError`` state of ``states`` in a part not declared is refused with the filter's name."""
+    parts = cls.navigation
+    if isinstance(parts, str) or not isinstance(parts, tuple | list):
+        raise TypeError(f"filter {cls.name!r}: navigation must be a tuple of part names "
+                        f"({', '.join(INITIAL_PARTS)}), got {parts!r}")
+    unknown = sorted(str(p) for p in set(parts) - set(INITIAL_PARTS))
+    if unknown or not parts or len(set(parts)) != len(parts):
+        raise ValueError(f"filter {cls.name!r}: navigation names "
+                         f"{'unknown parts ' + str(unknown) if unknown else repr(tuple(parts))}"
+                         f"; declare each of some of {', '.join(INITIAL_PARTS)} once")
+    outside = [s.name for s in states
+               if isinstance(s.truth, NavError) and NAV_PART[s.truth.q] not in parts]
+    if outside:
+        raise ValueError(f"filter {cls.name!r}: states {', '.join(outside)} are errors of parts "
+                         f"of the navigation solution it does not declare (navigation = "
+                         f"{tuple(parts)!r})")
+    return tuple(k for k in INITIAL_PARTS if k in parts)
 
 
 class Filter(abc.ABC):
@@ -428,6 +458,12 @@ class Filter(abc.ABC):
         ``pos``, ``v_n``, ``q_nb`` (all three, the default). ``run`` asks the recording, the
         ``[initial]`` table or ``--init`` for these only; a filter that initialises itself from
         its measurements declares fewer (``()``: none).
+    navigation : tuple[str, ...]
+        The parts of the navigation solution ``Estimate.nav`` the filter outputs, among the
+        same names (all three, the default). A filter that estimates attitude only (an AHRS)
+        declares ``("q_nb",)`` and returns NaN in the parts it does not estimate; they are
+        neither checked nor scored nor shown. Its ``NavError`` states may only name
+        quantities of the declared parts.
 
     Optional method
     ---------------
@@ -452,6 +488,7 @@ class Filter(abc.ABC):
     scored_extras: tuple[State, ...] = ()
     measurements: tuple[MeasurementKind, ...] | None = None
     initial: ClassVar[tuple[str, ...]] = INITIAL_PARTS
+    navigation: ClassVar[tuple[str, ...]] = INITIAL_PARTS
 
     @property
     def state_names(self) -> tuple[str, ...]:

@@ -139,7 +139,9 @@ and :func:`navreplay.filters.kalman.correct_batch`, the same equations as
 Outputs (:meth:`VectorMatchingFilter.estimate`)
 -----------------------------------------------
 ``x`` is the attitude error state after feedback (zero), ``P`` its covariance (3x3; the consider
-states stay inside the filter); ``nav`` is None (the filter estimates attitude only); extras:
+states stay inside the filter), both in phi = 2 q_ev [rad], declared as the navigation errors
+phi_N, phi_E, phi_D; ``nav`` holds the attitude ``q_nb`` only (``navigation = ("q_nb",)``:
+position and velocity NaN, the filter estimates attitude only); extras:
 
 - ``q_nb`` (4,): attitude estimate, Hamilton scalar first;
 - ``euler`` (3,) [rad]: roll, pitch, yaw of ``q_nb``;
@@ -180,6 +182,9 @@ from navreplay.filters.base import (
     FilterParams,
     Innovation,
     MeasurementKind,
+    Nav,
+    NavError,
+    NavSolution,
     Quantity,
     State,
     check_number,
@@ -210,8 +215,10 @@ Z_H = slice(3, 6)
 """Magnetic-field residual rows of z and H."""
 N_MEAS = 6
 
-STATES = tuple(State(f"q_e{i}", "-", Quantity.ATTITUDE) for i in (1, 2, 3))
-"""Vector part of the attitude error quaternion."""
+STATES = tuple(State(f"phi_{a}", "rad", Quantity.ATTITUDE, NavError(q), nees=True)
+               for a, q in (("N", Nav.PHI_N), ("E", Nav.PHI_E), ("D", Nav.PHI_D)))
+"""The outputs' states: the attitude error phi = 2 q_ev [rad] (the filter's own states are q_ev,
+the vector part of the attitude-error quaternion), in the sign of the navigation errors."""
 
 # --------------------------------------------------------------------------------------------
 # datasheet values of the paper's Table 1 (docs/methods/vector-matching.md §3.1), converted once
@@ -804,6 +811,7 @@ class VectorMatchingFilter(Filter):
     requires = (StreamKind.IMU, StreamKind.MAG, StreamKind.GPS_VEL)
     required_columns = {StreamKind.IMU: ("f_b",)}  # an accelerometer: no gyro column needed
     initial = ("pos",)  # the site (gravity, earth field); the attitude comes from TRIAD
+    navigation = ("q_nb",)  # attitude only: position and velocity of the solution are NaN
     Params = VectorMatchingParams
     states = STATES
     measurements = (MeasurementKind("vector", ("g_N", "g_E", "g_D", "h_N", "h_E", "h_D"),
@@ -877,7 +885,9 @@ class VectorMatchingFilter(Filter):
         }
         if self.params.model is MatchModel.GRAVITY:
             extras["model_induced_phi"] = self._diag.copy()
-        return Estimate(self.t, np.zeros(N_STATES), self.P[QE, QE].copy(), None, extras)
+        # declared as phi = 2 q_ev (STATES): x = 0 after feedback, P_phi = 4 P_qe
+        nav = NavSolution(np.full(3, np.nan), np.full(3, np.nan), self.q_nb.copy())
+        return Estimate(self.t, np.zeros(N_STATES), 4.0 * self.P[QE, QE], nav, extras)
 
     # -- epochs
 

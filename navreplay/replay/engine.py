@@ -67,6 +67,7 @@ import numpy as np
 
 from navreplay import params as _params
 from navreplay.filters.base import (
+    INITIAL_PARTS,
     Estimate,
     Filter,
     FilterContext,
@@ -75,6 +76,7 @@ from navreplay.filters.base import (
     State,
     check_measurements,
     check_states,
+    navigation_parts,
 )
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.io.checks import first_problem
@@ -365,11 +367,17 @@ def _join(a: Stream, b: Stream) -> Stream:
 # output columns
 
 
+_NAV_COLUMN = {"pos": "position", "v_n": "velocity", "q_nb": "attitude"}
+"""The name of each part of the navigation solution in messages."""
+
+
 class _Columns:
     """Estimate columns allocated at a known upper bound of rows (the operating system backs
     only the rows written with memory, so they are neither grown nor copied)."""
 
-    def __init__(self, first: Estimate | None, upper: int, n: int = 0) -> None:
+    def __init__(self, first: Estimate | None, upper: int, n: int = 0,
+                 navigation: tuple[str, ...] = INITIAL_PARTS) -> None:
+        self.navigation = navigation
         self.upper = max(upper, 1)
         self.cap = self.upper
         self.m = 0
@@ -449,7 +457,8 @@ class _Columns:
             return None
         cols: list[tuple[str, np.ndarray]] = [("state", self.x), ("covariance", self.P)]
         if self.has_nav:
-            cols += [("position", self.pos), ("velocity", self.v_n), ("attitude", self.q_nb)]
+            cols += [(what, getattr(self, part)) for part, what in _NAV_COLUMN.items()
+                     if part in self.navigation]
         cols += [(k, v) for k, v in self.extras.items()]
         found: tuple[int, str] | None = None
         for name, col in cols:
@@ -475,6 +484,7 @@ class _Columns:
             nav_pos=self.pos[:m] if self.has_nav else None,
             nav_v_n=self.v_n[:m] if self.has_nav else None,
             nav_q_nb=self.q_nb[:m] if self.has_nav else None,
+            navigation=self.navigation if self.has_nav else (),
             extras={k: v[:m] for k, v in self.extras.items()},
             **kw,
         )
@@ -675,6 +685,10 @@ class ReplaySession:
             ) from e
         self.filter = filt
         self.states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
+        try:
+            self.navigation = navigation_parts(filter_cls, self.states)
+        except (TypeError, ValueError) as e:
+            raise FilterInitError(str(e)) from e
         self.label, self.source = label, source
         self._names = tuple(st.name for st in self.states)
         scored_extras = check_states(filt.scored_extras, f"filter {label!r}: scored_extras")
@@ -913,7 +927,7 @@ class ReplaySession:
                     j = _clean_run(feeder, ev_end, i, min(n_events, i + run_cap))
                     if j > i:  # events [i, j) in one call of the filter
                         if columns is None:
-                            columns = _Columns(None, upper, len(states))
+                            columns = _Columns(None, upper, len(states), self.navigation)
                         m0 = columns.m
                         done = _apply_run(events, columns, feeder, plan, ev_t_arr,
                                           ev_record_arr, samples, innovations, i, j)
@@ -938,7 +952,8 @@ class ReplaySession:
                         ends = plan.imu_end[i:j] - block[2]
                         rows = batch(block[0], block[1], ends)
                         if columns is None:
-                            columns = _Columns(_first_estimate(rows, len(states), names), upper)
+                            columns = _Columns(_first_estimate(rows, len(states), names), upper,
+                                               navigation=self.navigation)
                         columns.add_rows(*rows)
                         t_now = ev_t[j - 1]
                         i = j - 1
@@ -977,7 +992,7 @@ class ReplaySession:
                                 f"{len(states)} states ({', '.join(names) or 'none'}; set "
                                 "Filter.states)"
                             )
-                        columns = _Columns(est, upper)
+                        columns = _Columns(est, upper, navigation=self.navigation)
                     columns.add(est)
                     if columns.m - checked >= _CHECK_EVERY:
                         _check_finite(columns, checked, label, source, names)

@@ -6,7 +6,13 @@ import dataclasses
 
 import numpy as np
 
-from navreplay.filters.base import MeasurementKind, State, check_measurements, check_states
+from navreplay.filters.base import (
+    INITIAL_PARTS,
+    MeasurementKind,
+    State,
+    check_measurements,
+    check_states,
+)
 
 
 @dataclasses.dataclass
@@ -41,6 +47,10 @@ class RunResult:
     nav_pos : (M, 3) or None   latitude, longitude [rad], height [m]
     nav_v_n : (M, 3) or None
     nav_q_nb : (M, 4) or None
+    navigation : tuple[str, ...]
+        The parts of the navigation solution the filter outputs (``pos``, ``v_n``, ``q_nb``;
+        :attr:`navreplay.filters.base.Filter.navigation`); the columns of the others are NaN
+        and nothing downstream scores or shows them. Empty without a solution.
     extras : dict[str, (M, ...)]
     innovations : dict[str, InnovationSeries]
     scored_extras : tuple[State, ...]
@@ -65,12 +75,21 @@ class RunResult:
     innovations: dict[str, InnovationSeries] = dataclasses.field(default_factory=dict)
     scored_extras: tuple[State, ...] = ()
     measurements: tuple[MeasurementKind, ...] = ()
+    navigation: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         self.states = check_states(self.states, f"{self.label}: states")
         self.scored_extras = check_states(self.scored_extras, f"{self.label}: scored_extras")
         self.measurements = check_measurements(self.measurements,
                                                f"{self.label}: measurements") or ()
+        if self.navigation is None:  # not given: every part of the solution there is
+            self.navigation = INITIAL_PARTS if self.nav_pos is not None else ()
+        self.navigation = tuple(self.navigation)
+
+    def has(self, part: str) -> bool:
+        """Whether the result holds part ``part`` (``pos``, ``v_n``, ``q_nb``) of a navigation
+        solution."""
+        return part in self.navigation and getattr(self, f"nav_{part}") is not None
 
     def measurement(self, name: str) -> MeasurementKind | None:
         """The declaration of measurement ``name``, or None when the filter declares none."""

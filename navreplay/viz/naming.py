@@ -150,6 +150,17 @@ def quantity_of(name: str) -> Tab:
     return Tab.SENSOR
 
 
+_PART_OF_TAB = {Tab.POSITION: "pos", Tab.VELOCITY: "v_n", Tab.ATTITUDE: "q_nb"}
+
+
+def nav_part(name: str) -> str | None:
+    """The part of the navigation solution (``pos``, ``v_n``, ``q_nb``) a plotted navigation
+    quantity or error (``roll``, ``v_N``, ``p_E``, ``phi_D``) belongs to; None for others."""
+    if name not in NAV_UNITS and not any(name in v for v in NAV_ERROR_NAMES.values()):
+        return None
+    return _PART_OF_TAB.get(quantity_of(name))
+
+
 _TAB_OF_QUANTITY = {
     StateQuantity.POSITION: Tab.POSITION,
     StateQuantity.VELOCITY: Tab.VELOCITY,

@@ -78,6 +78,7 @@ from navreplay.viz.naming import (
     entity_path,
     group_of,
     innovation_rows,
+    nav_part,
     quantity_of,
     resolve_unit,
     tab_of,
@@ -936,11 +937,7 @@ class Sink:
             self._scalars(path, idx, flat * scale)
             self.catalog.add("states", f"extra:{key}", f"{key} [{label}]", path,
                              rank=_RANK_EXTRA)
-        if (
-            result.nav_pos is not None
-            and result.nav_v_n is not None
-            and result.nav_q_nb is not None
-        ):
+        if any(result.has(part) for part in ("pos", "v_n", "q_nb")):
             self._log_nav(run, result, a, b, idx, nav_override or {})
         run.rows = b
 
@@ -953,17 +950,22 @@ class Sink:
         idx: list[rr.TimeColumn],
         nav_override: Mapping[str, tuple[np.ndarray, np.ndarray | None, str]],
     ) -> None:
-        """Navigation solution rows [a, b): values, errors vs truth, 3D."""
+        """Navigation solution rows [a, b): values, errors vs truth, 3D; of the parts the filter
+        outputs only (an attitude-only filter has no position, velocity or 3D trajectory)."""
         L = run.label
         t = result.t[a:b]
+        parts = result.navigation
         nav = convert.NavColumns(t, result.nav_pos[a:b], result.nav_v_n[a:b], result.nav_q_nb[a:b])
-        if self._ref is None:
+        if self._ref is None and "pos" in parts:
             finite = np.flatnonzero(np.isfinite(nav.pos).all(axis=1))
             if finite.shape[0] == 0:
                 return
             self._ref = nav.pos[finite[0]].copy()
-        values = convert.nav_values(nav, self._ref)
-        values["yaw"] = self._unwrap_yaw(run, t, values["yaw"])
+        ref = self._ref if self._ref is not None else np.zeros(3)
+        values = {n: v for n, v in convert.nav_values(nav, ref).items()
+                  if nav_part(n) in parts}
+        if "yaw" in values:
+            values["yaw"] = self._unwrap_yaw(run, t, values["yaw"])
         for n, v in values.items():
             u = display_unit(NAV_UNITS[n])
             path = entity_path(L, "nav", n)
@@ -979,8 +981,10 @@ class Sink:
         if self._truth is not None:
             tr = self._truth.at(t)
             ne = nav_errors(nav.pos, nav.v_n, nav.q_nb,
-                            {"pos": tr.pos, "v_n": tr.v_n, "q_nb": tr.q_nb})
+                            {"pos": tr.pos, "v_n": tr.v_n, "q_nb": tr.q_nb}, parts)
             for n, e in ne.columns().items():
+                if nav_part(n) not in parts:
+                    continue
                 s = nav_sigma[n]
                 errors[n] = (e, s if np.isfinite(s).any() else None)
         for n, (e, s, _) in nav_override.items():
@@ -993,6 +997,8 @@ class Sink:
             self.catalog.add(quantity_of(n).value, f"error:{n}@{L}",
                              f"{L}: {title(n, u, 'error')}{bounds}", path,
                              rank=_RANK_ERROR + run.order, legend=False)
+        if "pos" not in parts:
+            return
         self._log_world(run, result, nav, a, b, values)
         run.track.add(t, np.stack([values["p_N"], values["p_E"], values["p_D"]], axis=1),
                       nav.pos)
