@@ -56,7 +56,8 @@ import numpy as np
 
 from navreplay import chi2
 from navreplay.filters.base import (
-    INITIAL_PARTS,
+    NAV_PART,
+    NAV_PARTS,
     Nav,
     NavError,
     State,
@@ -326,7 +327,7 @@ def position_error_ned(pos_hat: np.ndarray, pos_true: np.ndarray) -> np.ndarray:
 
 def nav_errors(
     pos: np.ndarray, v_n: np.ndarray, q_nb: np.ndarray, truth: Mapping[str, np.ndarray],
-    navigation: tuple[str, ...] = INITIAL_PARTS,
+    navigation: tuple[str, ...] = NAV_PARTS,
 ) -> NavErrors:
     """Errors of a navigation solution against the reference at the same times: the one
     navigation-error computation of navreplay (tables, ensembles and the Rerun view).
@@ -346,7 +347,7 @@ def nav_errors(
     NavErrors
     """
     nan = np.full((np.shape(pos)[0], 3), np.nan)
-    truth = {k: v for k, v in truth.items() if k not in INITIAL_PARTS or k in navigation}
+    truth = {k: v for k, v in truth.items() if k not in NAV_PARTS or k in navigation}
     pos_ned = position_error_ned(pos, truth["pos"]) if "pos" in truth else nan
     dv = np.asarray(v_n) - truth["v_n"] if "v_n" in truth else nan
     if "q_nb" in truth:
@@ -357,20 +358,20 @@ def nav_errors(
     return NavErrors(pos_ned=pos_ned, v_n=dv, phi=phi, euler=euler)
 
 
-_NAV_PART: dict[Nav, tuple[str, int, float]] = {
-    Nav.LAT: ("pos", 0, 1.0), Nav.LON: ("pos", 1, 1.0), Nav.H: ("pos", 2, 1.0),
-    Nav.DEPTH: ("pos", 2, -1.0),
-    Nav.V_N: ("v_n", 0, 1.0), Nav.V_E: ("v_n", 1, 1.0), Nav.V_D: ("v_n", 2, 1.0),
-    Nav.PHI_N: ("q_nb", 0, 1.0), Nav.PHI_E: ("q_nb", 1, 1.0), Nav.PHI_D: ("q_nb", 2, 1.0),
+_NAV_COMPONENT: dict[Nav, tuple[int, float]] = {
+    Nav.LAT: (0, 1.0), Nav.LON: (1, 1.0), Nav.H: (2, 1.0), Nav.DEPTH: (2, -1.0),
+    Nav.V_N: (0, 1.0), Nav.V_E: (1, 1.0), Nav.V_D: (2, 1.0),
+    Nav.PHI_N: (0, 1.0), Nav.PHI_E: (1, 1.0), Nav.PHI_D: (2, 1.0),
 }
-"""Reference column, component and sign of each navigation quantity."""
+"""Component and sign of each navigation quantity in its part (``NAV_PART``)."""
 
 
 def _nav_quantity(q: Nav, result: RunResult, truth: Mapping[str, np.ndarray],
                   nav: NavErrors) -> np.ndarray | None:
     """Error of the navigation solution in quantity q (units of the state), or None when the
     result has no solution or the reference lacks the column."""
-    column, i, sign = _NAV_PART[q]
+    column = NAV_PART[q]
+    i, sign = _NAV_COMPONENT[q]
     if not result.has(column) or column not in truth:
         return None
     if column == "pos":

@@ -377,7 +377,7 @@ class Innovation:
     S: np.ndarray
 
 
-INITIAL_PARTS = ("pos", "v_n", "q_nb")
+NAV_PARTS = ("pos", "v_n", "q_nb")
 """The parts of a navigation solution, in order: of the initial solution a filter starts from
 (:attr:`Filter.initial`) and of the solution it outputs (:attr:`Filter.navigation`)."""
 
@@ -391,37 +391,37 @@ NAV_PART: dict[Nav, str] = {
 
 def initial_parts(classes: Sequence[type[Filter]]) -> tuple[str, ...]:
     """The parts of the initial solution that any of ``classes`` starts from, in the order of
-    :data:`INITIAL_PARTS`; an undeclared part name is refused with the filter's name."""
+    :data:`NAV_PARTS`; an undeclared part name is refused with the filter's name."""
     wanted: set[str] = set()
     for cls in classes:
-        unknown = set(cls.initial) - set(INITIAL_PARTS)
+        unknown = set(cls.initial) - set(NAV_PARTS)
         if unknown:
             raise ValueError(f"filter {cls.name!r}: initial names unknown parts "
-                             f"{sorted(unknown)}; use some of {', '.join(INITIAL_PARTS)}")
+                             f"{sorted(unknown)}; use some of {', '.join(NAV_PARTS)}")
         wanted |= set(cls.initial)
-    return tuple(k for k in INITIAL_PARTS if k in wanted)
+    return tuple(k for k in NAV_PARTS if k in wanted)
 
 
 def navigation_parts(cls: type[Filter], states: Sequence[State] = ()) -> tuple[str, ...]:
     """The parts of the navigation solution ``cls`` outputs (:attr:`Filter.navigation`), in
-    the order of :data:`INITIAL_PARTS`; an unknown or repeated part name, none at all, or a
+    the order of :data:`NAV_PARTS`; an unknown or repeated part name, none at all, or a
     ``NavError`` state of ``states`` in a part not declared is refused with the filter's name."""
     parts = cls.navigation
     if isinstance(parts, str) or not isinstance(parts, tuple | list):
         raise TypeError(f"filter {cls.name!r}: navigation must be a tuple of part names "
-                        f"({', '.join(INITIAL_PARTS)}), got {parts!r}")
-    unknown = sorted(str(p) for p in set(parts) - set(INITIAL_PARTS))
+                        f"({', '.join(NAV_PARTS)}), got {parts!r}")
+    unknown = sorted(str(p) for p in set(parts) - set(NAV_PARTS))
     if unknown or not parts or len(set(parts)) != len(parts):
         raise ValueError(f"filter {cls.name!r}: navigation names "
                          f"{'unknown parts ' + str(unknown) if unknown else repr(tuple(parts))}"
-                         f"; declare each of some of {', '.join(INITIAL_PARTS)} once")
+                         f"; declare each of some of {', '.join(NAV_PARTS)} once")
     outside = [s.name for s in states
                if isinstance(s.truth, NavError) and NAV_PART[s.truth.q] not in parts]
     if outside:
         raise ValueError(f"filter {cls.name!r}: states {', '.join(outside)} are errors of parts "
                          f"of the navigation solution it does not declare (navigation = "
                          f"{tuple(parts)!r})")
-    return tuple(k for k in INITIAL_PARTS if k in parts)
+    return tuple(k for k in NAV_PARTS if k in parts)
 
 
 class Filter(abc.ABC):
@@ -487,8 +487,8 @@ class Filter(abc.ABC):
     states: tuple[State, ...] = ()
     scored_extras: tuple[State, ...] = ()
     measurements: tuple[MeasurementKind, ...] | None = None
-    initial: ClassVar[tuple[str, ...]] = INITIAL_PARTS
-    navigation: ClassVar[tuple[str, ...]] = INITIAL_PARTS
+    initial: ClassVar[tuple[str, ...]] = NAV_PARTS
+    navigation: ClassVar[tuple[str, ...]] = NAV_PARTS
 
     @property
     def state_names(self) -> tuple[str, ...]:

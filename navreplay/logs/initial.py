@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from navreplay.filters.base import INITIAL_PARTS
+from navreplay.filters.base import NAV_PARTS
 from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_dcm, euler_to_quat, quat_to_euler, wrap_angle
 from navreplay.io.errors import RecordingError
@@ -107,7 +107,7 @@ def _from_table(nav: dict[str, Any], table: Mapping[str, Any]) -> dict[str, Any]
     return nav
 
 
-def _complete(nav: Mapping[str, Any], needs: Sequence[str] = INITIAL_PARTS) -> list[str]:
+def _complete(nav: Mapping[str, Any], needs: Sequence[str] = NAV_PARTS) -> list[str]:
     return [k for k in needs if k not in nav]
 
 
@@ -327,7 +327,7 @@ def _chord(recording: Recording, stop: int, C_lb: np.ndarray
 
 
 def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[str, Any],
-                needs: Sequence[str] = INITIAL_PARTS) -> tuple[dict[str, Any], str]:
+                needs: Sequence[str] = NAV_PARTS) -> tuple[dict[str, Any], str]:
     """The initial solution by ``method`` with ``[initial]`` applied, and a line saying how.
 
     With ``method`` None: the recording's own when it has one, else the ``[initial]`` table when

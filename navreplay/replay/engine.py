@@ -67,7 +67,7 @@ import numpy as np
 
 from navreplay import params as _params
 from navreplay.filters.base import (
-    INITIAL_PARTS,
+    NAV_PARTS,
     Estimate,
     Filter,
     FilterContext,
@@ -376,7 +376,7 @@ class _Columns:
     only the rows written with memory, so they are neither grown nor copied)."""
 
     def __init__(self, first: Estimate | None, upper: int, n: int = 0,
-                 navigation: tuple[str, ...] = INITIAL_PARTS) -> None:
+                 navigation: tuple[str, ...] = NAV_PARTS) -> None:
         self.navigation = navigation
         self.upper = max(upper, 1)
         self.cap = self.upper

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 
 from navreplay.filters.base import (
-    INITIAL_PARTS,
+    NAV_PARTS,
     MeasurementKind,
     State,
     check_measurements,
@@ -83,7 +83,7 @@ class RunResult:
         self.measurements = check_measurements(self.measurements,
                                                f"{self.label}: measurements") or ()
         if self.navigation is None:  # not given: every part of the solution there is
-            self.navigation = INITIAL_PARTS if self.nav_pos is not None else ()
+            self.navigation = NAV_PARTS if self.nav_pos is not None else ()
         self.navigation = tuple(self.navigation)
 
     def has(self, part: str) -> bool:
