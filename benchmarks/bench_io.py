@@ -51,8 +51,8 @@ def imu_recording(n: int, seed: int = 0) -> Recording:
 
 
 def hour_recording(seed: int = 0, seconds: float = 3600.0) -> Recording:
-    """One hour (or ``seconds``) at 200 Hz: IMU and truth (with 9 extra truth columns), 720k
-    messages each."""
+    """``seconds`` (one hour) at 200 Hz: IMU and truth (with 9 extra truth columns), 720k
+    messages each for the hour."""
     n = round(seconds * RATE_HZ)
     rec = imu_recording(n, seed)
     rng = np.random.default_rng(seed + 1)
