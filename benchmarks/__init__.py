@@ -1,6 +1,7 @@
 """Benchmarks: each ``bench_*.py`` module has a ``main()`` that prints ratios against a baseline
 measured in the same run. Run them all with ``python -m benchmarks`` (or one with
-``python -m benchmarks.bench_io``)."""
+``python -m benchmarks.bench_io``); ``main(quick=True)`` (``python -m benchmarks --quick``)
+runs the same code at tiny sizes in seconds, to check that they still run."""
 
 from __future__ import annotations
 

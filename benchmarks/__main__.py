@@ -1,7 +1,10 @@
 """Run every benchmarks/bench_*.py module's main(), or those named on the command line.
 
 ``python -m benchmarks`` runs them all; ``python -m benchmarks io viz`` runs bench_io.py and
-bench_viz.py. A new module only needs a ``main()`` that prints its figures.
+bench_viz.py. ``--quick`` calls ``main(quick=True)``: the same code paths at tiny sizes, one or
+two repeats and temporary files only, in seconds per module (a check that the benchmarks still
+run, not a measurement). A new module only needs a ``main(quick=False)`` that prints its
+figures.
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ import benchmarks
 
 
 def main(argv: list[str]) -> int:
+    quick = "--quick" in argv
+    argv = [a for a in argv if a != "--quick"]
     names = sorted(
         m.name for m in pkgutil.iter_modules(benchmarks.__path__) if m.name.startswith("bench_")
     )
@@ -26,10 +31,11 @@ def main(argv: list[str]) -> int:
             return 2
         names = [n for n in names if n in wanted]
     for name in names:
-        print(f"== {name}")
+        print(f"== {name}{' (quick)' if quick else ''}", flush=True)
         start = time.perf_counter()
-        importlib.import_module(f"benchmarks.{name}").main()
-        print(f"== {name} done in {time.perf_counter() - start:.1f} s\n")
+        bench = importlib.import_module(f"benchmarks.{name}")
+        bench.main(quick=quick)
+        print(f"== {name} done in {time.perf_counter() - start:.1f} s\n", flush=True)
     return 0
 
 

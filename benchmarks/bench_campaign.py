@@ -47,7 +47,10 @@ def _load() -> str:
     return f"load average {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} cores"
 
 
-def main(short_runs: int = 60, runs: int = 40, repeats: int = 3) -> None:
+def main(short_runs: int = 60, runs: int = 40, repeats: int = 3, duration: float = 300.0,
+         *, quick: bool = False) -> None:
+    if quick:  # the same executors and campaigns, a few short runs
+        short_runs, runs, repeats, duration = 4, 4, 1, 5.0
     print(_load())
     executors = {"one process": make_executor(1)}
     for name, spec in (("process pool, 2 workers", "process"), ("Dask LocalCluster, 2", "dask")):
@@ -61,8 +64,8 @@ def main(short_runs: int = 60, runs: int = 40, repeats: int = 3) -> None:
     for name, ex in executors.items():
         t = _campaign("stationary", "ins", short_runs, 1.0, ex)
         print(f"  {name:24s} {t / short_runs * 1e3:7.1f} ms per run")
-    print(f"Monte Carlo ({runs} runs of 300 s 'vehicle-drive' with 'gps-ins'; workers started), "
-          f"wall, {repeats} paired repeats:")
+    print(f"Monte Carlo ({runs} runs of {duration:g} s 'vehicle-drive' with 'gps-ins'; "
+          f"workers started), wall, {repeats} paired repeats:")
     one_times: list[float] = []
     ratios: dict[str, list[float]] = {name: [] for name in list(executors)[1:]}
     for r in range(repeats):
@@ -70,7 +73,7 @@ def main(short_runs: int = 60, runs: int = 40, repeats: int = 3) -> None:
             pair = {}
             order = ("one process", name) if r % 2 == 0 else (name, "one process")
             for who in order:
-                pair[who] = _campaign("vehicle-drive", "gps-ins", runs, 300.0, executors[who])
+                pair[who] = _campaign("vehicle-drive", "gps-ins", runs, duration, executors[who])
             one_times.append(pair["one process"])
             ratios[name].append(pair["one process"] / pair[name])
             print(f"  repeat {r + 1}: one process {pair['one process']:6.1f} s, {name} "

@@ -77,7 +77,7 @@ def _driver(recording: Any, filter_cls: type, block_period: float) -> Callable[[
     return run
 
 
-def main(duration: float = 3600.0) -> None:
+def main(duration: float = 3600.0, *, quick: bool = False) -> None:
     from navreplay import strapdown
     from navreplay.filters import ins_error as ie
     from navreplay.filters import ins_time_update as itu
@@ -87,6 +87,9 @@ def main(duration: float = 3600.0) -> None:
     from navreplay.sim.scenario import simulate
     from navreplay.streams import StreamKind
 
+    if quick:  # the same paths on a short drive, one repeat, few calls
+        duration = 20.0
+    repeat, number = (1, 20) if quick else (3, 2000)
     rec = simulate("vehicle-drive", {"duration": duration}, seed=0)
     imu = rec[StreamKind.IMU]
     n = len(imu)
@@ -99,14 +102,14 @@ def main(duration: float = 3600.0) -> None:
           f"{len(rec[StreamKind.GPS])} GPS fixes + velocities")
 
     strapdown.integrate(nav0, omega[:10], f[:10], dt[:10])  # compile
-    t_floor = best(lambda: strapdown.integrate(nav0, omega, f, dt))
+    t_floor = best(lambda: strapdown.integrate(nav0, omega, f, dt), repeat)
 
     def blocks10() -> None:
         nav = nav0
         for i in range(0, n, 10):
             nav = strapdown.propagate(nav, omega[i:i + 10], f[i:i + 10], dt[i:i + 10])
 
-    t_blocks = best(blocks10)
+    t_blocks = best(blocks10, repeat)
 
     rows: list[tuple[str, float]] = [
         ("strapdown.integrate, one call (baseline)", t_floor),
@@ -119,7 +122,7 @@ def main(duration: float = 3600.0) -> None:
     ):
         run = _driver(rec, cls, period)
         _driver(simulate("vehicle-drive", {"duration": 10.0}, seed=0), cls, period)()  # compile
-        rows.append((label, best(run, repeat=2)))
+        rows.append((label, best(run, repeat=min(repeat, 2))))
 
     print(f"{'':46s} {'samples/s':>11s} {'x real time':>12s} {'x baseline':>11s}")
     for label, t in rows:
@@ -151,7 +154,7 @@ def main(duration: float = 3600.0) -> None:
     ]
     print(f"\n{'per call (15 states, m = 3)':46s} {'us':>11s}")
     for label, fn in calls:
-        print(f"{label:46s} {best(fn, number=2000) * 1e6:11.1f}")
+        print(f"{label:46s} {best(fn, repeat, number) * 1e6:11.1f}")
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@
 Timings keep the best of ``--repeat`` runs, since the machine may be shared.
 
     python -m benchmarks.bench_io [--n 200000] [--baseline-n 50000] [--repeat 3] [--skip-rss]
+                                  [--rss-seconds 3600]
 """
 
 from __future__ import annotations
@@ -49,9 +50,10 @@ def imu_recording(n: int, seed: int = 0) -> Recording:
     return Recording({StreamKind.IMU: imu}, Metadata(scenario="bench"), T0_NS)
 
 
-def hour_recording(seed: int = 0) -> Recording:
-    """One hour at 200 Hz: IMU and truth (with 9 extra truth columns), 720k messages each."""
-    n = 3600 * RATE_HZ
+def hour_recording(seed: int = 0, seconds: float = 3600.0) -> Recording:
+    """``seconds`` (one hour) at 200 Hz: IMU and truth (with 9 extra truth columns), 720k
+    messages each for the hour."""
+    n = round(seconds * RATE_HZ)
     rec = imu_recording(n, seed)
     rng = np.random.default_rng(seed + 1)
     t_ns = rec[StreamKind.IMU].t_ns
@@ -130,10 +132,10 @@ def _best(repeat: int, fn, *args) -> float:  # type: ignore[no-untyped-def]
     return best
 
 
-def _rss_child(mode: str, path: str) -> None:
+def _rss_child(mode: str, path: str, seconds: str) -> None:
     """Subprocess entry: print JSON with peak RSS [MiB] before and after the I/O."""
     if mode == "write":
-        rec = hour_recording()
+        rec = hour_recording(seconds=float(seconds))
         before = peak_rss()
         start = time.perf_counter()
         write_recording(path, rec, force=True)
@@ -159,9 +161,10 @@ def _rss_child(mode: str, path: str) -> None:
     )
 
 
-def _rss(mode: str, path: Path) -> dict[str, float]:
+def _rss(mode: str, path: Path, seconds: float) -> dict[str, float]:
     out = subprocess.run(
-        [sys.executable, "-m", "benchmarks.bench_io", "--rss-child", mode, str(path)],
+        [sys.executable, "-m", "benchmarks.bench_io", "--rss-child", mode, str(path),
+         str(seconds)],
         check=True,
         capture_output=True,
         text=True,
@@ -170,18 +173,24 @@ def _rss(mode: str, path: Path) -> dict[str, float]:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_io")
-    parser.add_argument("--n", type=int, default=200_000, help="IMU messages (default 200000)")
+    # quick: the same paths on a few thousand messages and a 10-second memory run
+    parser.add_argument("--n", type=int, default=2_000 if quick else 200_000,
+                        help="IMU messages (default 200000)")
     parser.add_argument(
         "--baseline-n",
         type=int,
-        default=50_000,
+        default=500 if quick else 50_000,
         help="messages for the (slow) mcap-ros2-support baseline; 0: same as --n (default 50000)",
     )
-    parser.add_argument("--repeat", type=int, default=3, help="runs per timing, best kept")
+    parser.add_argument("--repeat", type=int, default=1 if quick else 3,
+                        help="runs per timing, best kept")
     parser.add_argument("--skip-rss", action="store_true", help="skip the 1-hour memory runs")
-    parser.add_argument("--rss-child", nargs=2, metavar=("MODE", "PATH"), help=argparse.SUPPRESS)
+    parser.add_argument("--rss-seconds", type=float, default=10.0 if quick else 3600.0,
+                        help="length of the memory runs' recording [s] (default 3600)")
+    parser.add_argument("--rss-child", nargs=3, metavar=("MODE", "PATH", "SECONDS"),
+                        help=argparse.SUPPRESS)
     args = parser.parse_args([] if argv is None else argv)
     if args.rss_child:
         _rss_child(*args.rss_child)
@@ -221,14 +230,16 @@ def main(argv: list[str] | None = None) -> None:
         if args.skip_rss:
             return
         hour = Path(tmp) / "hour.mcap"
-        w = _rss("write", hour)
+        w = _rss("write", hour, args.rss_seconds)
+        span = (f"{args.rss_seconds / 3600:g} h" if args.rss_seconds % 3600 == 0
+                else f"{args.rss_seconds:g} s")
         print(
-            f"write 1 h at 200 Hz (IMU + truth, {w['messages']:,.0f} messages, "
+            f"write {span} at 200 Hz (IMU + truth, {w['messages']:,.0f} messages, "
             f"{hour.stat().st_size / 2**20:.0f} MiB file) in {w['seconds']:.1f} s: peak RSS "
             f"{w['peak_mib']:.0f} MiB (recording in memory: {w['data_mib']:.0f} MiB of columns, "
             f"process at {w['before_mib']:.0f} MiB before writing)"
         )
-        r = _rss("read", hour)
+        r = _rss("read", hour, args.rss_seconds)
         print(
             f"read the same file in {r['seconds']:.1f} s: peak RSS {r['peak_mib']:.0f} MiB "
             f"({r['data_mib']:.0f} MiB of columns, process at {r['before_mib']:.0f} MiB before)"

@@ -56,7 +56,8 @@ def _numpy_loop(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray, steps: int) -> n
     return P
 
 
-def main() -> None:
+def main(*, quick: bool = False) -> None:
+    steps, repeat = (20, 1) if quick else (STEPS, 5)  # quick: the same loops, a few steps
     rng = np.random.default_rng(0)
     print(f"{'P <- Phi P Phi^T + Qd, us per step':40s} {'n':>3s} {'r':>3s} {'numpy':>7s} "
           f"{'dense':>7s} {'rows':>7s} {'dense/rows':>11s}")
@@ -69,16 +70,16 @@ def main() -> None:
         M = np.ascontiguousarray(Phi[:r, :nc])
         cols = np.arange(nc, dtype=np.int64)
         Qd = np.diag(rng.uniform(1e-12, 1e-10, size=n))
-        dense = _dense_loop(P, Phi, Qd, STEPS)
-        rows = _rows_loop(P, M, cols, Qd, STEPS)
+        dense = _dense_loop(P, Phi, Qd, steps)
+        rows = _rows_loop(P, M, cols, Qd, steps)
         np.testing.assert_allclose(rows, dense, rtol=1e-12, atol=1e-15)
         t_np, t_dense, t_rows = (
-            best(lambda f=f, a=a: f(*a, STEPS), repeat=5)
+            best(lambda f=f, a=a: f(*a, steps), repeat=repeat)
             for f, a in ((_numpy_loop, (P, Phi, Qd)), (_dense_loop, (P, Phi, Qd)),
                          (_rows_loop, (P, M, cols, Qd)))
         )
-        print(f"{label:40s} {n:3d} {r:3d} {t_np / STEPS * 1e6:7.2f} {t_dense / STEPS * 1e6:7.2f} "
-              f"{t_rows / STEPS * 1e6:7.2f} {t_dense / t_rows:11.1f}")
+        print(f"{label:40s} {n:3d} {r:3d} {t_np / steps * 1e6:7.2f} {t_dense / steps * 1e6:7.2f} "
+              f"{t_rows / steps * 1e6:7.2f} {t_dense / t_rows:11.1f}")
 
 
 if __name__ == "__main__":

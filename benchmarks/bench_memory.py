@@ -104,31 +104,47 @@ def measure(mode: str, path: Path) -> dict[str, float]:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_memory")
-    parser.add_argument("--hours", type=float, nargs="+", default=[1.0, 4.0])
-    parser.add_argument("--modes", nargs="+", default=["streamed", "rrd", "outputs", "whole"],
-                        choices=["streamed", "rrd", "outputs", "whole"])
-    parser.add_argument("--dir", type=Path, default=Path("bench-data"))
-    parser.add_argument("--gps-pause", type=float, default=0.0, metavar="SECONDS",
-                        help="no GPS fix for this long from ten minutes in")
-    parser.add_argument("--child", nargs=2, metavar=("MODE", "PATH"), help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.child:
-        _child(*args.child)
-        return
-    args.dir.mkdir(parents=True, exist_ok=True)
+def measure_all(hours_list: list[float], modes: list[str], directory: Path,
+                gps_pause: float) -> None:
+    """Print the peak RSS and seconds of each mode on the recording of each length."""
     base: dict[str, float] = {}
     print(f"{'log':>6} {'mode':>9} {'peak RSS':>10} {'vs first':>9} {'seconds':>8}")
-    for hours in args.hours:
-        path = (paused_recording(hours, args.gps_pause, args.dir.resolve()) if args.gps_pause
-                else recording(hours, args.dir.resolve()))
-        for mode in args.modes:
+    for hours in hours_list:
+        path = (paused_recording(hours, gps_pause, directory) if gps_pause
+                else recording(hours, directory))
+        for mode in modes:
             r = measure(mode, path)
             base.setdefault(mode, r["peak_mib"])
-            print(f"{hours:>5g}h {mode:>9} {r['peak_mib']:>7.0f} MiB {r['peak_mib'] / base[mode]:>8.2f}x"
+            log = f"{hours:>5g}h" if hours >= 0.01 else f"{hours * 3600:>5g}s"
+            print(f"{log} {mode:>9} {r['peak_mib']:>7.0f} MiB {r['peak_mib'] / base[mode]:>8.2f}x"
                   f" {r['seconds']:>8.1f}", flush=True)
 
 
+def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_memory")
+    # quick: every mode on a 20-second drive in a temporary directory
+    parser.add_argument("--hours", type=float, nargs="+",
+                        default=[20.0 / 3600.0] if quick else [1.0, 4.0])
+    parser.add_argument("--modes", nargs="+", default=["streamed", "rrd", "outputs", "whole"],
+                        choices=["streamed", "rrd", "outputs", "whole"])
+    parser.add_argument("--dir", type=Path, default=None,
+                        help="where the simulated recordings are kept (default bench-data; "
+                        "with quick, a temporary directory)")
+    parser.add_argument("--gps-pause", type=float, default=0.0, metavar="SECONDS",
+                        help="no GPS fix for this long from ten minutes in")
+    parser.add_argument("--child", nargs=2, metavar=("MODE", "PATH"), help=argparse.SUPPRESS)
+    args = parser.parse_args([] if argv is None else argv)
+    if args.child:
+        _child(*args.child)
+        return
+    if args.dir is None and quick:
+        with tempfile.TemporaryDirectory() as tmp:
+            measure_all(args.hours, args.modes, Path(tmp), args.gps_pause)
+        return
+    directory = args.dir or Path("bench-data")
+    directory.mkdir(parents=True, exist_ok=True)
+    measure_all(args.hours, args.modes, directory.resolve(), args.gps_pause)
+
+
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -44,12 +44,14 @@ def _best(repeat: int, fn: Callable[[], Any]) -> tuple[float, float]:
     return best
 
 
-def bench_replay(repeat: int) -> dict[str, float]:
-    """Decode + replay of one recording per mode, and the free-inertial baseline."""
-    rec = simulate("underwater-rpm", {}, seed=0)
+def bench_replay(repeat: int, values: dict[str, Any] | None = None) -> dict[str, float]:
+    """Decode + replay of one recording per mode (scenario ``values``: its defaults), and the
+    free-inertial baseline."""
+    values = values or {}
+    rec = simulate("underwater-rpm", values, seed=0)
     n_imu = len(rec["imu"])
     duration = n_imu / rec.metadata.params["imu_rate"]
-    sim_w, sim_c = _best(repeat, lambda: simulate("underwater-rpm", {}, seed=0))
+    sim_w, sim_c = _best(repeat, lambda: simulate("underwater-rpm", values, seed=0))
     rpm_ins = load_filter("rpm-aided-ins")
     ins = load_filter("ins")
     with tempfile.TemporaryDirectory() as tmp:
@@ -87,12 +89,12 @@ def bench_replay(repeat: int) -> dict[str, float]:
     return result
 
 
-def bench_campaign(runs: int, workers: int) -> float:
+def bench_campaign(runs: int, workers: int, values: dict[str, Any] | None = None) -> float:
     """Wall time of the reproduction campaign, simulation included [s]."""
     from navreplay.reproduce import get
 
     w0 = time.perf_counter()
-    report = get("rpm-aided-ins").run(runs=runs, workers=workers)
+    report = get("rpm-aided-ins").run(runs=runs, workers=workers, values=values)
     wall = time.perf_counter() - w0
     timing = report.figures["timing"]
     passed = sum(c.passed for c in report.checks)
@@ -108,16 +110,21 @@ def bench_campaign(runs: int, workers: int) -> float:
     return wall
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_rpm_aided_ins")
-    parser.add_argument("--repeat", type=int, default=5, help="runs per timing, best kept")
-    parser.add_argument("--runs", type=int, default=100, help="campaign runs (default 100)")
-    parser.add_argument("--workers", type=int, default=2, help="campaign processes (default 2)")
+    # quick: the same replays and campaign on 30-second recordings, two runs in this process
+    parser.add_argument("--repeat", type=int, default=1 if quick else 5,
+                        help="runs per timing, best kept")
+    parser.add_argument("--runs", type=int, default=2 if quick else 100,
+                        help="campaign runs (default 100)")
+    parser.add_argument("--workers", type=int, default=1 if quick else 2,
+                        help="campaign processes (default 2)")
     parser.add_argument("--skip-campaign", action="store_true", help="replay timings only")
     args = parser.parse_args([] if argv is None else argv)
-    bench_replay(args.repeat)
+    values = {"duration": 30.0} if quick else None
+    bench_replay(args.repeat, values)
     if not args.skip_campaign:
-        bench_campaign(args.runs, args.workers)
+        bench_campaign(args.runs, args.workers, values)
 
 
 if __name__ == "__main__":

@@ -64,11 +64,13 @@ def measure(recording: Path, repeat: int, filt: str = "gps-ins") -> dict[str, tu
             for k, v in rows.items()}
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--filter", default="gps-ins", help="filter to run (default gps-ins)")
+    # quick: once, with ins (the fewest kernels to compile of the INS filters)
+    ap.add_argument("--filter", default="ins" if quick else "gps-ins",
+                    help="filter to run (default gps-ins)")
     ap.add_argument("--recording", type=Path, default=RECORDING)
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=1 if quick else 3)
     args = ap.parse_args([] if argv is None else argv)
     m = measure(args.recording, args.repeat, args.filter)
     print(f"navreplay run {args.filter} {args.recording.name} --no-viz, fresh interpreters, medians "

@@ -38,24 +38,27 @@ def _imu(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.n
     return omega, f, np.full(n, 1.0 / RATE)
 
 
-def main() -> None:
+def main(*, quick: bool = False) -> None:
+    # quick: the same calls on a few thousand samples, one repeat
+    n_samples, n_reference, n_calls, repeat = (
+        (10_000, 300, 500, 1) if quick else (N_SAMPLES, N_REFERENCE, N_CALLS, 3))
     rng = np.random.default_rng(0)
-    omega, f, dt = _imu(N_SAMPLES, rng)
+    omega, f, dt = _imu(n_samples, rng)
     nav0 = strapdown.nav_vector(
         [0.65, 2.2, 100.0], [15.0, -5.0, 0.2], euler_to_quat([0.05, -0.02, 1.0])
     )
     strapdown.integrate(nav0, omega[:BLOCK], f[:BLOCK], dt[:BLOCK])  # compile or load cache
 
-    t_int = best(lambda: strapdown.integrate(nav0, omega, f, dt), 3)
-    rate_int = N_SAMPLES / t_int
+    t_int = best(lambda: strapdown.integrate(nav0, omega, f, dt), repeat)
+    rate_int = n_samples / t_int
 
     t_ref = best(
         lambda: strapdown.propagate_reference(
-            nav0, omega[:N_REFERENCE], f[:N_REFERENCE], dt[:N_REFERENCE]
+            nav0, omega[:n_reference], f[:n_reference], dt[:n_reference]
         ),
-        2,
+        min(repeat, 2),
     )
-    rate_ref = N_REFERENCE / t_ref
+    rate_ref = n_reference / t_ref
 
     blocks = [
         (omega[i : i + BLOCK].copy(), f[i : i + BLOCK].copy(), dt[i : i + BLOCK].copy())
@@ -64,7 +67,7 @@ def main() -> None:
 
     def calls() -> None:
         nav = nav0
-        for i in range(N_CALLS):
+        for i in range(n_calls):
             w, a, d = blocks[i % 100]
             nav = strapdown.propagate(nav, w, a, d)
 
@@ -72,31 +75,31 @@ def main() -> None:
     out = np.empty(strapdown.NAV_SIZE)
 
     def kernel_calls() -> None:
-        for i in range(N_CALLS):
+        for i in range(n_calls):
             w, a, d = blocks[i % 100]
             strapdown.propagate_kernel(nav0, w, a, d, prev, out)
 
-    t_call = best(calls, 3) / N_CALLS
-    t_kernel_call = best(kernel_calls, 3) / N_CALLS
+    t_call = best(calls, repeat) / n_calls
+    t_kernel_call = best(kernel_calls, repeat) / n_calls
     overhead = t_call - BLOCK / rate_int
 
     # imu_from_truth on a smooth 1M-sample trajectory
-    t = np.arange(N_SAMPLES) / RATE
+    t = np.arange(n_samples) / RATE
     yaw = 0.3 + 0.2 * np.sin(2 * np.pi * t / 300.0)
     euler = np.stack([0.1 * np.sin(0.7 * t), 0.05 * np.sin(0.3 * t), yaw], axis=-1)
     q = euler_to_quat(euler)
     v = 20.0 * np.stack([np.cos(yaw), np.sin(yaw), 0.0 * t], axis=-1)
     pos = kinematics.integrate_position(t, v, [0.65, 2.2, 100.0])
     kinematics.imu_from_truth(t[:3], pos[:3], v[:3], q[:3])
-    t_gen = best(lambda: kinematics.imu_from_truth(t, pos, v, q), 2)
+    t_gen = best(lambda: kinematics.imu_from_truth(t, pos, v, q), min(repeat, 2))
 
     print(
-        f"integrate, {N_SAMPLES:,} samples         {rate_int / 1e3:10.0f} k samples/s"
+        f"integrate, {n_samples:,} samples         {rate_int / 1e3:10.0f} k samples/s"
         f"   (target >= 300 k)"
     )
     print(
         f"propagate_reference (numpy baseline)  {rate_ref / 1e3:10.1f} k samples/s"
-        f"   ({N_REFERENCE:,} samples)"
+        f"   ({n_reference:,} samples)"
     )
     print(f"speed-up integrate / reference        {rate_int / rate_ref:10.0f} x")
     print(
@@ -111,7 +114,7 @@ def main() -> None:
         f"  of which the Python wrapper         {(t_call - t_kernel_call) * 1e6:10.2f} us"
         f"   (propagate_kernel called directly: {t_kernel_call * 1e6:.2f} us)"
     )
-    print(f"imu_from_truth, {N_SAMPLES:,} samples    {N_SAMPLES / t_gen / 1e3:10.0f} k samples/s")
+    print(f"imu_from_truth, {n_samples:,} samples    {n_samples / t_gen / 1e3:10.0f} k samples/s")
 
 
 if __name__ == "__main__":

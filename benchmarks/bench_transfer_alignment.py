@@ -20,6 +20,7 @@ Times are the minimum over repeats (the machine is shared).
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
@@ -71,7 +72,7 @@ class _FreeIns(_Engine):
         self.t_prev = float(t[-1])
 
 
-def kf_step(repeat: int) -> dict[str, float]:
+def kf_step(repeat: int, number: int = 2000) -> dict[str, float]:
     """Seconds per call of each part of the filter's step at a GINS sample (9 states, 5
     measurements), and of the numpy model + prediction that the first part replaces."""
     q_m = kernels.euler_to_quat(np.array([0.05, -0.03, 0.52]))
@@ -105,27 +106,31 @@ def kf_step(repeat: int) -> dict[str, float]:
 
     feedback()
     return {
-        "model + prediction + z, H (numba)": best(model, repeat, 2000),
+        "model + prediction + z, H (numba)": best(model, repeat, number),
         "correction + checks (kalman.correct)": best(
-            lambda: kalman.correct(np.zeros(9), P, z, H, r), repeat, 2000),
-        "feedback + recovery (numba)": best(feedback, repeat, 2000),
-        "baseline: numpy discretize + predict": best(numpy_model, repeat, 1000),
+            lambda: kalman.correct(np.zeros(9), P, z, H, r), repeat, number),
+        "feedback + recovery (numba)": best(feedback, repeat, number),
+        "baseline: numpy discretize + predict": best(numpy_model, repeat, number // 2),
     }
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=7, help="repeats (the minimum is reported)")
-    ap.add_argument("--campaign-runs", type=int, default=36,
+    # quick: the same replays and step on a 10-second recording, one campaign run per condition
+    ap.add_argument("--repeat", type=int, default=1 if quick else 7,
+                    help="repeats (the minimum is reported)")
+    ap.add_argument("--campaign-runs", type=int, default=1 if quick else 36,
                     help="runs per condition of the campaign (0: skip it)")
-    ap.add_argument("--workers", type=int, default=2, help="processes of the campaign")
-    args = ap.parse_args(argv)
+    ap.add_argument("--workers", type=int, default=1 if quick else 2,
+                    help="processes of the campaign")
+    args = ap.parse_args([] if argv is None else argv)
 
-    rec = simulate(SCENARIO, {}, seed=0)
+    values = {"duration": 10.0} if quick else {}
+    rec = simulate(SCENARIO, values, seed=0)
     n_imu = len(rec[StreamKind.IMU])
     n_gins = len(rec[StreamKind.MASTER_INS])
     duration = n_imu / 100.0
-    t_sim = best(lambda: simulate(SCENARIO, {}, seed=1), args.repeat)
+    t_sim = best(lambda: simulate(SCENARIO, values, seed=1), args.repeat)
     print(f"recording: {n_imu} IMU samples, {n_gins} GINS samples, {duration:.0f} s; "
           f"simulate {t_sim * 1e3:.1f} ms")
 
@@ -141,7 +146,7 @@ def main(argv: list[str] | None = None) -> None:
               f"{t / n_gins * 1e6:>10.1f}")
 
     print("step at a GINS sample (9 states, 5 measurements):")
-    for label, t in kf_step(args.repeat).items():
+    for label, t in kf_step(args.repeat, 20 if quick else 2000).items():
         print(f"  {label:<40}{t * 1e6:>8.1f} us")
 
     if args.campaign_runs > 0:
@@ -155,4 +160,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

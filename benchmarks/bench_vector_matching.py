@@ -14,6 +14,7 @@ per model) and the ratio reference / fast. ``--campaign`` also times the full re
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
@@ -88,13 +89,15 @@ def fast_path(name: str, values: dict, seeds: range) -> dict[str, float]:
             "metrics": (t3 - t2) / n}
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--ref-runs", type=int, default=20, help="runs of the reference path")
-    ap.add_argument("--fast-runs", type=int, default=1000,
+    # quick: the same paths on a few runs
+    ap.add_argument("--ref-runs", type=int, default=2 if quick else 20,
+                    help="runs of the reference path")
+    ap.add_argument("--fast-runs", type=int, default=10 if quick else 1000,
                     help="runs stacked in the fast path")
     ap.add_argument("--campaign", action="store_true", help="also time the full reproduction")
-    args = ap.parse_args(argv)
+    args = ap.parse_args([] if argv is None else argv)
 
     per_run: dict[str, tuple[dict[str, float], dict[str, float]]] = {}
     for label, (name, values) in CASES.items():
@@ -132,4 +135,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -90,10 +90,12 @@ def per_sample_seconds(rows: int, directory: Path) -> float:
     return elapsed / rows
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_viz")
-    parser.add_argument("--minutes", type=float, default=60.0, help="recording length [min]")
-    parser.add_argument("--per-sample-rows", type=int, default=3000)
+    # quick: the same filter, sink and per-sample logging on a half-minute run
+    parser.add_argument("--minutes", type=float, default=0.5 if quick else 60.0,
+                        help="recording length [min]")
+    parser.add_argument("--per-sample-rows", type=int, default=200 if quick else 3000)
     args = parser.parse_args([] if argv is None else argv)
 
     recording = stationary_recording(args.minutes)
