@@ -8,7 +8,7 @@ errors. Per stage it prints microseconds per run (a run = one recording; the fil
 per model) and the ratio reference / fast. ``--campaign`` also times the full reproduction
 (11,300 recordings, 22,600 filter runs) and projects the reference path onto it.
 
-    python -m benchmarks.bench_vector_matching [--ref-runs 20] [--fast-runs 100] [--campaign]
+    python -m benchmarks.bench_vector_matching [--ref-runs 20] [--fast-runs 1000] [--campaign]
 """
 
 from __future__ import annotations
