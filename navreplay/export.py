@@ -783,9 +783,9 @@ class RunExport:
     """``--export DIR`` of one run, written as the estimates come (see the module docstring
     for the files).
 
-    Feed it the truth window by window (:meth:`add_reference`) and each filter's estimates
-    block by block (:meth:`add`, blocks of one label in time order), then :meth:`close`; or
-    :meth:`abort`. Every file goes to a temporary beside its target, renamed when complete, so
+    Feed it the truth window by window (:meth:`add_reference`), each filter's estimates
+    block by block (:meth:`add`, blocks of one label in time order) and its updates
+    (:meth:`add_innovations`, or with the estimates), then :meth:`close`; or :meth:`abort`. Every file goes to a temporary beside its target, renamed when complete, so
     an interrupted run leaves the directory as it was. The files are those of one call with the
     whole run: what is written depends on the rows, not on how they were split into blocks.
 
