@@ -1,6 +1,7 @@
 """Innovation exports (``L.innovations.<measurement>.csv``): they round-trip the run's
 innovations and the summary's NIS, are the same bytes whether fed block by block or whole,
-number the rows of undeclared measurements, and refuse to overwrite without force."""
+number the rows of undeclared measurements (a plug-in through the CLI too), and refuse to
+overwrite without force."""
 
 from __future__ import annotations
 
@@ -150,3 +151,41 @@ def test_existing_innovation_files_are_refused(run, tmp_path) -> None:
     assert (out / "gps-ins.innovations.gps_vel.csv").read_text() == "kept\n"
     export.export_run(out, [fo], rec, force=True)
     assert (out / "gps-ins.innovations.gps_vel.csv").read_text().startswith("stamp [ns],")
+
+
+PLUGIN = '''
+from navreplay.filters.gps_ins import GpsInsFilter
+
+
+class Silent(GpsInsFilter):
+    """gps-ins declaring no measurements."""
+
+    name = "silent"
+    measurements = None
+'''
+
+
+def test_cli_exports_a_plug_in_without_declarations(run, tmp_path, monkeypatch) -> None:
+    """``navreplay run --filter module:Class --export``, streamed: the plug-in's innovations
+    with numbered rows, the same updates as the declared filter's."""
+    from click.testing import CliRunner
+
+    from navreplay.cli import cli
+
+    d, _, result = run
+    (tmp_path / "silent_plugin.py").write_text(PLUGIN)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    out = tmp_path / "exp"
+    res = CliRunner().invoke(cli, ["run", "gps-ins", "--filter", "silent_plugin:Silent",
+                                   str(d / "drive.mcap"), "--no-viz", "--export", str(out)])
+    assert res.exit_code == 0, res.output
+    manifest = json.loads((out / "manifest.json").read_text())["filters"]
+    assert sorted(manifest["silent"]["innovations"]) == ["gps_pos", "gps_vel"]
+    for name in ("gps_pos", "gps_vel"):
+        header, table = _table(out / f"silent.innovations.{name}.csv")
+        assert header[2:5] == ["nu.0 [unknown]", "nu.1 [unknown]", "nu.2 [unknown]"]
+        declared = (out / f"gps-ins.innovations.{name}.csv").read_text().splitlines()
+        assert declared[0].startswith("stamp [ns],t [s],nu.N [m")
+        assert (out / f"silent.innovations.{name}.csv").read_text().splitlines()[1:] == \
+            declared[1:]
+        assert len(declared) - 1 == len(result.innovations[name].t)
