@@ -10,6 +10,10 @@
 ``L.tum``
     ``timestamp tx ty tz qx qy qz qw`` (evo's TUM format): absolute time [s], position [m] in
     the local ENU frame of :class:`LocalFrame`, orientation of base_link (FLU) in that frame.
+``L.innovations.<measurement>.csv``
+    One row per update of each measurement: time, the innovation of each row and its predicted
+    1-sigma ``sqrt(S_ii)``, the NIS and its dof (the rows the filter declares, with their units;
+    rows numbered ``0..m-1`` of unknown unit for a filter that declares none).
 ``reference.tum``
     The reference (truth) in the same frame, when the recording has one.
 ``estimates.mcap``
@@ -58,11 +62,11 @@ from typing import Any
 
 import numpy as np
 
-from navreplay.filters.base import Nav, NavError, State
+from navreplay.filters.base import MeasurementKind, Nav, NavError, State
 from navreplay.geo import earth
 from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, quat_to_euler, skew
 from navreplay.outputs import Output, atomic_path, check_outputs
-from navreplay.replay.result import RunResult
+from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.streams import Recording, Stream, StreamKind
 
 MANIFEST = "manifest.json"
@@ -70,6 +74,8 @@ ODOMETRY_FILE = "estimates.mcap"
 REFERENCE_LABEL = "reference"
 WORLD_FRAME = "map"
 BODY_FRAME = "base_link"
+UNKNOWN_UNIT = "unknown"
+"""Unit of the innovation rows of a measurement the filter does not declare."""
 UNKNOWN_VARIANCE = -1.0
 """Covariance diagonal of an element the filter does not estimate (sensor_msgs convention)."""
 
@@ -124,6 +130,10 @@ class FilterOutput:
     navigation : tuple of str
         The parts of the solution the filter outputs (``pos``, ``v_n``, ``q_nb``;
         ``RunResult.navigation``): the CSV carries their columns only.
+    innovations : dict[str, InnovationSeries]
+        The updates of each measurement (``RunResult.innovations``).
+    measurements : tuple of MeasurementKind
+        The filter's declarations of its measurements (empty when it declares none).
     """
 
     label: str
@@ -141,6 +151,8 @@ class FilterOutput:
     nis: dict[str, tuple[np.ndarray, np.ndarray, int]]
     nav_states: tuple[str, ...] = ()
     navigation: tuple[str, ...] = ("pos", "v_n", "q_nb")
+    innovations: dict[str, InnovationSeries] = dataclasses.field(default_factory=dict)
+    measurements: tuple[MeasurementKind, ...] = ()
 
     def has(self, part: str) -> bool:
         """Whether the output holds part ``part`` (``pos``, ``v_n``, ``q_nb``) of a solution."""
@@ -190,6 +202,8 @@ def filter_output(result: RunResult, recording: Recording | None = None,
         nis={name: (s.t, s.nis, int(s.nu.shape[1])) for name, s in result.innovations.items()},
         nav_states=nav_state_names(result.states),
         navigation=result.navigation,
+        innovations=dict(result.innovations),
+        measurements=tuple(result.measurements),
     )
 
 
@@ -270,9 +284,20 @@ def run_targets(out_dir: Path, labels: Sequence[str], has_reference: bool) -> li
     paths = [out_dir / MANIFEST, out_dir / ODOMETRY_FILE]
     for stem in stems.values():
         paths += [out_dir / f"{stem}.csv", out_dir / f"{stem}.tum"]
+        # the measurements are known once the filters run: refuse those there are already
+        paths += sorted(out_dir.glob(f"{stem}{INNOVATIONS}*.csv"))  # no glob characters
     if has_reference:
         paths.append(out_dir / f"{REFERENCE_LABEL}.tum")
     return paths
+
+
+INNOVATIONS = ".innovations."
+"""Between a filter's file stem and a measurement's in the name of an innovation file."""
+
+
+def innovation_file(stem: str, measurement_stem: str) -> str:
+    """``L.innovations.<measurement>.csv``."""
+    return f"{stem}{INNOVATIONS}{measurement_stem}.csv"
 
 
 def ensemble_targets(out_dir: Path, labels: Sequence[str]) -> list[Path]:
@@ -564,6 +589,44 @@ def nis_columns(t: np.ndarray, mean: np.ndarray, count: np.ndarray, dof: int,
     return cols
 
 
+def innovation_rows(kind: MeasurementKind | None, dim: int) -> tuple[tuple[str, ...],
+                                                                     tuple[str, ...]]:
+    """The row names and units of a measurement's innovation: the declared ones, else
+    ``0..dim-1`` of :data:`UNKNOWN_UNIT`."""
+    if kind is None:
+        return tuple(str(i) for i in range(dim)), (UNKNOWN_UNIT,) * dim
+    if kind.dim != dim:
+        raise ValueError(f"measurement {kind.name}: {dim} innovation rows, {kind.dim} declared")
+    return kind.rows, kind.units
+
+
+def innovation_columns(t0_ns: int, series: InnovationSeries, rows: Sequence[str],
+                       units: Sequence[str]) -> list[Column]:
+    """The columns of one measurement's innovation file: update time, ``nu`` and
+    ``sqrt(S_ii)`` of each row, the NIS ``nu^T S^-1 nu`` and its dof (see docs/exports.md)."""
+    t = np.asarray(series.t, dtype=float)
+    m = len(rows)
+    with np.errstate(invalid="ignore"):  # a negative S_ii (a broken filter) shows as nan
+        sd = np.sqrt(np.diagonal(series.S, axis1=1, axis2=2))
+    cols = [Column("stamp", "ns", "absolute update time",
+                   np.int64(t0_ns) + np.rint(t * 1e9).astype(np.int64), "%d"),
+            Column("t", "s", "update time since the recording start", t)]
+    cols += [Column(f"nu.{r}", u, f"innovation z - h(x) of row {r}", series.nu[:, i])
+             for i, (r, u) in enumerate(zip(rows, units, strict=True))]
+    cols += [Column(f"sigma.{r}", u, f"predicted 1-sigma of the innovation of row {r}, "
+                    "sqrt(S_ii)", sd[:, i]) for i, (r, u) in enumerate(zip(rows, units,
+                                                                           strict=True))]
+    cols += [Column("nis", "-", f"NIS nu^T S^-1 nu of the update ({m} dof)", series.nis),
+             Column("dof", "-", "degrees of freedom of the NIS (the rows of the update)",
+                    np.full(t.shape[0], m, dtype=np.int64), "%d")]
+    return cols
+
+
+def _no_updates(dim: int) -> InnovationSeries:
+    return InnovationSeries(t=np.zeros(0), nu=np.zeros((0, dim)), S=np.zeros((0, dim, dim)),
+                            nis=np.zeros(0))
+
+
 # --------------------------------------------------------------------------------------------
 # Odometry MCAP
 
@@ -720,9 +783,9 @@ class RunExport:
     """``--export DIR`` of one run, written as the estimates come (see the module docstring
     for the files).
 
-    Feed it the truth window by window (:meth:`add_reference`) and each filter's estimates
-    block by block (:meth:`add`, blocks of one label in time order), then :meth:`close`; or
-    :meth:`abort`. Every file goes to a temporary beside its target, renamed when complete, so
+    Feed it the truth window by window (:meth:`add_reference`), each filter's estimates
+    block by block (:meth:`add`, blocks of one label in time order) and its updates
+    (:meth:`add_innovations`, or with the estimates), then :meth:`close`; or :meth:`abort`. Every file goes to a temporary beside its target, renamed when complete, so
     an interrupted run leaves the directory as it was. The files are those of one call with the
     whole run: what is written depends on the rows, not on how they were split into blocks.
 
@@ -749,6 +812,7 @@ class RunExport:
         self.labels = tuple(labels)
         self.has_reference = has_reference
         self.source = source
+        self.force = force
         check_targets(run_targets(self.out_dir, self.labels, has_reference), force)
         self._stems = _stems(self.labels)
         self._frame: LocalFrame | None = None
@@ -760,6 +824,10 @@ class RunExport:
         self._entries: dict[str, dict[str, Any]] = {}
         self._odometry: _OdometryWriter | None = None
         self._topics: dict[str, str] = {}  # label (or the reference) -> odometry topic
+        # label -> measurement -> its file's manifest entry; the rows and units of its columns
+        self._innovations: dict[str, dict[str, dict[str, Any]]] = {}
+        self._rows: dict[tuple[str, str], tuple[tuple[str, ...], tuple[str, ...]]] = {}
+        self._declared: dict[str, dict[str, MeasurementKind]] = {}
         self._done = False
 
     # -- feeding -------------------------------------------------------------------------
@@ -775,9 +843,9 @@ class RunExport:
         self._feed("ref", truth)
 
     def add(self, out: FilterOutput) -> None:
-        """A block of one filter's estimates (:func:`filter_output` of its rows)."""
-        if out.label not in self._stems:
-            raise ValueError(f"{out.label!r} is not one of the exported filters")
+        """A block of one filter's estimates (:func:`filter_output` of its rows) and the
+        innovations it carries."""
+        self.add_innovations(out.label, out.t0_ns, out.innovations, out.measurements)
         if not len(out.t):
             self._empty.setdefault(out.label, out)
             return
@@ -788,6 +856,44 @@ class RunExport:
             self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
                                      f"first navigation estimate of {out.label}")
         self._feed("out", out)
+
+    def add_innovations(self, label: str, t0_ns: int,
+                        innovations: Mapping[str, InnovationSeries],
+                        measurements: Sequence[MeasurementKind] = ()) -> None:
+        """A block of one filter's updates (later than its updates before), per measurement;
+        ``measurements``: the filter's declarations (each gets a file, updates or not)."""
+        if label not in self._stems:
+            raise ValueError(f"{label!r} is not one of the exported filters")
+        if label not in self._declared:
+            self._declared[label] = {m.name: m for m in measurements}
+            self._innovations[label] = {}
+            for m in measurements:
+                self._innovation_file(label, m.name, m.dim)
+        for name, series in innovations.items():
+            f = self._innovation_file(label, name, int(series.nu.shape[1]))
+            if len(series.t):
+                f.write(csv_rows(innovation_columns(t0_ns, series, *self._rows[label, name])))
+
+    def _innovation_file(self, label: str, name: str, dim: int) -> Any:
+        """The open file of a measurement's innovations (opened with its header at first)."""
+        entry = self._innovations[label].get(name)
+        if entry is not None:
+            return self._file(entry["csv"])
+        rows, units = self._rows[label, name] = innovation_rows(
+            self._declared[label].get(name), dim)
+        taken = {e["csv"] for e in self._innovations[label].values()}
+        stem = base = file_stem(name)
+        k = 2
+        while innovation_file(self._stems[label], stem) in taken:
+            stem, k = f"{base}_{k}", k + 1
+        csv_name = innovation_file(self._stems[label], stem)
+        check_targets([self.out_dir / csv_name], self.force)  # a name known only now
+        cols = innovation_columns(0, _no_updates(dim), rows, units)
+        self._innovations[label][name] = {"csv": csv_name, "dof": dim,
+                                          "columns": [c.to_json() for c in cols]}
+        f = self._open(csv_name)
+        f.write(csv_header(cols))
+        return f
 
     def _first_nav(self) -> str | None:
         """The first label (in order) whose rows may carry a navigation solution."""
@@ -923,6 +1029,8 @@ class RunExport:
         written = []
         order = [self.out_dir / e[k] for e in self._entries.values() for k in ("csv", "tum")
                  if k in e]
+        order += [self.out_dir / e["csv"] for files in self._innovations.values()
+                  for e in files.values()]
         order += [p for p in self._tmp if p not in order]
         for target in order:
             tmp, _ = self._tmp[target]
@@ -949,6 +1057,11 @@ class RunExport:
                                 if k in e}
                         for label, e in self._entries.items()},
         }
+        for label, files in self._innovations.items():
+            if files:  # the declared measurements in order, then the others by name
+                declared = list(self._declared[label])
+                names = declared + sorted(set(files) - set(declared))
+                manifest["filters"][label]["innovations"] = {n: files[n] for n in names}
         if REFERENCE_LABEL in self._topics:
             manifest["reference"] = {"tum": f"{REFERENCE_LABEL}.tum",
                                      "odometry_topic": "/reference/odom"}

@@ -54,6 +54,7 @@ def test_files_written(runs) -> None:
     out, rec, _, _, written = runs
     assert sorted(p.name for p in written) == sorted(
         ["ins.csv", "ins.tum", "gps-ins.csv", "gps-ins.tum", "reference.tum",
+         "gps-ins.innovations.gps_pos.csv", "gps-ins.innovations.gps_vel.csv",
          "estimates.mcap", "manifest.json"])
     manifest = json.loads((out / "manifest.json").read_text())
     truth0 = rec["truth"]["pos"][0]

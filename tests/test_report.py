@@ -90,9 +90,10 @@ def test_cli_export_report_and_force(drive, tmp_path) -> None:
 
     res = invoke("--report", str(tmp_path / "r.html"))
     assert res.exit_code == 0, res.output
-    assert "Report written to" in res.output and "Exported 5 files" in res.output
+    assert "Report written to" in res.output and "Exported 7 files" in res.output
     assert {p.name for p in (tmp_path / "exp").iterdir()} == {
-        "gps-ins.csv", "gps-ins.tum", "reference.tum", "estimates.mcap", "manifest.json"}
+        "gps-ins.csv", "gps-ins.tum", "reference.tum", "estimates.mcap", "manifest.json",
+        "gps-ins.innovations.gps_pos.csv", "gps-ins.innovations.gps_vel.csv"}
     assert len(_images((tmp_path / "r.html").read_text())) == 3
     before = (tmp_path / "exp" / "gps-ins.csv").stat().st_mtime_ns
     res = invoke()  # refused before the replay starts, nothing touched

@@ -10,6 +10,7 @@ import csv
 import dataclasses
 import importlib
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -77,12 +78,12 @@ def test_streamed_exports_are_the_files_of_the_whole_run(both) -> None:
     names = sorted(p.name for p in b.iterdir())
     assert names == sorted(p.name for p in a.iterdir()) == sorted(
         ["ins.csv", "ins.tum", "gps-ins.csv", "gps-ins.tum", "reference.tum", "estimates.mcap",
-         "manifest.json"])
+         "gps-ins.innovations.gps_pos.csv", "gps-ins.innovations.gps_vel.csv", "manifest.json"])
     for name in names:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     assert (d / "streamed" / "r.html").stat().st_size > 10_000
     assert streamed.summary["filters"].keys() == whole.summary["filters"].keys()
-    assert any(n.startswith("Exported 7 files") for n in streamed.notes)
+    assert any(n.startswith("Exported 9 files") for n in streamed.notes)
 
 
 def _csv(path: Path) -> dict[str, np.ndarray]:
@@ -149,7 +150,7 @@ def test_an_interrupted_export_publishes_nothing(drive, tmp_path, monkeypatch) -
     real = streaming.RunningSummary.add
 
     def failing(self, block):
-        calls.append({".".join(p.name.split(".")[1:3]): p.stat().st_size
+        calls.append({p.name[1:p.name.index(f".{os.getpid()}@")]: p.stat().st_size
                       for p in out.glob(".*.part")})
         if len(calls) == 3:  # the files are being written: interrupt
             raise KeyboardInterrupt
@@ -162,9 +163,11 @@ def test_an_interrupted_export_publishes_nothing(drive, tmp_path, monkeypatch) -
     with pytest.raises(KeyboardInterrupt):
         run._run_streamed(job, None)
     # the files were being written as the rows came: CSV, TUM, reference TUM, MCAP
-    assert len(calls) == 3 and sorted(calls[-1]) == ["estimates.mcap", "gps-ins.csv",
-                                                      "gps-ins.tum", "reference.tum"]
-    assert all(size > 1000 for size in calls[-1].values()), calls[-1]
+    assert len(calls) == 3 and sorted(calls[-1]) == [
+        "estimates.mcap", "gps-ins.csv", "gps-ins.innovations.gps_pos.csv",
+        "gps-ins.innovations.gps_vel.csv", "gps-ins.tum", "reference.tum"]
+    assert all(size > 1000 for name, size in calls[-1].items()  # (small ones: buffered)
+               if ".innovations." not in name), calls[-1]
     assert [p.name for p in out.iterdir()] == ["gps-ins.csv"]  # no temporaries, no new files
     assert (out / "gps-ins.csv").read_text() == "kept\n"
 

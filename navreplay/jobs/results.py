@@ -79,6 +79,9 @@ class Outputs:
 
     def innovations(self, block: Any) -> None:
         """The innovations of a block of one filter's run (a RunResult)."""
+        if self._export is not None:
+            self._export.add_innovations(block.label, block.t0_ns, block.innovations,
+                                         block.measurements)
         series = self._series.get(block.label)
         if series is not None:
             for name, s in block.innovations.items():
