@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from test_streaming import assert_same_results as _assert_same
 
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.filters.ins import InsFilter
@@ -29,15 +30,6 @@ def _one_by_one(monkeypatch: pytest.MonkeyPatch, *args: Any, **kw: Any) -> Any:
         m.setattr(engine, "_batch_hook", lambda filt: None)
         m.setattr(engine, "_events_hook", lambda filt: None)
         return replay(*args, **kw)
-
-
-def _assert_same(a: Any, b: Any) -> None:
-    assert a.t.shape == b.t.shape and a.t.shape[0] > 100
-    for name in ("t", "x", "P", "nav_pos", "nav_v_n", "nav_q_nb"):
-        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
-    assert a.innovations.keys() == b.innovations.keys()
-    for k in a.innovations:
-        np.testing.assert_array_equal(a.innovations[k].nu, b.innovations[k].nu, err_msg=k)
 
 
 @pytest.mark.parametrize("filter_cls, params", [

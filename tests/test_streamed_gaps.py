@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_streaming import assert_same_results as _assert_same
 
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.io import read_recording, windows
@@ -94,15 +95,6 @@ def _streamed(path: Path, held: list[int] | None = None, **kw) -> RunResult:
         if final:
             return concat_results(blocks)
         window = aiding = following
-
-
-def _assert_same(a: RunResult, b: RunResult) -> None:
-    assert a.t.shape == b.t.shape and a.t.shape[0] > 100
-    for name in ("t", "x", "P", "nav_pos", "nav_v_n", "nav_q_nb"):
-        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
-    assert a.innovations.keys() == b.innovations.keys()
-    for k in a.innovations:
-        np.testing.assert_array_equal(a.innovations[k].nu, b.innovations[k].nu, err_msg=k)
 
 
 # --------------------------------------------------------------------------------------------

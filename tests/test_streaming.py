@@ -35,7 +35,8 @@ def _windows(rec: Recording, cls: type, params: dict, sizes: list[int], **kw) ->
     return concat_results(blocks)
 
 
-def _assert_same(a: RunResult, b: RunResult) -> None:
+def assert_same_results(a: RunResult, b: RunResult) -> None:
+    """Two replays of the same recording gave the same bits (estimates and innovations)."""
     assert a.t.shape == b.t.shape and a.t.shape[0] > 100
     for name in ("t", "x", "P", "nav_pos", "nav_v_n", "nav_q_nb"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
@@ -50,7 +51,7 @@ def test_windows_give_the_bits_of_the_whole_replay(drive: Recording, filter_cls:
     whole = replay(drive, filter_cls, {}, output_rate=10.0)
     rng = np.random.default_rng(1)
     sizes = [int(s) for s in rng.integers(1, 700, size=40)]  # windows of 1 to 699 samples
-    _assert_same(_windows(drive, filter_cls, {}, sizes, output_rate=10.0), whole)
+    assert_same_results(_windows(drive, filter_cls, {}, sizes, output_rate=10.0), whole)
 
 
 def test_windows_across_an_imu_gap(drive: Recording) -> None:
@@ -63,7 +64,7 @@ def test_windows_across_an_imu_gap(drive: Recording) -> None:
     whole = replay(rec, GpsInsFilter, {}, output_rate=20.0)
     cut = int(np.searchsorted(t[keep], 20.0))  # a window ends at the last sample before it
     sizes = [cut - 7, 7, 150, 3, 10_000]
-    _assert_same(_windows(rec, GpsInsFilter, {}, sizes, output_rate=20.0), whole)
+    assert_same_results(_windows(rec, GpsInsFilter, {}, sizes, output_rate=20.0), whole)
 
 
 def test_a_window_without_samples_applies_nothing(drive: Recording) -> None:
@@ -171,7 +172,7 @@ def test_aiding_in_windows_gives_the_bits_of_the_whole_replay(drive: Recording,
     cuts = np.cumsum(rng.uniform(0.003, 4.0, size=60))  # 3 ms to 4 s windows, odd boundaries
     got = _time_windows(drive, filter_cls, _ends(drive, list(cuts[cuts < 59.0])),
                         output_rate=10.0)
-    _assert_same(got, whole)
+    assert_same_results(got, whole)
     if filter_cls is GpsInsFilter:  # GPS updates were applied
         assert sum(len(s.t) for s in got.innovations.values()) > 50
 
@@ -193,7 +194,7 @@ def test_a_window_boundary_between_an_imu_sample_and_a_gps_fix(drive: Recording)
             int(imu.t_ns[j2]) - 2, int(imu.t_ns[j2]), rec.t0_ns + 10**12]
     ends = sorted(set(ends))
     got = _time_windows(rec, GpsInsFilter, ends, output_rate=10.0)
-    _assert_same(got, whole)
+    assert_same_results(got, whole)
 
 
 def test_an_aiding_stream_that_starts_late(drive: Recording) -> None:
@@ -203,4 +204,4 @@ def test_an_aiding_stream_that_starts_late(drive: Recording) -> None:
     whole = replay(rec, GpsInsFilter, {}, output_rate=10.0)
     got = _time_windows(rec, GpsInsFilter, _ends(rec, [3.0, 7.5, 24.999, 25.0, 40.0, 55.5]),
                         output_rate=10.0)
-    _assert_same(got, whole)
+    assert_same_results(got, whole)
