@@ -18,8 +18,9 @@ from test_streaming import assert_same_results as _assert_same
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.io import read_recording, windows
 from navreplay.io import writer as writer_module
-from navreplay.io.errors import RecordingWarning
+from navreplay.io.errors import RecordingError, RecordingWarning
 from navreplay.io.writer import write_recording
+from navreplay.logs.options import LogOptions
 from navreplay.replay import replay
 from navreplay.replay.engine import ReplayError, ReplaySession
 from navreplay.replay.ensemble import FilterSpec
@@ -101,9 +102,11 @@ def _streamed(path: Path, held: list[int] | None = None, **kw) -> RunResult:
 # warnings once per run
 
 
-def _zero_imu_stamps(src: Path, dst: Path) -> None:
+def _zero_imu_stamps(src: Path, dst: Path, *, at: int | None = None, latency: int = 0) -> None:
     """A copy of ``src`` whose IMU messages have zero header stamps (a driver that never sets
-    them): the stamp is the first 8 bytes after the CDR encapsulation header."""
+    them; with ``at``: from log time ``at`` [ns] on, or before ``-at`` when negative): the stamp
+    is the first 8 bytes after the CDR encapsulation header. ``latency`` [ns] is added to the
+    IMU log times (a receiver's delay)."""
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer
 
@@ -121,9 +124,12 @@ def _zero_imu_stamps(src: Path, dst: Path) -> None:
                     for c in summary.channels.values()}
         for _, channel, m in reader.iter_messages(log_time_order=False):
             data = m.data
+            log = m.log_time
             if channel.topic == "/imu":
-                data = data[:4] + bytes(8) + data[12:]
-            w.add_message(channels[channel.id], m.log_time, data, m.publish_time, m.sequence)
+                if at is None or (log >= at if at >= 0 else log < -at):
+                    data = data[:4] + bytes(8) + data[12:]
+                log += latency
+            w.add_message(channels[channel.id], log, data, m.publish_time, m.sequence)
         w.finish()
 
 
@@ -146,6 +152,37 @@ def test_a_warning_is_given_once_per_run_with_the_windows_it_concerns(drive, tmp
     total = int(re.search(r"(\d+) header stamps are zero",
                           next(m for m in whole if "header stamps" in m)).group(1))
     assert 0 < count < total == len(drive[StreamKind.IMU])
+
+
+def test_the_time_base_a_topic_starts_with_holds_for_all_its_windows(drive, tmp_path) -> None:
+    """Stamps unusable in the first windows: every window takes the log times, as the whole
+    reader does for the whole topic (not the stamps of the later windows)."""
+    plain = _write(drive, tmp_path / "plain.mcap")
+    t0 = int(drive[StreamKind.IMU].t_ns[0])
+    path = tmp_path / "late.mcap"
+    _zero_imu_stamps(plain, path, at=-(t0 + 5_000_000_000), latency=3_000_000)
+    whole, _ = _caught(read_recording, path)
+    parts, _ = _caught(lambda: [w[StreamKind.IMU].t_ns for w in windows.read_windows(
+        path, {StreamKind.IMU}) if StreamKind.IMU in w])
+    assert len(parts) >= 10
+    np.testing.assert_array_equal(np.concatenate(parts), whole[StreamKind.IMU].t_ns)
+    np.testing.assert_array_equal(whole[StreamKind.IMU].t_ns, drive[StreamKind.IMU].t_ns + 3_000_000)
+
+
+def test_stamps_that_turn_unusable_after_windows_used_them_are_refused(drive, tmp_path) -> None:
+    """The windows already replayed cannot move to log times: one line naming the topic, the
+    time and ``--time log``, which then replays the file on one time base."""
+    plain = _write(drive, tmp_path / "plain.mcap")
+    t0 = int(drive[StreamKind.IMU].t_ns[0])
+    path = tmp_path / "turns.mcap"
+    _zero_imu_stamps(plain, path, at=t0 + 30_000_000_000, latency=3_000_000)
+    with pytest.raises(RecordingError) as err:
+        _caught(run._run_streamed, _job(path), None)
+    text = str(err.value)
+    assert str(path) in text and "topic /imu" in text and "--time log" in text
+    assert "t = 30." in text, text
+    report, _ = _caught(run._run_streamed, _job(path, log=LogOptions(time="log")), None)
+    assert report is not None
 
 
 # --------------------------------------------------------------------------------------------

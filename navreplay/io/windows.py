@@ -178,6 +178,7 @@ class _State:
         self.frame: dict[StreamKind, str] = {}
         self.ahead: dict[StreamKind, tuple[int, int]] = {}  # kind -> (chunk, first time)
         self.floor: dict[StreamKind, int] = {}  # no sample of the kind may come before
+        self.base: dict[StreamKind, str] = {}  # kind -> "header" or "log", as first chosen
         self.gaps = {kind: _Gaps() for kind in chosen}
         self.warnings = _Warnings()
         self.windows = 0
@@ -263,7 +264,7 @@ class _State:
 
     def _stream(self, kind: StreamKind, topic: _Topic) -> Stream:
         fields = topic.drain()
-        fields["t_ns"] = sample_times(fields["t_ns"], topic.log_ns, self.time, topic.label)
+        fields["t_ns"] = self._times(kind, topic, fields["t_ns"])
         self.frame.setdefault(kind, topic.first_frame_id or SPECS[kind].frame_id)
         stream, source = build_stream(kind, fields, self.frame[kind], topic.label, self.aux,
                                       self.t0_ns, self.validate, self.declared.get(kind),
@@ -289,6 +290,26 @@ class _State:
             if self.validate:
                 self.gaps[kind].add(stream.t_ns)
         return stream
+
+    def _times(self, kind: StreamKind, topic: _Topic, stamps: np.ndarray) -> np.ndarray:
+        """The window's sample times on the time base the topic's first window chose: header
+        stamps, or log times once the stamps were unusable there (as the whole reader chooses
+        for the whole topic). Stamps that turn unusable after windows that used them are
+        refused: the windows already replayed cannot move to log times."""
+        t = sample_times(stamps, topic.log_ns, self.time, topic.label)
+        used = "header" if t is stamps else "log"
+        base = self.base.setdefault(kind, used)
+        if used == base:
+            return t
+        log = np.asarray(topic.log_ns if topic.log_ns is not None else stamps, dtype=np.int64)
+        if base == "log":
+            return log.copy()
+        zero = np.flatnonzero(stamps == 0)
+        k = int(zero[0]) if zero.size else int(np.argmax(np.diff(stamps) <= 0)) + 1
+        raise RecordingError(
+            f"{topic.label}: header stamps are unusable (zero or not increasing) from the "
+            f"message logged at {when(int(log[k]), self.t0_ns)}, after windows before it used "
+            f"them: replay with --time log, so the whole topic takes its log times")
 
     def report(self) -> None:
         """Give the warnings of the read, each once (gaps over the whole stream)."""
