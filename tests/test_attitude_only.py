@@ -3,7 +3,6 @@ it (``Filter.navigation``) and is scored, shown and exported like any other: att
 attitude RMS and NEES; no position or velocity anywhere."""
 
 import json
-import textwrap
 
 import numpy as np
 import pytest
@@ -110,10 +109,8 @@ def drive(tmp_path_factory):
 
 
 @pytest.fixture()
-def plugins(tmp_path, monkeypatch):
-    (tmp_path / "ahrs_plugins.py").write_text(textwrap.dedent(PLUGINS))
-    monkeypatch.syspath_prepend(str(tmp_path))
-    return "ahrs_plugins"
+def plugins(plugin_module):
+    return plugin_module("ahrs_plugins", PLUGINS)
 
 
 def test_a_plug_in_ahrs_is_scored_and_shown_for_its_attitude_only(plugins, drive, tmp_path):

@@ -165,7 +165,7 @@ class Silent(GpsInsFilter):
 '''
 
 
-def test_cli_exports_a_plug_in_without_declarations(run, tmp_path, monkeypatch) -> None:
+def test_cli_exports_a_plug_in_without_declarations(run, tmp_path, plugin_module) -> None:
     """``navreplay run --filter module:Class --export``, streamed: the plug-in's innovations
     with numbered rows, the same updates as the declared filter's."""
     from click.testing import CliRunner
@@ -173,8 +173,7 @@ def test_cli_exports_a_plug_in_without_declarations(run, tmp_path, monkeypatch) 
     from navreplay.cli import cli
 
     d, _, result = run
-    (tmp_path / "silent_plugin.py").write_text(PLUGIN)
-    monkeypatch.syspath_prepend(str(tmp_path))
+    plugin_module("silent_plugin", PLUGIN)
     out = tmp_path / "exp"
     res = CliRunner().invoke(cli, ["run", "gps-ins", "--filter", "silent_plugin:Silent",
                                    str(d / "drive.mcap"), "--no-viz", "--export", str(out)])

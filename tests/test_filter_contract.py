@@ -2,7 +2,6 @@
 the engine validates every filter's output (built-in or plug-in) with one-line errors."""
 
 import json
-import textwrap
 
 import pytest
 from click.testing import CliRunner
@@ -71,21 +70,14 @@ class RejectsItsStart(GpsInsFilter):
 '''
 
 
-@pytest.fixture(scope="module")
-def drive(tmp_path_factory):
-    from navreplay.io import write_recording
-    from navreplay.sim.scenario import simulate
-
-    path = tmp_path_factory.mktemp("rec") / "drive.mcap"
-    write_recording(path, simulate("vehicle-drive", {"duration": 40.0}, seed=4))
-    return path
+@pytest.fixture()
+def drive(drive_40s):
+    return drive_40s
 
 
 @pytest.fixture()
-def plugins(tmp_path, monkeypatch):
-    (tmp_path / "contract_plugins.py").write_text(textwrap.dedent(PLUGINS))
-    monkeypatch.syspath_prepend(str(tmp_path))
-    return "contract_plugins"
+def plugins(plugin_module):
+    return plugin_module("contract_plugins", PLUGINS)
 
 
 def test_a_copy_of_gps_ins_is_scored_like_the_built_in(plugins, drive, tmp_path):

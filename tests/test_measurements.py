@@ -3,7 +3,6 @@ refuses an innovation that breaks its declaration with one line, the Rerun view 
 declared units and row names, and a filter that declares nothing falls back to the naming guess.
 """
 
-import textwrap
 
 import numpy as np
 import pytest
@@ -69,21 +68,14 @@ class Silent(GpsInsFilter):
 '''
 
 
-@pytest.fixture(scope="module")
-def drive(tmp_path_factory):
-    from navreplay.io import write_recording
-    from navreplay.sim.scenario import simulate
-
-    path = tmp_path_factory.mktemp("rec") / "drive.mcap"
-    write_recording(path, simulate("vehicle-drive", {"duration": 40.0}, seed=4))
-    return path
+@pytest.fixture()
+def drive(drive_40s):
+    return drive_40s
 
 
 @pytest.fixture()
-def plugins(tmp_path, monkeypatch):
-    (tmp_path / "measurement_plugins.py").write_text(textwrap.dedent(PLUGINS))
-    monkeypatch.syspath_prepend(str(tmp_path))
-    return "measurement_plugins"
+def plugins(plugin_module):
+    return plugin_module("measurement_plugins", PLUGINS)
 
 
 def test_declaration_checks():
@@ -218,16 +210,14 @@ def test_built_in_declarations_match_what_they_emit(recordings, name, rec, param
         assert s.t.size > 0 and s.nu.shape[1] == m.dim
 
 
-def test_a_declaration_refused_at_class_definition_stops_with_one_line(drive, tmp_path,
-                                                                        monkeypatch):
-    (tmp_path / "repeated_rows.py").write_text(textwrap.dedent("""
+def test_a_declaration_refused_at_class_definition_stops_with_one_line(drive, plugin_module):
+    plugin_module("repeated_rows", """
         from navreplay.filters.base import MeasurementKind
         from navreplay.filters.gps_ins import GpsInsFilter
 
         class Repeated(GpsInsFilter):
             measurements = (MeasurementKind("gps_pos", ("N", "E", "N"), "m"),)
-    """))
-    monkeypatch.syspath_prepend(str(tmp_path))
+    """)
     res = CliRunner().invoke(cli, ["run", "--filter", "repeated_rows:Repeated", str(drive),
                                    "--no-viz"])
     assert res.exit_code == 1
