@@ -11,6 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
+from test_robustness import uncompressed_copy
 
 from navreplay.io import RecordingError, RecordingWarning, read_recording, write_recording
 from navreplay.io import writer as writer_module
@@ -176,28 +177,6 @@ def test_truncation_anywhere_gives_a_prefix_or_a_recording_error(
         assert read == sum(len(s) for s in rec.streams.values())
 
 
-def _rewritten(src: Path, dst: Path, data_crc: bool) -> None:
-    """``src`` rewritten in uncompressed chunks with chunk CRCs, with or without the
-    data-section CRC."""
-    from mcap.writer import CompressionType, Writer
-
-    with src.open("rb") as f, dst.open("wb") as out:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        w = Writer(out, compression=CompressionType.NONE, enable_crcs=True,
-                   enable_data_crcs=data_crc, chunk_size=SMALL_CHUNK)
-        w.start(profile=reader.get_header().profile, library="test")
-        for m in reader.iter_metadata():
-            w.add_metadata(m.name, m.metadata)
-        ids = {sid: w.register_schema(s.name, s.encoding, s.data)
-               for sid, s in summary.schemas.items()}
-        cids = {cid: w.register_channel(c.topic, c.message_encoding, ids[c.schema_id])
-                for cid, c in summary.channels.items()}
-        for _, channel, msg in reader.iter_messages(log_time_order=False):
-            w.add_message(cids[channel.id], msg.log_time, msg.data, msg.publish_time)
-        w.finish()
-
-
 @pytest.mark.parametrize("data_crc", [True, False])
 def test_flipped_payload_byte_is_caught_by_one_crc_or_the_other(
     original: tuple[Recording, Path], tmp_path: Path, data_crc: bool
@@ -206,7 +185,7 @@ def test_flipped_payload_byte_is_caught_by_one_crc_or_the_other(
     payload byte in an uncompressed chunk is reported by whichever CRC the file stores."""
     rec, path = original
     good = tmp_path / "plain.mcap"
-    _rewritten(path, good, data_crc)
+    uncompressed_copy(path, good, SMALL_CHUNK, crcs=True, data_crc=data_crc)
     assert assert_prefix(read_recording(good), rec) == sum(len(s) for s in rec.streams.values())
     data = bytearray(good.read_bytes())
     data[_chunk_offsets(good)[3] + 400] ^= 0x04

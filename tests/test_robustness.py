@@ -61,13 +61,15 @@ def cut_imu(rec: Recording, t_from: float, length: float) -> Recording:
     return Recording(streams, rec.metadata, rec.t0_ns)
 
 
-def uncompressed_copy(src: Path, dst: Path, chunk_size: int = 1 << 15) -> None:
-    """The recording rewritten uncompressed and without CRCs, metadata first."""
+def uncompressed_copy(src: Path, dst: Path, chunk_size: int = 1 << 15, *, crcs: bool = False,
+                      data_crc: bool = False) -> None:
+    """The recording rewritten uncompressed, metadata first; without CRCs unless ``crcs``
+    (chunk CRCs) and ``data_crc`` (the data-section CRC) ask for them."""
     with src.open("rb") as f, dst.open("wb") as out:
         reader = make_reader(f)
         summary = reader.get_summary()
-        w = Writer(out, compression=CompressionType.NONE, enable_crcs=False,
-                   enable_data_crcs=False, chunk_size=chunk_size)
+        w = Writer(out, compression=CompressionType.NONE, enable_crcs=crcs,
+                   enable_data_crcs=data_crc, chunk_size=chunk_size)
         w.start(profile=reader.get_header().profile, library="test")
         for m in reader.iter_metadata():
             w.add_metadata(m.name, m.metadata)
