@@ -193,6 +193,7 @@ from navreplay.filters.registry import register_filter
 from navreplay.geo.earth import gravity as normal_gravity
 from navreplay.geo.rotations import (
     dcm_to_quat,
+    quat_conj,
     quat_mult,
     quat_normalize,
     quat_to_dcm,
@@ -1031,7 +1032,7 @@ class VectorMatchingFilter(Filter):
         if qd is not None and p.turn_model is TurnModel.CONSTANT_RATE:
             # the rotation of this step and its error d = e(k) - R e(k-1); kept for the next
             # step when significant at the manoeuvre test's false alarm
-            turn = quat_mult(self.q_nb, q_prev * np.array([1.0, -1.0, -1.0, -1.0]))
+            turn = quat_mult(self.q_nb, quat_conj(q_prev))
             turn *= np.sign(turn[0])
             A = np.eye(N_CONSISTENT)
             A[CLONE, QE] = np.eye(3)

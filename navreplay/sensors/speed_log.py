@@ -29,7 +29,7 @@ import dataclasses
 
 import numpy as np
 
-from navreplay.geo.rotations import quat_rotate, rotvec_to_dcm
+from navreplay.geo.rotations import quat_conj, quat_rotate, rotvec_to_dcm
 from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors._common import RealisedErrors
 from navreplay.units import DEG
@@ -163,6 +163,6 @@ def water_speed_along_axis(
     ndarray, shape (M,)
         u [m/s].
     """
-    q_bn = np.asarray(q_nb, dtype=float) * np.array([1.0, -1.0, -1.0, -1.0])
+    q_bn = quat_conj(np.asarray(q_nb, dtype=float))
     v_w_b = quat_rotate(q_bn, np.asarray(v_n, dtype=float) - np.asarray(v_c_n, dtype=float))
     return v_w_b @ rpm_axis_b(misalignment)
