@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from navreplay.filters.base import MeasurementKind, Nav, NavError, State
+from navreplay.filters.base import NAV_PARTS, MeasurementKind, Nav, NavError, State
 from navreplay.geo import earth
 from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, quat_to_euler, skew
 from navreplay.outputs import Output, atomic_path, check_outputs
@@ -447,8 +447,6 @@ class Column:
 
 
 _RAD_TO_DEG = 180.0 / math.pi
-_NAV_ROW_PART = ("pos", "v_n", "q_nb")
-"""The part of the solution of each block of three :data:`NAV_ROWS`."""
 
 
 def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
@@ -475,7 +473,7 @@ def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
         sig = np.sqrt(np.clip(np.diagonal(out.nav_cov, axis1=1, axis2=2), 0.0, None))
         units = ("m",) * 3 + ("m/s",) * 3 + ("deg",) * 3
         for i, (name, unit) in enumerate(zip(NAV_ROWS, units, strict=True)):
-            if not out.has(_NAV_ROW_PART[i // 3]):
+            if not out.has(NAV_PARTS[i // 3]):  # blocks of three rows per part
                 continue
             scale = _RAD_TO_DEG if unit == "deg" else 1.0
             cols.append(Column(f"sigma_{name}", unit, f"predicted 1-sigma of the {name} error",
