@@ -77,7 +77,7 @@ def _child(mode: str, path: str) -> None:
     import importlib
     from pathlib import Path as _Path
 
-    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.replay.spec import FilterSpec
     from navreplay.viz.options import VizMode, VizOptions
 
     run = importlib.import_module("navreplay.jobs.run")

@@ -25,13 +25,13 @@ EXPECTED_ERRORS: tuple[type[BaseException], ...] = ()
 def _expected_errors() -> tuple[type[BaseException], ...]:
     global EXPECTED_ERRORS
     if not EXPECTED_ERRORS:
+        from navreplay.campaign.ensemble import RunFailedError
         from navreplay.filters.kalman import FilterDivergedError
         from navreplay.filters.registry import FilterLoadError
         from navreplay.io import RecordingError
         from navreplay.outputs import OutputError
         from navreplay.params import ParamError
         from navreplay.replay.engine import ReplayError
-        from navreplay.replay.ensemble import RunFailedError
         from navreplay.viz import VizUnavailableError
 
         EXPECTED_ERRORS = (
@@ -220,7 +220,7 @@ _max_imu_gap = click.option(
 
 
 def _check_executor(ctx: click.Context, param: click.Parameter, value: str) -> str:
-    from navreplay.replay.dask_executor import is_address
+    from navreplay.campaign.dask_executor import is_address
 
     if value in ("process", "dask") or is_address(value):
         return value

@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 from rosbag_maker import LAT, LON, H, truth_table, write_bag
 
+from navreplay.campaign.tasks import replay_filters
 from navreplay.cli import cli
 from navreplay.geo import earth
 from navreplay.geo.rotations import quat_to_euler, wrap_angle
@@ -19,7 +20,6 @@ from navreplay.jobs import filter_specs
 from navreplay.logs.initial import initial_nav
 from navreplay.logs.options import InitMethod, log_options
 from navreplay.logs.prepare import open_log
-from navreplay.replay.ensemble import replay_filters
 from navreplay.streams import StreamKind
 
 

@@ -23,8 +23,8 @@ from navreplay.io.writer import write_recording
 from navreplay.logs.options import LogOptions
 from navreplay.replay import replay
 from navreplay.replay.engine import ReplayError, ReplaySession
-from navreplay.replay.ensemble import FilterSpec
 from navreplay.replay.result import RunResult
+from navreplay.replay.spec import FilterSpec
 from navreplay.replay.streaming import concat_results
 from navreplay.sim.scenario import simulate
 from navreplay.streams import Recording, Stream, StreamKind

@@ -20,7 +20,7 @@ from rosbags.highlevel import AnyReader
 from navreplay.envelope import Envelope
 from navreplay.io import windows
 from navreplay.io.writer import write_recording
-from navreplay.replay.ensemble import FilterSpec
+from navreplay.replay.spec import FilterSpec
 from navreplay.sim.scenario import simulate
 from navreplay.viz.options import VizMode, VizOptions
 

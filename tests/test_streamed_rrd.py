@@ -10,7 +10,7 @@ import pytest
 
 from navreplay.io import windows
 from navreplay.io.writer import write_recording
-from navreplay.replay.ensemble import FilterSpec
+from navreplay.replay.spec import FilterSpec
 from navreplay.sim.scenario import simulate
 from navreplay.viz.options import VizMode, VizOptions
 from tests.test_viz import read_rrd

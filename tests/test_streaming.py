@@ -84,7 +84,7 @@ def test_run_on_a_file_streams_and_scores_as_the_whole_run(
 
     from navreplay.io import windows
     from navreplay.io.writer import write_recording
-    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.replay.spec import FilterSpec
     from navreplay.viz.options import VizMode, VizOptions
 
     run = importlib.import_module("navreplay.jobs.run")
@@ -116,7 +116,7 @@ def test_paced_replay_reads_the_whole_file(drive: Recording, tmp_path) -> None:
     import importlib
 
     from navreplay.io.writer import write_recording
-    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.replay.spec import FilterSpec
     from navreplay.viz.options import VizMode, VizOptions
 
     run = importlib.import_module("navreplay.jobs.run")

@@ -10,7 +10,7 @@ from typing import Any
 from navreplay import params as _params
 from navreplay.filters.registry import load_filter
 from navreplay.replay.engine import build_params
-from navreplay.replay.ensemble import FilterSpec
+from navreplay.replay.spec import FilterSpec
 
 
 def split_filter_list(text: str) -> list[str]:

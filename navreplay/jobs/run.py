@@ -13,18 +13,13 @@ import numpy as np
 
 from navreplay import params as _params
 from navreplay import tables
+from navreplay.campaign.ensemble import run_ensemble
+from navreplay.campaign.tasks import RunOutput, RunTask, default_extract, file_tasks
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
 from navreplay.replay.engine import Progress, check_streams, replay
-from navreplay.replay.ensemble import (
-    FilterSpec,
-    RunOutput,
-    RunTask,
-    default_extract,
-    file_tasks,
-    run_ensemble,
-)
 from navreplay.replay.result import RunResult
+from navreplay.replay.spec import FilterSpec
 from navreplay.streams import Recording, StreamKind
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
 
@@ -79,7 +74,7 @@ class RunJob:
         Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
     executor : str
         Where several recordings run: ``process``, ``dask`` or ``dask://HOST:PORT``
-        (:func:`navreplay.replay.ensemble.make_executor`).
+        (:func:`navreplay.campaign.executors.make_executor`).
     """
 
     filters: tuple[FilterSpec, ...]

@@ -1,6 +1,6 @@
-"""Replaying filters over recordings: the event loop (:mod:`~navreplay.replay.engine`), many
-runs in parallel (:mod:`~navreplay.replay.ensemble`) and the columnar result
-(:mod:`~navreplay.replay.result`).
+"""Replaying filters over recordings: the event loop (:mod:`~navreplay.replay.engine`), what
+to replay (:mod:`~navreplay.replay.spec`) and the columnar result
+(:mod:`~navreplay.replay.result`). Campaigns of many runs are :mod:`navreplay.campaign`.
 """
 
 from navreplay.replay.engine import (
@@ -16,46 +16,22 @@ from navreplay.replay.engine import (
     replay,
     validate_recording,
 )
-from navreplay.replay.ensemble import (
-    EnsembleRun,
-    Executor,
-    FilterSpec,
-    InlineExecutor,
-    RunFailedError,
-    RunOutput,
-    RunTask,
-    file_tasks,
-    make_executor,
-    monte_carlo_tasks,
-    replay_filters,
-    run_ensemble,
-)
 from navreplay.replay.result import InnovationSeries, RunResult
+from navreplay.replay.spec import FilterSpec
 
 __all__ = [
     "STREAM_PRIORITY",
-    "EnsembleRun",
-    "Executor",
     "FilterFailedError",
     "FilterInitError",
     "FilterOutputError",
     "FilterSpec",
-    "InlineExecutor",
     "InnovationSeries",
     "InvalidRecordingError",
     "MissingStreamError",
     "ReplayError",
-    "RunFailedError",
-    "RunOutput",
     "RunResult",
-    "RunTask",
     "check_streams",
-    "file_tasks",
-    "make_executor",
-    "monte_carlo_tasks",
     "plan_events",
     "replay",
-    "replay_filters",
-    "run_ensemble",
     "validate_recording",
 ]

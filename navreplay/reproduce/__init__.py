@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from navreplay.replay.engine import Progress
 
 if TYPE_CHECKING:
-    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.replay.spec import FilterSpec
 
 __all__ = ["Check", "Progress", "Report", "Reproduction", "available", "get", "save_view",
            "slashed", "warm_up"]
