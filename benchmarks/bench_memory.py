@@ -54,7 +54,7 @@ def paused_recording(hours: float, pause: float, directory: Path) -> Path:
     :data:`PAUSE_START` (made when missing)."""
     import dataclasses
 
-    from navreplay.io.reader import read_recording
+    from navreplay.io import read_recording
     from navreplay.io.writer import write_recording
     from navreplay.streams import Recording, StreamKind
 

@@ -125,12 +125,13 @@ def _read_streamed(path: Path) -> int:
     """Decode a file the way a streamed run of gps-ins does (one pass, every stream the run
     needs in windows); the number of IMU rows."""
     from navreplay.filters.registry import load_filter
-    from navreplay.io.windows import read_windows
+    from navreplay.io import open_recording
     from navreplay.jobs.run import decoded_kinds
     from navreplay.logs.options import LogOptions
 
     kinds = decoded_kinds([load_filter("gps-ins")], LogOptions())
-    return sum(len(w["imu"]) for w in read_windows(path, kinds) if "imu" in w)
+    with open_recording(path, kinds=kinds) as source:
+        return sum(len(w["imu"]) for w in source if "imu" in w)
 
 
 def _throughput(path: Path) -> tuple[Any, Any, float]:

@@ -349,13 +349,13 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str], time: str
     Exits with status 1 after the report when the file is DAMAGED or holds no message.
     """
     from navreplay.io import recording_info
-    from navreplay.io.reader import is_rosbag
+    from navreplay.io.files import file_kind
     from navreplay.logs.describe import describe_log
     from navreplay.logs.options import log_options
 
     click.echo(describe_log(recording, log_options(
         topics, frames, config=_load_config(config, "topics", "frames"), time=time)))
-    report = None if is_rosbag(Path(recording)) else recording_info(recording)
+    report = None if file_kind(recording).name == "rosbag2" else recording_info(recording)
     if report is not None and report.damage:
         raise click.ClickException(f"{recording}: DAMAGED ({report.message_count} messages "
                                    "readable; see above)")

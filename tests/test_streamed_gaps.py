@@ -16,9 +16,10 @@ import pytest
 from test_streaming import assert_same_results as _assert_same
 
 from navreplay.filters.gps_ins import GpsInsFilter
-from navreplay.io import read_recording, windows
+from navreplay.io import mcapread, open_recording, read_recording
 from navreplay.io import writer as writer_module
 from navreplay.io.errors import RecordingError, RecordingWarning
+from navreplay.io.source import COMPLETE
 from navreplay.io.writer import write_recording
 from navreplay.logs.options import LogOptions
 from navreplay.replay import replay
@@ -36,7 +37,7 @@ CHUNK = 1 << 17  # about 2 s of the drive per chunk: many windows in a short fil
 
 @pytest.fixture(autouse=True)
 def _small_windows(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(windows, "WINDOW_MESSAGES", 150)  # a window per chunk
+    monkeypatch.setattr(mcapread, "WINDOW_MESSAGES", 150)  # a window per chunk
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +61,7 @@ def _without(stream: Stream, t0_ns: int, lo: float, hi: float) -> Stream:
 
 
 def _imu_window_ends(path: Path) -> list[int]:
-    return [int(w[StreamKind.IMU].t_ns[-1]) for w in windows.read_windows(path, {StreamKind.IMU})
+    return [int(w[StreamKind.IMU].t_ns[-1]) for w in open_recording(path, kinds={StreamKind.IMU})
             if StreamKind.IMU in w]
 
 
@@ -79,7 +80,7 @@ def _caught(fn, *args) -> tuple[object, list[str]]:
 def _streamed(path: Path, held: list[int] | None = None, **kw) -> RunResult:
     """What ``navreplay run`` does with one filter, the blocks kept: windows of the file fed to
     a session (its aiding streams window by window, known as far as the reader says)."""
-    ws = windows.read_windows(path, set(StreamKind))
+    ws = open_recording(path, kinds=set(StreamKind))
     window = next(ws)
     head = Recording({k: s.slice(0, 0) for k, s in window.items()}, window.metadata,
                      window.t0_ns)
@@ -88,7 +89,7 @@ def _streamed(path: Path, held: list[int] | None = None, **kw) -> RunResult:
     while True:
         following = next(ws, None)
         final = following is None
-        known = {k: (windows.COMPLETE if final else t) for k, t in window.known.items()}
+        known = {k: (COMPLETE if final else t) for k, t in window.known.items()}
         blocks.append(session.feed(window.get(StreamKind.IMU), final=final, aiding=aiding,
                                    known=known))
         if held is not None:
@@ -143,7 +144,7 @@ def test_a_warning_is_given_once_per_run_with_the_windows_it_concerns(drive, tmp
     zero = [m for m in messages if "header stamps are zero" in m]
     assert len(zero) == 1, messages
     n = len(_imu_window_ends(path))
-    total = len(list(windows.read_windows(path, set(StreamKind))))
+    total = len(list(open_recording(path, kinds=set(StreamKind))))
     assert str(path) in zero[0] and "topic /imu" in zero[0]
     assert f"the same in {n} of the {total} windows of the read" in zero[0]
     # the first window's count, as the whole reader says it for the whole stream
@@ -162,8 +163,8 @@ def test_the_time_base_a_topic_starts_with_holds_for_all_its_windows(drive, tmp_
     path = tmp_path / "late.mcap"
     _zero_imu_stamps(plain, path, at=-(t0 + 5_000_000_000), latency=3_000_000)
     whole, _ = _caught(read_recording, path)
-    parts, _ = _caught(lambda: [w[StreamKind.IMU].t_ns for w in windows.read_windows(
-        path, {StreamKind.IMU}) if StreamKind.IMU in w])
+    parts, _ = _caught(lambda: [w[StreamKind.IMU].t_ns for w in open_recording(
+        path, kinds={StreamKind.IMU}) if StreamKind.IMU in w])
     assert len(parts) >= 10
     np.testing.assert_array_equal(np.concatenate(parts), whole[StreamKind.IMU].t_ns)
     np.testing.assert_array_equal(whole[StreamKind.IMU].t_ns, drive[StreamKind.IMU].t_ns + 3_000_000)
@@ -194,7 +195,7 @@ def boundary(drive, tmp_path_factory) -> tuple[Path, int]:
     """The drive's file, and the last IMU sample of a window in its middle."""
     path = _write(drive, tmp_path_factory.mktemp("gaps") / "plain.mcap")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(windows, "WINDOW_MESSAGES", 150)
+        mp.setattr(mcapread, "WINDOW_MESSAGES", 150)
         ends = _imu_window_ends(path)
     assert len(ends) >= 10
     return path, ends[len(ends) // 2]
@@ -276,7 +277,7 @@ def test_the_reader_knows_a_paused_stream_up_to_its_next_sample(paused) -> None:
     rec, path = paused
     gps = rec[StreamKind.GPS].t_ns
     resume = int(gps[np.searchsorted(gps, rec.t0_ns + 50 * 10**9)])
-    during = [w for w in windows.read_windows(path, {StreamKind.IMU, StreamKind.GPS})
+    during = [w for w in open_recording(path, kinds={StreamKind.IMU, StreamKind.GPS})
               if StreamKind.IMU in w and StreamKind.GPS not in w]
     assert len(during) >= 10  # windows of the pause
     for w in during:

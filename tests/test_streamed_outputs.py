@@ -18,8 +18,9 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from navreplay.envelope import Envelope
-from navreplay.io import windows
+from navreplay.io import mcapread
 from navreplay.io.writer import write_recording
+from navreplay.logs import prepare
 from navreplay.replay.spec import FilterSpec
 from navreplay.sim.scenario import simulate
 from navreplay.viz.options import VizMode, VizOptions
@@ -45,16 +46,14 @@ def both(drive, tmp_path_factory):
     """The same run streamed (small windows) and replayed whole."""
     d = tmp_path_factory.mktemp("runs")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(windows, "WINDOW_MESSAGES", 1500)
+        mp.setattr(mcapread, "WINDOW_MESSAGES", 1500)
         read = []
-        real = windows.read_windows
+        real = prepare.open_recording
 
         def counted(*a, **kw):
-            for w in real(*a, **kw):
-                read.append(w)
-                yield w
+            return _counted(real(*a, **kw), read.append)
 
-        mp.setattr(windows, "read_windows", counted)
+        mp.setattr(prepare, "open_recording", counted)
         from navreplay import figures
 
         shown = []
@@ -156,7 +155,7 @@ def test_an_interrupted_export_publishes_nothing(drive, tmp_path, monkeypatch) -
             raise KeyboardInterrupt
         return real(self, block)
 
-    monkeypatch.setattr(windows, "WINDOW_MESSAGES", 1500)
+    monkeypatch.setattr(mcapread, "WINDOW_MESSAGES", 1500)
     monkeypatch.setattr(streaming.RunningSummary, "add", failing)
     job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(drive,),
                      viz=VizOptions(mode=VizMode.NONE), export_dir=out, force=True)
@@ -186,7 +185,7 @@ def test_live_view_is_logged_block_by_block(drive, tmp_path, monkeypatch) -> Non
         rec.save(live)
         return Sink(rec, Connect("rerun+http://127.0.0.1:1/proxy"), url="test viewer")
 
-    monkeypatch.setattr(windows, "WINDOW_MESSAGES", 1500)
+    monkeypatch.setattr(mcapread, "WINDOW_MESSAGES", 1500)
     spec = (FilterSpec("gps-ins", {}),)
     saved = run._run_streamed(run.RunJob(filters=spec, recordings=(drive,), viz=VizOptions(
         mode=VizMode.SAVE, path=tmp_path / "saved.rrd")), None)
@@ -244,3 +243,16 @@ def test_envelope_of_a_short_series_is_the_series() -> None:
     got_t, got_v = e.points()
     np.testing.assert_array_equal(got_t, t)
     np.testing.assert_array_equal(got_v, v)
+
+
+def _counted(source, seen):
+    """The source, each window it hands out passed to ``seen`` first."""
+    windows = source._windows
+
+    def counting():
+        for w in windows():
+            seen(w)
+            yield w
+
+    source._windows = counting
+    return source

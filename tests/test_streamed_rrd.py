@@ -8,7 +8,7 @@ import importlib
 import numpy as np
 import pytest
 
-from navreplay.io import windows
+from navreplay.io import mcapread
 from navreplay.io.writer import write_recording
 from navreplay.replay.spec import FilterSpec
 from navreplay.sim.scenario import simulate
@@ -34,7 +34,7 @@ def test_streamed_rrd_holds_the_whole_run(tmp_path, monkeypatch: pytest.MonkeyPa
     rec = simulate("vehicle-drive", {"duration": 90.0}, seed=3)
     path = tmp_path / "drive.mcap"
     write_recording(path, rec)
-    monkeypatch.setattr(windows, "WINDOW_MESSAGES", 1500)
+    monkeypatch.setattr(mcapread, "WINDOW_MESSAGES", 1500)
 
     def job(rrd):
         return run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(path,),

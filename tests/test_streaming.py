@@ -82,8 +82,9 @@ def test_run_on_a_file_streams_and_scores_as_the_whole_run(
 ) -> None:
     import importlib
 
-    from navreplay.io import windows
+    from navreplay.io import mcapread
     from navreplay.io.writer import write_recording
+    from navreplay.logs import prepare
     from navreplay.replay.spec import FilterSpec
     from navreplay.viz.options import VizMode, VizOptions
 
@@ -93,15 +94,14 @@ def test_run_on_a_file_streams_and_scores_as_the_whole_run(
     job = run.RunJob(filters=(FilterSpec("gps-ins", {}),), recordings=(path,),
                      viz=VizOptions(mode=VizMode.NONE))
     read = []
-    real = windows.read_windows
+    real = prepare.open_recording
 
     def counted(*a, **kw):
-        for w in real(*a, **kw):
-            read.append(len(w[StreamKind.IMU]) if StreamKind.IMU in w else 0)
-            yield w
+        return _counted(real(*a, **kw),
+                        lambda w: read.append(len(w[StreamKind.IMU]) if StreamKind.IMU in w else 0))
 
-    monkeypatch.setattr(windows, "WINDOW_MESSAGES", 700)
-    monkeypatch.setattr(windows, "read_windows", counted)
+    monkeypatch.setattr(mcapread, "WINDOW_MESSAGES", 700)
+    monkeypatch.setattr(prepare, "open_recording", counted)
     streamed = run._run_streamed(job, None)
     assert streamed is not None and len(read) >= 3 and max(read) < 2500  # chunk by chunk
     whole = run._run_one(job, None).summary["filters"]["gps-ins"]
@@ -141,7 +141,7 @@ def _head(rec: Recording) -> Recording:
 def _time_windows(rec: Recording, cls: type, ends_ns: list[int], **kw) -> RunResult:
     """Every stream fed in the windows (previous end, end] of time, each aiding kind known up
     to its last sample so far (complete once all of it is fed), as read_windows hands them."""
-    from navreplay.io.windows import COMPLETE
+    from navreplay.io.source import COMPLETE
 
     session = ReplaySession(_head(rec), cls, {}, **kw)
     blocks, lo = [], None
@@ -205,3 +205,16 @@ def test_an_aiding_stream_that_starts_late(drive: Recording) -> None:
     got = _time_windows(rec, GpsInsFilter, _ends(rec, [3.0, 7.5, 24.999, 25.0, 40.0, 55.5]),
                         output_rate=10.0)
     assert_same_results(got, whole)
+
+
+def _counted(source, seen):
+    """The source, each window it hands out passed to ``seen`` first."""
+    windows = source._windows
+
+    def counting():
+        for w in windows():
+            seen(w)
+            yield w
+
+    source._windows = counting
+    return source

@@ -134,7 +134,7 @@ class RunOutput:
     salvaged : bool
         The recording was salvaged from a damaged file.
     coverage : float or None
-        Fraction of the recording replayed (:func:`navreplay.io.integrity.coverage`).
+        Fraction of the recording replayed (:meth:`navreplay.io.source.Source.coverage`).
     """
 
     index: int
@@ -151,13 +151,15 @@ def load_task(task: RunTask) -> Recording:
     return _load_task(task)[0]
 
 
-def _load_task(task: RunTask) -> tuple[Recording, bool]:
-    """The task's recording and whether it was salvaged from a damaged file."""
+def _load_task(task: RunTask) -> tuple[Recording, bool, float | None]:
+    """The task's recording, whether it was salvaged from a damaged file and the fraction of
+    it that was (1 for a whole recording)."""
     if task.path is not None:
         from navreplay.logs.prepare import open_log
 
-        prepared = open_log(task.path, task.log)
-        return prepared.recording, prepared.salvaged
+        with open_log(task.path, task.log, whole=True) as source:
+            recording = next(source).recording()
+        return recording, source.salvaged, source.coverage()
     if task.scenario is None:
         raise ValueError(f"run {task.index}: neither a recording path nor a scenario")
     from navreplay.sim.scenario import simulate
@@ -168,7 +170,7 @@ def _load_task(task: RunTask) -> tuple[Recording, bool]:
 
         Path(task.keep).parent.mkdir(parents=True, exist_ok=True)
         write_recording(task.keep, recording, force=task.force)
-    return recording, False
+    return recording, False, 1.0
 
 
 def replay_filters(
@@ -206,9 +208,7 @@ def run_task(
 ) -> RunOutput:
     """Load or simulate one recording, replay the filters, extract the metrics."""
     t0 = time.perf_counter()
-    from navreplay.io.integrity import coverage
-
-    recording, salvaged = _load_task(task)
+    recording, salvaged, covered = _load_task(task)
     results = replay_filters(
         recording, filters, source=task.source, output_rate=output_rate,
         validate=task.path is None,  # files are validated by the reader
@@ -216,7 +216,7 @@ def run_task(
     )
     metrics = extract(recording, results, task)
     return RunOutput(task.index, task.source, task.seed, metrics, time.perf_counter() - t0,
-                     salvaged, coverage(recording, salvaged))
+                     salvaged, covered)
 
 
 def default_extract(

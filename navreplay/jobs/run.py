@@ -98,13 +98,9 @@ def outputs_of(job: Any) -> Outputs:
 
 
 def _check_files(paths: Sequence[Path]) -> None:
-    from navreplay.io.reader import is_rosbag
-
     for p in paths:
-        if not (Path(p).is_file() or (Path(p).is_dir() and is_rosbag(Path(p)))):
-            what = ("is a directory, not a recording or rosbag2 folder" if Path(p).is_dir()
-                    else "no such recording")
-            raise FileNotFoundError(f"{p}: {what}")
+        if not Path(p).exists():
+            raise FileNotFoundError(f"{p}: no such recording")
 
 
 def run(job: RunJob, progress: Progress | None = None) -> RunReport:
@@ -141,34 +137,25 @@ def _with_needs(job: RunJob) -> RunJob:
 
 
 def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
-    """Replay one intact MCAP file window by window (memory flat in its length): the .rrd or
+    """Replay one recording window by window (memory flat in its length): the .rrd or
     the live view logged, the exports written and the report's series kept block by block;
-    None when the run needs the whole recording (a reference, paced replay, a rosbag2 folder
-    or a damaged file): :func:`_run_one` then reads it whole."""
+    None for a paced replay: :func:`_run_one` then reads it whole."""
     from navreplay.filters.base import TruthColumn
-    from navreplay.io.reader import is_rosbag
-    from navreplay.io.windows import COMPLETE, NotStreamable, Window, read_windows, streamable
+    from navreplay.io.source import COMPLETE, Window
     from navreplay.logs.options import LogOptions
-    from navreplay.logs.prepare import make_ready
+    from navreplay.logs.prepare import open_log
     from navreplay.replay.engine import ReplaySession
     from navreplay.replay.streaming import RunningSummary
     from navreplay.streams import FIELDS, Stream
 
     path = Path(job.recordings[0])
     options = job.log or LogOptions()
-    if (job.pacing is not None or options.reference is not None or is_rosbag(path)
-            or not streamable(path)):
+    if job.pacing is not None:
         return None
     classes = [spec.load() for spec in job.filters]
-    sources: dict[StreamKind, Any] = {}
-    windows = read_windows(path, decoded_kinds(classes, options), topics=options.topics,
-                           frames=options.stream_frames, time=options.time, sources=sources)
-    try:
-        window: Window = next(windows)
-    except NotStreamable:
-        return None
+    windows = open_log(path, options, kinds=decoded_kinds(classes, options))
+    window: Window = next(windows)
     metadata = window.metadata
-    metadata.extra.setdefault("source", str(path))
     # every kind the file holds (empty if not decoded or not in the first window): the filters
     # see the streams of the whole recording
     empty = {k: Stream(k, np.zeros(0, np.int64),
@@ -177,7 +164,7 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     merged = {**empty, **window}
     head = Recording({k: merged[k] for k in StreamKind if k in merged}, metadata,
                      window.t0_ns)
-    notes = make_ready(head, sources, options)
+    notes = list(windows.notes)
     has_truth = StreamKind.TRUTH in head
     labels = [spec.label for spec in job.filters]
     outputs = outputs_of(job)
@@ -232,6 +219,8 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             aiding = window
         summaries = {spec.label: score.summary()
                      for spec, score in zip(job.filters, scores, strict=True)}
+        if windows.salvaged:
+            notes.append(salvaged_note(str(path), windows.coverage()))
         notes += outputs.write_run(summaries, title=title)
         hint = close_output(sink, job.viz)
     except BaseException:
@@ -240,7 +229,8 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
         if sink is not None:
             sink.abort()
         raise
-    summary = {"recording": str(path), "coverage": 1.0, "salvaged": False,
+    covered = windows.coverage()
+    summary = {"recording": str(path), "coverage": covered, "salvaged": windows.salvaged,
                "filters": summaries}
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
@@ -268,13 +258,12 @@ def decoded_kinds(classes: Sequence[type], options: Any) -> set[StreamKind]:
 
 def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     from navreplay import metrics
-    from navreplay.io.integrity import coverage
     from navreplay.logs.prepare import open_log
 
     path = Path(job.recordings[0])
     classes = [spec.load() for spec in job.filters]
-    prepared = open_log(path, job.log)
-    recording = prepared.recording
+    with open_log(path, job.log, whole=True) as prepared:
+        recording = next(prepared).recording()
     for cls in classes:
         check_streams(recording, cls, str(path))
     has_truth = StreamKind.TRUTH in recording
@@ -315,7 +304,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
         if sink is not None:
             sink.abort()
         raise
-    covered = coverage(recording, prepared.salvaged)
+    covered = prepared.coverage()
     summary = {"recording": str(path), "coverage": covered, "salvaged": prepared.salvaged,
                "filters": summaries}
     notes = list(prepared.notes)

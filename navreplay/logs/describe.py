@@ -10,8 +10,8 @@ from pathlib import Path
 
 from navreplay.io.checks import gap_report
 from navreplay.io.errors import RecordingError
+from navreplay.io.files import file_kind, read_streams
 from navreplay.io.info import format_info, recording_info
-from navreplay.io.reader import is_rosbag, read_streams
 from navreplay.logs.options import LogOptions
 from navreplay.logs.reference import REFERENCE_TYPES
 from navreplay.streams import seconds
@@ -21,7 +21,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> str:
     """The ``info`` text of a log: the container summary, the topic table, the conventions."""
     options = options or LogOptions()
     path = Path(path)
-    if is_rosbag(path):
+    if file_kind(path).name == "rosbag2":
         from navreplay.io.rosbag import bag_topics
 
         listing = [(t, ty, n, None, None) for t, ty, _, n in bag_topics(path)]

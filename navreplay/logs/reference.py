@@ -47,8 +47,9 @@ from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.reader import is_rosbag, sample_times
+from navreplay.io.files import file_kind
 from navreplay.io.schemas import normalize_type_name
+from navreplay.io.topics import sample_times
 from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -145,7 +146,7 @@ def _xyz(v: Any) -> list[float]:
 def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
                   declared: Convention | None, time: str = "header") -> Reference:
     """A reference from decoded messages (log time, message) of one topic, in log-time order;
-    times as ``--time`` says (:func:`navreplay.io.reader.sample_times`)."""
+    times as ``--time`` says (:func:`navreplay.io.topics.sample_times`)."""
     if not items:
         raise ReferenceError(f"reference {source}: the topic has no messages")
     items = sorted(items, key=lambda item: item[0])
@@ -188,7 +189,7 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
 
 def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
     """Type name and (log time, decoded message) of one topic of a bag or MCAP file."""
-    if is_rosbag(path):
+    if file_kind(path).name == "rosbag2":
         from navreplay.io.rosbag import bag_topics, iter_messages
 
         types = {t: ty for t, ty, _, _ in bag_topics(path)}
