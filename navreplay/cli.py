@@ -31,7 +31,7 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
         from navreplay.io import RecordingError
         from navreplay.outputs import OutputError
         from navreplay.params import ParamError
-        from navreplay.replay.engine import ReplayError
+        from navreplay.replay.errors import ReplayError
         from navreplay.viz import VizUnavailableError
 
         EXPECTED_ERRORS = (

@@ -20,7 +20,6 @@ from collections.abc import Callable, Sequence
 from navreplay import lifecycle
 from navreplay.campaign.executors import Executor, Future, InlineExecutor, make_executor
 from navreplay.campaign.tasks import Extractor, RunOutput, RunTask, default_extract, run_task
-from navreplay.replay.engine import build_params
 from navreplay.replay.spec import FilterSpec
 
 
@@ -103,7 +102,7 @@ def run_ensemble(
     if dupes:
         raise ValueError(f"filter labels must be unique; repeated: {', '.join(dupes)}")
     for spec in filters:  # fail on an unknown filter or bad parameters before any work
-        build_params(spec.load(), spec.params)
+        spec.resolve()
     own = executor is None or isinstance(executor, str)
     ex = make_executor(workers, executor or "process") if own else executor
     parallelism = getattr(ex, "parallelism", workers)

@@ -25,8 +25,10 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from navreplay.replay.engine import check_streams, replay
-from navreplay.replay.result import RunResult
+from navreplay.filters.result import RunResult
+from navreplay.io.source import MemorySource
+from navreplay.replay.checks import validate_recording
+from navreplay.replay.pipeline import Collect, replay_file
 from navreplay.replay.spec import FilterSpec
 from navreplay.streams import Recording
 
@@ -182,22 +184,19 @@ def replay_filters(
     validate: bool = True,
     max_imu_gap: float | None = None,
 ) -> dict[str, RunResult]:
-    """Replay each filter over one recording; results by label.
+    """Replay each filter over one recording in memory (:func:`navreplay.replay.replay_file`
+    over it as one window); results by label.
 
-    Every filter's streams are checked before the first one runs, so a missing stream fails
-    the whole command before any work.
+    Every filter's streams are checked, and every filter built, before the first one runs, so a
+    missing stream fails the whole command before any work.
     """
-    classes = [spec.load() for spec in filters]
-    for cls in classes:
-        check_streams(recording, cls, source)
-    results: dict[str, RunResult] = {}
-    for spec, cls in zip(filters, classes, strict=True):
-        results[spec.label] = replay(
-            recording, cls, spec.params, label=spec.label, source=source,
-            output_rate=output_rate, validate=validate, max_imu_gap=max_imu_gap,
-        )
-        validate = False  # once per recording is enough
-    return results
+    src = MemorySource(recording, source)
+    if validate:
+        validate_recording(recording, src.name)
+    collect = Collect()
+    replay_file(src, filters, stages=[collect], output_rate=output_rate,
+                max_imu_gap=max_imu_gap, score=False)
+    return collect.results()
 
 
 def run_task(

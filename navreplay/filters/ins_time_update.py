@@ -506,13 +506,15 @@ class TimeUpdate:
         self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
         omega_ib_b: np.ndarray, f_b: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
         ends: np.ndarray, gyro_z: np.ndarray | None = None, accel_k: np.ndarray | None = None,
+        out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`propagate` over each segment ``[ends[j-1], ends[j])`` of a block followed by
         :meth:`close`, in one compiled call; the state after each segment is an output.
 
         The same arithmetic as the calls one by one (the gyro compensated first for the
         z-rate error estimates ``gyro_z`` (m_xz, m_yz, s_z) of eq. (22), the accelerometer for
-        the estimates ``accel_k`` (6,) of eq. (23), if given).
+        the estimates ``accel_k`` (6,) of eq. (23), if given). ``out``: arrays ``(t_out,
+        nav_out, P_out)`` of at least ``len(ends)`` rows to write into.
 
         Returns
         -------
@@ -529,7 +531,7 @@ class TimeUpdate:
         as :meth:`propagate` and :meth:`close`.
         """
         return self._run(nav, P, t_nav, t, omega_ib_b, f_b, b_a, b_g, ends, gyro_z, accel_k,
-                         True, DEFAULT_RTOL)
+                         True, DEFAULT_RTOL, out)
 
     def close(self, P: np.ndarray, t: float) -> np.ndarray:
         """P at the time t [s] of the last sample: propagated over the open covariance step,
@@ -548,14 +550,15 @@ class TimeUpdate:
         self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
         omega_ib_b: np.ndarray, f_b: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
         ends: np.ndarray, gyro_z: np.ndarray | None, accel_k: np.ndarray | None, close: bool,
-        rtol: float,
+        rtol: float, out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:func:`_propagate_outputs` with the arrays it takes (one compiled signature for
         every caller); raises the error of a failed segment."""
         m = ends.shape[0]
-        t_out = np.empty(m)
-        nav_out = np.empty((m, 10))
-        P_out = np.empty((m, *self._shape))
+        if out is None:
+            t_out, nav_out, P_out = np.empty(m), np.empty((m, 10)), np.empty((m, *self._shape))
+        else:
+            t_out, nav_out, P_out = (a[:m] for a in out)
         w_last = np.full(3, np.nan)
         k_z = _NO_GYRO_Z if gyro_z is None else _f64(gyro_z)
         k_a = _NO_ACCEL if accel_k is None else _f64(accel_k)

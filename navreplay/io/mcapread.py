@@ -233,7 +233,10 @@ class _Reading:
             else:
                 known[kind] = last
         self.newest = max(self.last.values(), default=self.newest)
-        return Window(out, known, self.metadata, self.t0_ns, self.present, final=final)
+        stats = self.contents.statistics
+        end = int(stats.message_end_time) if self.contents.intact and stats else None
+        return Window(out, known, self.metadata, self.t0_ns, self.present, final=final,
+                      end_ns=end)
 
     def _before_next(self, kind: StreamKind, decoder: ChannelDecoder) -> int:
         """The time just before the stream's next sample, read ahead in the chunk that holds it

@@ -46,17 +46,22 @@ class Window(dict[StreamKind, Stream]):
         Every stream the recording holds (read or not).
     final : bool
         No window follows.
+    end_ns : int or None
+        The recording's last time [ns], when the reader knows it (the file's statistics; the
+        last sample of a recording in one window).
     """
 
     def __init__(self, streams: dict[StreamKind, Stream], known: dict[StreamKind, int],
                  metadata: Metadata, t0_ns: int, present: frozenset[StreamKind],
-                 final: bool = False) -> None:
+                 final: bool = False, end_ns: int | None = None) -> None:
         super().__init__(streams)
         self.known = known
         self.metadata = metadata
         self.t0_ns = t0_ns
         self.present = present
         self.final = final
+        ends = [int(s.t_ns[-1]) for s in streams.values() if len(s)]
+        self.end_ns = end_ns if end_ns is not None or not (final and ends) else max(ends)
 
     def recording(self) -> Recording:
         """The window's streams as a recording (of the whole recording for a final first
@@ -90,6 +95,7 @@ class Source:
         self._t0_ns = 0
         self._last_ns: int | None = None
         self._iterator: Iterator[Window] | None = None
+        self._peeked: Window | None = None
 
     @property
     def salvaged(self) -> bool:
@@ -101,7 +107,19 @@ class Source:
     def __iter__(self) -> Iterator[Window]:
         return self
 
+    def peek(self) -> Window:
+        """The first window, read now (every problem of the recording up to it is raised
+        here); iterating still starts with it."""
+        if self._peeked is None and self._iterator is None:
+            self._peeked = next(self)
+        if self._peeked is None:
+            raise ValueError(f"{self.name}: windows were read already")
+        return self._peeked
+
     def __next__(self) -> Window:
+        if self._peeked is not None:
+            window, self._peeked = self._peeked, None
+            return window
         if self._iterator is None:
             self._iterator = self._windows()
         window = next(self._iterator)

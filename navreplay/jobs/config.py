@@ -9,7 +9,6 @@ from typing import Any
 
 from navreplay import params as _params
 from navreplay.filters.registry import load_filter
-from navreplay.replay.engine import build_params
 from navreplay.replay.spec import FilterSpec
 
 
@@ -133,8 +132,7 @@ def filter_specs(
     specs = []
     for (label, ref, inline, cls), vals in zip(parsed, values, strict=True):
         vals.update(inline)
-        build_params(cls, vals)  # validate now
-        specs.append(FilterSpec(ref, vals, label))
+        specs.append(FilterSpec(ref, vals, label, cls=cls).resolve())  # typed and checked now
     return tuple(specs)
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 from navreplay.jobs.report import DEFAULT_OUT
 from navreplay.jobs.run import RunJob, run
 from navreplay.jobs.simulate import SimulateJob, simulate
-from navreplay.replay.engine import Progress
+from navreplay.replay.session import Progress
 from navreplay.replay.spec import FilterSpec
 from navreplay.viz.options import VizMode, VizOptions, open_viewer
 

@@ -12,7 +12,8 @@ from navreplay.campaign.tasks import monte_carlo_tasks
 from navreplay.jobs.config import check_scenario
 from navreplay.jobs.report import DEFAULT_OUT, RunReport
 from navreplay.jobs.run import campaign, outputs_of
-from navreplay.replay.engine import MissingStreamError, Progress
+from navreplay.replay.errors import MissingStreamError
+from navreplay.replay.session import Progress
 from navreplay.replay.spec import FilterSpec
 from navreplay.viz.options import VizOptions
 
@@ -74,7 +75,7 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
 
     streams = set(get_scenario(job.scenario).streams)
     for spec in job.filters:
-        cls = spec.load()
+        cls = spec.filter_cls
         missing = [str(k) for k in cls.requires if k not in streams]
         if missing:
             raise MissingStreamError(

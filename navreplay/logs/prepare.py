@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from navreplay.filters.base import Filter, consumed_streams
 from navreplay.io.files import open_recording
 from navreplay.io.source import COMPLETE, Source, Window
 from navreplay.io.topics import TopicSource
@@ -90,6 +91,20 @@ def open_log(path: str | Path, options: LogOptions | None = None, *,
                            frames=options.stream_frames, time=options.time,
                            whole=whole or options.reference is not None)
     return LogSource(inner, path, options)
+
+
+def streams_needed(classes: Iterable[type[Filter]], options: LogOptions | None = None
+                   ) -> set[StreamKind]:
+    """The streams a replay of ``classes`` reads: IMU and truth, those the filters consume (all
+    for a filter that declares none) and those the frame checks and the initialisation read."""
+    options = options or LogOptions()
+    kinds = {StreamKind.IMU, StreamKind.TRUTH}
+    for cls in classes:
+        consumed = consumed_streams(cls)
+        kinds |= set(StreamKind) if consumed is None else set(consumed)
+    if options.check_frames or options.init is not None or options.initial:
+        kinds |= {StreamKind.GPS, StreamKind.GPS_VEL, StreamKind.MAG}
+    return kinds
 
 
 def make_ready(recording: Recording, sources: dict[StreamKind, TopicSource],

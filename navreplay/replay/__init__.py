@@ -1,26 +1,34 @@
-"""Replaying filters over recordings: the event loop (:mod:`~navreplay.replay.engine`), what
-to replay (:mod:`~navreplay.replay.spec`) and the columnar result
-(:mod:`~navreplay.replay.result`). Campaigns of many runs are :mod:`navreplay.campaign`.
+"""Replaying filters over recordings.
+
+:func:`replay_file` (:mod:`~navreplay.replay.pipeline`) is the one pipeline: a recording's
+windows through one :class:`ReplaySession` per filter (:mod:`~navreplay.replay.session`, the
+event loop over the plan of :mod:`~navreplay.replay.plan`), the scoring and the output stages,
+block by block; :func:`replay` the same over a recording in memory. What to replay is a
+:class:`FilterSpec` (:mod:`~navreplay.replay.spec`); checks before a replay are in
+:mod:`~navreplay.replay.checks`, the estimates' columns and their checks in
+:mod:`~navreplay.replay.columns`, IMU gaps in :mod:`~navreplay.replay.gaps`, the errors in
+:mod:`~navreplay.replay.errors`. Campaigns of many runs are :mod:`navreplay.campaign`.
 """
 
-from navreplay.replay.engine import (
-    STREAM_PRIORITY,
+from navreplay.filters.result import InnovationSeries, RunResult
+from navreplay.replay.checks import check_streams, validate_recording
+from navreplay.replay.errors import (
     FilterFailedError,
     FilterInitError,
     FilterOutputError,
     InvalidRecordingError,
     MissingStreamError,
     ReplayError,
-    check_streams,
-    plan_events,
-    replay,
-    validate_recording,
 )
-from navreplay.replay.result import InnovationSeries, RunResult
-from navreplay.replay.spec import FilterSpec
+from navreplay.replay.pipeline import Collect, FileRun, RunStart, Stage, replay, replay_file
+from navreplay.replay.plan import STREAM_PRIORITY, plan_events
+from navreplay.replay.session import Progress, ReplaySession
+from navreplay.replay.spec import FilterSpec, build_params
 
 __all__ = [
     "STREAM_PRIORITY",
+    "Collect",
+    "FileRun",
     "FilterFailedError",
     "FilterInitError",
     "FilterOutputError",
@@ -28,10 +36,16 @@ __all__ = [
     "InnovationSeries",
     "InvalidRecordingError",
     "MissingStreamError",
+    "Progress",
     "ReplayError",
+    "ReplaySession",
     "RunResult",
+    "RunStart",
+    "Stage",
+    "build_params",
     "check_streams",
     "plan_events",
     "replay",
+    "replay_file",
     "validate_recording",
 ]

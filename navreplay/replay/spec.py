@@ -1,9 +1,21 @@
-"""What to replay: a filter of a run, named by the user, with its parameter values.
+"""What to replay: a filter of a run, named by the user, with its parameter values, resolved
+once.
+
+A :class:`FilterSpec` is made from the command line (:func:`navreplay.jobs.config.filter_specs`)
+or in code, and passed along to every recording it runs over (pickled to campaign workers with
+its class and values). :meth:`FilterSpec.resolve` loads the class (once) and parses the values
+into typed values (once: the strings of ``-p key=value`` become floats, tuples, enums),
+checking them against the filter's parameters, so mistakes surface before any work. The
+filter's parameter instance is built per recording from them, in one place
+(:func:`build_params`, called by the replay session).
 
 Examples
 --------
->>> FilterSpec("gps-ins", {"gps_pos_sigma_scale": "2"}).label
-'gps-ins'
+>>> spec = FilterSpec("gps-ins", {"gps_pos_sigma_scale": "2"}).resolve()
+>>> spec.label, spec.values, spec.cls.__name__
+('gps-ins', {'gps_pos_sigma_scale': 2.0}, 'GpsInsFilter')
+>>> build_params(spec.cls, spec.values).gps_pos_sigma_scale
+2.0
 """
 
 from __future__ import annotations
@@ -12,7 +24,8 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
-from navreplay.filters.base import Filter
+from navreplay import params as _params
+from navreplay.filters.base import Filter, FilterParams
 from navreplay.filters.registry import load_filter
 
 
@@ -30,18 +43,69 @@ class FilterSpec:
     label : str
         Display label, unique within a campaign (default: the name, or the class name for a
         ``module:Class`` reference).
+    cls : type[Filter], optional
+        The filter class when the caller has it already (else loaded from ``ref`` once, at
+        the first use).
     """
 
     ref: str
     params: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     label: str = ""
+    cls: type[Filter] | None = dataclasses.field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if not self.label:
             default = self.ref.rpartition(":")[2] if ":" in self.ref else self.ref
             object.__setattr__(self, "label", default)
         object.__setattr__(self, "params", dict(self.params))
+        object.__setattr__(self, "_values", None)
 
-    def load(self) -> type[Filter]:
-        """The filter class (raises :class:`~navreplay.filters.registry.FilterLoadError`)."""
-        return load_filter(self.ref)
+    @classmethod
+    def of(cls, filter_cls: type[Filter],
+           params: Mapping[str, Any] | FilterParams | None = None,
+           label: str | None = None) -> FilterSpec:
+        """The spec of a filter class in hand, with parameter values (or a parameter
+        instance)."""
+        ref = f"{filter_cls.__module__}:{filter_cls.__qualname__}"
+        if not isinstance(params, FilterParams):
+            return cls(ref, params or {}, label or filter_cls.name, cls=filter_cls)
+        spec = cls(ref, {}, label or filter_cls.name, cls=filter_cls)
+        object.__setattr__(spec, "_values", {f.name: getattr(params, f.name)
+                                             for f in dataclasses.fields(params) if f.init})
+        return spec
+
+    def resolve(self) -> FilterSpec:
+        """Load the class and parse the values (each once; raises
+        :class:`~navreplay.filters.registry.FilterLoadError` or
+        :class:`~navreplay.params.ParamError`); returns the spec."""
+        if self.cls is None:
+            object.__setattr__(self, "cls", load_filter(self.ref))
+        if self._values is None:
+            assert self.cls is not None
+            checked = _params.build(self.cls.Params, self.params,
+                                    where=f"filter {self.cls.name}")
+            object.__setattr__(self, "_values", {k: getattr(checked, k) for k in self.params})
+        return self
+
+    @property
+    def filter_cls(self) -> type[Filter]:
+        """The filter class (loaded once)."""
+        return self.resolve().cls  # type: ignore[return-value]
+
+    @property
+    def values(self) -> dict[str, Any]:
+        """The parameter values, typed (parsed once)."""
+        return dict(self.resolve()._values)  # type: ignore[arg-type]
+
+
+def build_params(filter_cls: type[Filter], values: Mapping[str, Any] | FilterParams | None
+                 ) -> FilterParams:
+    """The filter's parameter instance for one recording, from typed values
+    (:attr:`FilterSpec.values`) over its defaults: the one place a filter's parameters are
+    built."""
+    if isinstance(values, FilterParams):
+        return values
+    try:
+        return filter_cls.Params(**dict(values or {}))
+    except (ValueError, TypeError) as e:
+        raise _params.ParamError(f"filter {filter_cls.name}: {e}") from None

@@ -44,10 +44,10 @@ import numpy as np
 from navreplay import consistency
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.tasks import RunOutput, RunTask, monte_carlo_tasks
+from navreplay.filters.result import RunResult
 from navreplay.filters.rpm_aided_ins import Mode
 from navreplay.metrics import EnsembleResult, EnsembleStats, RunMetrics, run_metrics
 from navreplay.params import build
-from navreplay.replay.result import RunResult
 from navreplay.replay.spec import FilterSpec
 from navreplay.reproduce import Check, Progress, Report, Reproduction, warm_up
 from navreplay.sim.scenarios.underwater import UnderwaterRpmParams

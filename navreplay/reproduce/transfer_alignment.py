@@ -48,10 +48,10 @@ import numpy as np
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.executors import make_executor
 from navreplay.campaign.tasks import RunOutput, RunTask, monte_carlo_tasks
+from navreplay.filters.result import RunResult
 from navreplay.filters.transfer_alignment import flexure_rate_sigma
 from navreplay.geo.rotations import attitude_error, quat_to_dcm
 from navreplay.metrics import rms, truth_at
-from navreplay.replay.result import RunResult
 from navreplay.replay.spec import FilterSpec
 from navreplay.reproduce import Check, Progress, Report, Reproduction, slashed, warm_up
 from navreplay.sim.scenarios.ship_transfer_alignment import ShipTransferAlignmentParams
