@@ -119,6 +119,7 @@ from navreplay.filters.base import (
     overrides,
 )
 from navreplay.filters.ins import InsFilter, InsParams
+from navreplay.filters.ins_time_update import Imu
 from navreplay.filters.registry import register_filter
 from navreplay.streams import StreamKind
 
@@ -392,13 +393,15 @@ class GpsInsFilter(InsFilter):
         inn_t, inn_nu, inn_S = np.empty(n_inn), np.empty((n_inn, 3)), np.empty((n_inn, 3, 3))
         f64 = np.ascontiguousarray
         done, m, k, self.nav, self.P, self.t = ev.run_events(
-            self.nav, self.P, self.t, s, run.t, f64(run.imu["omega_ib_b"], dtype=float),
-            f64(run.imu["f_b"], dtype=float), run.ends, codes, run.rows, run.t_ev, run.record,
-            *(f64(a, dtype=float) for a in cols[gnss.POSITION]),
-            *(f64(a, dtype=float) for a in cols[gnss.VELOCITY]),
-            p.gps_pos_sigma_scale, p.gps_vel_sigma_scale, p.estimate_lever_arm,
-            self._gz is not None, self._ga is not None, tu.step, *tu._model, *tu._work,
-            kalman.DEFAULT_RTOL, *run.out(), inn_code, inn_t, inn_nu, inn_S)
+            self.nav, self.P, self.t, s,
+            Imu(run.t, f64(run.imu["omega_ib_b"], dtype=float), f64(run.imu["f_b"], dtype=float)),
+            ev.Events(run.ends, codes, run.rows, run.t_ev, run.record),
+            ev.Gnss(*(f64(a, dtype=float) for a in (*cols[gnss.POSITION], *cols[gnss.VELOCITY])),
+                    p.gps_pos_sigma_scale, p.gps_vel_sigma_scale),
+            ev.Options(p.estimate_lever_arm, self._gz is not None, self._ga is not None,
+                       kalman.DEFAULT_RTOL),
+            tu.step, tu.model, tu.work, ev.Rows(*run.out()),
+            ev.Updates(inn_code, inn_t, inn_nu, inn_S))
         for key, (a, b) in ev.LAYOUT.items():  # the filter's arrays are updated in place
             state[key][:] = s[a:b]
         run.add_rows(m, checked=True)
