@@ -222,6 +222,7 @@ def replay_file(
         start = RunStart(source.name, tuple(labels), t0_ns, has_truth, metadata, columns)
         for stage in stages:
             stage.start(start)
+        estimates = [0] * len(specs)
         window: Window | None = first
         while window is not None:
             known = {k: (COMPLETE if window.final else t) for k, t in window.known.items()}
@@ -229,10 +230,11 @@ def replay_file(
             if truth is not None and len(truth):
                 for stage in stages:
                     stage.truth(truth)
-            for session, scorer in zip(sessions, scorers, strict=True):
+            for k, (session, scorer) in enumerate(zip(sessions, scorers, strict=True)):
                 if scorer is not None:
                     scorer.add_truth(truth, final=window.final)
                 block = session.feed(window, final=window.final, known=known)
+                estimates[k] += block.t.shape[0] + session.live_rows
                 for stage in stages:
                     stage.innovations(block)
                 if scorer is not None:
@@ -241,7 +243,7 @@ def replay_file(
                     rows = block.rows(0, block.t.shape[0])
                     for stage in stages:
                         stage.rows(rows, None, None)
-                if window.final and (scorer.rows if scorer is not None else block.t.size) == 0:
+                if window.final and estimates[k] == 0:
                     empty = block.rows(0, 0)  # no estimate at all: the outputs' headers
                     for stage in stages:
                         stage.rows(empty, None, None)

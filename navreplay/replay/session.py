@@ -187,6 +187,8 @@ class ReplaySession:
         self._events = 0
         self._wall0 = time.perf_counter()
         self._t_first: float | None = None
+        self.live_rows = 0
+        """Estimates handed to ``live`` by the last :meth:`feed` (not in the block it returned)."""
         self.finished = False
 
     # -- windows -----------------------------------------------------------------------------
@@ -216,6 +218,7 @@ class ReplaySession:
         """
         if self.finished:
             raise ReplayError(f"{self.source}: the replay of {self.label!r} is finished")
+        self.live_rows = 0
         t0_ns = self._t0_ns
         self._add_aiding(window, known or {})
         imu_t_ns, imu_columns, start = self._window_imu(window.get(StreamKind.IMU))
@@ -482,6 +485,7 @@ class _Events:
         if s._live is None or columns is None or columns.m == self.emitted:
             return
         s._live(columns.view(self.emitted, **s._meta))
+        s.live_rows += columns.m - self.emitted
         self.emitted = columns.m
 
     def finish(self) -> None:
