@@ -119,18 +119,31 @@ def _stderr_is_tty() -> bool:
 
 def _load_config(path: str | None, *tables: str) -> dict[str, Any] | None:
     """The TOML file, strict: only ``tables`` (``scenario``, ``filter``, ``topics``, ``frames``,
-    ``initial``) may appear."""
+    ``initial``, ``sensors``) may appear; its ``[sensors.*]`` tables are checked here, so that a
+    mistake names the file."""
     if path is None:
         return None
     from navreplay.params import load_toml
+    from navreplay.sensors.specs import SPEC_KINDS, specs_from_tables
 
     allowed: dict[str, Any] = {"scenario": None, "topics": None, "frames": None,
-                               "initial": None}
+                               "initial": None, "sensors": list(SPEC_KINDS)}
     if "filter" in tables:
         from navreplay.filters.registry import filters
 
         allowed["filter"] = list(filters())
-    return load_toml(path, tables={t: allowed[t] for t in tables})
+    config = load_toml(path, tables={t: allowed[t] for t in tables})
+    specs_from_tables(config.get("sensors"), where=path)
+    return config
+
+
+def _sensor_config(path: str | None, config: dict[str, Any] | None) -> Any:
+    """The ``[sensors.*]`` tables of the config file as sensor specifications (or None)."""
+    if not config or not config.get("sensors"):
+        return None
+    from navreplay.sensors.specs import specs_from_tables
+
+    return specs_from_tables(config["sensors"], where=Path(path).name if path else "")
 
 
 def _viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool,
@@ -169,7 +182,9 @@ def _viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
     return fn
 
 
-_PARAM_HELP = "Parameter as key=value (repeatable)."
+_PARAM_HELP = ("Parameter as key=value (repeatable); sensors.KIND.FIELD=VALUE sets a sensor "
+               "specification, e.g. sensors.imu.grade=mems or "
+               "sensors.imu.gyro_arw='0.2 deg/sqrt(h)'.")
 _FORCE_HELP = "Overwrite existing output files (never an input of the command)."
 
 
@@ -291,7 +306,8 @@ def scenarios(verbose: bool) -> None:
 @click.option("--duration", type=float, help="Length [s] (same as -p duration=...).")
 @click.option("-p", "--param", "params", multiple=True, metavar="KEY=VALUE", help=_PARAM_HELP)
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
-              help="TOML file; its [scenario] table sets parameters (-p wins).")
+              help="TOML file; its [scenario] table sets parameters (-p wins), its "
+                   "[sensors.imu|gps|mag|speed_log|depth] tables the sensors (datasheet units).")
 @click.option("--runs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Number of recordings (seeds seed, seed+1, ...).")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
@@ -306,7 +322,8 @@ def simulate(scenario: str, output: str, seed: int, duration: float | None,
     job = jobs.SimulateJob(
         scenario=scenario,
         output=Path(output),
-        values=jobs.scenario_values(params, _load_config(config, "scenario"), duration),
+        values=jobs.scenario_values(params, _load_config(config, "scenario", "sensors"),
+                                    duration),
         seed=seed, runs=runs, force=force, workers=workers,
     )
     _check_outputs(force, [config], *(_out(p, "-o") for p in job.paths()))
@@ -426,7 +443,9 @@ def _looks_like_recording(arg: str) -> bool:
 @click.option("-p", "--param", "params", multiple=True, metavar="[FILTER.]KEY=VALUE",
               help="Filter parameter; FILTER.KEY targets one filter (repeatable).")
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
-              help="TOML file with [filter.NAME] tables (-p wins).")
+              help="TOML file with [filter.NAME] tables (-p wins), [sensors.KIND] tables of "
+                   "sensor specifications (datasheet units; over the recording's own), "
+                   "[topics], [frames], [initial].")
 @_viz_flags
 @click.option("--summary", "summary", type=click.Path(dir_okay=False), metavar="OUT.json",
               help="Write the summary figures as JSON.")
@@ -485,7 +504,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
                    _viz_out(save, no_viz, spawn or serve or bool(connect)),
                    _out(summary, "--summary"), _out(export, "--export", directory=True),
                    _out(report, "--report"))
-    cfg = _load_config(config, "filter", "topics", "frames", "initial")
+    cfg = _load_config(config, "filter", "topics", "frames", "initial", "sensors")
     job = jobs.RunJob(
         filters=jobs.filter_specs(names, refs, params, cfg),
         recordings=tuple(Path(a) for a in args),
@@ -493,7 +512,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         summary_path=Path(summary) if summary else None,
         workers=workers, executor=executor, pacing=rate, output_rate=output_rate,
         max_imu_gap=max_imu_gap,
-        log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time),
+        log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
+                        sensors=_sensor_config(config, cfg)),
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None, force=force,
     )
@@ -528,7 +548,8 @@ def _finish(report: Any) -> None:
               help="Filter parameter, or scenario.KEY=VALUE for the scenario (repeatable).")
 @click.option("--duration", type=float, help="Scenario length [s].")
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
-              help="TOML file with [scenario] and [filter.NAME] tables (-p wins).")
+              help="TOML file with [scenario], [sensors.KIND] and [filter.NAME] tables "
+                   "(-p wins).")
 @click.option("--keep", "keep", type=click.Path(file_okay=False), metavar="DIR",
               help="Also write every run's recording into DIR.")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
@@ -561,7 +582,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
                    _out(report, "--report"))
     scenario_items = [p.partition(".")[2] for p in params if p.startswith("scenario.")]
     filter_items = [p for p in params if not p.startswith("scenario.")]
-    cfg = _load_config(config, "scenario", "filter")
+    cfg = _load_config(config, "scenario", "filter", "sensors")
     job = jobs.MonteCarloJob(
         scenario=scenario,
         filters=jobs.filter_specs(filter_names, refs, filter_items, cfg),

@@ -143,20 +143,43 @@ def scenario_values(
     config: Mapping[str, Any] | None = None,
     duration: float | None = None,
 ) -> dict[str, Any]:
-    """Scenario parameter values: ``[scenario]`` table of a TOML config < ``-p`` < --duration."""
+    """Scenario parameter values: ``[scenario]`` table of a TOML config < ``-p`` < --duration;
+    the config's ``[sensors.KIND]`` tables and ``-p sensors.KIND.FIELD=VALUE`` items (which
+    win) under ``"sensors"`` (:func:`navreplay.sim.scenario.scenario_inputs`).
+
+    >>> scenario_values(["sensors.imu.grade=mems", "duration=60"])
+    {'sensors': {'imu': {'grade': 'mems'}}, 'duration': '60'}
+    """
+    from navreplay.sim.scenario import SENSORS_KEY
+
     values: dict[str, Any] = {}
+    sensors: dict[str, dict[str, Any]] = {}
     if config:
         table = config.get("scenario")
         if isinstance(table, Mapping):
             values.update(table)
-    values.update(_params.parse_assignments(assignments))
+        for kind, table in (config.get(SENSORS_KEY) or {}).items():
+            sensors[kind] = dict(table)
+    for key, value in _params.parse_assignments(assignments).items():
+        head, _, rest = key.partition(".")
+        if head != SENSORS_KEY:
+            values[key] = value
+            continue
+        kind, _, name = rest.partition(".")
+        if not kind or not name:
+            raise _params.ParamError(f"-p {key}: write sensors.KIND.FIELD=VALUE, e.g. "
+                                     "sensors.imu.gyro_arw=\"0.15 deg/sqrt(h)\"")
+        sensors.setdefault(kind, {})[name] = value
+    if sensors:
+        values = {SENSORS_KEY: sensors, **values}
     if duration is not None:
         values["duration"] = duration
     return values
 
 
 def check_scenario(scenario: str, values: Mapping[str, Any]) -> None:
-    from navreplay.sim.scenario import get_scenario
+    """Raise :class:`navreplay.params.ParamError` (one line) unless ``values`` make a run of
+    ``scenario`` (parameters and ``[sensors.*]`` tables)."""
+    from navreplay.sim.scenario import get_scenario, scenario_inputs
 
-    cls = get_scenario(scenario)
-    _params.build(cls.Params, values, where=f"scenario {scenario}")
+    scenario_inputs(get_scenario(scenario), values)

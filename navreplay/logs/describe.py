@@ -17,6 +17,20 @@ from navreplay.logs.reference import REFERENCE_TYPES
 from navreplay.streams import seconds
 
 
+def _sensor_lines(sensors: dict, where: str) -> list[str]:
+    """The recording's sensor specifications in datasheet units, or why they cannot be read."""
+    from navreplay.sensors.specs import SensorSpecs, describe_specs
+
+    if not sensors:
+        return ["sensors: no specifications (give [sensors.imu] etc. in `run --config`; "
+                "filters use their defaults)"]
+    try:
+        specs = SensorSpecs.from_metadata(sensors, where)
+    except ValueError as e:
+        return [f"sensors: cannot be read: {e}"]
+    return ["sensors (datasheet units, as [sensors.*] tables take them):", *describe_specs(specs)]
+
+
 def describe_log(path: str | Path, options: LogOptions | None = None) -> str:
     """The ``info`` text of a log: the container summary, the topic table, the conventions."""
     options = options or LogOptions()
@@ -31,6 +45,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> str:
         listing = [(t.topic, t.schema or "-", t.count, t.start_ns, t.end_ns)
                    for t in info.topics]
         lines = [format_info(info, topic_table=False)]
+        lines += _sensor_lines(info.metadata.sensors, str(path))
     problem = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -1,5 +1,6 @@
 """What the user says about a log: ``--topic``, ``--frame``, ``--init``, ``--reference`` and the
-``[topics]``, ``[frames]``, ``[initial]`` TOML tables (the command line wins over the file)."""
+``[topics]``, ``[frames]``, ``[initial]``, ``[sensors.*]`` TOML tables (the command line wins over
+the file)."""
 
 from __future__ import annotations
 
@@ -72,6 +73,10 @@ class LogOptions:
     needs : tuple[str, ...]
         The parts of the initial solution the filters start from (``pos``, ``v_n``, ``q_nb``;
         :func:`navreplay.filters.base.initial_parts`).
+    sensors : SensorSpecs or None
+        The ``[sensors.*]`` tables (:mod:`navreplay.sensors.specs`): written over the
+        recording's own sensor specifications (``Metadata.sensors``) before the filters are
+        built.
     """
 
     topics: Mapping[StreamKind, str] = dataclasses.field(default_factory=dict)
@@ -82,6 +87,7 @@ class LogOptions:
     check_frames: bool = True
     time: str = "header"
     needs: tuple[str, ...] = ("pos", "v_n", "q_nb")
+    sensors: Any = None
 
     @property
     def stream_frames(self) -> dict[StreamKind, Convention]:
@@ -114,8 +120,11 @@ def log_options(
     config: Mapping[str, Any] | None = None,
     check_frames: bool = True,
     time: str | None = None,
+    sensors: Any = None,
 ) -> LogOptions:
-    """Parse ``--topic``/``--frame`` items and the TOML tables into :class:`LogOptions`."""
+    """Parse ``--topic``/``--frame`` items and the TOML tables into :class:`LogOptions`
+    (``sensors``: the config's ``[sensors.*]`` tables already read,
+    :func:`navreplay.sensors.specs.specs_from_tables`)."""
     config = config or {}
     topic_items: dict[str, str] = {}
     frame_items: dict[str, str] = {}
@@ -161,4 +170,4 @@ def log_options(
     if time not in ("header", "log"):
         raise ParamError(f"--time {time}: use header or log")
     return LogOptions(topic_map, frame_map, method, dict(initial), reference, check_frames,
-                      time)
+                      time, sensors=sensors or None)

@@ -58,9 +58,16 @@ def open_log(path: str | Path, options: LogOptions | None = None) -> PreparedLog
 
 def make_ready(recording: Recording, sources: dict[StreamKind, TopicSource],
                options: LogOptions) -> list[str]:
-    """Check the frames and set the initial solution (``metadata.initial_nav``) of a log read
+    """Check the frames, set the initial solution (``metadata.initial_nav``) and write the
+    ``[sensors.*]`` tables over the sensor specifications (``metadata.sensors``) of a log read
     (for a log read in windows: its aiding streams and first window); one note per line."""
     notes: list[str] = []
+    if options.sensors:
+        from navreplay.sensors.specs import SensorSpecs
+
+        own = SensorSpecs.from_metadata(recording.metadata.sensors,
+                                        str(recording.metadata.extra.get("source", "")))
+        recording.metadata.sensors = own.overridden_by(options.sensors).to_metadata()
     if options.check_frames and StreamKind.IMU in recording:
         notes += check_frames(recording, sources, _position(recording, options))
     nav, note = initial_nav(options.init, recording, options.initial, options.needs)
