@@ -66,11 +66,14 @@ its variance).
 
 At a roughly level attitude the accelerometer scale factor and misalignment times gravity, and
 the gyro g-sensitivity times gravity, act as constant biases: the bias states estimate these
-*effective* biases, and the default bias sigmas are the effective values for the ``tactical``
-IMU grade of :func:`navreplay.sensors.imu_grade`: level accelerometer axes 0.3 mg bias + 0.5 mrad
-misalignment x g + 0.05 mg instability (0.58 mg); the z axis sees gravity through its 300 ppm
-scale factor instead (0.42 mg, ``accel_bias_sigma_z``; it drives the free-inertial vertical
-channel); gyros 1 deg/h bias + 1 deg/h/g x g + 0.3 deg/h instability. Under motion, the gyro
+*effective* biases, and their initial sigmas are the effective values of the recording's IMU
+specification (:func:`imu_settings`; the defaults are those of the ``tactical`` grade of
+:func:`navreplay.sensors.imu_grade`): level accelerometer axes the turn-on bias, misalignment x
+g and the instability (0.3 mg, 0.5 mrad g, 0.05 mg: 0.585 mg); the z axis sees gravity through
+its scale factor instead (300 ppm: 0.427 mg, ``accel_bias_sigma_z``; it drives the
+free-inertial vertical channel); gyros the turn-on bias, g-sensitivity x g and the instability
+(1 deg/h, 1 deg/h/g, 0.3 deg/h: 1.446 deg/h). Every IMU setting of :class:`InsParams` follows
+the specification the same way (docs/methods/ins.md §4). Under motion, the gyro
 errors a land vehicle's yaw rate drives, ``(m_xz, m_yz, s_z) omega_z``, are the states (5b):
 a constant misalignment turns with the body, so over a turn of angle dpsi it adds the bounded
 tilt ``m (sin psi - sin psi_0, cos psi_0 - cos psi)``, and s_z adds ``s_z dpsi`` of heading.
@@ -216,7 +219,7 @@ class InsParams(FilterParams):
     """Initial 1-sigma of the (effective) accelerometer bias, x and y axes (and z unless
     ``accel_bias_sigma_z`` is set) [m/s^2]: the turn-on bias, the misalignment that couples
     gravity into a level axis and the Gauss-Markov instability, sqrt(0.3 mg^2 +
-    (0.5 mrad g)^2 + 0.05 mg^2) = 0.577 mg for the tactical grade."""
+    (0.5 mrad g)^2 + 0.05 mg^2) = 0.585 mg for the tactical grade."""
     accel_bias_sigma_z: float | None = _DEFAULT["accel_bias_sigma_z"]
     """Initial 1-sigma of the (effective) z (down) accelerometer bias [m/s^2]; None: as
     ``accel_bias_sigma``. Gravity acts on the z axis through its scale factor, not a
