@@ -74,7 +74,8 @@ GPS position (antenna at ``l_b`` from the IMU, body frame), residual in NED metr
     H = [ D | 0 | [(C_nb_hat l_hat) x] | 0 | 0 | C_nb_hat ]                               (6)
     R = diag(pos_sigma^2) * gps_pos_sigma_scale^2                                         (7)
         pos_sigma: the fix's (its message covariance), else ``gps_pos_sigma`` (the GNSS
-        specification: white and Gauss-Markov parts together)
+        specification: white and Gauss-Markov parts together); the error is taken as white,
+        a time-correlated part is not modelled (docs/sensors.md §3)
 
 GPS velocity, with ``w = omega_ib_b_hat`` (last compensated gyro sample) and
 ``w_in = w_ie + w_en``::
