@@ -8,6 +8,7 @@ errors exit with 2. ``navreplay --debug COMMAND`` shows the traceback instead.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -42,11 +43,21 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
     return EXPECTED_ERRORS
 
 
+def _expected(e: BaseException) -> bool:
+    """One of the project's expected errors, or a device error (a full disk)."""
+    from navreplay.outputs import DISK_ERRORS
+
+    return isinstance(e, _expected_errors()) or (isinstance(e, OSError)
+                                                 and e.errno in DISK_ERRORS)
+
+
 def _message(e: BaseException) -> str:
     if isinstance(e, KeyError) and e.args:
         return str(e.args[0])
     if isinstance(e, OSError) and e.filename and e.strerror:
         return f"{e.filename}: {e.strerror}"
+    if isinstance(e, OSError) and e.strerror and _expected(e) and type(e) is OSError:
+        return f"{e.strerror}; nothing was written"
     return str(e) or type(e).__name__
 
 
@@ -55,9 +66,12 @@ class _Group(click.Group):
 
     def invoke(self, ctx: click.Context) -> Any:
         from navreplay.lifecycle import Terminated, handle_signals, interrupted_by
+        from navreplay.outputs import release_locks
 
         debug = bool(ctx.params.get("debug"))
-        with warnings.catch_warnings(), handle_signals():
+        with (warnings.catch_warnings(), handle_signals(),
+              contextlib.ExitStack() as stack):
+            stack.callback(release_locks)
             warnings.showwarning = _show_warning  # type: ignore[assignment]
             try:
                 return super().invoke(ctx)
@@ -70,7 +84,7 @@ class _Group(click.Group):
                 if stop is not None:  # also when a compiled function was hit by the signal
                     click.echo(str(stop) or "interrupted", err=True)
                     raise click.exceptions.Exit(getattr(stop, "exit_code", 130)) from None
-                if debug or not isinstance(e, _expected_errors()):
+                if debug or not _expected(e):
                     raise
                 raise click.ClickException(_message(e)) from None
 
@@ -174,11 +188,15 @@ _FORCE_HELP = "Overwrite existing output files (never an input of the command)."
 
 
 def _check_outputs(force: bool, inputs: Sequence[str | Path | None], *items: Any) -> None:
-    """Refuse, before any work, outputs that would lose a file or fail late
-    (:func:`navreplay.outputs.check_outputs`); ``items`` are Outputs or None."""
+    """Refuse, before any work, outputs that would lose a file or fail late, and lock them
+    against other commands (:func:`navreplay.outputs.check_outputs`); ``items`` are Outputs or
+    None. A rosbag2 input (its folder, metadata.yaml or a data file) protects its folder."""
+    from navreplay.io.rosbag import bag_folder
     from navreplay.outputs import check_outputs
 
-    check_outputs(items, [p for p in inputs if p is not None], force=force)
+    paths = [Path(p) for p in inputs if p is not None]
+    folders = [bag_folder(p) for p in paths if p.exists()]
+    check_outputs(items, paths + [f for f in folders if f is not None], force=force, lock=True)
 
 
 def _out(path: str | Path | None, option: str, **kw: Any) -> Any:
@@ -186,6 +204,14 @@ def _out(path: str | Path | None, option: str, **kw: Any) -> Any:
     from navreplay.outputs import Output
 
     return None if path is None else Output(Path(path), option, **kw)
+
+
+def _export_out(path: str | None, specs: Sequence[Any]) -> Any:
+    """The ``--export DIR`` output, with the names of the files it writes for these filters."""
+    from navreplay.jobs.results import export_names
+
+    return _out(path, "--export", directory=True,
+                writes=export_names([spec.label for spec in specs]))
 
 
 def _viz_out(save: str | None, no_viz: bool, live: bool) -> Any:
@@ -196,7 +222,7 @@ def _viz_out(save: str | None, no_viz: bool, live: bool) -> Any:
         return None
     from navreplay.jobs import DEFAULT_OUT
 
-    return _out(DEFAULT_OUT, "--save (default)", directory=True)
+    return _out(DEFAULT_OUT, "--save (default)", directory=True, writes=("*.rrd",))
 
 
 def _result_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -415,6 +441,10 @@ def filters(name: str | None) -> None:
 # run, montecarlo
 
 
+def _is_file(path: str | None) -> bool:
+    return path is not None and Path(path).is_file()
+
+
 def _looks_like_recording(arg: str) -> bool:
     return arg.endswith((".mcap", ".db3")) or Path(arg).is_file() or Path(arg).is_dir()
 
@@ -481,13 +511,14 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         raise click.UsageError("no RECORDING given")
     from navreplay.logs.options import log_options
 
-    _check_outputs(force, [*args, config, reference],
-                   _viz_out(save, no_viz, spawn or serve or bool(connect)),
-                   _out(summary, "--summary"), _out(export, "--export", directory=True),
-                   _out(report, "--report"))
     cfg = _load_config(config, "filter", "topics", "frames", "initial")
+    specs = jobs.filter_specs(names, refs, params, cfg)
+    _check_outputs(force, [*args, config, reference if _is_file(reference) else None],
+                   _viz_out(save, no_viz, spawn or serve or bool(connect)),
+                   _out(summary, "--summary"), _export_out(export, specs),
+                   _out(report, "--report"))
     job = jobs.RunJob(
-        filters=jobs.filter_specs(names, refs, params, cfg),
+        filters=specs,
         recordings=tuple(Path(a) for a in args),
         viz=_viz_options(save, spawn, connect, serve, no_viz),
         summary_path=Path(summary) if summary else None,
@@ -555,16 +586,17 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     """
     from navreplay import jobs
 
-    _check_outputs(force, [config], _out(keep, "--keep", directory=True),
-                   _viz_out(save, no_viz, spawn or serve or bool(connect)),
-                   _out(summary, "--summary"), _out(export, "--export", directory=True),
-                   _out(report, "--report"))
     scenario_items = [p.partition(".")[2] for p in params if p.startswith("scenario.")]
     filter_items = [p for p in params if not p.startswith("scenario.")]
     cfg = _load_config(config, "scenario", "filter")
+    specs = jobs.filter_specs(filter_names, refs, filter_items, cfg)
+    _check_outputs(force, [config], _out(keep, "--keep", directory=True, writes=("*.mcap",)),
+                   _viz_out(save, no_viz, spawn or serve or bool(connect)),
+                   _out(summary, "--summary"), _export_out(export, specs),
+                   _out(report, "--report"))
     job = jobs.MonteCarloJob(
         scenario=scenario,
-        filters=jobs.filter_specs(filter_names, refs, filter_items, cfg),
+        filters=specs,
         runs=runs,
         values=jobs.scenario_values(scenario_items, cfg, duration),
         seed=seed, workers=workers, executor=executor,

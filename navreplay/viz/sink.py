@@ -66,7 +66,7 @@ from navreplay import metrics as _metrics
 from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.geo import quat_wxyz_to_xyzw, radii
 from navreplay.metrics import RunMetrics, nav_errors
-from navreplay.outputs import release
+from navreplay.outputs import OutputError, release
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording, Stream, StreamKind
 from navreplay.viz import convert
@@ -89,6 +89,7 @@ from navreplay.viz.targets import (
     Serve,
     Target,
     VizUnavailableError,
+    rrd_problem,
 )
 
 APPLICATION_ID = "navreplay"
@@ -1284,14 +1285,21 @@ class Sink:
             self.flush(timeout)
             if not self._keep_alive:  # a served stream keeps its server up for late browsers
                 self._rec.disconnect()
-        except BaseException:
+        except BaseException as e:
+            problem = rrd_problem(self._tmp) if self._tmp is not None else None
             self.abort()
+            if problem is not None and isinstance(e, VizUnavailableError):
+                raise OutputError(f"{self.path}: the Rerun view is {problem}; nothing was "
+                                  "saved") from None
             raise
-        self._closed = True
         if self._tmp is not None and self.path is not None:
-            if not self._tmp.is_file() or self._tmp.stat().st_size == 0:
-                raise OSError(f"Rerun did not write {self._tmp}")
+            problem = rrd_problem(self._tmp)  # rerun reports a failed write only in its log
+            if problem is not None:
+                self.abort()
+                raise OutputError(f"{self.path}: the Rerun view is {problem}; nothing was "
+                                  "saved")
             os.replace(self._tmp, self.path)
+        self._closed = True
         return self.path or self.url
 
     def abort(self) -> None:

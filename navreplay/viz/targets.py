@@ -13,6 +13,7 @@ import dataclasses
 import os
 import shutil
 import socket
+import struct
 import sys
 import urllib.parse
 from pathlib import Path
@@ -188,3 +189,45 @@ def port_free(port: int) -> bool:
         except OSError:
             return False
     return True
+
+
+RRD_FOOTER = struct.Struct("<QQI8sI")
+"""The end of a finished .rrd file (rerun 0.41): manifest offset and length [bytes], manifest
+checksum, the magic ``RRF2FOOT`` and the footer version."""
+RRD_FOOTER_MAGIC = b"RRF2FOOT"
+
+
+def rrd_problem(path: str | os.PathLike[str]) -> str | None:
+    """Why the .rrd file at ``path`` is not a finished recording, or None.
+
+    Rerun writes an .rrd in a background thread and reports a failed write (a full disk) only
+    in its own log; a file cut short lacks the footer that ends a finished one (the manifest's
+    offset and length, which must end where the footer starts). The free space of the disk is
+    named when it is (nearly) full.
+    """
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        with path.open("rb") as f:
+            f.seek(max(size - RRD_FOOTER.size, 0))
+            tail = f.read(RRD_FOOTER.size)
+    except OSError as e:
+        return f"cannot be read back ({e.strerror or e})"
+    why = None
+    if size < RRD_FOOTER.size:
+        why = f"only {size} bytes"
+    else:
+        offset, length, _, magic, _ = RRD_FOOTER.unpack(tail)
+        if magic != RRD_FOOTER_MAGIC:
+            why = "it ends without the footer of a finished recording"
+        elif offset + length != size - RRD_FOOTER.size:
+            why = "its footer does not match its length"
+    if why is None:
+        return None
+    try:
+        free = shutil.disk_usage(path.parent).free
+    except OSError:
+        free = None
+    if free is not None and free < (1 << 20):
+        why += f"; the disk is full ({free} bytes free)"
+    return f"incomplete: {why}"
