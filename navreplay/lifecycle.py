@@ -1,8 +1,8 @@
 """Stopping cleanly: signals in the command process, and workers that die with their parent.
 
 * :func:`handle_signals` (the command line wraps every command in it) turns SIGTERM and SIGHUP
-  into :class:`Terminated` and SIGINT into ``KeyboardInterrupt``, after deleting the live
-  temporary files (:func:`navreplay.outputs.remove_temporaries`): whatever was being written is
+  into :class:`Terminated` and SIGINT into :class:`Interrupted` (a ``KeyboardInterrupt``), after
+  deleting the live temporary files (:func:`navreplay.outputs.remove_temporaries`): whatever was being written is
   gone at once, even if unwinding takes a while, and existing targets are untouched.
 * :func:`worker_init` is the initializer of the process pools: a worker ignores Ctrl-C (the parent
   cancels the campaign), deletes its temporaries and exits on SIGTERM/SIGHUP, and exits when its
@@ -37,6 +37,11 @@ class Terminated(BaseException):  # noqa: N818 - like KeyboardInterrupt
         super().__init__(f"terminated by {signal.Signals(signum).name}")
 
 
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C (SIGINT) as :func:`handle_signals` raises it: told apart from a
+    ``KeyboardInterrupt`` that code (a plug-in filter) raises itself."""
+
+
 def _on_stop(signum: int, frame: FrameType | None) -> None:
     outputs.remove_temporaries()
     raise Terminated(signum)
@@ -44,7 +49,24 @@ def _on_stop(signum: int, frame: FrameType | None) -> None:
 
 def _on_interrupt(signum: int, frame: FrameType | None) -> None:
     outputs.remove_temporaries()
-    raise KeyboardInterrupt
+    raise Interrupted
+
+
+def from_signal(exc: BaseException) -> bool:
+    """Whether ``exc`` stops the process because it was signalled (:class:`Terminated`, or
+    Ctrl-C), rather than because code raised a ``BaseException`` itself (``SystemExit``,
+    ``KeyboardInterrupt``, ``GeneratorExit`` from a plug-in: an error of that code).
+
+    Without the handlers of :func:`handle_signals` (navreplay used as a library), a
+    ``KeyboardInterrupt`` is taken as Ctrl-C."""
+    if isinstance(exc, Terminated | Interrupted):
+        return True
+    if isinstance(exc, KeyboardInterrupt):
+        try:
+            return signal.getsignal(signal.SIGINT) is not _on_interrupt
+        except ValueError:  # not the main interpreter
+            return True
+    return False
 
 
 @contextlib.contextmanager
@@ -67,12 +89,13 @@ def handle_signals() -> Iterator[None]:
 
 
 def interrupted_by(exc: BaseException) -> BaseException | None:
-    """The ``KeyboardInterrupt`` or :class:`Terminated` behind ``exc`` (itself, or the context
-    of an error that a compiled function raised while the signal arrived), else None."""
+    """The signal's ``KeyboardInterrupt`` or :class:`Terminated` behind ``exc`` (itself, or the
+    context of an error that a compiled function raised while the signal arrived), else None
+    (:func:`from_signal`)."""
     seen = 0
     e: BaseException | None = exc
     while e is not None and seen < 16:
-        if isinstance(e, KeyboardInterrupt | Terminated):
+        if from_signal(e):
             return e
         e = e.__cause__ or e.__context__
         seen += 1

@@ -25,7 +25,7 @@ from navreplay.replay.ensemble import (
     run_ensemble,
 )
 from navreplay.replay.result import RunResult
-from navreplay.streams import Recording, StreamKind
+from navreplay.streams import Recording, StreamKind, seconds
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
 
 
@@ -41,8 +41,17 @@ def campaign_extract(
     recording: Recording, results: dict[str, RunResult], task: RunTask
 ) -> PerRun:
     """Extractor of ``navreplay run`` over several recordings and ``navreplay montecarlo``."""
+    from navreplay.logs.reference import add_coverage, reference_coverage
+
     scored = default_extract(recording, results, task)
-    return PerRun(scored, {label: m.summary() for label, m in scored.items()})
+    summaries = {label: m.summary() for label, m in scored.items()}
+    if StreamKind.TRUTH in recording:
+        t_ref = seconds(recording[StreamKind.TRUTH].t_ns, recording.t0_ns)
+        for label, result in results.items():
+            if label in summaries:
+                add_coverage(summaries[label], label, reference_coverage(result.t, t_ref),
+                             f"the reference of {task.source}")
+    return PerRun(scored, summaries)
 
 
 def salvaged_note(source: str, covered: float | None) -> str:
@@ -155,6 +164,7 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     from navreplay.io.windows import COMPLETE, NotStreamable, Window, read_windows, streamable
     from navreplay.logs.options import LogOptions
     from navreplay.logs.prepare import make_ready
+    from navreplay.logs.reference import CoverageCount, add_coverage
     from navreplay.replay.engine import ReplaySession
     from navreplay.replay.streaming import RunningSummary
     from navreplay.streams import FIELDS, Stream
@@ -203,6 +213,7 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     scores = [RunningSummary(spec.label, t0_ns, metadata.true_errors, has_truth,
                              scored=scored)
               for spec in job.filters]
+    covers = [CoverageCount() for _ in job.filters]
     columns = {st.truth.column: st.unit for session in sessions for st in session.states
                if isinstance(st.truth, TruthColumn)}
     duration = float(metadata.params.get("duration") or 0.0)
@@ -217,8 +228,11 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             known = {k: (COMPLETE if final else t) for k, t in window.known.items()}
             if sink is not None and truth is not None and len(truth):
                 sink.log_truth_window(truth, t0_ns, columns)
-            for session, score in zip(sessions, scores, strict=True):
+            for session, score, cover in zip(sessions, scores, covers, strict=True):
                 block = session.feed(imu, final=final, aiding=aiding, known=known)
+                cover.outputs(block.t)
+                if truth is not None:
+                    cover.reference(seconds(truth.t_ns, t0_ns))
                 if sink is not None:
                     sink.log_innovations(block)
                 outputs.innovations(block)
@@ -237,6 +251,9 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             aiding = window
         summaries = {spec.label: score.summary()
                      for spec, score in zip(job.filters, scores, strict=True)}
+        if has_truth:
+            for spec, cover in zip(job.filters, covers, strict=True):
+                add_coverage(summaries[spec.label], spec.label, cover.fraction(), "the truth")
         notes += outputs.write_run(summaries, title=title)
         hint = close_output(sink, job.viz)
     except BaseException:
@@ -275,6 +292,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     from navreplay import metrics
     from navreplay.io.integrity import coverage
     from navreplay.logs.prepare import open_log
+    from navreplay.logs.reference import add_coverage, reference_coverage
 
     path = Path(job.recordings[0])
     classes = [spec.load() for spec in job.filters]
@@ -310,6 +328,11 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             )
             scored = metrics.run_metrics(result, recording)  # NIS only without a reference
             summaries[spec.label] = scored.summary()
+            if has_truth:
+                add_coverage(summaries[spec.label], spec.label, reference_coverage(
+                    result.t, seconds(recording[StreamKind.TRUTH].t_ns, recording.t0_ns)),
+                    f"reference {ref}" if (ref := getattr(job.log, "reference", None))
+                    else "the truth")
             outputs.rows(result, scored if has_truth else None)  # with its innovations
             if sink is not None:
                 sink.log_run(result, truth=recording if has_truth else None,
