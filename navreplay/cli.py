@@ -133,13 +133,13 @@ def _stderr_is_tty() -> bool:
 
 def _load_config(path: str | None, *tables: str) -> dict[str, Any] | None:
     """The TOML file, strict: only ``tables`` (``scenario``, ``filter``, ``topics``, ``frames``,
-    ``initial``) may appear."""
+    ``initial``, ``imu_range``) may appear."""
     if path is None:
         return None
     from navreplay.params import load_toml
 
     allowed: dict[str, Any] = {"scenario": None, "topics": None, "frames": None,
-                               "initial": None}
+                               "initial": None, "imu_range": None}
     if "filter" in tables:
         from navreplay.filters.registry import filters
 
@@ -352,10 +352,17 @@ def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--frame", "frames", multiple=True, metavar="KIND=flu|frd|enu|ned",
                      help="Axis convention of a stream's topic, or reference=enu|ned; "
                           "repeatable."),
+        click.option("--force-frame", "force_frame", is_flag=True,
+                     help="Read topics in the axes --frame declares even where their frame "
+                          "ids name other axes (else an error)."),
         click.option("--time", "time", type=click.Choice(["header", "log"]), default="header",
                      show_default=True,
                      help="Sample times: header stamps (log times where the stamps are zero "
                           "or do not increase, with a warning), or the log (receive) times."),
+        click.option("--imu-range", "imu_range", metavar="gyro=DEG_PER_S,accel=G",
+                     help="The IMU's measurement range per axis (datasheet); a sample beyond "
+                          "it stops the run [default: gyro=20000,accel=200; or an [imu_range] "
+                          "table]."),
     ]
     for opt in reversed(opts):
         fn = opt(fn)
@@ -367,26 +374,32 @@ def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
 @_log_flags
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
               help="TOML file with [topics] and [frames] tables.")
-def info(recording: str, topics: Sequence[str], frames: Sequence[str], time: str,
-         config: str | None) -> None:
+def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_frame: bool,
+         time: str, imu_range: str | None, config: str | None) -> None:
     """Topics, types, frames, rates, gaps and metadata of a RECORDING (MCAP file, rosbag2
     folder or .db3), and which stream each topic feeds.
 
-    Exits with status 1 after the report when the file is DAMAGED or holds no message.
+    Exits with status 1 after the report when the file is DAMAGED (for a rosbag2 folder: its
+    data files disagree with its metadata.yaml), holds no message, or its streams cannot be
+    read as asked.
     """
     from navreplay.io import recording_info
     from navreplay.io.reader import is_rosbag
     from navreplay.logs.describe import describe_log
     from navreplay.logs.options import log_options
 
-    click.echo(describe_log(recording, log_options(
-        topics, frames, config=_load_config(config, "topics", "frames"), time=time)))
+    described = describe_log(recording, log_options(
+        topics, frames, config=_load_config(config, "topics", "frames", "imu_range"),
+        time=time, imu_range_text=imu_range, force_frames=force_frame))
+    click.echo(described.text)
     report = None if is_rosbag(Path(recording)) else recording_info(recording)
-    if report is not None and report.damage:
-        raise click.ClickException(f"{recording}: DAMAGED ({report.message_count} messages "
-                                   "readable; see above)")
+    if described.damage:
+        count = f"{report.message_count} messages readable; " if report is not None else ""
+        raise click.ClickException(f"{recording}: DAMAGED ({count}see above)")
     if report is not None and not report.message_count:
         raise click.ClickException(f"{recording}: no message")
+    if described.problem:
+        raise click.ClickException(described.problem)
 
 
 # --------------------------------------------------------------------------------------------
@@ -486,8 +499,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
         summary: str | None, workers: int, executor: str, rate: float | None,
         output_rate: float,
-        topics: Sequence[str], frames: Sequence[str], time: str, init: str | None,
-        reference: str | None, no_frame_check: bool,
+        topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
+        imu_range: str | None, init: str | None, reference: str | None, no_frame_check: bool,
         export: str | None, report: str | None, max_imu_gap: float | None,
         force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
@@ -511,7 +524,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         raise click.UsageError("no RECORDING given")
     from navreplay.logs.options import log_options
 
-    cfg = _load_config(config, "filter", "topics", "frames", "initial")
+    cfg = _load_config(config, "filter", "topics", "frames", "initial", "imu_range")
     specs = jobs.filter_specs(names, refs, params, cfg)
     _check_outputs(force, [*args, config, reference if _is_file(reference) else None],
                    _viz_out(save, no_viz, spawn or serve or bool(connect)),
@@ -524,7 +537,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         summary_path=Path(summary) if summary else None,
         workers=workers, executor=executor, pacing=rate, output_rate=output_rate,
         max_imu_gap=max_imu_gap,
-        log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time),
+        log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
+                        imu_range, force_frame),
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None, force=force,
     )

@@ -13,6 +13,7 @@ import numpy as np
 
 from navreplay import params as _params
 from navreplay import tables
+from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
 from navreplay.replay.engine import Progress, check_streams, replay
@@ -133,7 +134,8 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
         raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
     job = _with_needs(job)
     if len(job.recordings) == 1:
-        return _run_streamed(job, progress) or _run_one(job, progress)
+        with read_policy(job.log.policy):  # the IMU's range, --force-frame
+            return _run_streamed(job, progress) or _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
