@@ -9,6 +9,7 @@ errors exit with 2. ``navreplay --debug COMMAND`` shows the traceback instead.
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -83,6 +84,8 @@ class _Group(click.Group):
                 stop = interrupted_by(e)
                 if stop is not None:  # also when a compiled function was hit by the signal
                     click.echo(str(stop) or "interrupted", err=True)
+                    global _STOPPED
+                    _STOPPED = True
                     raise click.exceptions.Exit(getattr(stop, "exit_code", 130)) from None
                 if debug or not _expected(e):
                     raise
@@ -725,9 +728,23 @@ def warm_up(filters: tuple[str, ...], workers: int | None) -> None:
         raise click.ClickException(str(e)) from None
     click.echo(f"numba cache warm ({wall:.1f} s)")
 
+_STOPPED = False
+"""A signal stopped the command (its temporaries are gone, its workers stopped)."""
+
+
 def main(argv: Sequence[str] | None = None) -> None:
-    """Console-script entry point."""
-    cli.main(args=list(argv) if argv is not None else None, prog_name="navreplay")
+    """Console-script entry point. A command stopped by a signal ends at once: the
+    interpreter's teardown (freeing a loaded process, joining pools) could take longer than
+    the second a stop may take, and nothing is left to save."""
+    try:
+        cli.main(args=list(argv) if argv is not None else None, prog_name="navreplay")
+    except SystemExit as e:
+        if not _STOPPED:
+            raise
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(e.code if isinstance(e.code, int) else 1)
 
 
 if __name__ == "__main__":

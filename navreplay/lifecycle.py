@@ -18,6 +18,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from types import FrameType
 from typing import Any
@@ -143,9 +144,23 @@ def _watch_parent(parent: int, interval: float = 1.0) -> None:
             _exit_now(1)
 
 
-def stop_workers(executor: Any) -> None:
-    """Terminate the worker processes of a ``concurrent.futures.ProcessPoolExecutor``."""
-    processes = getattr(executor, "_processes", None) or {}
-    for proc in list(processes.values()):
+def stop_workers(executor: Any, grace: float | None = None) -> None:
+    """Terminate the worker processes of a ``concurrent.futures.ProcessPoolExecutor`` (call
+    it before ``shutdown``, which drops the executor's list of processes); with
+    ``grace`` [s], wait that long for them to exit (their handlers delete their temporaries)
+    and kill those still running (in a compiled loop that does not look at signals)."""
+    processes = list((getattr(executor, "_processes", None) or {}).values())
+    for proc in processes:
         with contextlib.suppress(Exception):
             proc.terminate()
+    if grace is None:
+        return
+    end = time.monotonic() + grace
+    for proc in processes:
+        with contextlib.suppress(Exception):
+            proc.join(max(end - time.monotonic(), 0.0))
+    for proc in processes:
+        with contextlib.suppress(Exception):
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1.0)

@@ -292,18 +292,22 @@ def stale_temporaries(directory: str | os.PathLike[str]) -> list[Path]:
     return sorted(out)
 
 
-def clean_stale(directory: str | os.PathLike[str]) -> list[Path]:
-    """Delete the temporaries a killed run left in ``directory``; warn about each."""
+def clean_stale(directory: str | os.PathLike[str], *, warn: bool = True) -> list[Path]:
+    """Delete the temporaries a killed run left in ``directory``; warn about each (unless
+    ``warn`` is False: this command's own workers, killed as it stops)."""
     removed = []
     for p in stale_temporaries(directory):
         try:
             p.unlink()
         except OSError as e:
-            warnings.warn(f"{p}: temporary file of an interrupted run; cannot remove it: "
-                          f"{e.strerror}", stacklevel=2)
+            if warn:
+                warnings.warn(f"{p}: temporary file of an interrupted run; cannot remove it: "
+                              f"{e.strerror}", stacklevel=2)
             continue
         removed.append(p)
-        warnings.warn(f"removed {p}, the temporary file of an interrupted run", stacklevel=2)
+        if warn:
+            warnings.warn(f"removed {p}, the temporary file of an interrupted run",
+                          stacklevel=2)
     return removed
 
 

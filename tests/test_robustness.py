@@ -212,15 +212,18 @@ def test_sigterm_during_simulate_and_stale_temporaries_of_kill_9(tmp_path):
     assert proc.returncode == 143 and "terminated by SIGTERM" in err, err
     assert parts(tmp_path) == [] and target.read_bytes() == b"keep"
 
-    proc = _spawn(args, tmp_path)
+    # kill -9 of the command and its worker (the process group, as a killed session would)
+    proc = subprocess.Popen(NAVREPLAY + args, cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         assert _wait_for(lambda: parts(tmp_path), 120)
-        proc.send_signal(signal.SIGKILL)
+        os.killpg(proc.pid, signal.SIGKILL)
         proc.communicate(timeout=30)
     finally:
         proc.kill()
     left = parts(tmp_path)
-    assert len(left) == 1 and str(proc.pid) in left[0].name  # kill -9 cannot clean up
+    assert len(left) == 1  # kill -9 cannot clean up
+    assert _wait_for(lambda: not outputs._alive(outputs._pid_of(left[0])), 10)
     res = invoke("simulate", "stationary", "-o", tmp_path / "next.mcap", "--duration", "5")
     assert res.exit_code == 0, res.output
     assert "temporary file of an interrupted run" in res.stderr
