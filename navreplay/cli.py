@@ -9,8 +9,10 @@ errors exit with 2. ``navreplay --debug COMMAND`` shows the traceback instead.
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import sys
+import traceback
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -89,6 +91,10 @@ class _Group(click.Group):
                     raise click.exceptions.Exit(getattr(stop, "exit_code", 130)) from None
                 if debug or not _expected(e):
                     raise
+                # a reader left open by the error (a generator of windows) reports its
+                # warnings when collected: now, as warnings, not as sys:1 lines at exit
+                traceback.clear_frames(e.__traceback__)
+                gc.collect()
                 raise click.ClickException(_message(e)) from None
 
 
@@ -279,7 +285,8 @@ def cli(debug: bool) -> None:
     Exit status:
       0    success
       1    an error (one line on stderr); an acceptance check that failed in `reproduce` or
-           `demo` (unless --no-strict); a DAMAGED recording in `info`
+           `demo` (unless --no-strict); a DAMAGED recording or bag in `info`, or one whose
+           streams cannot be read as asked
       2    usage error
       130  interrupted by Ctrl-C (SIGINT)
       129, 143  stopped by SIGHUP, SIGTERM
@@ -485,7 +492,7 @@ def _looks_like_recording(arg: str) -> bool:
 @click.option("--rate", type=float, metavar="X",
               help="Replay at X times real time (1.0 = real time), for live viewing.")
 @click.option("--output-rate", type=float, default=10.0, show_default=True, metavar="HZ",
-              help="Estimate output rate between aiding samples [Hz].")
+              help="Estimate output rate between aiding samples [Hz] (at most 1000).")
 @_log_flags
 @click.option("--init", "init", type=click.Choice(["metadata", "reference", "align", "table"]),
               help="Initial solution: the recording's metadata (default when present), the "

@@ -80,7 +80,8 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
               imu_lag: float = 0.0, imu_zero_stamps: bool = False,
               imu_frame_after: tuple[float, str] | None = None,
               gyro_spike: tuple[float, float] | None = None,
-              world_frame: str | None = None) -> Path:
+              world_frame: str | None = None, imu: bool = True,
+              text_topic: str | None = None) -> Path:
     """Write a rosbag2 folder at ``path``.
 
     ``imu_frame`` overrides the IMU frame id (a mislabelled FRD IMU: ``ned=True,
@@ -91,7 +92,8 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
     logged that long after their header stamps; ``imu_zero_stamps``: their stamps are zero.
     ``imu_frame_after`` (t [s], frame id): the IMU's frame id from that time on; ``gyro_spike``
     (t [s], rate [rad/s]): the gyro x sample at that time replaced; ``world_frame``: the
-    Odometry's frame id.
+    Odometry's frame id; ``imu=False``: no IMU topic; ``text_topic``: a std_msgs/String topic
+    of that name beside the others.
     """
     rng = np.random.default_rng(seed)
     tr = trajectory(duration, rate)
@@ -136,7 +138,12 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
         lag = int(round(imu_lag * 1e9))
         if gyro_spike is not None:
             w[int(round(gyro_spike[0] * rate)) - 1, 0] = gyro_spike[1]
-        for k in range(1, len(t_ns)):
+        if text_topic is not None:
+            c_text = bag.add_connection(text_topic, "std_msgs/msg/String", typestore=STORE)
+            for k in range(0, len(t_ns), int(rate)):
+                msg = T["std_msgs/msg/String"](data=f"status {k}")
+                bag.write(c_text, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+        for k in range(1, len(t_ns) if imu else 0):
             frame = imu_frame
             if imu_frame_after is not None and tr.t[k] >= imu_frame_after[0]:
                 frame = imu_frame_after[1]

@@ -61,6 +61,11 @@ def salvaged_note(source: str, covered: float | None) -> str:
     return f"SALVAGED: {source} is damaged; replayed {part} of it"
 
 
+MAX_OUTPUT_RATE = 1000.0
+"""Highest ``--output-rate`` [Hz]: estimates between aiding samples faster than an IMU's rate
+add nothing, and a run allocates its output rows at this rate times its length."""
+
+
 @dataclasses.dataclass(frozen=True)
 class RunJob:
     """``navreplay run``.
@@ -130,8 +135,9 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     _check_files(job.recordings)
     if job.pacing is not None and not (0 < job.pacing < math.inf):
         raise _params.ParamError(f"--rate must be positive, got {job.pacing}")
-    if not (0 < job.output_rate < math.inf):
-        raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
+    if not (0 < job.output_rate <= MAX_OUTPUT_RATE):
+        raise _params.ParamError(f"--output-rate must be positive and at most "
+                                 f"{MAX_OUTPUT_RATE:g} Hz, got {job.output_rate:g}")
     job = _with_needs(job)
     if len(job.recordings) == 1:
         with read_policy(job.log.policy):  # the IMU's range, --force-frame

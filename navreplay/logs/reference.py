@@ -162,6 +162,7 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
                   declared: Convention | None, time: str = "header") -> Reference:
     """A reference from decoded messages (log time, message) of one topic, in log-time order;
     times as ``--time`` says (:func:`navreplay.io.reader.sample_times`)."""
+    _check_type(source, type_name)
     if not items:
         raise ReferenceError(f"reference {source}: the topic has no messages")
     items = sorted(items, key=lambda item: item[0])
@@ -180,10 +181,7 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
                          v_n=np.array([list(m.v_n) for m in msgs]),
                          q_nb=np.array([list(m.q_nb) for m in msgs]))
     pose = {ODOMETRY: lambda m: m.pose.pose, POSE_COV: lambda m: m.pose.pose,
-            POSE: lambda m: m.pose}.get(type_name)
-    if pose is None:
-        raise ReferenceError(f"reference {source}: type {type_name} cannot be a reference "
-                             f"(use one of {', '.join(REFERENCE_TYPES)})")
+            POSE: lambda m: m.pose}[type_name]
     world, why = _world(msgs[0].header.frame_id, declared, source)
     child = getattr(msgs[0], "child_frame_id", "")
     frd = _body_is_frd(child, world)
@@ -202,6 +200,12 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
     return ref
 
 
+def _check_type(source: str, type_name: str) -> None:
+    if type_name not in REFERENCE_TYPES:
+        raise ReferenceError(f"reference {source}: type {type_name or 'unknown'} cannot be a "
+                             f"reference (use one of {', '.join(REFERENCE_TYPES)})")
+
+
 def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
     """Type name and (log time, decoded message) of one topic of a bag or MCAP file."""
     if is_rosbag(path):
@@ -211,6 +215,7 @@ def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
         if topic not in types:
             raise ReferenceError(f"reference {topic}: no such topic in {path} (it has "
                                  f"{', '.join(sorted(types)) or 'no topics'})")
+        _check_type(topic, types[topic])
         return types[topic], list(iter_messages(path, topic))
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
@@ -227,6 +232,7 @@ def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
                 raise ReferenceError(f"reference {topic}: no such topic in {path} (it has "
                                      f"{', '.join(sorted(topics)) or 'no topics'})")
             type_name = topics[topic]
+            _check_type(topic, type_name)
             for _, _, message, decoded in reader.iter_decoded_messages(topics=[topic]):
                 items.append((message.log_time, decoded))
     except ReferenceError:

@@ -1371,11 +1371,12 @@ def _truth_stream(truth: Truth, t0_ns: int | None) -> tuple[Stream, int]:
 
 
 def _truth_nav(stream: Stream, t0_ns: int) -> convert.NavColumns:
-    missing = [c for c in ("pos", "v_n", "q_nb") if c not in stream.columns]
-    if missing:
-        raise ValueError(f"truth stream lacks columns {missing} (has {sorted(stream.columns)})")
+    """The truth's solution; parts a reference lacks (a position-only one) are NaN."""
+    n = len(stream)
+    parts = [stream.columns.get(c, np.full((n, w), np.nan))
+             for c, w in (("pos", 3), ("v_n", 3), ("q_nb", 4))]
     t = (stream.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9
-    return convert.NavColumns(t, stream["pos"], stream["v_n"], stream["q_nb"])
+    return convert.NavColumns(t, *parts)
 
 
 def _unwrap_after(yaw: np.ndarray, previous: tuple[float, float] | None) -> np.ndarray:
