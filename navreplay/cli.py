@@ -157,7 +157,8 @@ def _load_config(path: str | None, *tables: str) -> dict[str, Any] | None:
 
 
 def _viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool,
-                 no_viz: bool) -> Any:
+                 no_viz: bool, bind: str | None = None, web_port: int | None = None,
+                 grpc_port: int | None = None) -> Any:
     from navreplay.jobs import VizMode, VizOptions
 
     chosen = [name for name, on in (("--save", save is not None), ("--spawn", spawn),
@@ -165,12 +166,27 @@ def _viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool
                                     ("--no-viz", no_viz)) if on]
     if len(chosen) > 1:
         raise click.UsageError(f"{' and '.join(chosen)} exclude each other")
+    served = [name for name, v in (("--bind", bind), ("--web-port", web_port),
+                                   ("--grpc-port", grpc_port)) if v is not None]
+    if served and not serve:
+        raise click.UsageError(f"{', '.join(served)} only go with --serve")
     if spawn:
         return VizOptions(VizMode.SPAWN)
     if connect is not None:
         return VizOptions(VizMode.CONNECT, url=connect)
     if serve:
-        return VizOptions(VizMode.SERVE)
+        from navreplay.viz.targets import Serve, bind_address, exposure
+
+        try:
+            target = Serve(grpc_port=grpc_port or 9876, web_port=web_port or 9090,
+                           bind=bind_address(bind or "127.0.0.1"))
+        except ValueError as e:
+            raise click.BadParameter(str(e)) from None
+        warning = exposure(target)
+        if warning is not None:  # said once, before anything is served
+            click.echo(f"warning: {warning}", err=True)
+        return VizOptions(VizMode.SERVE, bind=target.bind, web_port=target.web_port,
+                          grpc_port=target.grpc_port)
     if no_viz:
         return VizOptions(VizMode.NONE)
     return VizOptions(VizMode.SAVE, Path(save) if save else None)
@@ -184,7 +200,16 @@ def _viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--connect", metavar="URL",
                      help="Stream to a running Rerun viewer (rerun+http://host:9876/proxy)."),
         click.option("--serve", is_flag=True,
-                     help="Serve the view to a web browser until Ctrl-C."),
+                     help="Serve the view to a web browser until Ctrl-C (on this machine "
+                          "only, unless --bind)."),
+        click.option("--bind", "bind", metavar="ADDR",
+                     help="With --serve: the address to listen on (default 127.0.0.1; "
+                          "0.0.0.0 or :: for every interface: the viewer and its data are "
+                          "then open to every host that reaches this machine, unauthenticated)."),
+        click.option("--web-port", "web_port", type=click.IntRange(1, 65535), metavar="PORT",
+                     help="With --serve: the web viewer's port [default: 9090]."),
+        click.option("--grpc-port", "grpc_port", type=click.IntRange(1, 65535), metavar="PORT",
+                     help="With --serve: the data's (gRPC) port [default: 9876]."),
         click.option("--no-viz", is_flag=True, help="No Rerun output."),
     ]
     for opt in reversed(opts):
@@ -506,7 +531,8 @@ def _looks_like_recording(arg: str) -> bool:
 @_max_imu_gap
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
-        save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
+        save: str | None, spawn: bool, connect: str | None, serve: bool, bind: str | None,
+        web_port: int | None, grpc_port: int | None, no_viz: bool,
         summary: str | None, workers: int, executor: str, rate: float | None,
         output_rate: float,
         topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
@@ -543,7 +569,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
     job = jobs.RunJob(
         filters=specs,
         recordings=tuple(Path(a) for a in args),
-        viz=_viz_options(save, spawn, connect, serve, no_viz),
+        viz=_viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port),
         summary_path=Path(summary) if summary else None,
         workers=workers, executor=executor, pacing=rate, output_rate=output_rate,
         max_imu_gap=max_imu_gap,
@@ -595,7 +621,8 @@ def _finish(report: Any) -> None:
 def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, workers: int,
                executor: str, refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
-               spawn: bool, connect: str | None, serve: bool, no_viz: bool,
+               spawn: bool, connect: str | None, serve: bool, bind: str | None,
+               web_port: int | None, grpc_port: int | None, no_viz: bool,
                summary: str | None, export: str | None, report: str | None,
                max_imu_gap: float | None) -> None:
     """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
@@ -625,7 +652,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         values=jobs.scenario_values(scenario_items, cfg, duration),
         seed=seed, workers=workers, executor=executor,
         keep_dir=Path(keep) if keep else None, force=force,
-        viz=_viz_options(save, spawn, connect, serve, no_viz),
+        viz=_viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port),
         summary_path=Path(summary) if summary else None,
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None,
@@ -748,6 +775,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     except SystemExit as e:
         if not _STOPPED:
             raise
+        from navreplay import lifecycle
+
+        lifecycle.release_children()  # a served viewer
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 stream.flush()

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import signal
@@ -45,11 +46,13 @@ class Interrupted(KeyboardInterrupt):
 
 def _on_stop(signum: int, frame: FrameType | None) -> None:
     outputs.remove_temporaries()
+    release_children()
     raise Terminated(signum)
 
 
 def _on_interrupt(signum: int, frame: FrameType | None) -> None:
     outputs.remove_temporaries()
+    release_children()
     raise Interrupted
 
 
@@ -101,6 +104,53 @@ def interrupted_by(exc: BaseException) -> BaseException | None:
         e = e.__cause__ or e.__context__
         seen += 1
     return None
+
+
+# --------------------------------------------------------------------------------------------
+# helper processes (a served viewer): they end with this process
+
+_CHILDREN: list[Any] = []
+
+
+def child_init() -> None:
+    """``preexec_fn`` of a helper process: on Linux it gets SIGTERM when this process dies,
+    even by ``kill -9``."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+
+
+def adopt(proc: Any) -> None:
+    """Terminate the ``subprocess.Popen`` ``proc`` when this process stops or exits."""
+    if not _CHILDREN:
+        atexit.register(release_children)
+    _CHILDREN.append(proc)
+
+
+def release_child(proc: Any) -> None:
+    """Terminate an adopted process now and forget it."""
+    with contextlib.suppress(ValueError):
+        _CHILDREN.remove(proc)
+    _end(proc)
+
+
+def release_children() -> None:
+    """Terminate every adopted process (also done at exit and on a stop signal)."""
+    while _CHILDREN:
+        _end(_CHILDREN.pop())
+
+
+
+def _end(proc: Any) -> None:
+    with contextlib.suppress(Exception):
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(1.0)
+            except Exception:
+                proc.kill()
 
 
 # --------------------------------------------------------------------------------------------
