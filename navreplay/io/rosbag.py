@@ -380,12 +380,19 @@ def check_bag(path: Path) -> BagCheck | None:
         problems.append(f"metadata.yaml counts {total} messages in all, the data files hold "
                         f"{sum(found.values())}")
         lost |= sum(found.values()) < total
-    if declared_end is not None and start is not None and (
-            last_ns is None or last_ns < declared_end - BAG_TIME_SLACK_NS):
-        end = "no message" if last_ns is None else f"{(last_ns - start) * 1e-9:.3f} s"
-        problems.append(f"the data end at {end} of the {duration * 1e-9:.3f} s metadata.yaml "
-                        "declares")
-        lost = True
+    if declared_end is not None and start is not None and duration is not None:
+        if last_ns is None or last_ns < declared_end - BAG_TIME_SLACK_NS:
+            end = "no message" if last_ns is None else f"{(last_ns - start) * 1e-9:.3f} s"
+            problems.append(f"the data end at {end} of the {duration * 1e-9:.3f} s "
+                            "metadata.yaml declares")
+            lost = True
+        elif last_ns > declared_end + BAG_TIME_SLACK_NS:
+            problems.append(f"the data end at {(last_ns - start) * 1e-9:.3f} s, after the "
+                            f"{duration * 1e-9:.3f} s metadata.yaml declares")
+    if start is not None and first_ns is not None and abs(first_ns - start) > BAG_TIME_SLACK_NS:
+        problems.append(f"the data start {(first_ns - start) * 1e-9:+.3f} s from the start "
+                        "metadata.yaml declares")
+        lost |= first_ns > start
     return BagCheck(declared, found, first_ns, last_ns, start, declared_end, tuple(problems),
                     lost)
 
