@@ -23,7 +23,7 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
-from navreplay.io.convert import BODY_KINDS, NAV_KINDS, Convention
+from navreplay.io.convert import BODY_KINDS, NAV_KINDS, Convention, assumed_convention
 from navreplay.io.errors import RecordingError
 from navreplay.streams import Stream, StreamKind
 
@@ -151,12 +151,14 @@ def when(t_ns: int, t0_ns: int) -> str:
     return f"t = {(int(t_ns) - int(t0_ns)) * 1e-9:.9f} s ({int(t_ns)} ns)"
 
 
-def first_problem(stream: Stream, t0_ns: int) -> str | None:
+def first_problem(stream: Stream, t0_ns: int, ranges: bool = True) -> str | None:
     """Describe the first bad sample or timestamp, or return None.
 
-    Bad: a non-finite value, a negative standard deviation (columns named ``*_sigma``), a value
-    beyond its physical range (:data:`PHYSICAL_RANGES`, the IMU's :class:`ImuRange` of the
-    current :class:`ReadPolicy`), a timestamp that repeats or goes backwards.
+    Bad: a non-finite value, a negative standard deviation (columns named ``*_sigma``), with
+    ``ranges`` a value beyond its physical range (:data:`PHYSICAL_RANGES`, the IMU's
+    :class:`ImuRange` of the current :class:`ReadPolicy`; the readers and the writer check
+    them, the engine's check of an in-memory recording does not), a timestamp that repeats or
+    goes backwards.
     """
     t = stream.t_ns
     n = len(t)
@@ -173,7 +175,7 @@ def first_problem(stream: Stream, t0_ns: int) -> str | None:
         if name.endswith("_sigma"):
             good &= ~(flat < 0).any(axis=1)
             what = "non-finite or negative value"
-        beyond = _beyond(stream.kind, name, flat, imu)
+        beyond = _beyond(stream.kind, name, flat, imu) if ranges else None
         bad = ~good if beyond is None else ~good | beyond[0]
         if bad.any():
             row = int(np.argmax(bad))
@@ -241,30 +243,31 @@ def check_frame_ids(kind: StreamKind, label: str, frame_ids: Iterable[str],
     """Check the frame ids of a topic against each other and against ``--frame``.
 
     For a stream with frame-dependent vectors (IMU, magnetometer, GNSS velocity): frame ids
-    that change between messages are an error unless ``--frame`` declares the axes (the data
+    that change between messages and with them the axes they give (``imu_frd``, then
+    ``imu_link``, FLU by REP-103) are an error unless ``--frame`` declares the axes (the data
     cannot tell which messages are in which axes), and a declaration contradicting a frame id
     that names its axes outright is an error unless the :class:`ReadPolicy` forces frames.
 
     Returns
     -------
     str or None
-        A note for a stream without frame-dependent vectors whose frame id changes (``used``:
-        the one kept).
+        A note when the frame id changes and that is no error (``used``: the one kept).
 
     Raises
     ------
     RecordingError
     """
     ids = sorted(set(frame_ids))
+    note = f"frame_id changes between messages ({ids}); using {used!r}" if len(ids) > 1 \
+        else None
     if kind not in _NAMED:
-        if len(ids) > 1:
-            return f"frame_id changes between messages ({ids}); using {used!r}"
-        return None
+        return note
     axes = "|".join(c.value for c in _NAMED[kind])
-    if len(ids) > 1 and declared is None:
+    if len({assumed_convention(kind, i)[0] for i in ids}) > 1 and declared is None:
         raise RecordingError(
-            f"{label}: frame_id changes between messages ({ids}): which axes the vectors are "
-            f"in cannot be told; declare them with --frame {kind.value}={axes} (or [frames])")
+            f"{label}: frame_id changes between messages ({ids}), and with it the axes "
+            f"their names give: which axes the vectors are in cannot be told; declare them "
+            f"with --frame {kind.value}={axes} (or [frames])")
     if declared is not None and not current_policy().force_frames:
         for frame_id in ids:
             named = named_convention(kind, frame_id)
@@ -273,4 +276,4 @@ def check_frame_ids(kind: StreamKind, label: str, frame_ids: Iterable[str],
                     f"{label}: --frame {kind.value}={declared.value} contradicts frame id "
                     f"{frame_id!r}, which names {named.value.upper()} axes; drop the "
                     "declaration, or add --force-frame to read the topic as declared")
-    return None
+    return note
