@@ -47,8 +47,8 @@ INITIAL_RANGES: dict[str, tuple[float, float, tuple[int, ...]]] = {
     "accel_bias_sigma": (0.0, 200.0, (1,)),
     "gyro_bias_sigma_dph": (0.0, 1e6, (1,)),
 }
-"""Allowed values of the ``[initial]`` keys: (low, high, number of values allowed). Sigmas must
-be positive."""
+"""Allowed values of the ``[initial]`` keys: (low, high, numbers of values allowed); the
+covariances' sigmas (``pos_sigma``, ``vel_sigma``, ``att_sigma_deg``) must be positive."""
 
 IMU_RANGE_UNITS = {"gyro": ("deg/s", math.pi / 180.0), "accel": ("g", STANDARD_GRAVITY)}
 """``--imu-range`` / ``[imu_range]`` keys: their datasheet unit and its value in SI."""
