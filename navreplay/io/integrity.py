@@ -100,11 +100,15 @@ def read_salvaged(path: str | os.PathLike[str]) -> tuple[Recording, bool]:
 def coverage(recording: Recording, salvaged: bool) -> float | None:
     """Fraction of the recording's duration that its streams cover: 1 for a complete file;
     for a salvaged one the last message time over the metadata's duration (None when the file
-    does not say how long it was)."""
+    does not say how long it was), and at most the fraction of its messages kept
+    (``metadata.extra["messages_kept"]``: a rosbag2 folder whose data files hold fewer
+    messages than its metadata.yaml counts)."""
     if not salvaged:
         return 1.0
     duration = recording.metadata.params.get("duration")
     ends = [int(s.t_ns[-1]) for s in recording.streams.values() if len(s)]
     if not isinstance(duration, int | float) or not duration > 0 or not ends:
         return None
-    return min(max((max(ends) - recording.t0_ns) * 1e-9 / float(duration), 0.0), 1.0)
+    covered = min(max((max(ends) - recording.t0_ns) * 1e-9 / float(duration), 0.0), 1.0)
+    kept = recording.metadata.extra.get("messages_kept")
+    return min(covered, float(kept)) if isinstance(kept, int | float) else covered

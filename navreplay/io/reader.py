@@ -19,7 +19,7 @@ import numpy as np
 from mcap.records import Channel, Schema
 
 from navreplay.io import cdr
-from navreplay.io.checks import first_problem, gap_report, when
+from navreplay.io.checks import check_frame_ids, first_problem, gap_report, when
 from navreplay.io.convert import DECODERS, REDUCE, AuxColumn, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.mcapfile import FileContents, MessageBlock, walk
@@ -501,9 +501,9 @@ def read_streams(
     sources: dict[StreamKind, TopicSource] = {}
     for kind, topic in chosen.items():
         frame_id = topic.first_frame_id or SPECS[kind].frame_id
-        if len(topic.frame_ids) > 1:
-            _warn(f"{topic.label}: frame_id changes between messages "
-                  f"({sorted(topic.frame_ids)}); using {frame_id!r}")
+        note = check_frame_ids(kind, topic.label, topic.frame_ids, declared.get(kind), frame_id)
+        if note:
+            _warn(f"{topic.label}: {note}")
         fields = topic.finish()
         fields["t_ns"] = sample_times(fields["t_ns"], topic.log_ns, time, topic.label)
         streams[kind], sources[kind] = build_stream(

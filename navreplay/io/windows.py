@@ -32,16 +32,18 @@ from typing import BinaryIO
 
 import numpy as np
 
-from navreplay.io.checks import GAP_FACTOR, gap_text, when
+from navreplay.io.checks import GAP_FACTOR, check_frame_ids, gap_text, when
 from navreplay.io.convert import AuxColumn, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning
 from navreplay.io.mcapfile import FileContents, probe, read_chunk, walk
 from navreplay.io.reader import (
     TopicSource,
+    _describe_topics,
     _metadata,
     _Plan,
     _Topic,
     build_stream,
+    check_named_topics,
     sample_times,
     topic_map,
 )
@@ -194,6 +196,8 @@ class _State:
             raise NotStreamable(f"{where}: no summary to read the file in windows")
         chosen = plan.resolve(contents, explicit=False)
         every = _Plan(where, set(SPECS), topic_map(topics)).resolve(contents, explicit=False)
+        check_named_topics(where, topics, {k: t.channel.topic for k, t in every.items()},
+                           _describe_topics(contents))
         counts = contents.statistics.channel_message_counts if contents.statistics else {}
         totals = {k: counts.get(t.channel.id) for k, t in chosen.items()}
         metadata, t0_ns, aux = _metadata(contents, where)
@@ -266,6 +270,10 @@ class _State:
         fields = topic.drain()
         fields["t_ns"] = self._times(kind, topic, fields["t_ns"])
         self.frame.setdefault(kind, topic.first_frame_id or SPECS[kind].frame_id)
+        note = check_frame_ids(kind, topic.label, topic.frame_ids, self.declared.get(kind),
+                               self.frame[kind])
+        if note:
+            warnings.warn(RecordingWarning(f"{topic.label}: {note}"), stacklevel=2)
         stream, source = build_stream(kind, fields, self.frame[kind], topic.label, self.aux,
                                       self.t0_ns, self.validate, self.declared.get(kind),
                                       topic.channel.topic, report_gaps=False)

@@ -14,6 +14,7 @@ import numpy as np
 from navreplay import params as _params
 from navreplay import tables
 from navreplay.filters.settings import setting_notes, summary_entries
+from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
 from navreplay.replay.engine import Progress, check_streams, replay
@@ -26,7 +27,7 @@ from navreplay.replay.ensemble import (
     run_ensemble,
 )
 from navreplay.replay.result import RunResult
-from navreplay.streams import Recording, StreamKind
+from navreplay.streams import Recording, StreamKind, seconds
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
 
 
@@ -42,15 +43,29 @@ def campaign_extract(
     recording: Recording, results: dict[str, RunResult], task: RunTask
 ) -> PerRun:
     """Extractor of ``navreplay run`` over several recordings and ``navreplay montecarlo``."""
+    from navreplay.logs.reference import add_coverage, reference_coverage
+
     scored = default_extract(recording, results, task)
-    return PerRun(scored, {label: {**m.summary(), **summary_entries(results[label].settings)}
-                           for label, m in scored.items()})
+    summaries = {label: {**m.summary(), **summary_entries(results[label].settings)}
+                 for label, m in scored.items()}
+    if StreamKind.TRUTH in recording:
+        t_ref = seconds(recording[StreamKind.TRUTH].t_ns, recording.t0_ns)
+        for label, result in results.items():
+            if label in summaries:
+                add_coverage(summaries[label], label, reference_coverage(result.t, t_ref),
+                             f"the reference of {task.source}")
+    return PerRun(scored, summaries)
 
 
 def salvaged_note(source: str, covered: float | None) -> str:
     """The note of a run over a recording salvaged from a damaged file."""
     part = "an unknown part" if covered is None else f"{100 * covered:.1f} %"
     return f"SALVAGED: {source} is damaged; replayed {part} of it"
+
+
+MAX_OUTPUT_RATE = 1000.0
+"""Highest ``--output-rate`` [Hz]: estimates between aiding samples faster than an IMU's rate
+add nothing, and a run allocates its output rows at this rate times its length."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,11 +137,13 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     _check_files(job.recordings)
     if job.pacing is not None and not (0 < job.pacing < math.inf):
         raise _params.ParamError(f"--rate must be positive, got {job.pacing}")
-    if not (0 < job.output_rate < math.inf):
-        raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
+    if not (0 < job.output_rate <= MAX_OUTPUT_RATE):
+        raise _params.ParamError(f"--output-rate must be positive and at most "
+                                 f"{MAX_OUTPUT_RATE:g} Hz, got {job.output_rate:g}")
     job = _with_needs(job)
     if len(job.recordings) == 1:
-        return _run_streamed(job, progress) or _run_one(job, progress)
+        with read_policy(job.log.policy):  # the IMU's range, --force-frame
+            return _run_streamed(job, progress) or _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
@@ -157,6 +174,7 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     from navreplay.io.windows import COMPLETE, NotStreamable, Window, read_windows, streamable
     from navreplay.logs.options import LogOptions
     from navreplay.logs.prepare import make_ready
+    from navreplay.logs.reference import CoverageCount, add_coverage
     from navreplay.replay.engine import ReplaySession
     from navreplay.replay.streaming import RunningSummary
     from navreplay.streams import FIELDS, Stream
@@ -205,6 +223,7 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
     scores = [RunningSummary(spec.label, t0_ns, metadata.true_errors, has_truth,
                              scored=scored)
               for spec in job.filters]
+    covers = [CoverageCount() for _ in job.filters]
     columns = {st.truth.column: st.unit for session in sessions for st in session.states
                if isinstance(st.truth, TruthColumn)}
     duration = float(metadata.params.get("duration") or 0.0)
@@ -219,8 +238,11 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
             known = {k: (COMPLETE if final else t) for k, t in window.known.items()}
             if sink is not None and truth is not None and len(truth):
                 sink.log_truth_window(truth, t0_ns, columns)
-            for session, score in zip(sessions, scores, strict=True):
+            for session, score, cover in zip(sessions, scores, covers, strict=True):
                 block = session.feed(imu, final=final, aiding=aiding, known=known)
+                cover.outputs(block.t)
+                if truth is not None:
+                    cover.reference(seconds(truth.t_ns, t0_ns))
                 if sink is not None:
                     sink.log_innovations(block)
                 outputs.innovations(block)
@@ -240,6 +262,9 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
         summaries = {spec.label: {**score.summary(), **summary_entries(session.settings)}
                      for spec, score, session in zip(job.filters, scores, sessions, strict=True)}
         notes += setting_notes(summaries.values())
+        if has_truth:
+            for spec, cover in zip(job.filters, covers, strict=True):
+                add_coverage(summaries[spec.label], spec.label, cover.fraction(), "the truth")
         notes += outputs.write_run(summaries, title=title)
         hint = close_output(sink, job.viz)
     except BaseException:
@@ -278,6 +303,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     from navreplay import metrics
     from navreplay.io.integrity import coverage
     from navreplay.logs.prepare import open_log
+    from navreplay.logs.reference import add_coverage, reference_coverage
 
     path = Path(job.recordings[0])
     classes = [spec.load() for spec in job.filters]
@@ -313,6 +339,11 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             )
             scored = metrics.run_metrics(result, recording)  # NIS only without a reference
             summaries[spec.label] = {**scored.summary(), **summary_entries(result.settings)}
+            if has_truth:
+                add_coverage(summaries[spec.label], spec.label, reference_coverage(
+                    result.t, seconds(recording[StreamKind.TRUTH].t_ns, recording.t0_ns)),
+                    f"reference {ref}" if (ref := getattr(job.log, "reference", None))
+                    else "the truth")
             outputs.rows(result, scored if has_truth else None)  # with its innovations
             if sink is not None:
                 sink.log_run(result, truth=recording if has_truth else None,

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from navreplay.io.checks import read_policy
 from navreplay.io.integrity import salvage_watch
 from navreplay.io.reader import TopicSource, read_streams
 from navreplay.logs.framecheck import check_frames
@@ -41,18 +42,19 @@ def open_log(path: str | Path, options: LogOptions | None = None) -> PreparedLog
     """Read a log and make it ready to replay; every problem is raised before any replay."""
     options = options or LogOptions()
     path = Path(path)
-    with salvage_watch() as lost:
-        recording, sources = read_streams(path, topics=options.topics,
-                                          frames=options.stream_frames, time=options.time)
-    recording.metadata.extra.setdefault("source", str(path))
-    notes: list[str] = []
-    if options.reference is not None:
-        ref = read_reference(options.reference, path, recording,
-                             options.frames.get(REFERENCE), options.time)
-        stream, note = reference_stream(ref, recording, options.initial)
-        recording.streams[StreamKind.TRUTH] = stream
-        notes.append(note)
-    notes += make_ready(recording, sources, options)
+    with read_policy(options.policy):
+        with salvage_watch() as lost:
+            recording, sources = read_streams(path, topics=options.topics,
+                                              frames=options.stream_frames, time=options.time)
+        recording.metadata.extra.setdefault("source", str(path))
+        notes: list[str] = []
+        if options.reference is not None:
+            ref = read_reference(options.reference, path, recording,
+                                 options.frames.get(REFERENCE), options.time)
+            stream, note = reference_stream(ref, recording, options.initial)
+            recording.streams[StreamKind.TRUTH] = stream
+            notes.append(note)
+        notes += make_ready(recording, sources, options)
     return PreparedLog(recording, sources, notes, salvaged=lost[0])
 
 

@@ -76,11 +76,13 @@ from navreplay.filters.base import (
     check_measurements,
     check_states,
     navigation_parts,
+    output_problem,
 )
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.filters.settings import build_params  # noqa: F401  (the one place it is built)
 from navreplay.io.checks import first_problem
 from navreplay.io.errors import RecordingError
+from navreplay.lifecycle import from_signal
 from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.sensors.specs import SensorSpecs
@@ -195,7 +197,7 @@ def validate_recording(recording: Recording, source: str = "") -> None:
     """
     source = source or recording_name(recording)
     for kind, stream in recording.streams.items():
-        problem = first_problem(stream, recording.t0_ns)
+        problem = first_problem(stream, recording.t0_ns, ranges=False)
         if problem is not None:
             raise InvalidRecordingError(f"{source}: stream {kind}: {problem}")
 
@@ -444,23 +446,24 @@ class _Columns:
         self.m = m + k
 
     def first_nonfinite(self, start: int) -> tuple[int, str] | None:
-        """First row >= start with a non-finite entry, and the column's name."""
+        """First row >= start with a non-finite or overflowing entry
+        (:func:`navreplay.filters.base.output_problem`), and what is wrong with which column."""
         stop = self.m
         if stop <= start:
             return None
-        cols: list[tuple[str, np.ndarray]] = [("state", self.x), ("covariance", self.P)]
+        cols: list[tuple[str, str, np.ndarray]] = [("state", "state", self.x),
+                                                   ("covariance", "covariance", self.P)]
         if self.has_nav:
-            cols += [(what, getattr(self, part)) for part, what in _NAV_COLUMN.items()
+            cols += [(part, what, getattr(self, part)) for part, what in _NAV_COLUMN.items()
                      if part in self.navigation]
-        cols += [(k, v) for k, v in self.extras.items()]
+        cols += [(k, k, v) for k, v in self.extras.items()]
         found: tuple[int, str] | None = None
-        for name, col in cols:
-            block = col[start:stop].reshape(stop - start, -1)
-            ok = np.isfinite(block).all(axis=1)
-            if not ok.all():
-                i = start + int(np.argmin(ok))
+        for part, name, col in cols:
+            bad, why = output_problem(part, col[start:stop])
+            if bad.any():
+                i = start + int(np.argmax(bad))
                 if found is None or i < found[0]:
-                    found = (i, name)
+                    found = (i, f"{why} {name}")
         return found
 
     def result(self, **kw: Any) -> RunResult:
@@ -518,11 +521,12 @@ def _innovation_series(
     nu = np.stack([np.asarray(it[1], dtype=np.float64) for it in items])
     S = np.stack([np.asarray(it[2], dtype=np.float64) for it in items])
     nan = np.full(len(t), np.nan)
-    bad_nu = ~np.isfinite(nu).all(axis=1)
+    bad_nu, why = output_problem("nu", nu)
     problem = covariance_problem(S)
     first: tuple[int, str] | None = None
     if bad_nu.any():
-        first = (int(np.argmax(bad_nu)), "nu is not finite")
+        first = (int(np.argmax(bad_nu)), "nu is not finite" if why == "non-finite"
+                 else f"nu is {why}")
     if problem is not None and (first is None or problem[0] < first[0]):
         first = (problem[0], problem[1].replace("covariance P", "S"))
     if first is not None:
@@ -681,6 +685,12 @@ class ReplaySession:
             raise FilterInitError(
                 f"filter {label!r} cannot start on {source}: {_one_line(e)}"
             ) from e
+        except BaseException as e:
+            if from_signal(e):
+                raise
+            raise FilterInitError(f"filter {label!r} cannot start on {source}: "
+                                  f"{_one_line(e)} (a filter raises an Exception; it never "
+                                  "ends the process)") from None
         self.filter = filt
         self.states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
         try:
@@ -1020,6 +1030,12 @@ class ReplaySession:
             raise FilterFailedError(
                 f"filter {label!r} failed on {source} at t = {t_now:.3f} s: {_one_line(e)}"
             ) from e
+        except BaseException as e:
+            if from_signal(e):
+                raise
+            raise FilterFailedError(  # sys.exit(), an interrupt raised by code: its error
+                f"filter {label!r} failed on {source} at t = {t_now:.3f} s: {_one_line(e)} "
+                "(a filter raises an Exception; it never ends the process)") from None
         self._events = done0 + n_events
 
         if columns is not None:
@@ -1222,7 +1238,7 @@ def _check_finite(columns: _Columns, start: int, label: str, source: str,
     if cov is not None:
         raise _invalid(label, source, float(columns.t[start + cov[0]]), cov[1])
     if bad is not None:
-        raise _diverged(label, source, float(columns.t[bad[0]]), f"non-finite {bad[1]} estimate")
+        raise _diverged(label, source, float(columns.t[bad[0]]), f"{bad[1]} estimate")
 
 
 def _invalid(label: str, source: str, t: float, why: str) -> FilterOutputError:
