@@ -7,8 +7,8 @@ goes through this module:
   ``force``), a target that is one of the command's inputs or lies inside an input folder (a
   rosbag2 folder), a directory output that would write over an input (even with ``force``:
   resolved paths and device/inode are compared, so links and ``./x`` spellings are caught), two
-  outputs on the same file or one inside a file another writes (``--export x --summary
-  x/manifest.json``), a target that is a directory, and a target whose directory cannot be
+  outputs on the same file, an output inside another's directory (``--export x --summary
+  x/summary.json``; the default view folder ``out/`` holds only its ``.rrd`` files), a target that is a directory, and a target whose directory cannot be
   created or written. Each refusal is one line naming the option and the file. With ``lock``
   it then takes an exclusive lock on every explicit target (:func:`lock_outputs`), so that two
   commands running at once cannot write the same file: the second stops at once, naming the
@@ -66,8 +66,9 @@ class Output:
         outputs of their own.
     writes : tuple of str, optional
         For a directory: the names (glob patterns) of the files it receives, e.g.
-        ``("manifest.json", "gps-ins.*")``; None: any name. An input, or another output, at
-        such a name inside the directory is refused.
+        ``("manifest.json", "gps-ins.*")``; None: any name. An input at such a name inside
+        the directory is refused, and so is any other output inside an explicit directory
+        (an implicit one, the default ``out/``, refuses only its own names).
     """
 
     path: Path
