@@ -8,9 +8,13 @@ errors exit with 2. ``navreplay --debug COMMAND`` shows the traceback instead.
 
 from __future__ import annotations
 
+import contextlib
+import gc
+import os
 import sys
+import traceback
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -42,11 +46,21 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
     return EXPECTED_ERRORS
 
 
+def _expected(e: BaseException) -> bool:
+    """One of the project's expected errors, or a device error (a full disk)."""
+    from navreplay.outputs import DISK_ERRORS
+
+    return isinstance(e, _expected_errors()) or (isinstance(e, OSError)
+                                                 and e.errno in DISK_ERRORS)
+
+
 def _message(e: BaseException) -> str:
     if isinstance(e, KeyError) and e.args:
         return str(e.args[0])
     if isinstance(e, OSError) and e.filename and e.strerror:
         return f"{e.filename}: {e.strerror}"
+    if isinstance(e, OSError) and e.strerror and _expected(e) and type(e) is OSError:
+        return f"{e.strerror}; nothing was written"
     return str(e) or type(e).__name__
 
 
@@ -55,9 +69,12 @@ class _Group(click.Group):
 
     def invoke(self, ctx: click.Context) -> Any:
         from navreplay.lifecycle import Terminated, handle_signals, interrupted_by
+        from navreplay.outputs import release_locks
 
         debug = bool(ctx.params.get("debug"))
-        with warnings.catch_warnings(), handle_signals():
+        with (warnings.catch_warnings(), handle_signals(),
+              contextlib.ExitStack() as stack):
+            stack.callback(release_locks)
             warnings.showwarning = _show_warning  # type: ignore[assignment]
             try:
                 return super().invoke(ctx)
@@ -69,9 +86,15 @@ class _Group(click.Group):
                 stop = interrupted_by(e)
                 if stop is not None:  # also when a compiled function was hit by the signal
                     click.echo(str(stop) or "interrupted", err=True)
+                    global _STOPPED
+                    _STOPPED = True
                     raise click.exceptions.Exit(getattr(stop, "exit_code", 130)) from None
-                if debug or not isinstance(e, _expected_errors()):
+                if debug or not _expected(e):
                     raise
+                # a reader left open by the error (a generator of windows) reports its
+                # warnings when collected: now, as warnings, not as sys:1 lines at exit
+                traceback.clear_frames(e.__traceback__)
+                gc.collect()
                 raise click.ClickException(_message(e)) from None
 
 
@@ -119,22 +142,36 @@ def _stderr_is_tty() -> bool:
 
 def _load_config(path: str | None, *tables: str) -> dict[str, Any] | None:
     """The TOML file, strict: only ``tables`` (``scenario``, ``filter``, ``topics``, ``frames``,
-    ``initial``) may appear."""
+    ``initial``, ``sensors``, ``imu_range``) may appear; its ``[sensors.*]`` tables are checked
+    here, so that a mistake names the file."""
     if path is None:
         return None
     from navreplay.params import load_toml
+    from navreplay.sensors.specs import SPEC_KINDS, specs_from_tables
 
     allowed: dict[str, Any] = {"scenario": None, "topics": None, "frames": None,
-                               "initial": None}
+                               "initial": None, "sensors": list(SPEC_KINDS), "imu_range": None}
     if "filter" in tables:
         from navreplay.filters.registry import filters
 
         allowed["filter"] = list(filters())
-    return load_toml(path, tables={t: allowed[t] for t in tables})
+    config = load_toml(path, tables={t: allowed[t] for t in tables})
+    specs_from_tables(config.get("sensors"), where=path)
+    return config
+
+
+def _sensor_config(path: str | None, config: dict[str, Any] | None) -> Any:
+    """The ``[sensors.*]`` tables of the config file as sensor specifications (or None)."""
+    if not config or not config.get("sensors"):
+        return None
+    from navreplay.sensors.specs import specs_from_tables
+
+    return specs_from_tables(config["sensors"], where=Path(path).name if path else "")
 
 
 def _viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool,
-                 no_viz: bool) -> Any:
+                 no_viz: bool, bind: str | None = None, web_port: int | None = None,
+                 grpc_port: int | None = None) -> Any:
     from navreplay.jobs import VizMode, VizOptions
 
     chosen = [name for name, on in (("--save", save is not None), ("--spawn", spawn),
@@ -142,12 +179,27 @@ def _viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool
                                     ("--no-viz", no_viz)) if on]
     if len(chosen) > 1:
         raise click.UsageError(f"{' and '.join(chosen)} exclude each other")
+    served = [name for name, v in (("--bind", bind), ("--web-port", web_port),
+                                   ("--grpc-port", grpc_port)) if v is not None]
+    if served and not serve:
+        raise click.UsageError(f"{', '.join(served)} only go with --serve")
     if spawn:
         return VizOptions(VizMode.SPAWN)
     if connect is not None:
         return VizOptions(VizMode.CONNECT, url=connect)
     if serve:
-        return VizOptions(VizMode.SERVE)
+        from navreplay.viz.targets import Serve, bind_address, exposure
+
+        try:
+            target = Serve(grpc_port=grpc_port or 9876, web_port=web_port or 9090,
+                           bind=bind_address(bind or "127.0.0.1"))
+        except ValueError as e:
+            raise click.BadParameter(str(e)) from None
+        warning = exposure(target)
+        if warning is not None:  # said once, before anything is served
+            click.echo(f"warning: {warning}", err=True)
+        return VizOptions(VizMode.SERVE, bind=target.bind, web_port=target.web_port,
+                          grpc_port=target.grpc_port)
     if no_viz:
         return VizOptions(VizMode.NONE)
     return VizOptions(VizMode.SAVE, Path(save) if save else None)
@@ -161,7 +213,16 @@ def _viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--connect", metavar="URL",
                      help="Stream to a running Rerun viewer (rerun+http://host:9876/proxy)."),
         click.option("--serve", is_flag=True,
-                     help="Serve the view to a web browser until Ctrl-C."),
+                     help="Serve the view to a web browser until Ctrl-C (on this machine "
+                          "only, unless --bind)."),
+        click.option("--bind", "bind", metavar="ADDR",
+                     help="With --serve: the address to listen on (default 127.0.0.1; "
+                          "0.0.0.0 or :: for every interface: the viewer and its data are "
+                          "then open to every host that reaches this machine, unauthenticated)."),
+        click.option("--web-port", "web_port", type=click.IntRange(1, 65535), metavar="PORT",
+                     help="With --serve: the web viewer's port [default: 9090]."),
+        click.option("--grpc-port", "grpc_port", type=click.IntRange(1, 65535), metavar="PORT",
+                     help="With --serve: the data's (gRPC) port [default: 9876]."),
         click.option("--no-viz", is_flag=True, help="No Rerun output."),
     ]
     for opt in reversed(opts):
@@ -169,16 +230,22 @@ def _viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
     return fn
 
 
-_PARAM_HELP = "Parameter as key=value (repeatable)."
+_PARAM_HELP = ("Parameter as key=value (repeatable); sensors.KIND.FIELD=VALUE sets a sensor "
+               "specification, e.g. sensors.imu.grade=mems or "
+               "sensors.imu.gyro_arw='0.2 deg/sqrt(h)'.")
 _FORCE_HELP = "Overwrite existing output files (never an input of the command)."
 
 
 def _check_outputs(force: bool, inputs: Sequence[str | Path | None], *items: Any) -> None:
-    """Refuse, before any work, outputs that would lose a file or fail late
-    (:func:`navreplay.outputs.check_outputs`); ``items`` are Outputs or None."""
+    """Refuse, before any work, outputs that would lose a file or fail late, and lock them
+    against other commands (:func:`navreplay.outputs.check_outputs`); ``items`` are Outputs or
+    None. A rosbag2 input (its folder, metadata.yaml or a data file) protects its folder."""
+    from navreplay.io.rosbag import bag_folder
     from navreplay.outputs import check_outputs
 
-    check_outputs(items, [p for p in inputs if p is not None], force=force)
+    paths = [Path(p) for p in inputs if p is not None]
+    folders = [bag_folder(p) for p in paths if p.exists()]
+    check_outputs(items, paths + [f for f in folders if f is not None], force=force, lock=True)
 
 
 def _out(path: str | Path | None, option: str, **kw: Any) -> Any:
@@ -186,6 +253,14 @@ def _out(path: str | Path | None, option: str, **kw: Any) -> Any:
     from navreplay.outputs import Output
 
     return None if path is None else Output(Path(path), option, **kw)
+
+
+def _export_out(path: str | None, specs: Sequence[Any]) -> Any:
+    """The ``--export DIR`` output, with the names of the files it writes for these filters."""
+    from navreplay.jobs.results import export_names
+
+    return _out(path, "--export", directory=True,
+                writes=export_names([spec.label for spec in specs]))
 
 
 def _viz_out(save: str | None, no_viz: bool, live: bool) -> Any:
@@ -196,7 +271,7 @@ def _viz_out(save: str | None, no_viz: bool, live: bool) -> Any:
         return None
     from navreplay.jobs import DEFAULT_OUT
 
-    return _out(DEFAULT_OUT, "--save (default)", directory=True)
+    return _out(DEFAULT_OUT, "--save (default)", directory=True, writes=("*.rrd",))
 
 
 def _result_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -250,7 +325,8 @@ def cli(debug: bool) -> None:
     Exit status:
       0    success
       1    an error (one line on stderr); an acceptance check that failed in `reproduce` or
-           `demo` (unless --no-strict); a DAMAGED recording in `info`
+           `demo` (unless --no-strict); a DAMAGED recording or bag in `info`, or one whose
+           streams cannot be read as asked
       2    usage error
       130  interrupted by Ctrl-C (SIGINT)
       129, 143  stopped by SIGHUP, SIGTERM
@@ -291,7 +367,8 @@ def scenarios(verbose: bool) -> None:
 @click.option("--duration", type=float, help="Length [s] (same as -p duration=...).")
 @click.option("-p", "--param", "params", multiple=True, metavar="KEY=VALUE", help=_PARAM_HELP)
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
-              help="TOML file; its [scenario] table sets parameters (-p wins).")
+              help="TOML file; its [scenario] table sets parameters (-p wins), its "
+                   "[sensors.imu|gps|mag|speed_log|depth] tables the sensors (datasheet units).")
 @click.option("--runs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Number of recordings (seeds seed, seed+1, ...).")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
@@ -306,7 +383,8 @@ def simulate(scenario: str, output: str, seed: int, duration: float | None,
     job = jobs.SimulateJob(
         scenario=scenario,
         output=Path(output),
-        values=jobs.scenario_values(params, _load_config(config, "scenario"), duration),
+        values=jobs.scenario_values(params, _load_config(config, "scenario", "sensors"),
+                                    duration),
         seed=seed, runs=runs, force=force, workers=workers,
     )
     _check_outputs(force, [config], *(_out(p, "-o") for p in job.paths()))
@@ -326,10 +404,17 @@ def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--frame", "frames", multiple=True, metavar="KIND=flu|frd|enu|ned",
                      help="Axis convention of a stream's topic, or reference=enu|ned; "
                           "repeatable."),
+        click.option("--force-frame", "force_frame", is_flag=True,
+                     help="Read topics in the axes --frame declares even where their frame "
+                          "ids name other axes (else an error)."),
         click.option("--time", "time", type=click.Choice(["header", "log"]), default="header",
                      show_default=True,
                      help="Sample times: header stamps (log times where the stamps are zero "
                           "or do not increase, with a warning), or the log (receive) times."),
+        click.option("--imu-range", "imu_range", metavar="gyro=DEG_PER_S,accel=G",
+                     help="The IMU's measurement range per axis (datasheet); a sample beyond "
+                          "it stops the run [default: gyro=20000,accel=200; or an [imu_range] "
+                          "table]."),
     ]
     for opt in reversed(opts):
         fn = opt(fn)
@@ -341,39 +426,47 @@ def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
 @_log_flags
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
               help="TOML file with [topics] and [frames] tables.")
-def info(recording: str, topics: Sequence[str], frames: Sequence[str], time: str,
-         config: str | None) -> None:
+def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_frame: bool,
+         time: str, imu_range: str | None, config: str | None) -> None:
     """Topics, types, frames, rates, gaps and metadata of a RECORDING (MCAP file, rosbag2
     folder or .db3), and which stream each topic feeds.
 
-    Exits with status 1 after the report when the file is DAMAGED or holds no message.
+    Exits with status 1 after the report when the file is DAMAGED (for a rosbag2 folder: its
+    data files disagree with its metadata.yaml), holds no message, or its streams cannot be
+    read as asked.
     """
     from navreplay.io import recording_info
     from navreplay.io.files import file_kind
     from navreplay.logs.describe import describe_log
     from navreplay.logs.options import log_options
 
-    click.echo(describe_log(recording, log_options(
-        topics, frames, config=_load_config(config, "topics", "frames"), time=time)))
+    described = describe_log(recording, log_options(
+        topics, frames, config=_load_config(config, "topics", "frames", "imu_range"),
+        time=time, imu_range_text=imu_range, force_frames=force_frame))
+    click.echo(described.text)
     report = None if file_kind(recording).name == "rosbag2" else recording_info(recording)
-    if report is not None and report.damage:
-        raise click.ClickException(f"{recording}: DAMAGED ({report.message_count} messages "
-                                   "readable; see above)")
+    if described.damage:
+        count = f"{report.message_count} messages readable; " if report is not None else ""
+        raise click.ClickException(f"{recording}: DAMAGED ({count}see above)")
     if report is not None and not report.message_count:
         raise click.ClickException(f"{recording}: no message")
+    if described.problem:
+        raise click.ClickException(described.problem)
 
 
 # --------------------------------------------------------------------------------------------
 # filters
 
 
-def _param_lines(rows: Sequence[tuple[str, str, Any, str]]) -> list[str]:
+def _param_lines(rows: Sequence[tuple[str, str, Any, str]],
+                 marked: Collection[str] = ()) -> list[str]:
     if not rows:
         return ["(no parameters)"]
-    width = max(len(r[0]) for r in rows)
+    width = max(len(r[0]) for r in rows) + (1 if marked else 0)
     out = []
     for name, tp, default, doc in rows:
-        out.append(f"{name:<{width}}  {tp} = {_show(default)}  {doc}".rstrip())
+        shown = f"{name}*" if name in marked else name
+        out.append(f"{shown:<{width}}  {tp} = {_show(default)}  {doc}".rstrip())
     return out
 
 
@@ -406,13 +499,22 @@ def filters(name: str | None) -> None:
         click.echo(f"  requires: {', '.join(str(s) for s in cls.requires) or '-'}")
         if cls.optional:
             click.echo(f"  optional: {', '.join(str(s) for s in cls.optional)}")
-        click.echo("  parameters:")
-        for line in _param_lines(describe(cls.Params)):
+        derived = set(cls.settings_from_sensors(cls.default_sensors()))
+        reference = cls.default_sensors()
+        click.echo("  parameters" + (" (* from the recording's sensor specifications; the "
+                                     "defaults are for " + "; ".join(
+                                         f"{k}: {reference.source(k)}" for k in reference.models)
+                                     + ")" if derived else "") + ":")
+        for line in _param_lines(describe(cls.Params), derived):
             click.echo(f"    {line}")
 
 
 # --------------------------------------------------------------------------------------------
 # run, montecarlo
+
+
+def _is_file(path: str | None) -> bool:
+    return path is not None and Path(path).is_file()
 
 
 def _looks_like_recording(arg: str) -> bool:
@@ -426,7 +528,9 @@ def _looks_like_recording(arg: str) -> bool:
 @click.option("-p", "--param", "params", multiple=True, metavar="[FILTER.]KEY=VALUE",
               help="Filter parameter; FILTER.KEY targets one filter (repeatable).")
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
-              help="TOML file with [filter.NAME] tables (-p wins).")
+              help="TOML file with [filter.NAME] tables (-p wins), [sensors.KIND] tables of "
+                   "sensor specifications (datasheet units; over the recording's own), "
+                   "[topics], [frames], [initial].")
 @_viz_flags
 @click.option("--summary", "summary", type=click.Path(dir_okay=False), metavar="OUT.json",
               help="Write the summary figures as JSON.")
@@ -439,7 +543,7 @@ def _looks_like_recording(arg: str) -> bool:
 @click.option("--rate", type=float, metavar="X",
               help="Replay at X times real time (1.0 = real time), for live viewing.")
 @click.option("--output-rate", type=float, default=10.0, show_default=True, metavar="HZ",
-              help="Estimate output rate between aiding samples [Hz].")
+              help="Estimate output rate between aiding samples [Hz] (at most 1000).")
 @_log_flags
 @click.option("--init", "init", type=click.Choice(["metadata", "reference", "align", "table"]),
               help="Initial solution: the recording's metadata (default when present), the "
@@ -453,11 +557,12 @@ def _looks_like_recording(arg: str) -> bool:
 @_max_imu_gap
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
-        save: str | None, spawn: bool, connect: str | None, serve: bool, no_viz: bool,
+        save: str | None, spawn: bool, connect: str | None, serve: bool, bind: str | None,
+        web_port: int | None, grpc_port: int | None, no_viz: bool,
         summary: str | None, workers: int, executor: str, rate: float | None,
         output_rate: float,
-        topics: Sequence[str], frames: Sequence[str], time: str, init: str | None,
-        reference: str | None, no_frame_check: bool,
+        topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
+        imu_range: str | None, init: str | None, reference: str | None, no_frame_check: bool,
         export: str | None, report: str | None, max_imu_gap: float | None,
         force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
@@ -481,19 +586,22 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         raise click.UsageError("no RECORDING given")
     from navreplay.logs.options import log_options
 
-    _check_outputs(force, [*args, config, reference],
+    cfg = _load_config(config, "filter", "topics", "frames", "initial", "sensors", "imu_range")
+    specs = jobs.filter_specs(names, refs, params, cfg)
+    _check_outputs(force, [*args, config, reference if _is_file(reference) else None],
                    _viz_out(save, no_viz, spawn or serve or bool(connect)),
-                   _out(summary, "--summary"), _out(export, "--export", directory=True),
+                   _out(summary, "--summary"), _export_out(export, specs),
                    _out(report, "--report"))
-    cfg = _load_config(config, "filter", "topics", "frames", "initial")
     job = jobs.RunJob(
-        filters=jobs.filter_specs(names, refs, params, cfg),
+        filters=specs,
         recordings=tuple(Path(a) for a in args),
-        viz=_viz_options(save, spawn, connect, serve, no_viz),
+        viz=_viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port),
         summary_path=Path(summary) if summary else None,
         workers=workers, executor=executor, pacing=rate, output_rate=output_rate,
         max_imu_gap=max_imu_gap,
-        log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time),
+        log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
+                        sensors=_sensor_config(config, cfg), imu_range_text=imu_range,
+                        force_frames=force_frame),
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None, force=force,
     )
@@ -528,7 +636,8 @@ def _finish(report: Any) -> None:
               help="Filter parameter, or scenario.KEY=VALUE for the scenario (repeatable).")
 @click.option("--duration", type=float, help="Scenario length [s].")
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
-              help="TOML file with [scenario] and [filter.NAME] tables (-p wins).")
+              help="TOML file with [scenario], [sensors.KIND] and [filter.NAME] tables "
+                   "(-p wins).")
 @click.option("--keep", "keep", type=click.Path(file_okay=False), metavar="DIR",
               help="Also write every run's recording into DIR.")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
@@ -540,7 +649,8 @@ def _finish(report: Any) -> None:
 def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, workers: int,
                executor: str, refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
-               spawn: bool, connect: str | None, serve: bool, no_viz: bool,
+               spawn: bool, connect: str | None, serve: bool, bind: str | None,
+               web_port: int | None, grpc_port: int | None, no_viz: bool,
                summary: str | None, export: str | None, report: str | None,
                max_imu_gap: float | None) -> None:
     """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
@@ -555,21 +665,22 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     """
     from navreplay import jobs
 
-    _check_outputs(force, [config], _out(keep, "--keep", directory=True),
-                   _viz_out(save, no_viz, spawn or serve or bool(connect)),
-                   _out(summary, "--summary"), _out(export, "--export", directory=True),
-                   _out(report, "--report"))
     scenario_items = [p.partition(".")[2] for p in params if p.startswith("scenario.")]
     filter_items = [p for p in params if not p.startswith("scenario.")]
-    cfg = _load_config(config, "scenario", "filter")
+    cfg = _load_config(config, "scenario", "filter", "sensors")
+    specs = jobs.filter_specs(filter_names, refs, filter_items, cfg)
+    _check_outputs(force, [config], _out(keep, "--keep", directory=True, writes=("*.mcap",)),
+                   _viz_out(save, no_viz, spawn or serve or bool(connect)),
+                   _out(summary, "--summary"), _export_out(export, specs),
+                   _out(report, "--report"))
     job = jobs.MonteCarloJob(
         scenario=scenario,
-        filters=jobs.filter_specs(filter_names, refs, filter_items, cfg),
+        filters=specs,
         runs=runs,
         values=jobs.scenario_values(scenario_items, cfg, duration),
         seed=seed, workers=workers, executor=executor,
         keep_dir=Path(keep) if keep else None, force=force,
-        viz=_viz_options(save, spawn, connect, serve, no_viz),
+        viz=_viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port),
         summary_path=Path(summary) if summary else None,
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None,
@@ -679,9 +790,26 @@ def warm_up(filters: tuple[str, ...], workers: int | None) -> None:
         raise click.ClickException(str(e)) from None
     click.echo(f"numba cache warm ({wall:.1f} s)")
 
+_STOPPED = False
+"""A signal stopped the command (its temporaries are gone, its workers stopped)."""
+
+
 def main(argv: Sequence[str] | None = None) -> None:
-    """Console-script entry point."""
-    cli.main(args=list(argv) if argv is not None else None, prog_name="navreplay")
+    """Console-script entry point. A command stopped by a signal ends at once: the
+    interpreter's teardown (freeing a loaded process, joining pools) could take longer than
+    the second a stop may take, and nothing is left to save."""
+    try:
+        cli.main(args=list(argv) if argv is not None else None, prog_name="navreplay")
+    except SystemExit as e:
+        if not _STOPPED:
+            raise
+        from navreplay import lifecycle
+
+        lifecycle.release_children()  # a served viewer
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(e.code if isinstance(e.code, int) else 1)
 
 
 if __name__ == "__main__":

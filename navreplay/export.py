@@ -394,7 +394,10 @@ def _mark_unknown(cov: np.ndarray) -> np.ndarray:
 
 def _reference_poses(frame: LocalFrame, truth: Stream) -> Poses:
     zero = np.zeros((len(truth), 9, 9))
-    return ros_poses(frame, truth.t_ns, truth["pos"], truth["v_n"], truth["q_nb"], zero)
+    n = len(truth)  # parts a reference lacks (a position-only one) are NaN
+    pos, v_n, q_nb = (truth.columns.get(c, np.full((n, w), np.nan))
+                      for c, w in (("pos", 3), ("v_n", 3), ("q_nb", 4)))
+    return ros_poses(frame, truth.t_ns, pos, v_n, q_nb, zero)
 
 
 # --------------------------------------------------------------------------------------------

@@ -4,14 +4,22 @@ Every file a command writes (a recording, an .rrd view, a JSON summary, an expor
 goes through this module:
 
 * :func:`check_outputs` runs before the work starts. It refuses a target that exists (unless
-  ``force``), a target that is one of the command's inputs (even with ``force``: resolved paths
-  and device/inode are compared, so links and ``./x`` spellings are caught), two outputs on the
-  same file, a target that is a directory, and a target whose directory cannot be created or
-  written. Each refusal is one line naming the option and the file.
+  ``force``), a target that is one of the command's inputs or lies inside an input folder (a
+  rosbag2 folder), a directory output that would write over an input (even with ``force``:
+  resolved paths and device/inode are compared, so links and ``./x`` spellings are caught), two
+  outputs on the same file, an output inside another's directory (``--export x --summary
+  x/summary.json``; the default view folder ``out/`` holds only its ``.rrd`` files), a target that is a directory, and a target whose directory cannot be
+  created or written. Each refusal is one line naming the option and the file. With ``lock``
+  it then takes an exclusive lock on every explicit target (:func:`lock_outputs`), so that two
+  commands running at once cannot write the same file: the second stops at once, naming the
+  first one's PID.
 * :func:`temporary_path` names the file the work writes into: ``.NAME.PID.XXXXXXXX.part`` beside
   the target, renamed onto it only when complete (:func:`atomic_path` does both). Live
   temporaries are registered so that :func:`remove_temporaries` (called by the signal handlers of
   :mod:`navreplay.lifecycle`) deletes them when the process is told to stop.
+* :func:`writing` turns a full disk (or a quota, a read-only or failing device) met while
+  writing into one :class:`OutputError` naming the output; the temporaries are removed and
+  nothing incomplete is published.
 * A run killed outright (``kill -9``, power loss) cannot clean up; the PID and host in the name
   let the next write into the same directory recognise the leftovers of a process of this
   machine that no longer exists and delete them (:func:`clean_stale`, reported as a warning).
@@ -25,6 +33,8 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
+import fnmatch
 import os
 import re
 import secrets
@@ -54,12 +64,32 @@ class Output:
     directory : bool
         A directory the command fills (``--keep DIR``); it may exist, its files are checked as
         outputs of their own.
+    writes : tuple of str, optional
+        For a directory: the names (glob patterns) of the files it receives, e.g.
+        ``("manifest.json", "gps-ins.*")``; None: any name. An input at such a name inside
+        the directory is refused, and so is any other output inside an explicit directory
+        (an implicit one, the default ``out/``, refuses only its own names).
     """
 
     path: Path
     option: str
     explicit: bool = True
     directory: bool = False
+    writes: tuple[str, ...] | None = None
+
+    def receives(self, path: Path) -> bool:
+        """Whether this directory output writes ``path`` (resolved paths)."""
+        if not self.directory or _resolved(Path(path).parent) != _resolved(self.path):
+            return False
+        return self.writes is None or any(fnmatch.fnmatchcase(path.name, w)
+                                          for w in self.writes)
+
+    def holds(self, path: Path) -> bool:
+        """Whether another output at ``path`` would land in this one: anywhere inside an explicit
+        directory (``--export``, ``--keep``), or among the files an implicit one writes."""
+        if self.directory and self.explicit:
+            return _resolved(Path(path)).is_relative_to(_resolved(self.path))
+        return self.receives(path)
 
 
 def check_outputs(
@@ -67,29 +97,40 @@ def check_outputs(
     inputs: Iterable[str | os.PathLike[str]] = (),
     *,
     force: bool = False,
+    lock: bool = False,
 ) -> None:
     """Refuse outputs that would lose a file or fail after the work (see the module docstring).
+
+    Parameters
+    ----------
+    outputs : iterable of Output or None
+    inputs : iterable of path-like
+        Files and folders the command reads; nothing at or inside them is written.
+    force : bool
+        Replace existing explicit targets (never an input).
+    lock : bool
+        Then lock the explicit targets for this process (:func:`lock_outputs`).
 
     Raises
     ------
     OutputError
         The first problem found, naming the option and the file.
     """
-    seen: dict[str, Output] = {}
+    outs = [o for o in outputs if o is not None]
     ins = [Path(p) for p in inputs]
-    for out in outputs:
-        if out is None:
-            continue
+    seen: dict[str, Output] = {}
+    for out in outs:
         path = Path(out.path)
         label = f"{out.option} {path}"
-        key = os.path.normcase(os.path.abspath(path.resolve()))
+        key = os.path.normcase(str(_resolved(path)))
         if key in seen:
             raise OutputError(f"{label}: the same file as {seen[key].option} {seen[key].path}")
         seen[key] = out
-        for src in ins:
-            if _same_file(path, src):
-                raise OutputError(f"{label}: is an input of this command ({src}); choose "
-                                  "another file")
+        _check_inputs(out, label, ins)
+        for other in outs:
+            if other is not out and other.holds(path):
+                raise OutputError(f"{label}: is inside {other.option} {other.path}, another "
+                                  "output of this command; choose another name or directory")
         if out.directory:
             if path.exists() and not path.is_dir():
                 raise OutputError(f"{label}: exists and is not a directory")
@@ -100,6 +141,31 @@ def check_outputs(
         if path.exists() and out.explicit and not force:
             raise OutputError(f"{label} exists; use --force to overwrite")
         _check_directory(label, path.parent)
+    if lock:
+        lock_outputs(o for o in outs if o.explicit)
+
+
+def _check_inputs(out: Output, label: str, inputs: list[Path]) -> None:
+    path = Path(out.path)
+    target = _resolved(path)
+    for src in inputs:
+        if _same_file(path, src):
+            raise OutputError(f"{label}: is an input of this command ({src}); choose "
+                              "another file")
+        if src.is_dir() and target.is_relative_to(_resolved(src)):
+            raise OutputError(f"{label}: is inside {src}, an input folder of this command; "
+                              "write elsewhere")
+        if out.receives(src):
+            raise OutputError(f"{label}: would write over {src}, an input of this command; "
+                              "choose another directory")
+
+
+def _resolved(path: str | os.PathLike[str]) -> Path:
+    """The absolute path with the links of its existing part resolved."""
+    try:
+        return Path(os.path.abspath(Path(path).resolve()))
+    except (OSError, RuntimeError):  # a link loop: compare as written
+        return Path(os.path.abspath(path))
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -163,13 +229,15 @@ def release(tmp: Path, *, remove: bool = True) -> None:
 
 
 def remove_temporaries() -> list[Path]:
-    """Delete every live temporary of this process (signal handlers call this); returns them."""
+    """Delete every live temporary of this process and release its locks (signal handlers
+    call this); returns the temporaries."""
     with _LOCK:
         live = [p for p in _LIVE if _pid_of(p) == os.getpid()]
         _LIVE.clear()
     for p in live:
         with contextlib.suppress(OSError):
             p.unlink()
+    release_locks()
     return live
 
 
@@ -180,9 +248,10 @@ def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
     target = Path(target)
     tmp = temporary_path(target)
     try:
-        yield tmp
-        fsync_path(tmp)  # the data on disk before the name: a power loss leaves old or new
-        os.replace(tmp, target)
+        with writing(str(target)):
+            yield tmp
+            fsync_path(tmp)  # the data on disk before the name: a power loss leaves old or new
+            os.replace(tmp, target)
     finally:
         release(tmp)
 
@@ -231,17 +300,122 @@ def stale_temporaries(directory: str | os.PathLike[str]) -> list[Path]:
     return sorted(out)
 
 
-def clean_stale(directory: str | os.PathLike[str]) -> list[Path]:
-    """Delete the temporaries a killed run left in ``directory``; warn about each."""
+def clean_stale(directory: str | os.PathLike[str], *, warn: bool = True) -> list[Path]:
+    """Delete the temporaries a killed run left in ``directory``; warn about each (unless
+    ``warn`` is False: this command's own workers, killed as it stops)."""
     removed = []
     for p in stale_temporaries(directory):
         try:
             p.unlink()
         except OSError as e:
-            warnings.warn(f"{p}: temporary file of an interrupted run; cannot remove it: "
-                          f"{e.strerror}", stacklevel=2)
+            if warn:
+                warnings.warn(f"{p}: temporary file of an interrupted run; cannot remove it: "
+                              f"{e.strerror}", stacklevel=2)
             continue
         removed.append(p)
-        warnings.warn(f"removed {p}, the temporary file of an interrupted run", stacklevel=2)
+        if warn:
+            warnings.warn(f"removed {p}, the temporary file of an interrupted run",
+                          stacklevel=2)
     return removed
 
+
+# --------------------------------------------------------------------------------------------
+# locks: one command at a time per target
+
+_LOCKS: dict[Path, tuple[int, int]] = {}
+"""Lock files held -> (open descriptor, PID of the process that took it: a forked worker
+inherits the descriptors but never removes its parent's locks)."""
+
+
+def lock_path(target: str | os.PathLike[str]) -> Path:
+    """The lock file of a target: ``.NAME.lock`` beside it (beside, not inside, a directory)."""
+    target = Path(os.path.abspath(target))
+    return target.with_name(f".{target.name}.lock")
+
+
+def lock_outputs(outputs: Iterable[Output]) -> None:
+    """Take an exclusive lock on each target for the life of this process (or until
+    :func:`release_locks`).
+
+    A target that another running process has locked is refused with one line naming it
+    (:class:`OutputError`), before any work: two commands writing the same ``--summary``,
+    ``--save`` or ``--export`` at once would otherwise both succeed, the later rename silently
+    replacing the earlier result. The lock is ``flock`` on ``.NAME.lock`` beside the target:
+    the kernel drops it when its process ends, even by ``kill -9``, so a lock file left behind
+    never blocks. Where the file system cannot lock (no ``flock``), the lock is skipped.
+    """
+    if os.name != "posix":
+        return
+    import fcntl
+
+    for out in outputs:
+        lock = lock_path(out.path)
+        if _LOCKS.get(lock, (0, 0))[1] == os.getpid():
+            continue
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        while True:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = _holder(fd)
+                os.close(fd)
+                raise OutputError(f"{out.option} {out.path}: another navreplay command"
+                                  f"{holder} is writing it; wait for it to end") from None
+            except OSError:  # no locks on this file system
+                os.close(fd)
+                break
+            try:  # the file we locked is still the lock file (not unlinked by its last owner)
+                same = os.path.samestat(os.fstat(fd), os.stat(lock))
+            except OSError:
+                same = False
+            if not same:
+                os.close(fd)
+                continue
+            with contextlib.suppress(OSError):  # who holds it, for messages (a full disk
+                os.ftruncate(fd, 0)              # leaves it empty)
+                os.write(fd, f"{os.getpid()}@{_HOST}\n".encode())
+            with _LOCK:
+                _LOCKS[lock] = (fd, os.getpid())
+            break
+
+
+def _holder(fd: int) -> str:
+    with contextlib.suppress(OSError, ValueError):
+        text = os.pread(fd, 256, 0).decode().strip()
+        if text:
+            pid, _, host = text.partition("@")
+            return f" (PID {int(pid)}{'' if host in ('', _HOST) else f' on {host}'})"
+    return ""
+
+
+def release_locks() -> None:
+    """Remove and release every lock of this process."""
+    with _LOCK:
+        held = list(_LOCKS.items())
+        _LOCKS.clear()
+    for lock, (fd, pid) in held:
+        if pid == os.getpid():
+            with contextlib.suppress(OSError):
+                lock.unlink()
+        with contextlib.suppress(OSError):
+            os.close(fd)
+
+
+# --------------------------------------------------------------------------------------------
+# a full disk
+
+DISK_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO})
+"""Errors of the device, not of the program: reported in one line."""
+
+
+@contextlib.contextmanager
+def writing(what: str) -> Iterator[None]:
+    """A block that writes ``what`` (``--export out``): a full disk, a quota, a read-only or
+    failing device becomes one :class:`OutputError` naming it."""
+    try:
+        yield
+    except OSError as e:
+        if isinstance(e, OutputError) or e.errno not in DISK_ERRORS:
+            raise
+        raise OutputError(f"{what}: {e.strerror or e}; nothing was written") from None

@@ -193,6 +193,8 @@ def _coerce(name: str, tp: Any, value: Any) -> Any:
     if tp is bool:
         if isinstance(value, bool):
             return value
+        if not isinstance(value, str):  # a TOML number is not a boolean
+            raise ParamError(f"parameter {name}: {value!r} is not a boolean (true/false)")
         s = str(value).strip().lower()
         if s in ("1", "true", "yes", "on"):
             return True
@@ -210,6 +212,8 @@ def _coerce(name: str, tp: Any, value: Any) -> Any:
             raise ParamError(f"parameter {name}: {value!r} is not an integer")
         return int(f)
     if tp is float:
+        if isinstance(value, bool):  # TOML true is not 1.0
+            raise ParamError(f"parameter {name}: expected a number, got {value!r}")
         try:
             f = float(value)
         except (TypeError, ValueError):
@@ -218,7 +222,9 @@ def _coerce(name: str, tp: Any, value: Any) -> Any:
             raise ParamError(f"parameter {name}: {value!r} is not finite")
         return f
     if tp is str:
-        return str(value)
+        if not isinstance(value, str):
+            raise ParamError(f"parameter {name}: expected a string, got {value!r}")
+        return value
     return value
 
 

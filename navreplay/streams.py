@@ -154,6 +154,10 @@ class Metadata:
         Seed of the numpy Generator the recording was simulated with.
     params : dict
         All scenario parameters, SI units.
+    sensors : dict
+        The sensor specifications, SI: per kind (``imu``, ``gps``, ...) the stated fields of
+        its error-model record and a ``source``
+        (:meth:`navreplay.sensors.specs.SensorSpecs.to_metadata`); empty when unknown.
     true_errors : dict
         True values of the simulated error states (biases, scale factors, misalignments, lever
         arm, current, ...), SI, lists for vectors.
@@ -173,9 +177,10 @@ class Metadata:
     initial_nav: dict[str, Any] = dataclasses.field(default_factory=dict)
     navreplay_version: str = ""
     extra: dict[str, Any] = dataclasses.field(default_factory=dict)
+    sensors: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name in ("params", "true_errors", "initial_nav", "extra"):
+        for name in ("params", "true_errors", "initial_nav", "extra", "sensors"):
             setattr(self, name, jsonable(getattr(self, name)))
 
 

@@ -77,7 +77,11 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
               seed: int = 0, imu_grade: tuple[float, float, float, float] | None = None,
               gyro_bias_dph: tuple[float, float, float] | None = None, mag: bool = False,
               mag_frame: str | None = None, mag_bias_nT: float = 0.0, poses: bool = False,
-              imu_lag: float = 0.0, imu_zero_stamps: bool = False) -> Path:
+              imu_lag: float = 0.0, imu_zero_stamps: bool = False,
+              imu_frame_after: tuple[float, str] | None = None,
+              gyro_spike: tuple[float, float] | None = None,
+              world_frame: str | None = None, imu: bool = True,
+              text_topic: str | None = None) -> Path:
     """Write a rosbag2 folder at ``path``.
 
     ``imu_frame`` overrides the IMU frame id (a mislabelled FRD IMU: ``ned=True,
@@ -86,6 +90,10 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
     sets the GNSS noise); ``gyro_bias_dph`` fixes the gyro bias instead of drawing it.
     ``mag_bias_nT`` adds a hard-iron bias along body x. ``imu_lag`` [s]: the IMU messages are
     logged that long after their header stamps; ``imu_zero_stamps``: their stamps are zero.
+    ``imu_frame_after`` (t [s], frame id): the IMU's frame id from that time on; ``gyro_spike``
+    (t [s], rate [rad/s]): the gyro x sample at that time replaced; ``world_frame``: the
+    Odometry's frame id; ``imu=False``: no IMU topic; ``text_topic``: a std_msgs/String topic
+    of that name beside the others.
     """
     rng = np.random.default_rng(seed)
     tr = trajectory(duration, rate)
@@ -101,7 +109,7 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
         f += grade[2] * rng.standard_normal(3)
         f += grade[3] / math.sqrt(dt) * rng.standard_normal(f.shape)
     body = "base_link_frd" if ned else "base_link"
-    world = "odom_ned" if ned else "odom"
+    world = world_frame or ("odom_ned" if ned else "odom")
     imu_frame = imu_frame or ("imu_frd" if ned else "imu_link")
     d_ned = earth.lla_to_ned_offset(LAT, LON, H, *tr.pos.T)
     q = tr.q_nb if ned else quat_mult(quat_mult(Q_ENU_NED, tr.q_nb), Q_FRD_FLU)
@@ -128,9 +136,19 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
         ocov = zero9.copy()
         ocov[0] = -1.0
         lag = int(round(imu_lag * 1e9))
-        for k in range(1, len(t_ns)):
+        if gyro_spike is not None:
+            w[int(round(gyro_spike[0] * rate)) - 1, 0] = gyro_spike[1]
+        if text_topic is not None:
+            c_text = bag.add_connection(text_topic, "std_msgs/msg/String", typestore=STORE)
+            for k in range(0, len(t_ns), int(rate)):
+                msg = T["std_msgs/msg/String"](data=f"status {k}")
+                bag.write(c_text, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+        for k in range(1, len(t_ns) if imu else 0):
+            frame = imu_frame
+            if imu_frame_after is not None and tr.t[k] >= imu_frame_after[0]:
+                frame = imu_frame_after[1]
             msg = T["sensor_msgs/msg/Imu"](
-                header=_header(0 if imu_zero_stamps else t_ns[k], imu_frame),
+                header=_header(0 if imu_zero_stamps else t_ns[k], frame),
                 orientation=_q([1.0, 0, 0, 0]),
                 orientation_covariance=ocov, angular_velocity=_v3(w[k - 1]),
                 angular_velocity_covariance=zero9, linear_acceleration=_v3(f[k - 1]),

@@ -19,14 +19,13 @@ from navreplay.geo.rotations import quat_to_euler, wrap_angle
 from navreplay.jobs import filter_specs
 from navreplay.logs.initial import initial_nav
 from navreplay.logs.options import InitMethod, log_options
-from navreplay.logs.prepare import open_log
+from navreplay.logs.prepare import read_log
 from navreplay.streams import StreamKind
 
 
 def _prepared(path, options):
     """The log read whole and made ready, and its notes."""
-    with open_log(path, options, whole=True) as source:
-        return next(source).recording(), source.notes
+    return read_log(path, options)
 
 
 @pytest.fixture(scope="session")
@@ -270,14 +269,19 @@ def test_local_origin_from_initial_or_gnss(short_bags: dict[str, Path], tmp_path
 
 def test_magnetometer_dip_sign(short_bags: dict[str, Path], tmp_path: Path) -> None:
     """A FLU magnetometer labelled *_frd reads the vertical field upside down: stopped with
-    the fix; declared flu it passes. The correct one passes with the WMM's dip."""
+    the fix (a declaration that must win over the frame id's name, so --force-frame); declared
+    flu alone it is refused (the frame id says FRD), forced it passes. The correct one passes
+    with the WMM's dip."""
     args = ["--reference", "/ground_truth/odom"]
     _, out = _run("ins", str(short_bags["mag_flipped"]), "--init", "reference", *args,
                   tmp=tmp_path, ok=False)
-    assert "--frame mag=flu" in out and "dip" in out and "Traceback" not in out
+    assert "--frame mag=flu --force-frame" in out and "dip" in out and "Traceback" not in out
     assert out.endswith("1")
     _, out = _run("ins", str(short_bags["mag_flipped"]), "--init", "reference", "--frame",
-                  "mag=flu", *args, tmp=tmp_path)
+                  "mag=flu", *args, tmp=tmp_path, ok=False)
+    assert "contradicts frame id 'mag_frd'" in out
+    _, out = _run("ins", str(short_bags["mag_flipped"]), "--init", "reference", "--frame",
+                  "mag=flu", "--force-frame", *args, tmp=tmp_path)
     assert "magnetometer dip sign agrees" in out
     _, out = _run("ins", str(short_bags["mag"]), "--init", "reference", *args, tmp=tmp_path)
     assert "magnetometer dip sign agrees" in out

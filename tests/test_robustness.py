@@ -21,7 +21,7 @@ from mcap.writer import CompressionType, Writer
 from navreplay import metrics, outputs
 from navreplay.cli import cli
 from navreplay.filters.gps_ins import GpsInsFilter
-from navreplay.io import write_recording
+from navreplay.io import read_recording, write_recording
 from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 from navreplay.streams import Recording, Stream, StreamKind
@@ -212,15 +212,18 @@ def test_sigterm_during_simulate_and_stale_temporaries_of_kill_9(tmp_path):
     assert proc.returncode == 143 and "terminated by SIGTERM" in err, err
     assert parts(tmp_path) == [] and target.read_bytes() == b"keep"
 
-    proc = _spawn(args, tmp_path)
+    # kill -9 of the command and its worker (the process group, as a killed session would)
+    proc = subprocess.Popen(NAVREPLAY + args, cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         assert _wait_for(lambda: parts(tmp_path), 120)
-        proc.send_signal(signal.SIGKILL)
+        os.killpg(proc.pid, signal.SIGKILL)
         proc.communicate(timeout=30)
     finally:
         proc.kill()
     left = parts(tmp_path)
-    assert len(left) == 1 and str(proc.pid) in left[0].name  # kill -9 cannot clean up
+    assert len(left) == 1  # kill -9 cannot clean up
+    assert _wait_for(lambda: not outputs._alive(outputs._pid_of(left[0])), 10)
     res = invoke("simulate", "stationary", "-o", tmp_path / "next.mcap", "--duration", "5")
     assert res.exit_code == 0, res.output
     assert "temporary file of an interrupted run" in res.stderr
@@ -470,3 +473,90 @@ def test_help_documents_exit_codes():
     text = invoke("--help").output
     for code in ("130", "143", "usage error", "--no-strict", "DAMAGED"):
         assert code in text
+
+
+# --------------------------------------------------------------------------------------------
+# 7. what used to end in a traceback
+
+
+@pytest.fixture(scope="module")
+def odd_bags(tmp_path_factory) -> dict[str, Path]:
+    from rosbag_maker import write_bag
+
+    root = tmp_path_factory.mktemp("odd")
+    return {"no_imu": write_bag(root / "no_imu", duration=20.0, imu=False),
+            "text": write_bag(root / "text", duration=20.0, text_topic="/status")}
+
+
+def test_a_bag_without_imu_and_init_reference(odd_bags):
+    one_line_error(invoke("run", "ins", odd_bags["no_imu"], "--no-viz", "--init", "reference",
+                          "--reference", "/ground_truth/odom"),
+                   "--init reference", "no IMU samples", "--topic imu=")
+
+
+def test_a_reference_topic_of_another_type(odd_bags, drive):
+    one_line_error(invoke("run", "ins", odd_bags["text"], "--no-viz", "--init", "reference",
+                          "--reference", "/status"),
+                   "reference /status: type std_msgs/msg/String cannot be a reference",
+                   "nav_msgs/msg/Odometry")
+    one_line_error(invoke("run", "gps-ins", drive, "--no-viz", "--reference", "/imu"),
+                   "type sensor_msgs/msg/Imu cannot be a reference")
+
+
+def test_output_rate_has_an_upper_bound(drive):
+    for bad in ("1e9", "1000.5"):
+        one_line_error(invoke("run", "gps-ins", drive, "--no-viz", "--output-rate", bad),
+                       "--output-rate must be positive and at most 1000 Hz")
+    assert invoke("run", "ins", drive, "--no-viz", "--output-rate", "1000").exit_code == 0
+
+
+def test_a_position_only_reference_is_viewed_exported_and_reported(drive, tmp_path):
+    """A reference with positions only: the default view, the exports and the report are
+    written (its missing attitude is NaN, never made up), and the position is scored."""
+    rec = read_recording(drive)
+    truth = rec[StreamKind.TRUTH]
+    rows = ["t_ns,lat_deg,lon_deg,h"] + [
+        f"{t},{np.degrees(p[0]):.10f},{np.degrees(p[1]):.10f},{p[2]:.4f}"
+        for t, p in zip(truth.t_ns[::10], truth["pos"][::10], strict=True)]
+    ref = tmp_path / "pos.csv"
+    ref.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "out"
+    res = invoke("run", "gps-ins", drive, "--reference", ref, "--save", out / "v.rrd",
+                 "--export", out / "e", "--report", out / "r.html", "--summary", out / "s.json")
+    assert res.exit_code == 0, res.output
+    assert res.stderr == "", res.stderr
+    assert (out / "v.rrd").stat().st_size > 0 and (out / "r.html").stat().st_size > 0
+    lines = [ln.split() for ln in (out / "e" / "reference.tum").read_text().splitlines()
+             if not ln.startswith("#")]
+    assert len(lines) == len(rows) - 1 and all(ln[4:] == ["nan"] * 4 for ln in lines)
+    s = json.loads((out / "s.json").read_text())["filters"]["gps-ins"]
+    assert s["pos_rms_h"] < 5.0 and "att_rms_heading" not in s
+
+
+def test_info_exit_status_agrees_with_what_it_prints(drive, tmp_path):
+    """A CRC mismatch (an uncompressed file with chunk CRCs, one bit flipped in a chunk) is
+    printed and is an error: exit 1."""
+    plain = tmp_path / "crc.mcap"
+    uncompressed_copy(drive, plain, crcs=True)
+    data = bytearray(plain.read_bytes())
+    data[len(data) // 2] ^= 0x10
+    plain.write_bytes(bytes(data))
+    res = invoke("info", plain)
+    assert res.exit_code == 1 and "CRC mismatch" in res.output
+    one_line_error(res, "CRC mismatch")
+
+
+def test_no_raw_warning_lines_after_an_error(tmp_path):
+    """An error while a file is read in windows: the reader's warnings come as `warning:`
+    lines before the error, never as `sys:1: RecordingWarning` at exit."""
+    from rosbag_maker import write_bag
+
+    bag = write_bag(tmp_path / "bag", duration=20.0)
+    data = next(bag.glob("*.mcap"))  # the bag's MCAP file alone: no start for gps-ins
+    res = subprocess.run(NAVREPLAY + ["run", "gps-ins", str(data), "--no-viz"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 1
+    lines = res.stderr.strip().splitlines()
+    assert "sys:1" not in res.stderr and "RecordingWarning" not in res.stderr, res.stderr
+    assert lines[-1].startswith("Error: ") and all(ln.startswith("warning: ")
+                                                   for ln in lines[:-1]), lines

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -237,6 +238,28 @@ def test_gps_noise_statistics_and_true_errors():
     np.testing.assert_allclose(out.vel_sigma[0], [0.05, 0.05, 0.1])
     assert set(out.fix_columns()) == {"pos", "pos_sigma"}
     assert set(out.velocity_columns()) == {"v_n", "vel_sigma"}
+
+
+def test_gps_velocity_gauss_markov_error():
+    """The time-correlated velocity error has its stationary sigma and correlation time, and
+    the reported sigma is the total; without it the draws are those of the white model."""
+    model = GpsModel(pos_sigma=1.0, vel_sigma=0.02, vel_gm_sigma=(0.1, 0.1, 0.2), vel_gm_tau=20.0,
+                     rate=1.0)
+    m = 200_000
+    pos, v = np.tile([0.6, 2.2, 10.0], (m, 1)), np.zeros((m, 3))
+    out = model.measure(model.draw(rng(3)), pos, v, rng(4))
+    err = out.vel_error_n
+    total = np.hypot(0.02, [0.1, 0.1, 0.2])
+    np.testing.assert_allclose(err.std(axis=0) / total, 1.0, atol=0.02)
+    np.testing.assert_allclose(out.vel_sigma[0], total)
+    lag = 20  # one correlation time: the GM part correlates exp(-1), the white part not at all
+    corr = np.mean(err[:-lag] * err[lag:], axis=0) / err.var(axis=0)
+    np.testing.assert_allclose(corr, np.exp(-1.0) * (1.0 - 0.02 ** 2 / total ** 2), atol=0.03)
+    white = GpsModel(pos_sigma=1.0, vel_sigma=0.02, rate=1.0)
+    a = white.measure(white.draw(rng(3)), pos[:100], v[:100], rng(4))
+    b = dataclasses.replace(model, vel_gm_sigma=0.0)
+    b = b.measure(b.draw(rng(3)), pos[:100], v[:100], rng(4))
+    np.testing.assert_array_equal(a.v_n, b.v_n)
 
 
 # --------------------------------------------------------------------------------------------

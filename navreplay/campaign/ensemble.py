@@ -143,8 +143,8 @@ def run_ensemble(
             if ok:
                 ex.shutdown(wait=True)
             elif isinstance(ex, cf.Executor):
+                lifecycle.stop_workers(ex)  # before shutdown, which forgets the processes
                 ex.shutdown(wait=False, cancel_futures=True)
-                lifecycle.stop_workers(ex)
             else:
                 ex.shutdown(wait=False)
     return EnsembleRun(done - len(failed), failed, time.perf_counter() - t0, run_seconds)

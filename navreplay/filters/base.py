@@ -69,11 +69,14 @@ import dataclasses
 import enum
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from navreplay.streams import Metadata, StreamKind
+
+if TYPE_CHECKING:
+    from navreplay.sensors.specs import SensorSpecs
 
 
 class Quantity(enum.StrEnum):
@@ -394,6 +397,52 @@ NAV_PART: dict[Nav, str] = {
 """The part of the navigation solution each navigation quantity is an error of."""
 
 
+OUTPUT_LIMIT = 1e100
+"""Largest magnitude of any entry of an estimate (states, covariance, solution, extras): a
+value beyond it is no estimate but an overflow waiting to happen (its square, or a latitude
+turned into metres and squared, overflows in the scores), and stops the run like a non-finite
+one."""
+LATITUDE_SLACK = 1e-9
+"""How far beyond a pole [rad] a latitude of the solution may lie (rounding)."""
+
+
+def output_problem(part: str, values: np.ndarray) -> tuple[np.ndarray, str]:
+    """Rows of an estimate column that cannot be an estimate, and why.
+
+    Parameters
+    ----------
+    part : str
+        ``pos``, ``v_n`` or ``q_nb`` for the solution's parts (``pos`` rows are lat, lon [rad],
+        h [m]), anything else for states, covariances and extras.
+    values : ndarray, shape (N, ...)
+
+    Returns
+    -------
+    bad : ndarray of bool, shape (N,)
+        Non-finite, beyond :data:`OUTPUT_LIMIT`, or (``pos``) a latitude beyond a pole.
+    why : str
+        What the first bad row has, for the message.
+    """
+    flat = values.reshape(len(values), -1)
+    finite = np.isfinite(flat).all(axis=1)
+    with np.errstate(invalid="ignore"):
+        huge = (np.abs(flat) > OUTPUT_LIMIT).any(axis=1) & finite
+        pole = np.zeros(len(flat), bool)
+        if part == "pos" and flat.shape[1] >= 1:
+            pole = (np.abs(flat[:, 0]) > np.pi / 2 + LATITUDE_SLACK) & finite & ~huge
+    bad = ~finite | huge | pole
+    if not bad.any():
+        return bad, ""
+    i = int(np.argmax(bad))
+    if not finite[i]:
+        why = "non-finite"
+    elif huge[i]:
+        why = f"overflowing ({float(np.max(np.abs(flat[i]))):.3g}, beyond {OUTPUT_LIMIT:g})"
+    else:
+        why = f"impossible (latitude {float(flat[i, 0]):.6g} rad, beyond a pole)"
+    return bad, why
+
+
 def initial_parts(classes: Sequence[type[Filter]]) -> tuple[str, ...]:
     """The parts of the initial solution that any of ``classes`` starts from, in the order of
     :data:`NAV_PARTS`; an undeclared part name is refused with the filter's name."""
@@ -563,6 +612,20 @@ class Filter(abc.ABC):
     it falls back to the default where its kernel does not apply (a subclass that changes
     ``propagate``, ``update`` or ``estimate``).
 
+    Settings from the sensors
+    -------------------------
+    settings_from_sensors(sensors) -> dict  (classmethod)
+        The parameter values that follow from the recording's sensor specifications
+        (:class:`navreplay.sensors.specs.SensorSpecs`: ``sensors.imu.gyro_arw`` [rad/sqrt(s)],
+        ``sensors.gps.pos_sigma``, ...), by parameter name, in SI. Only values of stated
+        fields (``sensors.has("imu", "gyro_arw")``) may be used. The replay builds the filter's
+        ``Params`` from the user's values over these over the defaults
+        (:func:`navreplay.filters.settings.build_params`), and the run summary says where each
+        came from. The base class derives nothing.
+    default_sensors() -> SensorSpecs  (classmethod)
+        The sensors the defaults of ``Params`` stand for (e.g. a tactical IMU): a run whose
+        recording does not state them says once that it uses these defaults. Empty by default.
+
     Optional method
     ---------------
     bridge_imu_gap(t: float, since: float) -> None
@@ -592,6 +655,19 @@ class Filter(abc.ABC):
     def state_names(self) -> tuple[str, ...]:
         """Names of the declared states, in order."""
         return state_names(self.states)
+
+    @classmethod
+    def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
+        """Parameter values derived from the recording's sensor specifications (see the class
+        docstring); none here."""
+        return {}
+
+    @classmethod
+    def default_sensors(cls) -> SensorSpecs:
+        """The sensor specifications the ``Params`` defaults stand for; none here."""
+        from navreplay.sensors.specs import SensorSpecs
+
+        return SensorSpecs()
 
     def __init__(self, params: FilterParams, context: FilterContext) -> None:
         self.params = params

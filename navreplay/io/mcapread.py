@@ -36,7 +36,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from navreplay.io.checks import GAP_FACTOR, gap_text, when
+from navreplay.io.checks import GAP_FACTOR, check_frame_ids, gap_text, when
 from navreplay.io.convert import AuxColumn, Convention
 from navreplay.io.decode import ChannelDecoder, Decoding, describe_topics, file_metadata
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
@@ -156,7 +156,7 @@ class McapSource(Source):
         with warnings.catch_warnings():  # (said once, for the streams read)
             warnings.simplefilter("ignore", RecordingWarning)
             present = choose_topics(where, every.all_candidates(contents), set(SPECS),
-                                    explicit=False, named=None, available=available)
+                                    explicit=False, named=self._topics, available=available)
         counts = contents.statistics.channel_message_counts if contents.statistics else {}
         decoders = {k: plan.decoder_of(c) for k, (c, _) in chosen.items()}
         totals = {k: counts.get(d.channel.id) if contents.intact else None
@@ -204,6 +204,7 @@ class _Reading:
         self.contents = contents
         self.last: dict[StreamKind, int] = {}
         self.frame: dict[StreamKind, str] = {}
+        self.notes: dict[StreamKind, str] = {}  # frame ids that change, the latest note
         self.ahead: dict[StreamKind, tuple[int, int]] = {}  # kind -> (chunk, first time)
         self.floor: dict[StreamKind, int] = {}  # no sample of the kind may come before
         self.base: dict[StreamKind, str] = {}  # kind -> "header" or "log", as first chosen
@@ -283,6 +284,10 @@ class _Reading:
         fields = decoder.drain()
         fields["t_ns"] = self._times(kind, decoder, fields["t_ns"])
         self.frame.setdefault(kind, decoder.first_frame_id or SPECS[kind].frame_id)
+        note = check_frame_ids(kind, decoder.label, decoder.frame_ids, src._declared.get(kind),
+                               self.frame[kind])  # an error stops the read at this window
+        if note:
+            self.notes[kind] = f"{decoder.label}: {note}"  # said once, by report()
         stream, topic_source = build_stream(
             kind, fields, self.frame[kind], decoder.label, self.aux, self.t0_ns, src._validate,
             src._declared.get(kind), decoder.channel.topic, self.others[kind],
@@ -332,11 +337,8 @@ class _Reading:
 
     def report(self) -> None:
         """Give the warnings of the read, each once (gaps over the whole stream)."""
-        for kind, decoder in self.chosen.items():
-            if len(decoder.frame_ids) > 1:
-                self.warnings.add(f"{decoder.label}: frame_id changes between messages "
-                                  f"({sorted(decoder.frame_ids)}); using {self.frame.get(kind)!r}",
-                                  self.windows)
+        for note in self.notes.values():
+            self.warnings.add(note, self.windows)
         for kind, gaps in self.gaps.items():
             line = gaps.line(self.t0_ns)
             if line:

@@ -7,6 +7,8 @@ Keys (all values are strings; JSON where noted):
 ``scenario``           scenario name, ``""`` for a recording not simulated here
 ``seed``               integer seed, ``""`` when unknown
 ``params``             JSON object, scenario parameters (SI)
+``sensors``            JSON object, the sensor specifications (SI; per kind its fields and
+                       ``source``, :mod:`navreplay.sensors.specs`); absent when unknown
 ``true_errors``        JSON object, true values of the simulated error states (SI)
 ``initial_nav``        JSON object, the initial navigation solution handed to filters
 ``navreplay_version``  version of navreplay that simulated the recording
@@ -31,7 +33,7 @@ from navreplay.io.errors import RecordingError
 from navreplay.io.schemas import FORMAT_VERSION
 from navreplay.streams import Metadata
 
-_JSON_KEYS = ("params", "true_errors", "initial_nav", "extra")
+_JSON_KEYS = ("params", "true_errors", "initial_nav", "extra", "sensors")
 
 
 def _builtin(obj: Any) -> Any:
@@ -80,7 +82,7 @@ def encode_metadata(meta: Metadata, t0_ns: int, aux: list[AuxColumn]) -> dict[st
         "extra",
         "t0_ns",
         "truth_columns",
-    )
+    ) + (("sensors",) if meta.sensors else ())
     return {k: out[k] for k in order}
 
 
@@ -134,7 +136,10 @@ def decode_metadata(
         initial_nav=load("initial_nav", {}),
         navreplay_version=pairs.get("navreplay_version", ""),
         extra=load("extra", {}),
+        sensors=load("sensors", {}),
     )
+    if not isinstance(meta.sensors, dict):
+        raise RecordingError(f"{where}: metadata 'sensors' is not a JSON object")
     try:
         aux = [AuxColumn.from_json(c) for c in load("truth_columns", [])]
     except (KeyError, TypeError, ValueError) as exc:

@@ -16,6 +16,7 @@ topic whose stamps are zero or do not increase takes the log times, with a warni
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sqlite3
 import warnings
@@ -26,8 +27,9 @@ from typing import Any
 import numpy as np
 
 from navreplay.io.cdr import fields_of_messages
+from navreplay.io.checks import check_frame_ids
 from navreplay.io.convert import REDUCE, Convention
-from navreplay.io.errors import RecordingError, RecordingWarning
+from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.schemas import SPECS, normalize_type_name
 from navreplay.io.source import COMPLETE, Source, Window
 from navreplay.io.topics import build_stream, candidate, choose_topics, sample_times, topic_map
@@ -69,6 +71,8 @@ class _Bag:
         folder = bag_folder(self.path)
         if not self.path.exists():
             raise RecordingError(f"{self.where}: no such file or folder")
+        if folder is not None:
+            bag_metadata(folder)  # a garbled metadata.yaml: one line that says where
         try:
             if folder is not None:
                 from rosbags.highlevel import AnyReader
@@ -84,7 +88,8 @@ class _Bag:
         except RecordingError:
             raise
         except Exception as exc:  # rosbags and sqlite raise many types on foreign data
-            raise RecordingError(f"{self.where}: not a readable rosbag2 bag ({exc})") from None
+            raise RecordingError(f"{self.where}: not a readable rosbag2 bag "
+                                 f"({' '.join(str(exc).split()) or type(exc).__name__})") from None
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -125,7 +130,8 @@ class _Bag:
             raise
         except Exception as exc:
             raise RecordingError(
-                f"{self.where}: messages of {', '.join(topics)} cannot be read ({exc!r})"
+                f"{self.where}: messages of {', '.join(topics)} cannot be read "
+                f"({type(exc).__name__}: {' '.join(str(exc).split())})"
             ) from None
 
 
@@ -169,6 +175,7 @@ class BagSource(Source):
     def _windows(self) -> Iterator[Window]:
         where = self.name
         topic_kinds = topic_map(self._topics)
+        metadata = self._check()
         with _open(self.path) as bag:
             listing = bag.topics()
             available = ", ".join(f"{t} ({ty})" for t, ty, _, _ in listing) or "no topics"
@@ -178,8 +185,8 @@ class BagSource(Source):
                                    named=self._topics, available=available, what="bag")
             with warnings.catch_warnings():  # (said once, for the streams read)
                 warnings.simplefilter("ignore", RecordingWarning)
-                present = choose_topics(where, cands, set(SPECS), explicit=False, named=None,
-                                        available=available, what="bag")
+                present = choose_topics(where, cands, set(SPECS), explicit=False,
+                                        named=self._topics, available=available, what="bag")
             gathered: dict[StreamKind, tuple[list[Any], list[int]]] = {}
             for kind, (c, _) in chosen.items():
                 msgs, times = [], []
@@ -203,15 +210,34 @@ class BagSource(Source):
             fields["t_ns"] = sample_times(fields["t_ns"], log_ns, self._time, label)
             frames = {m.header.frame_id for m in msgs}
             frame_id = msgs[0].header.frame_id if msgs else SPECS[kind].frame_id
-            if len(frames) > 1:
-                warnings.warn(RecordingWarning(
-                    f"{label}: frame_id changes between messages ({sorted(frames)}); using "
-                    f"{frame_id!r}"), stacklevel=2)
+            note = check_frame_ids(kind, label, frames, self._declared.get(kind), frame_id)
+            if note:
+                warnings.warn(RecordingWarning(f"{label}: {note}"), stacklevel=2)
             streams[kind], self.sources[kind] = build_stream(
                 kind, fields, frame_id, label, [], t0_ns, self._validate,
                 self._declared.get(kind), topic, others)
-        yield Window(streams, dict.fromkeys(streams, COMPLETE), Metadata(), t0_ns,
+        yield Window(streams, dict.fromkeys(streams, COMPLETE), metadata, t0_ns,
                      frozenset(present), final=True)
+
+    def _check(self) -> Metadata:
+        """The data files against metadata.yaml (:func:`check_bag`): a disagreement is a
+        warning, data lost a salvage (the part kept goes into the metadata:
+        :attr:`Source.coverage`)."""
+        check = check_bag(self.path)
+        metadata = Metadata()
+        if check is not None and check.problems:
+            text = (f"{self.name}: the data disagree with metadata.yaml: "
+                    f"{'; '.join(check.problems)}")
+            if check.lost:
+                self._salvaged = True
+                warnings.warn(SalvagedWarning(f"{text}; replaying what the data files hold",
+                                              data_complete=False), stacklevel=4)
+                if check.declared_duration_s:  # the part replayed (Source.coverage)
+                    metadata.params["duration"] = check.declared_duration_s
+                metadata.extra["messages_kept"] = check.kept
+            else:
+                warnings.warn(RecordingWarning(text), stacklevel=4)
+        return metadata
 
 
 def _fields(msgs: list[Any], kind: StreamKind, label: str) -> dict[str, np.ndarray]:
@@ -226,3 +252,197 @@ def _fields(msgs: list[Any], kind: StreamKind, label: str) -> dict[str, np.ndarr
         out[name] = np.array(value if columns is None else value[:, columns])
     return out
 
+
+
+# --------------------------------------------------------------------------------------------
+# integrity: the data files against metadata.yaml
+
+BAG_TIME_SLACK_NS = 1_000_000
+"""The data may end this much before the end metadata.yaml declares [ns] (rounding)."""
+
+
+def bag_metadata(folder: Path) -> dict[str, Any]:
+    """The ``rosbag2_bagfile_information`` of a folder's metadata.yaml; a file that is not
+    YAML, or not rosbag2 metadata, is one :class:`RecordingError` line."""
+    from ruamel.yaml import YAML
+    from ruamel.yaml.error import MarkedYAMLError, YAMLError
+
+    path = folder / "metadata.yaml"
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RecordingError(f"{folder}: no metadata.yaml (not a rosbag2 folder)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecordingError(f"{path}: cannot be read ({exc})") from None
+    try:
+        doc = YAML(typ="safe", pure=True).load(text)
+    except MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        raise RecordingError(f"{path}: not valid YAML{at} ({exc.problem or exc.context})"
+                             ) from None
+    except YAMLError as exc:
+        raise RecordingError(f"{path}: not valid YAML ({' '.join(str(exc).split())})"
+                             ) from None
+    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+    if not isinstance(info, dict):
+        raise RecordingError(f"{path}: no rosbag2_bagfile_information (not rosbag2 metadata)")
+    return info
+
+
+@dataclasses.dataclass(frozen=True)
+class BagCheck:
+    """The data files of a rosbag2 folder against its metadata.yaml.
+
+    Attributes
+    ----------
+    declared : dict[str, int]
+        Messages per topic that metadata.yaml counts.
+    found : dict[str, int] or None
+        Messages per topic the data files hold (None: not counted, e.g. compressed files).
+    start_ns, end_ns : int or None
+        First and last log time in the data files.
+    declared_start_ns, declared_end_ns : int or None
+        What metadata.yaml declares.
+    problems : tuple of str
+        Each disagreement, one phrase (the ``DAMAGED`` line of ``navreplay info``).
+    lost : bool
+        The data files hold less than metadata.yaml declares: messages were lost.
+    """
+
+    declared: dict[str, int]
+    found: dict[str, int] | None
+    start_ns: int | None
+    end_ns: int | None
+    declared_start_ns: int | None
+    declared_end_ns: int | None
+    problems: tuple[str, ...] = ()
+    lost: bool = False
+
+    @property
+    def kept(self) -> float:
+        """The fraction of the declared messages the data files hold (at most 1)."""
+        total = sum(self.declared.values())
+        if self.found is None or not total:
+            return 1.0
+        return min(sum(self.found.values()) / total, 1.0)
+
+    @property
+    def declared_duration_s(self) -> float | None:
+        if self.declared_start_ns is None or self.declared_end_ns is None:
+            return None
+        return (self.declared_end_ns - self.declared_start_ns) * 1e-9
+
+
+def _int(value: Any) -> int | None:
+    if isinstance(value, dict):
+        value = value.get("nanoseconds", value.get("nanoseconds_since_epoch"))
+    return int(value) if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+def check_bag(path: Path) -> BagCheck | None:
+    """Count the messages of a rosbag2 folder's data files (per topic, and their first and
+    last log times) and compare them with its metadata.yaml; None for a lone ``.db3``
+    (nothing declares what it should hold).
+
+    MCAP data files are summarised from their own indexes (and walked when damaged, as
+    ``navreplay info`` does); sqlite3 ones are counted by SQL. Compressed files are not
+    counted.
+
+    Raises
+    ------
+    RecordingError
+        A metadata.yaml that is not YAML or not rosbag2 metadata, a data file that is not
+        there or cannot be opened.
+    """
+    folder = bag_folder(path)
+    if folder is None:
+        return None
+    info = bag_metadata(folder)
+    declared: dict[str, int] = {}
+    for item in info.get("topics_with_message_count") or []:
+        try:
+            declared[str(item["topic_metadata"]["name"])] = int(item["message_count"])
+        except (KeyError, TypeError, ValueError):
+            raise RecordingError(f"{folder / 'metadata.yaml'}: a topics_with_message_count "
+                                 f"entry lacks its name or count ({item!r:.80})") from None
+    start = _int(info.get("starting_time"))
+    duration = _int(info.get("duration"))
+    declared_end = start + duration if start is not None and duration is not None else None
+    files = [folder / str(f) for f in info.get("relative_file_paths") or []]
+    problems: list[str] = []
+    for f in files:
+        if not f.is_file():
+            raise RecordingError(f"{folder}: data file {f.name} named in metadata.yaml is "
+                                 "missing")
+    if info.get("compression_mode"):
+        return BagCheck(declared, None, None, None, start, declared_end)
+    found: dict[str, int] = {}
+    lo: list[int] = []
+    hi: list[int] = []
+    lost = False
+    for f in files:
+        counts, first, last, damage = _count_file(f, str(info.get("storage_identifier", "")))
+        for topic, n in counts.items():
+            found[topic] = found.get(topic, 0) + n
+        lo += [first] if first is not None else []
+        hi += [last] if last is not None else []
+        if damage:
+            problems.append(f"data file {f.name}: {damage}")
+            lost = True
+    first_ns, last_ns = (min(lo) if lo else None), (max(hi) if hi else None)
+    for topic in sorted(set(declared) | set(found)):
+        d, n = declared.get(topic, 0), found.get(topic, 0)
+        if d != n:
+            problems.append(f"topic {topic}: metadata.yaml counts {d} messages, the data files "
+                            f"hold {n}")
+            lost |= n < d
+    total = info.get("message_count")
+    if isinstance(total, int) and total != sum(found.values()):
+        problems.append(f"metadata.yaml counts {total} messages in all, the data files hold "
+                        f"{sum(found.values())}")
+        lost |= sum(found.values()) < total
+    if declared_end is not None and start is not None and duration is not None:
+        if last_ns is None or last_ns < declared_end - BAG_TIME_SLACK_NS:
+            end = "no message" if last_ns is None else f"{(last_ns - start) * 1e-9:.3f} s"
+            problems.append(f"the data end at {end} of the {duration * 1e-9:.3f} s "
+                            "metadata.yaml declares")
+            lost = True
+        elif last_ns > declared_end + BAG_TIME_SLACK_NS:
+            problems.append(f"the data end at {(last_ns - start) * 1e-9:.3f} s, after the "
+                            f"{duration * 1e-9:.3f} s metadata.yaml declares")
+    if start is not None and first_ns is not None and abs(first_ns - start) > BAG_TIME_SLACK_NS:
+        problems.append(f"the data start {(first_ns - start) * 1e-9:+.3f} s from the start "
+                        "metadata.yaml declares")
+        lost |= first_ns > start
+    return BagCheck(declared, found, first_ns, last_ns, start, declared_end, tuple(problems),
+                    lost)
+
+
+def _count_file(path: Path, storage: str) -> tuple[dict[str, int], int | None, int | None,
+                                                     str | None]:
+    """Messages per topic of one data file, its first and last log time, and its damage."""
+    if storage == "sqlite3" or path.suffix == ".db3":
+        try:
+            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+            try:
+                rows = db.execute(
+                    "SELECT t.name, COUNT(m.id), MIN(m.timestamp), MAX(m.timestamp) FROM topics t "
+                    "LEFT JOIN messages m ON m.topic_id = t.id GROUP BY t.id").fetchall()
+                verdict = db.execute("PRAGMA quick_check").fetchall()
+            finally:
+                db.close()
+        except sqlite3.Error as exc:
+            raise RecordingError(f"{path}: not a readable sqlite3 bag file ({exc})") from None
+        counts = {str(n): int(c) for n, c, _, _ in rows}
+        firsts = [int(a) for _, _, a, _ in rows if a is not None]
+        lasts = [int(b) for _, _, _, b in rows if b is not None]
+        damage = None if verdict == [("ok",)] else f"sqlite finds it damaged ({verdict[0][0]})"
+        return counts, min(firsts, default=None), max(lasts, default=None), damage
+    from navreplay.io.info import recording_info
+
+    info = recording_info(path)
+    counts: dict[str, int] = {}
+    for t in info.topics:
+        counts[t.topic] = counts.get(t.topic, 0) + t.count
+    return counts, info.start_ns, info.end_ns, info.damage

@@ -132,13 +132,17 @@ class Source:
     def coverage(self) -> float | None:
         """Fraction of the recording's duration that the windows read cover: 1 for a complete
         recording; for a salvaged one the last sample time over the metadata's duration (None
-        when the file does not say how long it was)."""
+        when the file does not say how long it was), and at most the fraction of its messages
+        kept (``metadata.extra["messages_kept"]``: a rosbag2 folder whose data files hold fewer
+        messages than its metadata.yaml counts)."""
         if not self.salvaged:
             return 1.0
         duration = self._metadata.params.get("duration") if self._metadata else None
         if not isinstance(duration, int | float) or not duration > 0 or self._last_ns is None:
             return None
-        return min(max((self._last_ns - self._t0_ns) * 1e-9 / float(duration), 0.0), 1.0)
+        covered = min(max((self._last_ns - self._t0_ns) * 1e-9 / float(duration), 0.0), 1.0)
+        kept = self._metadata.extra.get("messages_kept") if self._metadata else None
+        return min(covered, float(kept)) if isinstance(kept, int | float) else covered
 
     def close(self) -> None:
         """Stop reading (the reader's warnings so far are given, its file closed)."""

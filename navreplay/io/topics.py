@@ -161,7 +161,8 @@ def choose_topics(
     explicit : bool
         The streams were asked for: one without a topic, or with several, is an error.
     named : mapping, optional
-        Topics named for streams (``--topic``); each must be found.
+        Topics named for streams (``--topic``); each of a wanted stream must be found (the
+        readers check them all against a choice over every stream).
     available : str
         The recording's topics, for messages.
     what : str
@@ -185,6 +186,8 @@ def choose_topics(
             others = tuple(sorted(o.topic for o in of_kind if o.topic != c.topic))
             chosen[kind] = (c, others)
     for kind, topic in (named or {}).items():
+        if StreamKind(kind) not in wanted:
+            continue
         got = chosen.get(StreamKind(kind))
         if got is None or got[0].topic != topic:
             raise RecordingError(

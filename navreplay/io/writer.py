@@ -194,7 +194,8 @@ def write_recording(
     where = str(target)
     plan = _plan(recording, where, validate)
     if target.exists() and not force:
-        raise RecordingExistsError(f"{where}: file exists; pass force=True to replace it")
+        raise RecordingExistsError(
+            f"{where}: file exists; use --force (force=True) to replace it")
     tmp = temporary_path(target)
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0),
@@ -219,12 +220,12 @@ def _commit(tmp: Path, target: Path, force: bool) -> None:
         os.link(tmp, target)  # fails if the target appeared meanwhile, unlike rename
     except FileExistsError:
         raise RecordingExistsError(
-            f"{target}: file exists; pass force=True to replace it"
+            f"{target}: file exists; use --force (force=True) to replace it"
         ) from None
     except OSError:  # no hard links on this file system
         if target.exists():
             raise RecordingExistsError(
-                f"{target}: file exists; pass force=True to replace it"
+                f"{target}: file exists; use --force (force=True) to replace it"
             ) from None
         os.replace(tmp, target)
         return

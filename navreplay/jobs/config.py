@@ -9,6 +9,7 @@ from typing import Any
 
 from navreplay import params as _params
 from navreplay.filters.registry import load_filter
+from navreplay.filters.settings import ParamValues, Source
 from navreplay.replay.spec import FilterSpec
 
 
@@ -83,8 +84,10 @@ def filter_specs(
     config : mapping, optional
         A TOML document: ``[filter.<label or name>]`` tables of parameter values.
 
-    Precedence: inline > ``-p`` > config > the filter's defaults. Every filter is loaded and its
-    parameters are validated here, so mistakes surface before any work.
+    Precedence: inline > ``-p`` > config > the recording's sensor specifications > the
+    filter's defaults (:mod:`navreplay.filters.settings`); each spec's ``params`` says where
+    each value came from. Every filter is loaded and its parameters are validated here, so
+    mistakes surface before any work.
     """
     items = split_filter_list(names) if names else []
     parsed: list[tuple[str, str, dict[str, Any], type]] = []  # label, ref, inline, cls
@@ -103,13 +106,14 @@ def filter_specs(
             f"filter {', '.join(dupes)} given twice; give variants their own parameters, "
             "e.g. gps-ins[gps_pos_sigma_scale=1],gps-ins[gps_pos_sigma_scale=2]"
         )
-    values: list[dict[str, Any]] = [{} for _ in parsed]
+    values: list[ParamValues] = [ParamValues() for _ in parsed]
     tables = dict((config or {}).get("filter", {}) or {})
     for i, (label, ref, _, cls) in enumerate(parsed):
         for key in (cls.name, ref, label):
             table = tables.get(key)
             if isinstance(table, Mapping):
                 values[i].update(table)
+                values[i].sources.update(dict.fromkeys(table, Source.TOML))
     fields = [{f.name for f in dataclasses.fields(p[3].Params)} for p in parsed]
     for key, val in _params.parse_assignments(assignments).items():
         prefix, dot, name = key.rpartition(".")
@@ -129,9 +133,11 @@ def filter_specs(
                 )
         for i in hit:
             values[i][name] = val
+            values[i].sources[name] = Source.OPTION
     specs = []
     for (label, ref, inline, cls), vals in zip(parsed, values, strict=True):
         vals.update(inline)
+        vals.sources.update(dict.fromkeys(inline, Source.INLINE))
         specs.append(FilterSpec(ref, vals, label, cls=cls).resolve())  # typed and checked now
     return tuple(specs)
 
@@ -141,20 +147,43 @@ def scenario_values(
     config: Mapping[str, Any] | None = None,
     duration: float | None = None,
 ) -> dict[str, Any]:
-    """Scenario parameter values: ``[scenario]`` table of a TOML config < ``-p`` < --duration."""
+    """Scenario parameter values: ``[scenario]`` table of a TOML config < ``-p`` < --duration;
+    the config's ``[sensors.KIND]`` tables and ``-p sensors.KIND.FIELD=VALUE`` items (which
+    win) under ``"sensors"`` (:func:`navreplay.sim.scenario.scenario_inputs`).
+
+    >>> scenario_values(["sensors.imu.grade=mems", "duration=60"])
+    {'sensors': {'imu': {'grade': 'mems'}}, 'duration': '60'}
+    """
+    from navreplay.sim.scenario import SENSORS_KEY
+
     values: dict[str, Any] = {}
+    sensors: dict[str, dict[str, Any]] = {}
     if config:
         table = config.get("scenario")
         if isinstance(table, Mapping):
             values.update(table)
-    values.update(_params.parse_assignments(assignments))
+        for kind, table in (config.get(SENSORS_KEY) or {}).items():
+            sensors[kind] = dict(table)
+    for key, value in _params.parse_assignments(assignments).items():
+        head, _, rest = key.partition(".")
+        if head != SENSORS_KEY:
+            values[key] = value
+            continue
+        kind, _, name = rest.partition(".")
+        if not kind or not name:
+            raise _params.ParamError(f"-p {key}: write sensors.KIND.FIELD=VALUE, e.g. "
+                                     "sensors.imu.gyro_arw=\"0.15 deg/sqrt(h)\"")
+        sensors.setdefault(kind, {})[name] = value
+    if sensors:
+        values = {SENSORS_KEY: sensors, **values}
     if duration is not None:
         values["duration"] = duration
     return values
 
 
 def check_scenario(scenario: str, values: Mapping[str, Any]) -> None:
-    from navreplay.sim.scenario import get_scenario
+    """Raise :class:`navreplay.params.ParamError` (one line) unless ``values`` make a run of
+    ``scenario`` (parameters and ``[sensors.*]`` tables)."""
+    from navreplay.sim.scenario import get_scenario, scenario_inputs
 
-    cls = get_scenario(scenario)
-    _params.build(cls.Params, values, where=f"scenario {scenario}")
+    scenario_inputs(get_scenario(scenario), values)

@@ -18,6 +18,19 @@ from pathlib import Path
 from typing import Any
 
 from navreplay import export
+from navreplay.outputs import writing
+
+
+def export_names(labels: Sequence[str]) -> tuple[str, ...]:
+    """Names (glob patterns) of every file ``--export DIR`` may write for filters ``labels``,
+    a run's or a campaign's: the manifest, the Odometry MCAP, the reference's TUM and
+    ``STEM.*`` per filter (CSV, TUM, innovations, ensemble and NIS files; ``STEM_2.*``... for
+    repeated labels). An input or another output there is refused before any work
+    (:func:`navreplay.outputs.check_outputs`)."""
+    names = [export.MANIFEST, export.ODOMETRY_FILE, f"{export.REFERENCE_LABEL}.tum"]
+    for stem in dict.fromkeys(export.file_stem(label) for label in labels):
+        names += [f"{stem}.*", f"{stem}_[0-9]*.*"]
+    return tuple(names)
 
 
 @dataclasses.dataclass
@@ -41,6 +54,10 @@ class Outputs:
     @property
     def wanted(self) -> bool:
         return self.export_dir is not None or self.report_path is not None
+
+    def _writing(self) -> Any:
+        """A full disk while exporting: one line naming ``--export DIR``."""
+        return writing(f"--export {self.export_dir}")
 
     def check(self, labels: Sequence[str], *, ensemble: bool, has_reference: bool = True) -> None:
         """Refuse existing targets (unless force) before the job starts."""
@@ -66,7 +83,8 @@ class Outputs:
     def truth(self, truth: Any) -> None:
         """A window of the truth stream (later than before)."""
         if self._export is not None:
-            self._export.add_reference(truth)
+            with self._writing():
+                self._export.add_reference(truth)
 
     def rows(self, rows: Any, metrics: Any = None, truth: Any = None) -> None:
         """A block of one filter's estimates (a RunResult, later than its blocks before) with
@@ -75,15 +93,17 @@ class Outputs:
             return
         out = export.filter_output(rows, metrics)
         if self._export is not None:
-            self._export.add(out)
+            with self._writing():
+                self._export.add(out)
         if rows.label in self._series:
             self._series[rows.label].add(out)
 
     def innovations(self, block: Any) -> None:
         """The innovations of a block of one filter's run (a RunResult)."""
         if self._export is not None:
-            self._export.add_innovations(block.label, block.t0_ns, block.innovations,
-                                         block.measurements)
+            with self._writing():
+                self._export.add_innovations(block.label, block.t0_ns, block.innovations,
+                                             block.measurements)
         series = self._series.get(block.label)
         if series is not None:
             for name, s in block.innovations.items():
@@ -93,7 +113,8 @@ class Outputs:
         """Finish the exports and write the report of filters replayed over one recording."""
         notes = []
         if self._export is not None:
-            written = self._export.close()
+            with self._writing():
+                written = self._export.close()
             self._export = None
             notes.append(f"Exported {len(written)} files to {self.export_dir} "
                          f"(see {self.export_dir / export.MANIFEST})")
@@ -116,8 +137,9 @@ class Outputs:
         """Write the ensemble statistics and the report of a campaign."""
         notes = []
         if self.export_dir is not None:
-            written = export.export_ensemble(self.export_dir, ensembles, title=title,
-                                             force=self.force)
+            with self._writing():
+                written = export.export_ensemble(self.export_dir, ensembles, title=title,
+                                                 force=self.force)
             notes.append(f"Exported {len(written)} files to {self.export_dir}")
         if self.report_path is not None:
             from navreplay import report

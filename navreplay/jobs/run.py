@@ -14,12 +14,14 @@ from navreplay import tables
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.tasks import RunOutput, RunTask, default_extract, file_tasks
 from navreplay.filters.result import RunResult
+from navreplay.filters.settings import setting_notes, summary_entries
+from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
 from navreplay.replay.pipeline import replay_file
 from navreplay.replay.session import Progress
 from navreplay.replay.spec import FilterSpec
-from navreplay.streams import Recording
+from navreplay.streams import Recording, StreamKind, seconds
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
 
 
@@ -35,14 +37,29 @@ def campaign_extract(
     recording: Recording, results: dict[str, RunResult], task: RunTask
 ) -> PerRun:
     """Extractor of ``navreplay run`` over several recordings and ``navreplay montecarlo``."""
+    from navreplay.metrics.coverage import add_coverage, reference_coverage
+
     scored = default_extract(recording, results, task)
-    return PerRun(scored, {label: m.summary() for label, m in scored.items()})
+    summaries = {label: {**m.summary(), **summary_entries(results[label].settings)}
+                 for label, m in scored.items()}
+    if StreamKind.TRUTH in recording:
+        t_ref = seconds(recording[StreamKind.TRUTH].t_ns, recording.t0_ns)
+        for label, result in results.items():
+            if label in summaries:
+                add_coverage(summaries[label], label, reference_coverage(result.t, t_ref),
+                             f"the reference of {task.source}")
+    return PerRun(scored, summaries)
 
 
 def salvaged_note(source: str, covered: float | None) -> str:
     """The note of a run over a recording salvaged from a damaged file."""
     part = "an unknown part" if covered is None else f"{100 * covered:.1f} %"
     return f"SALVAGED: {source} is damaged; replayed {part} of it"
+
+
+MAX_OUTPUT_RATE = 1000.0
+"""Highest ``--output-rate`` [Hz]: estimates between aiding samples faster than an IMU's rate
+add nothing, and a run allocates its output rows at this rate times its length."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,11 +127,13 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     _check_files(job.recordings)
     if job.pacing is not None and not (0 < job.pacing < math.inf):
         raise _params.ParamError(f"--rate must be positive, got {job.pacing}")
-    if not (0 < job.output_rate < math.inf):
-        raise _params.ParamError(f"--output-rate must be positive, got {job.output_rate}")
+    if not (0 < job.output_rate <= MAX_OUTPUT_RATE):
+        raise _params.ParamError(f"--output-rate must be positive and at most "
+                                 f"{MAX_OUTPUT_RATE:g} Hz, got {job.output_rate:g}")
     job = _with_needs(job)
     if len(job.recordings) == 1:
-        return _run_one(job, progress)
+        with read_policy(job.log.policy):  # the IMU's range, --force-frame
+            return _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
@@ -140,6 +159,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     the .rrd or the live view, the exports and the report's series fed block by block
     (:func:`navreplay.replay.replay_file`)."""
     from navreplay.logs.prepare import open_log, streams_needed
+    from navreplay.metrics.coverage import add_coverage
 
     path = Path(job.recordings[0])
     classes = [spec.filter_cls for spec in job.filters]
@@ -158,7 +178,12 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
         done = replay_file(source, job.filters, stages=stages, output_rate=job.output_rate,
                            pacing=job.pacing, max_imu_gap=job.max_imu_gap,
                            live=job.viz.live or job.pacing is not None, progress=progress)
-        notes = list(source.notes)
+        if done.has_truth:
+            ref = getattr(job.log, "reference", None)
+            for label, fraction in done.reference_coverage.items():
+                add_coverage(done.summaries[label], label, fraction,
+                             f"reference {ref}" if ref else "the truth")
+        notes = list(source.notes) + setting_notes(done.summaries.values())
         if done.salvaged:
             notes.append(salvaged_note(str(path), done.coverage))
         notes += outputs.write_run(done.summaries, title=title)
@@ -211,6 +236,7 @@ def campaign(
     stats: dict[str, Any] = {spec.label: metrics.EnsembleStats(spec.label) for spec in filters}
     rows: list[dict[str, Any]] = []
     notes: list[str] = []
+    settings: dict[str, dict[str, Any]] = {}  # each filter's, from its first run
 
     drill: dict[int, Any] = {}  # per-run metrics for the view when the runs are kept
 
@@ -223,6 +249,9 @@ def campaign(
                      "salvaged": out.salvaged, "filters": per.summaries})
         if out.salvaged:
             notes.append(salvaged_note(out.source, out.coverage))
+        notes.extend(n for n in setting_notes(per.summaries.values()) if n not in notes)
+        for label, s in per.summaries.items():
+            settings.setdefault(label, {k: v for k, v in s.items() if k.startswith("settings")})
         for label, m in per.metrics.items():
             if label in stats:
                 try:
@@ -252,7 +281,8 @@ def campaign(
         raise
     summary = {
         "runs": rows,
-        "ensemble": {label: e.summary() for label, e in ens.items()},
+        "ensemble": {label: {**e.summary(), **settings.get(label, {})}
+                     for label, e in ens.items()},
         "wall_seconds": done.seconds,
     }
     notes += outputs.write_ensemble(ens, summary["ensemble"], title=title)

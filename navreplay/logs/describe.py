@@ -5,10 +5,11 @@ assumed."""
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from pathlib import Path
 
-from navreplay.io.checks import gap_report
+from navreplay.io.checks import gap_report, read_policy
 from navreplay.io.errors import RecordingError
 from navreplay.io.files import file_kind, read_streams
 from navreplay.io.info import format_info, recording_info
@@ -17,27 +18,72 @@ from navreplay.logs.reference import REFERENCE_TYPES
 from navreplay.streams import seconds
 
 
-def describe_log(path: str | Path, options: LogOptions | None = None) -> str:
+def _sensor_lines(sensors: dict, where: str) -> list[str]:
+    """The recording's sensor specifications in datasheet units, or why they cannot be read."""
+    from navreplay.sensors.specs import SensorSpecs, describe_specs
+
+    if not sensors:
+        return ["sensors: no specifications (give [sensors.imu] etc. in `run --config`; "
+                "filters use their defaults)"]
+    try:
+        specs = SensorSpecs.from_metadata(sensors, where)
+    except ValueError as e:
+        return [f"sensors: cannot be read: {e}"]
+    return ["sensors (datasheet units, as [sensors.*] tables take them):", *describe_specs(specs)]
+
+
+@dataclasses.dataclass(frozen=True)
+class LogDescription:
+    """What ``navreplay info`` prints, and why it fails.
+
+    Attributes
+    ----------
+    text : str
+    damage : str or None
+        The container is damaged (an MCAP file's DAMAGED line, or a rosbag2 folder whose data
+        files disagree with its metadata.yaml).
+    problem : str or None
+        The streams cannot be read as asked (a named topic absent, frame ids that change...).
+    """
+
+    text: str
+    damage: str | None = None
+    problem: str | None = None
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDescription:
     """The ``info`` text of a log: the container summary, the topic table, the conventions."""
     options = options or LogOptions()
     path = Path(path)
+    damage = None
     if file_kind(path).name == "rosbag2":
-        from navreplay.io.rosbag import bag_topics
+        from navreplay.io.rosbag import bag_topics, check_bag
 
-        listing = [(t, ty, n, None, None) for t, ty, _, n in bag_topics(path)]
+        check = check_bag(path)
+        found = check.found if check is not None and check.found is not None else {}
+        listing = [(t, ty, found.get(t, n), None, None) for t, ty, _, n in bag_topics(path)]
         lines = [f"{path}  (rosbag2, {sum(r[2] for r in listing)} messages)"]
+        if check is not None and check.problems:
+            damage = "; ".join(check.problems)
+            lines.append(f"DAMAGED: the data files disagree with metadata.yaml: {damage}")
     else:
         info = recording_info(path)
         listing = [(t.topic, t.schema or "-", t.count, t.start_ns, t.end_ns)
                    for t in info.topics]
         lines = [format_info(info, topic_table=False)]
+        lines += _sensor_lines(info.metadata.sensors, str(path))
+        damage = info.damage
     problem = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            recording, sources = read_streams(path, topics=options.topics,
-                                              frames=options.stream_frames, validate=False,
-                                              time=options.time)
+            with read_policy(options.policy):
+                recording, sources = read_streams(path, topics=options.topics,
+                                                  frames=options.stream_frames, validate=False,
+                                                  time=options.time)
         except RecordingError as exc:
             recording, sources, problem = None, {}, str(exc)
     by_topic = {src.topic: kind for kind, src in sources.items()}
@@ -67,7 +113,8 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> str:
                  for i, (c, w) in enumerate(zip(r, widths, strict=True))]
         lines.append("  ".join(cells).rstrip())
     if problem is not None:
-        return "\n".join([*lines, "", f"streams: cannot be read: {problem}"])
+        return LogDescription("\n".join([*lines, "", f"streams: cannot be read: {problem}"]),
+                              damage, problem)
     lines += ["", f"streams (what `navreplay run` replays; times from {options.time} "
                   f"{'stamps' if options.time == 'header' else 'times'}):"]
     for kind, src in sources.items():
@@ -82,4 +129,4 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> str:
         text = str(w.message)
         if "several topics" in text or "header stamps" in text:
             lines.append(f"  ! {text}")
-    return "\n".join(lines)
+    return LogDescription("\n".join(lines), damage)

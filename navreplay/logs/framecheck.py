@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from navreplay.io.checks import named_convention
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
 from navreplay.io.topics import TopicSource
@@ -70,6 +71,14 @@ def _where(source: TopicSource | None, kind: str) -> str:
             f"{source.convention.value.upper() if source.convention else '-'}: {source.reason})")
 
 
+def _advice(kind: StreamKind, source: TopicSource | None, other: str) -> str:
+    """``--frame KIND=OTHER``, with ``--force-frame`` when the topic's frame id names the axes
+    the data contradict (a mislabelled topic: the declaration must win over its name)."""
+    named = named_convention(kind, source.frame_id) if source is not None else None
+    force = " --force-frame" if named is not None and named.value != other else ""
+    return f"--frame {kind.value}={other}{force}"
+
+
 def check_accelerometer(recording: Recording, source: TopicSource | None) -> str:
     """Raise :class:`FrameError` on a contradiction; return what the check saw."""
     imu = recording[StreamKind.IMU]
@@ -85,8 +94,8 @@ def check_accelerometer(recording: Recording, source: TopicSource | None) -> str
         raise FrameError(
             f"{recording_where(recording)}: {_where(source, 'IMU')}: over {what} the "
             f"accelerometer reads {f[2]:+.2f} m/s^2 along z after conversion to FRD, i.e. +g "
-            f"on a z-down axis: the data are in the other convention; use --frame imu={other} "
-            f"(or [frames] imu = \"{other}\")")
+            f"on a z-down axis: the data are in the other convention; use "
+            f"{_advice(StreamKind.IMU, source, other)} (or [frames] imu = \"{other}\")")
     if stop >= 2:
         mag = float(np.linalg.norm(f))
         if abs(mag - g) > 0.1 * g:
@@ -136,7 +145,8 @@ def check_magnetometer(recording: Recording, source: TopicSource | None,
         raise FrameError(
             f"{recording_where(recording)}: {_where(source, 'magnetometer')}: the field along "
             f"down is {measured * 1e9:+.0f} nT but the World Magnetic Model gives "
-            f"{expected * 1e9:+.0f} nT here (dip sign): use --frame mag={other}")
+            f"{expected * 1e9:+.0f} nT here (dip sign): use "
+            f"{_advice(StreamKind.MAG, source, other)}")
     return (f"magnetometer dip sign agrees with the WMM ({measured * 1e9:+.0f} nT down, "
             f"averaged over {span(recording[StreamKind.MAG].t_ns, recording.t0_ns)})")
 

@@ -343,6 +343,12 @@ def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[
             method = InitMethod.TABLE
         else:
             return {}, ""
+    if method is not InitMethod.METADATA and not (
+            StreamKind.IMU in recording and len(recording[StreamKind.IMU])):
+        raise InitialisationError(
+            f"--init {method.value}: {recording.metadata.extra.get('source', 'the log')} has no "
+            "IMU samples to start from; name the IMU topic with --topic imu=TOPIC (navreplay "
+            "info lists the topics)")
     if method is InitMethod.METADATA:
         if not meta:
             raise InitialisationError("--init metadata: the recording has no initial solution; "

@@ -1,5 +1,6 @@
 """What the user says about a log: ``--topic``, ``--frame``, ``--init``, ``--reference`` and the
-``[topics]``, ``[frames]``, ``[initial]`` TOML tables (the command line wins over the file)."""
+``[topics]``, ``[frames]``, ``[initial]``, ``[sensors.*]`` TOML tables (the command line wins over
+the file)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from navreplay.io.checks import STANDARD_GRAVITY, ImuRange, ReadPolicy
 from navreplay.io.convert import Convention
 from navreplay.params import ParamError
 from navreplay.streams import StreamKind
@@ -29,6 +31,28 @@ class InitMethod(enum.StrEnum):
     TABLE = "table"
     """Only the ``[initial]`` table (complete: position and attitude)."""
 
+
+INITIAL_RANGES: dict[str, tuple[float, float, tuple[int, ...]]] = {
+    "lat_deg": (-90.0, 90.0, (1,)),
+    "lon_deg": (-180.0, 360.0, (1,)),
+    "h": (-2e4, 1e8, (1,)),
+    "v_n": (-2e4, 2e4, (3,)),
+    "roll_deg": (-180.0, 180.0, (1,)),
+    "pitch_deg": (-90.0, 90.0, (1,)),
+    "yaw_deg": (-360.0, 360.0, (1,)),
+    "pos_sigma": (0.0, 1e7, (1, 3)),
+    "vel_sigma": (0.0, 2e4, (1, 3)),
+    "att_sigma_deg": (0.0, 180.0, (1, 3)),
+    "accel_bias": (-200.0, 200.0, (3,)),
+    "gyro_bias_dph": (-1e6, 1e6, (3,)),
+    "accel_bias_sigma": (0.0, 200.0, (1,)),
+    "gyro_bias_sigma_dph": (0.0, 1e6, (1,)),
+}
+"""Allowed values of the ``[initial]`` keys: (low, high, numbers of values allowed); the
+covariances' sigmas (``pos_sigma``, ``vel_sigma``, ``att_sigma_deg``) must be positive."""
+
+IMU_RANGE_UNITS = {"gyro": ("deg/s", math.pi / 180.0), "accel": ("g", STANDARD_GRAVITY)}
+"""``--imu-range`` / ``[imu_range]`` keys: their datasheet unit and its value in SI."""
 
 INITIAL_KEYS: dict[str, str] = {
     "lat_deg": "latitude [deg]",
@@ -72,6 +96,14 @@ class LogOptions:
     needs : tuple[str, ...]
         The parts of the initial solution the filters start from (``pos``, ``v_n``, ``q_nb``;
         :func:`navreplay.filters.base.initial_parts`).
+    sensors : SensorSpecs or None
+        The ``[sensors.*]`` tables (:mod:`navreplay.sensors.specs`): written over the
+        recording's own sensor specifications (``Metadata.sensors``) before the filters are
+        built.
+    imu_range : ImuRange
+        The IMU's measurement range: a sample beyond it stops the run (``--imu-range``).
+    force_frames : bool
+        ``--force-frame``: ``--frame`` wins over frame ids that name other axes.
     """
 
     topics: Mapping[StreamKind, str] = dataclasses.field(default_factory=dict)
@@ -82,10 +114,18 @@ class LogOptions:
     check_frames: bool = True
     time: str = "header"
     needs: tuple[str, ...] = ("pos", "v_n", "q_nb")
+    sensors: Any = None
+    imu_range: ImuRange = ImuRange()
+    force_frames: bool = False
 
     @property
     def stream_frames(self) -> dict[StreamKind, Convention]:
         return {StreamKind(k): v for k, v in self.frames.items() if k != REFERENCE}
+
+    @property
+    def policy(self) -> ReadPolicy:
+        """How the log's samples and frame ids are checked (:mod:`navreplay.io.checks`)."""
+        return ReadPolicy(self.imu_range, self.force_frames)
 
 
 def _pairs(items: Sequence[str], option: str) -> dict[str, str]:
@@ -106,6 +146,71 @@ def _kind(key: str, where: str) -> StreamKind:
                          f"{', '.join(k.value for k in StreamKind)})") from None
 
 
+def _strings(name: str, table: Any, what: str) -> dict[str, str]:
+    """A ``[topics]`` / ``[frames]`` table: keys and values strings (a number, a boolean or a
+    table is a mistake, not a name)."""
+    if not isinstance(table, Mapping):
+        raise ParamError(f"[{name}] must be a table of KIND = {what}")
+    for key, value in table.items():
+        if not isinstance(value, str) or not value.strip():
+            raise ParamError(f"[{name}] {key} = {value!r}: expected {what} as a string "
+                             f"(e.g. {key} = \"{'/imu/data' if name == 'topics' else 'frd'}\")")
+    return {str(k): v for k, v in table.items()}
+
+
+def _check_initial(initial: Mapping[str, Any]) -> None:
+    """Types, counts and ranges of the ``[initial]`` values (:data:`INITIAL_RANGES`)."""
+    for key, value in initial.items():
+        lo, hi, counts = INITIAL_RANGES[key]
+        values = value if isinstance(value, list) else [value]
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                   for v in values):
+            raise ParamError(f"[initial] {key} = {value!r}: expected finite numbers "
+                             f"({INITIAL_KEYS[key]})")
+        if len(values) not in counts or (isinstance(value, list) and counts == (1,)):
+            n = " or ".join(str(c) for c in counts)
+            raise ParamError(f"[initial] {key} = {value!r}: expected {n} value(s) "
+                             f"({INITIAL_KEYS[key]})")
+        positive = key in ("pos_sigma", "vel_sigma", "att_sigma_deg")  # covariances
+        bad = [v for v in values if not (lo <= v <= hi) or (positive and v <= 0)]
+        if bad:
+            span = f"{'0 <' if positive else f'{lo:g} <='} value <= {hi:g}"
+            raise ParamError(f"[initial] {key} = {value!r}: out of range ({span}; "
+                             f"{INITIAL_KEYS[key]})")
+
+
+def imu_range(text: str | None = None, table: Mapping[str, Any] | None = None) -> ImuRange:
+    """The IMU's measurement range from ``--imu-range gyro=DPS,accel=G`` and/or an
+    ``[imu_range]`` table (``gyro = 2000``, ``accel = 16``; the option wins); the defaults of
+    :class:`~navreplay.io.checks.ImuRange` for what neither gives."""
+    values: dict[str, Any] = {}
+    if table is not None:
+        if not isinstance(table, Mapping):
+            raise ParamError("[imu_range] must be a table (gyro = DEG_PER_S, accel = G)")
+        values.update(table)
+    if text:
+        values.update(_pairs([p for p in text.split(",") if p.strip()], "--imu-range"))
+    unknown = sorted(set(values) - set(IMU_RANGE_UNITS))
+    if unknown:
+        raise ParamError(f"--imu-range / [imu_range]: unknown key(s) {', '.join(unknown)}; "
+                         "use gyro=DEG_PER_S and accel=G")
+    si: dict[str, float] = {}
+    for key, value in values.items():
+        unit, scale = IMU_RANGE_UNITS[key]
+        number = value
+        if isinstance(value, str):
+            try:
+                number = float(value)
+            except ValueError:
+                number = None
+        if (isinstance(number, bool) or not isinstance(number, int | float)
+                or not 0 < number < math.inf):
+            raise ParamError(f"--imu-range {key}={value}: expected a positive number of {unit} "
+                             "(the datasheet's measurement range)")
+        si[key] = float(number) * scale
+    return ImuRange(**si)
+
+
 def log_options(
     topics: Sequence[str] = (),
     frames: Sequence[str] = (),
@@ -114,19 +219,19 @@ def log_options(
     config: Mapping[str, Any] | None = None,
     check_frames: bool = True,
     time: str | None = None,
+    sensors: Any = None,
+    imu_range_text: str | None = None,
+    force_frames: bool = False,
 ) -> LogOptions:
-    """Parse ``--topic``/``--frame`` items and the TOML tables into :class:`LogOptions`."""
+    """Parse ``--topic``/``--frame``/``--imu-range`` items and the TOML tables into
+    :class:`LogOptions`; every value is checked for its type and range here (``sensors``: the
+    config's ``[sensors.*]`` tables already read, :func:`navreplay.sensors.specs.specs_from_tables`)."""
     config = config or {}
-    topic_items: dict[str, str] = {}
-    frame_items: dict[str, str] = {}
-    for name, target in (("topics", topic_items), ("frames", frame_items)):
-        table = config.get(name, {})
-        if not isinstance(table, Mapping):
-            raise ParamError(f"[{name}] must be a table of KIND = VALUE")
-        target.update({str(k): str(v) for k, v in table.items()})
+    topic_items = _strings("topics", config.get("topics", {}), "a topic")
+    frame_items = _strings("frames", config.get("frames", {}), "axes")
     topic_items.update(_pairs(topics, "--topic"))
     frame_items.update(_pairs(frames, "--frame"))
-    topic_map = {_kind(k, "--topic"): v for k, v in topic_items.items()}
+    topic_map = {_kind(k, "--topic"): v.strip() for k, v in topic_items.items()}
     frame_map: dict[str, Convention] = {}
     for key, value in frame_items.items():
         if key != REFERENCE:
@@ -142,10 +247,7 @@ def log_options(
     if unknown:
         raise ParamError(f"[initial]: unknown key(s) {', '.join(unknown)}; known: "
                          f"{', '.join(INITIAL_KEYS)}")
-    for key, value in initial.items():
-        values = value if isinstance(value, list) else [value]
-        if not all(isinstance(v, int | float) and math.isfinite(v) for v in values):
-            raise ParamError(f"[initial] {key} = {value!r}: expected finite numbers")
+    _check_initial(initial)
     ref_table = config.get("reference", {})
     if reference is None and isinstance(ref_table, Mapping):
         reference = ref_table.get("source")
@@ -161,4 +263,6 @@ def log_options(
     if time not in ("header", "log"):
         raise ParamError(f"--time {time}: use header or log")
     return LogOptions(topic_map, frame_map, method, dict(initial), reference, check_frames,
-                      time)
+                      time, sensors=sensors or None,
+                      imu_range=imu_range(imu_range_text, config.get("imu_range")),
+                      force_frames=force_frames)

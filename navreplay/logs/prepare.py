@@ -2,8 +2,10 @@
 
 :func:`open_log` opens a recording file (:func:`navreplay.io.files.open_recording`) as a
 :class:`LogSource`: the same windows, the first made ready before it is handed out (frames
-checked, the initial solution set in ``metadata.initial_nav``, and with ``--reference`` the
-reference as its truth stream: a log with a reference is read in one window).
+checked, the initial solution set in ``metadata.initial_nav``, the ``[sensors.*]`` tables of
+the configuration written over the sensor specifications, and with ``--reference`` the
+reference as its truth stream: a log with a reference is read in one window). Every window is
+read under the options' :class:`~navreplay.io.checks.ReadPolicy`.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from navreplay.filters.base import Filter, consumed_streams
+from navreplay.io.checks import read_policy
 from navreplay.io.files import open_recording
 from navreplay.io.source import COMPLETE, Source, Window
 from navreplay.io.topics import TopicSource
@@ -55,6 +58,17 @@ class LogSource(Source):
         self.inner.close()
 
     def _windows(self) -> Iterator[Window]:
+        """Each window read under the log's :class:`~navreplay.io.checks.ReadPolicy` (the
+        IMU's range, ``--force-frame``), which the reader's checks consult."""
+        windows = self._ready()
+        while True:
+            with read_policy(self.options.policy):
+                window = next(windows, None)
+            if window is None:
+                return
+            yield window
+
+    def _ready(self) -> Iterator[Window]:
         first = next(self.inner)
         first.metadata.extra.setdefault("source", str(self.path))
         if self.options.reference is not None:
@@ -107,11 +121,25 @@ def streams_needed(classes: Iterable[type[Filter]], options: LogOptions | None =
     return kinds
 
 
+def read_log(path: str | Path, options: LogOptions | None = None, *,
+             kinds: Iterable[StreamKind] | None = None) -> tuple[Recording, list[str]]:
+    """A log read whole (one window) and made ready, with its notes."""
+    with open_log(path, options, kinds=kinds, whole=True) as source:
+        return next(source).recording(), source.notes
+
+
 def make_ready(recording: Recording, sources: dict[StreamKind, TopicSource],
                options: LogOptions) -> list[str]:
-    """Check the frames and set the initial solution (``metadata.initial_nav``) of a log read
-    (of its first window, for a log read in windows); one note per line."""
+    """Check the frames, set the initial solution (``metadata.initial_nav``) and write the
+    ``[sensors.*]`` tables over the sensor specifications (``metadata.sensors``) of a log read
+    (for a log read in windows: its aiding streams and first window); one note per line."""
     notes: list[str] = []
+    if options.sensors:
+        from navreplay.sensors.specs import SensorSpecs
+
+        own = SensorSpecs.from_metadata(recording.metadata.sensors,
+                                        str(recording.metadata.extra.get("source", "")))
+        recording.metadata.sensors = own.overridden_by(options.sensors).to_metadata()
     if options.check_frames and StreamKind.IMU in recording:
         notes += check_frames(recording, sources, _position(recording, options))
     nav, note = initial_nav(options.init, recording, options.initial, options.needs)

@@ -45,11 +45,19 @@ import numpy as np
 
 from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
+from navreplay.io.checks import current_policy, named_convention
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
 from navreplay.io.files import file_kind
 from navreplay.io.schemas import normalize_type_name
 from navreplay.io.topics import sample_times
+from navreplay.metrics.coverage import (  # noqa: F401  (their home is the scoring)
+    COVERAGE_WARNING,
+    CoverageCount,
+    add_coverage,
+    coverage_warning,
+    reference_coverage,
+)
 from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -85,6 +93,8 @@ class Reference:
         Position in the local world frame, resolved NED [m] (needs an origin).
     v_n : ndarray (N, 3) or None
     q_nb : ndarray (N, 4) or None
+    world : Convention or None
+        The axes a local reference was read in (ENU or NED), and ``world_reason`` why.
     """
 
     source: str
@@ -93,6 +103,8 @@ class Reference:
     local_ned: np.ndarray | None = None
     v_n: np.ndarray | None = None
     q_nb: np.ndarray | None = None
+    world: Convention | None = None
+    world_reason: str = ""
 
     @property
     def has(self) -> tuple[str, ...]:
@@ -101,13 +113,24 @@ class Reference:
         return tuple(have + [k for k in ("v_n", "q_nb") if getattr(self, k) is not None])
 
 
-def _world(frame_id: str, declared: Convention | None) -> Convention:
+def _world(frame_id: str, declared: Convention | None, source: str = ""
+           ) -> tuple[Convention, str]:
+    """The world axes of a local reference, and why: ``--frame reference=``, else the frame
+    id (``_ned`` / ``_enu`` suffix, else ENU by REP-103). A declaration that contradicts a
+    frame id naming its axes is an error unless the read policy forces frames."""
+    named = named_convention(StreamKind.GPS_VEL, frame_id)  # the local-level axes it names
     if declared is not None:
         if declared not in (Convention.ENU, Convention.NED):
             raise ReferenceError(f"--frame reference={declared.value}: use enu or ned")
-        return declared
-    name = frame_id.lower()
-    return Convention.NED if name.endswith("_ned") or name == "ned" else Convention.ENU
+        if named is not None and named is not declared and not current_policy().force_frames:
+            raise ReferenceError(
+                f"reference {source}: --frame reference={declared.value} contradicts frame id "
+                f"{frame_id!r}, which names {named.value.upper()} axes; drop the declaration, "
+                "or add --force-frame to read it as declared")
+        return declared, f"declared {declared.value}"
+    if named is not None:
+        return named, f"frame id {frame_id!r} names {named.value.upper()} axes"
+    return Convention.ENU, f"frame id {frame_id!r} has no _ned suffix: ENU by REP-103"
 
 
 def _body_is_frd(child: str, world: Convention) -> bool:
@@ -147,6 +170,7 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
                   declared: Convention | None, time: str = "header") -> Reference:
     """A reference from decoded messages (log time, message) of one topic, in log-time order;
     times as ``--time`` says (:func:`navreplay.io.topics.sample_times`)."""
+    _check_type(source, type_name)
     if not items:
         raise ReferenceError(f"reference {source}: the topic has no messages")
     items = sorted(items, key=lambda item: item[0])
@@ -165,18 +189,15 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
                          v_n=np.array([list(m.v_n) for m in msgs]),
                          q_nb=np.array([list(m.q_nb) for m in msgs]))
     pose = {ODOMETRY: lambda m: m.pose.pose, POSE_COV: lambda m: m.pose.pose,
-            POSE: lambda m: m.pose}.get(type_name)
-    if pose is None:
-        raise ReferenceError(f"reference {source}: type {type_name} cannot be a reference "
-                             f"(use one of {', '.join(REFERENCE_TYPES)})")
-    world = _world(msgs[0].header.frame_id, declared)
+            POSE: lambda m: m.pose}[type_name]
+    world, why = _world(msgs[0].header.frame_id, declared, source)
     child = getattr(msgs[0], "child_frame_id", "")
     frd = _body_is_frd(child, world)
     xyz = np.array([_xyz(pose(m).position) for m in msgs])
     q_raw = np.array([_xyzw(pose(m).orientation) for m in msgs])
     q_given = bool(np.any(np.abs(q_raw) > 0))
     local, q_nb = to_ned(world, xyz, q_raw if q_given else None, frd)
-    ref = Reference(source, t_ns, local_ned=local, q_nb=q_nb)
+    ref = Reference(source, t_ns, local_ned=local, q_nb=q_nb, world=world, world_reason=why)
     if type_name == ODOMETRY and q_nb is not None:
         v_b = np.array([_xyz(m.twist.twist.linear) for m in msgs])
         if not frd:
@@ -185,6 +206,12 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
 
         ref.v_n = np.einsum("kij,kj->ki", quat_to_dcm(q_nb), v_b)
     return ref
+
+
+def _check_type(source: str, type_name: str) -> None:
+    if type_name not in REFERENCE_TYPES:
+        raise ReferenceError(f"reference {source}: type {type_name or 'unknown'} cannot be a "
+                             f"reference (use one of {', '.join(REFERENCE_TYPES)})")
 
 
 def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
@@ -196,6 +223,7 @@ def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
         if topic not in types:
             raise ReferenceError(f"reference {topic}: no such topic in {path} (it has "
                                  f"{', '.join(sorted(types)) or 'no topics'})")
+        _check_type(topic, types[topic])
         return types[topic], list(iter_messages(path, topic))
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
@@ -212,6 +240,7 @@ def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
                 raise ReferenceError(f"reference {topic}: no such topic in {path} (it has "
                                      f"{', '.join(sorted(topics)) or 'no topics'})")
             type_name = topics[topic]
+            _check_type(topic, type_name)
             for _, _, message, decoded in reader.iter_decoded_messages(topics=[topic]):
                 items.append((message.log_time, decoded))
     except ReferenceError:
@@ -295,7 +324,13 @@ def from_file(path: Path, t0_ns: int, declared: Convention | None) -> Reference:
         return _from_columns(f"reference {path}", cols, t0_ns, declared)
     world = declared or Convention.ENU
     local, q_nb = to_ned(world, data[:, 1:4], data[:, 4:8], world is Convention.NED)
-    return Reference(str(path), _times(data[:, 0], t0_ns), local_ned=local, q_nb=q_nb)
+    return Reference(str(path), _times(data[:, 0], t0_ns), local_ned=local, q_nb=q_nb,
+                     world=world, world_reason=_file_world(declared))
+
+
+def _file_world(declared: Convention | None) -> str:
+    return (f"declared {declared.value}" if declared is not None
+            else "a file's local frame is ENU unless --frame reference=ned")
 
 
 def _from_columns(where: str, c: Mapping[str, np.ndarray], t0_ns: int,
@@ -313,6 +348,7 @@ def _from_columns(where: str, c: Mapping[str, np.ndarray], t0_ns: int,
     elif {"x", "y", "z"} <= set(c):
         ref.local_ned = to_ned(world, np.stack([c["x"], c["y"], c["z"]], axis=1), None,
                                False)[0]
+        ref.world, ref.world_reason = world, _file_world(declared)
     if {"v_N", "v_E", "v_D"} <= set(c):
         ref.v_n = np.stack([c["v_N"], c["v_E"], c["v_D"]], axis=1)
     if {"roll_deg", "pitch_deg", "yaw_deg"} <= set(c):
@@ -342,6 +378,13 @@ def read_reference(spec: str, log: Path, recording: Recording,
 
 def origin_from_gnss(ref: Reference, recording: Recording) -> np.ndarray:
     """Geodetic origin (lat, lon, h) of a local reference fitted to the GNSS fixes."""
+    return _gnss_fit(ref, ref.local_ned, recording)[0]
+
+
+def _gnss_fit(ref: Reference, local_ned: np.ndarray, recording: Recording
+              ) -> tuple[np.ndarray, float]:
+    """The origin fitted to the GNSS fixes inside the reference's span, and the RMS [m] of
+    what the fixes and the placed reference still differ by."""
     gps = recording[StreamKind.GPS]
     t_ref = seconds(ref.t_ns, recording.t0_ns)
     t_fix = seconds(gps.t_ns, recording.t0_ns)
@@ -349,14 +392,38 @@ def origin_from_gnss(ref: Reference, recording: Recording) -> np.ndarray:
     if not inside.any():
         raise ReferenceError(f"reference {ref.source}: no GNSS fix inside its time span to "
                              "place its local origin; give lat_deg, lon_deg, h in [initial]")
-    d = np.stack([np.interp(t_fix[inside], t_ref, ref.local_ned[:, i]) for i in range(3)], 1)
+    d = np.stack([np.interp(t_fix[inside], t_ref, local_ned[:, i]) for i in range(3)], 1)
     fixes = gps["pos"][inside]
     origin = fixes[0] - 0.0
+    r = earth.lla_to_ecef(*fixes.T)
     for _ in range(3):
         C = earth.C_en(origin[0], origin[1])
-        r0 = earth.lla_to_ecef(*fixes.T) - d @ C.T
+        r0 = r - d @ C.T
         origin = np.array(earth.ecef_to_lla(r0.mean(axis=0)))
-    return origin
+    residual = r0 - r0.mean(axis=0)
+    return origin, float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
+
+
+FRAME_FIT_MIN = 10.0
+"""A local reference fitted to the GNSS fixes with a residual RMS above this [m], and above
+:data:`FRAME_FIT_RATIO` times the residual in the other world axes, is read in the wrong axes."""
+FRAME_FIT_RATIO = 5.0
+
+
+def _check_world(ref: Reference, recording: Recording, rms: float) -> None:
+    """Raise when the reference's positions fit the GNSS fixes in the other world axes and not
+    in those it was read in (ENU data read as NED, or the reverse), unless frames are forced."""
+    if ref.world is None or ref.local_ned is None or rms <= FRAME_FIT_MIN:
+        return
+    other = Convention.NED if ref.world is Convention.ENU else Convention.ENU
+    swapped = ref.local_ned[:, [1, 0, 2]] * np.array([1.0, 1.0, -1.0])  # the other reading
+    rms_other = _gnss_fit(ref, swapped, recording)[1]
+    if rms > FRAME_FIT_RATIO * rms_other and not current_policy().force_frames:
+        raise ReferenceError(
+            f"reference {ref.source}: read as {ref.world.value.upper()} ({ref.world_reason}) "
+            f"its positions miss the GNSS fixes by {rms:.1f} m RMS, read as "
+            f"{other.value.upper()} by {rms_other:.1f} m: use --frame reference={other.value} "
+            "(or --force-frame to keep the reading)")
 
 
 def reference_stream(ref: Reference, recording: Recording, initial: Mapping[str, Any]
@@ -371,8 +438,10 @@ def reference_stream(ref: Reference, recording: Recording, initial: Mapping[str,
                                float(initial.get("h", 0.0))])
             how = "[initial] lat_deg, lon_deg, h"
         elif StreamKind.GPS in recording:
-            origin = origin_from_gnss(ref, recording)
-            how = f"a fit to {len(recording[StreamKind.GPS])} GNSS fixes"
+            origin, rms = _gnss_fit(ref, ref.local_ned, recording)
+            _check_world(ref, recording, rms)
+            how = (f"a fit to {len(recording[StreamKind.GPS])} GNSS fixes, {rms:.1f} m RMS "
+                   "apart")
         else:
             raise ReferenceError(
                 f"reference {ref.source}: local positions need an origin: a NavSatFix topic "

@@ -2,7 +2,8 @@
 windows): each block of estimates is scored once the truth around it is at hand, with the
 errors of :func:`navreplay.metrics.run_metrics` on the block, and its scores accumulate in a
 :class:`~navreplay.metrics.summary.RunSummary`; the truth is kept from the sample before the next
-estimate on. Memory does not grow with the run's length."""
+estimate on. Memory does not grow with the run's length. The scorer also counts the part of
+the outputs the truth covers (:class:`~navreplay.metrics.coverage.CoverageCount`)."""
 
 from __future__ import annotations
 
@@ -13,10 +14,11 @@ from typing import Any
 import numpy as np
 
 from navreplay.filters.result import RunResult, concat
+from navreplay.metrics.coverage import CoverageCount
 from navreplay.metrics.reference import Reference
 from navreplay.metrics.run import RunMetrics, row_nis, run_metrics
 from navreplay.metrics.summary import RunSummary
-from navreplay.streams import Stream
+from navreplay.streams import Stream, seconds
 
 Scored = Callable[[RunResult, RunMetrics | None, Stream | None], None]
 """Called with each block of rows as it is scored, its metrics (None without truth) and the
@@ -55,6 +57,7 @@ class RunScorer:
         self._truth_done = False
         self._pending: list[RunResult] = []
         self._offset = 0.0  # true distance up to the first kept truth sample [m]
+        self._coverage = CoverageCount()
 
     @property
     def rows(self) -> int:
@@ -65,6 +68,7 @@ class RunScorer:
         """More truth samples (later than those before); ``final``: no more follow."""
         if truth is not None and len(truth):
             self._truth = _join_streams(self._truth, truth)
+            self._coverage.reference(seconds(truth.t_ns, self.t0_ns))
         self._truth_done = self._truth_done or final
         self._score()
 
@@ -72,6 +76,7 @@ class RunScorer:
         """A block of estimates and innovations (later than those before)."""
         for name, s in block.innovations.items():
             self.summary.add_nis(name, s.nis, int(s.nu.shape[1]), row_nis(block, name))
+        self._coverage.outputs(block.t)
         if block.t.size:
             self._pending.append(block)
             self._score()
@@ -113,6 +118,11 @@ class RunScorer:
         if keep:
             self._offset += float(ref.distance(np.array([(int(ts[keep]) - self.t0_ns) * 1e-9]))[0])
             self._truth = self._truth.slice(keep, len(self._truth))
+
+    def coverage(self) -> float:
+        """The fraction of the outputs so far that the truth scores
+        (``reference_coverage``)."""
+        return self._coverage.fraction()
 
     def result(self) -> dict[str, Any]:
         """The summary of the run (:meth:`RunSummary.result`), the rows still waiting for

@@ -23,7 +23,7 @@ from navreplay.replay.errors import (
 from navreplay.replay.pipeline import Collect, FileRun, RunStart, Stage, replay, replay_file
 from navreplay.replay.plan import STREAM_PRIORITY, plan_events
 from navreplay.replay.session import Progress, ReplaySession
-from navreplay.replay.spec import FilterSpec, build_params
+from navreplay.replay.spec import FilterSpec
 
 __all__ = [
     "STREAM_PRIORITY",
@@ -42,7 +42,6 @@ __all__ = [
     "RunResult",
     "RunStart",
     "Stage",
-    "build_params",
     "check_streams",
     "plan_events",
     "replay",

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from navreplay.filters.base import NAV_PARTS, Estimate
+from navreplay.filters.base import NAV_PARTS, Estimate, output_problem
 from navreplay.filters.result import InnovationSeries, RunResult
 from navreplay.replay.errors import BadOutput, diverged, invalid
 
@@ -94,23 +94,24 @@ class Columns:
         self.m = m + k
 
     def first_nonfinite(self, start: int) -> tuple[int, str] | None:
-        """First row >= start with a non-finite entry, and the column's name."""
+        """First row >= start with a non-finite or overflowing entry
+        (:func:`navreplay.filters.base.output_problem`), and what is wrong with which column."""
         stop = self.m
         if stop <= start:
             return None
-        cols: list[tuple[str, np.ndarray]] = [("state", self.x), ("covariance", self.P)]
+        cols: list[tuple[str, str, np.ndarray]] = [("state", "state", self.x),
+                                                   ("covariance", "covariance", self.P)]
         if self.has_nav:
-            cols += [(what, getattr(self, part)) for part, what in _NAV_COLUMN.items()
+            cols += [(part, what, getattr(self, part)) for part, what in _NAV_COLUMN.items()
                      if part in self.navigation]
-        cols += [(k, v) for k, v in self.extras.items()]
+        cols += [(k, k, v) for k, v in self.extras.items()]
         found: tuple[int, str] | None = None
-        for name, col in cols:
-            block = col[start:stop].reshape(stop - start, -1)
-            ok = np.isfinite(block).all(axis=1)
-            if not ok.all():
-                i = start + int(np.argmin(ok))
+        for part, name, col in cols:
+            bad, why = output_problem(part, col[start:stop])
+            if bad.any():
+                i = start + int(np.argmax(bad))
                 if found is None or i < found[0]:
-                    found = (i, name)
+                    found = (i, f"{why} {name}")
         return found
 
     def view(self, start: int = 0, **kw: Any) -> RunResult:
@@ -138,7 +139,7 @@ class Columns:
         if cov is not None:
             raise invalid(label, source, float(self.t[start + cov[0]]), cov[1])
         if bad is not None:
-            raise diverged(label, source, float(self.t[bad[0]]), f"non-finite {bad[1]} estimate")
+            raise diverged(label, source, float(self.t[bad[0]]), f"{bad[1]} estimate")
 
 
 def undeclared(name: str, items: list[tuple[float, np.ndarray, np.ndarray]],
@@ -176,11 +177,12 @@ def innovation_series(
     nu = np.stack([np.asarray(it[1], dtype=np.float64) for it in items])
     S = np.stack([np.asarray(it[2], dtype=np.float64) for it in items])
     nan = np.full(len(t), np.nan)
-    bad_nu = ~np.isfinite(nu).all(axis=1)
+    bad_nu, why = output_problem("nu", nu)
     problem = covariance_problem(S)
     first: tuple[int, str] | None = None
     if bad_nu.any():
-        first = (int(np.argmax(bad_nu)), "nu is not finite")
+        first = (int(np.argmax(bad_nu)), "nu is not finite" if why == "non-finite"
+                 else f"nu is {why}")
     if problem is not None and (first is None or problem[0] < first[0]):
         first = (problem[0], problem[1].replace("covariance P", "S"))
     if first is not None:

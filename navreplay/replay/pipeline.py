@@ -29,6 +29,7 @@ from typing import Any, Protocol
 
 from navreplay.filters.base import Filter, FilterParams, TruthColumn
 from navreplay.filters.result import RunResult, concat, concat_innovations
+from navreplay.filters.settings import summary_entries
 from navreplay.io.source import COMPLETE, MemorySource, Source, Window
 from navreplay.metrics import RunMetrics, RunScorer
 from navreplay.replay.checks import validate_recording
@@ -129,20 +130,24 @@ class FileRun:
     Attributes
     ----------
     summaries : dict[str, dict]
-        Each filter's summary (:meth:`navreplay.metrics.RunSummary.result`), by label; empty
-        without scoring.
+        Each filter's summary (:meth:`navreplay.metrics.RunSummary.result`, then its settings:
+        :func:`navreplay.filters.settings.summary_entries`), by label; empty without scoring.
     has_truth : bool
         A truth (or reference) stream was scored against.
     salvaged : bool
         Messages were lost to damage.
     coverage : float or None
         Fraction of the recording replayed (:meth:`navreplay.io.source.Source.coverage`).
+    reference_coverage : dict[str, float]
+        With a truth: the fraction of each filter's outputs that it scores, by label
+        (:func:`navreplay.metrics.coverage.add_coverage` puts it into a summary).
     """
 
     summaries: dict[str, dict[str, Any]]
     has_truth: bool
     salvaged: bool
     coverage: float | None
+    reference_coverage: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
 def replay_file(
@@ -249,16 +254,19 @@ def replay_file(
                         stage.rows(empty, None, None)
             tracker.window(window)
             window = None if window.final else next(source)
-        summaries = {spec.label: scorer.result() for spec, scorer in zip(specs, scorers,
-                                                                          strict=True)
+        summaries = {spec.label: {**scorer.result(), **summary_entries(session.settings)}
+                     for spec, scorer, session in zip(specs, scorers, sessions, strict=True)
                      if scorer is not None}
+        covered = {spec.label: scorer.coverage()
+                   for spec, scorer in zip(specs, scorers, strict=True)
+                   if scorer is not None and has_truth}
     except BaseException:
         source.close()  # the reader's warnings so far, before the error
         for stage in stages:
             stage.abort()
         raise
     source.close()
-    return FileRun(summaries, has_truth, source.salvaged, source.coverage())
+    return FileRun(summaries, has_truth, source.salvaged, source.coverage(), covered)
 
 
 def _fan_out(stages: Sequence[Stage]

@@ -49,7 +49,10 @@ from navreplay.filters.base import (
 )
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.filters.result import RunResult
+from navreplay.filters.settings import FilterSettings, build_params
+from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, Window
+from navreplay.lifecycle import from_signal
 from navreplay.replay.checks import check_streams
 from navreplay.replay.columns import Columns, innovation_series, undeclared
 from navreplay.replay.errors import (
@@ -65,7 +68,8 @@ from navreplay.replay.errors import (
 )
 from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.plan import EventPlan, aiding_kinds, merge_streams, window_plan
-from navreplay.replay.spec import FilterSpec, build_params
+from navreplay.replay.spec import FilterSpec
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import Stream, StreamKind
 
 CHECK_EVERY = 1024
@@ -91,7 +95,8 @@ class ReplaySession:
         every window's.
     spec : FilterSpec
         The filter and its parameter values; the filter's parameters are built here, for this
-        recording (:func:`navreplay.replay.spec.build_params`).
+        recording (:func:`navreplay.filters.settings.build_params`, from the recording's sensor
+        specifications and the spec's values).
     source : str
         The recording in messages and in the result.
     output_rate : float or None
@@ -136,7 +141,13 @@ class ReplaySession:
         filter_cls = spec.filter_cls
         label = spec.label
         check_streams(first, filter_cls, source)
-        p = build_params(filter_cls, spec.values)
+        try:
+            sensors = SensorSpecs.from_metadata(first.metadata.sensors, source)
+        except ValueError as e:
+            raise RecordingError(str(e)) from None
+        self.settings: FilterSettings = build_params(filter_cls, spec.values, sensors,
+                                                     label=label)
+        p = self.settings.params
         context = FilterContext(metadata=first.metadata, t0_ns=first.t0_ns,
                                 streams=frozenset(first.present | set(first)))
         try:
@@ -145,6 +156,12 @@ class ReplaySession:
             raise FilterInitError(
                 f"filter {label!r} cannot start on {source}: {one_line(e)}"
             ) from e
+        except BaseException as e:
+            if from_signal(e):
+                raise
+            raise FilterInitError(f"filter {label!r} cannot start on {source}: "
+                                  f"{one_line(e)} (a filter raises an Exception; it never "
+                                  "ends the process)") from None
         self.filter: Filter = filt
         self.states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
         try:
@@ -176,6 +193,7 @@ class ReplaySession:
             states=self.states,
             scored_extras=scored_extras,
             measurements=measurements or (),
+            settings=self.settings,
         )
         # IMU state between windows: samples not yet handed over, the last one handed over,
         # the tick range and the nominal sample interval
@@ -408,6 +426,13 @@ class ReplaySession:
                 f"filter {label!r} failed on {source} at t = {_time(run, t_ev, i):.3f} s: "
                 f"{one_line(e)}"
             ) from e
+        except BaseException as e:
+            if from_signal(e):
+                raise
+            raise FilterFailedError(  # sys.exit(), an interrupt raised by code: its error
+                f"filter {label!r} failed on {source} at t = {_time(run, t_ev, i):.3f} s: "
+                f"{one_line(e)} (a filter raises an Exception; it never ends the process)"
+            ) from None
         self._events = done0 + n_events
         events.finish()
         if progress is not None:

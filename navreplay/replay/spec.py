@@ -6,15 +6,18 @@ or in code, and passed along to every recording it runs over (pickled to campaig
 its class and values). :meth:`FilterSpec.resolve` loads the class (once) and parses the values
 into typed values (once: the strings of ``-p key=value`` become floats, tuples, enums),
 checking them against the filter's parameters, so mistakes surface before any work. The
-filter's parameter instance is built per recording from them, in one place
-(:func:`build_params`, called by the replay session).
+values keep where each came from (:class:`~navreplay.filters.settings.ParamValues`). The
+filter's parameter instance is built per recording from them and the recording's sensor
+specifications, in one place (:func:`navreplay.filters.settings.build_params`, called by the
+replay session).
 
 Examples
 --------
+>>> from navreplay.filters.settings import build_params
 >>> spec = FilterSpec("gps-ins", {"gps_pos_sigma_scale": "2"}).resolve()
 >>> spec.label, spec.values, spec.cls.__name__
 ('gps-ins', {'gps_pos_sigma_scale': 2.0}, 'GpsInsFilter')
->>> build_params(spec.cls, spec.values).gps_pos_sigma_scale
+>>> build_params(spec.cls, spec.values).params.gps_pos_sigma_scale
 2.0
 """
 
@@ -24,9 +27,9 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
-from navreplay import params as _params
 from navreplay.filters.base import Filter, FilterParams
 from navreplay.filters.registry import load_filter
+from navreplay.filters.settings import ParamValues, build_params
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,7 +42,8 @@ class FilterSpec:
     ref : str
         Registry name (``navreplay filters``) or ``package.module:Class``.
     params : mapping
-        Parameter values by name (strings as from ``-p key=value``, or typed values).
+        Parameter values by name (strings as from ``-p key=value``, or typed values; a
+        :class:`~navreplay.filters.settings.ParamValues` says where each came from).
     label : str
         Display label, unique within a campaign (default: the name, or the class name for a
         ``module:Class`` reference).
@@ -57,7 +61,7 @@ class FilterSpec:
         if not self.label:
             default = self.ref.rpartition(":")[2] if ":" in self.ref else self.ref
             object.__setattr__(self, "label", default)
-        object.__setattr__(self, "params", dict(self.params))
+        object.__setattr__(self, "params", ParamValues(self.params))  # keeps the sources
         object.__setattr__(self, "_values", None)
 
     @classmethod
@@ -70,8 +74,7 @@ class FilterSpec:
         if not isinstance(params, FilterParams):
             return cls(ref, params or {}, label or filter_cls.name, cls=filter_cls)
         spec = cls(ref, {}, label or filter_cls.name, cls=filter_cls)
-        object.__setattr__(spec, "_values", {f.name: getattr(params, f.name)
-                                             for f in dataclasses.fields(params) if f.init})
+        object.__setattr__(spec, "_values", params)  # used as it is
         return spec
 
     def resolve(self) -> FilterSpec:
@@ -82,9 +85,9 @@ class FilterSpec:
             object.__setattr__(self, "cls", load_filter(self.ref))
         if self._values is None:
             assert self.cls is not None
-            checked = _params.build(self.cls.Params, self.params,
-                                    where=f"filter {self.cls.name}")
-            object.__setattr__(self, "_values", {k: getattr(checked, k) for k in self.params})
+            checked = build_params(self.cls, self.params).params  # no sensors: the values only
+            object.__setattr__(self, "_values", ParamValues(
+                {k: getattr(checked, k) for k in self.params}, self.params.sources))
         return self
 
     @property
@@ -93,19 +96,11 @@ class FilterSpec:
         return self.resolve().cls  # type: ignore[return-value]
 
     @property
-    def values(self) -> dict[str, Any]:
-        """The parameter values, typed (parsed once)."""
-        return dict(self.resolve()._values)  # type: ignore[arg-type]
+    def values(self) -> ParamValues | FilterParams:
+        """The parameter values, typed (parsed once), with their sources; or the parameter
+        instance the spec was made with (:meth:`of`)."""
+        values = self.resolve()._values
+        if isinstance(values, FilterParams):
+            return values
+        return ParamValues(values)  # type: ignore[arg-type]
 
-
-def build_params(filter_cls: type[Filter], values: Mapping[str, Any] | FilterParams | None
-                 ) -> FilterParams:
-    """The filter's parameter instance for one recording, from typed values
-    (:attr:`FilterSpec.values`) over its defaults: the one place a filter's parameters are
-    built."""
-    if isinstance(values, FilterParams):
-        return values
-    try:
-        return filter_cls.Params(**dict(values or {}))
-    except (ValueError, TypeError) as e:
-        raise _params.ParamError(f"filter {filter_cls.name}: {e}") from None

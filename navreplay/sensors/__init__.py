@@ -14,6 +14,8 @@ module                    model                                        stream
 :mod:`.speed_log`         propeller-RPM speed log, sea current         speed_log
 :mod:`.depth`             depth sensor                                 depth
 :mod:`.noise`             white-noise conversions, Gauss-Markov, RW    -
+:mod:`.specs`             the models as sensor specifications: TOML    -
+                          tables in datasheet units, metadata
 ========================  ===========================================  ====================
 """
 

@@ -4,7 +4,7 @@ errors as plain JSON values."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -12,6 +12,15 @@ from navreplay.streams import jsonable
 
 Vec3 = tuple[float, float, float]
 """Three per-axis values (N, E, D or x, y, z)."""
+
+
+class FieldUnit(NamedTuple):
+    """Units of a field of an error specification: the unit its value is held in (SI, or the
+    unit the field's docstring names) and the datasheet unit it is written in
+    (:mod:`navreplay.sensors.specs`); both expressions of :mod:`navreplay.units`."""
+
+    si: str
+    datasheet: str
 
 
 def as_vec3(owner: object, name: str) -> None:

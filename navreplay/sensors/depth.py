@@ -12,16 +12,23 @@ array([50.])
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 
 from navreplay.params import check_nonnegative, check_positive
-from navreplay.sensors._common import RealisedErrors
+from navreplay.sensors._common import FieldUnit, RealisedErrors
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class DepthModel:
     """1-sigma error specification of a depth (pressure) sensor (SI)."""
+
+    field_units: ClassVar[Mapping[str, FieldUnit]] = {
+        "bias": FieldUnit("m", "m"), "noise": FieldUnit("m", "m"), "rate": FieldUnit("Hz", "Hz"),
+    }
+    """Unit of each field in SI and in datasheets."""
 
     bias: float = 0.0
     """Bias, random constant [m]."""

@@ -1,12 +1,12 @@
 """GNSS receiver error model: position fix and NED velocity.
 
     pos_meas = pos + (white_N,E,D + gm_N,E,D)  (NED metres, mapped to latitude/longitude/height)
-    v_meas   = v_n + white velocity noise
+    v_meas   = v_n + (white_N,E,D + gm_N,E,D)  (m/s)
 
-The white parts are independent per epoch and axis; the optional Gauss-Markov part (per-axis
-steady-state sigma, one correlation time) models the slowly wandering position error of a
-real receiver. The reported ``pos_sigma`` is the total stationary 1-sigma per axis,
-sqrt(white^2 + gm^2); ``vel_sigma`` the velocity white-noise sigma.
+The white parts are independent per epoch and axis; the optional Gauss-Markov parts (per-axis
+steady-state sigma, one correlation time each) model the slowly wandering errors of a real
+receiver (multipath, atmosphere). The reported ``pos_sigma`` and ``vel_sigma`` are the total
+stationary 1-sigma per axis, sqrt(white^2 + gm^2).
 
 Examples
 --------
@@ -22,18 +22,31 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 
 from navreplay.geo.earth import radii
 from navreplay.params import check_nonnegative, check_positive
-from navreplay.sensors._common import RealisedErrors, Vec3, as_vec3
+from navreplay.sensors._common import FieldUnit, RealisedErrors, Vec3, as_vec3
 from navreplay.sensors.noise import gauss_markov
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GpsModel:
     """1-sigma error specification of a GNSS receiver (SI). A scalar applies to all axes."""
+
+    field_units: ClassVar[Mapping[str, FieldUnit]] = {
+        "pos_sigma": FieldUnit("m", "m"),
+        "pos_gm_sigma": FieldUnit("m", "m"),
+        "pos_gm_tau": FieldUnit("s", "s"),
+        "vel_sigma": FieldUnit("m/s", "m/s"),
+        "vel_gm_sigma": FieldUnit("m/s", "m/s"),
+        "vel_gm_tau": FieldUnit("s", "s"),
+        "rate": FieldUnit("Hz", "Hz"),
+    }
+    """Unit of each field in SI and in datasheets."""
 
     pos_sigma: float | Vec3 = (2.5, 2.5, 5.0)
     """White position noise per axis N, E, D [m]."""
@@ -43,14 +56,27 @@ class GpsModel:
     """Correlation time of the Gauss-Markov position error [s]."""
     vel_sigma: float | Vec3 = 0.05
     """White velocity noise per axis N, E, D [m/s]."""
+    vel_gm_sigma: float | Vec3 = 0.0
+    """Steady-state sigma of the Gauss-Markov velocity error per axis N, E, D [m/s]."""
+    vel_gm_tau: float = 10.0
+    """Correlation time of the Gauss-Markov velocity error [s]."""
     rate: float = 1.0
     """Output rate [Hz]."""
 
     def __post_init__(self) -> None:
-        for name in ("pos_sigma", "pos_gm_sigma", "vel_sigma"):
+        for name in ("pos_sigma", "pos_gm_sigma", "vel_sigma", "vel_gm_sigma"):
             as_vec3(self, name)
-        check_nonnegative(self, "pos_sigma", "pos_gm_sigma", "vel_sigma")
-        check_positive(self, "pos_gm_tau", "rate")
+        check_nonnegative(self, "pos_sigma", "pos_gm_sigma", "vel_sigma", "vel_gm_sigma")
+        check_positive(self, "pos_gm_tau", "vel_gm_tau", "rate")
+
+    def total_pos_sigma(self) -> np.ndarray:
+        """Stationary 1-sigma of the position error per axis N, E, D, white and Gauss-Markov
+        together [m], shape (3,)."""
+        return np.hypot(self.pos_sigma, self.pos_gm_sigma)
+
+    def total_vel_sigma(self) -> np.ndarray:
+        """Stationary 1-sigma of the velocity error per axis N, E, D [m/s], shape (3,)."""
+        return np.hypot(self.vel_sigma, self.vel_gm_sigma)
 
     def draw(self, rng: np.random.Generator) -> GpsErrors:
         """Draw the random constants of one run: the initial Gauss-Markov position error."""
@@ -89,6 +115,7 @@ class GpsModel:
         gm = gauss_markov(m, dt, gm_sigma, self.pos_gm_tau, rng, x0=errors.pos_gm0_ned)
         err_ned = gm + rng.standard_normal((m, 3)) * white
         vel_err = rng.standard_normal((m, 3)) * np.asarray(self.vel_sigma)
+        vel_err += gauss_markov(m, dt, np.asarray(self.vel_gm_sigma), self.vel_gm_tau, rng)
 
         R_M, R_N = radii(pos[:, 0])
         h = pos[:, 2]
@@ -96,8 +123,8 @@ class GpsModel:
         meas[:, 0] += err_ned[:, 0] / (R_M + h)
         meas[:, 1] += err_ned[:, 1] / ((R_N + h) * np.cos(pos[:, 0]))
         meas[:, 2] -= err_ned[:, 2]
-        pos_sigma = np.broadcast_to(np.hypot(white, gm_sigma), (m, 3))
-        vel_sigma = np.broadcast_to(np.asarray(self.vel_sigma), (m, 3))
+        pos_sigma = np.broadcast_to(self.total_pos_sigma(), (m, 3))
+        vel_sigma = np.broadcast_to(self.total_vel_sigma(), (m, 3))
         return GpsMeasurement(
             pos=meas,
             pos_sigma=np.array(pos_sigma),

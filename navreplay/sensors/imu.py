@@ -38,6 +38,8 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 
@@ -45,7 +47,7 @@ from navreplay import units
 from navreplay.geo import earth
 from navreplay.geo.rotations import quat_to_dcm
 from navreplay.params import check_nonnegative, check_positive
-from navreplay.sensors._common import RealisedErrors, draw_misalignment, triad_matrix
+from navreplay.sensors._common import FieldUnit, RealisedErrors, draw_misalignment, triad_matrix
 from navreplay.sensors.noise import gauss_markov, random_walk, sample_sigma
 
 
@@ -53,8 +55,29 @@ from navreplay.sensors.noise import gauss_markov, random_walk, sample_sigma
 class ImuModel:
     """1-sigma error specification of a strapdown IMU (SI units, per axis).
 
-    Every random constant is drawn independently per axis (per matrix entry) and run.
+    Every random constant is drawn independently per axis (per matrix entry) and run. The
+    record is the IMU's sensor specification (:mod:`navreplay.sensors.specs`): the simulator
+    draws from it and the filters derive their noise and initial uncertainties from it.
     """
+
+    field_units: ClassVar[Mapping[str, FieldUnit]] = {
+        "gyro_bias": FieldUnit("rad/s", "deg/h"),
+        "gyro_bias_instability": FieldUnit("rad/s", "deg/h"),
+        "gyro_bias_tau": FieldUnit("s", "s"),
+        "gyro_scale_factor": FieldUnit("", "ppm"),
+        "gyro_misalignment": FieldUnit("rad", "mrad"),
+        "gyro_g_sensitivity": FieldUnit("rad/s/(m/s^2)", "deg/h/g"),
+        "gyro_arw": FieldUnit("rad/sqrt(s)", "deg/sqrt(h)"),
+        "gyro_rrw": FieldUnit("rad/s/sqrt(s)", "deg/h/sqrt(h)"),
+        "accel_bias": FieldUnit("m/s^2", "mg"),
+        "accel_bias_instability": FieldUnit("m/s^2", "ug"),
+        "accel_bias_tau": FieldUnit("s", "s"),
+        "accel_scale_factor": FieldUnit("", "ppm"),
+        "accel_misalignment": FieldUnit("rad", "mrad"),
+        "accel_vrw": FieldUnit("m/s/sqrt(s)", "ug/sqrt(Hz)"),
+        "accel_rw": FieldUnit("m/s^2/sqrt(s)", "ug/sqrt(s)"),
+    }
+    """Unit of each field in SI and in datasheets (``gyro_arw``: rad/sqrt(s), deg/sqrt(h))."""
 
     gyro_bias: float = 0.0
     """Gyro bias, random constant [rad/s]."""
@@ -327,7 +350,8 @@ def effective_biases(
 
 
 class ImuGrade(enum.StrEnum):
-    """Preset IMU error levels (typical datasheet values, 1 sigma)."""
+    """Preset IMU error levels (typical datasheet values, 1 sigma; the values are in
+    ``_GRADES`` and in docs/sensors.md)."""
 
     IDEAL = "ideal"
     """No errors at all."""
@@ -337,6 +361,10 @@ class ImuGrade(enum.StrEnum):
     """Tactical grade (FOG / high-end MEMS): 1 deg/h, 0.3 mg."""
     MEMS = "mems"
     """Industrial MEMS: 10 deg/h, 3 mg."""
+    CONSUMER = "consumer"
+    """Consumer MEMS (phone, automotive consumer 6-axis IMU): 0.1 deg/s turn-on bias,
+    20 deg/h in-run instability, 0.4 deg/sqrt(h); 20 mg, 0.5 % scale factors, 0.5 deg
+    misalignments."""
 
 
 def imu_grade(grade: ImuGrade | str) -> ImuModel:
@@ -405,5 +433,25 @@ _GRADES: dict[ImuGrade, ImuModel] = {
         accel_scale_factor=1000 * units.PPM,
         accel_misalignment=1e-3,
         accel_vrw=100 * units.MICRO_G_PER_SQRT_HZ,
+    ),
+    # A consumer 6-axis MEMS IMU as in phones and consumer automotive modules (datasheet
+    # typicals of that class: zero-rate offset +-0.5 deg/s max, noise density ~0.007
+    # deg/s/sqrt(Hz), sensitivity tolerance +-0.5 %, cross-axis +-1 %, zero-g offset +-40 mg,
+    # noise ~150 ug/sqrt(Hz)), 1 sigma: the in-run (Allan) instability is tens of deg/h, the
+    # turn-on bias a fifth of the max offset.
+    ImuGrade.CONSUMER: ImuModel(
+        gyro_bias=0.1 * units.DEG_PER_SECOND,
+        gyro_bias_instability=20.0 * units.DEG_PER_HOUR,
+        gyro_bias_tau=100.0,
+        gyro_scale_factor=0.5 * units.PERCENT,
+        gyro_misalignment=0.5 * units.DEG,
+        gyro_g_sensitivity=100.0 * units.DEG_PER_HOUR_PER_G,
+        gyro_arw=0.4 * units.DEG_PER_SQRT_HOUR,
+        accel_bias=20.0 * units.MILLI_G,
+        accel_bias_instability=0.2 * units.MILLI_G,
+        accel_bias_tau=100.0,
+        accel_scale_factor=0.5 * units.PERCENT,
+        accel_misalignment=0.5 * units.DEG,
+        accel_vrw=150 * units.MICRO_G_PER_SQRT_HZ,
     ),
 }

@@ -27,13 +27,15 @@ import datetime as _dt
 import enum
 import functools
 import math
+from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 from pygeomag import GeoMag
 
 from navreplay.geo.rotations import quat_conj, quat_rotate
 from navreplay.params import check_nonnegative, check_positive
-from navreplay.sensors._common import RealisedErrors, draw_misalignment, triad_matrix
+from navreplay.sensors._common import FieldUnit, RealisedErrors, draw_misalignment, triad_matrix
 from navreplay.units import NANOTESLA
 
 
@@ -135,6 +137,15 @@ def decimal_year(when: _dt.datetime | _dt.date) -> float:
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class MagnetometerModel:
     """1-sigma error specification of a three-axis magnetometer (SI, per axis)."""
+
+    field_units: ClassVar[Mapping[str, FieldUnit]] = {
+        "scale_factor": FieldUnit("", "%"),
+        "misalignment": FieldUnit("rad", "deg"),
+        "bias": FieldUnit("T", "nT"),
+        "noise": FieldUnit("T", "nT"),
+        "rate": FieldUnit("Hz", "Hz"),
+    }
+    """Unit of each field in SI and in datasheets."""
 
     scale_factor: float = 0.0
     """Scale-factor error, random constant per axis [-]."""

@@ -29,18 +29,30 @@ True
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 
 from navreplay.geo.rotations import dcm_to_euler, quat_to_dcm, rotvec_to_dcm, wrap_angle
 from navreplay.params import check_nonnegative, check_positive
-from navreplay.sensors._common import RealisedErrors, Vec3, as_vec3
+from navreplay.sensors._common import FieldUnit, RealisedErrors, Vec3, as_vec3
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class MasterInsModel:
     """1-sigma error specification of a master gimballed INS (SI). A scalar applies to all
     three axes / angles."""
+
+    field_units: ClassVar[Mapping[str, FieldUnit]] = {
+        "tilt": FieldUnit("rad", "arcmin"),
+        "synchro_bias": FieldUnit("rad", "arcmin"),
+        "synchro_noise": FieldUnit("rad", "arcmin"),
+        "vel_bias": FieldUnit("m/s", "m/s"),
+        "vel_noise": FieldUnit("m/s", "m/s"),
+        "rate": FieldUnit("Hz", "Hz"),
+    }
+    """Unit of each field in SI and in datasheets."""
 
     tilt: float | Vec3 = 0.0
     """Platform tilt eps_N, eps_E, eps_D, random constant [rad]."""

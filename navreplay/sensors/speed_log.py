@@ -26,18 +26,29 @@ array([1400.])
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 
 from navreplay.geo.rotations import quat_conj, quat_rotate, rotvec_to_dcm
 from navreplay.params import check_nonnegative, check_positive
-from navreplay.sensors._common import RealisedErrors
+from navreplay.sensors._common import FieldUnit, RealisedErrors
 from navreplay.units import DEG
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SpeedLogModel:
     """1-sigma error specification of a propeller-RPM speed log (SI)."""
+
+    field_units: ClassVar[Mapping[str, FieldUnit]] = {
+        "scale_factor": FieldUnit("", "%"),
+        "misalignment": FieldUnit("rad", "deg"),
+        "noise": FieldUnit("rpm", "rpm"),
+        "speed_per_rpm": FieldUnit("m/s/rpm", "m/s/rpm"),
+        "rate": FieldUnit("Hz", "Hz"),
+    }
+    """Unit of each field in SI and in datasheets (the noise in rev/min, as the stream)."""
 
     scale_factor: float = 0.02
     """RPM scale-factor error k, random constant [-]."""

@@ -12,7 +12,15 @@ Metadata (:meth:`Scenario.metadata`)
     themselves, what an external alignment hands over: the truth plus drawn errors with their
     sigmas (:func:`navreplay.sim.trajectory.initial_nav`), or a surveyed site that the
     scenario's filter is meant to know; ``extra`` the site, date, rates and a description of
-    every truth column.
+    every truth column; ``sensors`` the specification of every sensor it simulated
+    (:class:`navreplay.sensors.specs.SensorSpecs`, SI), the records the filters derive their
+    settings from.
+
+Sensors (:meth:`Scenario.sensor_specs`)
+    A scenario builds its sensors from its parameters (the IMU grade, the paper's table);
+    ``[sensors.KIND]`` tables (``simulate --config``, or ``-p sensors.KIND.FIELD=VALUE``) are
+    written over them before the run (:func:`scenario_inputs`), and the scenario simulates
+    exactly the records it is handed.
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ import numpy as np
 import navreplay
 from navreplay import params as _params
 from navreplay.sensors.imu import ImuErrors, ImuMeasurement, effective_biases
+from navreplay.sensors.specs import SensorSpecs, specs_from_tables
 from navreplay.sim.trajectory import Trajectory
 from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
 
@@ -34,7 +43,7 @@ _REGISTRY: dict[str, type[Scenario]] = {}
 
 class Scenario(abc.ABC):
     """Base class: subclasses set ``name``, ``summary``, ``streams``, ``Params`` and implement
-    :meth:`simulate`.
+    :meth:`sensor_specs` and :meth:`simulate`.
 
     ``Params`` is a frozen keyword-only dataclass in SI (datasheet units converted with
     :mod:`navreplay.units`) with a ``duration`` field [s] where the length is free.
@@ -46,8 +55,16 @@ class Scenario(abc.ABC):
     Params: ClassVar[type]
 
     @abc.abstractmethod
-    def simulate(self, params: Any, rng: np.random.Generator, seed: int) -> Recording:
-        """Simulate one run. ``seed`` is recorded in the metadata; draw only from ``rng``."""
+    def sensor_specs(self, params: Any) -> SensorSpecs:
+        """The specifications of the scenario's sensors for ``params`` (one record per kind it
+        simulates, with its source)."""
+
+    @abc.abstractmethod
+    def simulate(self, params: Any, rng: np.random.Generator, seed: int,
+                 sensors: SensorSpecs) -> Recording:
+        """Simulate one run with the sensors ``sensors`` (:meth:`sensor_specs`, perhaps with
+        tables written over it). ``seed`` is recorded in the metadata; draw only from
+        ``rng``."""
 
     def metadata(
         self,
@@ -56,6 +73,7 @@ class Scenario(abc.ABC):
         *,
         true_errors: Mapping[str, Any],
         extra: Mapping[str, Any],
+        sensors: SensorSpecs,
         initial_nav: Mapping[str, Any] | None = None,
         derived: Mapping[str, Any] | None = None,
     ) -> Metadata:
@@ -67,6 +85,8 @@ class Scenario(abc.ABC):
             The run's parameters, recorded field by field.
         seed : int
         true_errors, extra : mapping
+        sensors : SensorSpecs
+            The sensors simulated.
         initial_nav : mapping, optional
             For scenarios whose filters do not initialise themselves.
         derived : mapping, optional
@@ -80,6 +100,7 @@ class Scenario(abc.ABC):
             initial_nav=dict(initial_nav or {}),
             navreplay_version=navreplay.__version__,
             extra=dict(extra),
+            sensors=sensors.to_metadata(),
         )
 
 
@@ -105,18 +126,55 @@ def get_scenario(name: str) -> type[Scenario]:
     return table[name]
 
 
+SENSORS_KEY = "sensors"
+"""The key of a scenario's values that holds ``[sensors.KIND]`` tables (datasheet units)."""
+
+
+def scenario_inputs(
+    cls: type[Scenario], values: Mapping[str, Any] | None = None
+) -> tuple[Any, SensorSpecs]:
+    """The parameters and the sensors of a run of scenario ``cls``.
+
+    ``values`` are parameter values (strings or values) and, under :data:`SENSORS_KEY`,
+    ``[sensors.KIND]`` tables written over the scenario's own sensors
+    (:func:`navreplay.sensors.specs.specs_from_tables`). Raises
+    :class:`navreplay.params.ParamError` with one line.
+    """
+    values = dict(values or {})
+    tables = values.pop(SENSORS_KEY, None) or {}
+    p = _params.build(cls.Params, values, where=f"scenario {cls.name}")
+    scenario = cls()
+    base = scenario.sensor_specs(p)
+    foreign = sorted(set(tables) - set(base.models))
+    if foreign:
+        raise _params.ParamError(
+            f"scenario {cls.name} simulates no {', '.join(foreign)} (its sensors: "
+            f"{', '.join(base.models) or 'none'}): remove [sensors.{foreign[0]}]")
+    return p, specs_from_tables(tables, base=base)
+
+
 def simulate(
     name: str, values: dict[str, Any] | None = None, seed: int = 0
 ) -> Recording:
-    """Simulate scenario ``name`` with parameter overrides ``values`` (strings or values)."""
+    """Simulate scenario ``name`` with parameter overrides ``values`` (strings or values, and
+    ``[sensors.KIND]`` tables under ``"sensors"``: :func:`scenario_inputs`)."""
     cls = get_scenario(name)
-    p = _params.build(cls.Params, values, where=f"scenario {name}")
+    p, sensors = scenario_inputs(cls, values)
     rng = np.random.default_rng(seed)
-    return cls().simulate(p, rng, seed)
+    return cls().simulate(p, rng, seed, sensors)
 
 
 # --------------------------------------------------------------------------------------------
 # streams shared by the scenarios
+
+
+def check_sensor_rate(kind: str, rate: float, imu_rate: float) -> None:
+    """Raise ``ValueError`` unless a sensor's ``rate`` [Hz] divides the IMU (truth) rate a
+    whole number of times (it is sampled at every k-th truth sample)."""
+    k = imu_rate / rate
+    if round(k) < 1 or abs(k - round(k)) > 1e-9 * k:
+        raise ValueError(f"the {kind} rate ({rate:g} Hz) must divide imu_rate ({imu_rate:g} Hz) "
+                         "a whole number of times")
 
 
 def imu_stream(

@@ -25,7 +25,12 @@ docs/rerun-view.md. The names below are imported (with rerun) on first use.
 from __future__ import annotations
 
 import importlib
+import os
 from typing import Any
+
+# rerun's own log lines (a failed file write, a lost connection) would come beside the one
+# line navreplay reports for the same failure; RUST_LOG, when set, still decides
+os.environ.setdefault("RUST_LOG", "off")
 
 _EXPORTS = {
     "APPLICATION_ID": "navreplay.viz.sink",

@@ -18,6 +18,7 @@ import os
 import urllib.parse
 import uuid
 from pathlib import Path
+from typing import Any
 
 import rerun as rr
 
@@ -35,6 +36,7 @@ from navreplay.viz.targets import (
     parse_url,
     port_error,
     port_free,
+    url_host,
 )
 
 
@@ -45,11 +47,9 @@ def _new_stream(recording_id: str | None, recording_name: str | None) -> rr.Reco
     return rec
 
 
-_WEB_VIEWERS: set[int] = set()
-"""Web-viewer ports served by this process."""
-_SERVERS: dict[int, rr.RecordingStream] = {}
-"""gRPC servers of this process by port: the serving stream stays alive (not disconnected) so
-that browsers can still connect after its sink is closed; they stop when the process exits."""
+_SERVERS: dict[tuple[str, int], Any] = {}
+"""Server processes started by this process, by (bind address, gRPC port): they keep the data
+for browsers after the sinks are closed, and stop when this process ends."""
 
 
 def open_sink(
@@ -133,28 +133,67 @@ def _open_spawn(target: Spawn, name: str | None, rid: str | None) -> Sink:
     return Sink(rec, target, url=url)
 
 
+SERVER_START_S = 20.0
+"""How long a started server may take to listen on its ports [s]."""
+
+
 def _open_serve(target: Serve, name: str | None, rid: str | None) -> Sink:
-    url, _, _ = parse_url(target.grpc_port)
-    start_web = target.web_port not in _WEB_VIEWERS
-    if start_web and not port_free(target.web_port):
-        raise VizUnavailableError(f"cannot serve the web viewer: port {target.web_port} is in use")
+    host = target.host
+    url = f"rerun+http://{url_host(host)}:{target.grpc_port}/proxy"
+    if port_error(host, target.grpc_port, 0.5) is not None:
+        _start_server(target)  # else: the server of an earlier sink (or another process)
     rec = _new_stream(rid, name)
-    owner = False
-    if port_error("127.0.0.1", target.grpc_port, 0.5) is None:
-        rec.connect_grpc(url)  # the server of an earlier sink (or of another process)
-    else:
-        url = rec.serve_grpc(
-            grpc_port=target.grpc_port, server_memory_limit=target.server_memory_limit
-        )
-        _SERVERS[target.grpc_port] = rec
-        owner = True
-    if start_web:
-        rr.serve_web_viewer(
-            web_port=target.web_port, open_browser=target.open_browser, connect_to=url
-        )
-        _WEB_VIEWERS.add(target.web_port)
-    web = f"http://localhost:{target.web_port}/?url={urllib.parse.quote(url, safe='')}"
-    return Sink(rec, target, url=url, web_url=web, keep_alive=owner)
+    rec.connect_grpc(url)
+    public = url_host(target.public_host)
+    grpc = f"rerun+http://{public}:{target.grpc_port}/proxy"
+    web = f"http://{public}:{target.web_port}/?url={urllib.parse.quote(grpc, safe='')}"
+    if target.open_browser:
+        import webbrowser
+
+        webbrowser.open(web)
+    return Sink(rec, target, url=url, web_url=web)
+
+
+def _start_server(target: Serve) -> None:
+    """Start ``rerun --serve-web`` listening on ``target.bind`` only (rerun-sdk 0.41's
+    ``serve_web_viewer`` takes no address and listens on every interface) and wait until both
+    its ports answer; it ends with this process (:mod:`navreplay.lifecycle`)."""
+    import subprocess
+    import tempfile
+    import time
+
+    from navreplay import lifecycle
+
+    exe = targets.find_server()
+    if exe is None:
+        raise VizUnavailableError("no `rerun` executable to serve the web viewer "
+                                  "(pip install rerun-sdk); use --save")
+    for port in (target.web_port, target.grpc_port):
+        if not port_free(port, target.bind):
+            raise VizUnavailableError(f"cannot serve the web viewer: port {port} is in use on "
+                                      f"{target.bind}")
+    log = tempfile.TemporaryFile()
+    proc = subprocess.Popen(
+        [exe, "--serve-web", "--bind", target.bind, "--port", str(target.grpc_port),
+         "--web-viewer-port", str(target.web_port),
+         "--server-memory-limit", target.server_memory_limit],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log,
+        preexec_fn=lifecycle.child_init, env={**os.environ, "RUST_LOG": "warn"})
+    lifecycle.adopt(proc)
+    end = time.monotonic() + SERVER_START_S
+    while any(port_error(target.host, p, 0.2) is not None
+              for p in (target.grpc_port, target.web_port)):
+        if proc.poll() is not None or time.monotonic() > end:
+            lifecycle.release_child(proc)
+            log.seek(0)
+            lines = [ln for ln in log.read().decode(errors="replace").splitlines() if ln.strip()]
+            why = lines[-1].strip() if lines else (
+                f"exit status {proc.returncode}" if proc.returncode is not None
+                else f"not listening after {SERVER_START_S:g} s")
+            raise VizUnavailableError(f"cannot serve the web viewer on {target.bind} ({exe}): "
+                                      f"{why}")
+        time.sleep(0.1)
+    _SERVERS[(target.bind, target.grpc_port)] = proc
 
 
 def _open_save(target: Save, name: str | None, rid: str | None) -> Sink:

@@ -34,11 +34,19 @@ class VizOptions:
         The .rrd file (SAVE); default chosen by the job (under ``out/``).
     url : str, optional
         Viewer address (CONNECT).
+    bind : str
+        The address a served viewer listens on (SERVE): the loopback interface unless told
+        otherwise (:class:`navreplay.viz.targets.Serve`).
+    web_port, grpc_port : int
+        The served viewer's ports (SERVE).
     """
 
     mode: VizMode = VizMode.SAVE
     path: Path | None = None
     url: str | None = None
+    bind: str = "127.0.0.1"
+    web_port: int = 9090
+    grpc_port: int = 9876
 
     def target(self, default: Path) -> Any:
         """The :mod:`navreplay.viz` target, or None for no output."""
@@ -52,7 +60,7 @@ class VizOptions:
             return viz.Spawn()
         if self.mode is VizMode.CONNECT:
             return viz.Connect(self.url) if self.url else viz.Connect()
-        return viz.Serve()
+        return viz.Serve(grpc_port=self.grpc_port, web_port=self.web_port, bind=self.bind)
 
     @property
     def live(self) -> bool:

@@ -66,7 +66,7 @@ from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import quat_wxyz_to_xyzw, radii
 from navreplay.metrics import RunMetrics, nav_errors
-from navreplay.outputs import release
+from navreplay.outputs import OutputError, release
 from navreplay.streams import Stream
 from navreplay.viz import convert
 from navreplay.viz.blueprint import Catalog, build_blueprint
@@ -88,6 +88,7 @@ from navreplay.viz.targets import (
     Serve,
     Target,
     VizUnavailableError,
+    rrd_problem,
 )
 
 APPLICATION_ID = "navreplay"
@@ -1116,14 +1117,21 @@ class Sink:
             self.flush(timeout)
             if not self._keep_alive:  # a served stream keeps its server up for late browsers
                 self._rec.disconnect()
-        except BaseException:
+        except BaseException as e:
+            problem = rrd_problem(self._tmp) if self._tmp is not None else None
             self.abort()
+            if problem is not None and isinstance(e, VizUnavailableError):
+                raise OutputError(f"{self.path}: the Rerun view is {problem}; nothing was "
+                                  "saved") from None
             raise
-        self._closed = True
         if self._tmp is not None and self.path is not None:
-            if not self._tmp.is_file() or self._tmp.stat().st_size == 0:
-                raise OSError(f"Rerun did not write {self._tmp}")
+            problem = rrd_problem(self._tmp)  # rerun reports a failed write only in its log
+            if problem is not None:
+                self.abort()
+                raise OutputError(f"{self.path}: the Rerun view is {problem}; nothing was "
+                                  "saved")
             os.replace(self._tmp, self.path)
+        self._closed = True
         return self.path or self.url
 
     def abort(self) -> None:
@@ -1172,11 +1180,12 @@ def _thin(pts: np.ndarray) -> np.ndarray:
 
 
 def _truth_nav(stream: Stream, t0_ns: int) -> convert.NavColumns:
-    missing = [c for c in ("pos", "v_n", "q_nb") if c not in stream.columns]
-    if missing:
-        raise ValueError(f"truth stream lacks columns {missing} (has {sorted(stream.columns)})")
+    """The truth's solution; parts a reference lacks (a position-only one) are NaN."""
+    n = len(stream)
+    parts = [stream.columns.get(c, np.full((n, w), np.nan))
+             for c, w in (("pos", 3), ("v_n", 3), ("q_nb", 4))]
     t = (stream.t_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9
-    return convert.NavColumns(t, stream["pos"], stream["v_n"], stream["q_nb"])
+    return convert.NavColumns(t, *parts)
 
 
 def _unwrap_after(yaw: np.ndarray, previous: tuple[float, float] | None) -> np.ndarray:

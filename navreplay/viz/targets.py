@@ -10,9 +10,11 @@ answers.
 from __future__ import annotations
 
 import dataclasses
+import ipaddress
 import os
 import shutil
 import socket
+import struct
 import sys
 import urllib.parse
 from pathlib import Path
@@ -76,12 +78,20 @@ class Connect:
     timeout: float = 1.0
 
 
+LOOPBACK = "127.0.0.1"
+"""Where :class:`Serve` listens unless told otherwise: this machine only."""
+
+
 @dataclasses.dataclass(frozen=True)
 class Serve:
-    """Serve gRPC and the web viewer from this process, for a remote browser.
+    """Serve gRPC and the web viewer for a browser, on ``bind`` only.
 
-    The server lives as long as the process: call :meth:`Sink.wait` to keep it up. A second
-    sink with the same ``grpc_port`` streams into the first one's server.
+    A ``rerun --serve-web --bind ADDR`` server process (rerun's own server, whose viewer and
+    gRPC ports both listen on ``bind``) is started beside this one and fed by it; it lives as
+    long as this process: call :meth:`Sink.wait` to keep it up. A second sink with the same
+    ``grpc_port`` streams into the first one's server. Neither port asks who connects: with a
+    ``bind`` other than the loopback interface, the viewer and the recording's data are open to
+    every host that reaches this machine (:func:`exposure`).
 
     Attributes
     ----------
@@ -89,12 +99,68 @@ class Serve:
     open_browser : bool
     server_memory_limit : str
         Data buffered for late browsers, e.g. ``"1GiB"``.
+    bind : str
+        The IP address both ports listen on: ``127.0.0.1`` (default, this machine only),
+        ``0.0.0.0`` or ``::`` (every interface) or one interface's address.
     """
 
     grpc_port: int = DEFAULT_PORT
     web_port: int = 9090
     open_browser: bool = False
     server_memory_limit: str = "1GiB"
+    bind: str = LOOPBACK
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "bind", bind_address(self.bind))
+        for name in ("grpc_port", "web_port"):
+            port = getattr(self, name)
+            if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
+                raise ValueError(f"{name} must be a port number 1..65535, got {port!r}")
+
+    @property
+    def host(self) -> str:
+        """The host of the URLs this process connects to: the bound address, or the loopback
+        one when every interface is bound."""
+        ip = ipaddress.ip_address(self.bind)
+        if ip.is_unspecified:
+            return "::1" if ip.version == 6 else LOOPBACK
+        return self.bind
+
+    @property
+    def public_host(self) -> str:
+        """The host of the URL printed for a browser: the bound address, or this machine's
+        name when every interface is bound (the loopback address only when that is bound)."""
+        return socket.gethostname() if ipaddress.ip_address(self.bind).is_unspecified \
+            else self.bind
+
+
+def bind_address(text: str) -> str:
+    """An IP address to listen on (``localhost`` means ``127.0.0.1``); ValueError otherwise."""
+    value = str(text).strip()
+    if value.lower() == "localhost":
+        return LOOPBACK
+    try:
+        return str(ipaddress.ip_address(value.strip("[]")))
+    except ValueError:
+        raise ValueError(f"--bind {text!r}: not an IP address (127.0.0.1, 0.0.0.0, ::, or one "
+                         "of this machine's addresses)") from None
+
+
+def exposure(target: Serve) -> str | None:
+    """The warning for a served viewer that hosts other than this one can reach, or None."""
+    if ipaddress.ip_address(target.bind).is_loopback:
+        return None
+    where = ("every host that can reach this machine"
+             if ipaddress.ip_address(target.bind).is_unspecified
+             else f"every host that can reach {target.bind}")
+    return (f"--bind {target.bind}: the web viewer (port {target.web_port}) and the "
+            f"recording's data (gRPC port {target.grpc_port}) are served without "
+            f"authentication to {where}")
+
+
+def url_host(host: str) -> str:
+    """``host`` as it goes into a URL (IPv6 addresses in brackets)."""
+    return f"[{host}]" if ":" in host else host
 
 
 Target = Save | Spawn | Connect | Serve
@@ -153,6 +219,21 @@ def find_viewer() -> str | None:
     return None
 
 
+def find_server() -> str | None:
+    """The ``rerun`` binary itself for a server process: the one rerun-sdk ships in its
+    ``rerun_cli`` package (the ``rerun`` command on PATH is a Python launcher that would leave
+    the binary running when it is stopped), else :func:`find_viewer`."""
+    try:
+        import rerun_cli
+    except ImportError:
+        return find_viewer()
+    folder = Path(rerun_cli.__file__).parent
+    for candidate in (folder / "rerun", folder / "rerun.exe"):
+        if candidate.is_file() and os.access(candidate, os.X_OK):
+            return str(candidate)
+    return find_viewer()
+
+
 def display_problem() -> str | None:
     """Why a native viewer window cannot open here, or None (always None off Linux/BSD)."""
     if sys.platform in ("darwin", "win32", "cygwin"):
@@ -179,12 +260,55 @@ def display_problem() -> str | None:
     return None if err is None else f"X server for DISPLAY={display} unreachable ({err})"
 
 
-def port_free(port: int) -> bool:
-    """Whether this process could listen on ``port`` (all interfaces)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+def port_free(port: int, host: str = "0.0.0.0") -> bool:  # noqa: S104 - a test, not a server
+    """Whether this process could listen on ``port`` at ``host`` (all interfaces by default)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            s.bind(("0.0.0.0", port))
+            s.bind((host, port))
         except OSError:
             return False
     return True
+
+
+RRD_FOOTER = struct.Struct("<QQI8sI")
+"""The end of a finished .rrd file (rerun 0.41): manifest offset and length [bytes], manifest
+checksum, the magic ``RRF2FOOT`` and the footer version."""
+RRD_FOOTER_MAGIC = b"RRF2FOOT"
+
+
+def rrd_problem(path: str | os.PathLike[str]) -> str | None:
+    """Why the .rrd file at ``path`` is not a finished recording, or None.
+
+    Rerun writes an .rrd in a background thread and reports a failed write (a full disk) only
+    in its own log; a file cut short lacks the footer that ends a finished one (the manifest's
+    offset and length, which must end where the footer starts). The free space of the disk is
+    named when it is (nearly) full.
+    """
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        with path.open("rb") as f:
+            f.seek(max(size - RRD_FOOTER.size, 0))
+            tail = f.read(RRD_FOOTER.size)
+    except OSError as e:
+        return f"cannot be read back ({e.strerror or e})"
+    why = None
+    if size < RRD_FOOTER.size:
+        why = f"only {size} bytes"
+    else:
+        offset, length, _, magic, _ = RRD_FOOTER.unpack(tail)
+        if magic != RRD_FOOTER_MAGIC:
+            why = "it ends without the footer of a finished recording"
+        elif offset + length != size - RRD_FOOTER.size:
+            why = "its footer does not match its length"
+    if why is None:
+        return None
+    try:
+        free = shutil.disk_usage(path.parent).free
+    except OSError:
+        free = None
+    if free is not None and free < (1 << 20):
+        why += f"; the disk is full ({free} bytes free)"
+    return f"incomplete: {why}"

@@ -89,6 +89,7 @@ from navreplay.sensors.magnetometer import (
     earth_field_n,
 )
 from navreplay.sensors.noise import nyquist_sample_sigma
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.sim.scenario import Scenario, register_scenario
 from navreplay.sim.trajectory import parse_utc, utc_ns
 from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
@@ -539,7 +540,8 @@ def measure(
     )
 
 
-def simulate_runs(p: GimpoParams, truth: Truth, seeds: Sequence[int]) -> SensorData:
+def simulate_runs(p: GimpoParams, truth: Truth, seeds: Sequence[int],
+                  models: SensorModels | None = None) -> SensorData:
     """Sensor data of many runs, stacked on a leading run axis.
 
     Run i is identical to the streams of ``simulate(scenario, values, seeds[i])``: the same
@@ -551,13 +553,15 @@ def simulate_runs(p: GimpoParams, truth: Truth, seeds: Sequence[int]) -> SensorD
     truth : Truth
         From the scenario's :meth:`GimpoScenario.truth` (computed once for all runs).
     seeds : sequence of int
+    models : SensorModels, optional
+        The sensors (default: ``p.sensor_models()``).
 
     Returns
     -------
     SensorData
         Arrays (B, N, 3); ``errors`` a list of B pairs.
     """
-    models = p.sensor_models()
+    models = models or p.sensor_models()
     runs = [measure(models, p.dt, truth, np.random.default_rng(s)) for s in seeds]
     return SensorData(
         f_b=np.stack([r.f_b for r in runs]),
@@ -585,10 +589,20 @@ class GimpoScenario(Scenario):
         """The truth of parameters ``p`` at the sensor times."""
         return truth_from_segments(p, self.segments(p), p.duration)
 
-    def simulate(self, params, rng: np.random.Generator, seed: int) -> Recording:
+    def sensor_specs(self, params: GimpoParams) -> SensorSpecs:
+        models = params.sensor_models()
+        source = f"scenario {self.name}"
+        return SensorSpecs(models._asdict(), sources=dict.fromkeys(models._fields, source))
+
+    def simulate(self, params, rng: np.random.Generator, seed: int,
+                 sensors: SensorSpecs) -> Recording:
         p = params
+        for kind in ("mag", "gps"):
+            if sensors.get(kind).rate != p.rate:
+                raise ValueError(f"the {kind} rate of gimpo recordings is the scenario's rate "
+                                 f"({p.rate:g} Hz), got {sensors.get(kind).rate:g} Hz")
         truth = self.truth(p)
-        data = measure(p.sensor_models(), p.dt, truth, rng)
+        data = measure(SensorModels(sensors.imu, sensors.mag, sensors.gps), p.dt, truth, rng)
         t0_ns = utc_ns(p.start)
         t_ns = nanoseconds(truth.t, t0_ns)
         streams = {
@@ -616,6 +630,7 @@ class GimpoScenario(Scenario):
         metadata = self.metadata(
             p, seed,
             true_errors=true_errors(*data.errors),
+            sensors=sensors,
             initial_nav={
                 "t_ns": int(t0_ns),
                 "pos": [p.lat, p.lon, p.height],

@@ -61,6 +61,7 @@ from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.master_ins import MasterInsModel
 from navreplay.sensors.noise import density_from_average_sigma
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.sim.kinematics import imu_from_truth, integrate_position
 from navreplay.sim.scenario import Scenario, imu_stream, register_scenario
 from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
@@ -342,15 +343,24 @@ class ShipTransferAlignment(Scenario):
     streams = (StreamKind.IMU, StreamKind.MASTER_INS, StreamKind.TRUTH)
     Params = ShipTransferAlignmentParams
 
+    def sensor_specs(self, params: ShipTransferAlignmentParams) -> SensorSpecs:
+        return SensorSpecs({"imu": params.imu_model(), "master_ins": params.gins_model()},
+                           sources={"imu": f"scenario {self.name} (Table 2)",
+                                    "master_ins": f"scenario {self.name} (eqs. 20-22)"})
+
     def simulate(
-        self, params: ShipTransferAlignmentParams, rng: np.random.Generator, seed: int
+        self, params: ShipTransferAlignmentParams, rng: np.random.Generator, seed: int,
+        sensors: SensorSpecs,
     ) -> Recording:
         p = params
+        gins, imu = sensors.master_ins, sensors.imu
         n = int(round(p.duration * p.imu_rate))
         dt = 1.0 / p.imu_rate
         t = np.arange(n + 1) * dt  # truth grid; IMU sample k covers (t[k-1], t[k]]
-        m = int(math.floor(p.duration * p.gins_rate + 1e-9))
-        t_gins = np.arange(m + 1) / p.gins_rate
+        m = int(math.floor(p.duration * gins.rate + 1e-9))
+        if m < 1:
+            raise ValueError(f"duration must hold at least two GINS samples at {gins.rate:g} Hz")
+        t_gins = np.arange(m + 1) / gins.rate
 
         # random constants, always drawn in this order and number (paired runs across
         # parameter changes such as flexure on/off)
@@ -359,9 +369,7 @@ class ShipTransferAlignment(Scenario):
         lever_arm_error = rng.standard_normal(3) * p.lever_arm_sigma
         mounting_euler = rng.standard_normal(3) * p.mounting_sigma
         flexure_normals = rng.standard_normal((n + 1, 2))
-        gins = p.gins_model()
         gins_errors = gins.draw(rng)
-        imu = p.imu_model()
         imu_errors = imu.draw(rng)
 
         lever_arm_r = np.asarray(p.lever_arm_r, dtype=float)
@@ -451,6 +459,7 @@ class ShipTransferAlignment(Scenario):
             p, seed,
             derived={"lever_arm_r_nom": lever_arm_nom},
             true_errors=true_errors,
+            sensors=sensors,
             extra={
                 "params_derived": {
                     "lever_arm_r_nom": "surveyed lever arm GINS -> SDINS in the ship frame [m]"

@@ -83,8 +83,15 @@ import scipy.signal
 from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
 from navreplay.sensors.depth import DepthModel
 from navreplay.sensors.imu import ImuModel
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.sensors.speed_log import SpeedLogModel
-from navreplay.sim.scenario import Scenario, imu_stream, register_scenario, truth_stream
+from navreplay.sim.scenario import (
+    Scenario,
+    check_sensor_rate,
+    imu_stream,
+    register_scenario,
+    truth_stream,
+)
 from navreplay.sim.trajectory import (
     Channel,
     Manoeuvre,
@@ -350,9 +357,25 @@ class UnderwaterRpm(Scenario):
     )
     Params: ClassVar[type] = UnderwaterRpmParams
 
-    def simulate(self, params: UnderwaterRpmParams, rng: np.random.Generator,
-                 seed: int) -> Recording:
+    def sensor_specs(self, params: UnderwaterRpmParams) -> SensorSpecs:
         p = params
+        sensor_bias = p.init_depth_error if p.depth_error_source is DepthErrorSource.SENSOR else 0.0
+        source = f"scenario {self.name} (Table 1)"
+        return SensorSpecs(
+            {"imu": p.imu_model(),
+             "speed_log": SpeedLogModel(
+                 scale_factor=p.rpm_scale_factor, misalignment=p.rpm_misalignment,
+                 noise=p.rpm_noise, speed_per_rpm=p.speed_per_rpm, rate=p.speed_log_rate),
+             "depth": DepthModel(bias=sensor_bias, noise=p.depth_noise, rate=p.depth_rate)},
+            sources={"imu": source, "speed_log": f"scenario {self.name}",
+                     "depth": f"scenario {self.name}"},
+        )
+
+    def simulate(self, params: UnderwaterRpmParams, rng: np.random.Generator,
+                 seed: int, sensors: SensorSpecs) -> Recording:
+        p = params
+        for kind in ("speed_log", "depth"):
+            check_sensor_rate(kind, sensors.get(kind).rate, p.imu_rate)
         rng_imu, rng_log, rng_depth, rng_init, rng_current, rng_sway = rng.spawn(6)
         start = parse_utc(p.date)
         t0_ns = utc_ns(start)
@@ -363,15 +386,9 @@ class UnderwaterRpm(Scenario):
         else:
             direction = math.radians(p.current_direction_deg) % (2.0 * math.pi)
         v_c = current_velocity(p.current_speed, direction)
-        log_model = SpeedLogModel(
-            scale_factor=p.rpm_scale_factor, misalignment=p.rpm_misalignment,
-            noise=p.rpm_noise, speed_per_rpm=p.speed_per_rpm, rate=p.speed_log_rate,
-        )
+        log_model, depth_model, imu_model = sensors.speed_log, sensors.depth, sensors.imu
         log_errors = log_model.draw(rng_log)
-        sensor_bias = p.init_depth_error if p.depth_error_source is DepthErrorSource.SENSOR else 0.0
-        depth_model = DepthModel(bias=sensor_bias, noise=p.depth_noise, rate=p.depth_rate)
         depth_errors = depth_model.draw(rng_depth)
-        imu_model = p.imu_model()
         imu_errors = imu_model.draw(rng_imu)
 
         # truth: C_nb = Rz Ry, v_n = C_nb C_bv [u, 0, 0] + v_c_n
@@ -386,9 +403,9 @@ class UnderwaterRpm(Scenario):
         imu_meas = imu_model.measure(imu_errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate,
                                      rng_imu)
 
-        li = sample_indices(n, p.imu_rate, p.speed_log_rate)
+        li = sample_indices(n, p.imu_rate, log_model.rate)
         rpm_cols = log_model.measure(log_errors, traj.speed[li], rng_log)
-        di = sample_indices(n, p.imu_rate, p.depth_rate)
+        di = sample_indices(n, p.imu_rate, depth_model.rate)
         depth_cols = depth_model.measure(depth_errors, -traj.pos[di, 2], rng_depth)
         ti = sample_indices(n, p.imu_rate, p.truth_rate)
 
@@ -424,11 +441,12 @@ class UnderwaterRpm(Scenario):
                 "initial_nav": init_errors,
             },
             initial_nav=nav0,
+            sensors=sensors,
             extra={
                 "site": {"lat_deg": p.lat_deg, "lon_deg": p.lon_deg, "depth": p.depth},
                 "date": start.isoformat(),
-                "rates": {"imu": p.imu_rate, "speed_log": p.speed_log_rate,
-                          "depth": p.depth_rate, "truth": p.truth_rate},
+                "rates": {"imu": p.imu_rate, "speed_log": log_model.rate,
+                          "depth": depth_model.rate, "truth": p.truth_rate},
                 "truth_columns": _TRUTH_COLUMNS,
                 "path_length": path_length(traj.t, traj.v_n),
             },

@@ -17,6 +17,12 @@ Both record the truth at the IMU rate with the extra columns ``euler`` (roll, pi
 Gauss-Markov instability, at each truth sample; see :class:`navreplay.sensors.ImuMeasurement`),
 described in ``metadata.extra["truth_columns"]``.
 
+Sensors
+    ``sensor_specs``: the IMU of grade ``imu_grade``; for the drive the GNSS and magnetometer
+    of the ``gps_*`` and ``mag_*`` parameters. ``[sensors.KIND]`` tables may replace any field
+    (:func:`navreplay.sim.scenario.scenario_inputs`); a GNSS or magnetometer rate must still
+    divide ``imu_rate``.
+
 Metadata
     ``true_errors``: ``imu`` (:class:`~navreplay.sensors.ImuErrors`), ``gps``, ``mag``, and
     ``initial_nav`` (the realised initial errors, estimate minus truth: ``pos_ned`` [m],
@@ -38,14 +44,21 @@ import numpy as np
 
 from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
 from navreplay.sensors.gps import GpsModel
-from navreplay.sensors.imu import ImuErrors, ImuGrade, ImuMeasurement, imu_grade
+from navreplay.sensors.imu import ImuErrors, ImuGrade, ImuMeasurement, ImuModel, imu_grade
 from navreplay.sensors.magnetometer import (
     MagnetometerModel,
     WmmEpoch,
     decimal_year,
     earth_field_n,
 )
-from navreplay.sim.scenario import Scenario, imu_stream, register_scenario, truth_stream
+from navreplay.sensors.specs import SensorSpecs
+from navreplay.sim.scenario import (
+    Scenario,
+    check_sensor_rate,
+    imu_stream,
+    register_scenario,
+    truth_stream,
+)
 from navreplay.sim.trajectory import (
     Channel,
     Manoeuvre,
@@ -195,11 +208,11 @@ def drive_manoeuvres(duration: float, cruise_speed: float) -> tuple[Manoeuvre, .
 
 
 def _imu(
-    p: VehicleDriveParams | StationaryParams, route: Route, rng: np.random.Generator
+    p: VehicleDriveParams | StationaryParams, model: ImuModel, route: Route,
+    rng: np.random.Generator,
 ) -> tuple[Trajectory, ImuErrors, ImuMeasurement]:
-    """Truth at the IMU rate and the IMU of grade ``p.imu_grade`` on it."""
+    """Truth at the IMU rate and the IMU ``model`` on it."""
     traj = generate(route, p.duration, p.imu_rate)
-    model = imu_grade(p.imu_grade)
     errors = model.draw(rng)
     return traj, errors, model.measure(errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate, rng)
 
@@ -222,6 +235,11 @@ def _site(p: Any) -> dict[str, float]:
     return {"lat_deg": p.lat_deg, "lon_deg": p.lon_deg, "h": p.h}
 
 
+def _imu_specs(p: VehicleDriveParams | StationaryParams) -> SensorSpecs:
+    return SensorSpecs({"imu": imu_grade(p.imu_grade)}, sources={"imu": f"grade {p.imu_grade}"})
+
+
+
 @register_scenario
 class VehicleDrive(Scenario):
     """Car-like drive with turns, slopes, speed changes and stops; IMU, GPS and magnetometer."""
@@ -236,8 +254,25 @@ class VehicleDrive(Scenario):
     )
     Params: ClassVar[type] = VehicleDriveParams
 
-    def simulate(self, params: VehicleDriveParams, rng: np.random.Generator, seed: int) -> Recording:
+    def sensor_specs(self, params: VehicleDriveParams) -> SensorSpecs:
         p = params
+        gps = GpsModel(
+            pos_sigma=(p.gps_pos_sigma_h, p.gps_pos_sigma_h, p.gps_pos_sigma_v),
+            pos_gm_sigma=p.gps_pos_gm_sigma, pos_gm_tau=p.gps_pos_gm_tau,
+            vel_sigma=p.gps_vel_sigma, rate=p.gps_rate,
+        )
+        mag = MagnetometerModel(
+            scale_factor=p.mag_scale_factor, bias=p.mag_bias, noise=p.mag_noise, rate=p.mag_rate
+        )
+        return _imu_specs(p).with_model("gps", gps, f"scenario {self.name}").with_model(
+            "mag", mag, f"scenario {self.name}")
+
+    def simulate(self, params: VehicleDriveParams, rng: np.random.Generator, seed: int,
+                 sensors: SensorSpecs) -> Recording:
+        p = params
+        gps_model, mag_model = sensors.gps, sensors.mag
+        check_sensor_rate("gps", gps_model.rate, p.imu_rate)
+        check_sensor_rate("mag", mag_model.rate, p.imu_rate)
         rng_imu, rng_gps, rng_mag, rng_init = rng.spawn(4)
         start = parse_utc(p.date)
         t0_ns = utc_ns(start)
@@ -247,24 +282,16 @@ class VehicleDrive(Scenario):
             speed=0.0, manoeuvres=drive_manoeuvres(p.duration, p.cruise_speed),
             turn_mode=p.turn_mode,
         )
-        traj, imu_errors, imu_meas = _imu(p, route, rng_imu)
+        traj, imu_errors, imu_meas = _imu(p, sensors.imu, route, rng_imu)
         n = traj.t.shape[0]
 
-        gps_model = GpsModel(
-            pos_sigma=(p.gps_pos_sigma_h, p.gps_pos_sigma_h, p.gps_pos_sigma_v),
-            pos_gm_sigma=p.gps_pos_gm_sigma, pos_gm_tau=p.gps_pos_gm_tau,
-            vel_sigma=p.gps_vel_sigma, rate=p.gps_rate,
-        )
-        gi = sample_indices(n, p.imu_rate, p.gps_rate)
+        gi = sample_indices(n, p.imu_rate, gps_model.rate)
         gps_errors = gps_model.draw(rng_gps)
         gps_meas = gps_model.measure(gps_errors, traj.pos[gi], traj.v_n[gi], rng_gps)
         t_gps = nanoseconds(traj.t[gi], t0_ns)
 
         h_n = earth_field_n(route.lat, route.lon, route.h, year)
-        mag_model = MagnetometerModel(
-            scale_factor=p.mag_scale_factor, bias=p.mag_bias, noise=p.mag_noise, rate=p.mag_rate
-        )
-        mi = sample_indices(n, p.imu_rate, p.mag_rate)
+        mi = sample_indices(n, p.imu_rate, mag_model.rate)
         mag_errors = mag_model.draw(rng_mag)
         mag_cols = mag_model.measure(mag_errors, traj.q_nb[mi], h_n, rng_mag)
 
@@ -287,14 +314,15 @@ class VehicleDrive(Scenario):
                 "initial_nav": init_errors,
             },
             initial_nav=nav0,
+            sensors=sensors,
             extra={
                 "site": _site(p),
                 "date": start.isoformat(),
                 "decimal_year": year,
                 "wmm": WmmEpoch.for_year(year).value,
                 "mag_field_n": h_n,
-                "rates": {"imu": p.imu_rate, "gps": p.gps_rate, "gps_vel": p.gps_rate,
-                          "mag": p.mag_rate, "truth": p.imu_rate},
+                "rates": {"imu": p.imu_rate, "gps": gps_model.rate, "gps_vel": gps_model.rate,
+                          "mag": mag_model.rate, "truth": p.imu_rate},
                 "truth_columns": _TRUTH_COLUMNS,
             },
         )
@@ -352,18 +380,23 @@ class Stationary(Scenario):
     streams: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU, StreamKind.TRUTH)
     Params: ClassVar[type] = StationaryParams
 
-    def simulate(self, params: StationaryParams, rng: np.random.Generator, seed: int) -> Recording:
+    def sensor_specs(self, params: StationaryParams) -> SensorSpecs:
+        return _imu_specs(params)
+
+    def simulate(self, params: StationaryParams, rng: np.random.Generator, seed: int,
+                 sensors: SensorSpecs) -> Recording:
         p = params
         rng_imu, rng_init = rng.spawn(2)
         start = parse_utc(p.date)
         t0_ns = utc_ns(start)
         route = Route(lat=p.lat_deg * DEG, lon=p.lon_deg * DEG, h=p.h, heading=p.heading_deg * DEG)
-        traj, imu_errors, imu_meas = _imu(p, route, rng_imu)
+        traj, imu_errors, imu_meas = _imu(p, sensors.imu, route, rng_imu)
         nav0, init_errors = _initial_nav(p, traj, t0_ns, rng_init, p.init_attitude_error)
         meta = self.metadata(
             p, seed,
             true_errors={"imu": imu_errors.as_dict(), "initial_nav": init_errors},
             initial_nav=nav0,
+            sensors=sensors,
             extra={
                 "site": _site(p),
                 "date": start.isoformat(),
