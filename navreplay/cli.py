@@ -428,6 +428,58 @@ def filters(name: str | None) -> None:
             click.echo(f"    {line}")
 
 
+@cli.command()
+@click.argument("recording", type=click.Path())
+@click.option("--topic", metavar="TOPIC", help="The IMU topic (default: the recording's IMU).")
+@click.option("--start", type=float, metavar="S", help="Segment start [s from the recording "
+              "start].")
+@click.option("--end", type=float, metavar="S", help="Segment end [s from the recording start].")
+@click.option("-o", "--output", "spec", type=click.Path(dir_okay=False), metavar="SPEC.toml",
+              help="Write the fitted noise as a [sensors.imu] table (for simulate/run --config).")
+@click.option("--plot", type=click.Path(dir_okay=False), metavar="FIG.png|FIG.svg",
+              help="Write the Allan-deviation figure.")
+@click.option("--save", type=click.Path(dir_okay=False), metavar="OUT.rrd",
+              help="Write the Rerun view.")
+@click.option("--bootstrap", type=click.IntRange(min=0), default=40, show_default=True,
+              metavar="N", help="Synthetic records for the intervals of the fitted terms "
+                                "(0: none).")
+@click.option("--time", "time", type=click.Choice(["header", "log"]), default="header",
+              show_default=True, help="Sample times: header stamps or log (receive) times.")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
+def allan(recording: str, topic: str | None, start: float | None, end: float | None,
+          spec: str | None, plot: str | None, save: str | None, bootstrap: int, time: str,
+          force: bool) -> None:
+    """Allan deviation of a still IMU segment and the noise terms fitted to it.
+
+    Fits white noise (angle/velocity random walk), a Gauss-Markov bias instability (sigma and
+    correlation time) and a rate/acceleration random walk to the overlapping Allan deviation
+    of each triad, with intervals; refuses a segment that is not still or too short.
+
+    \b
+    Examples:
+      navreplay simulate stationary -o still.mcap -p duration=7200 -p imu_grade=consumer
+      navreplay allan still.mcap -o imu.toml --plot allan.png
+      navreplay run gps-ins drive.mcap --config imu.toml
+    """
+    from navreplay.jobs.allan import AllanJob, plot_format, run_allan
+
+    if plot is not None:
+        try:
+            plot_format(Path(plot))
+        except ValueError as e:
+            raise click.BadParameter(str(e), param_hint="--plot") from None
+    _check_outputs(force, [recording], _out(spec, "-o"), _out(plot, "--plot"),
+                   _out(save, "--save"))
+    job = AllanJob(recording=Path(recording), topic=topic, start=start, end=end,
+                   spec_path=Path(spec) if spec else None, plot_path=Path(plot) if plot else None,
+                   view_path=Path(save) if save else None, bootstrap=bootstrap, time=time)
+    try:
+        report = run_allan(job)
+    except ImportError as e:
+        raise click.ClickException(str(e)) from None
+    click.echo(report.format())
+
+
 # --------------------------------------------------------------------------------------------
 # run, montecarlo
 
