@@ -116,13 +116,13 @@ def _check_recovery(grade: str, duration: float, seed: int, rate: float = 100.0,
         assert a.fit.white == pytest.approx(white, rel=0.10), (grade, name)
         assert Term.GAUSS_MARKOV in a.fit.terms, (grade, name, a.fit.notes)
         assert a.fit.gm_sigma == pytest.approx(sigma, rel=0.30), (grade, name)
-        assert a.fit.gm_tau == pytest.approx(tau, rel=0.6), (grade, name)
+        assert 0.5 * tau < a.fit.gm_tau < 2.0 * tau, (grade, name)  # T spreads more: 10-20 %
         out[name] = a
     return out
 
 
 def test_consumer_grade_recovered_from_2_hours():
-    """Spread over 10 seeds (100-109): sigma 1.00 +- 0.07, N 1.000 +- 0.001."""
+    """Spread over 10 seeds (200-209): sigma 1.00 +- 0.05, T 1.00 +- 0.10, N 1.000 +- 0.002."""
     _check_recovery("consumer", 7200.0, seed=1)
 
 
