@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -384,13 +384,15 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str], time: str
 # filters
 
 
-def _param_lines(rows: Sequence[tuple[str, str, Any, str]]) -> list[str]:
+def _param_lines(rows: Sequence[tuple[str, str, Any, str]],
+                 marked: Collection[str] = ()) -> list[str]:
     if not rows:
         return ["(no parameters)"]
-    width = max(len(r[0]) for r in rows)
+    width = max(len(r[0]) for r in rows) + (1 if marked else 0)
     out = []
     for name, tp, default, doc in rows:
-        out.append(f"{name:<{width}}  {tp} = {_show(default)}  {doc}".rstrip())
+        shown = f"{name}*" if name in marked else name
+        out.append(f"{shown:<{width}}  {tp} = {_show(default)}  {doc}".rstrip())
     return out
 
 
@@ -423,8 +425,13 @@ def filters(name: str | None) -> None:
         click.echo(f"  requires: {', '.join(str(s) for s in cls.requires) or '-'}")
         if cls.optional:
             click.echo(f"  optional: {', '.join(str(s) for s in cls.optional)}")
-        click.echo("  parameters:")
-        for line in _param_lines(describe(cls.Params)):
+        derived = set(cls.settings_from_sensors(cls.default_sensors()))
+        reference = cls.default_sensors()
+        click.echo("  parameters" + (" (* from the recording's sensor specifications; the "
+                                     "defaults are for " + "; ".join(
+                                         f"{k}: {reference.source(k)}" for k in reference.models)
+                                     + ")" if derived else "") + ":")
+        for line in _param_lines(describe(cls.Params), derived):
             click.echo(f"    {line}")
 
 

@@ -81,6 +81,37 @@ def summary_table(summaries: Mapping[str, Mapping[str, Any]]) -> str:
     return f"<table><tr><th>filter</th>{head}</tr>{''.join(rows)}</table>"
 
 
+def settings_section(summary: Mapping[str, Any] | None) -> list[str]:
+    """The filter's settings and where each came from (the ``settings`` entries of its summary,
+    :func:`navreplay.filters.settings.summary_entries`): a note, then a folded table."""
+    summary = summary or {}
+    settings = summary.get("settings")
+    if not settings:
+        return []
+    parts = []
+    if summary.get("settings_note"):
+        parts.append(f"<p class='note'>{html.escape(summary['settings_note'])}</p>")
+    counts: dict[str, int] = {}
+    rows = []
+    for name, entry in settings.items():
+        value = entry.get("value")
+        shown = (", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in value)
+                 if isinstance(value, list) else
+                 f"{value:.4g}" if isinstance(value, float) else str(value))
+        source = str(entry.get("source", ""))
+        counts[source] = counts.get(source, 0) + 1
+        rows.append(f"<tr><td>{html.escape(name)}</td><td>{html.escape(shown)}</td>"
+                    f"<td>{html.escape(str(entry.get('unit', '')))}</td>"
+                    f"<td>{html.escape(source)}</td></tr>")
+    tally = ", ".join(f"{n} {src}" for src, n in counts.items())
+    sensors = summary.get("settings_sensors")
+    origin = f"; sensor specifications: {sensors}" if sensors else ""
+    parts.append(f"<details><summary>Settings ({html.escape(tally)}{html.escape(origin)})"
+                 "</summary><table><tr><th>setting</th><th>value (SI)</th><th>unit</th>"
+                 f"<th>source</th></tr>{''.join(rows)}</table></details>")
+    return parts
+
+
 def _display(unit: str) -> tuple[str, float]:
     """The unit an engineer reads a state in (deg, deg/h, mg; SI otherwise) and its scale."""
     from navreplay.viz.naming import display_unit
@@ -264,6 +295,7 @@ def write_run_report(path: Path, runs: Sequence[RunSeries | FilterOutput],
     for i, run in enumerate(runs):
         series = run if isinstance(run, RunSeries) else RunSeries.of(run)
         body.append(f"<h2>{html.escape(series.label)}</h2>")
+        body += settings_section(summaries.get(series.label))
         body += run_figures(series, figures.filter_color(i), summaries.get(series.label))
     return _write(path, _page(title, "filter run report", body), force)
 
@@ -321,5 +353,6 @@ def write_ensemble_report(path: Path, ensembles: Mapping[str, Any],
     body = ["<h2>Ensemble summary</h2>", summary_table(summaries)]
     for i, (label, ens) in enumerate(ensembles.items()):
         body.append(f"<h2>{html.escape(label)}</h2>")
+        body += settings_section(summaries.get(label))
         body += ensemble_figures(ens, figures.filter_color(i))
     return _write(path, _page(title, "Monte Carlo report", body), force)

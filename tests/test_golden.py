@@ -20,6 +20,7 @@ from rosbags.highlevel import AnyReader
 
 from navreplay import metrics
 from navreplay.filters.registry import load_filter
+from navreplay.filters.settings import summary_entries
 from navreplay.io import TOPICS, read_recording
 from navreplay.jobs import scenario_values
 from navreplay.replay.engine import replay
@@ -132,7 +133,8 @@ def _compare(got: Any, want: Any, where: str, problems: list[str]) -> None:
 
 
 def test_replay_reproduces_the_summary(case: Case, golden: Any) -> None:
-    """The filters over the golden file give the committed summary (rtol 1e-6)."""
+    """The filters over the golden file give the committed summary (rtol 1e-6), with the
+    settings each filter derived from the file's sensor specifications."""
     expected = json.loads(case.summary.read_text())
     assert expected["recording"] == case.rel, case.regenerate()
     assert list(expected["filters"]) == list(case.filters), case.regenerate()
@@ -140,7 +142,8 @@ def test_replay_reproduces_the_summary(case: Case, golden: Any) -> None:
     for label in case.filters:
         cls = load_filter(label)
         result = replay(golden, cls, None, label=label, source=case.rel, validate=False)
-        summaries[label] = metrics.run_metrics(result, golden).summary()
+        summaries[label] = {**metrics.run_metrics(result, golden).summary(),
+                            **summary_entries(result.settings)}
     problems: list[str] = []
     _compare(summaries, expected["filters"], "", problems)
     assert not problems, (

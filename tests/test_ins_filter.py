@@ -359,11 +359,18 @@ def test_ins_runs_from_the_initial_solution_without_updates():
     m = metrics.run_metrics(res, rec)
     assert np.abs(m.nav.pos_ned).max() < 1e-6 and np.abs(m.nav.phi).max() < 1e-9
     np.testing.assert_array_equal(res.x, 0.0)
-    # P0 from initial_nav: zero nav sigmas, bias sigmas from the parameters
+    # P0 from initial_nav: zero nav sigmas; bias sigmas from the recording's IMU
+    # specification, which states an ideal IMU (no bias), or without it the defaults
+    np.testing.assert_array_equal(res.P[0].diagonal()[9:15], 0.0)
+    assert res.settings.sources["accel_bias_sigma"] == "spec"
+    rec.metadata.sensors = {}
+    res = replay(rec, InsFilter, output_rate=10.0)
     p = InsFilter.Params()
     np.testing.assert_allclose(np.sqrt(res.P[0].diagonal()[9:12]),
                                [p.accel_bias_sigma, p.accel_bias_sigma, p.accel_bias_sigma_z],
                                rtol=1e-3)
+    assert res.settings.sources["accel_bias_sigma"] == "default"
+    assert "keep the defaults, which are for imu: grade tactical" in res.settings.note
 
 
 def test_ins_needs_an_initial_solution():

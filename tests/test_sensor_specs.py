@@ -145,6 +145,10 @@ def test_partial_specs_write_only_what_they_state():
     assert over.has("imu", *spec_fields(ImuModel))
     assert over.source("imu") == ("grade tactical, with [sensors.imu]: gyro_arw, "
                                   "gyro_bias_instability")
+    # a table over partial specs states its fields and the base's, no more
+    more = specs_from_tables({"imu": {"accel_vrw": "80 ug/sqrt(Hz)"}}, base=specs)
+    assert more.known_fields("imu") == {"gyro_arw", "gyro_bias_instability", "accel_vrw"}
+    assert more.imu.gyro_arw == specs.imu.gyro_arw
 
 
 @pytest.mark.parametrize("name", sorted(scenarios()))

@@ -10,15 +10,14 @@ validation windows.
 
 from __future__ import annotations
 
-import math
 import tomllib
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from navreplay import units
 from navreplay.cli import cli
+from navreplay.filters.ins import imu_settings
 from navreplay.filters.registry import load_filter
 from navreplay.jobs.tune import Objective, SearchRange, TuneJob, evaluate, parse_ranges, prepared
 from navreplay.jobs.tune import tune as run_tune
@@ -26,6 +25,7 @@ from navreplay.params import ParamError
 from navreplay.replay.engine import replay
 from navreplay.replay.holdout import HELD_OUT, held_out_errors, held_out_truth_errors, hold_out
 from navreplay.sensors.imu import imu_grade
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.sim.scenario import simulate
 from navreplay.streams import StreamKind
 
@@ -120,26 +120,9 @@ def test_held_out_objective_on_recordings_without_truth(tmp_path):
 # the claims (slow)
 
 
-def mems_settings() -> dict[str, float]:
-    """gps-ins settings derived from the MEMS grade as its defaults are from the tactical grade
-    (the formulas of the parameters' docstrings)."""
-    m = imu_grade("mems")
-    g = units.G0
-    return {
-        "gyro_arw": m.gyro_arw, "accel_vrw": m.accel_vrw,
-        "gyro_bias_sigma": math.hypot(m.gyro_bias, m.gyro_bias_instability,
-                                      m.gyro_g_sensitivity * g),
-        "accel_bias_sigma": math.hypot(m.accel_bias, m.accel_misalignment * g,
-                                       m.accel_bias_instability),
-        "accel_bias_sigma_z": math.hypot(m.accel_bias, m.accel_scale_factor * g,
-                                         m.accel_bias_instability),
-        "gyro_bias_rw": m.gyro_bias_instability * math.sqrt(2 / m.gyro_bias_tau),
-        "accel_bias_rw": m.accel_bias_instability * math.sqrt(2 / m.accel_bias_tau),
-        "gyro_misalignment_sigma": m.gyro_misalignment,
-        "gyro_scale_factor_sigma": m.gyro_scale_factor,
-        "accel_scale_factor_sigma": m.accel_scale_factor,
-        "accel_misalignment_sigma": m.accel_misalignment,
-    }
+def grade_settings(grade: str) -> dict[str, float]:
+    """The ins / gps-ins settings derived from an IMU grade (navreplay.filters.ins)."""
+    return imu_settings(SensorSpecs({"imu": imu_grade(grade)}))
 
 
 TUNED = ("gyro_arw", "accel_vrw", "gyro_bias_sigma", "accel_bias_sigma", "gyro_bias_rw",
@@ -148,8 +131,11 @@ TUNED = ("gyro_arw", "accel_vrw", "gyro_bias_sigma", "accel_bias_sigma", "gyro_b
 
 @pytest.mark.slow
 def test_tuning_a_mems_drive_from_tactical_settings_reaches_the_matched_settings():
-    matched = mems_settings()
-    job = TuneJob(filter="gps-ins", scenario="vehicle-drive",
+    """Started from the tactical grade's settings (given as -p values: on a MEMS recording
+    gps-ins would derive the MEMS settings itself), which the search keeps for everything
+    but the six noise parameters."""
+    matched = grade_settings("mems")
+    job = TuneJob(filter="gps-ins", scenario="vehicle-drive", fixed=grade_settings("tactical"),
                   ranges=tuple(SearchRange(n, matched[n] / 30, matched[n] * 30, True)
                                for n in TUNED),
                   values={"imu_grade": "mems", "duration": 300.0}, runs=12,
@@ -158,9 +144,9 @@ def test_tuning_a_mems_drive_from_tactical_settings_reaches_the_matched_settings
     start, chosen = report.validation
     assert not start.parts["NEES in band"] and start.parts["NEES/dof"] > 3
     assert chosen.parts["NEES in band"] and chosen.parts["worst RMS/σ"] < 1.5, chosen.parts
-    with prepared(job) as data:  # the same validation seeds, 1000-1011
-        reference = evaluate(data.validation, TuneJob(filter="gps-ins", fixed=matched,
-                                                      workers=2), Objective.TRUTH, {})
+    with prepared(job) as data:  # the same validation seeds; the settings gps-ins derives
+        reference = evaluate(data.validation, TuneJob(filter="gps-ins", workers=2),
+                             Objective.TRUTH, {})
     assert reference.parts["NEES in band"]
     for key in ("pos_rms_h", "att_rms_heading"):
         assert chosen.parts[key] <= 1.1 * reference.parts[key], (key, chosen, reference)
@@ -171,6 +157,7 @@ def test_tuning_a_mems_drive_from_tactical_settings_reaches_the_matched_settings
 
 @pytest.mark.slow
 def test_held_out_objective_lowers_the_true_outage_error():
+    """From the tactical settings on MEMS drives, as above."""
     job = TuneJob(filter="gps-ins", scenario="vehicle-drive",
                   ranges=(SearchRange("gyro_arw", 3e-6, 3e-3, True),
                           SearchRange("accel_vrw", 3e-5, 3e-2, True),
@@ -179,7 +166,7 @@ def test_held_out_objective_lowers_the_true_outage_error():
                           SearchRange("gyro_bias_rw", 4e-8, 4e-5, True),
                           SearchRange("accel_bias_rw", 3e-6, 3e-3, True)),
                   values={"imu_grade": "mems", "duration": 600.0}, runs=3, trials=30,
-                  objective=Objective.HELD_OUT, workers=2)
+                  objective=Objective.HELD_OUT, fixed=grade_settings("tactical"), workers=2)
     report = run_tune(job)
     start, chosen = report.validation
     assert chosen.parts["held-out RMS [m]"] < start.parts["held-out RMS [m]"]

@@ -64,11 +64,14 @@ import dataclasses
 import enum
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from navreplay.streams import Metadata, StreamKind
+
+if TYPE_CHECKING:
+    from navreplay.sensors.specs import SensorSpecs
 
 
 class Quantity(enum.StrEnum):
@@ -465,6 +468,20 @@ class Filter(abc.ABC):
         neither checked nor scored nor shown. Its ``NavError`` states may only name
         quantities of the declared parts.
 
+    Settings from the sensors
+    -------------------------
+    settings_from_sensors(sensors) -> dict  (classmethod)
+        The parameter values that follow from the recording's sensor specifications
+        (:class:`navreplay.sensors.specs.SensorSpecs`: ``sensors.imu.gyro_arw`` [rad/sqrt(s)],
+        ``sensors.gps.pos_sigma``, ...), by parameter name, in SI. Only values of stated
+        fields (``sensors.has("imu", "gyro_arw")``) may be used. The replay builds the filter's
+        ``Params`` from the user's values over these over the defaults
+        (:func:`navreplay.filters.settings.build_params`), and the run summary says where each
+        came from. The base class derives nothing.
+    default_sensors() -> SensorSpecs  (classmethod)
+        The sensors the defaults of ``Params`` stand for (e.g. a tactical IMU): a run whose
+        recording does not state them says once that it uses these defaults. Empty by default.
+
     Optional method
     ---------------
     bridge_imu_gap(t: float, since: float) -> None
@@ -494,6 +511,19 @@ class Filter(abc.ABC):
     def state_names(self) -> tuple[str, ...]:
         """Names of the declared states, in order."""
         return state_names(self.states)
+
+    @classmethod
+    def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
+        """Parameter values derived from the recording's sensor specifications (see the class
+        docstring); none here."""
+        return {}
+
+    @classmethod
+    def default_sensors(cls) -> SensorSpecs:
+        """The sensor specifications the ``Params`` defaults stand for; none here."""
+        from navreplay.sensors.specs import SensorSpecs
+
+        return SensorSpecs()
 
     def __init__(self, params: FilterParams, context: FilterContext) -> None:
         self.params = params

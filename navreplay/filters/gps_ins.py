@@ -72,7 +72,10 @@ GPS position (antenna at ``l_b`` from the IMU, body frame), residual in NED metr
     p_ant_hat = p_hat + D^-1 (C_nb_hat l_hat + v_hat tau)       tau = t_fix - t_ins >= 0 (4)
     z = D (p_ant_hat - p_gps)                                   (3,) [m]                  (5)
     H = [ D | 0 | [(C_nb_hat l_hat) x] | 0 | 0 | C_nb_hat ]                               (6)
-    R = diag(pos_sigma^2) * gps_pos_sigma_scale^2               from the fix              (7)
+    R = diag(pos_sigma^2) * gps_pos_sigma_scale^2                                         (7)
+        pos_sigma: the fix's (its message covariance), else ``gps_pos_sigma`` (the GNSS
+        specification: white and Gauss-Markov parts together); the error is taken as white,
+        a time-correlated part is not modelled (docs/sensors.md §3)
 
 GPS velocity, with ``w = omega_ib_b_hat`` (last compensated gyro sample) and
 ``w_in = w_ie + w_en``::
@@ -82,6 +85,7 @@ GPS velocity, with ``w = omega_ib_b_hat`` (last compensated gyro sample) and
     H = [ 0 | I | [(C (w x l)) x] - [w_in x][(C l) x] | 0 | C [l x] | C [w x] - [w_in x] C ] (10)
     H[:, k] = C [l x] w_z                                       (gyro z-rate states)
     R = diag(vel_sigma^2) * gps_vel_sigma_scale^2                                          (11)
+        vel_sigma: the sample's, else ``gps_vel_sigma``
 
 Update (the compiled kernel of :func:`navreplay.filters.kalman.correct`, Cholesky + Joseph
 form, with its checks) of the error state dx = 0, then feedback (12); the models, update and
@@ -118,6 +122,7 @@ from navreplay.filters.base import (
 )
 from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.registry import register_filter
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import StreamKind
 
 LEVER = slice(15, 18)
@@ -135,6 +140,13 @@ class GpsInsParams(InsParams):
     """Add the three lever-arm error states (random constants)."""
     lever_arm_sigma: float = 0.1
     """Initial 1-sigma of the lever arm per axis [m] (with ``estimate_lever_arm``)."""
+    gps_pos_sigma: tuple[float, float, float] | None = None
+    """1-sigma position noise N, E, D of a fix whose message gives none (no ``pos_sigma``
+    column) [m]; None: such fixes are refused. Derived from the GNSS specification
+    (``sqrt(pos_sigma^2 + pos_gm_sigma^2)``)."""
+    gps_vel_sigma: tuple[float, float, float] | None = None
+    """1-sigma velocity noise N, E, D of a velocity sample without its own [m/s]; None:
+    refused. Derived from the GNSS specification."""
     gps_pos_sigma_scale: float = 1.0
     """Factor on the fix's ``pos_sigma`` in R [-]."""
     gps_vel_sigma_scale: float = 1.0
@@ -159,6 +171,14 @@ class GpsInsParams(InsParams):
         if max(abs(v) for v in lever) > 100.0:
             raise ValueError(f"lever_arm_b must be within 100 m per axis, got {lever!r}")
         object.__setattr__(self, "lever_arm_b", lever)
+        for name in ("gps_pos_sigma", "gps_vel_sigma"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            sigma = tuple(float(v) for v in value)
+            if len(sigma) != 3 or not all(math.isfinite(v) and v > 0.0 for v in sigma):
+                raise ValueError(f"{name} must be three finite values > 0, got {value!r}")
+            object.__setattr__(self, name, sigma)
         check_number(self, "lever_arm_sigma")
         for name in ("gps_pos_sigma_scale", "gps_vel_sigma_scale"):
             check_number(self, name, positive=True)
@@ -276,6 +296,8 @@ class GpsInsFilter(InsFilter):
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU, StreamKind.GPS)
     optional: ClassVar[tuple[StreamKind, ...]] = (StreamKind.GPS_VEL,)
+    required_columns: ClassVar[Mapping[StreamKind, tuple[str, ...]]] = {
+        StreamKind.GPS: ("pos",)}  # pos_sigma: the fix's, else gps_pos_sigma
     Params: ClassVar[type[FilterParams]] = GpsInsParams
     measurements: tuple[MeasurementKind, ...] | None = (
         MeasurementKind("gps_pos", ("N", "E", "D"), "m"),
@@ -283,6 +305,18 @@ class GpsInsFilter(InsFilter):
     )
 
     params: GpsInsParams
+
+    @classmethod
+    def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
+        """The IMU settings of ``ins`` and the GNSS noise of fixes without their own sigma."""
+        out = super().settings_from_sensors(sensors)
+        if sensors.has("gps", "pos_sigma"):
+            gm = sensors.gps.pos_gm_sigma if sensors.has("gps", "pos_gm_sigma") else 0.0
+            out["gps_pos_sigma"] = tuple(np.hypot(sensors.gps.pos_sigma, gm).tolist())
+        if sensors.has("gps", "vel_sigma"):
+            gm = sensors.gps.vel_gm_sigma if sensors.has("gps", "vel_gm_sigma") else 0.0
+            out["gps_vel_sigma"] = tuple(np.hypot(sensors.gps.vel_sigma, gm).tolist())
+        return out
 
     def __init__(self, params: GpsInsParams, context: FilterContext) -> None:
         self.lever_arm_b = np.array(params.lever_arm_b, dtype=float)
@@ -312,12 +346,13 @@ class GpsInsFilter(InsFilter):
         p = self.params
         if kind is StreamKind.GPS:
             code, name, lag = gnss.POSITION, "gps_pos", max(t - self.t, 0.0)
-            value, sigma, scale = sample["pos"], sample["pos_sigma"], p.gps_pos_sigma_scale
+            value, scale = sample["pos"], p.gps_pos_sigma_scale
         elif kind is StreamKind.GPS_VEL and p.use_gps_vel:
             code, name, lag = gnss.VELOCITY, "gps_vel", 0.0
-            value, sigma, scale = sample["v_n"], sample["vel_sigma"], p.gps_vel_sigma_scale
+            value, scale = sample["v_n"], p.gps_vel_sigma_scale
         else:
             return None
+        sigma = self._sigma(kind, sample)
         self._sync_covariance()
         f64 = np.ascontiguousarray
         value, sigma = f64(value, dtype=float), f64(sigma, dtype=float)
@@ -334,6 +369,20 @@ class GpsInsFilter(InsFilter):
             return [c.innovation(name, t)]
         self.nav, self.P = nav, P
         return [Innovation(name, t, nu, S)]
+
+    def _sigma(self, kind: StreamKind, sample: Mapping[str, Any]) -> np.ndarray:
+        """The 1-sigma of a GPS sample (3,) or of a block of them (k, 3): the sample's own,
+        else the ``gps_pos_sigma`` / ``gps_vel_sigma`` parameter."""
+        column, param = (("pos_sigma", "gps_pos_sigma") if kind is StreamKind.GPS
+                         else ("vel_sigma", "gps_vel_sigma"))
+        if column in sample:
+            return sample[column]
+        fallback = getattr(self.params, param)
+        if fallback is None:
+            raise ValueError(f"the {kind} samples carry no {column} (no covariance in the "
+                             f"messages): set {param}, or give [sensors.gps] in --config")
+        shape = np.shape(sample["pos" if kind is StreamKind.GPS else "v_n"])
+        return np.broadcast_to(np.asarray(fallback, dtype=float), shape)
 
     def _measurement(self, code: int, value: np.ndarray, sigma: np.ndarray,
                      lag: float) -> kalman.Measurement:
@@ -375,10 +424,10 @@ class GpsInsFilter(InsFilter):
         for c, kind in enumerate(kinds):
             if kind is StreamKind.GPS:
                 local[c + 1] = gnss.POSITION
-                cols[gnss.POSITION] = (samples[c]["pos"], samples[c]["pos_sigma"])
+                cols[gnss.POSITION] = (samples[c]["pos"], self._sigma(kind, samples[c]))
             elif kind is StreamKind.GPS_VEL and p.use_gps_vel:
                 local[c + 1] = gnss.VELOCITY
-                cols[gnss.VELOCITY] = (samples[c]["v_n"], samples[c]["vel_sigma"])
+                cols[gnss.VELOCITY] = (samples[c]["v_n"], self._sigma(kind, samples[c]))
         s = np.zeros(ev.PACKED)
         tu = self._time_update
         state = {"prev": tu.prev, "open_nav": tu.open_step.nav, "open_sums": tu.open_step.sums,

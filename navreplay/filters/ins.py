@@ -66,11 +66,14 @@ its variance).
 
 At a roughly level attitude the accelerometer scale factor and misalignment times gravity, and
 the gyro g-sensitivity times gravity, act as constant biases: the bias states estimate these
-*effective* biases, and the default bias sigmas are the effective values for the ``tactical``
-IMU grade of :func:`navreplay.sensors.imu_grade`: level accelerometer axes 0.3 mg bias + 0.5 mrad
-misalignment x g + 0.05 mg instability (0.58 mg); the z axis sees gravity through its 300 ppm
-scale factor instead (0.42 mg, ``accel_bias_sigma_z``; it drives the free-inertial vertical
-channel); gyros 1 deg/h bias + 1 deg/h/g x g + 0.3 deg/h instability. Under motion, the gyro
+*effective* biases, and their initial sigmas are the effective values of the recording's IMU
+specification (:func:`imu_settings`; the defaults are those of the ``tactical`` grade of
+:func:`navreplay.sensors.imu_grade`): level accelerometer axes the turn-on bias, misalignment x
+g and the instability (0.3 mg, 0.5 mrad g, 0.05 mg: 0.585 mg); the z axis sees gravity through
+its scale factor instead (300 ppm: 0.427 mg, ``accel_bias_sigma_z``; it drives the
+free-inertial vertical channel); gyros the turn-on bias, g-sensitivity x g and the instability
+(1 deg/h, 1 deg/h/g, 0.3 deg/h: 1.446 deg/h). Every IMU setting of :class:`InsParams` follows
+the specification the same way (docs/methods/ins.md §4). Under motion, the gyro
 errors a land vehicle's yaw rate drives, ``(m_xz, m_yz, s_z) omega_z``, are the states (5b):
 a constant misalignment turns with the body, so over a turn of angle dpsi it adds the bounded
 tilt ``m (sin psi - sin psi_0, cos psi_0 - cos psi)``, and s_z adds ``s_z dpsi`` of heading.
@@ -120,42 +123,118 @@ from navreplay.filters.base import (
     state_names,
 )
 from navreplay.filters.registry import register_filter
+from navreplay.geo.earth import OMEGA_IE
+from navreplay.sensors.imu import ImuGrade, imu_grade
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import StreamKind
-from navreplay.units import (
-    DEG_PER_HOUR,
-    DEG_PER_SQRT_HOUR,
-    MICRO_G,
-    MICRO_G_PER_SQRT_HZ,
-    PPM,
-)
+from navreplay.units import G0
+
+
+def imu_settings(sensors: SensorSpecs) -> dict[str, float]:
+    """The settings of :class:`InsParams` that follow from the IMU specification (SI), eqs.
+    (5)-(6); only those whose fields are stated (a setting needs its first-named field, and
+    counts the others where they are stated)::
+
+        accel_vrw, gyro_arw               = the white-noise densities
+        accel_bias_sigma   (x, y)         = sqrt(b_a^2 + (m_a g)^2 + s_GM,a^2)   gravity through a
+                                            misalignment into a level axis
+        accel_bias_sigma_z (z)            = sqrt(b_a^2 + (k_a g)^2 + s_GM,a^2)   ... the z scale factor
+        gyro_bias_sigma                   = sqrt(b_g^2 + (K_g g)^2 + s_GM,g^2 + (sqrt(k_g^2 + 2 m_g^2) W)^2)
+        accel_bias_rw, gyro_bias_rw       = sqrt(q_RW + 2 s_GM^2 / tau)          the random walk and
+                                            the initial slope of the Gauss-Markov variance
+        gyro_misalignment_sigma, gyro_scale_factor_sigma, accel_scale_factor_sigma,
+        accel_misalignment_sigma          = the specification's m and k
+
+    with b the turn-on biases, m the misalignments, k the scale factors, s_GM the bias
+    instabilities, K_g the g-sensitivity, g standard gravity and W the earth rate: the bias
+    states hold the effective biases of a level IMU at rest (the module docstring).
+    """
+    imu = sensors.imu
+    if imu is None:
+        return {}
+
+    def has(*names: str) -> bool:
+        return sensors.has("imu", *names)
+
+    def stated(name: str, value: float) -> float:
+        return value if has(name) else 0.0
+
+    out: dict[str, float] = {}
+    if has("accel_vrw"):
+        out["accel_vrw"] = imu.accel_vrw
+    if has("gyro_arw"):
+        out["gyro_arw"] = imu.gyro_arw
+    if has("accel_bias"):
+        common = imu.accel_bias**2 + stated("accel_bias_instability",
+                                            imu.accel_bias_instability) ** 2
+        out["accel_bias_sigma"] = math.sqrt(
+            common + (stated("accel_misalignment", imu.accel_misalignment) * G0) ** 2)
+        out["accel_bias_sigma_z"] = math.sqrt(
+            common + (stated("accel_scale_factor", imu.accel_scale_factor) * G0) ** 2)
+    if has("gyro_bias"):
+        earth = math.hypot(stated("gyro_scale_factor", imu.gyro_scale_factor),
+                           math.sqrt(2.0) * stated("gyro_misalignment", imu.gyro_misalignment))
+        out["gyro_bias_sigma"] = math.sqrt(
+            imu.gyro_bias**2 + (stated("gyro_g_sensitivity", imu.gyro_g_sensitivity) * G0) ** 2
+            + stated("gyro_bias_instability", imu.gyro_bias_instability) ** 2
+            + (earth * OMEGA_IE) ** 2)
+    for triad, walk in (("accel", "accel_rw"), ("gyro", "gyro_rrw")):
+        q, used = 0.0, False
+        if has(f"{triad}_bias_instability", f"{triad}_bias_tau"):
+            q += 2.0 * getattr(imu, f"{triad}_bias_instability") ** 2 / getattr(
+                imu, f"{triad}_bias_tau")
+            used = True
+        if has(walk):
+            q += getattr(imu, walk) ** 2
+            used = True
+        if used:
+            out[f"{triad}_bias_rw"] = math.sqrt(q)
+    for setting, name in (("gyro_misalignment_sigma", "gyro_misalignment"),
+                          ("gyro_scale_factor_sigma", "gyro_scale_factor"),
+                          ("accel_scale_factor_sigma", "accel_scale_factor"),
+                          ("accel_misalignment_sigma", "accel_misalignment")):
+        if has(name):
+            out[setting] = getattr(imu, name)
+    return out
+
+
+TACTICAL = SensorSpecs({"imu": imu_grade(ImuGrade.TACTICAL)},
+                       sources={"imu": "grade tactical"})
+"""The sensors the defaults of :class:`InsParams` stand for: the ``tactical`` IMU grade."""
+_DEFAULT = imu_settings(TACTICAL)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class InsParams(FilterParams):
-    """IMU error model and covariance schedule of the INS filters (SI)."""
+    """IMU error model and covariance schedule of the INS filters (SI). The IMU settings
+    follow from the recording's IMU specification (:func:`imu_settings`); their defaults are
+    those of the ``tactical`` grade (1 deg/h, 0.3 mg)."""
 
-    accel_vrw: float = 50.0 * MICRO_G_PER_SQRT_HZ
-    """Accelerometer white noise, velocity random walk [(m/s)/sqrt(s)]."""
-    gyro_arw: float = 0.1 * DEG_PER_SQRT_HOUR
-    """Gyro white noise, angle random walk [rad/sqrt(s)]."""
-    accel_bias_sigma: float = 580.0 * MICRO_G
+    accel_vrw: float = _DEFAULT["accel_vrw"]
+    """Accelerometer white noise, velocity random walk [(m/s)/sqrt(s)] (tactical: 50
+    ug/sqrt(Hz))."""
+    gyro_arw: float = _DEFAULT["gyro_arw"]
+    """Gyro white noise, angle random walk [rad/sqrt(s)] (tactical: 0.1 deg/sqrt(h))."""
+    accel_bias_sigma: float = _DEFAULT["accel_bias_sigma"]
     """Initial 1-sigma of the (effective) accelerometer bias, x and y axes (and z unless
-    ``accel_bias_sigma_z`` is set) [m/s^2]. Default: the ``tactical`` grade's effective level
-    bias, sqrt(0.3 mg^2 + (0.5 mrad g)^2 + 0.05 mg^2) = 0.577 mg (constant bias, the
-    misalignment that couples gravity into a level axis, the Gauss-Markov instability)."""
-    accel_bias_sigma_z: float | None = 420.0 * MICRO_G
+    ``accel_bias_sigma_z`` is set) [m/s^2]: the turn-on bias, the misalignment that couples
+    gravity into a level axis and the Gauss-Markov instability, sqrt(0.3 mg^2 +
+    (0.5 mrad g)^2 + 0.05 mg^2) = 0.585 mg for the tactical grade."""
+    accel_bias_sigma_z: float | None = _DEFAULT["accel_bias_sigma_z"]
     """Initial 1-sigma of the (effective) z (down) accelerometer bias [m/s^2]; None: as
     ``accel_bias_sigma``. Gravity acts on the z axis through its scale factor, not a
-    misalignment: for the ``tactical`` grade sqrt(0.3 mg^2 + (300 ppm g)^2 + 0.05 mg^2) =
-    0.423 mg. This sigma sets the growth of the free-inertial vertical channel."""
-    gyro_bias_sigma: float = 1.5 * DEG_PER_HOUR
-    """Initial 1-sigma of the (effective) gyro bias, per axis [rad/s]."""
-    accel_bias_rw: float = 50.0 * MICRO_G * math.sqrt(2.0 / 600.0)
-    """Accelerometer bias random walk density [(m/s^2)/sqrt(s)]; default: a 50 ug, 600 s
-    Gauss-Markov instability as sigma sqrt(2 / tau)."""
-    gyro_bias_rw: float = 0.3 * DEG_PER_HOUR * math.sqrt(2.0 / 600.0)
-    """Gyro bias random walk density [(rad/s)/sqrt(s)]; default: a 0.3 deg/h, 600 s
-    Gauss-Markov instability."""
+    misalignment: sqrt(0.3 mg^2 + (300 ppm g)^2 + 0.05 mg^2) = 0.427 mg for the tactical grade.
+    This sigma sets the growth of the free-inertial vertical channel."""
+    gyro_bias_sigma: float = _DEFAULT["gyro_bias_sigma"]
+    """Initial 1-sigma of the (effective) gyro bias, per axis [rad/s]: turn-on bias,
+    g-sensitivity times gravity, instability (and the earth rate through the scale factor and
+    misalignments): 1.446 deg/h for the tactical grade."""
+    accel_bias_rw: float = _DEFAULT["accel_bias_rw"]
+    """Accelerometer bias random walk density [(m/s^2)/sqrt(s)]: the acceleration random walk
+    and a Gauss-Markov instability as sigma sqrt(2 / tau) (tactical: 50 ug, 600 s)."""
+    gyro_bias_rw: float = _DEFAULT["gyro_bias_rw"]
+    """Gyro bias random walk density [(rad/s)/sqrt(s)]: the rate random walk and the
+    instability as sigma sqrt(2 / tau) (tactical: 0.3 deg/h, 600 s)."""
     init_pos_sigma: float | None = None
     """Initial position 1-sigma per N, E, D axis [m]; None: ``initial_nav["sigma"]["pos_ned"]``."""
     init_vel_sigma: float | None = None
@@ -170,9 +249,9 @@ class InsParams(FilterParams):
     """Carry the gyro errors driven by the z (yaw) rate, misalignments m_xz, m_yz and scale
     factor s_z, as random-constant states (eq. 5b); the motion noise of ``gyro_sf_mis`` is
     then off."""
-    gyro_misalignment_sigma: float = 0.5e-3
+    gyro_misalignment_sigma: float = _DEFAULT["gyro_misalignment_sigma"]
     """Initial 1-sigma of m_xz and m_yz [rad] (``tactical`` grade: 0.5 mrad)."""
-    gyro_scale_factor_sigma: float = 100.0 * PPM
+    gyro_scale_factor_sigma: float = _DEFAULT["gyro_scale_factor_sigma"]
     """Initial 1-sigma of s_z [-] (``tactical`` grade: 100 ppm)."""
     gyro_sf_mis: float = 0.5e-3
     """Unmodelled gyro scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off); used only
@@ -182,9 +261,9 @@ class InsParams(FilterParams):
     y of S_a + M_a) as six random-constant states (eq. 5c); the motion noise of
     ``accel_sf_mis`` is then off. Off in ``ins``: they change its tilt and velocity sigma by
     less than 1 %; on in ``gps-ins``."""
-    accel_scale_factor_sigma: float = 300.0 * PPM
+    accel_scale_factor_sigma: float = _DEFAULT["accel_scale_factor_sigma"]
     """Initial 1-sigma of s_a_x, s_a_y [-] (``tactical`` grade: 300 ppm)."""
-    accel_misalignment_sigma: float = 0.5e-3
+    accel_misalignment_sigma: float = _DEFAULT["accel_misalignment_sigma"]
     """Initial 1-sigma of m_a_yx, m_a_zx, m_a_xy, m_a_zy [rad] (``tactical``: 0.5 mrad)."""
     sf_mis_time: float = 30.0
     """Correlation time tau of eq. (5a) [s]: a manoeuvre and the time its error persists."""
@@ -344,6 +423,15 @@ class InsFilter(Filter):
     measurements: tuple[MeasurementKind, ...] | None = ()  # no measurement update
 
     params: InsParams
+
+    @classmethod
+    def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
+        """The IMU settings of :func:`imu_settings`."""
+        return imu_settings(sensors)
+
+    @classmethod
+    def default_sensors(cls) -> SensorSpecs:
+        return TACTICAL
 
     def __init__(self, params: InsParams, context: FilterContext) -> None:
         super().__init__(params, context)

@@ -169,6 +169,10 @@ from navreplay.filters.ins import (
 )
 from navreplay.filters.registry import register_filter
 from navreplay.geo.rotations import skew
+from navreplay.sensors.depth import DepthModel
+from navreplay.sensors.imu import ImuModel
+from navreplay.sensors.specs import SensorSpecs
+from navreplay.sensors.speed_log import SpeedLogModel
 from navreplay.streams import StreamKind
 from navreplay.units import (
     ARCSEC,
@@ -244,6 +248,23 @@ class Mode(enum.StrEnum):
     """RPM (and depth) aiding with the current frozen at 0 ("Aided Navi.")."""
     RPM_CURRENT = "rpm_current"
     """RPM aiding with sea-current estimation ("Aided Navi. est Current")."""
+
+
+TABLE_1 = SensorSpecs(
+    {"imu": ImuModel(
+        accel_bias=100.0 * MICRO_G, accel_scale_factor=100.0 * PPM,
+        accel_vrw=1.0 * MICRO_G_PER_SQRT_HZ, accel_misalignment=5.0 * ARCSEC,
+        gyro_bias=0.1 * DEG_PER_HOUR, gyro_scale_factor=100.0 * PPM,
+        gyro_arw=0.01 * DEG_PER_SQRT_HOUR, gyro_misalignment=5.0 * ARCSEC),
+     "speed_log": SpeedLogModel(scale_factor=0.02, misalignment=0.1 * DEG, noise=5.0,
+                                speed_per_rpm=0.01, rate=10.0),
+     "depth": DepthModel(noise=0.1, rate=1.0)},
+    sources={"imu": "Table 1 of docs/methods/rpm-aided-ins.md",
+             "speed_log": "the underwater-rpm speed log",
+             "depth": "the underwater-rpm depth sensor"},
+)
+"""The sensors the defaults of :class:`RpmAidedInsParams` stand for: the paper's IMU (Table 1)
+and the speed log and depth sensor of ``underwater-rpm``."""
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -571,6 +592,49 @@ class RpmAidedIns(Filter):
     )
 
     params: RpmAidedInsParams
+
+    @classmethod
+    def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
+        """The settings the IMU, speed-log and depth specifications give (SI)::
+
+            accel_noise, gyro_noise        = accel_vrw, gyro_arw
+            accel_bias_sigma               = sqrt(accel_bias^2 + accel_bias_instability^2)
+            gyro_bias_sigma                = sqrt(gyro_bias^2 + gyro_bias_instability^2)
+            gyro_misalignment_sigma, gyro_scale_factor_sigma, accel_misalignment_sigma,
+            accel_scale_factor_sigma       = the IMU's misalignments and scale factors
+            rpm_scale_factor_sigma, rpm_misalignment_sigma, speed_per_rpm = the speed log's
+            rpm_sigma                      = speed log noise [rev/min] x speed_per_rpm
+            depth_sigma                    = the depth sensor's noise
+
+        The biases are the turn-on biases of the IMU, as in the paper's model (Table 1; the
+        scale factors and misalignments are states of their own)."""
+        out: dict[str, Any] = {}
+        imu, log = sensors.imu, sensors.speed_log
+        pairs = (("accel_noise", "imu", "accel_vrw"), ("gyro_noise", "imu", "gyro_arw"),
+                 ("gyro_misalignment_sigma", "imu", "gyro_misalignment"),
+                 ("gyro_scale_factor_sigma", "imu", "gyro_scale_factor"),
+                 ("accel_misalignment_sigma", "imu", "accel_misalignment"),
+                 ("accel_scale_factor_sigma", "imu", "accel_scale_factor"),
+                 ("rpm_scale_factor_sigma", "speed_log", "scale_factor"),
+                 ("rpm_misalignment_sigma", "speed_log", "misalignment"),
+                 ("speed_per_rpm", "speed_log", "speed_per_rpm"),
+                 ("depth_sigma", "depth", "noise"))
+        for setting, kind, name in pairs:
+            if sensors.has(kind, name):
+                out[setting] = getattr(sensors.get(kind), name)
+        for triad in ("accel", "gyro"):
+            if sensors.has("imu", f"{triad}_bias"):
+                instability = (getattr(imu, f"{triad}_bias_instability")
+                               if sensors.has("imu", f"{triad}_bias_instability") else 0.0)
+                out[f"{triad}_bias_sigma"] = math.hypot(getattr(imu, f"{triad}_bias"),
+                                                        instability)
+        if sensors.has("speed_log", "noise", "speed_per_rpm"):
+            out["rpm_sigma"] = log.noise * log.speed_per_rpm
+        return out
+
+    @classmethod
+    def default_sensors(cls) -> SensorSpecs:
+        return TABLE_1
 
     def __init__(self, params: RpmAidedInsParams, context: FilterContext) -> None:
         super().__init__(params, context)

@@ -192,6 +192,9 @@ from navreplay.filters.base import (
 from navreplay.filters.registry import register_filter
 from navreplay.geo import earth, kernels
 from navreplay.lti import second_order_markov
+from navreplay.sensors.imu import ImuModel
+from navreplay.sensors.master_ins import MasterInsModel
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import StreamKind
 from navreplay.units import ARCMIN, DEG, FOOT, G0, MICRO_G
 
@@ -244,6 +247,19 @@ ZV = slice(0, 2)
 """Velocity rows."""
 ZQ = slice(2, None)
 """Quaternion rows s."""
+
+
+TABLE_2 = SensorSpecs(
+    {"imu": ImuModel(accel_bias=250.0 * MICRO_G, accel_misalignment=1.0 * ARCMIN),
+     "master_ins": MasterInsModel(tilt=(3.0 * ARCMIN, 3.0 * ARCMIN, 5.0 * ARCMIN),
+                                  synchro_bias=3.0 * ARCMIN, synchro_noise=1.0 * ARCMIN,
+                                  vel_bias=0.7 * FOOT, vel_noise=0.3 * FOOT)},
+    known={"imu": ("accel_bias", "accel_misalignment")},
+    sources={"imu": "Table 2 of docs/methods/transfer-alignment.md (the SDINS)",
+             "master_ins": "the GINS of docs/methods/transfer-alignment.md §3.2"},
+)
+"""The sensors the defaults of :class:`TransferAlignmentParams` stand for (those of its
+settings that follow from sensors): the SDINS accelerometer of Table 2 and the ship's GINS."""
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -1026,6 +1042,41 @@ class TransferAlignment(Filter):
               TruthColumn("misalignment_euler")),
         State("q_rb", "-", Quantity.MISALIGNMENT, TruthColumn("q_rb")),
     )
+
+    @classmethod
+    def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
+        """The settings the SDINS IMU and GINS specifications give (SI)::
+
+            vel_sigma              = GINS velocity white noise (RMS over the axes)
+            gins_euler_noise       = GINS synchro white noise (RMS over the angles)
+            quat_sigma             = gins_euler_noise / 2
+            gins_heading_sigma     = sqrt(tilt_D^2 + synchro_bias_yaw^2)
+            accel_bias_sigma, accel_misalignment_sigma = the IMU's
+
+        The process noise (``accel_noise``, ``gyro_noise``) stays a tuning value: it covers the
+        ship's flexure and lever-arm motion besides the IMU noise
+        (docs/methods/transfer-alignment.md §4.3)."""
+        out: dict[str, Any] = {}
+        gins, imu = sensors.master_ins, sensors.imu
+
+        def rms(v: Any) -> float:
+            return float(np.sqrt(np.mean(np.square(v))))
+
+        if sensors.has("master_ins", "vel_noise"):
+            out["vel_sigma"] = rms(gins.vel_noise)
+        if sensors.has("master_ins", "synchro_noise"):
+            out["gins_euler_noise"] = rms(gins.synchro_noise)
+            out["quat_sigma"] = 0.5 * rms(gins.synchro_noise)
+        if sensors.has("master_ins", "tilt", "synchro_bias"):
+            out["gins_heading_sigma"] = math.hypot(gins.tilt[2], gins.synchro_bias[2])
+        for name in ("accel_bias", "accel_misalignment"):
+            if sensors.has("imu", name):
+                out[f"{name}_sigma"] = getattr(imu, name)
+        return out
+
+    @classmethod
+    def default_sensors(cls) -> SensorSpecs:
+        return TABLE_2
 
     def __init__(self, params: TransferAlignmentParams, context: FilterContext) -> None:
         super().__init__(params, context)

@@ -200,6 +200,9 @@ from navreplay.geo.rotations import (
     quat_to_euler,
     skew,
 )
+from navreplay.sensors.imu import ImuModel
+from navreplay.sensors.magnetometer import MagnetometerModel
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import StreamKind
 from navreplay.units import DEG, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 
@@ -817,6 +820,32 @@ class VectorMatchingFilter(Filter):
     states = STATES
     measurements = (MeasurementKind("vector", ("g_N", "g_E", "g_D", "h_N", "h_E", "h_D"),
                                     ("m/s^2",) * 3 + ("T",) * 3),)  # [z_g; z_h], (10), (14)
+
+    @classmethod
+    def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
+        """The per-sample noise of the accelerometer and magnetometer (SI)::
+
+            accel_noise_sigma = accel_vrw sqrt(rate)    an interval-mean sample at the epoch
+                                                        rate (the magnetometer's)
+            mag_noise_sigma   = the magnetometer's per-sample noise
+
+        The sigmas of the consider states follow the variant (``paper`` has none)."""
+        out: dict[str, Any] = {}
+        if sensors.has("imu", "accel_vrw") and sensors.has("mag", "rate"):
+            out["accel_noise_sigma"] = sensors.imu.accel_vrw * math.sqrt(sensors.mag.rate)
+        if sensors.has("mag", "noise"):
+            out["mag_noise_sigma"] = sensors.mag.noise
+        return out
+
+    @classmethod
+    def default_sensors(cls) -> SensorSpecs:
+        rate = SENSOR_RATE
+        return SensorSpecs(
+            {"imu": ImuModel(accel_vrw=ACCEL_NOISE_SIGMA / math.sqrt(rate)),
+             "mag": MagnetometerModel(noise=MAG_NOISE_SIGMA, rate=rate)},
+            known={"imu": ("accel_vrw",), "mag": ("noise", "rate")},
+            sources={"imu": "Table 1 of docs/methods/vector-matching.md",
+                     "mag": "Table 1 of docs/methods/vector-matching.md"})
 
     def __init__(self, params: VectorMatchingParams, context: FilterContext) -> None:
         super().__init__(params, context)

@@ -9,6 +9,7 @@ from typing import Any
 
 from navreplay import params as _params
 from navreplay.filters.registry import load_filter
+from navreplay.filters.settings import ParamValues, Source
 from navreplay.replay.engine import build_params
 from navreplay.replay.ensemble import FilterSpec
 
@@ -84,8 +85,10 @@ def filter_specs(
     config : mapping, optional
         A TOML document: ``[filter.<label or name>]`` tables of parameter values.
 
-    Precedence: inline > ``-p`` > config > the filter's defaults. Every filter is loaded and its
-    parameters are validated here, so mistakes surface before any work.
+    Precedence: inline > ``-p`` > config > the recording's sensor specifications > the
+    filter's defaults (:mod:`navreplay.filters.settings`); each spec's ``params`` says where
+    each value came from. Every filter is loaded and its parameters are validated here, so
+    mistakes surface before any work.
     """
     items = split_filter_list(names) if names else []
     parsed: list[tuple[str, str, dict[str, Any], type]] = []  # label, ref, inline, cls
@@ -104,13 +107,14 @@ def filter_specs(
             f"filter {', '.join(dupes)} given twice; give variants their own parameters, "
             "e.g. gps-ins[gps_pos_sigma_scale=1],gps-ins[gps_pos_sigma_scale=2]"
         )
-    values: list[dict[str, Any]] = [{} for _ in parsed]
+    values: list[ParamValues] = [ParamValues() for _ in parsed]
     tables = dict((config or {}).get("filter", {}) or {})
     for i, (label, ref, _, cls) in enumerate(parsed):
         for key in (cls.name, ref, label):
             table = tables.get(key)
             if isinstance(table, Mapping):
                 values[i].update(table)
+                values[i].sources.update(dict.fromkeys(table, Source.TOML))
     fields = [{f.name for f in dataclasses.fields(p[3].Params)} for p in parsed]
     for key, val in _params.parse_assignments(assignments).items():
         prefix, dot, name = key.rpartition(".")
@@ -130,9 +134,11 @@ def filter_specs(
                 )
         for i in hit:
             values[i][name] = val
+            values[i].sources[name] = Source.OPTION
     specs = []
     for (label, ref, inline, cls), vals in zip(parsed, values, strict=True):
         vals.update(inline)
+        vals.sources.update(dict.fromkeys(inline, Source.INLINE))
         build_params(cls, vals)  # validate now
         specs.append(FilterSpec(ref, vals, label))
     return tuple(specs)

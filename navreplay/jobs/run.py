@@ -13,6 +13,7 @@ import numpy as np
 
 from navreplay import params as _params
 from navreplay import tables
+from navreplay.filters.settings import setting_notes, summary_entries
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
 from navreplay.replay.engine import Progress, check_streams, replay
@@ -42,7 +43,8 @@ def campaign_extract(
 ) -> PerRun:
     """Extractor of ``navreplay run`` over several recordings and ``navreplay montecarlo``."""
     scored = default_extract(recording, results, task)
-    return PerRun(scored, {label: m.summary() for label, m in scored.items()})
+    return PerRun(scored, {label: {**m.summary(), **summary_entries(results[label].settings)}
+                           for label, m in scored.items()})
 
 
 def salvaged_note(source: str, covered: float | None) -> str:
@@ -235,8 +237,9 @@ def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
                 break
             window = following
             aiding = window
-        summaries = {spec.label: score.summary()
-                     for spec, score in zip(job.filters, scores, strict=True)}
+        summaries = {spec.label: {**score.summary(), **summary_entries(session.settings)}
+                     for spec, score, session in zip(job.filters, scores, sessions, strict=True)}
+        notes += setting_notes(summaries.values())
         notes += outputs.write_run(summaries, title=title)
         hint = close_output(sink, job.viz)
     except BaseException:
@@ -309,7 +312,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
                 progress=prog, observer=observer, max_imu_gap=job.max_imu_gap,
             )
             scored = metrics.run_metrics(result, recording)  # NIS only without a reference
-            summaries[spec.label] = scored.summary()
+            summaries[spec.label] = {**scored.summary(), **summary_entries(result.settings)}
             outputs.rows(result, scored if has_truth else None)  # with its innovations
             if sink is not None:
                 sink.log_run(result, truth=recording if has_truth else None,
@@ -323,7 +326,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     covered = coverage(recording, prepared.salvaged)
     summary = {"recording": str(path), "coverage": covered, "salvaged": prepared.salvaged,
                "filters": summaries}
-    notes = list(prepared.notes)
+    notes = list(prepared.notes) + setting_notes(summaries.values())
     if prepared.salvaged:
         notes.append(salvaged_note(str(path), covered))
     notes += outputs.write_run(summaries,
@@ -371,6 +374,7 @@ def campaign(
     stats: dict[str, Any] = {spec.label: metrics.EnsembleStats(spec.label) for spec in filters}
     rows: list[dict[str, Any]] = []
     notes: list[str] = []
+    settings: dict[str, dict[str, Any]] = {}  # each filter's, from its first run
 
     drill: dict[int, Any] = {}  # per-run metrics for the view when the runs are kept
 
@@ -383,6 +387,9 @@ def campaign(
                      "salvaged": out.salvaged, "filters": per.summaries})
         if out.salvaged:
             notes.append(salvaged_note(out.source, out.coverage))
+        notes.extend(n for n in setting_notes(per.summaries.values()) if n not in notes)
+        for label, s in per.summaries.items():
+            settings.setdefault(label, {k: v for k, v in s.items() if k.startswith("settings")})
         for label, m in per.metrics.items():
             if label in stats:
                 try:
@@ -412,7 +419,8 @@ def campaign(
         raise
     summary = {
         "runs": rows,
-        "ensemble": {label: e.summary() for label, e in ens.items()},
+        "ensemble": {label: {**e.summary(), **settings.get(label, {})}
+                     for label, e in ens.items()},
         "wall_seconds": done.seconds,
     }
     notes += outputs.write_ensemble(ens, summary["ensemble"], title=title)

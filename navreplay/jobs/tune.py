@@ -14,8 +14,9 @@ Two objectives (docs/tuning.md):
     horizontal distance between the filter's position and the dropped fixes, and the NIS of the
     measurements it used.
 
-The search is optuna's TPE sampler (seeded), started from the filter's settings (its defaults
-and ``-p`` values), which are the first trial. Validation: a scenario's tuning runs use seeds
+The search is optuna's TPE sampler (seeded), started from the filter's settings on the data
+(``-p`` values, else those derived from the recordings' sensor specifications, else its
+defaults), which are the first trial. Validation: a scenario's tuning runs use seeds
 ``seed .. seed + runs - 1`` and its validation runs ``seed + VALIDATION_SEEDS ..``; recordings
 with truth alternate between tuning and validation; held-out windows alternate too, each
 recording replayed once with the tuning windows dropped and once with the validation windows.
@@ -55,6 +56,7 @@ from navreplay.replay.holdout import (
     hold_out,
     outage_windows,
 )
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import Recording, StreamKind, seconds
 
 VALIDATION_SEEDS = 1000
@@ -361,6 +363,8 @@ class Data:
     search: tuple[Path, ...]
     validation: tuple[Path, ...]
     where: tuple[str, str]
+    sensors: SensorSpecs | None = None
+    """The first search recording's sensor specifications (what the filter starts from)."""
 
 
 @contextlib.contextmanager
@@ -401,9 +405,11 @@ def _prepare(job: TuneJob, tmp: Path) -> Data:
         return path
 
     if job.scenario is not None and objective is Objective.TRUTH:
-        search = tuple(write(f"search_{s}", load(s)) for s in search_ids)
+        first = load(search_ids[0])
+        search = tuple(write(f"search_{s}", first if k == 0 else load(s))
+                       for k, s in enumerate(search_ids))
         validation = tuple(write(f"validation_{s}", load(s)) for s in valid_ids)
-        return Data(objective, search, validation, where)
+        return Data(objective, search, validation, where, _sensors(first))
     if job.scenario is None and objective is Objective.TRUTH:
         if len(job.recordings) < 2:
             raise _params.ParamError("tuning on recordings with truth needs at least two (they "
@@ -412,7 +418,7 @@ def _prepare(job: TuneJob, tmp: Path) -> Data:
         paths = tuple(job.recordings)
         return Data(objective, paths[0::2], paths[1::2],
                     (", ".join(p.name for p in paths[0::2]),
-                     ", ".join(p.name for p in paths[1::2])))
+                     ", ".join(p.name for p in paths[1::2])), _sensors(recordings[0]))
     # held-out windows, alternating between search and validation
     items = [load(s) for s in search_ids] if job.scenario is not None else recordings
     names = ([f"seed {s}" for s in search_ids] if job.scenario is not None
@@ -439,7 +445,11 @@ def _prepare(job: TuneJob, tmp: Path) -> Data:
     return Data(objective, tuple(search), tuple(validation),
                 (f"{counts[0]} GNSS outages of {job.outage:g} s (every "
                  f"{2 * job.outage_period:g} s) in {', '.join(names)}",
-                 f"the {counts[1]} outages between them"))
+                 f"the {counts[1]} outages between them"), _sensors(items[0]))
+
+
+def _sensors(recording: Recording) -> SensorSpecs:
+    return SensorSpecs.from_metadata(recording.metadata.sensors)
 
 
 def _seeds(first: int, count: int) -> str:
@@ -450,13 +460,13 @@ def _seeds(first: int, count: int) -> str:
 # the search
 
 
-def start_values(job: TuneJob) -> dict[str, float]:
-    """The filter's setting of each tuned parameter (its default, or the ``-p`` value),
-    clipped into its range."""
+def start_values(job: TuneJob, sensors: SensorSpecs | None = None) -> dict[str, float]:
+    """The filter's setting of each tuned parameter on the data (the ``-p`` value, else what
+    the recording's sensor specifications give, else the default), clipped into its range."""
     from navreplay.filters.registry import load_filter
-    from navreplay.replay.engine import build_params
+    from navreplay.filters.settings import build_params
 
-    p = build_params(load_filter(job.filter), job.fixed)
+    p = build_params(load_filter(job.filter), job.fixed, sensors).params
     out = {}
     for r in job.ranges:
         value = getattr(p, r.name)
@@ -464,7 +474,7 @@ def start_values(job: TuneJob) -> dict[str, float]:
     return out
 
 
-def _study(job: TuneJob) -> Any:
+def _study(job: TuneJob, start: Mapping[str, float]) -> Any:
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -481,7 +491,7 @@ def _study(job: TuneJob) -> Any:
     fingerprint = job.fingerprint()
     if not study.trials:
         study.set_user_attr("job", fingerprint)
-        study.enqueue_trial(start_values(job))
+        study.enqueue_trial(dict(start))
     elif study.user_attrs.get("job") != fingerprint:
         raise _params.ParamError(f"{job.storage} holds the study of another tuning (other "
                                  "filter, data, ranges or options); use another --storage")
@@ -497,12 +507,12 @@ def tune(job: TuneJob, progress: Callable[[int, int], None] | None = None) -> Tu
         raise ImportError("navreplay tune needs optuna: pip install 'navreplay[tune]'") from None
     if job.trials < 1:
         raise _params.ParamError(f"--trials must be at least 1, got {job.trials}")
-    start = start_values(job)
-    study = _study(job)
     finished = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED,
                 optuna.trial.TrialState.FAIL)
-    resumed = sum(t.state in finished for t in study.trials)
     with prepared(job) as data:
+        start = start_values(job, data.sensors)
+        study = _study(job, start)
+        resumed = sum(t.state in finished for t in study.trials)
 
         def objective(trial: Any) -> float:
             values = {r.name: trial.suggest_float(r.name, r.low, r.high, log=r.log)

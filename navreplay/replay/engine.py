@@ -65,7 +65,6 @@ from typing import Any
 
 import numpy as np
 
-from navreplay import params as _params
 from navreplay.filters.base import (
     NAV_PARTS,
     Estimate,
@@ -79,10 +78,12 @@ from navreplay.filters.base import (
     navigation_parts,
 )
 from navreplay.filters.kalman import FilterDivergedError
+from navreplay.filters.settings import build_params  # noqa: F401  (the one place it is built)
 from navreplay.io.checks import first_problem
 from navreplay.io.errors import RecordingError
 from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.result import InnovationSeries, RunResult
+from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import Recording, Stream, StreamKind
 
 STREAM_PRIORITY: tuple[StreamKind, ...] = (
@@ -198,14 +199,6 @@ def validate_recording(recording: Recording, source: str = "") -> None:
         if problem is not None:
             raise InvalidRecordingError(f"{source}: stream {kind}: {problem}")
 
-
-def build_params(
-    filter_cls: type[Filter], params: FilterParams | Mapping[str, Any] | None
-) -> FilterParams:
-    """The filter's parameter instance from an instance, a mapping of values, or defaults."""
-    if isinstance(params, FilterParams):
-        return params
-    return _params.build(filter_cls.Params, params, where=f"filter {filter_cls.name}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -671,7 +664,12 @@ class ReplaySession:
         check_streams(recording, filter_cls, source)
         if validate:
             validate_recording(recording, source)
-        p = build_params(filter_cls, params)
+        try:
+            sensors = SensorSpecs.from_metadata(recording.metadata.sensors, source)
+        except ValueError as e:
+            raise RecordingError(str(e)) from None
+        self.settings = build_params(filter_cls, params, sensors, label=label)
+        p = self.settings.params
         context = FilterContext(
             metadata=recording.metadata,
             t0_ns=recording.t0_ns,
@@ -714,6 +712,7 @@ class ReplaySession:
             states=self.states,
             scored_extras=scored_extras,
             measurements=measurements or (),
+            settings=self.settings,
         )
         self._batch = None if pacing is not None else _batch_hook(filt)
         self._events_hook = None if pacing is not None else _events_hook(filt)

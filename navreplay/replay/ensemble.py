@@ -45,6 +45,7 @@ from typing import Any, Protocol
 from navreplay import lifecycle
 from navreplay.filters.base import Filter
 from navreplay.filters.registry import load_filter
+from navreplay.filters.settings import ParamValues
 from navreplay.replay.engine import build_params, check_streams, replay
 from navreplay.replay.result import RunResult
 from navreplay.streams import Recording
@@ -77,7 +78,7 @@ class FilterSpec:
         if not self.label:
             default = self.ref.rpartition(":")[2] if ":" in self.ref else self.ref
             object.__setattr__(self, "label", default)
-        object.__setattr__(self, "params", dict(self.params))
+        object.__setattr__(self, "params", ParamValues(self.params))  # keeps the sources
 
     def load(self) -> type[Filter]:
         """The filter class (raises :class:`~navreplay.filters.registry.FilterLoadError`)."""

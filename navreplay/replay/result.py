@@ -13,6 +13,7 @@ from navreplay.filters.base import (
     check_measurements,
     check_states,
 )
+from navreplay.filters.settings import FilterSettings
 
 
 @dataclasses.dataclass
@@ -58,6 +59,9 @@ class RunResult:
     measurements : tuple[MeasurementKind, ...]
         The filter's declarations of its measurements (rows and units of each innovation);
         empty when the filter declares none (:meth:`measurement` is then None).
+    settings : FilterSettings or None
+        The filter's parameters and where each came from (sensor specifications, TOML, -p,
+        defaults; :mod:`navreplay.filters.settings`).
     """
 
     filter_name: str
@@ -76,6 +80,7 @@ class RunResult:
     scored_extras: tuple[State, ...] = ()
     measurements: tuple[MeasurementKind, ...] = ()
     navigation: tuple[str, ...] | None = None
+    settings: FilterSettings | None = None
 
     def __post_init__(self) -> None:
         self.states = check_states(self.states, f"{self.label}: states")

@@ -338,7 +338,7 @@ def spec_from_table(
     Returns
     -------
     record, frozenset of str, str
-        The record, its stated fields (all of them with a base or a grade) and a source text.
+        The record, the fields the table states (all of them with a grade) and a source text.
 
     Raises
     ------
@@ -382,7 +382,7 @@ def spec_from_table(
         model = dataclasses.replace(start, **values)
     except (TypeError, ValueError) as e:
         raise ParamError(f"{head}: {e}") from None
-    known = frozenset(spec_fields(cls)) if base is not None else frozenset(values)
+    known = frozenset(spec_fields(cls)) if source else frozenset(values)
     given = "" if set(values) == set(spec_fields(cls)) else ", ".join(values)
     if source and given:
         source = f"{source}, with {given}"
@@ -415,6 +415,7 @@ def specs_from_tables(
         detail = f"{label}: {source}" if source else label
         if kind in base and not (kind == "imu" and GRADE_KEY in table):
             detail = f"{base.source(kind)}, with {detail}" if base.source(kind) else detail
+            known = known | base.known_fields(kind)
         out = out.with_model(kind, model, detail, known)
     return out
 
