@@ -94,9 +94,9 @@ def estimate_size(job: SimulateJob) -> SizeEstimate | None:
     import tracemalloc
 
     from navreplay.io import write_recording
-    from navreplay.sim.scenario import get_scenario, simulate
+    from navreplay.sim.scenario import get_scenario, scenario_inputs, simulate
 
-    duration = getattr(_params.build(get_scenario(job.scenario).Params, job.values),
+    duration = getattr(scenario_inputs(get_scenario(job.scenario), job.values)[0],
                        "duration", None)
     if not isinstance(duration, int | float) or not duration > PROBE_S:
         return None
