@@ -509,6 +509,143 @@ def filters(name: str | None) -> None:
             click.echo(f"    {line}")
 
 
+@cli.command()
+@click.argument("recording", type=click.Path())
+@click.option("--topic", metavar="TOPIC", help="The IMU topic (default: the recording's IMU).")
+@click.option("--start", type=float, metavar="S", help="Segment start [s from the recording "
+              "start].")
+@click.option("--end", type=float, metavar="S", help="Segment end [s from the recording start].")
+@click.option("-o", "--output", "spec", type=click.Path(dir_okay=False), metavar="SPEC.toml",
+              help="Write the fitted noise as a [sensors.imu] table (for simulate/run --config).")
+@click.option("--plot", type=click.Path(dir_okay=False), metavar="FIG.png|FIG.svg",
+              help="Write the Allan-deviation figure.")
+@click.option("--save", type=click.Path(dir_okay=False), metavar="OUT.rrd",
+              help="Write the Rerun view.")
+@click.option("--bootstrap", type=click.IntRange(min=0), default=40, show_default=True,
+              metavar="N", help="Synthetic records for the intervals of the fitted terms "
+                                "(0: none).")
+@click.option("--time", "time", type=click.Choice(["header", "log"]), default="header",
+              show_default=True, help="Sample times: header stamps or log (receive) times.")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
+def allan(recording: str, topic: str | None, start: float | None, end: float | None,
+          spec: str | None, plot: str | None, save: str | None, bootstrap: int, time: str,
+          force: bool) -> None:
+    """Allan deviation of a still IMU segment and the noise terms fitted to it.
+
+    Fits white noise (angle/velocity random walk), a Gauss-Markov bias instability (sigma and
+    correlation time) and a rate/acceleration random walk to the overlapping Allan deviation
+    of each triad, with intervals; refuses a segment that is not still or too short.
+
+    \b
+    Examples:
+      navreplay simulate stationary -o still.mcap -p duration=7200 -p imu_grade=consumer
+      navreplay allan still.mcap -o imu.toml --plot allan.png
+      navreplay run gps-ins drive.mcap --config imu.toml
+    """
+    from navreplay.jobs.allan import AllanJob, plot_format, run_allan
+
+    if plot is not None:
+        try:
+            plot_format(Path(plot))
+        except ValueError as e:
+            raise click.BadParameter(str(e), param_hint="--plot") from None
+    _check_outputs(force, [recording], _out(spec, "-o"), _out(plot, "--plot"),
+                   _out(save, "--save"))
+    job = AllanJob(recording=Path(recording), topic=topic, start=start, end=end,
+                   spec_path=Path(spec) if spec else None, plot_path=Path(plot) if plot else None,
+                   view_path=Path(save) if save else None, bootstrap=bootstrap, time=time)
+    try:
+        report = run_allan(job)
+    except ImportError as e:
+        raise click.ClickException(str(e)) from None
+    click.echo(report.format())
+
+
+@cli.command()
+@click.argument("filter_ref", metavar="FILTER")
+@click.argument("sources", nargs=-1, required=True, metavar="SCENARIO | RECORDING...")
+@click.option("--param", "ranges", multiple=True, required=True,
+              metavar="NAME=LOW:HIGH[:log|:linear]",
+              help="A parameter to search and its range (repeatable).")
+@click.option("-p", "--set", "params", multiple=True, metavar="[scenario.]KEY=VALUE",
+              help="A fixed filter parameter (also the start), or scenario.KEY=VALUE.")
+@click.option("--duration", type=float, help="Scenario length [s].")
+@click.option("--trials", type=click.IntRange(min=1), default=40, show_default=True,
+              help="Trials in all (a resumed study counts its own).")
+@click.option("--runs", type=click.IntRange(min=1), default=8, show_default=True,
+              help="Scenario runs scored per trial (seeds seed, seed+1, ...).")
+@click.option("--validation-runs", type=click.IntRange(min=1), default=8, show_default=True,
+              help="Scenario runs of the truth objective's validation (seeds seed+1000, ...); "
+                   "the held-out objective validates on the other windows of the same runs.")
+@click.option("--seed", type=int, default=0, show_default=True, help="First scenario seed.")
+@click.option("--objective", type=click.Choice(["truth", "held-out"]),
+              help="truth: ensemble consistency and accuracy (default with truth); held-out: "
+                   "prediction of dropped GNSS fixes and NIS (default without).")
+@click.option("--outage", type=float, default=30.0, show_default=True, metavar="S",
+              help="Length of a held-out GNSS window [s].")
+@click.option("--outage-period", type=float, default=120.0, show_default=True, metavar="S",
+              help="One held-out window every S seconds (alternately search and validation).")
+@click.option("--storage", type=click.Path(dir_okay=False), metavar="STUDY.journal",
+              help="Keep the study in this file; the same command again resumes it.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="TUNED.toml",
+              help="Write the chosen values as a [filter.NAME] table for run --config.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Processes.")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
+def tune(filter_ref: str, sources: Sequence[str], ranges: Sequence[str],
+         params: Sequence[str], duration: float | None, trials: int, runs: int,
+         validation_runs: int, seed: int, objective: str | None, outage: float,
+         outage_period: float, storage: str | None, output: str | None, workers: int,
+         force: bool) -> None:
+    """Search FILTER's parameters over a SCENARIO's runs or RECORDING(s) (optuna).
+
+    With truth the objective is the ensemble's consistency (per-axis RMS/σ, time-averaged
+    NEES) and accuracy; without, the prediction of GNSS fixes dropped in windows and the NIS.
+    The chosen values are validated against the start on seeds (or windows) the search did
+    not use.
+
+    \b
+    Examples:
+      navreplay tune gps-ins vehicle-drive -p scenario.imu_grade=mems --duration 300 \\
+          --param gyro_arw=1e-5:1e-3 --param gyro_bias_rw=1e-8:1e-5 -o tuned.toml
+      navreplay tune gps-ins drive.mcap --param accel_bias_rw=1e-6:1e-3 --storage s.journal
+    """
+    from navreplay import jobs
+    from navreplay.jobs.tune import Objective, TuneJob, parse_ranges
+    from navreplay.sim.scenario import scenarios as table
+
+    scenario = None
+    recordings: tuple[Path, ...] = ()
+    if len(sources) == 1 and sources[0] in table() and not Path(sources[0]).exists():
+        scenario = sources[0]
+    else:
+        recordings = tuple(Path(s) for s in sources)
+    scenario_items = [p.partition(".")[2] for p in params if p.startswith("scenario.")]
+    filter_items = [p for p in params if not p.startswith("scenario.")]
+    if scenario is None and (scenario_items or duration is not None):
+        raise click.UsageError("scenario.KEY=VALUE and --duration apply to a SCENARIO")
+    from navreplay.params import parse_assignments
+
+    _check_outputs(force, [*recordings, storage], _out(output, "-o"))
+    job = TuneJob(
+        filter=filter_ref, scenario=scenario, recordings=recordings,
+        ranges=parse_ranges(ranges, filter_ref), fixed=parse_assignments(filter_items),
+        values=jobs.scenario_values(scenario_items, None, duration) if scenario else {},
+        runs=runs, validation_runs=validation_runs, seed=seed, trials=trials,
+        objective=Objective(objective) if objective else None, outage=outage,
+        outage_period=outage_period, storage=Path(storage) if storage else None,
+        output=Path(output) if output else None, workers=workers,
+    )
+    from navreplay.jobs.tune import tune as run_tune
+
+    with _Progress(f"tune {filter_ref}") as progress:
+        try:
+            report = run_tune(job, progress)
+        except ImportError as e:
+            raise click.ClickException(str(e)) from None
+    click.echo(report.format())
+
+
 # --------------------------------------------------------------------------------------------
 # run, montecarlo
 

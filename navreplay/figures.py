@@ -5,7 +5,8 @@ Each function takes plain arrays and returns a matplotlib Figure, so the HTML re
 
 * :func:`bounded_errors` — estimation errors with their shaded +-3 sigma, one panel per quantity;
 * :func:`consistency` — NEES and NIS (log scale) inside their shaded chi-square band;
-* :func:`rms_vs_sigma` — ensemble RMS error (solid) against the mean predicted sigma (dashed).
+* :func:`rms_vs_sigma` — ensemble RMS error (solid) against the mean predicted sigma (dashed);
+* :func:`allan_deviation` — Allan deviation per axis (log-log) with the fitted noise terms.
 
 A filter keeps its colour (:func:`filter_color`, by its position in the command) in every
 figure. Importing this module loads matplotlib: import it only when figures are wanted.
@@ -151,6 +152,107 @@ def rms_vs_sigma(title: str, panels: Sequence[Panel], color: str = COLORS[0],
     if axes:
         axes[0].legend(loc="upper left", fontsize=8, frameon=False)
     return fig
+
+
+@dataclasses.dataclass(frozen=True)
+class AllanTerm:
+    """One fitted noise term of an Allan-deviation panel.
+
+    Attributes
+    ----------
+    label : str
+        Name and value, for the legend.
+    tau, adev : ndarray, shape (K,)
+        The term's own ADEV (its asymptote) [s], [unit].
+    at_tau, at_adev : float
+        Where the term is read (tau = 1 s for white noise, 3 s for a random walk, the peak
+        of a Gauss-Markov hump), marked on the asymptote.
+    """
+
+    label: str
+    tau: np.ndarray
+    adev: np.ndarray
+    at_tau: float
+    at_adev: float
+
+
+@dataclasses.dataclass(frozen=True)
+class AllanPanel:
+    """One triad of an Allan-deviation figure (all ADEVs in ``unit``).
+
+    Attributes
+    ----------
+    title, unit : str
+    tau : ndarray, shape (K,)
+        Cluster times [s].
+    axes : tuple of three ndarray (K,)
+        ADEV of the x, y and z axes.
+    triad, lo, hi : ndarray, shape (K,)
+        ADEV of the triad (mean Allan variance) and its confidence interval.
+    model : ndarray, shape (K,)
+        ADEV of the fitted model (the sum of the terms).
+    terms : tuple of AllanTerm
+    floor : (tau, adev) or None
+        The flat part of the fitted curve (the IEEE bias instability is adev / 0.664).
+    """
+
+    title: str
+    unit: str
+    tau: np.ndarray
+    axes: tuple[np.ndarray, ...]
+    triad: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    model: np.ndarray
+    terms: tuple[AllanTerm, ...]
+    floor: tuple[float, float] | None
+
+
+AXIS_COLORS = ("tab:red", "tab:green", "tab:blue")
+"""x, y, z."""
+
+
+def allan_deviation(panels: Sequence[AllanPanel], title: str = "") -> plt.Figure:
+    """Allan deviation (log-log): the axes (thin), the triad with its shaded confidence
+    interval, the fitted model (black dashed) and each term's asymptote (dotted) marked where
+    it is read."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(6.0 * len(panels), 4.6), squeeze=False,
+                             layout="constrained")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    for ax, p in zip(axes[0], panels, strict=True):
+        for name, adev, color in zip("xyz", p.axes, AXIS_COLORS, strict=True):
+            ax.loglog(p.tau, adev, color=color, linewidth=0.8, alpha=0.7, label=name)
+        ax.fill_between(p.tau, p.lo, p.hi, color=BAND_COLOR, alpha=0.9, linewidth=0,
+                        label="triad, 68 % interval")
+        ax.loglog(p.tau, p.triad, color="0.2", linewidth=1.4, label="triad")
+        ax.loglog(p.tau, p.model, color="black", linewidth=1.2, linestyle="--", label="fit")
+        top = 3.0 * max(np.max(p.hi), np.max(p.triad))
+        bottom = 0.3 * np.min(p.lo[p.lo > 0]) if np.any(p.lo > 0) else None
+        for k, term in enumerate(p.terms):
+            color = COLORS[(k + 4) % len(COLORS)]
+            ax.loglog(term.tau, term.adev, color=color, linewidth=1.0, linestyle=":",
+                      label=term.label)
+            ax.plot([term.at_tau], [term.at_adev], marker="o", color=color, markersize=5)
+        if p.floor is not None:
+            ax.plot([p.floor[0]], [p.floor[1]], marker="v", color="black", markersize=6,
+                    linestyle="none", label=f"floor {p.floor[1]:.3g} {p.unit}")
+        ax.set_ylim(bottom, top)
+        ax.set_xlim(p.tau[0], p.tau[-1])
+        ax.set_title(p.title, fontsize=10)
+        ax.set_xlabel("cluster time τ [s]")
+        ax.set_ylabel(f"Allan deviation [{p.unit}]")
+        ax.grid(True, which="both", color="0.92", linewidth=0.6)
+        ax.set_axisbelow(True)
+        ax.legend(loc="lower left", fontsize=7, frameon=False)
+    return fig
+
+
+def save(fig: plt.Figure, path: str, fmt: str) -> None:
+    """Write the figure (``png`` or ``svg``, no metadata) and close it."""
+    fig.savefig(path, format=fmt, dpi=DPI, metadata={"Software": None} if fmt == "png"
+                else {"Date": None})
+    plt.close(fig)
 
 
 def png(fig: plt.Figure) -> bytes:

@@ -123,4 +123,34 @@ def format_summaries(summaries: Mapping[str, Mapping[str, Any]]) -> str:
                              f"{100 * s.get(f'nis_in_bounds_{meas}', math.nan):.0f} %"))
     if len(rows) > 1:
         out.append(_align(rows))
+    scale = scale_rows(summaries)
+    if scale:
+        out.append(scale)
     return "\n\n".join(out)
+
+
+def scale_rows(summaries: Mapping[str, Mapping[str, Any]]) -> str:
+    """The ensemble's per-axis RMS/sigma with 95 % intervals against their bands, and the
+    time-averaged NEES with its effective samples (docs/methods/consistency.md §7): the NEES
+    states of each filter, and any other axis that fails its check."""
+    rows = [("RMS/σ of normalised errors", "ratio", "95% interval", "samples", "band",
+             "check")]
+    alpha = None
+    for label, s in summaries.items():
+        alpha = s.get("consistency_false_alarm", alpha)
+        for name, c in (s.get("rms_over_sigma") or {}).items():
+            if c["nees"] or not c["passed"]:
+                rows.append((f"{label} {name}", f"{c['ratio']:.3g}",
+                             f"{c['interval_95'][0]:.3g}-{c['interval_95'][1]:.3g}",
+                             f"{c['samples']:.0f}", f"{c['band'][0]:.3g}-{c['band'][1]:.3g}",
+                             "ok" if c["passed"] else "INCONSISTENT"))
+        nees = s.get("nees_time_averaged")
+        if nees is not None:
+            rows.append((f"{label} NEES, time-averaged ({nees['dof']} dof)",
+                         f"{nees['mean']:.3g}", "", f"{nees['samples']:.0f}",
+                         f"{nees['band'][0]:.3g}-{nees['band'][1]:.3g}",
+                         ("ok" if nees["passed"] else "INCONSISTENT")
+                         + f"; {nees['runs_failed']} of {nees['runs']} runs fail their own"))
+    if len(rows) == 1:
+        return ""
+    return _align(rows) + f"\n(bands at false alarm {alpha:g})"

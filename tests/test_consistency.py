@@ -9,7 +9,7 @@ degrees of freedom come from what each filter declares, never from a hard-coded 
 import numpy as np
 import pytest
 
-from navreplay import consistency, metrics
+from navreplay import consistency, metrics, tables
 from navreplay.filters import rpm_aided_ins as rai
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.filters.ins import InsFilter
@@ -68,6 +68,104 @@ def _nis_samples(results, name):
     initial transient), and the measurement's dof."""
     inn = [r.innovations[name] for r in results]
     return np.concatenate([i.nis[10:] for i in inn]), inn[0].nu.shape[1]
+
+
+# --------------------------------------------------------------------------------------------
+# correlated epochs: effective samples, the per-run NEES test, per-axis RMS/sigma
+
+
+def _ar1(rng, a, n, k, runs=1):
+    """Unit-variance AR(1) series z[t] = a z[t-1] + sqrt(1 - a^2) w[t], shape (runs, n, k)."""
+    z = np.empty((runs, n, k))
+    z[:, 0] = rng.standard_normal((runs, k))
+    w = rng.standard_normal((runs, n, k)) * np.sqrt(1.0 - a * a)
+    for t in range(1, n):
+        z[:, t] = a * z[:, t - 1] + w[:, t]
+    return z
+
+
+def test_integrated_time_of_squared_ar1():
+    """z AR(1) with coefficient a: z^2 has autocorrelation a^(2l), integrated time
+    (1 + a^2) / (1 - a^2); pooled over runs from the lag products of z."""
+    rng = np.random.default_rng(11)
+    for a in (0.5, 0.9, 0.97):
+        lags = consistency.LagProducts()
+        for z in _ar1(rng, a, 2000, 2, runs=20):
+            lags.add(z)
+        expected = (1 + a * a) / (1 - a * a)
+        assert lags.times() == pytest.approx([expected, expected], rel=0.15)
+
+
+def test_per_run_nees_test_counts_correlated_epochs_honestly():
+    """A consistent filter's NEES (3 dof, errors AR(1) with a = 0.98: 600 epochs worth 11
+    samples) fails the per-run time-averaged test at its stated 5 %; counting every epoch as
+    a sample fails most runs; a covariance 1.5 times too small in sigma fails it."""
+    rng = np.random.default_rng(12)
+    z = _ar1(rng, 0.98, 600, 3, runs=400)
+    nees = np.sum(z * z, axis=2)
+    lags = consistency.LagProducts()  # the integrated time pooled over the runs
+    for zr in z:
+        lags.add(zr)
+    tau = lags.time_of_mean()
+    assert tau == pytest.approx((1 + 0.98**2) / (1 - 0.98**2), rel=0.15)
+    checks = [consistency.time_average_check(v, tau, 3, 0.05) for v in nees]
+    rate = np.mean([not c.passed for c in checks])
+    assert 0.025 < rate < 0.08, rate
+    naive = np.mean([not consistency.inside(float(v.mean()), 3, 600, 0.05) for v in nees])
+    assert naive > 0.5, naive
+    power = np.mean([not consistency.time_average_check(2.25 * v, tau, 3, 0.05).passed
+                     for v in nees])
+    assert power > 0.9, power
+
+
+def _ensemble(rng, scale_heading, runs=30, n=1200):
+    """RunMetrics of ``runs`` runs of nine NEES states whose normalised errors are AR(1)
+    (slow heading, a = 0.995), the heading's errors ``scale_heading`` times its sigma."""
+    names = ("dlat", "dlon", "dh", "dv_N", "dv_E", "dv_D", "phi_N", "phi_E", "phi_D")
+    stats = metrics.EnsembleStats("f")
+    per_run = []
+    for _ in range(runs):
+        z = np.concatenate([_ar1(rng, 0.99, n, 8)[0], _ar1(rng, 0.995, n, 1)[0]], axis=1)
+        z[:, 8] *= scale_heading
+        var = np.full(z.shape, 4.0)
+        m = metrics.RunMetrics(
+            label="f", t=np.arange(n) * 0.1, nav=None, nav_sigma={}, state_names=names,
+            state_error=2.0 * z, state_var=var, nees=np.sum(z * z, axis=1),
+            nees_states=names, nis={}, distance=np.zeros(n))
+        stats.add(m)
+        per_run.append(m.nees.mean())
+    return stats.result(), np.array(per_run)
+
+
+def test_heading_rms_over_sigma_of_1_6_is_flagged():
+    """The issue's case: the heading's errors are 1.6 times its sigma, the other eight states
+    are consistent. The NEES check with one sample per run passes (its 9-dof band is wide);
+    the per-axis RMS/sigma check flags the heading and only the heading."""
+    res, per_run = _ensemble(np.random.default_rng(13), 1.6)
+    assert consistency.inside(float(per_run.mean()), 9, len(per_run))  # the old check passes
+    c = res.consistency
+    heading = c.scale["phi_D"]
+    assert not heading.passed and heading.interval[0] > 1.2
+    assert heading.ratio == pytest.approx(1.6, rel=0.2)
+    assert all(c.scale[n].passed for n in c.names if n != "phi_D")
+    summary = res.summary()
+    assert summary["rms_over_sigma"]["phi_D"]["passed"] is False
+    assert "INCONSISTENT" in tables.format_summaries({"f": summary})
+    # a consistent ensemble passes every axis, and its intervals cover 1
+    res, _ = _ensemble(np.random.default_rng(14), 1.0)
+    assert all(ch.passed for ch in res.consistency.scale.values())
+    assert np.mean([ch.interval[0] <= 1.0 <= ch.interval[1]
+                    for ch in res.consistency.scale.values()]) >= 7 / 9
+
+
+def test_scale_interval_covers_the_true_scale():
+    """The 95 % interval of RMS/sigma from k independent samples covers the true scale in
+    95 % of 4000 draws."""
+    rng = np.random.default_rng(15)
+    k, s = 40, 1.3
+    hits = [(c := consistency.scale_check(s * s * rng.chisquare(k) / k, k)).interval[0]
+            <= s <= c.interval[1] for _ in range(4000)]
+    assert 0.935 < np.mean(hits) < 0.965
 
 
 def test_ins_has_no_measurements():

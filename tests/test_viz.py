@@ -604,8 +604,11 @@ def test_ensemble_view_colours_tabs_and_bands(tmp_path):
     tabs, _ = read_blueprint(path)
     assert {"Ensemble position", "Ensemble velocity", "Ensemble attitude",
             "Ensemble NEES / NIS", "Ensemble runs"} <= set(tabs)
-    # navigation-error states (scored: dlat, dv_N, phi_N..) are not repeated as states
-    assert not any("dlat" in v or "dv_N" in v for vs in tabs.values() for v in vs)
+    # navigation-error states (scored: dlat, dv_N, phi_N..) are not repeated as states; their
+    # ratio RMS/sigma has its own tab
+    assert not any("dlat" in v or "dv_N" in v for tab, vs in tabs.items() for v in vs
+                   if tab != "Ensemble RMS/σ")
+    assert any(v.startswith("ins: RMS/σ of dlat (") for v in tabs["Ensemble RMS/σ"])
     for i, label in enumerate(("ins", "gps-ins")):
         root = naming.entity_path("ensemble", f"{label}: position error N, RMS and σ")
         rms = first_color(data, f"{root}/{label}\\ RMS")

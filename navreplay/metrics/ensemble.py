@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.consistency import ConsistencyStats, EnsembleConsistency
 from navreplay.filters.base import State
 from navreplay.metrics.run import RunMetrics
 from navreplay.metrics.stats import CEP50_FACTOR, chi2_bounds_per_count, rms
@@ -84,6 +85,9 @@ class EnsembleResult:
         ``0.5887 (LatRMS + LongRMS)`` [m].
     distance : ndarray, shape (M,)
         Mean true distance travelled [m].
+    consistency : EnsembleConsistency or None
+        Per-axis RMS/sigma with intervals and checks, and the per-run time-averaged NEES tests
+        (:mod:`navreplay.consistency`).
     """
 
     label: str
@@ -105,6 +109,7 @@ class EnsembleResult:
     cep50: np.ndarray
     distance: np.ndarray
     nis_rows_mean: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
+    consistency: EnsembleConsistency | None = None
 
     @property
     def dt_cep50(self) -> np.ndarray:
@@ -137,6 +142,8 @@ class EnsembleResult:
             _chi2_summary(out, "nis", f"_{name}", m, c, dof, probability)
             for row, v in self.nis_rows_mean.get(name, {}).items():
                 _chi2_summary(out, "nis", f"_{name}.{row}", v, c, 1, probability)
+        if self.consistency is not None:
+            out.update(self.consistency.summary())
         return out
 
 
@@ -169,6 +176,7 @@ class EnsembleStats:
         self._dist = _Acc()
         self._nis: dict[str, tuple[_Acc, list, int]] = {}
         self._nis_rows: dict[str, dict[str, _Acc]] = {}
+        self._consistency = ConsistencyStats()
         self._state_names: tuple[str, ...] | None = None
         self._nees_states: tuple[str, ...] | None = None
         self._states: tuple[State, ...] = ()
@@ -195,6 +203,8 @@ class EnsembleStats:
                 acc.add(m.nav_sigma[k] ** 2)
         self._state.add(m.state_error)
         self._state_var.add(m.state_var)
+        self._consistency.add(m.state_error, m.state_var, m.nees,
+                              np.array([m.state_names.index(n) for n in m.nees_states], int))
         self._nees.add(m.nees)
         self._dist.add(m.distance)
         for name, (t, v, dof) in m.nis.items():
@@ -258,6 +268,8 @@ class EnsembleStats:
             distance=self._dist.mean(),
             nis_rows_mean={name: {row: acc.mean() for row, acc in rows.items()}
                            for name, rows in self._nis_rows.items()},
+            consistency=self._consistency.result(self._state_names or (),
+                                                 self._nees_states or ()),
         )
 
 

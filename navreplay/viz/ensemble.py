@@ -3,8 +3,11 @@
 Per filter, in the filter's colour (the same as in the single-run tabs): the RMS over runs of
 each error component (solid) and the mean predicted sigma (thinner, lighter), one pane per
 filter and component so that each filter is read at its own scale; the run-averaged NEES and
-NIS with their 95 % band. Tabs: "Ensemble position", "... velocity", "... attitude",
-"... states" (the scored states that are not navigation errors), "Ensemble NEES / NIS".
+NIS with their 95 % band; per axis the ratio RMS/sigma of the normalised errors over the runs
+at each epoch, in its 95 % band for that many runs, titled with the ensemble's check
+(docs/methods/consistency.md §7). Tabs: "Ensemble position",
+"... velocity", "... attitude", "... states" (the scored states that are not navigation
+errors), "Ensemble NEES / NIS", "Ensemble RMS/σ" (the NEES states and any axis that fails).
 With the runs' metrics (``navreplay montecarlo --keep``), "Ensemble runs" shows every run's
 navigation errors, one thin line per run, to find the runs behind an RMS.
 """
@@ -101,6 +104,29 @@ def log_ensemble(
                           t_k[: mean.shape[0]], {f"{label} NIS": mean}, unit="-",
                           bounds=(lo, hi), styles={f"{label} NIS": rms_style}, tab=tab,
                           tab_title=tab_title, rank=order)
+    _log_scale(sink, label, ens, rms_style, order)
+
+
+def _log_scale(sink: Sink, label: str, ens: EnsembleResult,
+               style: tuple[tuple[int, int, int], float], order: int) -> None:
+    """RMS/sigma per axis over time with its band, titled with the ensemble's check (the
+    ratio and its interval are in the summary table)."""
+    c = ens.consistency
+    if c is None:
+        return
+    tab, tab_title = _tab("RMS/σ")
+    for j, name in enumerate(c.names):
+        check = c.scale.get(name)
+        if check is None or (name not in c.nees_names and check.passed):
+            continue
+        count = c.z2_count[:, j]
+        lo, hi = chi2_bounds_per_count(1, count)
+        verdict = "ok" if check.passed else "INCONSISTENT"
+        sink.log_ensemble(
+            f"{label}: RMS/σ of {name} ({verdict})", ens.t[: count.shape[0]],
+            {f"{label} RMS/σ": np.sqrt(c.z2_mean[:, j])}, unit="-",
+            bounds=(np.sqrt(lo), np.sqrt(hi)), styles={f"{label} RMS/σ": style}, tab=tab,
+            tab_title=tab_title, rank=order)
 
 
 def log_runs(sink: Sink, runs: Mapping[int, Mapping[str, RunMetrics]]) -> None:
