@@ -16,12 +16,18 @@ so that an event is undone by copying it back.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from navreplay.filters import gnss_models as gnss
 from navreplay.filters.ins_time_update import (
     _TIME_TOL,
+    Imu,
+    Model,
+    Open,
+    Work,
     _close_step,
     _propagate_segment,
     compensate_accel,
@@ -40,6 +46,60 @@ bias, z-rate, accelerometer and lever-arm estimates, the last compensated body r
 PACKED = 44
 
 
+class Events(NamedTuple):
+    """The events of a run (:class:`navreplay.filters.base.EventRun`, codes mapped to the
+    kernel's): IMU segment ends (E,), :data:`TICK`, ``gnss.POSITION`` or ``gnss.VELOCITY``
+    (E,), sample rows (E,), times [s] (E,), whether an estimate is recorded (E,)."""
+
+    ends: np.ndarray
+    codes: np.ndarray
+    rows: np.ndarray
+    t_ev: np.ndarray
+    record: np.ndarray
+
+
+class Gnss(NamedTuple):
+    """The GNSS samples of a run: positions and their sigmas (K, 3), velocities and their
+    sigmas (L, 3), and the sigma scales of each."""
+
+    pos: np.ndarray
+    pos_sigma: np.ndarray
+    vel: np.ndarray
+    vel_sigma: np.ndarray
+    pos_scale: float
+    vel_scale: float
+
+
+class Options(NamedTuple):
+    """The filter's options a run needs: lever-arm states, gyro z-rate states, accelerometer
+    states, and the relative tolerance of the covariance checks."""
+
+    lever_states: bool
+    has_gz: bool
+    has_ga: bool
+    rtol: float
+
+
+class Rows(NamedTuple):
+    """The rows the estimates go to: times (E,), states (E, n), covariances (E, n, n),
+    navigation vectors (E, 10)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    nav: np.ndarray
+
+
+class Updates(NamedTuple):
+    """The rows the innovations go to: measurement code (U,), time (U,), nu (U, 3),
+    S (U, 3, 3)."""
+
+    code: np.ndarray
+    t: np.ndarray
+    nu: np.ndarray
+    S: np.ndarray
+
+
 @numba.njit(cache=True)
 def _any(a: np.ndarray) -> bool:
     for v in a:
@@ -50,30 +110,30 @@ def _any(a: np.ndarray) -> bool:
 
 @numba.njit(cache=True)
 def run_events(
-    nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray,
-    t: np.ndarray, omega: np.ndarray, f: np.ndarray,
-    ends: np.ndarray, codes: np.ndarray, rows: np.ndarray, t_ev: np.ndarray,
-    record: np.ndarray,
-    gps_pos: np.ndarray, gps_pos_sigma: np.ndarray, gps_vel: np.ndarray,
-    gps_vel_sigma: np.ndarray, pos_scale: float, vel_scale: float,
-    lever_states: bool, has_gz: bool, has_ga: bool,
-    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray,
-    cols: np.ndarray, mean: np.ndarray, rtol: float,
-    t_out: np.ndarray, x_out: np.ndarray, P_out: np.ndarray, nav_out: np.ndarray,
-    inn_code: np.ndarray, inn_t: np.ndarray, inn_nu: np.ndarray, inn_S: np.ndarray,
+    nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray, imu: Imu, events: Events,
+    gnss_samples: Gnss, options: Options, step: float, model: Model, work: Work, out: Rows,
+    updates: Updates,
 ) -> tuple[int, int, int, np.ndarray, np.ndarray, float]:
-    """Apply events ``0 .. len(codes) - 1`` (see the module docstring).
+    """Apply the events of ``events`` in order (see the module docstring).
 
-    ``ends[e]`` is the end of the IMU segment handed over before event e (indices into t,
-    omega, f); ``codes[e]`` :data:`TICK`, ``gnss.POSITION`` or ``gnss.VELOCITY`` with the
-    sample in row ``rows[e]`` of its columns; ``record[e]`` asks for an estimate after it.
-    Estimates go to rows of ``t_out, x_out, P_out, nav_out``, innovations to ``inn_*``.
+    ``ends[e]`` is the end of the IMU segment handed over before event e (indices into
+    ``imu``); ``codes[e]`` :data:`TICK`, ``gnss.POSITION`` or ``gnss.VELOCITY`` with the
+    sample in row ``rows[e]`` of its columns in ``gnss_samples``; ``record[e]`` asks for an
+    estimate after it. Estimates go to the rows of ``out``, innovations to ``updates``; ``s``
+    is the packed state (:data:`LAYOUT`), ``step``, ``model`` and ``work`` those of the
+    filter's :class:`~navreplay.filters.ins_time_update.TimeUpdate`.
 
     Returns (done, estimates, innovations, nav, P, t_nav): the events applied (all, or up to
     the first that failed, undone), the rows written and the state after them; ``s`` holds
     the packed state after them.
     """
+    t, omega, f = imu
+    ends, codes, rows, t_ev, record = events
+    gps_pos, gps_pos_sigma, gps_vel, gps_vel_sigma, pos_scale, vel_scale = gnss_samples
+    lever_states, has_gz, has_ga, rtol = options
+    t_out, x_out, P_out, nav_out = out
+    inn_code, inn_t, inn_nu, inn_S = updates
+    gz, ga = model.gz, model.ga
     n = P.shape[0]
     prev = s[0:6]
     open_nav = s[6:16]
@@ -84,6 +144,7 @@ def run_events(
     k_a = s[32:38]
     lever = s[38:41]
     w_last = s[41:44]
+    open_step = Open(open_nav, open_sums)
     snap = np.empty(s.shape[0])
     m = 0
     k = 0
@@ -106,9 +167,8 @@ def run_events(
                 first += 1
             if first < b - a:
                 code, nav_b, P_b = _propagate_segment(
-                    nav, P, t[a:b], t_nav, w, fb, b_a, b_g, first, b - a, prev, step, q, k_acc,
-                    k_gyro, depth, curvature, gz, ga, open_nav, open_sums, F, M, T, Q, cols,
-                    mean, w_last)
+                    nav, P, t[a:b], t_nav, w, fb, b_a, b_g, first, b - a, prev, step, model,
+                    open_step, work, w_last)
                 if code == -1:
                     nav, P, t_nav = nav_b, P_b, t[b - 1]
                     closes = open_sums[0] > 0.0 and (record[e] or (
@@ -120,8 +180,7 @@ def run_events(
         kind = codes[e]
         if ok and kind != TICK and not t_ev[e] < t_nav - 1e-6:
             if open_sums[0] > 0.0:
-                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav,
-                                open_sums, F, M, T, Q, cols, mean)
+                P = _close_step(P, model, open_step, work)
                 ok = _covariance_ok(P, rtol)
             if ok:
                 r = rows[e]
@@ -144,8 +203,7 @@ def run_events(
                     k += 1
         if ok and record[e]:
             if open_sums[0] > 0.0:
-                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav,
-                                open_sums, F, M, T, Q, cols, mean)
+                P = _close_step(P, model, open_step, work)
                 ok = _covariance_ok(P, rtol)
             if ok:
                 t_out[m] = t_nav
