@@ -6,7 +6,7 @@ Measured in one run on the ``ship-transfer-alignment`` scenario (100 s, 100 Hz I
 * replay: each variant of the ``transfer-alignment`` filter through the replay engine, in IMU
   samples per second and as a multiple of real time, against two baselines replayed over the
   same recording: the engine alone (a filter that does nothing) and a free strapdown INS
-  (:func:`navreplay.strapdown.propagate` only);
+  (:func:`navreplay.geo.strapdown.propagate` only);
 * step at a GINS sample: each part (numba model and prediction, the shared correction with its
   checks, numba feedback), and the numpy discretisation and prediction of
   :mod:`navreplay.filters.kalman` as a baseline for the first;
@@ -26,15 +26,14 @@ import time
 import numpy as np
 
 from benchmarks import best
-from navreplay import strapdown
+from navreplay.core.streams import StreamKind
 from navreplay.filters import kalman
 from navreplay.filters import transfer_alignment as ta
 from navreplay.filters.base import Estimate, Filter, Quantity, State
-from navreplay.geo import kernels
+from navreplay.geo import kernels, strapdown
 from navreplay.replay import replay
 from navreplay.reproduce.transfer_alignment import REPRODUCTION
 from navreplay.sim.scenario import simulate
-from navreplay.streams import StreamKind
 
 SCENARIO = "ship-transfer-alignment"
 

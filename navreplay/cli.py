@@ -30,11 +30,11 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
     global EXPECTED_ERRORS
     if not EXPECTED_ERRORS:
         from navreplay.campaign.ensemble import RunFailedError
+        from navreplay.core.params import ParamError
         from navreplay.filters.kalman import FilterDivergedError
         from navreplay.filters.registry import FilterLoadError
         from navreplay.io import RecordingError
-        from navreplay.outputs import OutputError
-        from navreplay.params import ParamError
+        from navreplay.io.outputs import OutputError
         from navreplay.replay.errors import ReplayError
         from navreplay.viz import VizUnavailableError
 
@@ -48,7 +48,7 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
 
 def _expected(e: BaseException) -> bool:
     """One of the project's expected errors, or a device error (a full disk)."""
-    from navreplay.outputs import DISK_ERRORS
+    from navreplay.io.outputs import DISK_ERRORS
 
     return isinstance(e, _expected_errors()) or (isinstance(e, OSError)
                                                  and e.errno in DISK_ERRORS)
@@ -68,8 +68,8 @@ class _Group(click.Group):
     """Turns the project's expected errors into one line and shows warnings as one line."""
 
     def invoke(self, ctx: click.Context) -> Any:
-        from navreplay.lifecycle import Terminated, handle_signals, interrupted_by
-        from navreplay.outputs import release_locks
+        from navreplay.io.lifecycle import Terminated, handle_signals, interrupted_by
+        from navreplay.io.outputs import release_locks
 
         debug = bool(ctx.params.get("debug"))
         with (warnings.catch_warnings(), handle_signals(),
@@ -146,7 +146,7 @@ def _load_config(path: str | None, *tables: str) -> dict[str, Any] | None:
     here, so that a mistake names the file."""
     if path is None:
         return None
-    from navreplay.params import load_toml
+    from navreplay.core.params import load_toml
     from navreplay.sensors.specs import SPEC_KINDS, specs_from_tables
 
     allowed: dict[str, Any] = {"scenario": None, "topics": None, "frames": None,
@@ -238,10 +238,10 @@ _FORCE_HELP = "Overwrite existing output files (never an input of the command)."
 
 def _check_outputs(force: bool, inputs: Sequence[str | Path | None], *items: Any) -> None:
     """Refuse, before any work, outputs that would lose a file or fail late, and lock them
-    against other commands (:func:`navreplay.outputs.check_outputs`); ``items`` are Outputs or
+    against other commands (:func:`navreplay.io.outputs.check_outputs`); ``items`` are Outputs or
     None. A rosbag2 input (its folder, metadata.yaml or a data file) protects its folder."""
+    from navreplay.io.outputs import check_outputs
     from navreplay.io.rosbag import bag_folder
-    from navreplay.outputs import check_outputs
 
     paths = [Path(p) for p in inputs if p is not None]
     folders = [bag_folder(p) for p in paths if p.exists()]
@@ -249,8 +249,8 @@ def _check_outputs(force: bool, inputs: Sequence[str | Path | None], *items: Any
 
 
 def _out(path: str | Path | None, option: str, **kw: Any) -> Any:
-    """An :class:`navreplay.outputs.Output`, or None without a path."""
-    from navreplay.outputs import Output
+    """An :class:`navreplay.io.outputs.Output`, or None without a path."""
+    from navreplay.io.outputs import Output
 
     return None if path is None else Output(Path(path), option, **kw)
 
@@ -343,7 +343,7 @@ def cli(debug: bool) -> None:
 @click.option("-v", "--verbose", is_flag=True, help="Also list each scenario's parameters.")
 def scenarios(verbose: bool) -> None:
     """List the built-in scenarios."""
-    from navreplay.params import describe
+    from navreplay.core.params import describe
     from navreplay.sim.scenario import scenarios as table
 
     items = table()
@@ -485,9 +485,9 @@ def _show(value: Any) -> str:
 @click.argument("name", required=False)
 def filters(name: str | None) -> None:
     """List the filters (built-in and plug-ins) with their streams and parameters."""
+    from navreplay.core.params import describe
     from navreplay.filters.registry import filters as table
     from navreplay.filters.registry import load_filter
-    from navreplay.params import describe
 
     items = {name: load_filter(name)} if name else table()
     for i, (fname, cls) in enumerate(items.items()):
@@ -624,7 +624,7 @@ def tune(filter_ref: str, sources: Sequence[str], ranges: Sequence[str],
     filter_items = [p for p in params if not p.startswith("scenario.")]
     if scenario is None and (scenario_items or duration is not None):
         raise click.UsageError("scenario.KEY=VALUE and --duration apply to a SCENARIO")
-    from navreplay.params import parse_assignments
+    from navreplay.core.params import parse_assignments
 
     _check_outputs(force, [*recordings, storage], _out(output, "-o"))
     job = TuneJob(
@@ -918,7 +918,7 @@ def demo(out: str, no_reproductions: bool, workers: int, view: bool | None,
 def warm_up(filters: tuple[str, ...], workers: int | None) -> None:
     """Compile the built-in filters' kernels into numba's cache (all, or FILTERS), so that
     the first run is as fast as the next ones; `make install` runs it."""
-    from navreplay import warmup
+    from navreplay.jobs import warmup
 
     try:
         wall = warmup.warm_up(filters or None, workers,
@@ -940,7 +940,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     except SystemExit as e:
         if not _STOPPED:
             raise
-        from navreplay import lifecycle
+        from navreplay.io import lifecycle
 
         lifecycle.release_children()  # a served viewer
         for stream in (sys.stdout, sys.stderr):

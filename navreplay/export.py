@@ -62,12 +62,12 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Stream
 from navreplay.filters.base import NAV_PARTS, MeasurementKind, Nav, NavError, State
 from navreplay.filters.result import InnovationSeries, RunResult
 from navreplay.geo import earth
 from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, quat_to_euler, skew
-from navreplay.outputs import Output, atomic_path, check_outputs
-from navreplay.streams import Stream
+from navreplay.io.outputs import Output, atomic_path, check_outputs
 
 MANIFEST = "manifest.json"
 ODOMETRY_FILE = "estimates.mcap"
@@ -236,7 +236,7 @@ def _nav_covariance(result: RunResult) -> np.ndarray:
 
 def check_targets(paths: Iterable[Path], force: bool, option: str = "--export") -> None:
     """Refuse targets that exist (unless ``force``), are directories or cannot be written
-    (:func:`navreplay.outputs.check_outputs`), before anything is written."""
+    (:func:`navreplay.io.outputs.check_outputs`), before anything is written."""
     unique = dict.fromkeys(Path(p) for p in paths)
     check_outputs([Output(p, option) for p in unique], force=force)
 
@@ -923,7 +923,7 @@ class RunExport:
     # -- writing -------------------------------------------------------------------------
 
     def _open(self, name: str) -> Any:
-        from navreplay.outputs import temporary_path
+        from navreplay.io.outputs import temporary_path
 
         target = self.out_dir / name
         tmp = temporary_path(target)
@@ -933,7 +933,7 @@ class RunExport:
 
     def _start(self) -> None:
         """The frame and the filters' solutions are known: open the files, write the rows held."""
-        from navreplay.outputs import temporary_path
+        from navreplay.io.outputs import temporary_path
 
         self._started = True
         topics = []
@@ -993,7 +993,7 @@ class RunExport:
     def close(self) -> list[Path]:
         """Write what is held, finish every file and rename it onto its target; returns the
         files written (the manifest last)."""
-        from navreplay.outputs import fsync_path, release
+        from navreplay.io.outputs import fsync_path, release
 
         if self._done:
             raise ValueError("the export is already closed")
@@ -1067,7 +1067,7 @@ class RunExport:
 
     def abort(self) -> None:
         """Stop without publishing: the temporaries are deleted, the targets untouched."""
-        from navreplay.outputs import release
+        from navreplay.io.outputs import release
 
         self._done = True
         for tmp, f in self._tmp.values():

@@ -7,10 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from navreplay import export
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.filters.result import RunResult
 from navreplay.metrics import run_metrics
 from navreplay.report import RunSeries
-from navreplay.streams import Recording, StreamKind
 
 
 def export_runs(out_dir: Path, results: list[RunResult], rec: Recording | None, *,

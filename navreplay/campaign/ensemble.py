@@ -17,9 +17,9 @@ import dataclasses
 import time
 from collections.abc import Callable, Sequence
 
-from navreplay import lifecycle
 from navreplay.campaign.executors import Executor, Future, InlineExecutor, make_executor
 from navreplay.campaign.tasks import Extractor, RunOutput, RunTask, default_extract, run_task
+from navreplay.io import lifecycle
 from navreplay.replay.spec import FilterSpec
 
 

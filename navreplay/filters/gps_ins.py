@@ -95,7 +95,7 @@ innovation ``nu = z`` and ``S`` for NIS statistics (``"gps_pos"`` [m], ``"gps_ve
 
 (10) omits the derivatives of w_in with respect to position and velocity in the lever-arm term
 (below 1e-8 m/s for metre-level errors); everything else in (6) and (10) was checked against
-central differences of (4)-(5) and (8)-(9) in tests/test_gps_ins.py. Samples older than the
+central differences of (4)-(5) and (8)-(9) in tests/filters/test_gps_ins.py. Samples older than the
 INS solution (before the initial solution's time) are ignored.
 """
 
@@ -108,6 +108,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from navreplay.core.streams import StreamKind
 from navreplay.filters import gnss_models as gnss
 from navreplay.filters import gps_ins_events as ev
 from navreplay.filters import kalman
@@ -126,7 +127,6 @@ from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.ins_time_update import Imu
 from navreplay.filters.registry import register_filter
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import StreamKind
 
 LEVER = slice(15, 18)
 """Lever-arm error states (present with ``estimate_lever_arm``)."""

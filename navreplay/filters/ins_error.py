@@ -116,7 +116,7 @@ b_a_y)``. With ``dk = k_hat - k``, ``df_b = -db_a - dk_x f_x - dk_y f_y`` and so
 with f the mean compensated specific force of the step.
 
 Every block was checked against central finite differences of (2)-(4) and of
-:func:`navreplay.strapdown.propagate` (tests/test_ins_filter.py).
+:func:`navreplay.geo.strapdown.propagate` (tests/filters/test_ins_filter.py).
 
 The covariance propagation over this model is :mod:`navreplay.filters.ins_time_update`.
 """
@@ -129,9 +129,8 @@ import math
 import numba
 import numpy as np
 
-from navreplay import strapdown
 from navreplay.filters.base import Nav, NavError, Quantity, State, TruthColumn
-from navreplay.geo import earth, kernels
+from navreplay.geo import earth, kernels, strapdown
 from navreplay.geo.rotations import (
     attitude_error,
     quat_to_dcm,
@@ -170,7 +169,7 @@ W_BG = slice(9, 12)
 """Gyro bias random walk [(rad/s)/sqrt(s)]."""
 N_NOISE = 12
 
-# -- blocks of the navigation vector of navreplay.strapdown -----------------------------------
+# -- blocks of the navigation vector of navreplay.geo.strapdown -----------------------------------
 
 NAV_POS = strapdown.POS
 NAV_VEL = strapdown.VEL

@@ -7,7 +7,7 @@ only for the 15 states here and the optional three of eq. (22) (the states a lar
 adds are random constants or random walks), so only 9 rows and columns of P change.
 :func:`propagate_covariance` steps over given points, :func:`accumulate_covariance` collects
 IMU samples into steps of a given length, and :class:`TimeUpdate` is the whole time update of
-an INS filter over an IMU block (bias compensation, :mod:`navreplay.strapdown`, covariance) in
+an INS filter over an IMU block (bias compensation, :mod:`navreplay.geo.strapdown`, covariance) in
 one compiled call; ``ins``, ``gps-ins`` and ``rpm-aided-ins`` use it.
 """
 
@@ -20,7 +20,6 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from navreplay import strapdown
 from navreplay.filters import kalman
 from navreplay.filters.ins_error import (
     N_ACCEL_HF,
@@ -35,7 +34,7 @@ from navreplay.filters.kalman import (
     _covariance_ok,
     check_covariance,
 )
-from navreplay.geo import kernels
+from navreplay.geo import kernels, strapdown
 
 N_NAV = 9
 """Rows of F that are not zero: position, velocity and attitude."""
@@ -425,7 +424,7 @@ def accumulate_covariance(
     P : ndarray, shape (n, n), n >= 15
     hist : ndarray, shape (k + 1, 10)
         Navigation states at the start of each sample and after the last (the output of
-        :func:`navreplay.strapdown.integrate`).
+        :func:`navreplay.geo.strapdown.integrate`).
     f_b : ndarray, shape (k, 3)
         Bias-compensated specific force of each sample, body [m/s^2].
     omega_b : ndarray, shape (k, 3)
@@ -473,7 +472,7 @@ class TimeUpdate:
 
     Each :meth:`propagate` compensates the IMU with the bias estimates (``f_hat = f_b - b_a``,
     ``omega_hat = omega_ib_b - b_g``), integrates it with
-    :func:`navreplay.strapdown.integrate_kernel` and propagates P as
+    :func:`navreplay.geo.strapdown.integrate_kernel` and propagates P as
     :func:`accumulate_covariance` does, in one compiled call. What carries over from one block
     to the next is kept here: the increments of the last sample (the coning and sculling terms
     of the next) and the open covariance step.

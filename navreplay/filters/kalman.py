@@ -59,8 +59,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from navreplay.core.lti import discrete_noise, discretize, van_loan  # noqa: F401  (part of this API)
 from navreplay.filters.base import Innovation
-from navreplay.lti import discrete_noise, discretize, van_loan  # noqa: F401  (part of this API)
 
 DEFAULT_RTOL = 1e-9
 """Default relative tolerance of the symmetry and PSD checks (on the correlation form)."""

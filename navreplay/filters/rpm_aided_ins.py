@@ -2,7 +2,7 @@
 
 An indirect feedback Kalman filter with the 24 error states of Choi (JANT 23(3), 2019) and
 three gyro z-rate and six accelerometer scale-factor / misalignment states (method docs/methods/rpm-aided-ins.md §4). The NED strapdown
-mechanization of :mod:`navreplay.strapdown` runs on the compensated IMU at the IMU rate; every
+mechanization of :mod:`navreplay.geo.strapdown` runs on the compensated IMU at the IMU rate; every
 ``cov_step`` (0.1 s) the error covariance is propagated with the 33-state error model; at
 ``update_rate`` (1 Hz) the propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
 back. Besides the navigation errors and the IMU biases the filter estimates the RPM scale
@@ -141,7 +141,16 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from navreplay import strapdown
+from navreplay.core.streams import StreamKind
+from navreplay.core.units import (
+    ARCSEC,
+    DEG,
+    DEG_PER_HOUR,
+    DEG_PER_SQRT_HOUR,
+    MICRO_G,
+    MICRO_G_PER_SQRT_HZ,
+    PPM,
+)
 from navreplay.filters import imu_gap, kalman
 from navreplay.filters import ins_error as ie
 from navreplay.filters import ins_time_update as itu
@@ -168,21 +177,12 @@ from navreplay.filters.ins import (
     initial_solution,
 )
 from navreplay.filters.registry import register_filter
+from navreplay.geo import strapdown
 from navreplay.geo.rotations import skew
 from navreplay.sensors.depth import DepthModel
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.specs import SensorSpecs
 from navreplay.sensors.speed_log import SpeedLogModel
-from navreplay.streams import StreamKind
-from navreplay.units import (
-    ARCSEC,
-    DEG,
-    DEG_PER_HOUR,
-    DEG_PER_SQRT_HOUR,
-    MICRO_G,
-    MICRO_G_PER_SQRT_HZ,
-    PPM,
-)
 
 # -- state layout (eq. 20) -------------------------------------------------------------------
 

@@ -31,10 +31,10 @@ import re
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from navreplay import params as _params
+from navreplay.core import params as _params
+from navreplay.core.streams import jsonable
 from navreplay.filters.base import Filter, FilterParams
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import jsonable
 
 
 class Source(enum.StrEnum):
@@ -169,7 +169,7 @@ def build_params(
 
     Raises
     ------
-    navreplay.params.ParamError
+    navreplay.core.params.ParamError
         Values that do not fit ``filter_cls.Params``, or a derivation that fails, naming the
         filter.
     """

@@ -118,7 +118,7 @@ correct without P), so it is not matched: it follows from the vector part. ``qua
 
 Cycle (at every GINS sample)
 ----------------------------
-1. SDINS mechanization (:func:`navreplay.strapdown.propagate_kernel`) at the IMU rate, raw
+1. SDINS mechanization (:func:`navreplay.geo.strapdown.propagate_kernel`) at the IMU rate, raw
    IMU, with the coning and sculling terms carried across blocks.
 2. Q_m from the GINS Euler angles, its sign such that ``(Q_m* (x) Q_bn_hat)_0 >= 0``.
 3. Predict P with (Phi, Q_d) (:func:`predict_and_measure`); update with the shared Cholesky /
@@ -174,7 +174,9 @@ from typing import Any
 import numba
 import numpy as np
 
-from navreplay import strapdown
+from navreplay.core.lti import second_order_markov
+from navreplay.core.streams import StreamKind
+from navreplay.core.units import ARCMIN, DEG, FOOT, G0, MICRO_G
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
@@ -190,13 +192,10 @@ from navreplay.filters.base import (
     check_number,
 )
 from navreplay.filters.registry import register_filter
-from navreplay.geo import earth, kernels
-from navreplay.lti import second_order_markov
+from navreplay.geo import earth, kernels, strapdown
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.master_ins import MasterInsModel
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import StreamKind
-from navreplay.units import ARCMIN, DEG, FOOT, G0, MICRO_G
 
 
 class Match(enum.StrEnum):
@@ -711,7 +710,7 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
         Flexure angle estimate at the GINS time [rad] (0 without flexure states).
     phi_f, qd_f : ndarray, shape (2, 2)
         Exact transition and process noise of the flexure states over dt
-        (:func:`navreplay.lti.second_order_markov`; unused without flexure states).
+        (:func:`navreplay.core.lti.second_order_markov`; unused without flexure states).
     euler : ndarray, shape (3,)
         GINS Euler angles of the sample [rad].
     euler_sigma : float
@@ -933,9 +932,9 @@ def block_intervals(t, t_prev, omega_ib_b, f_b, sums, last):
     """Sample intervals of an IMU block, the running sums for the means of eq. (14) and the
     increments of the block's last sample.
 
-    (The mechanization itself, :func:`navreplay.strapdown.propagate_kernel`, is called from
+    (The mechanization itself, :func:`navreplay.geo.strapdown.propagate_kernel`, is called from
     Python, which reports an invalid sample through the checked
-    :func:`navreplay.strapdown.propagate`.)
+    :func:`navreplay.geo.strapdown.propagate`.)
 
     Parameters
     ----------

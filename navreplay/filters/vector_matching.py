@@ -173,7 +173,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from navreplay import chi2
+from navreplay.core import chi2
+from navreplay.core.streams import StreamKind
+from navreplay.core.units import DEG, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
@@ -203,8 +205,6 @@ from navreplay.geo.rotations import (
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.magnetometer import MagnetometerModel
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import StreamKind
-from navreplay.units import DEG, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 
 # --------------------------------------------------------------------------------------------
 # indices

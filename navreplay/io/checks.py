@@ -23,9 +23,9 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
+from navreplay.core.streams import Stream, StreamKind
 from navreplay.io.convert import BODY_KINDS, NAV_KINDS, Convention, assumed_convention
 from navreplay.io.errors import RecordingError
-from navreplay.streams import Stream, StreamKind
 
 GAP_FACTOR = 5.0
 """An interval longer than this many times a topic's median interval counts as a gap."""

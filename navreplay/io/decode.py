@@ -15,6 +15,7 @@ import dataclasses
 import numpy as np
 from mcap.records import Channel, Schema
 
+from navreplay.core.streams import Metadata, StreamKind
 from navreplay.io import cdr
 from navreplay.io.convert import REDUCE, AuxColumn
 from navreplay.io.errors import RecordingError
@@ -28,7 +29,6 @@ from navreplay.io.schemas import (
     normalize_type_name,
 )
 from navreplay.io.topics import Candidate, candidate, decodable
-from navreplay.streams import Metadata, StreamKind
 
 
 class ChannelDecoder:

@@ -17,12 +17,12 @@ import os
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.io import mcapread, rosbag
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import Source
 from navreplay.io.topics import TopicSource
-from navreplay.streams import Recording, StreamKind
 
 
 @dataclasses.dataclass(frozen=True)

@@ -18,13 +18,13 @@ from typing import BinaryIO
 import numpy as np
 from mcap.opcode import Opcode
 
+from navreplay.core.streams import Metadata, StreamKind
 from navreplay.io.checks import when
 from navreplay.io.errors import RecordingError
 from navreplay.io.integrity import contents_problems
 from navreplay.io.mcapfile import DAMAGE_ERRORS, FileContents, walk
 from navreplay.io.metadata import decode_metadata
 from navreplay.io.schemas import KIND_BY_TYPE, METADATA_NAME, SPECS, normalize_type_name
-from navreplay.streams import Metadata, StreamKind
 
 _INDEX_HEAD = struct.Struct("<BQHI")
 

@@ -3,7 +3,7 @@
 A day of 100 Hz IMU and truth does not need to be in memory at once: :class:`McapSource`
 walks an intact file's chunks in order and hands out the decoded rows of the streams asked for
 every ``window`` messages of one stream, as a :class:`~navreplay.io.source.Window`: a checked
-:class:`~navreplay.streams.Stream` per stream (the conversions and checks of
+:class:`~navreplay.core.streams.Stream` per stream (the conversions and checks of
 :func:`navreplay.io.topics.build_stream`, time increasing across windows) and, per stream, the
 time up to which it is complete. Only the topics of the streams asked for are decoded
 (:mod:`navreplay.io.decode`).
@@ -36,6 +36,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from navreplay.core.streams import Metadata, Stream, StreamKind
 from navreplay.io.checks import GAP_FACTOR, check_frame_ids, gap_text, when
 from navreplay.io.convert import AuxColumn, Convention
 from navreplay.io.decode import ChannelDecoder, Decoding, describe_topics, file_metadata
@@ -44,7 +45,6 @@ from navreplay.io.mcapfile import FileContents, read_chunk, walk
 from navreplay.io.schemas import SPECS
 from navreplay.io.source import COMPLETE, Source, Window
 from navreplay.io.topics import build_stream, choose_topics, sample_times, topic_map
-from navreplay.streams import Metadata, Stream, StreamKind
 
 WINDOW_MESSAGES = 60_000
 """Messages of one stream per window (10 minutes of 100 Hz samples)."""

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Metadata, Stream, StreamKind
 from navreplay.io.cdr import fields_of_messages
 from navreplay.io.checks import check_frame_ids
 from navreplay.io.convert import REDUCE, Convention
@@ -33,7 +34,6 @@ from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarnin
 from navreplay.io.schemas import SPECS, normalize_type_name
 from navreplay.io.source import COMPLETE, Source, Window
 from navreplay.io.topics import build_stream, candidate, choose_topics, sample_times, topic_map
-from navreplay.streams import Metadata, Stream, StreamKind
 
 
 def bag_folder(path: Path) -> Path | None:

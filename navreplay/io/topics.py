@@ -6,7 +6,7 @@ Topics map to stream kinds by name (:data:`~navreplay.io.schemas.TOPICS`, replac
 kind with ``--topic KIND=TOPIC``), or, in a recording from elsewhere, by message type when
 exactly one topic carries it (:func:`choose_topics`). Sample times are the header stamps or
 the log times (:func:`sample_times`); :func:`build_stream` converts the fields of one topic
-into a :class:`~navreplay.streams.Stream` in navreplay's conventions and checks it.
+into a :class:`~navreplay.core.streams.Stream` in navreplay's conventions and checks it.
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
+from navreplay.core.streams import Stream, StreamKind
 from navreplay.io.checks import first_problem, gap_report
 from navreplay.io.convert import DECODERS, AuxColumn, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning
 from navreplay.io.schemas import KIND_BY_TYPE, MESSAGE_ENCODING, SPECS
-from navreplay.streams import Stream, StreamKind
 
 TIME_SOURCES = ("header", "log")
 """``--time``: sample times from the header stamps (default) or the log (receive) times."""

@@ -15,14 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from navreplay import units
+from navreplay.core import units
+from navreplay.core.streams import StreamKind
 from navreplay.io import RecordingError
 from navreplay.io.files import read_streams
-from navreplay.outputs import atomic_path
+from navreplay.io.outputs import atomic_path
 from navreplay.sensors import allan
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.specs import SensorSpecs, specs_toml
-from navreplay.streams import StreamKind
 
 MAX_GAP = 1.0
 """Longest gap in the IMU samples of a segment [s]: the Allan variance needs them contiguous."""
@@ -172,7 +172,7 @@ def run_allan(job: AllanJob) -> AllanReport:
             tmp.write_text(spec_text(specs, triads, segment), encoding="utf-8")
         written.append(("sensor specification", job.spec_path))
     if job.plot_path is not None:
-        from navreplay import figures
+        from navreplay.viz import figures
 
         fig = figures.allan_deviation(panels, title=segment.where)
         with atomic_path(job.plot_path) as tmp:
@@ -338,8 +338,8 @@ def _value(value: float, field: str, fit: allan.NoiseFit | None = None,
 
 
 def figure_panels(triads: dict[str, allan.TriadAnalysis]) -> list[Any]:
-    """One :class:`navreplay.figures.AllanPanel` per triad, in display units."""
-    from navreplay.figures import AllanPanel, AllanTerm
+    """One :class:`navreplay.viz.figures.AllanPanel` per triad, in display units."""
+    from navreplay.viz.figures import AllanPanel, AllanTerm
 
     panels = []
     for triad in TRIADS:

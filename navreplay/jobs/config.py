@@ -7,7 +7,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from navreplay import params as _params
+from navreplay.core import params as _params
 from navreplay.filters.registry import load_filter
 from navreplay.filters.settings import ParamValues, Source
 from navreplay.replay.spec import FilterSpec
@@ -182,7 +182,7 @@ def scenario_values(
 
 
 def check_scenario(scenario: str, values: Mapping[str, Any]) -> None:
-    """Raise :class:`navreplay.params.ParamError` (one line) unless ``values`` make a run of
+    """Raise :class:`navreplay.core.params.ParamError` (one line) unless ``values`` make a run of
     ``scenario`` (parameters and ``[sensors.*]`` tables)."""
     from navreplay.sim.scenario import get_scenario, scenario_inputs
 

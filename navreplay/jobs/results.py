@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from navreplay import export
-from navreplay.outputs import writing
+from navreplay.io.outputs import writing
 
 
 def export_names(labels: Sequence[str]) -> tuple[str, ...]:
@@ -26,7 +26,7 @@ def export_names(labels: Sequence[str]) -> tuple[str, ...]:
     a run's or a campaign's: the manifest, the Odometry MCAP, the reference's TUM and
     ``STEM.*`` per filter (CSV, TUM, innovations, ensemble and NIS files; ``STEM_2.*``... for
     repeated labels). An input or another output there is refused before any work
-    (:func:`navreplay.outputs.check_outputs`)."""
+    (:func:`navreplay.io.outputs.check_outputs`)."""
     names = [export.MANIFEST, export.ODOMETRY_FILE, f"{export.REFERENCE_LABEL}.tum"]
     for stem in dict.fromkeys(export.file_stem(label) for label in labels):
         names += [f"{stem}.*", f"{stem}_[0-9]*.*"]

@@ -9,19 +9,19 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from navreplay import params as _params
-from navreplay import tables
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.tasks import RunOutput, RunTask, default_extract, file_tasks
+from navreplay.core import params as _params
+from navreplay.core.streams import Recording, StreamKind, seconds
 from navreplay.filters.result import RunResult
 from navreplay.filters.settings import setting_notes, summary_entries
 from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
+from navreplay.metrics import tables
 from navreplay.replay.pipeline import replay_file
 from navreplay.replay.session import Progress
 from navreplay.replay.spec import FilterSpec
-from navreplay.streams import Recording, StreamKind, seconds
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
 
 

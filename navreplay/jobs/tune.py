@@ -6,7 +6,7 @@ Two objectives (docs/tuning.md):
 ``truth`` (a scenario, or recordings with a truth stream)
     ``J = mean_i (ln r_i)^2 + (ln NEES/dof)^2 + 0.1 mean_i ln RMS_i`` over the NEES states i of
     the ensemble: ``r_i`` the ratio RMS/sigma of the normalised errors and NEES/dof the
-    time-averaged NEES (:mod:`navreplay.consistency`), then accuracy (the RMS errors, whose
+    time-averaged NEES (:mod:`navreplay.metrics.consistency`), then accuracy (the RMS errors, whose
     logarithms make the weight independent of units) among consistent settings.
 ``held-out`` (recordings without truth, or asked for)
     GNSS fixes are dropped in windows (``--outage`` seconds every ``--outage-period``,
@@ -40,11 +40,12 @@ from typing import Any
 
 import numpy as np
 
-from navreplay import params as _params
 from navreplay.campaign.ensemble import RunFailedError, run_ensemble
 from navreplay.campaign.tasks import RunOutput, file_tasks
+from navreplay.core import params as _params
+from navreplay.core.streams import Recording, StreamKind, seconds
 from navreplay.io import RecordingWarning
-from navreplay.outputs import atomic_path
+from navreplay.io.outputs import atomic_path
 from navreplay.replay.holdout import (
     held_out_errors,
     held_out_truth_errors,
@@ -53,7 +54,6 @@ from navreplay.replay.holdout import (
 )
 from navreplay.replay.spec import FilterSpec
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import Recording, StreamKind, seconds
 
 VALIDATION_SEEDS = 1000
 """Offset of a scenario's validation seeds from its tuning seeds."""
@@ -198,7 +198,7 @@ class Score:
         The objective (smaller is better).
     parts : dict[str, float]
         What it is made of, for the report: ``NEES/dof`` (time-averaged), ``NEES in band``
-        (1 or 0, :mod:`navreplay.consistency` at its false alarm), ``worst RMS/σ`` (the NEES
+        (1 or 0, :mod:`navreplay.metrics.consistency` at its false alarm), ``worst RMS/σ`` (the NEES
         state's ratio furthest from 1) and the ensemble summary's ``pos_rms_h`` [m],
         ``att_rms_level`` and ``att_rms_heading`` [rad] (truth); ``held-out RMS [m]`` and ``NIS/dof <name>``
         per measurement (held-out).

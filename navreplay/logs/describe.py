@@ -9,13 +9,13 @@ import dataclasses
 import warnings
 from pathlib import Path
 
+from navreplay.core.streams import seconds
 from navreplay.io.checks import gap_report, read_policy
 from navreplay.io.errors import RecordingError
 from navreplay.io.files import file_kind, read_streams
 from navreplay.io.info import format_info, recording_info
 from navreplay.logs.options import LogOptions
 from navreplay.logs.reference import REFERENCE_TYPES
-from navreplay.streams import seconds
 
 
 def _sensor_lines(sensors: dict, where: str) -> list[str]:

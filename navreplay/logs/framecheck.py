@@ -19,11 +19,11 @@ import math
 
 import numpy as np
 
+from navreplay.core.streams import Recording, StreamKind, seconds
 from navreplay.io.checks import named_convention
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
 from navreplay.io.topics import TopicSource
-from navreplay.streams import Recording, StreamKind, seconds
 
 STILL_BLOCK = 1.0
 """Block length of the stillness test [s]."""

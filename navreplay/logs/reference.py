@@ -1,6 +1,6 @@
 """References to score against: a topic of the log or a TUM / CSV file, as a truth-like stream.
 
-The result is a :class:`~navreplay.streams.Stream` of kind ``truth`` holding whichever of
+The result is a :class:`~navreplay.core.streams.Stream` of kind ``truth`` holding whichever of
 ``pos`` (lat, lon, h), ``v_n`` (NED) and ``q_nb`` (FRD -> NED) the reference has; scoring uses
 what is there (docs/real-logs.md).
 
@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Recording, Stream, StreamKind, seconds
 from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
 from navreplay.io.checks import current_policy, named_convention
@@ -58,7 +59,6 @@ from navreplay.metrics.coverage import (  # noqa: F401  (their home is the scori
     coverage_warning,
     reference_coverage,
 )
-from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE = "geometry_msgs/msg/PoseStamped"

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from navreplay.consistency import ConsistencyStats, EnsembleConsistency
 from navreplay.filters.base import State
+from navreplay.metrics.consistency import ConsistencyStats, EnsembleConsistency
 from navreplay.metrics.run import RunMetrics
 from navreplay.metrics.stats import CEP50_FACTOR, chi2_bounds_per_count, rms
 
@@ -87,7 +87,7 @@ class EnsembleResult:
         Mean true distance travelled [m].
     consistency : EnsembleConsistency or None
         Per-axis RMS/sigma with intervals and checks, and the per-run time-averaged NEES tests
-        (:mod:`navreplay.consistency`).
+        (:mod:`navreplay.metrics.consistency`).
     """
 
     label: str

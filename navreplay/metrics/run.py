@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.filters.base import State
 from navreplay.filters.result import RunResult
 from navreplay.metrics.errors import (
@@ -21,7 +22,6 @@ from navreplay.metrics.errors import (
 from navreplay.metrics.reference import Reference
 from navreplay.metrics.stats import nees
 from navreplay.metrics.summary import RunSummary
-from navreplay.streams import Recording, StreamKind
 
 
 @dataclasses.dataclass
@@ -77,7 +77,7 @@ class RunMetrics:
     nis_rows: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
-        """Scalar scores (SI; see :data:`navreplay.tables.SUMMARY_UNITS`) for tables and JSON:
+        """Scalar scores (SI; see :data:`navreplay.metrics.tables.SUMMARY_UNITS`) for tables and JSON:
         those of :class:`~navreplay.metrics.summary.RunSummary` with the run as one block."""
         summary = RunSummary(probability)
         summary.add(self)

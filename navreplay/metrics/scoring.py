@@ -13,12 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Stream, seconds
 from navreplay.filters.result import RunResult, concat
 from navreplay.metrics.coverage import CoverageCount
 from navreplay.metrics.reference import Reference
 from navreplay.metrics.run import RunMetrics, row_nis, run_metrics
 from navreplay.metrics.summary import RunSummary
-from navreplay.streams import Stream, seconds
 
 Scored = Callable[[RunResult, RunMetrics | None, Stream | None], None]
 """Called with each block of rows as it is scored, its metrics (None without truth) and the

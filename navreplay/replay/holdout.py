@@ -21,8 +21,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from navreplay.core.streams import Recording, Stream, StreamKind, seconds
 from navreplay.filters.result import RunResult
-from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 HELD_OUT = "held_out"
 """Key of ``metadata.extra`` holding the dropped fixes: ``t_ns`` and ``pos`` (lat, lon [rad],

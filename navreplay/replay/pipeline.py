@@ -27,6 +27,7 @@ import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.filters.base import Filter, FilterParams, TruthColumn
 from navreplay.filters.result import RunResult, concat, concat_innovations
 from navreplay.filters.settings import summary_entries
@@ -35,7 +36,6 @@ from navreplay.metrics import RunMetrics, RunScorer
 from navreplay.replay.checks import validate_recording
 from navreplay.replay.session import Progress, ReplaySession
 from navreplay.replay.spec import FilterSpec
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 
 @dataclasses.dataclass(frozen=True)

@@ -34,6 +34,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
+from navreplay.core.streams import Stream, StreamKind
 from navreplay.filters.base import (
     TICK,
     Estimate,
@@ -51,8 +52,8 @@ from navreplay.filters.kalman import FilterDivergedError
 from navreplay.filters.result import RunResult
 from navreplay.filters.settings import FilterSettings, build_params
 from navreplay.io.errors import RecordingError
+from navreplay.io.lifecycle import from_signal
 from navreplay.io.source import COMPLETE, Window
-from navreplay.lifecycle import from_signal
 from navreplay.replay.checks import check_streams
 from navreplay.replay.columns import Columns, innovation_series, undeclared
 from navreplay.replay.errors import (
@@ -70,7 +71,6 @@ from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.plan import EventPlan, aiding_kinds, merge_streams, window_plan
 from navreplay.replay.spec import FilterSpec
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import Stream, StreamKind
 
 CHECK_EVERY = 1024
 """Estimates between divergence (non-finite) checks; events between live views and progress
@@ -119,7 +119,7 @@ class ReplaySession:
     ------
     MissingStreamError
         The recording lacks a required stream or column (before the filter is built).
-    navreplay.params.ParamError
+    navreplay.core.params.ParamError
         Parameters that do not fit the filter's.
     FilterInitError
         The filter raised while it was built.

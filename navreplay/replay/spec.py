@@ -80,7 +80,7 @@ class FilterSpec:
     def resolve(self) -> FilterSpec:
         """Load the class and parse the values (each once; raises
         :class:`~navreplay.filters.registry.FilterLoadError` or
-        :class:`~navreplay.params.ParamError`); returns the spec."""
+        :class:`~navreplay.core.params.ParamError`); returns the spec."""
         if self.cls is None:
             object.__setattr__(self, "cls", load_filter(self.ref))
         if self._values is None:

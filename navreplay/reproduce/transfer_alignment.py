@@ -48,6 +48,8 @@ import numpy as np
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.executors import make_executor
 from navreplay.campaign.tasks import RunOutput, RunTask, monte_carlo_tasks
+from navreplay.core.streams import Recording
+from navreplay.core.units import DEG
 from navreplay.filters.result import RunResult
 from navreplay.filters.transfer_alignment import flexure_rate_sigma
 from navreplay.geo.rotations import attitude_error, quat_to_dcm
@@ -55,8 +57,6 @@ from navreplay.metrics import rms, truth_at
 from navreplay.replay.spec import FilterSpec
 from navreplay.reproduce import Check, Progress, Report, Reproduction, slashed, warm_up
 from navreplay.sim.scenarios.ship_transfer_alignment import ShipTransferAlignmentParams
-from navreplay.streams import Recording
-from navreplay.units import DEG
 
 SCENARIO = "ship-transfer-alignment"
 FILTER = "transfer-alignment"

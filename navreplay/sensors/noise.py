@@ -16,7 +16,7 @@ Examples
 --------
 The 20 ug "white noise" of a 1-s average, at a 100 Hz IMU:
 
->>> from navreplay.units import MICRO_G
+>>> from navreplay.core.units import MICRO_G
 >>> N = density_from_average_sigma(20 * MICRO_G)          # (m/s^2)*sqrt(s)
 >>> round(sample_sigma(N, 0.01) / MICRO_G, 6)             # per-sample sigma [ug]
 200.0

@@ -33,8 +33,8 @@ datasheet units (:func:`specs_from_tables`), which :func:`specs_toml` writes bac
 TOML tables
 -----------
 The key is the field name and the value a number in SI or a string ``"NUMBER UNIT"``
-(:func:`navreplay.units.parse_quantity`); the unit may instead end the key
-(``gyro_arw_deg_per_sqrt_h = 0.15``, :func:`navreplay.units.key_unit`). Per-axis fields
+(:func:`navreplay.core.units.parse_quantity`); the unit may instead end the key
+(``gyro_arw_deg_per_sqrt_h = 0.15``, :func:`navreplay.core.units.key_unit`). Per-axis fields
 (GNSS sigmas N, E, D) take one value or an array of three. In ``[sensors.imu]`` the key
 ``grade`` starts from a built-in grade (:class:`~navreplay.sensors.imu.ImuGrade`) that the other
 keys override::
@@ -51,7 +51,7 @@ one line naming the table, the key and what was expected.
 
 Examples
 --------
->>> from navreplay.units import DEG_PER_SQRT_HOUR
+>>> from navreplay.core.units import DEG_PER_SQRT_HOUR
 >>> specs = specs_from_tables({"imu": {"grade": "tactical", "gyro_arw": "0.15 deg/sqrt(h)"}})
 >>> round(specs.imu.gyro_arw / DEG_PER_SQRT_HOUR, 6), specs.source("imu")
 (0.15, '[sensors.imu]: grade tactical, with gyro_arw')
@@ -69,8 +69,9 @@ import typing
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from navreplay import units
-from navreplay.params import ParamError, describe
+from navreplay.core import units
+from navreplay.core.params import ParamError, describe
+from navreplay.core.units import UnitError
 from navreplay.sensors._common import FieldUnit
 from navreplay.sensors.depth import DepthModel
 from navreplay.sensors.gps import GpsModel
@@ -78,7 +79,6 @@ from navreplay.sensors.imu import ImuGrade, ImuModel, imu_grade
 from navreplay.sensors.magnetometer import MagnetometerModel
 from navreplay.sensors.master_ins import MasterInsModel
 from navreplay.sensors.speed_log import SpeedLogModel
-from navreplay.units import UnitError
 
 SPEC_KINDS: dict[str, type] = {
     "imu": ImuModel,
@@ -342,7 +342,7 @@ def spec_from_table(
 
     Raises
     ------
-    navreplay.params.ParamError
+    navreplay.core.params.ParamError
         One line naming the file, the table and the key: an unknown key, an unreadable value,
         a unit of the wrong dimension (with the expected one) or a value out of range.
     """

@@ -62,12 +62,12 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from navreplay import metrics as _metrics
+from navreplay.core.streams import Stream
 from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import quat_wxyz_to_xyzw, radii
+from navreplay.io.outputs import OutputError, release
 from navreplay.metrics import RunMetrics, nav_errors
-from navreplay.outputs import OutputError, release
-from navreplay.streams import Stream
 from navreplay.viz import convert
 from navreplay.viz.blueprint import Catalog, build_blueprint
 from navreplay.viz.naming import (

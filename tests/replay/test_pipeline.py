@@ -21,14 +21,14 @@ import pytest
 from mcap_edits import write_small_chunks as _write
 from mcap_edits import zero_imu_stamps as _zero_imu_stamps
 from rosbags.highlevel import AnyReader
-from test_viz import read_rrd
+from rrd import read_rrd
 
+from navreplay.core.streams import Recording, Stream, StreamKind
 from navreplay.io import mcapread, open_recording, read_recording
 from navreplay.io.errors import RecordingError, RecordingWarning
 from navreplay.logs.options import LogOptions
 from navreplay.replay import FilterSpec, ReplayError
 from navreplay.sim.scenario import simulate
-from navreplay.streams import Recording, Stream, StreamKind
 from navreplay.viz.options import VizMode, VizOptions
 
 run_job = importlib.import_module("navreplay.jobs.run")
@@ -77,7 +77,7 @@ def _same_summaries(a: dict, b: dict) -> None:
 def both(drive, tmp_path_factory):
     """The run in windows of 1500 messages and in one window: exports, .rrd, report."""
     d = tmp_path_factory.mktemp("runs")
-    from navreplay import figures
+    from navreplay.viz import figures
 
     shown: list = []
     real = figures.consistency

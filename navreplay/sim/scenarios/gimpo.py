@@ -76,9 +76,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from navreplay.core.params import check_nonnegative, check_positive
+from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
+from navreplay.core.units import DEG, G0, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 from navreplay.geo.earth import gravity, gravity_n, ned_offset_to_lla, omega_en_n, omega_ie_n
 from navreplay.geo.rotations import euler_to_quat
-from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors.gps import GpsModel
 from navreplay.sensors.imu import ImuErrors, ImuModel
 from navreplay.sensors.magnetometer import (
@@ -92,8 +94,6 @@ from navreplay.sensors.noise import nyquist_sample_sigma
 from navreplay.sensors.specs import SensorSpecs
 from navreplay.sim.scenario import Scenario, register_scenario
 from navreplay.sim.trajectory import parse_utc, utc_ns
-from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
-from navreplay.units import DEG, G0, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 
 SITE_NAME = "Gimpo airport (RKSS), near runway 32R"
 IGRF_FIELD_N = (29467e-9, -4330e-9, 41593e-9)

@@ -80,7 +80,23 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
+from navreplay.core.params import (
+    check_divides,
+    check_nonnegative,
+    check_positive,
+    check_whole_intervals,
+)
+from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
+from navreplay.core.units import (
+    ARCSEC,
+    DEG,
+    DEG_PER_HOUR,
+    DEG_PER_SQRT_HOUR,
+    MICRO_G,
+    MICRO_G_PER_SQRT_HZ,
+    MIL,
+    PPM,
+)
 from navreplay.sensors.depth import DepthModel
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.specs import SensorSpecs
@@ -103,17 +119,6 @@ from navreplay.sim.trajectory import (
     sample_indices,
     time_grid,
     utc_ns,
-)
-from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
-from navreplay.units import (
-    ARCSEC,
-    DEG,
-    DEG_PER_HOUR,
-    DEG_PER_SQRT_HOUR,
-    MICRO_G,
-    MICRO_G_PER_SQRT_HZ,
-    MIL,
-    PPM,
 )
 
 ROUTE: tuple[tuple[float, float, Channel, float], ...] = (

@@ -42,7 +42,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
+from navreplay.core.params import (
+    check_divides,
+    check_nonnegative,
+    check_positive,
+    check_whole_intervals,
+)
+from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
+from navreplay.core.units import DEG
 from navreplay.sensors.gps import GpsModel
 from navreplay.sensors.imu import ImuErrors, ImuGrade, ImuMeasurement, ImuModel, imu_grade
 from navreplay.sensors.magnetometer import (
@@ -72,8 +79,6 @@ from navreplay.sim.trajectory import (
     sample_indices,
     utc_ns,
 )
-from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
-from navreplay.units import DEG
 
 _TRUTH_COLUMNS = {
     "pos": "true latitude [rad], longitude [rad], ellipsoidal height [m]",
