@@ -16,6 +16,7 @@ from rosbags.highlevel import AnyReader
 from whole_runs import export_runs
 
 from navreplay import export
+from navreplay.export.odometry import _ODOMETRY_SCHEMA
 from navreplay.filters.registry import load_filter
 from navreplay.geo import earth
 from navreplay.geo.rotations import quat_to_dcm
@@ -131,7 +132,7 @@ def test_odometry_bytes_equal_the_generic_ros2_serializer(runs, tmp_path) -> Non
     bulk = export.encode_odometry(poses)
     with open(tmp_path / "g.mcap", "wb") as f:
         w = Ros2Writer(f)
-        schema = w.register_msgdef("nav_msgs/msg/Odometry", export._ODOMETRY_SCHEMA)
+        schema = w.register_msgdef("nav_msgs/msg/Odometry", _ODOMETRY_SCHEMA)
         for m in msgs:
             w.write_message("/o", schema, _as_dict(m), 0)
         w.finish()
