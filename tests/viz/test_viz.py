@@ -38,7 +38,7 @@ from navreplay.viz import (
     targets,
 )
 from navreplay.viz.blueprint import Catalog, build_blueprint
-from navreplay.viz.sink import BAND_LINES, PALETTE, TRUTH_COLOR
+from navreplay.viz.style import BAND_LINES, PALETTE, TRUTH_COLOR
 
 STATES = tuple(dataclasses.replace(s, name=s.name.replace("b_", "db_", 1))
                if s.name.startswith("b_") else s for s in ie.nav_states())
@@ -543,7 +543,7 @@ def test_single_run_nees_with_band(tmp_path):
 def test_ensemble_view_colours_tabs_and_bands(tmp_path):
     from navreplay.metrics import EnsembleStats, run_metrics
     from navreplay.viz.ensemble import SIGMA_SHADE, log_ensemble, log_runs
-    from navreplay.viz.sink import lighter
+    from navreplay.viz.style import lighter
 
     truth = make_truth(duration=30.0)
     stats = {"ins": EnsembleStats("ins"), "gps-ins": EnsembleStats("gps-ins")}
@@ -622,7 +622,7 @@ def test_live_sink_sends_the_blueprint_before_the_data(tmp_path, monkeypatch):
 
 
 def test_sweep_on_its_own_axis_and_one_colour_per_variant(tmp_path):
-    from navreplay.viz.sink import SIGMA_SHADE, lighter
+    from navreplay.viz.style import SIGMA_SHADE, lighter
 
     a_mg = np.arange(-1500.0, 1501.0, 100.0)
     path = tmp_path / "sweep.rrd"
