@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from navreplay.export.frames import LocalFrame
+from navreplay.export.numbers import format_rows
 from navreplay.export.output import NAV_AXES, NAV_ROWS, FilterOutput
 from navreplay.filters.base import NAV_PARTS, MeasurementKind
 from navreplay.filters.result import InnovationSeries
@@ -112,12 +113,8 @@ def csv_header(cols: Sequence[Column]) -> str:
 
 
 def csv_rows(cols: Sequence[Column]) -> str:
-    """The rows of the columns' values, comma-separated."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    rows = [[c.fmt % v for v in np.asarray(c.values).tolist()] for c in cols]
-    w.writerows(zip(*rows, strict=True))
-    return buf.getvalue()
+    """The rows of the columns' values, comma-separated (numbers need no quoting)."""
+    return format_rows([(np.asarray(c.values), c.fmt) for c in cols])
 
 
 def csv_text(cols: Sequence[Column]) -> str:

@@ -130,8 +130,7 @@ class OdometryWriter:
 
     def _write(self, limit: int | None) -> None:
         """Write the queued messages earlier than ``limit`` (all with None)."""
-        times, rows = [], []  # per message: time; (queued piece, row in it)
-        pieces: list[np.ndarray] = []
+        times, channels, messages = [], [], []  # per message, in the order of the topics
         for topic, queue in self._queue.items():
             cid = self._ids[topic]
             kept = []
@@ -139,21 +138,20 @@ class OdometryWriter:
                 n = t.shape[0] if limit is None else int(np.searchsorted(t, limit, side="left"))
                 if n:
                     times.append(t[:n])
-                    rows.append(np.stack([np.full(n, len(pieces)), np.arange(n),
-                                          np.full(n, cid)], axis=1))
-                    pieces.append(rec)
+                    channels.append(np.full(n, cid))
+                    data, size = rec[:n].tobytes(), rec.shape[1]
+                    messages += [data[i:i + size] for i in range(0, n * size, size)]
                 if n < t.shape[0]:
                     kept.append((t[n:], rec[n:]))
             self._queue[topic] = kept
         if not times:
             return
         t = np.concatenate(times)
-        where = np.concatenate(rows)
+        order = np.argsort(t, kind="stable")
         add = self._w.add_message
-        for i in np.argsort(t, kind="stable").tolist():
-            ti = int(t[i])
-            k, j, cid = where[i].tolist()
-            add(cid, ti, pieces[k][j].tobytes(), ti)
+        cids = np.concatenate(channels)[order]
+        for i, ti, cid in zip(order.tolist(), t[order].tolist(), cids.tolist(), strict=True):
+            add(cid, ti, messages[i], ti)
 
     def finish(self) -> None:
         self._write(None)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from navreplay.export.frames import BODY_FRAME, WORLD_FRAME, Poses
+from navreplay.export.numbers import SECONDS_NS, format_rows
 
 TUM_HEADER = ("# timestamp tx ty tz qx qy qz qw\n"
               f"# position [m] in the local ENU frame '{WORLD_FRAME}' (see manifest.json);"
@@ -15,8 +16,6 @@ TUM_HEADER = ("# timestamp tx ty tz qx qy qz qw\n"
 def tum_lines(poses: Poses) -> str:
     """evo's TUM format: one ``timestamp tx ty tz qx qy qz qw`` line per pose, single spaces,
     no trailing delimiter. Timestamps are absolute seconds with nanosecond digits."""
-    s, ns = np.divmod(poses.stamps_ns, 1_000_000_000)
-    return "".join(f"{si}.{ni:09d} {p[0]:.6f} {p[1]:.6f} {p[2]:.6f} "
-                   f"{q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}\n"
-                   for si, ni, p, q in zip(s.tolist(), ns.tolist(), poses.p_enu.tolist(),
-                                           poses.q_xyzw.tolist(), strict=True))
+    return format_rows([(np.asarray(poses.stamps_ns, dtype=np.int64), SECONDS_NS)]
+                       + [(poses.p_enu[:, i], "%.6f") for i in range(3)]
+                       + [(poses.q_xyzw[:, i], "%.9f") for i in range(4)], sep=" ")
