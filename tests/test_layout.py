@@ -107,3 +107,17 @@ def test_the_layers_point_one_way() -> None:
                 assert "viz" not in deps and "jobs" not in deps and "cli" not in deps, unit
     assert not ({"io", "viz", "replay", "metrics"} & graph.get("filters", set()))
 
+
+
+def test_a_run_does_not_import_the_simulation_statistics() -> None:
+    """The modules of ``navreplay run`` (its view and exports too) leave scipy.signal and
+    scipy.stats unimported: they cost about a second of start-up."""
+    import subprocess
+    import sys
+
+    code = ("import sys, navreplay.cli, navreplay.jobs.run, navreplay.viz.sink, "
+            "navreplay.export; print(sorted(m for m in ('scipy.signal', 'scipy.stats') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]"
