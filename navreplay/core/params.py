@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+import threading
 import tomllib
 import types
 import typing
@@ -255,6 +256,11 @@ def as_dict(params: Any) -> dict[str, Any]:
     return {f.name: jsonable(getattr(params, f.name)) for f in dataclasses.fields(params)}
 
 
+_PARSING = threading.Lock()
+"""Source parsed by one thread at a time: CPython 3.11's parser fails ("AST constructor
+recursion depth mismatch") when threads (a Dask worker's) parse at once."""
+
+
 def describe(cls: type) -> list[tuple[str, str, Any, str]]:
     """(name, type, default, docstring) of each field, for listings."""
     import ast
@@ -266,7 +272,8 @@ def describe(cls: type) -> list[tuple[str, str, Any, str]]:
         if not dataclasses.is_dataclass(klass):
             continue
         try:
-            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
+            with _PARSING:
+                tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
         except (OSError, TypeError, SyntaxError):
             continue
         body = tree.body[0].body  # type: ignore[attr-defined]
