@@ -30,6 +30,9 @@ PLAN: dict[str, tuple[str, float]] = {
 }
 """Built-in filter -> (scenario, duration [s]) of the recording that warms it: the shortest
 that takes every kernel of the filter's replay (its measurement updates included)."""
+EXPORTS = "gps-ins"
+"""The filter whose warm-up run also writes ``--export`` (compiling the exports' number
+formatting, :mod:`navreplay.export.numbers`)."""
 _ENGINE_ONLY = {"vector-matching"}
 """Filters whose warm-up recording carries no initial attitude for ``navreplay run`` (their
 runs take ``--init``): read back and replayed by the engine itself."""
@@ -54,8 +57,9 @@ def warm_filter(name: str, directory: str) -> tuple[str, float]:
 
         replay(read_recording(path), load_filter(name))
     else:
+        export = {"export_dir": Path(directory) / "export"} if name == EXPORTS else {}
         run(RunJob(filters=(FilterSpec(name),), recordings=(path,),
-                   viz=VizOptions(VizMode.NONE)))
+                   viz=VizOptions(VizMode.NONE), **export))
     return name, time.process_time() - start
 
 
