@@ -4,6 +4,8 @@ the report's :class:`navreplay.report.RunSeries`."""
 
 from __future__ import annotations
 
+from navreplay.viz.naming import innovation_rows
+
 from pathlib import Path
 
 from navreplay import export
@@ -39,5 +41,8 @@ def run_series(result: RunResult, rec: Recording | None) -> RunSeries:
     has_ref = rec is not None and StreamKind.TRUTH in rec
     series.add(export.filter_output(rows, run_metrics(rows, rec) if has_ref else None))
     for name, s in result.innovations.items():
-        series.add_nis(name, s.t, s.nis, int(s.nu.shape[1]))
+        dim = int(s.nu.shape[1])
+        series.add_nis(name, s.t, s.nis, dim)
+        series.add_innovations(name, s.t, s.nu, s.S,
+                               innovation_rows(name, dim, result.measurement(name)))
     return series

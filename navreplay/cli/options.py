@@ -255,6 +255,13 @@ def show_value(value: Any) -> str:
     return str(value)
 
 
+def command_line() -> str:
+    """The command as typed (``navreplay ARGS``, shell-quoted), for reports."""
+    import shlex
+
+    return shlex.join(["navreplay", *click.get_current_context().meta.get("argv", [])])
+
+
 def is_file(path: str | None) -> bool:
     return path is not None and Path(path).is_file()
 

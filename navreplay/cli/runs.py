@@ -13,6 +13,7 @@ from navreplay.cli.options import (
     Progress,
     check_command_outputs,
     check_executor,
+    command_line,
     export_output,
     finish,
     is_file,
@@ -112,6 +113,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
                         force_frames=force_frame),
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None, force=force,
+        command=command_line(),
     )
     label = "replay" if len(args) == 1 else f"replay {len(args)} recordings"
     with Progress(label) as progress:
@@ -189,3 +191,35 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     with Progress(f"montecarlo {scenario}") as progress:
         report = jobs.montecarlo(job, progress)
     finish(report)
+
+
+@cli.command()
+@click.argument("summaries", nargs=-1, required=True, metavar="SUMMARY.json...",
+                type=click.Path(dir_okay=False))
+@viz_flags
+@click.option("--report", "report", type=click.Path(dir_okay=False), metavar="OUT.html|OUT.pdf",
+              help="Write the comparison as a self-contained HTML report (or a PDF).")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+def compare(summaries: Sequence[str], save: str | None, spawn: bool, connect: str | None,
+            serve: bool, bind: str | None, web_port: int | None, grpc_port: int | None,
+            no_viz: bool, report: str | None, force: bool) -> None:
+    """Compare the headline metrics of saved summaries (``run``/``montecarlo --summary``):
+    a row per metric, a column per filter (``FILE/label`` when labels repeat), the best marked.
+
+    \b
+    Examples:
+      navreplay compare day1.json day2.json
+      navreplay compare day1.json day2.json --save cmp.rrd --report cmp.html
+    """
+    from navreplay import jobs
+
+    view = save is not None or spawn or serve or connect is not None
+    check_command_outputs(force, list(summaries),
+                          output_of(save, "--save") if save is not None else None,
+                          output_of(report, "--report"))
+    job = jobs.CompareJob(
+        summaries=tuple(Path(s) for s in summaries),
+        viz=viz_options(save, spawn, connect, serve, no_viz or not view, bind, web_port,
+                        grpc_port),
+        report_path=Path(report) if report else None, force=force)
+    finish(jobs.compare(job))

@@ -91,6 +91,8 @@ class RunJob:
     executor : str
         Where several recordings run: ``process``, ``dask`` or ``dask://HOST:PORT``
         (:func:`navreplay.campaign.executors.make_executor`).
+    command : str, optional
+        The command line (shown in the report).
     """
 
     filters: tuple[FilterSpec, ...]
@@ -106,11 +108,13 @@ class RunJob:
     force: bool = False
     max_imu_gap: float | None = None
     executor: str = "process"
+    command: str | None = None
 
 
 def outputs_of(job: Any) -> Outputs:
     """The ``--export`` / ``--report`` outputs of a run or Monte Carlo job."""
-    return Outputs(job.export_dir, job.report_path, job.force)
+    return Outputs(job.export_dir, job.report_path, job.force,
+                   command=getattr(job, "command", None))
 
 
 def _check_files(paths: Sequence[Path]) -> None:
@@ -187,6 +191,8 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
         if done.salvaged:
             notes.append(salvaged_note(str(path), done.coverage))
         notes += outputs.write_run(done.summaries, title=title)
+        if sink is not None and done.has_truth:
+            sink.summaries(done.summaries)
         hint = close_output(sink, job.viz)
     except BaseException:
         outputs.abort()

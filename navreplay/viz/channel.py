@@ -23,6 +23,7 @@ from navreplay.viz.style import (
     N_SIGMA,
     PALETTE,
     TRUTH_COLOR,
+    color_index,
     dimmer,
     lighter,
 )
@@ -95,9 +96,11 @@ class Channel:
 
     def color_of(self, label: str) -> tuple[int, int, int]:
         """The colour of a filter label (or an ensemble variant) in every plot of this sink:
-        :data:`PALETTE` in order of first use."""
+        picked from :data:`PALETTE` by its name (:func:`~navreplay.viz.style.color_index`), the
+        same in every run."""
         if label not in self._colors:
-            self._colors[label] = PALETTE[len(self._colors) % len(PALETTE)]
+            taken = {PALETTE.index(c) for c in self._colors.values()}
+            self._colors[label] = PALETTE[color_index(label, taken)]
         return self._colors[label]
 
     def order_of(self, label: str) -> int:

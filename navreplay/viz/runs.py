@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -15,6 +16,7 @@ from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import radii
 from navreplay.metrics import nav_errors
+from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors
 from navreplay.viz import convert
 from navreplay.viz.naming import (
     NAV_ERROR_NAMES,
@@ -52,9 +54,14 @@ class RunState:
     track: Track = dataclasses.field(default_factory=lambda: Track())
     extent_box: tuple[np.ndarray, np.ndarray] | None = None
     """NED box of the true track up to this run's last block (its ellipsoids' caps)."""
+    quantiles: dict[str, Quantiles] = dataclasses.field(default_factory=dict)
+    """The distributions of the compared error magnitudes (the Compare tab's CDFs)."""
 
 
 _NAV_ERRORS = tuple(n for names in NAV_ERROR_NAMES.values() for n in names)
+
+CDF_POINTS = 200
+"""Percentiles drawn per CDF."""
 
 
 class RunView(TruthView):
@@ -80,6 +87,41 @@ class RunView(TruthView):
                 self._axes(entity_path("world", run.label, "body", "axes"), axis_size(extent))
                 run.axes = True
         self._log_track(run.label, run.track, run.color, 2.5, 3.0)
+        self._log_cdfs(run)
+
+    def _log_compare(self, run: RunState, idx: list[rr.TimeColumn], errors: Any) -> None:
+        """The run's error magnitudes in the Compare tab, overlaid with the other filters'
+        (one plot per quantity), and into the distributions of its CDFs."""
+        mags = compared_errors(errors.pos_ned, errors.v_n, errors.phi)
+        for rank, (key, name, unit) in enumerate(COMPARED):
+            v = mags[key]
+            if not np.isfinite(v).any():
+                continue
+            run.quantiles.setdefault(key, Quantiles()).add(v)
+            u = display_unit(unit)
+            path = entity_path("compare", key, run.label)
+            self._style(path, [run.label], [run.color], [1.5])
+            self._scalars(path, idx, v * u.scale)
+            self.catalog.add("compare", f"compare:{key}", f"{name} [{u.label}]", path,
+                             rank=rank)
+
+    def _log_cdfs(self, run: RunState) -> None:
+        """The CDF of each compared error magnitude over the whole run: a bar per percentile
+        (its height) at the error value below which that fraction of the run lies."""
+        for rank, (key, name, unit) in enumerate(COMPARED):
+            q = run.quantiles.get(key)
+            if q is None or not q.n:
+                continue
+            u = display_unit(unit)
+            value, frac = q.cdf(CDF_POINTS)
+            path = entity_path("compare", "cdf", key, run.label)
+            span = float(value[-1] - value[0]) or float(value[-1]) or 1.0
+            self._rec.log(path, rr.BarChart(100.0 * frac, abscissa=value * u.scale,
+                                            color=run.color,
+                                            widths=np.full(frac.shape, 0.004 * span * u.scale)),
+                          static=True)
+            self.catalog.add("compare", f"cdf:{key}", f"CDF of the {name} [%] vs [{u.label}]",
+                             path, rank=len(COMPARED) + rank, kind="bars")
 
     def _declare(self, run: RunState, result: RunResult) -> None:
         run.states = {s.name: s for s in (*result.states, *result.scored_extras)}
@@ -219,6 +261,7 @@ class RunView(TruthView):
                     continue
                 s = nav_sigma[n]
                 errors[n] = (e, s if np.isfinite(s).any() else None)
+            self._log_compare(run, idx, ne)
         for n, (e, s) in errors.items():
             u = display_unit(NAV_UNITS[n])
             path = entity_path(L, "error", n)

@@ -55,16 +55,20 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import rerun as rr
 
 from navreplay.core.streams import Stream
 from navreplay.filters.result import RunResult
 from navreplay.io.outputs import OutputError
 from navreplay.metrics import RunMetrics
+from navreplay.metrics.compare import headline_rows, markdown_comparison
 from navreplay.viz.ensemble import EnsemblePlots
+from navreplay.viz.naming import entity_path
 from navreplay.viz.runs import RunView
 from navreplay.viz.targets import (
     Serve,
@@ -179,6 +183,29 @@ class Sink(RunView, EnsemblePlots):
         self._run(block.label, None)
         if any(s.t.shape[0] for s in block.innovations.values()):
             self._layout_first(lambda: self._log_innovations(self._runs[block.label], block))
+
+    def summaries(self, summaries: Mapping[str, Mapping[str, Any]]) -> None:
+        """Log the headline metrics of the filters' summaries (label -> summary dict, SI) as a
+        table in the Compare tab (a row per metric, a column per filter, the best in bold)."""
+        text = markdown_comparison(summaries)
+        self._rec.log("/compare/summary", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN),
+                      static=True)
+        self.catalog.add("compare", "summary", "headline metrics", "/compare/summary",
+                         rank=10_000, kind="text")
+
+    def comparison(self, summaries: Mapping[str, Mapping[str, Any]]) -> None:
+        """Saved summaries side by side (``navreplay compare``): the table of headline metrics
+        and a bar chart per metric, a bar per label in its colour."""
+        self.summaries(summaries)
+        for rank, (name, values, _) in enumerate(headline_rows(summaries)):
+            for i, (label, v) in enumerate(zip(summaries, values, strict=True)):
+                if not np.isfinite(v):
+                    continue
+                path = entity_path("compare", "metric", name, label)
+                self._rec.log(path, rr.BarChart([v], abscissa=[float(i)],
+                                                color=self.color_of(label)), static=True)
+                self.catalog.add("compare", f"metric:{name}", name, path, rank=rank,
+                                 kind="bars")
 
     def flush(self, timeout: float = 30.0) -> None:
         """Wait until the logged data has left the process (raises VizUnavailableError)."""
