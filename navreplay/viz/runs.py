@@ -185,22 +185,24 @@ class RunView(TruthView):
             # an error state that feedback keeps at zero is logged but gets no plot of its own
             # (its error against the truth and its sigma are what is worth looking at)
             st = run.states.get(n)
+            # a column per filter in the State estimates tab, a row per group
             if np.any(result.x[a:b, i] != 0.0):
-                self.catalog.add("states", f"state:{g}", f"{g} [{label}]", p_state,
-                                 rank=RANK_STATE)
+                self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]", p_state,
+                                 rank=RANK_STATE, column=L, row=g)
                 if st is not None and isinstance(st.truth, TruthColumn):
                     p_true = self._truth_column(st.truth.column, st.unit)
                     if p_true is not None:
-                        self.catalog.add("states", f"state:{g}", f"{g} [{label}]", p_true,
-                                         rank=RANK_STATE)
+                        self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]",
+                                         p_true, rank=RANK_STATE, column=L, row=g)
             p_sig = entity_path(L, "sigma", n)
             self._style(p_sig, [f"σ {legend}"], [shade], [1.5])
             self._scalars(p_sig, idx, sigma[:, i] * scale)
             nav_state = st is not None and isinstance(st.truth, NavError)
-            if not nav_state and not self.catalog.has(entity_path(L, "error", n)):
+            frozen = not np.any(sigma[:, i] > 0.0)  # a disabled or frozen state: left out
+            if not (nav_state or frozen or self.catalog.has(entity_path(L, "error", n))):
                 # sigma of an unscored state; a navigation-error state's is in the nav bounds
                 self.catalog.add("states", f"sigma:{g}@{L}", f"{L}: σ {g} [{label}]", p_sig,
-                                 rank=RANK_SIGMA + run.order)
+                                 rank=RANK_SIGMA, column=L, row=f"σ {g}")
         for key, arr in result.extras.items():
             arr = np.asarray(arr[a:b], dtype=np.float64)
             flat = arr.reshape(b - a, int(np.prod(arr.shape[1:], dtype=np.int64)))
@@ -210,8 +212,8 @@ class RunView(TruthView):
             legend = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
             self._style(path, legend, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
             self._scalars(path, idx, flat * scale)
-            self.catalog.add("states", f"extra:{key}", f"{key} [{label}]", path,
-                             rank=RANK_EXTRA)
+            self.catalog.add("states", f"extra:{key}@{L}", f"{L}: {key} [{label}]", path,
+                             rank=RANK_EXTRA, column=L, row=key)
         if any(result.has(part) for part in ("pos", "v_n", "q_nb")):
             self._log_nav(run, result, a, b, idx)
         run.rows = b
@@ -318,6 +320,9 @@ class RunView(TruthView):
                 and result.nav_pos is not None and not np.any(result.x[:, states[n]] != 0.0)
             ):
                 continue
+            if s is not None and not np.any(s > 0.0) and not self.catalog.has(
+                    entity_path(L, "error", n)):
+                continue  # a disabled or frozen state (zero sigma) gets no pane
             label, scale = self._unit(run, key, result, 0, M)
             tab = self._tab(run, key)
             # a state named like a navigation error (phi_N) keeps its own entity
@@ -325,8 +330,10 @@ class RunView(TruthView):
             sig = None if s is None else s * scale
             self._bounded(path, idx, e * scale, sig, L, run.color)
             bounds = "" if s is None else ", ±3σ"
+            # Sensor errors: a column per filter, a row per group of components
             self.catalog.add(tab, f"error:{n}@{L}", f"{L}: {n} error [{label}]{bounds}", path,
-                             rank=RANK_ERROR + run.order, legend=False)
+                             rank=RANK_ERROR + run.order, legend=False,
+                             column=L if tab == "sensor" else None, row=group_of(key))
             if n in states:
                 self.catalog.discard("states", f"sigma:{group_of(n)}@{L}",
                                      entity_path(L, "sigma", n))

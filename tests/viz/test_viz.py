@@ -253,17 +253,24 @@ def test_ensemble_bounds(saved):
 
 
 def test_blueprint_adapts_to_what_was_logged(saved):
-    *_, sink, _ = saved
+    path, *_, sink, _ = saved
     plots = sink.catalog.plots
     assert list(plots["attitude"])[:3] == ["nav:roll", "nav:pitch", "nav:yaw"]
     # errors: one pane per filter (own scale), the filter named in the title, no legend
     pane = plots["attitude"]["error:phi_N@gps-ins"]
     assert pane.title == "gps-ins: attitude phi_N error [deg], ±3σ" and not pane.legend
     assert plots["position"]["error:p_N@gps-ins[q=2]"].title.startswith("gps-ins[q=2]: position N")
-    # components of a prefix share one plot; both filters overlay
-    paths = plots["states"]["state:db_g"].paths
-    assert len([p for p in paths if "/state/" in p]) == 6
-    assert "/truth/extra/gyro_bias_eff" in paths  # the truth the states are scored against
+    # components of a prefix share one plot, a column per filter
+    for label in ("gps-ins", "gps-ins[q=2]"):
+        pane = plots["states"][f"state:db_g@{label}"]
+        assert pane.column == label and pane.row == "db_g"
+        assert len([p for p in pane.paths if "/state/" in p]) == 3
+        assert "/truth/extra/gyro_bias_eff" in pane.paths  # the truth they are scored against
+    sensor = [p for p in plots["sensor"].values()]
+    assert sensor and all(p.column in ("gps-ins", "gps-ins[q=2]") for p in sensor)
+    tabs, _ = read_blueprint(path)
+    assert tabs["Sensor errors"][:2] == ["gps-ins: db_g_x error [deg/h], ±3σ",
+                                         "gps-ins: db_g_y error [deg/h], ±3σ"]
     # a state with an error plot leaves the sigma plot (its bounds are in the error plot)
     # (the gyro biases are scored, the accelerometer biases are not: the truth lacks them)
     assert "sigma:db_g@gps-ins" not in plots["states"]
