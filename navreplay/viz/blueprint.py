@@ -252,7 +252,7 @@ def _compare_tab(plots: list[Plot], name: str) -> rrb.Container:
     at the bottom."""
     rows = []
     shares = []
-    for kind, share in (("series", 3.0), ("bars", 3.0), ("text", 2.0)):
+    for kind, share in (("series", 3.0), ("bars", 3.0), ("text", 2.6)):
         views = [_view(p) for p in plots if p.kind == kind]
         if views:
             rows.append(rrb.Grid(*views, grid_columns=min(4, len(views))))

@@ -60,6 +60,12 @@ class RunState:
 
 _NAV_ERRORS = tuple(n for names in NAV_ERROR_NAMES.values() for n in names)
 
+def _row(name: str) -> str:
+    """The row of a state's pane in a per-filter column: its name without the last
+    ``_part`` (``b_a_x``, ``b_a_y`` -> ``b_a``; ``m_a_xy``, ``m_a_zx`` -> ``m_a``)."""
+    return name.rsplit("_", 1)[0] if "_" in name.strip("_") else name
+
+
 CDF_POINTS = 200
 """Percentiles drawn per CDF."""
 
@@ -333,7 +339,7 @@ class RunView(TruthView):
             # Sensor errors: a column per filter, a row per group of components
             self.catalog.add(tab, f"error:{n}@{L}", f"{L}: {n} error [{label}]{bounds}", path,
                              rank=RANK_ERROR + run.order, legend=False,
-                             column=L if tab == "sensor" else None, row=group_of(key))
+                             column=L if tab == "sensor" else None, row=_row(key))
             if n in states:
                 self.catalog.discard("states", f"sigma:{group_of(n)}@{L}",
                                      entity_path(L, "sigma", n))
