@@ -4,8 +4,6 @@ the report's :class:`navreplay.report.RunSeries`."""
 
 from __future__ import annotations
 
-from navreplay.viz.naming import innovation_rows
-
 from pathlib import Path
 
 from navreplay import export
@@ -13,6 +11,7 @@ from navreplay.core.streams import Recording, StreamKind
 from navreplay.filters.result import RunResult
 from navreplay.metrics import run_metrics
 from navreplay.report import RunSeries
+from navreplay.viz.naming import innovation_rows
 
 
 def export_runs(out_dir: Path, results: list[RunResult], rec: Recording | None, *,

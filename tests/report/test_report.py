@@ -24,7 +24,6 @@ from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 
 
-
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory):
     d = tmp_path_factory.mktemp("report")

@@ -721,3 +721,21 @@ def test_filter_colours_follow_their_names_not_their_order(tmp_path):
                         for r in order})
     assert colours[0] == colours[1] and colours[2]["gps-ins"] == colours[0]["gps-ins"]
     assert colours[0]["ins"] != colours[0]["gps-ins"]
+
+
+def test_a_frozen_state_gets_no_pane(tmp_path):
+    """A state with zero sigma all run (disabled, or frozen by its filter) is logged but gets
+    no plot; one with a sigma does, in its filter's column."""
+    from navreplay.filters.base import Quantity, State
+
+    t = np.arange(50) * 0.1
+    states = (State("b_g_x", "rad/s", Quantity.GYRO_BIAS),
+              State("b_a_x", "m/s^2", Quantity.ACCEL_BIAS))
+    P = np.zeros((50, 2, 2))
+    P[:, 0, 0] = 1e-10  # b_a_x frozen: zero variance
+    r = RunResult("f", "f", "demo", 0, t, states, np.full((50, 2), 1e-6), P)
+    with open_sink(tmp_path / "f.rrd") as sink:
+        sink.rows(r)
+    plots = sink.catalog.plots["states"]
+    assert "sigma:b_g@f" in plots and plots["sigma:b_g@f"].column == "f"
+    assert not any("/f/sigma/b_a_x" in p.paths for p in plots.values())
