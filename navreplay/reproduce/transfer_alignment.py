@@ -51,7 +51,7 @@ from navreplay.campaign.tasks import RunOutput, RunTask, monte_carlo_tasks
 from navreplay.core.streams import Recording
 from navreplay.core.units import DEG
 from navreplay.filters.result import RunResult
-from navreplay.filters.transfer_alignment import flexure_rate_sigma
+from navreplay.filters.transfer_alignment_model import flexure_rate_sigma
 from navreplay.geo.rotations import attitude_error, quat_to_dcm
 from navreplay.metrics import rms, truth_at
 from navreplay.replay.spec import FilterSpec
