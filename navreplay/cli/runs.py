@@ -115,8 +115,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
     )
     label = "replay" if len(args) == 1 else f"replay {len(args)} recordings"
     with Progress(label) as progress:
-        report = jobs.run(job, progress)
-    finish(report)
+        done = jobs.run(job, progress)
+    finish(done)
 
 
 @cli.command()
@@ -187,5 +187,5 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         max_imu_gap=max_imu_gap,
     )
     with Progress(f"montecarlo {scenario}") as progress:
-        report = jobs.montecarlo(job, progress)
-    finish(report)
+        done = jobs.montecarlo(job, progress)
+    finish(done)

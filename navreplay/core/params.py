@@ -166,11 +166,11 @@ def _line(text: str, dotted: str, top: bool = False) -> int:
 def _coerce(name: str, tp: Any, value: Any) -> Any:
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        members = [a for a in typing.get_args(tp) if a is not type(None)]
         if value is None or (isinstance(value, str) and value.lower() in ("none", "null", "")):
-            if len(args) < len(typing.get_args(tp)):
+            if len(members) < len(typing.get_args(tp)):
                 return None
-        return _coerce(name, args[0], value)
+        return _coerce(name, members[0], value)
     if origin in (tuple, list):
         args = typing.get_args(tp)
         if isinstance(value, str):

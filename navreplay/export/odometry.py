@@ -125,8 +125,9 @@ class OdometryWriter:
         self._queue[topic].append((poses.stamps_ns,
                                    rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)))
         self._last[topic] = int(poses.stamps_ns[-1])
-        if all(v is not None for v in self._last.values()):
-            self._write(min(self._last.values()))
+        stamps = [v for v in self._last.values() if v is not None]
+        if len(stamps) == len(self._last):
+            self._write(min(stamps))
 
     def _write(self, limit: int | None) -> None:
         """Write the queued messages earlier than ``limit`` (all with None)."""

@@ -115,6 +115,7 @@ class RunExport:
         self._nav.setdefault(out.label, out.has_nav)
         if (self._frame is None and not self.has_reference and out.has_nav
                 and self._first_nav() == out.label):
+            assert out.nav_pos is not None  # has_nav
             p = out.nav_pos[0]
             self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
                                      f"first navigation estimate of {out.label}")
@@ -239,6 +240,7 @@ class RunExport:
                 truth = item.slice(a, min(a + _REFERENCE_ROWS, len(item)))
                 poses = reference_poses(frame, truth)
                 self._file(f"{REFERENCE_LABEL}.tum").write(tum_lines(poses))
+                assert self._odometry is not None  # opened with the first rows
                 self._odometry.add(self._topics[REFERENCE_LABEL], poses)
             return
         out: FilterOutput = item
@@ -249,6 +251,8 @@ class RunExport:
             self._open(entry["csv"]).write(csv_header(cols))
         self._file(entry["csv"]).write(csv_rows(cols))
         if "tum" in entry and out.has_nav:
+            assert frame is not None and self._odometry is not None  # the first navigation rows
+            assert out.nav_pos is not None and out.nav_v_n is not None and out.nav_q_nb is not None
             poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
                               out.nav_cov)
             self._file(entry["tum"]).write(tum_lines(poses))

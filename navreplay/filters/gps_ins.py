@@ -313,12 +313,13 @@ class GpsInsFilter(InsFilter):
     def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
         """The IMU settings of ``ins`` and the GNSS noise of fixes without their own sigma."""
         out = super().settings_from_sensors(sensors)
+        gps = sensors.get("gps")  # read only where stated
         if sensors.has("gps", "pos_sigma"):
-            gm = sensors.gps.pos_gm_sigma if sensors.has("gps", "pos_gm_sigma") else 0.0
-            out["gps_pos_sigma"] = tuple(np.hypot(sensors.gps.pos_sigma, gm).tolist())
+            gm = gps.pos_gm_sigma if sensors.has("gps", "pos_gm_sigma") else 0.0
+            out["gps_pos_sigma"] = tuple(np.hypot(gps.pos_sigma, gm).tolist())
         if sensors.has("gps", "vel_sigma"):
-            gm = sensors.gps.vel_gm_sigma if sensors.has("gps", "vel_gm_sigma") else 0.0
-            out["gps_vel_sigma"] = tuple(np.hypot(sensors.gps.vel_sigma, gm).tolist())
+            gm = gps.vel_gm_sigma if sensors.has("gps", "vel_gm_sigma") else 0.0
+            out["gps_vel_sigma"] = tuple(np.hypot(gps.vel_sigma, gm).tolist())
         return out
 
     def __init__(self, params: GpsInsParams, context: FilterContext) -> None:
@@ -441,12 +442,13 @@ class GpsInsFilter(InsFilter):
         inn_code = np.zeros(n_inn, np.int64)
         inn_t, inn_nu, inn_S = np.empty(n_inn), np.empty((n_inn, 3)), np.empty((n_inn, 3, 3))
         f64 = np.ascontiguousarray
+        pos, pos_sigma = (f64(a, dtype=float) for a in cols[gnss.POSITION])
+        vel, vel_sigma = (f64(a, dtype=float) for a in cols[gnss.VELOCITY])
         done, m, k, self.nav, self.P, self.t = ev.run_events(
             self.nav, self.P, self.t, s,
             Imu(run.t, f64(run.imu["omega_ib_b"], dtype=float), f64(run.imu["f_b"], dtype=float)),
             ev.Events(run.ends, codes, run.rows, run.t_ev, run.record),
-            ev.Gnss(*(f64(a, dtype=float) for a in (*cols[gnss.POSITION], *cols[gnss.VELOCITY])),
-                    p.gps_pos_sigma_scale, p.gps_vel_sigma_scale),
+            ev.Gnss(pos, pos_sigma, vel, vel_sigma, p.gps_pos_sigma_scale, p.gps_vel_sigma_scale),
             ev.Options(p.estimate_lever_arm, self._gz is not None, self._ga is not None,
                        kalman.DEFAULT_RTOL),
             tu.step, tu.model, tu.work, ev.Rows(*run.out()),

@@ -220,7 +220,7 @@ def check_covariance(
     C = P / s[:, None] / s[None, :]
     asym = np.abs(C - C.T)
     if asym.max(initial=0.0) > rtol:
-        i, j = np.unravel_index(int(np.argmax(asym)), asym.shape)
+        i, j = (int(v) for v in np.unravel_index(int(np.argmax(asym)), asym.shape))
         raise FilterDivergedError(
             f"{name} is not symmetric: {name}[{i},{j}] = {P[i, j]:.6e} vs "
             f"{name}[{j},{i}] = {P[j, i]:.6e}",

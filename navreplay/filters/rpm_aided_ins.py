@@ -422,7 +422,7 @@ class RpmAidedIns(Filter):
         The biases are the turn-on biases of the IMU, as in the paper's model (Table 1; the
         scale factors and misalignments are states of their own)."""
         out: dict[str, Any] = {}
-        imu, log = sensors.imu, sensors.speed_log
+        imu, log = sensors.get("imu"), sensors.get("speed_log")  # read only where stated
         pairs = (("accel_noise", "imu", "accel_vrw"), ("gyro_noise", "imu", "gyro_arw"),
                  ("gyro_misalignment_sigma", "imu", "gyro_misalignment"),
                  ("gyro_scale_factor_sigma", "imu", "gyro_scale_factor"),

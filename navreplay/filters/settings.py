@@ -28,6 +28,7 @@ import dataclasses
 import enum
 import functools
 import re
+import typing
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -91,7 +92,7 @@ class FilterSettings:
     def summary(self) -> dict[str, Any]:
         """The ``settings`` entry of a run summary: per field ``{"value", "source", "unit"}``
         (SI, JSON values), in the order of the ``Params`` fields."""
-        units = field_units(type(self.params))
+        units = field_units(typing.cast(type, type(self.params)))
         out = {}
         for f in dataclasses.fields(self.params):
             entry = {"value": jsonable(getattr(self.params, f.name)),

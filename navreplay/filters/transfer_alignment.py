@@ -253,7 +253,7 @@ TABLE_2 = SensorSpecs(
      "master_ins": MasterInsModel(tilt=(3.0 * ARCMIN, 3.0 * ARCMIN, 5.0 * ARCMIN),
                                   synchro_bias=3.0 * ARCMIN, synchro_noise=1.0 * ARCMIN,
                                   vel_bias=0.7 * FOOT, vel_noise=0.3 * FOOT)},
-    known={"imu": ("accel_bias", "accel_misalignment")},
+    known={"imu": frozenset({"accel_bias", "accel_misalignment"})},
     sources={"imu": "Table 2 of docs/methods/transfer-alignment.md (the SDINS)",
              "master_ins": "the GINS of docs/methods/transfer-alignment.md §3.2"},
 )
@@ -437,6 +437,7 @@ class TransferAlignment(Filter):
     requires = (StreamKind.IMU, StreamKind.MASTER_INS)
     initial = ()  # starts from the first master INS sample
     Params = TransferAlignmentParams
+    params: TransferAlignmentParams
     scored_extras = (
         State("misalignment_euler", "rad", Quantity.MISALIGNMENT,
               TruthColumn("misalignment_euler")),
@@ -457,7 +458,7 @@ class TransferAlignment(Filter):
         ship's flexure and lever-arm motion besides the IMU noise
         (docs/methods/transfer-alignment.md §4.3)."""
         out: dict[str, Any] = {}
-        gins, imu = sensors.master_ins, sensors.imu
+        gins, imu = sensors.get("master_ins"), sensors.get("imu")  # read only where stated
 
         def rms(v: Any) -> float:
             return float(np.sqrt(np.mean(np.square(v))))
@@ -481,6 +482,7 @@ class TransferAlignment(Filter):
     def __init__(self, params: TransferAlignmentParams, context: FilterContext) -> None:
         super().__init__(params, context)
         p = params
+        arm: Any
         if p.lever_arm_r is not None:
             arm = p.lever_arm_r
         else:
@@ -617,6 +619,7 @@ class TransferAlignment(Filter):
         """(16), (17): start from the GINS attitude, lever-arm compensated GINS velocity."""
         p = self.params
         _, w_in = earth_terms(pos[0], pos[2], v_r)
+        assert self._w_last is not None and self._w_prev is not None  # an IMU block came first
         w_now = 1.5 * self._w_last - 0.5 * self._w_prev  # as in predict_and_measure()
         v_b = v_r + lever_velocity(q_m, q_m, w_now, w_in, self.lever_arm_r)
         self.nav = np.concatenate((lever_position(pos, q_m, self.lever_arm_r), v_b, q_m))

@@ -317,10 +317,11 @@ class VectorMatchingFilter(Filter):
 
         The sigmas of the consider states follow the variant (``paper`` has none)."""
         out: dict[str, Any] = {}
+        imu, mag = sensors.get("imu"), sensors.get("mag")  # read only where stated
         if sensors.has("imu", "accel_vrw") and sensors.has("mag", "rate"):
-            out["accel_noise_sigma"] = sensors.imu.accel_vrw * math.sqrt(sensors.mag.rate)
+            out["accel_noise_sigma"] = imu.accel_vrw * math.sqrt(mag.rate)
         if sensors.has("mag", "noise"):
-            out["mag_noise_sigma"] = sensors.mag.noise
+            out["mag_noise_sigma"] = mag.noise
         return out
 
     @classmethod
@@ -329,7 +330,7 @@ class VectorMatchingFilter(Filter):
         return SensorSpecs(
             {"imu": ImuModel(accel_vrw=ACCEL_NOISE_SIGMA / math.sqrt(rate)),
              "mag": MagnetometerModel(noise=MAG_NOISE_SIGMA, rate=rate)},
-            known={"imu": ("accel_vrw",), "mag": ("noise", "rate")},
+            known={"imu": frozenset({"accel_vrw"}), "mag": frozenset({"noise", "rate"})},
             sources={"imu": "Table 1 of docs/methods/vector-matching.md",
                      "mag": "Table 1 of docs/methods/vector-matching.md"})
 
@@ -429,6 +430,7 @@ class VectorMatchingFilter(Filter):
 
     def _initialise(self, cur: EpochSample) -> None:
         p = self.params
+        assert p.p0_sigma is not None  # filled from the variant
         self.q_nb = triad(cur.f_b, cur.m_b, self.ref.g_n, self.ref.h_n)
         if p.variant is Variant.PAPER:
             self.P = p.p0_sigma**2 * np.eye(N_STATES)
@@ -447,10 +449,11 @@ class VectorMatchingFilter(Filter):
     def _coast(self, cur: EpochSample) -> None:
         """An epoch without an accelerometer sample (IMU gap): predict only."""
         p = self.params
+        assert self._prev is not None and p.tau is not None  # an epoch before; from the variant
         phi, qd = process_noise(float(cur.t) - float(self._prev.t), p.tau, p.q_w)  # (16)-(18)
         if p.variant is Variant.PAPER:
             _, self.P = kalman.predict(np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
-                                       float(qd) * np.eye(N_STATES), t=cur.t)
+                                       float(qd) * np.eye(N_STATES), t=float(cur.t))
         else:
             # no measurement tests the rotation over a gap: the process noise applies; this
             # epoch's GNSS velocity becomes the previous one, with a fresh error
@@ -466,7 +469,7 @@ class VectorMatchingFilter(Filter):
     def _epoch(self, cur: EpochSample) -> Innovation:
         p = self.params
         prev = self._prev
-        assert prev is not None and self.q_nb is not None
+        assert prev is not None and self.q_nb is not None and p.tau is not None
         dt = float(cur.t) - float(prev.t)
         phi, qd = process_noise(dt, p.tau, p.q_w)  # (16)-(18)
         if p.variant is Variant.CONSISTENT:
@@ -486,11 +489,11 @@ class VectorMatchingFilter(Filter):
         else:
             _, P = kalman.predict(
                 np.zeros(N_STATES), self.P, float(phi) * np.eye(N_STATES),
-                float(qd) * np.eye(N_STATES), t=cur.t,
+                float(qd) * np.eye(N_STATES), t=float(cur.t),
             )
             m, a_n = epoch_measurement(p, self.ref, quat_to_dcm(self.q_nb), cur.f_b, cur.m_b,
                                        cur.v_n, prev.v_n, cur.vel_sigma, prev.vel_sigma, dt)
-            c = kalman.correct(np.zeros(N_STATES), P, *m, t=cur.t)
+            c = kalman.correct(np.zeros(N_STATES), P, *m, t=float(cur.t))
             self.q_nb = feedback(self.q_nb, c.x[QE])  # x_hat <- 0
             self.P = c.P
             if p.model is MatchModel.GRAVITY:
@@ -524,7 +527,7 @@ class VectorMatchingFilter(Filter):
             z, H_q = measurement(p.model, C, cur.f_b, cur.m_b, a_n, self.ref.g_n, self.ref.h_n)
             cc = consider_columns(C, cur.f_b, cur.m_b, dt)
             H = np.concatenate([H_q, cc[:, :15], np.zeros((N_MEAS, 3)), cc[:, 15:]], axis=1)
-            return kalman.correct(x, Pa, z, H, R, frozen=frozen, t=cur.t)
+            return kalman.correct(x, Pa, z, H, R, frozen=frozen, t=float(cur.t))
 
         q_prev = self._q_fix  # the fix of the last epoch
         c = correct(self.q_nb) if qd is None or p.manoeuvre_threshold > 0.0 else None
@@ -533,6 +536,7 @@ class VectorMatchingFilter(Filter):
             Pa[QE, QE] += qd * np.eye(3)  # the vehicle turned: unknown rotation since k-1
             c = correct(self.q_nb)
             wide = p.manoeuvre_threshold > 0.0
+        assert c is not None  # corrected in one of the branches above
         first = c
         self.q_nb = feedback(self.q_nb, c.x[QE])  # x_hat <- 0
         if wide:
@@ -680,6 +684,7 @@ def run_batch(
     diag = np.zeros((B, K, 3)) if gravity_model and diagnostic else None
 
     q = triad(f_b[:, 0], m_b[:, 0], ref.g_n, ref.h_n)
+    assert params.p0_sigma is not None and params.tau is not None  # filled from the variant
     P = np.broadcast_to(params.p0_sigma**2 * np.eye(N_STATES), (B, N_STATES, N_STATES)).copy()
     q_out[:, 0], P_out[:, 0] = q, P
     eye = np.eye(N_STATES)

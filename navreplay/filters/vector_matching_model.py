@@ -255,12 +255,14 @@ class VectorMatchingParams(FilterParams):
         """Chi-square(3) value above which the rotation measured over the last step is
         significant (inf: never; turn model ``constant-rate`` with a manoeuvre test only)."""
         a = self.manoeuvre_false_alarm
+        assert a is not None  # filled from the variant
         return math.inf if a == 0.0 or a >= 1.0 else chi2.ppf(1.0 - a, 3)
 
     @property
     def manoeuvre_threshold(self) -> float:
         """NIS above which an epoch gets the process noise (inf: never; 0: always)."""
         a = self.manoeuvre_false_alarm
+        assert a is not None  # filled from the variant
         return 0.0 if a == 0.0 else (math.inf if a >= 1.0 else chi2.ppf(1.0 - a, N_MEAS))
 
 

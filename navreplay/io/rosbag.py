@@ -20,7 +20,7 @@ import dataclasses
 import os
 import sqlite3
 import warnings
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +33,15 @@ from navreplay.io.convert import REDUCE, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.schemas import SPECS, normalize_type_name
 from navreplay.io.source import COMPLETE, Source, Window
-from navreplay.io.topics import build_stream, candidate, choose_topics, sample_times, topic_map
+from navreplay.io.topics import (
+    FrameNames,
+    TopicNames,
+    build_stream,
+    candidate,
+    choose_topics,
+    sample_times,
+    topic_map,
+)
 
 
 def bag_folder(path: Path) -> Path | None:
@@ -156,8 +164,8 @@ class BagSource(Source):
         *,
         kinds: Iterable[StreamKind | str] | None = None,
         explicit: bool = False,
-        topics: Mapping[StreamKind | str, str] | None = None,
-        frames: Mapping[StreamKind | str, Convention | str] | None = None,
+        topics: TopicNames | None = None,
+        frames: FrameNames | None = None,
         time: str = "header",
         validate: bool = True,
         window: int | None = None,
@@ -442,7 +450,7 @@ def _count_file(path: Path, storage: str) -> tuple[dict[str, int], int | None, i
     from navreplay.io.info import recording_info
 
     info = recording_info(path)
-    counts: dict[str, int] = {}
+    per_topic: dict[str, int] = {}
     for t in info.topics:
-        counts[t.topic] = counts.get(t.topic, 0) + t.count
-    return counts, info.start_ns, info.end_ns, info.damage
+        per_topic[t.topic] = per_topic.get(t.topic, 0) + t.count
+    return per_topic, info.start_ns, info.end_ns, info.damage

@@ -295,7 +295,8 @@ def _show(field: str, value: float) -> str:
 
 def triad_table(triad: Triad, a: allan.TriadAnalysis) -> list[str]:
     """The fitted terms of one triad: per axis, the triad value and its interval."""
-    rows = [(f"{triad.name}", "x", "y", "z", "triad", f"{allan.CONFIDENCE:.0%} interval")]
+    rows: list[tuple[str, ...]] = [
+        (f"{triad.name}", "x", "y", "z", "triad", f"{allan.CONFIDENCE:.0%} interval")]
     for key, field in triad.fields.items():
         unit = ImuModel.field_units[field].datasheet
         shown = [_value(f.values()[key], field, f, key) for f in a.axis_fits]

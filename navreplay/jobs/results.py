@@ -116,6 +116,7 @@ class Outputs:
             with self._writing():
                 written = self._export.close()
             self._export = None
+            assert self.export_dir is not None  # an export was asked for
             notes.append(f"Exported {len(written)} files to {self.export_dir} "
                          f"(see {self.export_dir / export.MANIFEST})")
         if self.report_path is not None:

@@ -270,22 +270,18 @@ def campaign(
             from navreplay.viz.ensemble import log_ensemble, log_runs
 
             declared = {spec.label: getattr(spec.filter_cls, "states", None) for spec in filters}
-            for label, e in ens.items():
+            for label, result in ens.items():
                 states = declared.get(label)
-                log_ensemble(sink, label, e, states if isinstance(states, tuple) else None)
+                log_ensemble(sink, label, result, states if isinstance(states, tuple) else None)
             log_runs(sink, drill)
         hint = close_output(sink, viz_options)
     except BaseException:
         if sink is not None:
             sink.abort()
         raise
-    summary = {
-        "runs": rows,
-        "ensemble": {label: {**e.summary(), **settings.get(label, {})}
-                     for label, e in ens.items()},
-        "wall_seconds": done.seconds,
-    }
-    notes += outputs.write_ensemble(ens, summary["ensemble"], title=title)
+    ensemble = {label: {**e.summary(), **settings.get(label, {})} for label, e in ens.items()}
+    summary = {"runs": rows, "ensemble": ensemble, "wall_seconds": done.seconds}
+    notes += outputs.write_ensemble(ens, ensemble, title=title)
     if summary_path is not None:
         write_json(summary_path, summary)
     parts = []

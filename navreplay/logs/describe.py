@@ -59,6 +59,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     options = options or LogOptions()
     path = Path(path)
     damage = None
+    listing: list[tuple[str, str, int, int | None, int | None]]
     if file_kind(path).name == "rosbag2":
         from navreplay.io.rosbag import bag_topics, check_bag
 
@@ -115,6 +116,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     if problem is not None:
         return LogDescription("\n".join([*lines, "", f"streams: cannot be read: {problem}"]),
                               damage, problem)
+    assert recording is not None  # read, or a problem above
     lines += ["", f"streams (what `navreplay run` replays; times from {options.time} "
                   f"{'stamps' if options.time == 'header' else 'times'}):"]
     for kind, src in sources.items():
@@ -122,9 +124,9 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         axes = (f"{src.convention.value.upper()}: {src.reason}" if src.convention
                 else "no axes to convert")
         lines.append(f"  {kind.value:<8} <- {src.topic}: {axes}{picked}")
-        gaps = gap_report(recording[kind], recording.t0_ns)
-        if gaps:
-            lines.append(f"  {'':<8}    {gaps}")
+        stream_gaps = gap_report(recording[kind], recording.t0_ns)
+        if stream_gaps:
+            lines.append(f"  {'':<8}    {stream_gaps}")
     for w in caught:
         text = str(w.message)
         if "several topics" in text or "header stamps" in text:

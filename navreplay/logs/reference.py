@@ -378,6 +378,7 @@ def read_reference(spec: str, log: Path, recording: Recording,
 
 def origin_from_gnss(ref: Reference, recording: Recording) -> np.ndarray:
     """Geodetic origin (lat, lon, h) of a local reference fitted to the GNSS fixes."""
+    assert ref.local_ned is not None  # a local reference
     return _gnss_fit(ref, ref.local_ned, recording)[0]
 
 

@@ -146,6 +146,7 @@ def run_metrics(
     truth = ref.at(result.t)
     nav = None
     if result.nav_pos is not None:
+        assert result.nav_v_n is not None and result.nav_q_nb is not None  # with the position
         nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth,
                          result.navigation)
     nav_for_states = nav if nav is not None else NavErrors(*(np.full((M, 3), np.nan),) * 4)

@@ -116,7 +116,8 @@ class RunScorer:
         keep = max(int(np.searchsorted(ts, self.t0_ns + round(t[-1] * 1e9), side="right")) - 1,
                    0)
         if keep:
-            self._offset += float(ref.distance(np.array([(int(ts[keep]) - self.t0_ns) * 1e-9]))[0])
+            self._offset += float(np.asarray(
+                ref.distance(np.array([(int(ts[keep]) - self.t0_ns) * 1e-9])))[0])
             self._truth = self._truth.slice(keep, len(self._truth))
 
     def coverage(self) -> float:

@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -185,7 +186,7 @@ class ReplaySession:
         self._imu_required = StreamKind.IMU in filter_cls.requires
         self._pacing, self._progress, self._live = pacing, progress, live
         self._observe_interval = observe_interval
-        self._meta = dict(
+        self._meta: dict[str, Any] = dict(
             filter_name=filter_cls.name,
             label=label,
             recording=source,

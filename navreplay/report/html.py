@@ -75,8 +75,10 @@ def summary_table(summaries: Mapping[str, Mapping[str, Any]]) -> str:
         cells = []
         for k in keys:
             v = s.get(k)
-            ok = isinstance(v, int | float) and math.isfinite(float(v))
-            cells.append(f"<td>{f'{float(v) * summary_unit(k)[1]:.4g}' if ok else '–'}</td>")
+            if isinstance(v, int | float) and math.isfinite(float(v)):
+                cells.append(f"<td>{float(v) * summary_unit(k)[1]:.4g}</td>")
+            else:
+                cells.append("<td>–</td>")
         rows.append(f"<tr><td>{html.escape(label)}</td>{''.join(cells)}</tr>")
     return f"<table><tr><th>filter</th>{head}</tr>{''.join(rows)}</table>"
 
@@ -210,8 +212,10 @@ class RunSeries:
             k = 0
             for key, _, axes, _, _, row in groups:
                 for i in range(len(axes)):
-                    self.nav[k].value.add(m.t, getattr(m.nav, key)[:, i])
-                    self.nav[k].sigma.add(m.t, sig[:, row + i])
+                    trace = self.nav[k]
+                    assert trace.sigma is not None  # made with one
+                    trace.value.add(m.t, getattr(m.nav, key)[:, i])
+                    trace.sigma.add(m.t, sig[:, row + i])
                     k += 1
         others = [(j, name) for j, name in enumerate(m.state_names) if name not in out.nav_states]
         if not self.states and others:
@@ -219,6 +223,7 @@ class RunSeries:
             self.states = [_Trace(name, *_display(units.get(name, "-")), sigma=Envelope())
                            for _, name in others]
         for trace, (j, _) in zip(self.states, others, strict=True):
+            assert trace.sigma is not None  # made with one
             trace.value.add(m.t, m.state_error[:, j])
             trace.sigma.add(m.t, np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
         if m.nees_states:

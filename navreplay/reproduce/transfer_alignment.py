@@ -62,7 +62,7 @@ SCENARIO = "ship-transfer-alignment"
 FILTER = "transfer-alignment"
 PARTIAL, FULL, VEL_ONLY = "vel_quat_partial", "vel_quat_full", "vel_only"
 PARTIAL_FLEX, FULL_FLEX = f"{PARTIAL}+flexure", f"{FULL}+flexure"
-VARIANTS = {
+VARIANTS: dict[str, dict[str, object]] = {
     PARTIAL: {"match": PARTIAL, "flexure_sigma": 0.0, "quat_model": "paper"},
     FULL: {"match": FULL, "flexure_sigma": 0.0, "quat_model": "paper"},
     VEL_ONLY: {"match": VEL_ONLY, "quat_model": "paper"},

@@ -67,7 +67,7 @@ import difflib
 import math
 import typing
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 from navreplay.core import units
 from navreplay.core.params import ParamError, describe
@@ -90,6 +90,8 @@ SPEC_KINDS: dict[str, type] = {
 }
 """Sensor kinds (the ``[sensors.KIND]`` tables, the keys of ``Metadata.sensors``) and their
 records."""
+
+M = TypeVar("M")
 
 SOURCE_KEY = "source"
 """The key of a kind's entry in ``Metadata.sensors`` that says where the record came from."""
@@ -151,6 +153,15 @@ class SensorSpecs:
     def get(self, kind: str) -> Any:
         """The record of ``kind``, or None."""
         return self.models.get(kind)
+
+    def require(self, model: type[M]) -> M:
+        """The record of the kind whose class is ``model`` (``specs.require(GpsModel)``), for
+        code that cannot run without it; a ValueError naming the kind when there is none."""
+        kind = next(k for k, cls in SPEC_KINDS.items() if cls is model)
+        found = self.models.get(kind)
+        if found is None:
+            raise ValueError(f"no {kind} specification (sensors: {', '.join(self.models) or 'none'})")
+        return found  # checked against SPEC_KINDS on creation
 
     @property
     def imu(self) -> ImuModel | None:
@@ -295,7 +306,7 @@ def _split_key(cls: type, key: str) -> tuple[str, str | None]:
     return name, units.key_unit(key[len(name) + 1:])
 
 
-def _value(cls: type, name: str, raw: Any, key_unit: str | None) -> Any:
+def _value(cls: Any, name: str, raw: Any, key_unit: str | None) -> Any:
     """The value of field ``name`` in its own unit from a TOML value."""
     si = cls.field_units[name].si
 
@@ -391,7 +402,7 @@ def spec_from_table(
     return model, known, source
 
 
-def _expected(cls: type, name: str) -> str:
+def _expected(cls: Any, name: str) -> str:
     """How field ``name`` is written, e.g. ``rad/s^(1/2), such as "0.1 deg/sqrt(h)"``."""
     unit = cls.field_units[name]
     dims = units.dimension_phrase(units.parse_unit(unit.si).dims)

@@ -154,7 +154,8 @@ class Catalog:
 
     def signature(self) -> tuple:
         """What the blueprint depends on (to resend it only when this changes)."""
-        world = None if self.world is None else tuple(np.round(np.r_[self.world], 1))
+        world = (None if self.world is None
+                 else tuple(float(v) for v in np.round(np.concatenate(self.world), 1)))
         return (
             tuple((t, k, len(p.paths)) for t, plots in self.plots.items() for k, p in plots.items()),
             world,

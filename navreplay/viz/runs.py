@@ -165,8 +165,8 @@ class RunView(TruthView):
             label, scale = self._unit(run, key, result, a, b)
             path = entity_path(L, "extra", key)
             k = flat.shape[1]
-            legend = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
-            self._style(path, legend, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
+            names = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
+            self._style(path, names, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
             self._scalars(path, idx, flat * scale)
             self.catalog.add("states", f"extra:{key}", f"{key} [{label}]", path,
                              rank=RANK_EXTRA)
@@ -187,6 +187,8 @@ class RunView(TruthView):
         L = run.label
         t = result.t[a:b]
         parts = result.navigation
+        assert result.nav_pos is not None and result.nav_v_n is not None
+        assert result.nav_q_nb is not None  # logged for a result with a navigation solution
         nav = convert.NavColumns(t, result.nav_pos[a:b], result.nav_v_n[a:b], result.nav_q_nb[a:b])
         if self._ref is None and "pos" in parts:
             finite = np.flatnonzero(np.isfinite(nav.pos).all(axis=1))
@@ -219,11 +221,12 @@ class RunView(TruthView):
                     continue
                 s = nav_sigma[n]
                 errors[n] = (e, s if np.isfinite(s).any() else None)
-        for n, (e, s) in errors.items():
+        for n, (e, sd) in errors.items():
             u = display_unit(NAV_UNITS[n])
             path = entity_path(L, "error", n)
-            self._bounded(path, idx, e * u.scale, None if s is None else s * u.scale, L, run.color)
-            bounds = "" if s is None else ", ±3σ"
+            self._bounded(path, idx, e * u.scale, None if sd is None else sd * u.scale, L,
+                          run.color)
+            bounds = "" if sd is None else ", ±3σ"
             self.catalog.add(quantity_of(n).value, f"error:{n}@{L}",
                              f"{L}: {title(n, u, 'error')}{bounds}", path,
                              rank=RANK_ERROR + run.order, legend=False)

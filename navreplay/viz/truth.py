@@ -53,6 +53,7 @@ class TruthView(WorldView):
         nav = truth_nav(stream, t0)
         if self._ref is None and nav.t.shape[0]:
             self._ref = nav.pos[0].copy()
+        assert self._ref is not None, "the first truth window has rows"
         ned = convert.local_ned(nav.pos, self._ref)
         finite = ned[np.isfinite(ned).all(axis=1)]
         if finite.shape[0]:

@@ -72,7 +72,7 @@ import datetime
 import enum
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -117,7 +117,8 @@ class Axis(enum.StrEnum):
         return cls.__members__.get(value.upper()) if isinstance(value, str) else None
 
     @property
-    def index(self) -> int:
+    def column(self) -> int:
+        """The column of the axis in a NED vector."""
         return "NED".index(self.value)
 
 
@@ -132,7 +133,8 @@ class BodyAxis(enum.StrEnum):
         return cls.__members__.get(value.upper()) if isinstance(value, str) else None
 
     @property
-    def index(self) -> int:
+    def column(self) -> int:
+        """The column of the body axis in a vector."""
         return "xy".index(self.value)
 
 
@@ -449,17 +451,17 @@ def truth_from_segments(
 def sweep_segments(p: GimpoAccelSweepParams) -> list[Segment]:
     """Rest, then ``accel_g`` along the navigation axis (= body axis: yaw stays 0)."""
     a_b = [0.0, 0.0, 0.0]
-    a_b[p.axis.index] = p.accel_g * G0
-    return [Segment(p.rest, p.duration, 0.0, tuple(a_b))]
+    a_b[p.axis.column] = p.accel_g * G0
+    return [Segment(p.rest, p.duration, 0.0, (a_b[0], a_b[1], a_b[2]))]
 
 
 def yaw_segments(p: GimpoAccelYawParams) -> list[Segment]:
     """+A along the body axis while turning +90 deg; coast; -A while turning back."""
     a_b = [0.0, 0.0, 0.0]
-    a_b[p.case.index] = p.accel_g * G0
-    minus = tuple(-a for a in a_b)
+    a_b[p.case.column] = p.accel_g * G0
+    minus = (-a_b[0], -a_b[1], -a_b[2])
     return [
-        Segment(10.0, 10.0 + YAW_WINDOW, YAW_RATE, tuple(a_b)),
+        Segment(10.0, 10.0 + YAW_WINDOW, YAW_RATE, (a_b[0], a_b[1], a_b[2])),
         Segment(20.0, 20.0 + YAW_WINDOW, -YAW_RATE, minus),
     ]
 
@@ -569,7 +571,7 @@ def simulate_runs(p: GimpoParams, truth: Truth, seeds: Sequence[int],
         v_n=np.stack([r.v_n for r in runs]),
         vel_sigma=np.stack([r.vel_sigma for r in runs]),
         accel_bias=np.stack([r.accel_bias for r in runs]),
-        errors=[r.errors for r in runs],
+        errors=[cast(tuple[ImuErrors, MagnetometerErrors], r.errors) for r in runs],
     )
 
 
@@ -602,7 +604,8 @@ class GimpoScenario(Scenario):
                 raise ValueError(f"the {kind} rate of gimpo recordings is the scenario's rate "
                                  f"({p.rate:g} Hz), got {sensors.get(kind).rate:g} Hz")
         truth = self.truth(p)
-        data = measure(SensorModels(sensors.imu, sensors.mag, sensors.gps), p.dt, truth, rng)
+        data = measure(SensorModels(sensors.require(ImuModel), sensors.require(MagnetometerModel),
+                                    sensors.require(GpsModel)), p.dt, truth, rng)
         t0_ns = utc_ns(p.start)
         t_ns = nanoseconds(truth.t, t0_ns)
         streams = {
