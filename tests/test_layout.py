@@ -136,7 +136,8 @@ part, as the filters' models and compiled kernels are modules of their own)."""
 
 
 def test_the_top_level_holds_rooms() -> None:
-    loose = sorted(p.name for p in ROOT.glob("*.py") if p.name not in ("__init__.py", "__main__.py"))
+    loose = sorted(p.name for p in ROOT.glob("*.py")
+                   if p.name not in ("__init__.py", "__main__.py"))
     assert not loose, f"modules outside a room: {loose}"
     rooms = {p.name for p in ROOT.iterdir() if (p / "__init__.py").is_file()}
     assert rooms == set(ROOMS) | set(APPLICATIONS), rooms ^ (set(ROOMS) | set(APPLICATIONS))

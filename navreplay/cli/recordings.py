@@ -152,7 +152,7 @@ def allan(recording: str, topic: str | None, start: float | None, end: float | N
         except ValueError as e:
             raise click.BadParameter(str(e), param_hint="--plot") from None
     check_command_outputs(force, [recording], output_of(spec, "-o"), output_of(plot, "--plot"),
-                   output_of(save, "--save"))
+                          output_of(save, "--save"))
     job = AllanJob(recording=Path(recording), topic=topic, start=start, end=end,
                    spec_path=Path(spec) if spec else None, plot_path=Path(plot) if plot else None,
                    view_path=Path(save) if save else None, bootstrap=bootstrap, time=time)

@@ -1,4 +1,5 @@
-"""Replaying filters: ``run`` (recordings, rosbag2 bags) and ``montecarlo`` (simulated campaigns)."""
+"""Replaying filters: ``run`` (recordings, rosbag2 bags) and ``montecarlo`` (simulated
+campaigns)."""
 
 from __future__ import annotations
 
@@ -97,9 +98,9 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
     cfg = load_config(config, "filter", "topics", "frames", "initial", "sensors", "imu_range")
     specs = jobs.filter_specs(names, refs, params, cfg)
     check_command_outputs(force, [*args, config, reference if is_file(reference) else None],
-                   viz_output(save, no_viz, spawn or serve or bool(connect)),
-                   output_of(summary, "--summary"), export_output(export, specs),
-                   output_of(report, "--report"))
+                          viz_output(save, no_viz, spawn or serve or bool(connect)),
+                          output_of(summary, "--summary"), export_output(export, specs),
+                          output_of(report, "--report"))
     job = jobs.RunJob(
         filters=specs,
         recordings=tuple(Path(a) for a in args),
@@ -169,10 +170,11 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     filter_items = [p for p in params if not p.startswith("scenario.")]
     cfg = load_config(config, "scenario", "filter", "sensors")
     specs = jobs.filter_specs(filter_names, refs, filter_items, cfg)
-    check_command_outputs(force, [config], output_of(keep, "--keep", directory=True, writes=("*.mcap",)),
-                   viz_output(save, no_viz, spawn or serve or bool(connect)),
-                   output_of(summary, "--summary"), export_output(export, specs),
-                   output_of(report, "--report"))
+    check_command_outputs(force, [config],
+                          output_of(keep, "--keep", directory=True, writes=("*.mcap",)),
+                          viz_output(save, no_viz, spawn or serve or bool(connect)),
+                          output_of(summary, "--summary"), export_output(export, specs),
+                          output_of(report, "--report"))
     job = jobs.MonteCarloJob(
         scenario=scenario,
         filters=specs,
