@@ -306,13 +306,12 @@ class ReplaySession:
 
     def _skip_to_start(self, t_ns: np.ndarray, cols: dict[str, np.ndarray], start: int
                        ) -> tuple[np.ndarray, dict[str, np.ndarray], int]:
-        """The IMU samples from the last one at or before the filter's start on (that one
-        handed over: the initial solution holds at it), so that neither the propagation nor
-        the output ticks run before the start; until a later sample arrives, the last one is
-        kept as handed over."""
+        """The IMU samples from the last one before the filter's start on (that one handed
+        over), so that neither the propagation nor the output ticks run before the start;
+        until a sample at or after the start arrives, the last one is kept as handed over."""
         assert self._start_ns is not None
-        k = int(np.searchsorted(t_ns, self._start_ns, side="right"))
-        if k == 0:  # every sample is later: nothing to skip, now or after
+        k = int(np.searchsorted(t_ns, self._start_ns, side="left"))
+        if k == 0:  # no sample before the start: nothing to skip, now or after
             self._start_ns = None
             return t_ns, cols, start
         t_ns, cols = t_ns[k - 1:], {name: v[k - 1:] for name, v in cols.items()}
