@@ -411,6 +411,10 @@ def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
                      show_default=True,
                      help="Sample times: header stamps (log times where the stamps are zero "
                           "or do not increase, with a warning), or the log (receive) times."),
+        click.option("--start", "start", metavar="T",
+                     help="Read from this time on: s from the recording start, UNIX s, or a "
+                          "UTC time (2025-06-15T14:02:00Z); the filters start there."),
+        click.option("--end", "end", metavar="T", help="Read up to this time (as --start)."),
         click.option("--imu-range", "imu_range", metavar="gyro=DEG_PER_S,accel=G",
                      help="The IMU's measurement range per axis (datasheet); a sample beyond "
                           "it stops the run [default: gyro=20000,accel=200; or an [imu_range] "
@@ -427,7 +431,8 @@ def _log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
               help="TOML file with [topics] and [frames] tables.")
 def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_frame: bool,
-         time: str, imu_range: str | None, config: str | None) -> None:
+         time: str, start: str | None, end: str | None, imu_range: str | None,
+         config: str | None) -> None:
     """Topics, types, frames, rates, gaps and metadata of a RECORDING (MCAP file, rosbag2
     folder or .db3), and which stream each topic feeds.
 
@@ -442,9 +447,10 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_fra
 
     described = describe_log(recording, log_options(
         topics, frames, config=_load_config(config, "topics", "frames", "imu_range"),
-        time=time, imu_range_text=imu_range, force_frames=force_frame))
+        time=time, imu_range_text=imu_range, force_frames=force_frame, start=start,
+        end=end))
     click.echo(described.text)
-    report = None if file_kind(recording).name == "rosbag2" else recording_info(recording)
+    report = recording_info(recording) if file_kind(recording).name == "mcap" else None
     if described.damage:
         count = f"{report.message_count} messages readable; " if report is not None else ""
         raise click.ClickException(f"{recording}: DAMAGED ({count}see above)")
@@ -512,9 +518,9 @@ def filters(name: str | None) -> None:
 @cli.command()
 @click.argument("recording", type=click.Path())
 @click.option("--topic", metavar="TOPIC", help="The IMU topic (default: the recording's IMU).")
-@click.option("--start", type=float, metavar="S", help="Segment start [s from the recording "
-              "start].")
-@click.option("--end", type=float, metavar="S", help="Segment end [s from the recording start].")
+@click.option("--start", metavar="T", help="Segment start: s from the recording start, UNIX s, "
+              "or a UTC time (2025-06-15T14:02:00Z).")
+@click.option("--end", metavar="T", help="Segment end (as --start).")
 @click.option("-o", "--output", "spec", type=click.Path(dir_okay=False), metavar="SPEC.toml",
               help="Write the fitted noise as a [sensors.imu] table (for simulate/run --config).")
 @click.option("--plot", type=click.Path(dir_okay=False), metavar="FIG.png|FIG.svg",
@@ -527,7 +533,7 @@ def filters(name: str | None) -> None:
 @click.option("--time", "time", type=click.Choice(["header", "log"]), default="header",
               show_default=True, help="Sample times: header stamps or log (receive) times.")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
-def allan(recording: str, topic: str | None, start: float | None, end: float | None,
+def allan(recording: str, topic: str | None, start: str | None, end: str | None,
           spec: str | None, plot: str | None, save: str | None, bootstrap: int, time: str,
           force: bool) -> None:
     """Allan deviation of a still IMU segment and the noise terms fitted to it.
@@ -699,6 +705,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         summary: str | None, workers: int, executor: str, rate: float | None,
         output_rate: float,
         topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
+        start: str | None, end: str | None,
         imu_range: str | None, init: str | None, reference: str | None, no_frame_check: bool,
         export: str | None, report: str | None, max_imu_gap: float | None,
         force: bool) -> None:
@@ -738,7 +745,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         max_imu_gap=max_imu_gap,
         log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
                         sensors=_sensor_config(config, cfg), imu_range_text=imu_range,
-                        force_frames=force_frame),
+                        force_frames=force_frame, start=start, end=end),
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None, force=force,
     )

@@ -830,6 +830,12 @@ class RunExport:
         """A window of the truth stream (``pos``, ``v_n``, ``q_nb``), later than before."""
         if not len(truth):
             return
+        if "pos" not in truth.columns:
+            # no pose to write (its velocity or attitude scores the CSV's errors): the frame
+            # is the first filter's, as without a reference
+            self.has_reference = False
+            self._feed("ref", None)
+            return
         if self._frame is None:
             p = truth["pos"][0]
             self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
@@ -909,8 +915,11 @@ class RunExport:
         return None
 
     def _feed(self, kind: str, item: Any) -> None:
+        if item is None and self._started:
+            return
         if not self._started:
-            self._held.append((kind, item))
+            if item is not None:
+                self._held.append((kind, item))
             # the frame comes from the reference when there is one (else from the first
             # filter with a position): wait for it, whatever the filters output
             if len(self._nav) == len(self.labels) and (

@@ -273,12 +273,17 @@ def run_figures(series: RunSeries, color: str,
 
 def write_run_report(path: Path, runs: Sequence[RunSeries],
                      summaries: Mapping[str, Mapping[str, Any]], *, title: str,
-                     force: bool = False) -> Path:
-    """Write the HTML report of filters replayed over one recording (their series)."""
+                     force: bool = False, log_notes: Sequence[str] = ()) -> Path:
+    """Write the HTML report of filters replayed over one recording (their series);
+    ``log_notes``: what the log's preparation said (reference, frame checks, the initial
+    state and its source), one line each."""
     from navreplay import figures
 
     check_targets([Path(path)], force, "--report")
     body = ["<h2>Summary</h2>"]
+    if log_notes:
+        body.insert(0, "<h2>The log</h2><ul>" + "".join(
+            f"<li>{html.escape(n)}</li>" for n in log_notes) + "</ul>")
     if summaries:
         body.append(summary_table(summaries))
     else:

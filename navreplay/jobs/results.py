@@ -109,8 +109,10 @@ class Outputs:
             for name, s in block.innovations.items():
                 series.add_nis(name, s.t, s.nis, int(s.nu.shape[1]))
 
-    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str) -> list[str]:
-        """Finish the exports and write the report of filters replayed over one recording."""
+    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str,
+                  log_notes: Sequence[str] = ()) -> list[str]:
+        """Finish the exports and write the report of filters replayed over one recording
+        (``log_notes``: the log's reference, checks and initial state, for the report)."""
         notes = []
         if self._export is not None:
             with self._writing():
@@ -122,7 +124,7 @@ class Outputs:
             from navreplay import report
 
             report.write_run_report(self.report_path, list(self._series.values()), summaries,
-                                    title=title, force=self.force)
+                                    title=title, force=self.force, log_notes=log_notes)
             notes.append(f"Report written to {self.report_path}")
         return notes
 

@@ -186,7 +186,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
         notes = list(source.notes) + setting_notes(done.summaries.values())
         if done.salvaged:
             notes.append(salvaged_note(str(path), done.coverage))
-        notes += outputs.write_run(done.summaries, title=title)
+        notes += outputs.write_run(done.summaries, title=title, log_notes=source.notes)
         hint = close_output(sink, job.viz)
     except BaseException:
         outputs.abort()

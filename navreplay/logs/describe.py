@@ -11,7 +11,8 @@ from pathlib import Path
 
 from navreplay.io.checks import gap_report, read_policy
 from navreplay.io.errors import RecordingError
-from navreplay.io.files import file_kind, read_streams
+from navreplay.io.files import BAGS, file_kind, read_streams
+from navreplay.io.gins import NAV_TYPE
 from navreplay.io.info import format_info, recording_info
 from navreplay.logs.options import LogOptions
 from navreplay.logs.reference import REFERENCE_TYPES
@@ -59,16 +60,21 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     options = options or LogOptions()
     path = Path(path)
     damage = None
-    if file_kind(path).name == "rosbag2":
+    kind = file_kind(path)
+    if kind.name in BAGS:
         from navreplay.io.rosbag import bag_topics, check_bag
 
         check = check_bag(path)
         found = check.found if check is not None and check.found is not None else {}
         listing = [(t, ty, found.get(t, n), None, None) for t, ty, _, n in bag_topics(path)]
-        lines = [f"{path}  (rosbag2, {sum(r[2] for r in listing)} messages)"]
+        lines = [f"{path}  ({kind.name}, {sum(r[2] for r in listing)} messages)"]
         if check is not None and check.problems:
             damage = "; ".join(check.problems)
             lines.append(f"DAMAGED: the data files disagree with metadata.yaml: {damage}")
+    elif kind.name != "mcap":  # a log read straight into streams (io.direct)
+        listing = [(t.name, t.type_name, t.count, None, None)
+                   for t in kind.source(path).topics()]
+        lines = [f"{path}  ({kind.name}, {sum(r[2] for r in listing)} messages)"]
     else:
         info = recording_info(path)
         listing = [(t.topic, t.schema or "-", t.count, t.start_ns, t.end_ns)
@@ -86,12 +92,23 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
                                                   time=options.time)
         except RecordingError as exc:
             recording, sources, problem = None, {}, str(exc)
+    if recording is not None and options.span is not None:
+        try:
+            lo, hi = options.span.bounds(recording.t0_ns)
+        except ValueError as exc:
+            raise RecordingError(f"{path}: {exc}") from None
+        lines.append("--start/--end: the streams below over "
+                     f"{options.span.describe(recording.t0_ns)}")
+        for kind, s in list(recording.streams.items()):
+            a = 0 if lo is None else int(s.t_ns.searchsorted(lo))
+            b = len(s) if hi is None else int(s.t_ns.searchsorted(hi, side="right"))
+            recording.streams[kind] = s.slice(a, max(a, b))
     by_topic = {src.topic: kind for kind, src in sources.items()}
     rows = [("topic", "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
              "end [s]", "gaps")]
     for topic, type_name, count, start, end in listing:
         kind = by_topic.get(topic)
-        stream = "(reference)" if type_name in REFERENCE_TYPES else "-"
+        stream = "(reference)" if type_name in (*REFERENCE_TYPES, NAV_TYPE) else "-"
         frame, axes, gaps = "", "", ""
         if kind is not None and recording is not None:
             s, src = recording[kind], sources[kind]
@@ -100,6 +117,8 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             gaps = "yes" if gap_report(s, recording.t0_ns) else "no"
             if len(s):  # the stream's sample times (header stamps or log times)
                 start, end = int(s.t_ns[0]), int(s.t_ns[-1])
+            if options.span is not None:
+                count = len(s)
         t0 = recording.t0_ns if recording is not None else (start or 0)
         span = (end - start) * 1e-9 if start is not None and end is not None else 0.0
         rows.append((topic, type_name, stream, frame, axes, str(count),
