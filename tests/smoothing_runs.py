@@ -17,6 +17,8 @@ OUTAGES = ((100.0, 30.0), (180.0, 60.0))
 """GNSS outages (start [s], length [s])."""
 GRADE = "consumer"
 """An industrial MEMS IMU: metres to tens of metres of drift in a minute without GNSS."""
+GNSS = {"gps_pos_sigma_h": 0.5, "gps_pos_sigma_v": 1.0}
+"""Differential GNSS, as a survey is post-processed."""
 DEV_SEEDS = (100, 101, 102, 103)
 """Seeds the smoother was developed on (and nothing else)."""
 
@@ -38,7 +40,8 @@ def drop_gnss(rec: Recording, outages=OUTAGES) -> Recording:
 
 
 def drive(seed: int, duration: float = DURATION) -> Recording:
-    return drop_gnss(simulate("vehicle-drive", {"duration": duration, "imu_grade": GRADE},
+    return drop_gnss(simulate("vehicle-drive", {"duration": duration, "imu_grade": GRADE,
+                                                 **GNSS},
                               seed=seed))
 
 
