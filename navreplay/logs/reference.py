@@ -24,7 +24,9 @@ CSV file (``.csv``)
     A header row naming the columns; ``t`` [s, UNIX or since the start as for TUM] or ``t_ns``
     [ns UNIX]; position as ``lat_deg, lon_deg, h`` or local ``x, y, z``; optional velocity
     ``v_N, v_E, v_D`` [m/s]; optional attitude ``roll_deg, pitch_deg, yaw_deg`` (FRD -> NED) or
-    ``qw, qx, qy, qz`` (body -> world, as for TUM).
+    ``qw, qx, qy, qz`` (body -> world, as for TUM). Names with their unit in brackets, as
+    ``navreplay run --export`` writes them (``stamp [ns]``, ``lat [deg]``, ``v_N [m/s]``), are
+    read as ``t_ns``, ``lat_deg``, ``v_N``: an exported run (a smoothed one) is a reference.
 
 Local positions need the geodetic position of the world origin: ``lat_deg``/``lon_deg``/``h``
 of the ``[initial]`` table when given, else a fit to the log's NavSatFix stream: the origin is the
@@ -37,6 +39,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -250,6 +253,19 @@ def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
     return type_name, items
 
 
+def _plain(column: str) -> str:
+    """A CSV column name with its unit in brackets, as ``navreplay run --export`` writes them
+    (``stamp [ns]``, ``lat [deg]``, ``v_N [m/s]``), under the name this reader takes
+    (``t_ns``, ``lat_deg``, ``v_N``); other names as they are."""
+    m = re.fullmatch(r"(.+?) \[(.+)\]", column)
+    if m is None:
+        return column
+    name, unit = m.groups()
+    if name == "stamp" and unit == "ns":
+        return "t_ns"
+    return f"{name}_deg" if unit == "deg" else name
+
+
 def _table(path: Path, csv_header: bool
            ) -> tuple[list[str] | None, np.ndarray, np.ndarray | None]:
     """Rows of numbers of a TUM (whitespace) or CSV (a header row, commas) file; blank lines
@@ -269,7 +285,7 @@ def _table(path: Path, csv_header: bool
     if csv_header:
         if not lines:
             raise ReferenceError(f"{where}: no header row")
-        header = [c.strip() for c in next(csv.reader([lines.pop(0)[1]]))]
+        header = [_plain(c.strip()) for c in next(csv.reader([lines.pop(0)[1]]))]
     rows = (csv.reader(line for _, line in lines) if csv_header
             else (line.split() for _, line in lines))
     width = len(header) if header is not None else None

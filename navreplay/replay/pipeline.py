@@ -317,7 +317,7 @@ def _replay_file(
                                 scored=_fan_out(stages)) if score else None)
             paths = backward(store, session.filter,  # type: ignore[arg-type]
                              tracker.backward(i, store.epochs))
-            meta = {**session._meta, "label": label, "scored_extras": (),
+            meta = {**session._meta, "label": label, "scored_extras": (), "measurements": (),
                     "navigation": session.navigation}
             _feed_smoothed(smoothed_blocks(paths, meta), truth_store, scorer, stages,
                            has_truth)
