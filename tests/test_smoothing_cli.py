@@ -2,12 +2,19 @@
 non-smoothable filter named once, and a smoothed export read back as ``--reference``."""
 
 import json
+import tempfile
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from mcap.reader import make_reader
 
 from navreplay.cli import cli
-from navreplay.io import write_recording
+from navreplay.export import RunExport, filter_output
+from navreplay.io import read_recording, write_recording
+from navreplay.io.source import MemorySource
+from navreplay.replay.pipeline import Collect, replay_file
+from navreplay.replay.spec import FilterSpec
 from navreplay.sim.scenario import simulate
 
 
@@ -66,3 +73,30 @@ def test_non_smoothable_filter_is_named_once(drive, tmp_path):
 def test_smooth_needs_one_recording(drive):
     res = invoke("run", "gps-ins", drive, drive, "--smooth", "--no-viz")
     assert res.exit_code != 0 and "--smooth needs a single recording" in res.output
+
+
+def test_exports_do_not_wait_for_the_smoothed_run(drive):
+    """The smoothed rows come after the last window: the exports write the forward rows as
+    they come (nothing held for the smoothed label), and the Odometry MCAP gets every row of
+    both."""
+    rec = read_recording(drive)
+    collect = Collect()
+    replay_file(MemorySource(rec, "d"), [FilterSpec("gps-ins")], stages=[collect], smooth=True,
+                score=False)
+    res = collect.results()
+    fwd, rts = res["gps-ins"], res["gps-ins/rts"]
+    with tempfile.TemporaryDirectory() as tmp:
+        ex = RunExport(Path(tmp), ["gps-ins", "gps-ins/rts"], has_reference=False,
+                       late={"gps-ins/rts": "gps-ins"})
+        half = fwd.t.shape[0] // 2
+        ex.add(filter_output(fwd.rows(0, half)))
+        assert not ex._held  # started on the forward rows alone
+        ex.add(filter_output(fwd.rows(half, fwd.t.shape[0])))
+        ex.add(filter_output(rts.rows(0, rts.t.shape[0])))
+        ex.close()
+        with open(Path(tmp) / "estimates.mcap", "rb") as f:
+            counts = {}
+            for _, channel, _ in make_reader(f).iter_messages():
+                counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    assert counts == {"/estimates/gps_ins/odom": fwd.t.shape[0],
+                      "/estimates/gps_ins_rts/odom": rts.t.shape[0]}

@@ -66,6 +66,10 @@ class RunStart:
     metadata : Metadata
     truth_columns : dict[str, str]
         Truth columns that declared states are scored against, with their SI units.
+    late : dict[str, str]
+        Labels whose rows all come after the last window (the smoothed runs), each with the
+        label of the run it follows (the same states and parts of the solution): a stage must
+        not hold the other labels' rows until they come.
     """
 
     source: str
@@ -74,6 +78,7 @@ class RunStart:
     has_truth: bool
     metadata: Metadata
     truth_columns: dict[str, str] = dataclasses.field(default_factory=dict)
+    late: dict[str, str] = dataclasses.field(default_factory=dict)
 
 
 class Stage(Protocol):
@@ -272,7 +277,9 @@ def _replay_file(
                 smoothing=stores.get(k)))
         columns = {st.truth.column: st.unit for s in sessions for st in s.states
                    if isinstance(st.truth, TruthColumn)}
-        start = RunStart(source.name, tuple(all_labels), t0_ns, has_truth, metadata, columns)
+        late = {smoothed_label(sessions[k].label): sessions[k].label for k in stores}
+        start = RunStart(source.name, tuple(all_labels), t0_ns, has_truth, metadata, columns,
+                         late)
         for stage in stages:
             stage.start(start)
         estimates = [0] * len(specs)
