@@ -109,10 +109,11 @@ def at_update_epochs(result: RunResult, rate: float = UPDATE_RATE) -> RunResult:
 @dataclasses.dataclass
 class RunScores:
     """One run of the campaign: metrics per label at the update epochs; for the first run also
-    the current estimate of ``rpm-current`` (t (K,), estimate (K, 2), truth (2,)) for Fig. 3."""
+    the current estimate of ``rpm-current`` (t (K,), estimate (K, 2), truth (2,), sigma (K, 2))
+    for Fig. 3."""
 
     metrics: dict[str, RunMetrics]
-    current: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    current: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def extract(recording: Recording, results: dict[str, RunResult], task: RunTask) -> RunScores:
@@ -123,7 +124,7 @@ def extract(recording: Recording, results: dict[str, RunResult], task: RunTask) 
         res = at_update_epochs(results["rpm-current"])
         i = [res.state_names.index(n) for n in ("vc_N", "vc_E")]
         truth = np.asarray(recording.metadata.true_errors["current_n"], dtype=float)[:2]
-        out.current = (res.t, res.x[:, i], truth)
+        out.current = (res.t, res.x[:, i], truth, np.sqrt(res.P[:, i, i]))
     return out
 
 
@@ -132,7 +133,7 @@ class _Collector:
 
     def __init__(self) -> None:
         self.stats = {label: EnsembleStats(label) for label in MODES}
-        self.current: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.current: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self.seconds = 0.0
 
     def __call__(self, out: RunOutput) -> None:
@@ -156,7 +157,7 @@ def run_campaign(
     Returns
     -------
     stats : dict label -> EnsembleResult
-    current : (t, estimate (K, 2), truth (2,)) of run 1, or None
+    current : (t, estimate (K, 2), truth (2,), sigma (K, 2)) of run 1, or None
     wall : float
         Wall time [s], simulation included.
     worker_seconds : float
@@ -343,7 +344,8 @@ def figures(stats: Mapping[str, EnsembleResult], current: tuple | None) -> dict[
         "dt_cep50": {label: s.dt_cep50 for label, s in stats.items()},
     }
     if current is not None:
-        figs["current_run1"] = {"t": current[0], "estimate": current[1], "truth": current[2]}
+        figs["current_run1"] = {"t": current[0], "estimate": current[1], "truth": current[2],
+                                "sigma": current[3]}
     return figs
 
 
@@ -397,7 +399,9 @@ class RpmAidedInsReproduction(Reproduction):
     def log_view(sink: Any, figs: Mapping[str, Any]) -> None:
         """Log the Figs. 3-5 equivalents into an open :class:`navreplay.viz.Sink`.
 
-        ``/ensemble/fig3 current ...`` (current estimate of run 1 against the truth, and the
+        ``/ensemble/fig3 current ...`` (current estimate of run 1 with its 1-sigma bounds
+        against the truth: it ends within them, not on the truth, docs/methods/rpm-aided-ins.md
+        §4.8; and the
         RMS of the current error with the filter's sigma), ``/ensemble/fig4 longitude error RMS``
         and ``/ensemble/fig5 latitude error RMS`` (the three modes overlaid, each with its mean
         predicted sigma), the run-averaged position NEES with its 95 % band, and DT CEP50 over time.
@@ -409,7 +413,10 @@ class RpmAidedInsReproduction(Reproduction):
             for j, axis in enumerate("NE"):
                 sink.log_ensemble(
                     f"fig3 current {axis} (run 1)", ct,
-                    {"estimate": c["estimate"][:, j], "truth": np.full(ct.shape, c["truth"][j])},
+                    {"estimate": c["estimate"][:, j],
+                     "estimate + sigma": c["estimate"][:, j] + c["sigma"][:, j],
+                     "estimate - sigma": c["estimate"][:, j] - c["sigma"][:, j],
+                     "truth": np.full(ct.shape, c["truth"][j])},
                     unit="m/s",
                 )
         for j, axis in enumerate("NE"):
