@@ -1,4 +1,4 @@
-"""The RTS smoother of ``navreplay run gps-ins REC --smooth --no-viz``: the time of its
+"""The RTS smoother of ``navreplay run gps-ins REC --smooth --no-viz --export DIR``: the time of its
 backward pass against the forward pass, and the peak memory against the log's length.
 
 Each figure comes from a fresh interpreter running the job on a simulated ``vehicle-drive``
@@ -9,7 +9,8 @@ stores each output's transition and covariances on disk), ``backward`` the backw
 the stored chunks (:func:`navreplay.replay.smoothing.backward`), ``scoring`` the smoothed run
 through its scorer; ``plain`` is the same job without ``--smooth`` (the compiled fast path),
 for comparison. The peak is ``VmHWM`` (:func:`benchmarks.peak_rss`) of the process with and
-without ``--smooth``. The chunks go to a temporary directory beside the recording.
+without ``--smooth``. The exports and the chunks go to a temporary directory beside the
+recording.
 
 Usage::
 
