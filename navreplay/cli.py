@@ -255,12 +255,14 @@ def _out(path: str | Path | None, option: str, **kw: Any) -> Any:
     return None if path is None else Output(Path(path), option, **kw)
 
 
-def _export_out(path: str | None, specs: Sequence[Any]) -> Any:
-    """The ``--export DIR`` output, with the names of the files it writes for these filters."""
+def _export_out(path: str | None, specs: Sequence[Any], smooth: bool = False) -> Any:
+    """The ``--export DIR`` output, with the names of the files it writes for these filters
+    (and their smoothed runs with ``smooth``)."""
     from navreplay.jobs.results import export_names
+    from navreplay.jobs.smooth import output_labels
 
     return _out(path, "--export", directory=True,
-                writes=export_names([spec.label for spec in specs]))
+                writes=export_names(output_labels(specs, smooth)))
 
 
 def _viz_out(save: str | None, no_viz: bool, live: bool) -> Any:
@@ -698,6 +700,10 @@ def _looks_like_recording(arg: str) -> bool:
               help="Skip the gravity and magnetic-dip checks of the frames.")
 @_result_flags
 @_max_imu_gap
+@click.option("--smooth", is_flag=True,
+              help="Also smooth every filter that can be (fixed-interval RTS smoother, "
+                   "docs/smoothing.md): its result LABEL/rts is scored, shown and exported "
+                   "as a filter's.")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, bind: str | None,
@@ -708,7 +714,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         start: str | None, end: str | None,
         imu_range: str | None, init: str | None, reference: str | None, no_frame_check: bool,
         export: str | None, report: str | None, max_imu_gap: float | None,
-        force: bool) -> None:
+        smooth: bool, force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b
@@ -719,6 +725,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
       navreplay run --filter mypkg.myfilter:MyFilter drive.mcap
       navreplay run gps-ins runs/*.mcap --workers 2      # ensemble statistics
       navreplay run ins,gps-ins drive.mcap --export out/drive --report out/drive.html
+      navreplay run gps-ins drive.mcap --smooth --export out/drive   # + gps-ins/rts
     """
     from navreplay import jobs
 
@@ -734,7 +741,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
     specs = jobs.filter_specs(names, refs, params, cfg)
     _check_outputs(force, [*args, config, reference if _is_file(reference) else None],
                    _viz_out(save, no_viz, spawn or serve or bool(connect)),
-                   _out(summary, "--summary"), _export_out(export, specs),
+                   _out(summary, "--summary"), _export_out(export, specs, smooth),
                    _out(report, "--report"))
     job = jobs.RunJob(
         filters=specs,
@@ -747,7 +754,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
                         sensors=_sensor_config(config, cfg), imu_range_text=imu_range,
                         force_frames=force_frame, start=start, end=end),
         export_dir=Path(export) if export else None,
-        report_path=Path(report) if report else None, force=force,
+        report_path=Path(report) if report else None, force=force, smooth=smooth,
     )
     label = "replay" if len(args) == 1 else f"replay {len(args)} recordings"
     with _Progress(label) as progress:

@@ -708,10 +708,12 @@ class _OdometryWriter:
     in the order the topics were registered), each topic's poses handed over in time order.
 
     A message is written once every topic has poses later than it; the rest wait (a window's
-    worth), :meth:`finish` writes them all.
+    worth), :meth:`finish` writes them all. The ``late`` topics (of runs whose poses all come
+    after the others', the smoothed runs) are written as they come, after the others' up to
+    then: nothing waits for them.
     """
 
-    def __init__(self, path: Path, topics: Sequence[str]) -> None:
+    def __init__(self, path: Path, topics: Sequence[str], late: Sequence[str] = ()) -> None:
         from mcap.writer import CompressionType, Writer
 
         from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
@@ -725,12 +727,19 @@ class _OdometryWriter:
                      for topic in topics}
         # per topic: (stamps, CDR messages as rows of bytes) not yet written
         self._queue: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {t: [] for t in topics}
-        self._last: dict[str, int | None] = dict.fromkeys(topics)
+        self._late = frozenset(late)
+        self._last: dict[str, int | None] = dict.fromkeys(t for t in topics if t not in late)
 
     def add(self, topic: str, poses: Poses) -> None:
         if not len(poses.stamps_ns):
             return
         rec = encode_odometry(poses)  # as rows of bytes (concatenating records repacks them)
+        if topic in self._late:
+            add, cid = self._w.add_message, self._ids[topic]
+            rows = rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)
+            for ti, row in zip(poses.stamps_ns.tolist(), rows, strict=True):
+                add(cid, ti, row.tobytes(), ti)
+            return
         self._queue[topic].append((poses.stamps_ns,
                                    rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)))
         self._last[topic] = int(poses.stamps_ns[-1])
@@ -801,9 +810,13 @@ class RunExport:
     """
 
     def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
-                 source: str = "", force: bool = False) -> None:
+                 source: str = "", force: bool = False,
+                 late: Mapping[str, str] | None = None) -> None:
         self.out_dir = Path(out_dir)
         self.labels = tuple(labels)
+        self.late = dict(late or {})
+        """Labels whose rows come after every other's (smoothed runs), each with the label whose
+        solution parts it shares: nothing waits for them."""
         self.has_reference = has_reference
         self.source = source
         self.force = force
@@ -850,6 +863,9 @@ class RunExport:
             self._empty.setdefault(out.label, out)
             return
         self._nav.setdefault(out.label, out.has_nav)
+        for late, follows in self.late.items():
+            if follows == out.label:
+                self._nav.setdefault(late, out.has_nav)
         if (self._frame is None and not self.has_reference and out.has_nav
                 and self._first_nav() == out.label):
             p = out.nav_pos[0]
@@ -962,7 +978,8 @@ class RunExport:
         if topics:
             target = self.out_dir / ODOMETRY_FILE
             tmp = temporary_path(target)
-            self._odometry = _OdometryWriter(tmp, topics)
+            self._odometry = _OdometryWriter(
+                tmp, topics, late=[self._topics[x] for x in self.late if x in self._topics])
             self._tmp[target] = (tmp, self._odometry)
         held, self._held = self._held, []
         # estimates first: the reference then goes out piece by piece instead of queueing

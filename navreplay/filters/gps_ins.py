@@ -359,12 +359,16 @@ class GpsInsFilter(InsFilter):
         self._sync_covariance()
         f64 = np.ascontiguousarray
         value, sigma = f64(value, dtype=float), f64(sigma, dtype=float)
-        ok, nav, P, nu, S = gnss.gps_update(
-            code, self.nav, self.P, value, sigma, scale, lag, self.omega_ib_b, self.b_a,
-            self.b_g, self.lever_arm_b, p.estimate_lever_arm, self.gyro_z,
-            -1 if self._gz is None else self._gz.start, self.accel_k,
-            -1 if self._ga is None else self._ga.start, kalman.DEFAULT_RTOL)  # (4)-(12)
-        if not ok:  # the checked path names what is wrong
+        ok = False
+        if self._smoothing is None:
+            ok, nav, P, nu, S = gnss.gps_update(
+                code, self.nav, self.P, value, sigma, scale, lag, self.omega_ib_b, self.b_a,
+                self.b_g, self.lever_arm_b, p.estimate_lever_arm, self.gyro_z,
+                -1 if self._gz is None else self._gz.start, self.accel_k,
+                -1 if self._ga is None else self._ga.start, kalman.DEFAULT_RTOL)  # (4)-(12)
+        else:  # smoothing: the same update, its correction kept (in _feedback)
+            self._smoothing_prior()
+        if not ok:  # the checked path names what is wrong (and keeps the correction)
             c = kalman.correct(np.zeros(self.P.shape[0]), self.P, *self._measurement(
                 code, value, sigma * scale, lag), t=t)
             self.P = c.P
@@ -415,7 +419,8 @@ class GpsInsFilter(InsFilter):
         ``update`` or ``estimate`` gets the default (its runs of ticks still compiled when
         :class:`~navreplay.filters.ins.InsFilter`'s kernel applies).
         """
-        if overrides(self, GpsInsFilter, "propagate", "update", "estimate"):
+        if (overrides(self, GpsInsFilter, "propagate", "update", "estimate")
+                or self._smoothing is not None):
             return super().run_events(run)
         p = self.params
         kinds, samples = run.kinds, run.samples

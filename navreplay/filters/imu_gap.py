@@ -73,6 +73,7 @@ def bridge(
     rate_sigma: float,
     q: np.ndarray,
     vertical: ie.Vertical = ie.Vertical.HEIGHT,
+    phi_out: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The navigation vector and covariance after a piece of a gap (eqs. 1-5).
 
@@ -91,6 +92,8 @@ def bridge(
     q : ndarray, shape (n,)
         Process noise density diagonal of the filter [state^2/s].
     vertical : Vertical
+    phi_out : ndarray, shape (n, n), optional
+        Receives the transition Phi of (2) (for a smoother).
 
     Returns
     -------
@@ -114,6 +117,8 @@ def bridge(
     Q = np.diag(np.asarray(q, dtype=np.float64) * T)
     Q += motion_noise(nav, n, (t1, t2), accel_sigma, rate_sigma, vertical)  # (3), (4)
     P = Phi @ P @ Phi.T + Q  # (5)
+    if phi_out is not None:
+        phi_out[:, :] = Phi
     return nav, 0.5 * (P + P.T)
 
 

@@ -125,6 +125,7 @@ from navreplay.filters.base import (
     overrides,
     state_names,
 )
+from navreplay.filters.ins_smoothing import InsSmoothing
 from navreplay.filters.registry import register_filter
 from navreplay.geo.earth import OMEGA_IE
 from navreplay.sensors.imu import ImuGrade, imu_grade
@@ -413,7 +414,7 @@ constants in ``metadata.true_errors["imu"]``."""
 
 
 @register_filter
-class InsFilter(Filter):
+class InsFilter(Filter, InsSmoothing):
     """Free-inertial navigation with the predicted error covariance (see the module docstring)."""
 
     name: ClassVar[str] = "ins"
@@ -563,8 +564,12 @@ class InsFilter(Filter):
             return
         self._sync_covariance()
         p = self.params
+        phi = np.empty(self.P.shape) if self._smoothing is not None else None
         self.nav, self.P = imu_gap.bridge(self.nav, self.P, (self.t - since, t - since),
-                                          p.gap_accel_sigma, p.gap_rate_sigma, self._noise.q)
+                                          p.gap_accel_sigma, p.gap_rate_sigma, self._noise.q,
+                                          phi_out=phi)
+        if phi is not None:
+            self._smoothing_transition(phi)
         self.t = t
         self._time_update.prev[:] = 0.0  # no coning/sculling across the gap
         kalman.check_covariance(self.P, t=self.t)
@@ -583,7 +588,7 @@ class InsFilter(Filter):
         :meth:`propagate` over its IMU segment and :meth:`estimate`, bit for bit. Other runs,
         and every run of a subclass that changes :meth:`propagate` or :meth:`estimate`, go
         through the default."""
-        if (overrides(self, InsFilter, "propagate", "estimate")
+        if (overrides(self, InsFilter, "propagate", "estimate") or self._smoothing is not None
                 or (run.codes != TICK).any() or not run.record.all()):
             return super().run_events(run)
         m = len(run)
@@ -616,6 +621,7 @@ class InsFilter(Filter):
 
     def _feedback(self, dx: np.ndarray) -> None:
         """Subtract estimated errors (n,) from the navigation solution and the estimates."""
+        self._smoothing_feedback(dx)
         self.nav = ie.apply_correction(self.nav, dx)
         self.b_a = self.b_a - dx[ie.BA]
         self.b_g = self.b_g - dx[ie.BG]

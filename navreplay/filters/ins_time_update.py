@@ -61,7 +61,8 @@ class Model(NamedTuple):
 class Work(NamedTuple):
     """Scratch arrays of the covariance step (:func:`_scratch`): F (15, nc), M (9, nc),
     T (9, n), Q (n, n), the columns ``cols`` (nc,) of the states F reaches, and the means
-    (2, 3) of an open step."""
+    (2, 3) of an open step; ``Phi`` (n, n) the product of the steps' transitions when it is
+    kept for a smoother (:meth:`TimeUpdate.keep_transition`), else (0, 0)."""
 
     F: np.ndarray
     M: np.ndarray
@@ -69,6 +70,7 @@ class Work(NamedTuple):
     Q: np.ndarray
     cols: np.ndarray
     mean: np.ndarray
+    Phi: np.ndarray
 
 
 class Open(NamedTuple):
@@ -125,7 +127,7 @@ def _covariance_step(
     ``gz >= 0``, + 6 with ``ga >= 0``).
     """
     q, k_acc, k_gyro, depth, curvature, gz, ga = model
-    F, M, T, Q, cols, _ = work
+    F, M, T, Q, cols = work.F, work.M, work.T, work.Q, work.cols
     n = P.shape[0]
     F[:, :] = 0.0
     C = kernels.quat_to_dcm(nav[6:10])
@@ -142,6 +144,8 @@ def _covariance_step(
                 for r in range(3):
                     F[3 + r, c + 3 * j + i] = -C[r, i] * f_b[j]
     kalman.transition_rows_kernel(F, M.shape[0], dt, M)  # kalman (3)
+    if work.Phi.shape[0] == n:  # kept for a smoother: Phi <- Phi_step Phi, T as scratch
+        _chain_transition(work.Phi, M, cols, T)
     for i in range(n):
         Q[i, i] = q[i] * dt  # kalman (4), diagonal (20)
     if k_acc > 0.0:  # (21): |a_n|^2 = |C f_b + g_n|^2, g on the ellipsoid
@@ -161,6 +165,27 @@ def _covariance_step(
     return kalman.predict_rows_kernel(P, M, cols, Q, T)  # kalman (6)
 
 
+@numba.njit(cache=True, inline="always")
+def _chain_transition(Phi: np.ndarray, M: np.ndarray, cols: np.ndarray, T: np.ndarray) -> None:
+    """``Phi <- Phi_step Phi`` for a step transition that is the identity but for its first r
+    rows, ``Phi_step[0:r, cols] = M`` (as :func:`navreplay.filters.kalman.predict_rows_kernel`
+    takes it): only rows 0..r-1 of Phi change. T (r, n) is scratch."""
+    n = Phi.shape[0]
+    r, nc = M.shape
+    for i in range(r):
+        for j in range(n):
+            T[i, j] = 0.0
+        for k in range(nc):
+            a = M[i, k]
+            if a != 0.0:
+                p = cols[k]
+                for j in range(n):
+                    T[i, j] += a * Phi[p, j]
+    for i in range(r):
+        for j in range(n):
+            Phi[i, j] = T[i, j]
+
+
 def _scratch(n: int, gz: int, ga: int) -> Work:
     """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro z-rate states at
     ``gz``, accelerometer states at ``ga``, or none for -1) and the means of
@@ -172,7 +197,7 @@ def _scratch(n: int, gz: int, ga: int) -> Work:
         cols = np.concatenate([cols, np.arange(ga, ga + N_ACCEL_HF, dtype=np.int64)])
     nc = cols.shape[0]
     return Work(np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
-                np.zeros((n, n)), cols, np.zeros((2, 3)))
+                np.zeros((n, n)), cols, np.zeros((2, 3)), np.zeros((0, 0)))
 
 
 @numba.njit(cache=True)
@@ -503,6 +528,23 @@ class TimeUpdate:
         self.prev = np.zeros(6)
         """Increments [dtheta, dv] of the last sample [rad, m/s]."""
         self.open_step = OpenStep()
+
+    def keep_transition(self) -> None:
+        """From now on, keep the product of the covariance steps' transitions (for a
+        smoother): :meth:`take_transition` hands it over."""
+        n = self._shape[0]
+        self.work = self.work._replace(Phi=np.eye(n))
+
+    def take_transition(self) -> np.ndarray:
+        """The transition of the error state over the covariance steps since the last call
+        (or :meth:`keep_transition`), and start the next; the steps of the open one are not in
+        it yet (close it first)."""
+        Phi = self.work.Phi
+        if Phi.shape[0] != self._shape[0]:
+            raise RuntimeError("the transition is not kept: call keep_transition first")
+        out = Phi.copy()
+        Phi[:, :] = np.eye(Phi.shape[0])
+        return out
 
     def propagate(
         self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,

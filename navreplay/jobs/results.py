@@ -74,7 +74,7 @@ class Outputs:
         if self.export_dir is not None:
             self._export = export.RunExport(self.export_dir, run.labels,
                                             has_reference=run.has_truth, source=run.source,
-                                            force=self.force)
+                                            force=self.force, late=getattr(run, "late", {}))
         if self.report_path is not None:
             from navreplay.report import RunSeries
 

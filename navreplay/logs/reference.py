@@ -24,7 +24,9 @@ CSV file (``.csv``)
     A header row naming the columns; ``t`` [s, UNIX or since the start as for TUM] or ``t_ns``
     [ns UNIX]; position as ``lat_deg, lon_deg, h`` or local ``x, y, z``; optional velocity
     ``v_N, v_E, v_D`` [m/s]; optional attitude ``roll_deg, pitch_deg, yaw_deg`` (FRD -> NED) or
-    ``qw, qx, qy, qz`` (body -> world, as for TUM).
+    ``qw, qx, qy, qz`` (body -> world, as for TUM). Names with their unit in brackets, as
+    ``navreplay run --export`` writes them (``stamp [ns]``, ``lat [deg]``, ``v_N [m/s]``), are
+    read as ``t_ns``, ``lat_deg``, ``v_N``: an exported run (a smoothed one) is a reference.
 
 Local positions need the geodetic position of the world origin: ``lat_deg``/``lon_deg``/``h``
 of the ``[initial]`` table when given, else a fit to the log's NavSatFix stream: the origin is the
@@ -338,7 +340,8 @@ COLUMN_NAMES: dict[str, tuple[str, ...]] = {
     "qz": ("qz", "q_z", "quat_z", "ori_z"),
 }
 """The CSV reference columns and the names each is recognised by (compared in lower case,
-a trailing unit in brackets or parentheses dropped: ``lat [deg]``, ``Altitude(m)``); other
+a trailing unit in brackets or parentheses dropped: ``lat [deg]``, ``Altitude(m)``; a time
+in ``[ns]`` is ``t_ns``); other
 columns are ignored."""
 
 _ALIASES = {alias: name for name, aliases in COLUMN_NAMES.items() for alias in aliases}
@@ -350,8 +353,11 @@ def column_names(names: list[str], where: str) -> list[str]:
     out: list[str] = []
     seen: dict[str, str] = {}
     for raw in names:
-        key = re.sub(r"\s*[\[(].*[\])]\s*$", "", raw.strip()).strip().lower()
-        name = _ALIASES.get(key, raw.strip())
+        m = re.fullmatch(r"(.*?)\s*[\[(](.*)[\])]", raw.strip())
+        key, unit = (m.group(1), m.group(2).strip().lower()) if m else (raw.strip(), "")
+        name = _ALIASES.get(key.strip().lower(), raw.strip())
+        if name == "t" and unit == "ns":  # ``stamp [ns]``, as navreplay's exports write it
+            name = "t_ns"
         if name in seen:
             raise ReferenceError(f"{where}: columns {seen[name]!r} and {raw!r} both give {name}")
         seen[name] = raw

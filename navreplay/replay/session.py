@@ -50,6 +50,7 @@ from navreplay.filters.base import (
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.filters.result import RunResult
 from navreplay.filters.settings import FilterSettings, build_params
+from navreplay.filters.smoothable import Smoothable
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, Window
 from navreplay.lifecycle import from_signal
@@ -68,6 +69,7 @@ from navreplay.replay.errors import (
 )
 from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.plan import EventPlan, aiding_kinds, merge_streams, window_plan
+from navreplay.replay.smoothing import ForwardStore
 from navreplay.replay.spec import FilterSpec
 from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import Stream, StreamKind
@@ -137,6 +139,7 @@ class ReplaySession:
         live: Rows | None = None,
         observe_interval: float = 0.25,
         progress: Progress | None = None,
+        smoothing: ForwardStore | None = None,
     ) -> None:
         filter_cls = spec.filter_cls
         label = spec.label
@@ -163,6 +166,13 @@ class ReplaySession:
                                   f"{one_line(e)} (a filter raises an Exception; it never "
                                   "ends the process)") from None
         self.filter: Filter = filt
+        self.smoothing = smoothing
+        """Where the forward pass is stored for the smoother (None: not smoothed)."""
+        if smoothing is not None:
+            if not isinstance(filt, Smoothable):
+                raise ReplayError(f"filter {label!r} cannot be smoothed (it does not declare "
+                                  "navreplay.filters.smoothable.Smoothable)")
+            filt.start_smoothing()
         self.states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
         try:
             self.navigation = navigation_parts(filter_cls, self.states)
@@ -504,6 +514,8 @@ class _Events:
             self.columns = Columns(est, self.upper, navigation=s.navigation)
         columns = self.columns
         columns.add(est)
+        if s.smoothing is not None:
+            s.smoothing.add(est, s.filter.smoothing_step())  # type: ignore[attr-defined]
         if columns.m - self.checked >= CHECK_EVERY:
             columns.check(self.checked, s.label, s.source, s._names)
             self.checked = columns.m
@@ -516,6 +528,10 @@ class _Events:
 
     def written(self, m: int, nav: np.ndarray, checked: bool) -> None:
         s = self.session
+        if s.smoothing is not None:
+            raise ReplayError(f"filter {s.label!r}: a compiled run wrote estimates while "
+                              "smoothing; a Smoothable filter takes its events one by one "
+                              "once start_smoothing is called")
         columns = self.columns
         assert columns is not None
         m0 = columns.m
