@@ -318,6 +318,15 @@ class GpsInsFilter(InsFilter):
             out["gps_vel_sigma"] = tuple(np.hypot(sensors.gps.vel_sigma, gm).tolist())
         return out
 
+    @classmethod
+    def modelled_terms(cls, params: FilterParams) -> dict[str, frozenset[str]]:
+        """The IMU terms of ``ins`` and the GNSS white noise (R); the time-correlated errors
+        are not modelled: R holds them as white (the velocity's only where it is used)."""
+        gps = {"pos_sigma", "vel_sigma"}
+        if not params.use_gps_vel:  # the velocities are not used
+            gps |= {"vel_gm_sigma"}
+        return {**super().modelled_terms(params), "gps": frozenset(gps)}
+
     def __init__(self, params: GpsInsParams, context: FilterContext) -> None:
         self.lever_arm_b = np.array(params.lever_arm_b, dtype=float)
         super().__init__(params, context)

@@ -124,7 +124,7 @@ from navreplay.filters.base import (
 )
 from navreplay.filters.registry import register_filter
 from navreplay.geo.earth import OMEGA_IE
-from navreplay.sensors.imu import ImuGrade, imu_grade
+from navreplay.sensors.imu import ImuGrade, ImuModel, imu_grade
 from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import StreamKind
 from navreplay.units import G0
@@ -432,6 +432,14 @@ class InsFilter(Filter):
     @classmethod
     def default_sensors(cls) -> SensorSpecs:
         return TACTICAL
+
+    @classmethod
+    def modelled_terms(cls, params: FilterParams) -> dict[str, frozenset[str]]:
+        """Every IMU error term: white noise and bias random walks in Q, turn-on bias,
+        instability, scale factor, misalignment and g-sensitivity in the initial sigmas of the
+        effective biases (:func:`imu_settings`) and in the scale-factor and misalignment
+        states."""
+        return {"imu": frozenset(ImuModel.error_terms)}
 
     def __init__(self, params: InsParams, context: FilterContext) -> None:
         super().__init__(params, context)

@@ -58,6 +58,14 @@ class GpsModel:
         "rate": FieldUnit("Hz", "Hz"),
     }
     """Unit of each field in SI and in datasheets."""
+    error_terms: ClassVar[Mapping[str, str]] = {
+        "pos_sigma": "white position noise",
+        "pos_gm_sigma": "time-correlated (Gauss-Markov) position error",
+        "vel_sigma": "white velocity noise",
+        "vel_gm_sigma": "time-correlated (Gauss-Markov) velocity error",
+    }
+    """The fields that are error magnitudes, each with what it is
+    (:attr:`navreplay.sensors.imu.ImuModel.error_terms`)."""
 
     pos_sigma: float | Vec3 = (2.5, 2.5, 5.0)
     """White position noise per axis N, E, D [m]."""

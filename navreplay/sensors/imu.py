@@ -78,6 +78,24 @@ class ImuModel:
         "accel_rw": FieldUnit("m/s^2/sqrt(s)", "ug/sqrt(s)"),
     }
     """Unit of each field in SI and in datasheets (``gyro_arw``: rad/sqrt(s), deg/sqrt(h))."""
+    error_terms: ClassVar[Mapping[str, str]] = {
+        "gyro_bias": "gyro turn-on bias",
+        "gyro_bias_instability": "gyro bias instability",
+        "gyro_scale_factor": "gyro scale factor",
+        "gyro_misalignment": "gyro misalignment",
+        "gyro_g_sensitivity": "gyro g-sensitivity",
+        "gyro_arw": "gyro angle random walk",
+        "gyro_rrw": "gyro rate random walk",
+        "accel_bias": "accelerometer turn-on bias",
+        "accel_bias_instability": "accelerometer bias instability",
+        "accel_scale_factor": "accelerometer scale factor",
+        "accel_misalignment": "accelerometer misalignment",
+        "accel_vrw": "accelerometer velocity random walk",
+        "accel_rw": "accelerometer bias random walk",
+    }
+    """The fields that are error magnitudes (the others, correlation times, parametrise them),
+    each with what it is; a filter declares those it models
+    (:meth:`navreplay.filters.base.Filter.modelled_terms`)."""
 
     gyro_bias: float = 0.0
     """Gyro bias, random constant [rad/s]."""
