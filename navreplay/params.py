@@ -181,6 +181,8 @@ def _coerce(name: str, tp: Any, value: Any, nested: bool = False) -> Any:
             for sep in seps[1:]:
                 value = value.replace(sep, seps[0])
             parts = [p for p in value.split(seps[0]) if p.strip()]
+        elif isinstance(value, int | float) and args and args[-1] is Ellipsis:
+            parts = [value]  # one number for a list of any length
         else:
             try:
                 parts = list(value)

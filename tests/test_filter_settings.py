@@ -76,6 +76,8 @@ def test_the_scenarios_of_the_reproductions_give_the_defaults(name):
             if key in ("gps_pos_sigma", "gps_vel_sigma"):
                 continue  # only for fixes without their own sigma
             assert _same(value, expected), (key, value, expected)
+        elif isinstance(default, tuple):
+            assert value == default, (key, value, default)
         else:
             assert math.isclose(value, default, rel_tol=1e-15), (key, value, default)
 

@@ -87,6 +87,8 @@ class Quantity(enum.StrEnum):
     ACCEL_MISALIGNMENT = "accel_misalignment"
     GYRO_MISALIGNMENT = "gyro_misalignment"
     LEVER_ARM = "lever_arm"
+    GNSS_ERROR = "gnss_error"
+    """A time-correlated error of a GNSS receiver's solution."""
     MISALIGNMENT = "misalignment"
     """Mounting / boresight misalignment between two frames."""
     SPEED_SCALE_FACTOR = "speed_scale_factor"

@@ -25,7 +25,7 @@ from navreplay.filters.ins_time_update import (
     _close_step,
     _propagate_segment,
     compensate_accel,
-    compensate_gyro_z,
+    compensate_gyro,
 )
 from navreplay.filters.kalman import _covariance_ok
 
@@ -33,11 +33,13 @@ TICK = 0
 """Event code: no measurement (an output tick or a stream the filter does not use)."""
 
 LAYOUT = {"prev": (0, 6), "open_nav": (6, 16), "open_sums": (16, 23), "b_a": (23, 26),
-          "b_g": (26, 29), "k_z": (29, 32), "k_a": (32, 38), "lever": (38, 41),
-          "omega": (41, 44)}
+          "b_g": (26, 29), "k_g": (29, 38), "k_a": (38, 47), "lever": (47, 50),
+          "omega": (50, 53), "gm": (53, 56), "gm_t": (56, 57)}
 """Slices of the packed state: coning/sculling increments, the open covariance step, the
-bias, z-rate, accelerometer and lever-arm estimates, the last compensated body rate."""
-PACKED = 44
+bias, gyro and accelerometer scale-factor and misalignment (up to three columns each),
+lever-arm estimates, the last compensated body rate, the GNSS Gauss-Markov estimate and its
+time."""
+PACKED = 57
 
 
 @numba.njit(cache=True)
@@ -56,9 +58,9 @@ def run_events(
     record: np.ndarray,
     gps_pos: np.ndarray, gps_pos_sigma: np.ndarray, gps_vel: np.ndarray,
     gps_vel_sigma: np.ndarray, pos_scale: float, vel_scale: float,
-    lever_states: bool, has_gz: bool, has_ga: bool,
+    lever_states: bool, gp: int, gm_tau: float, gm_var: np.ndarray,
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray,
+    gz: int, ga: int, ng: int, na: int, rate: np.ndarray, F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray,
     cols: np.ndarray, mean: np.ndarray, rtol: float,
     t_out: np.ndarray, x_out: np.ndarray, P_out: np.ndarray, nav_out: np.ndarray,
     inn_code: np.ndarray, inn_t: np.ndarray, inn_nu: np.ndarray, inn_S: np.ndarray,
@@ -80,10 +82,14 @@ def run_events(
     open_sums = s[16:23]
     b_a = s[23:26]
     b_g = s[26:29]
-    k_z = s[29:32]
-    k_a = s[32:38]
-    lever = s[38:41]
-    w_last = s[41:44]
+    k_z = s[29:29 + 3 * ng]
+    k_a = s[38:38 + 3 * na]
+    lever = s[47:50]
+    w_last = s[50:53]
+    est = gnss.Estimates(b_a, b_g, lever, k_z, k_a, s[53:56], s[56:57])
+    layout = gnss.Layout(lever_states, gz, ng, ga, na, gp)
+    gauss_markov = gnss.GaussMarkov(gm_tau, gm_var)
+    gm_now = np.empty(3)
     snap = np.empty(s.shape[0])
     m = 0
     k = 0
@@ -96,10 +102,10 @@ def run_events(
         b = ends[e]
         if b > a:
             w = omega[a:b]
-            if has_gz and _any(k_z):
-                w = compensate_gyro_z(w, b_g, k_z)
+            if _any(k_z):
+                w = compensate_gyro(w, b_g, k_z)
             fb = f[a:b]
-            if has_ga and _any(k_a):
+            if _any(k_a):
                 fb = compensate_accel(fb, b_a, k_a)
             first = 0
             while first < b - a and t[a + first] <= t_nav + _TIME_TOL:
@@ -107,7 +113,7 @@ def run_events(
             if first < b - a:
                 code, nav_b, P_b = _propagate_segment(
                     nav, P, t[a:b], t_nav, w, fb, b_a, b_g, first, b - a, prev, step, q, k_acc,
-                    k_gyro, depth, curvature, gz, ga, open_nav, open_sums, F, M, T, Q, cols,
+                    k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav, open_sums, F, M, T, Q, cols,
                     mean, w_last)
                 if code == -1:
                     nav, P, t_nav = nav_b, P_b, t[b - 1]
@@ -120,7 +126,7 @@ def run_events(
         kind = codes[e]
         if ok and kind != TICK and not t_ev[e] < t_nav - 1e-6:
             if open_sums[0] > 0.0:
-                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav,
+                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav,
                                 open_sums, F, M, T, Q, cols, mean)
                 ok = _covariance_ok(P, rtol)
             if ok:
@@ -128,12 +134,12 @@ def run_events(
                 if kind == gnss.POSITION:
                     lag = max(t_ev[e] - t_nav, 0.0)
                     ok, nav, P, nu, S = gnss.gps_update(
-                        kind, nav, P, gps_pos[r], gps_pos_sigma[r], pos_scale, lag, w_last,
-                        b_a, b_g, lever, lever_states, k_z, gz, k_a, ga, rtol)
+                        kind, nav, P, t_nav, gps_pos[r], gps_pos_sigma[r], pos_scale, lag,
+                        w_last, est, layout, gauss_markov, rtol)
                 else:
                     ok, nav, P, nu, S = gnss.gps_update(
-                        kind, nav, P, gps_vel[r], gps_vel_sigma[r], vel_scale, 0.0, w_last,
-                        b_a, b_g, lever, lever_states, k_z, gz, k_a, ga, rtol)
+                        kind, nav, P, t_nav, gps_vel[r], gps_vel_sigma[r], vel_scale, 0.0,
+                        w_last, est, layout, gauss_markov, rtol)
                 if ok:
                     inn_code[k] = kind
                     inn_t[k] = t_ev[e]
@@ -144,7 +150,7 @@ def run_events(
                     k += 1
         if ok and record[e]:
             if open_sums[0] > 0.0:
-                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav,
+                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav,
                                 open_sums, F, M, T, Q, cols, mean)
                 ok = _covariance_ok(P, rtol)
             if ok:
@@ -156,12 +162,14 @@ def run_events(
                     x_out[m, 12 + c] = b_g[c]
                     if lever_states:
                         x_out[m, 15 + c] = lever[c]
-                if has_gz:
+                for c in range(3 * ng):
+                    x_out[m, gz + c] = k_z[c]
+                for c in range(3 * na):
+                    x_out[m, ga + c] = k_a[c]
+                if gp >= 0:
+                    gnss.gm_at(est.gm, est.gm_t[0], t_nav, gm_tau, gm_now)
                     for c in range(3):
-                        x_out[m, gz + c] = k_z[c]
-                if has_ga:
-                    for c in range(6):
-                        x_out[m, ga + c] = k_a[c]
+                        x_out[m, gp + c] = gm_now[c]
                 for r in range(n):
                     for c in range(n):
                         P_out[m, r, c] = P[r, c]

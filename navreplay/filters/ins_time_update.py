@@ -22,6 +22,8 @@ import numpy as np
 from navreplay import strapdown
 from navreplay.filters import kalman
 from navreplay.filters.ins_error import (
+    ACCEL_COLUMNS,
+    GYRO_COLUMNS,
     N_ACCEL_HF,
     N_GYRO_Z,
     N_STATES,
@@ -35,6 +37,7 @@ from navreplay.filters.kalman import (
     check_covariance,
 )
 from navreplay.geo import kernels
+from navreplay.units import G0
 
 N_NAV = 9
 """Rows of F that are not zero: position, velocity and attitude."""
@@ -45,7 +48,7 @@ _TIME_TOL = 1e-9
 @numba.njit(cache=True)
 def _covariance_step(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int, ng: int, na: int, rate: np.ndarray,
     F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
 ) -> np.ndarray:
     """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19), (22), (23) and Qd from
@@ -64,19 +67,21 @@ def _covariance_step(
     C = kernels.quat_to_dcm(nav[6:10])
     fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], C, f_b, depth, curvature, F)
     c = N_STATES
-    if gz >= 0:  # (22): F[phi, (dm_xz, dm_yz, ds_z)] = C_nb_hat[:, j] omega_z
+    for k in range(ng):  # (22): F[phi, (k_j)_i] = C_nb_hat[:, i] omega_j, j = z, x, y
+        w = omega_b[GYRO_COLUMNS[k]]
         for i in range(3):
-            for j in range(3):
-                F[6 + i, c + j] = C[i, j] * omega_b[2]
-        c += N_GYRO_Z
-    if ga >= 0:  # (23): F[v, dk_ij] = -C_nb_hat[:, i] f_j, j = x, y
-        for j in range(2):
-            for i in range(3):
-                for r in range(3):
-                    F[3 + r, c + 3 * j + i] = -C[r, i] * f_b[j]
+            for r in range(3):
+                F[6 + r, c + 3 * k + i] = C[r, i] * w
+    c += 3 * ng
+    for k in range(na):  # (23): F[v, (k_j)_i] = -C_nb_hat[:, i] u_j, j = x, y, z
+        j = ACCEL_COLUMNS[k]
+        u = f_b[j] + G0 if j == 2 else f_b[j]
+        for i in range(3):
+            for r in range(3):
+                F[3 + r, c + 3 * k + i] = -C[r, i] * u
     kalman.transition_rows_kernel(F, M.shape[0], dt, M)  # kalman (3)
     for i in range(n):
-        Q[i, i] = q[i] * dt  # kalman (4), diagonal (20)
+        Q[i, i] = q[i] * dt if rate[i] == 0.0 else 0.0  # kalman (4), diagonal (20)
     if k_acc > 0.0:  # (21): |a_n|^2 = |C f_b + g_n|^2, g on the ellipsoid
         g = kernels.gravity(nav[0], 0.0)
         a2 = 0.0
@@ -91,19 +96,19 @@ def _covariance_step(
         w2 = omega_b[0] ** 2 + omega_b[1] ** 2 + omega_b[2] ** 2
         for i in range(6, 9):
             Q[i, i] += k_gyro * w2 * dt
-    return kalman.predict_rows_kernel(P, M, cols, Q, T)  # kalman (6)
+    P = kalman.predict_rows_kernel(P, M, cols, Q, T)  # kalman (6)
+    kalman.markov_rows_kernel(P, rate, q, dt)  # kalman (5a), (6)
+    return P
 
 
-def _scratch(n: int, gz: int, ga: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                np.ndarray, np.ndarray, np.ndarray]:
-    """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro z-rate states at
-    ``gz``, accelerometer states at ``ga``, or none for -1) and the means of
+def _scratch(n: int, gz: int, ga: int, ng: int, na: int
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro states of ``ng``
+    columns at ``gz``, accelerometer states of ``na`` columns at ``ga``) and the means of
     :func:`_close_step`."""
-    cols = np.arange(N_STATES, dtype=np.int64)
-    if gz >= 0:
-        cols = np.concatenate([cols, np.arange(gz, gz + N_GYRO_Z, dtype=np.int64)])
-    if ga >= 0:
-        cols = np.concatenate([cols, np.arange(ga, ga + N_ACCEL_HF, dtype=np.int64)])
+    cols = np.concatenate([np.arange(N_STATES, dtype=np.int64),
+                           np.arange(gz, gz + 3 * ng, dtype=np.int64),
+                           np.arange(ga, ga + 3 * na, dtype=np.int64)])
     nc = cols.shape[0]
     return (np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
             np.zeros((n, n)), cols, np.zeros((2, 3)))
@@ -112,19 +117,19 @@ def _scratch(n: int, gz: int, ga: int) -> tuple[np.ndarray, np.ndarray, np.ndarr
 @numba.njit(cache=True)
 def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int, ng: int, na: int, rate: np.ndarray,
     F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
 ) -> np.ndarray:
     for k in range(dt.shape[0]):
         P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
-                             curvature, gz, ga, F, M, T, Q, cols)
+                             curvature, gz, ga, ng, na, rate, F, M, T, Q, cols)
     return P
 
 
 @numba.njit(cache=True, inline="always")
 def _close_step(
     P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
+    gz: int, ga: int, ng: int, na: int, rate: np.ndarray, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
     T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray,
 ) -> np.ndarray:
     """P propagated over the open step, with F at its start and the mean specific force and
@@ -136,7 +141,7 @@ def _close_step(
         mean[0, j] = open_sums[1 + j] / dt
         mean[1, j] = open_sums[4 + j] / dt
     P = _covariance_step(P, open_nav, mean[0], mean[1], dt, q, k_acc, k_gyro, depth, curvature,
-                         gz, ga, F, M, T, Q, cols)
+                         gz, ga, ng, na, rate, F, M, T, Q, cols)
     for j in range(open_sums.shape[0]):
         open_sums[j] = 0.0
     return P
@@ -146,7 +151,7 @@ def _close_step(
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
+    gz: int, ga: int, ng: int, na: int, rate: np.ndarray, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
     T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray,
 ) -> np.ndarray:
     for k in range(dt.shape[0]):
@@ -158,47 +163,67 @@ def _accumulate_covariance(
             open_sums[1 + j] += f_b[k, j] * dt[k]
             open_sums[4 + j] += omega_b[k, j] * dt[k]
         if open_sums[0] >= step - 1e-9:
-            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav, open_sums,
+            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav, open_sums,
                             F, M, T, Q, cols, mean)
     return P
 
 
 @numba.njit(cache=True)
-def compensate_gyro_z(omega: np.ndarray, b_g: np.ndarray, k_z: np.ndarray) -> np.ndarray:
-    """Gyro samples (k, 3) compensated for the z-rate errors k_z = (m_xz, m_yz, s_z) of
-    ins_error eq. (22): ``omega - k_z (omega_z - b_g_z)`` (the bias itself is subtracted by
-    the time update)."""
+def compensate_gyro(omega: np.ndarray, b_g: np.ndarray, k_g: np.ndarray) -> np.ndarray:
+    """Gyro samples (k, 3) compensated for the scale-factor and misalignment errors of
+    ins_error eq. (22), ``k_g`` the estimates of the first ``len(k_g) / 3`` columns of
+    :data:`~navreplay.filters.ins_error.GYRO_COLUMNS` (z, x, y), three per column:
+    ``omega - sum_j k_j (omega_j - b_g_j)`` (the bias itself is subtracted by the time
+    update)."""
     out = np.empty(omega.shape)
+    ng = k_g.shape[0] // 3
     for i in range(omega.shape[0]):
-        w_z = omega[i, 2] - b_g[2]
         for c in range(3):
-            out[i, c] = omega[i, c] - w_z * k_z[c]
+            acc = omega[i, c]
+            for k in range(ng):
+                j = GYRO_COLUMNS[k]
+                acc -= (omega[i, j] - b_g[j]) * k_g[3 * k + c]
+            out[i, c] = acc
     return out
+
+
+compensate_gyro_z = compensate_gyro
+"""The gyro compensation of the column z alone (``k_g`` of three: m_xz, m_yz, s_z)."""
 
 
 @numba.njit(cache=True)
 def compensate_accel(f: np.ndarray, b_a: np.ndarray, k_a: np.ndarray) -> np.ndarray:
-    """Accelerometer samples (k, 3) compensated for the errors k_a = (k_x (3), k_y (3)) of
-    ins_error eq. (23) that the x and y specific force drives: ``f - k_x (f_x - b_a_x) - k_y
-    (f_y - b_a_y)`` (the bias itself is subtracted by the time update)."""
+    """Accelerometer samples (k, 3) compensated for the errors of ins_error eq. (23), ``k_a``
+    the estimates of the first ``len(k_a) / 3`` columns of
+    :data:`~navreplay.filters.ins_error.ACCEL_COLUMNS` (x, y, z), three per column:
+    ``f - sum_j k_j u_j``, ``u_x = f_x - b_a_x``, ``u_y = f_y - b_a_y``, ``u_z = f_z - b_a_z +
+    g0`` (the bias itself is subtracted by the time update)."""
     out = np.empty(f.shape)
+    na = k_a.shape[0] // 3
     for i in range(f.shape[0]):
-        fx = f[i, 0] - b_a[0]
-        fy = f[i, 1] - b_a[1]
         for c in range(3):
-            out[i, c] = f[i, c] - fx * k_a[c] - fy * k_a[3 + c]
+            acc = f[i, c]
+            for k in range(na):
+                j = ACCEL_COLUMNS[k]
+                u = f[i, j] - b_a[j]
+                if j == 2:
+                    u += G0
+                acc -= u * k_a[3 * k + c]
+            out[i, c] = acc
     return out
 
 
 @dataclasses.dataclass(frozen=True)
 class ProcessNoise:
-    """Process noise of the covariance propagation, per second.
+    """Process noise of the covariance propagation, per second, and the optional states the
+    time update moves.
 
     Attributes
     ----------
     q : ndarray, shape (n,)
         Diagonal of ``G Qc G^T`` (isotropic triad noise, :func:`process_noise_diagonal` with
-        dt = 1), units of state^2/s; entries beyond 15 belong to a larger filter's states.
+        dt = 1), units of state^2/s; entries beyond 15 belong to a larger filter's states (for
+        a first-order Markov state the density of its driving noise, ``2 sigma^2 / tau``).
     k_acc : float
         Velocity noise per unit squared acceleration, eq. (21) [(m/s)^2/s per (m/s^2)^2 = s].
     k_gyro : float
@@ -209,35 +234,60 @@ class ProcessNoise:
     k_acc: float = 0.0
     k_gyro: float = 0.0
     gyro_z_states: int = -1
-    """Index of the first of the three gyro z-rate error states (dm_xz, dm_yz, ds_z) of
-    eq. (22), which a larger filter places after the 15; -1: none."""
+    """Index of the first gyro scale-factor and misalignment state of eq. (22), which a larger
+    filter places after the 15; -1: none."""
     accel_states: int = -1
-    """Index of the first of the six accelerometer error states of eq. (23) (the columns x and
-    y of S_a + M_a), after the 15 and the gyro z-rate states; -1: none."""
+    """Index of the first accelerometer scale-factor and misalignment state of eq. (23), after
+    the 15 and the gyro states; -1: none."""
+    gyro_columns: int = 1
+    """Columns of ``S_g + M_g`` the gyro states hold, three states each, in the order of
+    :data:`~navreplay.filters.ins_error.GYRO_COLUMNS`: 1 (z: m_xz, m_yz, s_z) or 3 (z, x, y)."""
+    accel_columns: int = 2
+    """Columns of ``S_a + M_a`` the accelerometer states hold, in the order of
+    :data:`~navreplay.filters.ins_error.ACCEL_COLUMNS`: 2 (x, y) or 3 (x, y, z)."""
+    markov: np.ndarray | None = None
+    """1 / tau [1/s] of each state that is a first-order Markov process (kalman eq. 5a), 0 for
+    the others, shape (n,); None: none. Such states must be outside F (after the 15 and the
+    IMU error states)."""
 
     def __post_init__(self) -> None:
         q = np.ascontiguousarray(self.q, dtype=np.float64)
+        n = q.shape[0]
         if q.ndim != 1 or not np.all(np.isfinite(q)) or np.any(q < 0.0):
             raise ValueError(f"process noise q must be a vector of values >= 0, got {q}")
-        gz = self.gyro_z_states
-        if not (gz == -1 or N_STATES <= gz <= q.shape[0] - N_GYRO_Z):
-            raise ValueError(
-                f"gyro_z_states must be -1 or an index in 15..{q.shape[0] - N_GYRO_Z} (three "
-                f"states within the {q.shape[0]}), got {gz!r}"
-            )
-        object.__setattr__(self, "gyro_z_states", int(gz))
-        ga = self.accel_states
-        if not (ga == -1 or N_STATES <= ga <= q.shape[0] - N_ACCEL_HF):
-            raise ValueError(
-                f"accel_states must be -1 or an index in 15..{q.shape[0] - N_ACCEL_HF} (six "
-                f"states within the {q.shape[0]}), got {ga!r}"
-            )
-        object.__setattr__(self, "accel_states", int(ga))
+        end = N_STATES
+        for name, columns, allowed in (("gyro_z_states", "gyro_columns", (1, 3)),
+                                       ("accel_states", "accel_columns", (2, 3))):
+            k = getattr(self, columns)
+            if k not in allowed:
+                raise ValueError(f"{columns} must be one of {allowed}, got {k!r}")
+            first = getattr(self, name)
+            if not (first == -1 or end <= first <= n - 3 * k):
+                raise ValueError(
+                    f"{name} must be -1 or an index in {end}..{n - 3 * k} ({3 * k} states "
+                    f"within the {n}), got {first!r}")
+            object.__setattr__(self, name, int(first))
+            if first >= 0:
+                end = first + 3 * k
         for name in ("k_acc", "k_gyro"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        rate = np.zeros(n) if self.markov is None else np.ascontiguousarray(
+            self.markov, dtype=np.float64)
+        if rate.shape != (n,) or not np.all(np.isfinite(rate)) or np.any(rate < 0.0):
+            raise ValueError(f"markov must be {n} rates >= 0 [1/s], got {self.markov!r}")
+        if np.any(rate[:end] > 0.0):
+            raise ValueError(f"markov: the states F reaches (0..{end - 1}) cannot be Markov "
+                             "states")
+        object.__setattr__(self, "markov", rate)
         object.__setattr__(self, "q", q)
+
+    @property
+    def columns(self) -> tuple[int, int]:
+        """Columns of the gyro and of the accelerometer states (0 without them)."""
+        return (self.gyro_columns if self.gyro_z_states >= 0 else 0,
+                self.accel_columns if self.accel_states >= 0 else 0)
 
     @staticmethod
     def motion_coefficient(sigma: float, correlation_time: float) -> float:
@@ -277,8 +327,10 @@ def _model_args(
         raise ValueError(
             f"P must be (n, n) with n >= 15 the length of the process noise ({n}), got {shape}"
         )
+    ng, na = noise.columns
     return (noise.q, noise.k_acc, noise.k_gyro, vertical is Vertical.DEPTH,
-            bool(curvature_derivatives), noise.gyro_z_states, noise.accel_states)
+            bool(curvature_derivatives), noise.gyro_z_states, noise.accel_states, ng, na,
+            noise.markov)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
@@ -336,7 +388,7 @@ def propagate_covariance(
             f"nav must be ({k}, 10), f_b and omega_b ({k}, 3) for {k} steps; got {nav.shape}, "
             f"{f_b.shape}, {omega_b.shape}"
         )
-    F, M, T, Q, cols, _ = _scratch(P.shape[0], args[5], args[6])
+    F, M, T, Q, cols, _ = _scratch(P.shape[0], *args[5:9])
     return _propagate_covariance(_f64(P), _f64(nav), _f64(f_b), _f64(omega_b), _f64(dt), *args,
                                  F, M, T, Q, cols)
 
@@ -387,8 +439,8 @@ def accumulate_covariance(
     P : ndarray, shape (n, n)
         Symmetric, not checked.
     """
-    q, k_acc, k_gyro, depth, curvature, gz, ga = _model_args(P.shape, noise, vertical,
-                                                             curvature_derivatives)
+    q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate = _model_args(
+        P.shape, noise, vertical, curvature_derivatives)
     k = dt.shape[0]
     if hist.shape != (k + 1, 10) or f_b.shape != (k, 3) or omega_b.shape != (k, 3):
         raise ValueError(
@@ -397,7 +449,7 @@ def accumulate_covariance(
         )
     return _accumulate_covariance(
         _f64(P), _f64(hist), _f64(f_b), _f64(omega_b), _f64(dt), float(step), q, k_acc, k_gyro,
-        depth, curvature, gz, ga, open_step.nav, open_step.sums, *_scratch(P.shape[0], gz, ga),
+        depth, curvature, gz, ga, ng, na, rate, open_step.nav, open_step.sums, *_scratch(P.shape[0], gz, ga, ng, na),
     )
 
 
@@ -408,7 +460,7 @@ def close_step(
     """Propagate P over the open step (if any) and clear it; P at the last sample's time."""
     model = _model_args(P.shape, noise, vertical, curvature_derivatives)
     return _close_step(_f64(P), *model, open_step.nav, open_step.sums,
-                       *_scratch(P.shape[0], noise.gyro_z_states, noise.accel_states))
+                       *_scratch(P.shape[0], *model[5:9]))
 
 
 class TimeUpdate:
@@ -439,7 +491,7 @@ class TimeUpdate:
         n = noise.q.shape[0]
         self._shape = (n, n)
         self._model = _model_args(self._shape, noise, vertical, curvature_derivatives)
-        self._work = _scratch(n, noise.gyro_z_states, noise.accel_states)
+        self._work = _scratch(n, *self._model[5:9])
         self.step = float(step)
         self.prev = np.zeros(6)
         """Increments [dtheta, dv] of the last sample [rad, m/s]."""
@@ -585,11 +637,11 @@ _ZERO3 = _NO_GYRO_Z
 _NO_ACCEL = np.zeros(N_ACCEL_HF)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _propagate_segment(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, w: np.ndarray, f: np.ndarray,
     b_a: np.ndarray, b_g: np.ndarray, first: int, b: int, prev: np.ndarray, step: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int,
+    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int, ng: int, na: int, rate: np.ndarray,
     open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray, T: np.ndarray,
     Q: np.ndarray, cols: np.ndarray, mean: np.ndarray, w_last: np.ndarray,
 ) -> tuple[int, np.ndarray, np.ndarray]:
@@ -622,7 +674,7 @@ def _propagate_segment(
         prev[c] = wc[k - 1, c] * dt[k - 1]
         prev[3 + c] = fc[k - 1, c] * dt[k - 1]
     P = _accumulate_covariance(P, hist, fc, wc, dt, step, q, k_acc, k_gyro, depth, curvature,
-                               gz, ga, open_nav, open_sums, F, M, T, Q, cols, mean)
+                               gz, ga, ng, na, rate, open_nav, open_sums, F, M, T, Q, cols, mean)
     for i in range(P.shape[0]):
         if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
             return -3, nav, P
@@ -636,7 +688,7 @@ def _propagate_outputs(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
     f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, k_z: np.ndarray, k_a: np.ndarray,
     prev: np.ndarray, step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool,
-    curvature: bool, gz: int, ga: int, open_nav: np.ndarray, open_sums: np.ndarray,
+    curvature: bool, gz: int, ga: int, ng: int, na: int, rate: np.ndarray, open_nav: np.ndarray, open_sums: np.ndarray,
     F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
     mean: np.ndarray, ends: np.ndarray, close: bool, rtol: float, t_out: np.ndarray,
     nav_out: np.ndarray, P_out: np.ndarray, w_last: np.ndarray,
@@ -664,8 +716,10 @@ def _propagate_outputs(
     if P.shape[0] != n or P.shape[1] != n:
         return -5, 0, 0, nav, P, t_nav
     w = omega
-    if k_z[0] != 0.0 or k_z[1] != 0.0 or k_z[2] != 0.0:
-        w = compensate_gyro_z(omega, b_g, k_z)
+    for c in range(k_z.shape[0]):
+        if k_z[c] != 0.0:
+            w = compensate_gyro(omega, b_g, k_z)
+            break
     for c in range(k_a.shape[0]):
         if k_a[c] != 0.0:
             f = compensate_accel(f, b_a, k_a)
@@ -679,7 +733,7 @@ def _propagate_outputs(
         if first < b:
             code, nav_b, P = _propagate_segment(
                 nav, P, t, t_nav, w, f, b_a, b_g, first, b, prev, step, q, k_acc, k_gyro, depth,
-                curvature, gz, ga, open_nav, open_sums, F, M, T, Q, cols, mean, w_last)
+                curvature, gz, ga, ng, na, rate, open_nav, open_sums, F, M, T, Q, cols, mean, w_last)
             if code != -1:
                 return code, j, first, nav, P, t_nav
             nav = nav_b
@@ -688,7 +742,7 @@ def _propagate_outputs(
                 return -6, j, first, nav, P, t_nav  # (else checked below)
         a = max(a, b)
         if close and open_sums[0] > 0.0:
-            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, open_nav, open_sums,
+            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav, open_sums,
                             F, M, T, Q, cols, mean)
             if rtol >= 0.0 and not _covariance_ok(P, rtol):
                 return -7, j, a, nav, P, t_nav
