@@ -16,8 +16,10 @@ settings they derive from the recordings. An ensemble passes when
   RMS predicted sigma lies in the band of one sample per run (false alarm 0.001 over the
   outages together).
 
-Seeds: 7000-7999 were used to explore and to choose the models; 8100 (default suite) and 9200
-(slow) to validate them.
+Seeds: 7000-7999 were used to explore and to choose the models; 8100 (default suite) and 9300
+(slow) to validate them. (9200 was validated once, with ``ins`` still without the roll, pitch
+and load-factor states; its NEES / dof of 1.15 at 60 m/s, near the band's edge, led to
+exploring them on 7000-7299, so it is no longer a validation seed.)
 
 Run as a script to print the table of docs/methods/ins.md §5::
 
@@ -37,7 +39,7 @@ import numpy as np
 from navreplay import consistency
 
 FAST_SEED = 8100
-SLOW_SEED = 9200
+SLOW_SEED = 9300
 
 
 @dataclasses.dataclass(frozen=True)
