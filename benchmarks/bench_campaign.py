@@ -27,12 +27,10 @@ import statistics
 import time
 from typing import Any
 
-from navreplay.replay.ensemble import (
-    FilterSpec,
-    make_executor,
-    monte_carlo_tasks,
-    run_ensemble,
-)
+from navreplay.campaign.ensemble import run_ensemble
+from navreplay.campaign.executors import make_executor
+from navreplay.campaign.tasks import monte_carlo_tasks
+from navreplay.replay.spec import FilterSpec
 
 
 def _campaign(scenario: str, filt: str, runs: int, duration: float, executor: Any) -> float:

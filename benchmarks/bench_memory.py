@@ -54,7 +54,7 @@ def paused_recording(hours: float, pause: float, directory: Path) -> Path:
     :data:`PAUSE_START` (made when missing)."""
     import dataclasses
 
-    from navreplay.io.reader import read_recording
+    from navreplay.io import read_recording
     from navreplay.io.writer import write_recording
     from navreplay.streams import Recording, StreamKind
 
@@ -77,7 +77,7 @@ def _child(mode: str, path: str) -> None:
     import importlib
     from pathlib import Path as _Path
 
-    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.replay.spec import FilterSpec
     from navreplay.viz.options import VizMode, VizOptions
 
     run = importlib.import_module("navreplay.jobs.run")

@@ -125,12 +125,12 @@ def _read_streamed(path: Path) -> int:
     """Decode a file the way a streamed run of gps-ins does (one pass, every stream the run
     needs in windows); the number of IMU rows."""
     from navreplay.filters.registry import load_filter
-    from navreplay.io.windows import read_windows
-    from navreplay.jobs.run import decoded_kinds
-    from navreplay.logs.options import LogOptions
+    from navreplay.io import open_recording
+    from navreplay.logs.prepare import streams_needed
 
-    kinds = decoded_kinds([load_filter("gps-ins")], LogOptions())
-    return sum(len(w["imu"]) for w in read_windows(path, kinds) if "imu" in w)
+    kinds = streams_needed([load_filter("gps-ins")])
+    with open_recording(path, kinds=kinds) as source:
+        return sum(len(w["imu"]) for w in source if "imu" in w)
 
 
 def _throughput(path: Path) -> tuple[Any, Any, float]:
@@ -199,16 +199,32 @@ def _throughput(path: Path) -> tuple[Any, Any, float]:
     return result, recording, t_filt
 
 
+def log_one_block(sink: Any, result: Any, recording: Any, metrics: Any) -> None:
+    """A whole run into a sink as the replay pipeline hands a recording of one window over: the
+    truth, the innovations, the rows with their scores."""
+    from navreplay.filters.base import TruthColumn
+    from navreplay.replay import RunStart
+    from navreplay.streams import StreamKind
+
+    truth = recording[StreamKind.TRUTH]
+    columns = {st.truth.column: st.unit for st in result.states
+               if isinstance(st.truth, TruthColumn)}
+    sink.start(RunStart(result.recording, (result.label,), recording.t0_ns, True,
+                        recording.metadata, columns))
+    sink.truth(truth)
+    sink.innovations(result)
+    sink.rows(result.rows(0, result.t.shape[0]), metrics, truth)
+
+
 def _rerun_cost(result: Any, recording: Any, t_filt: float, rrd: Path) -> None:
     from navreplay import metrics
     from navreplay.viz import Save, open_sink
 
     errors = metrics.run_metrics(result, recording)
 
-    def log() -> None:  # what `navreplay run` does
+    def log() -> None:  # what `navreplay run` does with the run as one block
         with open_sink(Save(rrd), recording_name="drive.mcap") as sink:
-            sink.log_truth(recording)
-            sink.log_run(result, truth=recording, metrics=errors)
+            log_one_block(sink, result, recording, errors)
 
     t_viz, _ = _timed(log)
     verdict = "ok" if t_viz <= t_filt else "EXCEEDS the filter time"

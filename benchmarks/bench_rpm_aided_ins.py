@@ -25,7 +25,7 @@ from typing import Any
 
 from navreplay.filters.registry import load_filter
 from navreplay.io import read_recording, write_recording
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 
 TARGET_SAMPLES_PER_S = 100_000

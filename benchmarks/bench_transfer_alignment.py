@@ -31,7 +31,7 @@ from navreplay.filters import kalman
 from navreplay.filters import transfer_alignment as ta
 from navreplay.filters.base import Estimate, Filter, Quantity, State
 from navreplay.geo import kernels
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.reproduce.transfer_alignment import REPRODUCTION
 from navreplay.sim.scenario import simulate
 from navreplay.streams import StreamKind

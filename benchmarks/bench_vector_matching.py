@@ -27,7 +27,7 @@ from navreplay.filters.vector_matching import (
     run_batch,
 )
 from navreplay.metrics import rms
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.reproduce.vector_matching import ACCEL_G, MODELS, REPRODUCTION, euler_errors
 from navreplay.sim.scenario import get_scenario, simulate
 

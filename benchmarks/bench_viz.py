@@ -1,9 +1,10 @@
 """Rerun logging cost of a 1-hour run against the filter that produced it, measured in one run.
 
-* filter: :func:`navreplay.replay.engine.replay` of the free-inertial ``ins`` filter (strapdown at
+* filter: :func:`navreplay.replay.replay` of the free-inertial ``ins`` filter (strapdown at
   100 Hz, 15-state covariance, outputs at 10 Hz) over a synthetic stationary hour;
-* log: ``open_sink(Save(...))``, ``log_run(result, truth, metrics)`` with an error series (and
-  +-3 sigma) for each of the 15 states, then ``close()`` (blueprint, flush, atomic rename);
+* log: ``open_sink(Save(...))``, the run as one block of the replay pipeline (truth, rows
+  with their scores: an error series and +-3 sigma for each scored state, the navigation
+  errors, the NEES), then ``close()`` (blueprint, flush, atomic rename);
 * per-sample: ``rr.log`` of one scalar per call for a few thousand rows, extrapolated to the
   number of rows the sink sent (what logging sample by sample would have cost).
 
@@ -24,9 +25,11 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from benchmarks.bench_replay import log_one_block
 from navreplay.filters.ins import InsFilter
 from navreplay.geo import gravity, omega_ie_n
-from navreplay.replay.engine import replay
+from navreplay.metrics import run_metrics
+from navreplay.replay import replay
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.viz import Save, open_sink
 
@@ -106,20 +109,19 @@ def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
     warm_result = replay(warm, InsFilter, output_rate=10.0, label="ins")
     with tempfile.TemporaryDirectory() as tmp:
         with open_sink(Save(Path(tmp) / "warm.rrd")) as sink:
-            sink.log_run(warm_result, truth=warm)
+            log_one_block(sink, warm_result, warm, run_metrics(warm_result, warm))
 
     start = time.perf_counter()
     result = replay(recording, InsFilter, output_rate=10.0, label="ins")
     t_filter = time.perf_counter() - start
 
-    # error series of every state (the free INS estimates 0 errors; truth 0 here)
-    metrics = {name: result.x[:, i].copy() for i, name in enumerate(result.state_names)}
+    metrics = run_metrics(result, recording)
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "bench.rrd"
         start = time.perf_counter()
         with open_sink(Save(out), recording_name="bench") as sink:
-            sink.log_run(result, truth=recording, metrics=metrics)
+            log_one_block(sink, result, recording, metrics)
         t_log = time.perf_counter() - start
         size_mb = os.path.getsize(out) / 1e6
         chunks = rr.chunk.RrdReader(out).stream().to_chunks()

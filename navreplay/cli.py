@@ -29,13 +29,13 @@ EXPECTED_ERRORS: tuple[type[BaseException], ...] = ()
 def _expected_errors() -> tuple[type[BaseException], ...]:
     global EXPECTED_ERRORS
     if not EXPECTED_ERRORS:
+        from navreplay.campaign.ensemble import RunFailedError
         from navreplay.filters.kalman import FilterDivergedError
         from navreplay.filters.registry import FilterLoadError
         from navreplay.io import RecordingError
         from navreplay.outputs import OutputError
         from navreplay.params import ParamError
-        from navreplay.replay.engine import ReplayError
-        from navreplay.replay.ensemble import RunFailedError
+        from navreplay.replay.errors import ReplayError
         from navreplay.viz import VizUnavailableError
 
         EXPECTED_ERRORS = (
@@ -295,7 +295,7 @@ _max_imu_gap = click.option(
 
 
 def _check_executor(ctx: click.Context, param: click.Parameter, value: str) -> str:
-    from navreplay.replay.dask_executor import is_address
+    from navreplay.campaign.dask_executor import is_address
 
     if value in ("process", "dask") or is_address(value):
         return value
@@ -436,7 +436,7 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_fra
     read as asked.
     """
     from navreplay.io import recording_info
-    from navreplay.io.reader import is_rosbag
+    from navreplay.io.files import file_kind
     from navreplay.logs.describe import describe_log
     from navreplay.logs.options import log_options
 
@@ -444,7 +444,7 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_fra
         topics, frames, config=_load_config(config, "topics", "frames", "imu_range"),
         time=time, imu_range_text=imu_range, force_frames=force_frame))
     click.echo(described.text)
-    report = None if is_rosbag(Path(recording)) else recording_info(recording)
+    report = None if file_kind(recording).name == "rosbag2" else recording_info(recording)
     if described.damage:
         count = f"{report.message_count} messages readable; " if report is not None else ""
         raise click.ClickException(f"{recording}: DAMAGED ({count}see above)")

@@ -43,7 +43,7 @@ sensor_msgs convention for "not available"); the same marks any pose or linear-v
 whose variance the filter does not hold.
 
 Everything is read from the run through :func:`filter_output`, the one adapter between
-:class:`~navreplay.replay.result.RunResult` and the exports and the report.
+:class:`~navreplay.filters.result.RunResult` and the exports and the report.
 """
 
 from __future__ import annotations
@@ -63,11 +63,11 @@ from typing import Any
 import numpy as np
 
 from navreplay.filters.base import NAV_PARTS, MeasurementKind, Nav, NavError, State
+from navreplay.filters.result import InnovationSeries, RunResult
 from navreplay.geo import earth
 from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, quat_to_euler, skew
 from navreplay.outputs import Output, atomic_path, check_outputs
-from navreplay.replay.result import InnovationSeries, RunResult
-from navreplay.streams import Recording, Stream, StreamKind
+from navreplay.streams import Stream
 
 MANIFEST = "manifest.json"
 ODOMETRY_FILE = "estimates.mcap"
@@ -169,23 +169,16 @@ class FilterOutput:
         return np.int64(self.t0_ns) + np.rint(self.t * 1e9).astype(np.int64)
 
 
-def filter_output(result: RunResult, recording: Recording | None = None,
-                  metrics: Any = None) -> FilterOutput:
-    """The one place that reads a run's estimates for exports and reports.
+def filter_output(result: RunResult, metrics: Any = None) -> FilterOutput:
+    """The one place that reads a run's estimates for exports and reports (a block of them,
+    or a whole run: one block).
 
     Parameters
     ----------
     result : RunResult
-    recording : Recording, optional
-        The recording the filter ran over; its truth (if any) scores the run.
     metrics : RunMetrics, optional
-        Already computed :func:`navreplay.metrics.run_metrics` of this run (else computed here
-        when the recording has a truth).
+        The rows' scores (:func:`navreplay.metrics.run_metrics`); None without a reference.
     """
-    from navreplay import metrics as _metrics
-
-    if metrics is None and recording is not None and StreamKind.TRUTH in recording:
-        metrics = _metrics.run_metrics(result, recording)
     return FilterOutput(
         label=result.label,
         t0_ns=int(result.t0_ns),
@@ -1091,28 +1084,6 @@ not all held)."""
 
 # --------------------------------------------------------------------------------------------
 # the exports of a run and of an ensemble
-
-
-def export_run(out_dir: Path, outputs: Sequence[FilterOutput], recording: Recording | None,
-               *, source: str = "", force: bool = False) -> list[Path]:
-    """Write the CSV and TUM files of every filter, the Odometry MCAP and the manifest from
-    whole runs (:class:`RunExport` fed at once).
-
-    Returns the written files. Refuses to overwrite any of them unless ``force`` (checked
-    before the first one is written).
-    """
-    has_ref = recording is not None and StreamKind.TRUTH in recording
-    writer = RunExport(out_dir, [o.label for o in outputs], has_reference=has_ref,
-                       source=source, force=force)
-    try:
-        if has_ref:
-            writer.add_reference(recording[StreamKind.TRUTH])
-        for out in outputs:
-            writer.add(out)
-    except BaseException:
-        writer.abort()
-        raise
-    return writer.close()
 
 
 def export_ensemble(out_dir: Path, ensembles: Mapping[str, Any], *, title: str = "",

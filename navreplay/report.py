@@ -179,7 +179,7 @@ class RunSeries:
     (:class:`navreplay.envelope.Envelope`, at most a few thousand points per panel).
 
     Feed it :meth:`add` with :func:`navreplay.export.filter_output` of each block of rows (with
-    its metrics) and :meth:`add_nis` with each block's innovations; :meth:`of` takes a whole run.
+    its metrics) and :meth:`add_nis` with each block's innovations (a whole run is one block).
     The numbers on the figures (the fraction inside a chi-square band) are the summary's.
     """
 
@@ -191,13 +191,6 @@ class RunSeries:
         self.nees: _Trace | None = None
         self.nees_dof = 0
         self.nis: dict[str, tuple[_Trace, int]] = {}
-
-    @classmethod
-    def of(cls, out: FilterOutput) -> RunSeries:
-        """The series of a whole run."""
-        series = cls(out.label)
-        series.add(out)
-        return series
 
     def add(self, out: FilterOutput) -> None:
         """A block of rows (later than before) with its metrics, and its NIS if it has any."""
@@ -278,11 +271,10 @@ def run_figures(series: RunSeries, color: str,
     return parts
 
 
-def write_run_report(path: Path, runs: Sequence[RunSeries | FilterOutput],
+def write_run_report(path: Path, runs: Sequence[RunSeries],
                      summaries: Mapping[str, Mapping[str, Any]], *, title: str,
                      force: bool = False) -> Path:
-    """Write the HTML report of filters replayed over one recording (their series, or whole
-    runs)."""
+    """Write the HTML report of filters replayed over one recording (their series)."""
     from navreplay import figures
 
     check_targets([Path(path)], force, "--report")
@@ -292,8 +284,7 @@ def write_run_report(path: Path, runs: Sequence[RunSeries | FilterOutput],
     else:
         body.append("<p class='note'>The recording has no reference: no errors to score; "
                     "the NIS below needs none.</p>")
-    for i, run in enumerate(runs):
-        series = run if isinstance(run, RunSeries) else RunSeries.of(run)
+    for i, series in enumerate(runs):
         body.append(f"<h2>{html.escape(series.label)}</h2>")
         body += settings_section(summaries.get(series.label))
         body += run_figures(series, figures.filter_color(i), summaries.get(series.label))

@@ -40,7 +40,7 @@ def warm_filter(name: str, directory: str) -> tuple[str, float]:
     ``navreplay run NAME REC --no-viz`` does; (name, CPU seconds of this process)."""
     from navreplay.jobs.run import RunJob, run
     from navreplay.jobs.simulate import SimulateJob, simulate
-    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.replay.spec import FilterSpec
     from navreplay.viz.options import VizMode, VizOptions
 
     start = time.process_time()

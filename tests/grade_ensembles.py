@@ -32,7 +32,7 @@ import numpy as np
 
 from navreplay import consistency, metrics
 from navreplay.filters.registry import load_filter
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 
 GRADES = ("consumer", "mems", "tactical", "navigation")

@@ -13,7 +13,7 @@ from navreplay import consistency, metrics, tables
 from navreplay.filters import rpm_aided_ins as rai
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.filters.ins import InsFilter
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 
 # --------------------------------------------------------------------------------------------

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from mcap_ros2.writer import Writer as Ros2Writer
 from rosbags.highlevel import AnyReader
+from whole_runs import export_runs
 
 from navreplay import export
 from navreplay.filters.registry import load_filter
@@ -34,9 +35,8 @@ def runs(tmp_path_factory):
     write_recording(d / "drive.mcap", simulate("vehicle-drive", {"duration": 40.0}, seed=5))
     rec = read_recording(d / "drive.mcap")
     results = {name: replay(rec, load_filter(name), {}, label=name) for name in FILTERS}
-    outputs = [export.filter_output(r, rec) for r in results.values()]
-    written = export.export_run(d / "out", outputs, rec, source="drive.mcap")
-    return d / "out", rec, results, outputs, written
+    written = export_runs(d / "out", list(results.values()), rec, source="drive.mcap")
+    return d / "out", rec, results, list(results.values()), written
 
 
 def _odometry(path: Path) -> dict[str, list]:
@@ -234,9 +234,9 @@ def test_refuses_to_overwrite(runs) -> None:
     out, rec, _, outputs, _ = runs
     before = (out / "ins.csv").read_bytes()
     with pytest.raises(OutputError, match="exists.*--force"):
-        export.export_run(out, outputs[:1], rec)
+        export_runs(out, outputs[:1], rec)
     assert (out / "ins.csv").read_bytes() == before
-    export.export_run(out, outputs[:1], rec, force=True)
+    export_runs(out, outputs[:1], rec, force=True)
 
 
 def test_ensemble_export(runs, tmp_path) -> None:

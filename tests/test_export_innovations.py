@@ -12,14 +12,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from whole_runs import export_runs
 
 from navreplay import export
 from navreplay.filters.registry import load_filter
+from navreplay.filters.result import InnovationSeries
 from navreplay.io import read_recording, write_recording
 from navreplay.metrics import run_metrics
 from navreplay.outputs import OutputError
 from navreplay.replay import replay
-from navreplay.replay.result import InnovationSeries
 from navreplay.sim.scenario import simulate
 
 
@@ -41,7 +42,7 @@ def _table(path: Path) -> tuple[list[str], np.ndarray]:
 def test_round_trip_of_innovations_and_nis(run) -> None:
     d, rec, result = run
     out = d / "whole"
-    export.export_run(out, [export.filter_output(result, rec)], rec)
+    export_runs(out, [result], rec)
     summary = run_metrics(result, rec).summary()
     manifest = json.loads((out / "manifest.json").read_text())["filters"]["gps-ins"]
     assert list(manifest["innovations"]) == [m.name for m in result.measurements]
@@ -89,8 +90,8 @@ def test_block_by_block_is_the_whole_run(run) -> None:
     of the whole run."""
     d, rec, result = run
     whole, streamed = d / "bytes-whole", d / "bytes-streamed"
-    out = export.filter_output(result, rec)
-    export.export_run(whole, [out], rec)
+    export_runs(whole, [result], rec)
+    out = export.filter_output(result.rows(0, result.t.shape[0]), run_metrics(result, rec))
     writer = export.RunExport(streamed, ["gps-ins"], has_reference=True)
     cuts = [0.5, 0.5, 7.3, 12.0, 12.0, 29.0, 40.0]
     pieces = {name: _pieces(s, cuts) for name, s in result.innovations.items()}
@@ -99,7 +100,7 @@ def test_block_by_block_is_the_whole_run(run) -> None:
                                {name: p[k] for name, p in pieces.items()}, result.measurements)
         if k == 3:
             writer.add_reference(rec["truth"])
-            writer.add(dataclasses.replace(out, innovations={}))
+            writer.add(out)
     writer.close()
     names = sorted(p.name for p in whole.iterdir())
     assert names == sorted(p.name for p in streamed.iterdir())
@@ -116,8 +117,7 @@ def test_undeclared_measurements_are_numbered(run) -> None:
     only_pos = dataclasses.replace(result, label="declared",
                                    innovations={"gps_pos": result.innovations["gps_pos"]})
     out = d / "undeclared"
-    written = export.export_run(out, [export.filter_output(plain, rec),
-                                      export.filter_output(only_pos, rec)], rec)
+    written = export_runs(out, [plain, only_pos], rec)
     assert {p.name for p in written} >= {
         "plug-in.innovations.gps_pos.csv", "plug-in.innovations.gps_vel.csv",
         "declared.innovations.gps_pos.csv", "declared.innovations.gps_vel.csv"}
@@ -144,12 +144,11 @@ def test_existing_innovation_files_are_refused(run, tmp_path) -> None:
     out = tmp_path / "out"
     out.mkdir()
     (out / "gps-ins.innovations.gps_vel.csv").write_text("kept\n")
-    fo = export.filter_output(result, rec)
     with pytest.raises(OutputError, match=r"gps-ins\.innovations\.gps_vel\.csv exists"):
-        export.export_run(out, [fo], rec)
+        export_runs(out, [result], rec)
     assert [p.name for p in out.iterdir()] == ["gps-ins.innovations.gps_vel.csv"]
     assert (out / "gps-ins.innovations.gps_vel.csv").read_text() == "kept\n"
-    export.export_run(out, [fo], rec, force=True)
+    export_runs(out, [result], rec, force=True)
     assert (out / "gps-ins.innovations.gps_vel.csv").read_text().startswith("stamp [ns],")
 
 

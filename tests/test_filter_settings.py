@@ -22,8 +22,7 @@ from navreplay.filters.settings import ParamValues, Source, build_params, field_
 from navreplay.io import write_recording
 from navreplay.jobs import filter_specs
 from navreplay.params import ParamError
-from navreplay.replay.engine import replay
-from navreplay.replay.ensemble import FilterSpec
+from navreplay.replay import FilterSpec, replay
 from navreplay.sensors.imu import imu_grade
 from navreplay.sensors.specs import SensorSpecs, specs_from_tables
 from navreplay.sim.scenario import get_scenario, scenario_inputs, simulate

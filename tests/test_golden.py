@@ -23,7 +23,7 @@ from navreplay.filters.registry import load_filter
 from navreplay.filters.settings import summary_entries
 from navreplay.io import TOPICS, read_recording
 from navreplay.jobs import scenario_values
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,7 +18,7 @@ from navreplay.filters.gps_ins import (
 )
 from navreplay.filters.ins import NAV_STATE_NAMES
 from navreplay.geo import earth, rotations
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 from navreplay.streams import StreamKind
 

@@ -17,7 +17,7 @@ from navreplay.filters.rpm_aided_ins import RpmAidedIns
 from navreplay.filters.vector_matching import VectorMatchingFilter
 from navreplay.geo.rotations import quat_to_euler
 from navreplay.io import write_recording
-from navreplay.replay.engine import ReplayError, replay
+from navreplay.replay import ReplayError, replay
 from navreplay.sim.scenario import simulate
 
 GAP = 2.0

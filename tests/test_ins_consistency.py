@@ -11,7 +11,7 @@ import pytest
 from navreplay import consistency, metrics
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.filters.ins import InsFilter
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 
 RUNS = 40

@@ -11,7 +11,7 @@ from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.ins import InsFilter
 from navreplay.geo import earth, rotations
-from navreplay.replay.engine import FilterInitError, replay
+from navreplay.replay import FilterInitError, replay
 from navreplay.sim.scenario import simulate
 
 # --------------------------------------------------------------------------------------------

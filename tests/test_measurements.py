@@ -150,7 +150,7 @@ def test_the_rrd_shows_the_declared_unit_and_the_guess_only_without_one(plugins,
 
 def test_the_view_titles_name_declared_rows_and_units():
     from navreplay.filters.base import Quantity, State
-    from navreplay.replay.result import InnovationSeries, RunResult
+    from navreplay.filters.result import InnovationSeries, RunResult
     from navreplay.viz import Save, open_sink
 
     k = 5
@@ -162,8 +162,10 @@ def test_the_view_titles_name_declared_rows_and_units():
               P=np.ones((k, 1, 1)), innovations={"rpm": inn, "vector_g": inn})
     import tempfile
     with tempfile.TemporaryDirectory() as d, open_sink(Save(f"{d}/v.rrd")) as sink:
-        sink.log_run(RunResult(label="declared", measurements=decl, **kw))
-        sink.log_run(RunResult(label="guessed", **kw))
+        for r in (RunResult(label="declared", measurements=decl, **kw),
+                  RunResult(label="guessed", **kw)):
+            sink.innovations(r)
+            sink.rows(r)
         plots = sink.catalog.plots["innovation"]
     assert plots["nu:rpm:1@declared"].title == "declared: rpm innovation lateral, ±3√S [m/s]"
     # without a declaration: N/E/D by position, the unit guessed from the name ("rpm": m/s)

@@ -16,7 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 from navreplay.cli import cli
-from navreplay.filters.registry import ENTRY_POINT_GROUP, filters, load_filter
+from navreplay.filters.registry import ENTRY_POINT_GROUP, filters, load_filter, refresh
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "navreplay-example-filter"
 CLASS_REF = "navreplay_example_filter.gps_cv:GpsConstantVelocity"
@@ -46,12 +46,14 @@ def plugin(tmp_path_factory):
     import importlib
 
     importlib.invalidate_caches()
+    refresh()  # the registry scans the entry points once per process: again, with the plug-in
     yield
     for p in added:
         sys.path.remove(p)
     for name in [m for m in sys.modules if m.startswith("navreplay_example_filter")]:
         del sys.modules[name]
     importlib.invalidate_caches()
+    refresh()
 
 
 @pytest.fixture(scope="module")
@@ -152,6 +154,7 @@ def test_a_broken_plugin_does_not_hide_the_others(tmp_path):
     )
     sys.path.insert(0, str(tmp_path))
     importlib.invalidate_caches()
+    refresh()
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -165,3 +168,4 @@ def test_a_broken_plugin_does_not_hide_the_others(tmp_path):
     finally:
         sys.path.remove(str(tmp_path))
         importlib.invalidate_caches()
+        refresh()

@@ -12,15 +12,20 @@ import pytest
 from click.testing import CliRunner
 from rosbag_maker import LAT, LON, H, truth_table, write_bag
 
+from navreplay.campaign.tasks import replay_filters
 from navreplay.cli import cli
 from navreplay.geo import earth
 from navreplay.geo.rotations import quat_to_euler, wrap_angle
 from navreplay.jobs import filter_specs
 from navreplay.logs.initial import initial_nav
 from navreplay.logs.options import InitMethod, log_options
-from navreplay.logs.prepare import open_log
-from navreplay.replay.ensemble import replay_filters
+from navreplay.logs.prepare import read_log
 from navreplay.streams import StreamKind
+
+
+def _prepared(path, options):
+    """The log read whole and made ready, and its notes."""
+    return read_log(path, options)
 
 
 @pytest.fixture(scope="session")
@@ -253,8 +258,8 @@ def test_local_origin_from_initial_or_gnss(short_bags: dict[str, Path], tmp_path
         for k in ("pos_rms_h", "pos_err_final_h", "att_rms_heading", "vel_rms"):
             assert abs(s["ins"][k] - fit["ins"][k]) < 1e-3, k
         initial = {"lat_deg": lat, "lon_deg": math.degrees(LON), "h": H}
-        ref = open_log(bag, log_options(reference="/ground_truth/odom",
-                                        config={"initial": initial})).recording
+        ref, _ = _prepared(bag, log_options(reference="/ground_truth/odom",
+                                            config={"initial": initial}))
         refs.append(ref[StreamKind.TRUTH]["pos"])
     d = earth.lla_to_ned_offset(*refs[0][0], *refs[1].T) - earth.lla_to_ned_offset(
         *refs[0][0], *refs[0].T)
@@ -285,8 +290,7 @@ def test_magnetometer_dip_sign(short_bags: dict[str, Path], tmp_path: Path) -> N
 def _align(bag: Path, initial: dict | None = None, drop_mag: bool = False
            ) -> tuple[str, float, float]:
     """(method, yaw error [rad], claimed yaw sigma [rad]) of --init align."""
-    prepared = open_log(bag, log_options(init="align", config={"initial": initial or {}}))
-    rec = prepared.recording
+    rec, _ = _prepared(bag, log_options(init="align", config={"initial": initial or {}}))
     if drop_mag:
         rec.streams.pop(StreamKind.MAG)
         nav, _ = initial_nav(InitMethod.ALIGN, rec, initial or {})
@@ -324,10 +328,10 @@ def test_init_table_lands_in_the_filter(short_bags: dict[str, Path], tmp_path: P
              "roll_deg": 0.0, "pitch_deg": 0.0, "yaw_deg": yaw, "pos_sigma": [3.0, 3.0, 5.0],
              "att_sigma_deg": 2.0, "gyro_bias_dph": [1.0, 2.0, 3.0]}
     bag = short_bags["mag"]
-    prepared = open_log(bag, log_options(init="table", config={"initial": table}))
-    nav = prepared.recording.metadata.initial_nav
+    rec, _ = _prepared(bag, log_options(init="table", config={"initial": table}))
+    nav = rec.metadata.initial_nav
     spec = filter_specs("ins")
-    res = replay_filters(prepared.recording, spec, source=str(bag))["ins"]
+    res = replay_filters(rec, spec, source=str(bag))["ins"]
     assert res.t[0] <= 0.1
     assert res.nav_pos[0, :2] == pytest.approx(np.radians([45.001, 7.002]), abs=1e-9)
     assert res.nav_pos[0, 2] == pytest.approx(310.0, abs=1e-3)
@@ -387,11 +391,11 @@ def test_levelling_sigma_follows_the_grade_the_gyro_shows(short_bags: dict[str, 
     not observable at rest, so the sigma must cover them)."""
     claimed = {}
     for name in ("nav", "mems"):
-        prepared = open_log(short_bags[name], log_options(init="align"))
-        nav = prepared.recording.metadata.initial_nav
+        rec, notes = _prepared(short_bags[name], log_options(init="align"))
+        nav = rec.metadata.initial_nav
         roll, pitch, _ = quat_to_euler(np.asarray(nav["q_nb"]))
         s_level = nav["sigma"]["phi"][0]
         assert max(abs(roll), abs(pitch)) < 3 * s_level, name
         claimed[name] = math.degrees(s_level)
-        assert ("navigation grade" if name == "nav" else "MEMS grade") in " ".join(prepared.notes)
+        assert ("navigation grade" if name == "nav" else "MEMS grade") in " ".join(notes)
     assert claimed["nav"] < 0.01 and 0.3 < claimed["mems"] < 3.0

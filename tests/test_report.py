@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from whole_runs import run_series
 
-from navreplay import export, report
+from navreplay import report
 from navreplay.cli import cli
 from navreplay.filters.registry import load_filter
 from navreplay.io import read_recording, write_recording
@@ -48,9 +49,8 @@ def test_run_report(drive, tmp_path) -> None:
     outs, summaries = [], {}
     for name in ("ins", "gps-ins"):
         r = replay(rec, load_filter(name), {}, label=name)
-        m = run_metrics(r, rec)
-        outs.append(export.filter_output(r, rec, m))
-        summaries[name] = m.summary()
+        outs.append(run_series(r, rec))
+        summaries[name] = run_metrics(r, rec).summary()
     path = report.write_run_report(tmp_path / "r.html", outs, summaries, title="drive")
     text = path.read_text()
     _self_contained(text)

@@ -22,7 +22,7 @@ from navreplay import metrics, outputs
 from navreplay.cli import cli
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.io import read_recording, write_recording
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 from navreplay.streams import Recording, Stream, StreamKind
 

@@ -19,7 +19,7 @@ from navreplay.filters.registry import load_filter
 from navreplay.geo import earth, kernels, rotations
 from navreplay.metrics import position_error_ned
 from navreplay.params import ParamError, build
-from navreplay.replay.engine import FilterInitError, replay
+from navreplay.replay import FilterInitError, replay
 from navreplay.sim.scenario import get_scenario, simulate
 from navreplay.sim.scenarios.underwater import ROUTE, UnderwaterRpmParams
 from navreplay.streams import FIELDS, StreamKind

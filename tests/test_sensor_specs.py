@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from navreplay.cli import cli
 from navreplay.io import read_recording, write_recording
 from navreplay.logs.options import LogOptions
-from navreplay.logs.prepare import open_log
+from navreplay.logs.prepare import read_log
 from navreplay.params import ParamError
 from navreplay.sensors.gps import GpsModel
 from navreplay.sensors.imu import ImuGrade, ImuModel, imu_grade
@@ -230,8 +230,8 @@ def test_a_config_writes_over_the_recording_specs(tmp_path):
     path = tmp_path / "d.mcap"
     write_recording(path, simulate("vehicle-drive", {"duration": 4.0}, seed=1))
     over = specs_from_tables({"imu": {"gyro_arw": "0.3 deg/sqrt(h)"}}, where="my.toml")
-    prepared = open_log(path, LogOptions(sensors=over))
-    specs = SensorSpecs.from_metadata(prepared.recording.metadata.sensors)
+    recording, _ = read_log(path, LogOptions(sensors=over))
+    specs = SensorSpecs.from_metadata(recording.metadata.sensors)
     assert specs.imu == dataclasses.replace(imu_grade("tactical"),
                                             gyro_arw=0.3 * DEG_PER_SQRT_HOUR)
     assert specs.source("imu") == "grade tactical, with [sensors.imu] of my.toml: gyro_arw"
@@ -242,7 +242,7 @@ def test_a_config_writes_over_the_recording_specs(tmp_path):
     bare_path = tmp_path / "bare.mcap"
     write_recording(bare_path, bare)
     specs = SensorSpecs.from_metadata(
-        open_log(bare_path, LogOptions(sensors=over)).recording.metadata.sensors)
+        read_log(bare_path, LogOptions(sensors=over))[0].metadata.sensors)
     assert list(specs.models) == ["imu"] and specs.known_fields("imu") == {"gyro_arw"}
 
 

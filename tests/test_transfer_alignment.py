@@ -26,7 +26,7 @@ from navreplay.geo.rotations import (
 )
 from navreplay.lti import second_order_markov
 from navreplay.metrics import position_error_ned, truth_at
-from navreplay.replay.engine import FilterInitError, replay
+from navreplay.replay import FilterInitError, replay
 from navreplay.reproduce import get as get_reproduction
 from navreplay.reproduce import transfer_alignment as rep
 from navreplay.sim.scenario import simulate

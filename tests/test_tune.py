@@ -22,7 +22,7 @@ from navreplay.filters.registry import load_filter
 from navreplay.jobs.tune import Objective, SearchRange, TuneJob, evaluate, parse_ranges, prepared
 from navreplay.jobs.tune import tune as run_tune
 from navreplay.params import ParamError
-from navreplay.replay.engine import replay
+from navreplay.replay import replay
 from navreplay.replay.holdout import HELD_OUT, held_out_errors, held_out_truth_errors, hold_out
 from navreplay.sensors.imu import imu_grade
 from navreplay.sensors.specs import SensorSpecs

@@ -44,7 +44,7 @@ from navreplay.geo.rotations import (
     skew,
 )
 from navreplay.params import ParamError
-from navreplay.replay.engine import FilterInitError, MissingStreamError, replay
+from navreplay.replay import FilterInitError, MissingStreamError, replay
 from navreplay.reproduce import get as get_reproduction
 from navreplay.reproduce.vector_matching import (
     ACCEL_G,

@@ -14,6 +14,7 @@ import pytest
 import rerun as rr
 
 from navreplay.filters import ins_error as ie
+from navreplay.filters.result import InnovationSeries, RunResult
 from navreplay.geo import (
     euler_to_quat,
     lla_to_ned_offset,
@@ -23,7 +24,6 @@ from navreplay.geo import (
     quat_xyzw_to_wxyz,
     radii,
 )
-from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.units import DEG, DEG_PER_HOUR, MILLI_G
 from navreplay.viz import (
@@ -45,6 +45,7 @@ STATES = tuple(dataclasses.replace(s, name=s.name.replace("b_", "db_", 1))
 T0_NS = 1_700_000_000_123_456_789
 REF = np.array([0.6544, 2.2131, 12.0])  # lat, lon [rad], h [m]
 M = 5000  # output rows at 10 Hz: more than one 4096-row chunk
+GYRO_BIAS = np.array([1e-4, 2e-4, 3e-4])  # the truth of the db_g states [rad/s]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -60,7 +61,8 @@ def make_truth(duration: float = 500.0, rate: float = 50.0) -> Recording:
     truth = Stream(
         StreamKind.TRUTH,
         T0_NS + np.rint(t * 1e9).astype(np.int64),
-        {"pos": pos, "v_n": v, "q_nb": euler_to_quat(euler), "theta_f": 0.01 * np.sin(t)},
+        {"pos": pos, "v_n": v, "q_nb": euler_to_quat(euler), "theta_f": 0.01 * np.sin(t),
+         "gyro_bias_eff": np.tile(GYRO_BIAS, (t.shape[0], 1))},
     )
     return Recording({StreamKind.TRUTH: truth}, Metadata(scenario="synthetic"), T0_NS)
 
@@ -89,6 +91,26 @@ def make_result(label: str, seed: int, truth: Recording | None = None, m: int = 
         states=STATES, x=x, P=P, extras={"misalignment_euler": rng.normal(size=(m, 3))},
         innovations={"gps_pos": innov}, **nav,
     )  # fmt: skip
+
+
+def log_runs(sink, results, truth: Recording | None = None) -> None:
+    """Whole runs into a sink, each as one block, as the replay pipeline hands them over: the
+    truth, then each run's innovations and its rows scored against the truth."""
+    from navreplay.filters.base import TruthColumn
+    from navreplay.metrics import run_metrics
+    from navreplay.replay import RunStart
+
+    stream = truth[StreamKind.TRUTH] if truth is not None else None
+    columns = {st.truth.column: st.unit for r in results for st in r.states
+               if isinstance(st.truth, TruthColumn)}
+    sink.start(RunStart("synthetic", tuple(r.label for r in results), T0_NS, truth is not None,
+                        Metadata(), columns))
+    if stream is not None:
+        sink.truth(stream)
+    for r in results:
+        sink.innovations(r)
+        rows = r.rows(0, r.t.shape[0])
+        sink.rows(rows, run_metrics(rows, truth) if truth is not None else None, stream)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -146,10 +168,9 @@ def saved(tmp_path_factory):
     a = make_result("gps-ins", 1, truth)
     b = make_result("gps-ins[q=2]", 2, truth)  # a label that needs escaping
     path = tmp_path_factory.mktemp("rrd") / "run.rrd"
-    err = a.x[:, 12] - 1e-4
+    err = a.x[:, 12] - GYRO_BIAS[0]
     with open_sink(Save(path), recording_name="synthetic") as sink:
-        sink.log_run(a, truth=truth, metrics={"db_g_x": err})
-        sink.log_run(b, truth=truth)
+        log_runs(sink, [a, b], truth)
         sink.log_ensemble(
             "NEES", a.t, {"gps-ins": np.full(M, 15.2)}, unit="-", bounds=chi2_bounds(15, 50)
         )
@@ -279,10 +300,13 @@ def test_blueprint_adapts_to_what_was_logged(saved):
     assert pane.title == "gps-ins: attitude phi_N error [deg], ±3σ" and not pane.legend
     assert plots["position"]["error:p_N@gps-ins[q=2]"].title.startswith("gps-ins[q=2]: position N")
     # components of a prefix share one plot; both filters overlay
-    assert len(plots["states"]["state:db_g"].paths) == 6
+    paths = plots["states"]["state:db_g"].paths
+    assert len([p for p in paths if "/state/" in p]) == 6
+    assert "/truth/extra/gyro_bias_eff" in paths  # the truth the states are scored against
     # a state with an error plot leaves the sigma plot (its bounds are in the error plot)
-    assert "/gps-ins/sigma/db_g_x" not in plots["states"]["sigma:db_g@gps-ins"].paths
-    assert "/gps-ins/sigma/db_g_y" in plots["states"]["sigma:db_g@gps-ins"].paths
+    # (the gyro biases are scored, the accelerometer biases are not: the truth lacks them)
+    assert "sigma:db_g@gps-ins" not in plots["states"]
+    assert "/gps-ins/sigma/db_a_y" in plots["states"]["sigma:db_a@gps-ins"].paths
     assert plots["consistency"]["nis:gps_pos@gps-ins"].title == (
         "gps-ins: gps_pos NIS (3 dof), 95 % band [-]")
     assert sink.catalog.world is not None and sink.catalog.geo
@@ -297,20 +321,15 @@ def test_blueprint_adapts_to_what_was_logged(saved):
 # live logging
 
 
-def test_observer_then_log_run_logs_each_row_once(tmp_path):
+def test_rows_block_by_block_log_each_row_once(tmp_path):
     truth = make_truth(duration=60.0)
     r = make_result("live", 3, truth, m=600)
     path = tmp_path / "live.rrd"
     with open_sink(path) as sink:
-        observe = sink.observer(truth)
-        for stop in (0, 150, 151, 400, 600):
-            view = RunResult(
-                r.filter_name, r.label, r.recording, r.t0_ns, r.t[:stop], r.states,
-                r.x[:stop], r.P[:stop], r.nav_pos[:stop], r.nav_v_n[:stop], r.nav_q_nb[:stop],
-                {k: v[:stop] for k, v in r.extras.items()},
-            )  # fmt: skip
-            observe(view)
-        sink.log_run(r, truth=truth)
+        log_runs(sink, [r.rows(0, 0)], truth)
+        for a, b in ((0, 150), (150, 151), (151, 400), (400, 600)):
+            sink.rows(r.rows(a, b), None, truth[StreamKind.TRUTH])
+        sink.innovations(r)
     data = read_rrd(path)
     col = data["/live/state/dv_N"]
     np.testing.assert_array_equal(col["time"], np.rint(r.t * 1e9).astype(np.int64))
@@ -319,43 +338,22 @@ def test_observer_then_log_run_logs_each_row_once(tmp_path):
     assert "/live/innovation/gps_pos/nis" in data
 
 
-def test_observer_without_navigation_solution(tmp_path):
+def test_rows_without_navigation_solution(tmp_path):
     r = make_result("bare", 7, m=300)
     path = tmp_path / "bare.rrd"
     with open_sink(path) as sink:
-        observe = sink.observer()
-        for stop in (100, 300):
-            observe(
-                RunResult(
-                    r.filter_name,
-                    r.label,
-                    r.recording,
-                    r.t0_ns,
-                    r.t[:stop],
-                    r.states,
-                    r.x[:stop],
-                    r.P[:stop],
-                )  # fmt: skip
-            )
-        sink.log_run(r)
+        for a, b in ((0, 100), (100, 300)):
+            sink.rows(r.rows(a, b))
     data = read_rrd(path)
     assert data["/bare/state/phi_E"]["time"].shape == (300,)
     assert not any(p.startswith("/world") for p in [*data, *data["static"]])
-
-
-def test_run_logged_twice_is_refused(tmp_path):
-    r = make_result("twice", 4, m=20)
-    with open_sink(tmp_path / "t.rrd") as sink:
-        sink.log_run(r)
-        with pytest.raises(ValueError, match="already logged"):
-            sink.log_run(r)
 
 
 def test_two_sinks_are_two_recordings(tmp_path):
     ids = []
     for i in range(2):
         with open_sink(tmp_path / f"{i}.rrd") as sink:
-            sink.log_run(make_result("f", i, m=10))
+            sink.rows(make_result("f", i, m=10))
             ids.append(sink.recording_id)
     assert ids[0] != ids[1]
     assert rr.chunk.RrdReader(tmp_path / "1.rrd").recordings()[0].recording_id == ids[1]
@@ -405,15 +403,16 @@ def test_save_is_atomic_on_failure(tmp_path):
     target.write_bytes(b"previous")
     with pytest.raises(RuntimeError, match="boom"):
         with open_sink(Save(target)) as sink:
-            sink.log_run(make_result("f", 5, m=50))
+            sink.rows(make_result("f", 5, m=50))
             assert target.read_bytes() == b"previous"  # nothing under the name while writing
             raise RuntimeError("boom")
     assert target.read_bytes() == b"previous"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.rrd"]
     fresh = tmp_path / "new.rrd"
-    with pytest.raises(ValueError):
+    bad = make_result("f", 6, m=50)
+    with pytest.raises(ValueError, match="state names"):
         with open_sink(fresh) as sink:
-            sink.log_run(make_result("f", 6, m=50), metrics={"dv_N": np.zeros(3)})  # wrong rows
+            sink.rows(dataclasses.replace(bad, x=bad.x[:, :3]))  # x of other states
     assert not fresh.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.rrd"]
 
@@ -570,7 +569,7 @@ def test_single_run_nees_with_band(tmp_path):
     m = run_metrics(r, truth)
     path = tmp_path / "nees.rrd"
     with open_sink(path) as sink:
-        sink.log_run(r, truth=truth, metrics=m)
+        log_runs(sink, [r], truth)
     data = read_rrd(path)
     np.testing.assert_allclose(scalars(data, "/f/nees")[:, 0], m.nees, rtol=1e-12)
     lo, hi = chi2_bounds(len(m.nees_states))
@@ -643,14 +642,14 @@ def test_live_sink_sends_the_blueprint_before_the_data(tmp_path, monkeypatch):
     monkeypatch.setattr(rec, "send_blueprint", send_blueprint)
     truth = make_truth(duration=20.0)
     r = make_result("live", 5, truth, m=200)
-    observe = sink.observer(truth)
-    for stop in (50, 200):
-        observe(dataclasses.replace(r, t=r.t[:stop], x=r.x[:stop], P=r.P[:stop],
-                                    nav_pos=r.nav_pos[:stop], nav_v_n=r.nav_v_n[:stop],
-                                    nav_q_nb=r.nav_q_nb[:stop], extras={}, innovations={}))
+    log_runs(sink, [r.rows(0, 0)], truth)
+    for a, b in ((0, 50), (50, 200)):
+        sink.rows(dataclasses.replace(r.rows(a, b), extras={}), None, truth[StreamKind.TRUTH])
     assert events[0][0] == "blueprint"
-    # every plotted entity's first data comes after a blueprint that already shows it
-    plotted = set(sink.catalog.paths())
+    # every plotted entity's first data comes after a blueprint that already shows it (but the
+    # truth columns states are scored against: logged with the truth, they join their state's
+    # plot with its first estimates)
+    plotted = {p for p in sink.catalog.paths() if not p.startswith("/truth/extra/")}
     sent = 0
     checked = 0
     for kind, path in events:

@@ -10,6 +10,11 @@ Filters never print, never touch files and never import rerun.
 
 Time inside a filter is float seconds since the recording start.
 
+The engine hands a filter its events in runs (:class:`EventRun`: the IMU samples of a stretch
+without gaps and the events in it) through :meth:`Filter.run_events`, whose default calls
+``propagate``, ``update`` and ``estimate`` event by event; a filter with a compiled fast path
+overrides it (see its docstring).
+
 Declared states
 ---------------
 A filter says once, as data, what each entry of ``Estimate.x`` is: a :class:`State` with its
@@ -475,6 +480,91 @@ def navigation_parts(cls: type[Filter], states: Sequence[State] = ()) -> tuple[s
     return tuple(k for k in NAV_PARTS if k in parts)
 
 
+def consumed_streams(cls: type[Filter]) -> tuple[StreamKind, ...] | None:
+    """The aiding streams a filter is handed: ``requires`` + ``optional``, or None (all) when
+    it declares no stream at all."""
+    declared = tuple(cls.requires) + tuple(cls.optional)
+    return declared or None
+
+
+TICK = -1
+"""Event code of an output tick (an aiding event's code is the index of its stream in
+:attr:`EventRun.kinds`)."""
+
+
+class EventRun(abc.ABC):
+    """A run of replay events, handed to :meth:`Filter.run_events` by the engine.
+
+    Event ``e`` (``0 <= e < len(run)``) at time ``t_ev[e]`` [s] is: the IMU samples of its
+    segment ``[ends[e-1], ends[e])`` of the block (``0`` for ``e = 0``) to ``propagate``
+    (none when the segment is empty); unless ``codes[e]`` is :data:`TICK`, row ``rows[e]`` of
+    the aiding stream ``kinds[codes[e]]`` (columns ``samples[codes[e]]``) to ``update``; when
+    ``record[e]``, the estimate after it to :meth:`add_estimate`. The block holds no IMU gap
+    (the engine bridges gaps between runs).
+
+    Attributes
+    ----------
+    t : ndarray, shape (k,)
+        IMU sample times of the block [s].
+    imu : mapping
+        The block's IMU columns, ``omega_ib_b`` and ``f_b`` (k, 3).
+    ends : ndarray of int64, shape (E,)
+        End of each event's IMU segment (indices into ``t``, non-decreasing).
+    kinds : tuple of StreamKind
+        The aiding streams the filter consumes, in priority order.
+    codes, rows : ndarray of int64, shape (E,)
+        Stream of each event (index into ``kinds``, or :data:`TICK`) and row of its sample.
+    t_ev : ndarray, shape (E,)
+        Event times [s].
+    record : ndarray of bool, shape (E,)
+        Whether an estimate is recorded after the event (once per distinct time).
+    samples : sequence of mappings
+        The columns of each aiding stream, by its index in ``kinds``.
+    done : int
+        Events applied so far (:meth:`Filter.run_events` keeps it current, so that an error
+        names the event that raised it).
+    """
+
+    t: np.ndarray
+    imu: Mapping[str, np.ndarray]
+    ends: np.ndarray
+    kinds: tuple[StreamKind, ...]
+    codes: np.ndarray
+    rows: np.ndarray
+    t_ev: np.ndarray
+    record: np.ndarray
+    samples: Sequence[Mapping[str, np.ndarray]]
+    done: int = 0
+
+    def __len__(self) -> int:
+        return int(self.ends.shape[0])
+
+    @abc.abstractmethod
+    def add_estimate(self, est: Estimate) -> None:
+        """Record the estimate after an event (the engine checks it)."""
+
+    @abc.abstractmethod
+    def add_innovations(self, items: Sequence[Innovation]) -> None:
+        """The innovations an update returned."""
+
+    @abc.abstractmethod
+    def out(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For a compiled run: free rows ``(t (E,), x (E, n), P (E, n, n), nav (E, 10))`` to
+        write the estimates into (``nav`` the navigation vectors of :mod:`navreplay.strapdown`);
+        :meth:`add_rows` then says how many were written."""
+
+    @abc.abstractmethod
+    def add_rows(self, m: int, checked: bool = False) -> None:
+        """The first ``m`` rows of :meth:`out` hold estimates; ``checked``: their covariances
+        were checked as :func:`navreplay.filters.kalman.check_covariance` checks them."""
+
+    @abc.abstractmethod
+    def add_innovation_rows(self, name: str, t: np.ndarray, nu: np.ndarray,
+                            S: np.ndarray) -> None:
+        """Updates of measurement ``name`` made by a compiled run: times (K,) [s], innovations
+        (K, m) and their covariances (K, m, m)."""
+
+
 class Filter(abc.ABC):
     """Base class of every filter.
 
@@ -515,6 +605,14 @@ class Filter(abc.ABC):
         declares ``("q_nb",)`` and returns NaN in the parts it does not estimate; they are
         neither checked nor scored nor shown. Its ``NavError`` states may only name
         quantities of the declared parts.
+
+    Fast path
+    ---------
+    :meth:`run_events` applies a run of events; its default calls ``propagate``, ``update``
+    and ``estimate`` event by event. A filter with a compiled kernel overrides it to apply
+    the whole run in one call (``ins`` and ``gps-ins``), bit for bit as the default would;
+    it falls back to the default where its kernel does not apply (a subclass that changes
+    ``propagate``, ``update`` or ``estimate``).
 
     Settings from the sensors
     -------------------------
@@ -616,3 +714,46 @@ class Filter(abc.ABC):
     @abc.abstractmethod
     def estimate(self) -> Estimate | None:
         """The current estimate, or None before the filter is initialised."""
+
+    def run_events(self, run: EventRun) -> int:
+        """Apply the events of ``run`` in order (see :class:`EventRun`) and return how many
+        were applied.
+
+        This default hands each event's IMU segment to :meth:`propagate`, its sample to
+        :meth:`update` and records :meth:`estimate`: the reference of every fast path. An
+        override may apply fewer events than the run holds (a compiled run that stops before
+        an event failing one of its checks, its state as before that event): the engine then
+        applies the next event through this default, which names the problem, and goes on.
+        """
+        propagate, update, estimate = self.propagate, self.update, self.estimate
+        t, imu = run.t, tuple(run.imu.items())
+        kinds = run.kinds
+        samples = [tuple(s.items()) for s in run.samples]
+        ends, codes, rows = run.ends.tolist(), run.codes.tolist(), run.rows.tolist()
+        t_ev, record = run.t_ev.tolist(), run.record.tolist()
+        a = 0
+        for e in range(len(ends)):
+            run.done = e
+            b = ends[e]
+            if b > a:
+                propagate(t[a:b], {k: v[a:b] for k, v in imu})
+                a = b
+            c = codes[e]
+            if c != TICK:
+                r = rows[e]
+                inn = update(kinds[c], t_ev[e], {k: v[r] for k, v in samples[c]})
+                if inn:
+                    run.add_innovations(inn)
+            if record[e]:
+                est = estimate()
+                if est is not None:
+                    run.add_estimate(est)
+        run.done = len(ends)
+        return len(ends)
+
+
+def overrides(obj: Filter, base: type[Filter], *names: str) -> bool:
+    """Whether the class of ``obj`` defines any of the methods ``names`` otherwise than
+    ``base`` does (a subclass that changes what a compiled fast path of ``base`` assumes)."""
+    cls = type(obj)
+    return any(getattr(cls, n) is not getattr(base, n) for n in names)

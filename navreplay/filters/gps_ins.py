@@ -106,7 +106,7 @@ GPS velocity, with ``w = omega_ib_b_hat`` (last compensated gyro sample) and
 Update (the compiled kernel of :func:`navreplay.filters.kalman.correct`, Cholesky + Joseph
 form, with its checks) of the error state dx = 0, then feedback (12); the models, update and
 feedback are compiled together in :mod:`navreplay.filters.gnss_models`, and the replay engine
-hands whole runs of events to :meth:`GpsInsFilter.replay_events`. Each update returns its
+hands whole runs of events to :meth:`GpsInsFilter.run_events`. Each update returns its
 innovation ``nu = z`` and ``S`` for NIS statistics (``"gps_pos"`` [m], ``"gps_vel"`` [m/s]).
 
 (10) omits the derivatives of w_in with respect to position and velocity in the lever-arm term
@@ -129,6 +129,7 @@ from navreplay.filters import gps_ins_events as ev
 from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters.base import (
+    EventRun,
     FilterContext,
     FilterParams,
     Innovation,
@@ -137,8 +138,10 @@ from navreplay.filters.base import (
     State,
     TruthColumn,
     check_number,
+    overrides,
 )
 from navreplay.filters.ins import InsFilter, InsParams
+from navreplay.filters.ins_time_update import Imu
 from navreplay.filters.registry import register_filter
 from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import StreamKind
@@ -522,23 +525,21 @@ class GpsInsFilter(InsFilter):
             self.gm_t = np.array([self.t])
 
 
-    def replay_events(
-        self, t: np.ndarray, imu: Mapping[str, np.ndarray], ends: np.ndarray,
-        kinds: tuple[StreamKind, ...], codes: np.ndarray, rows: np.ndarray, t_ev: np.ndarray,
-        record: np.ndarray, samples: list[Mapping[str, np.ndarray]],
-        out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    ) -> tuple[int, int, dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    def run_events(self, run: EventRun) -> int:
         """A run of replay events in one compiled call
-        (:func:`navreplay.filters.gps_ins_events.run_events`): for each event e, propagate
-        over the IMU segment ``[ends[e-1], ends[e])`` of the block, apply the sample of row
-        ``rows[e]`` of stream ``kinds[codes[e]]`` (code -1: none), and when ``record[e]``
-        write an estimate into the next row of ``out`` = (t, x, P, nav vectors).
-
-        Returns (events applied, estimates written, innovations by name as (t, nu, S)
-        arrays); the events after those applied (the first of them failed a check and was
-        undone) are for :meth:`propagate`, :meth:`update` and :meth:`estimate`.
+        (:func:`navreplay.filters.gps_ins_events.run_events`): for each event, propagate over
+        its IMU segment, apply its GPS sample (if any) and write the estimate after it into
+        the run's rows, bit for bit as :meth:`propagate`, :meth:`update` and :meth:`estimate`
+        one by one, every estimate checked as :func:`navreplay.filters.kalman.check_covariance`
+        checks it. The kernel stops before an event that fails a check (undone): the default
+        then applies it, which names the problem. A subclass that changes ``propagate``,
+        ``update`` or ``estimate`` gets the default (its runs of ticks still compiled when
+        :class:`~navreplay.filters.ins.InsFilter`'s kernel applies).
         """
+        if overrides(self, GpsInsFilter, "propagate", "update", "estimate"):
+            return super().run_events(run)
         p = self.params
+        kinds, samples = run.kinds, run.samples
         local = np.zeros(len(kinds) + 1, np.int64)  # code + 1 -> event code of the kernel
         empty = np.zeros((0, 3))
         cols = {gnss.POSITION: (empty, empty), gnss.VELOCITY: (empty, empty)}
@@ -557,24 +558,28 @@ class GpsInsFilter(InsFilter):
                  "gm_t": self.gm_t}
         for key, (a, _) in ev.LAYOUT.items():
             s[a:a + len(state[key])] = state[key]
-        n_inn = int(np.count_nonzero(local[codes + 1]))
+        codes = local[run.codes + 1]
+        n_inn = int(np.count_nonzero(codes))
         inn_code = np.zeros(n_inn, np.int64)
         inn_t, inn_nu, inn_S = np.empty(n_inn), np.empty((n_inn, 3)), np.empty((n_inn, 3, 3))
         f64 = np.ascontiguousarray
         done, m, k, self.nav, self.P, self.t = ev.run_events(
-            self.nav, self.P, self.t, s, t, f64(imu["omega_ib_b"], dtype=float),
-            f64(imu["f_b"], dtype=float), ends, local[codes + 1], rows, t_ev, record,
-            *(f64(a, dtype=float) for a in cols[gnss.POSITION]),
-            *(f64(a, dtype=float) for a in cols[gnss.VELOCITY]),
-            p.gps_pos_sigma_scale, p.gps_vel_sigma_scale, p.estimate_lever_arm,
-            -1 if self._gp is None else self._gp.start, float(p.gps_pos_gm_tau), self._gm_var,
-            tu.step, *tu._model, *tu._work, kalman.DEFAULT_RTOL, *out, inn_code, inn_t,
-            inn_nu, inn_S)
+            self.nav, self.P, self.t, s,
+            Imu(run.t, f64(run.imu["omega_ib_b"], dtype=float), f64(run.imu["f_b"], dtype=float)),
+            ev.Events(run.ends, codes, run.rows, run.t_ev, run.record),
+            ev.Gnss(*(f64(a, dtype=float) for a in (*cols[gnss.POSITION], *cols[gnss.VELOCITY])),
+                    p.gps_pos_sigma_scale, p.gps_vel_sigma_scale),
+            ev.Options(p.estimate_lever_arm, -1 if self._gp is None else self._gp.start,
+                       gnss.GaussMarkov(float(p.gps_pos_gm_tau), self._gm_var),
+                       kalman.DEFAULT_RTOL),
+            tu.step, tu.model, tu.work, ev.Rows(*run.out()),
+            ev.Updates(inn_code, inn_t, inn_nu, inn_S))
         for key, (a, _) in ev.LAYOUT.items():  # the filter's arrays are updated in place
             state[key][:] = s[a:a + len(state[key])]
-        innovations = {}
+        run.add_rows(m, checked=True)
         for code, name in ((gnss.POSITION, "gps_pos"), (gnss.VELOCITY, "gps_vel")):
             sel = inn_code[:k] == code
             if sel.any():
-                innovations[name] = (inn_t[:k][sel], inn_nu[:k][sel], inn_S[:k][sel])
-        return done, m, innovations
+                run.add_innovation_rows(name, inn_t[:k][sel], inn_nu[:k][sel], inn_S[:k][sel])
+        run.done = done
+        return done

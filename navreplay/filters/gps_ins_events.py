@@ -4,8 +4,8 @@
 :meth:`~navreplay.filters.gps_ins.GpsInsFilter.propagate`,
 :meth:`~navreplay.filters.gps_ins.GpsInsFilter.update` and
 :meth:`~navreplay.filters.gps_ins.GpsInsFilter.estimate`, with the same kernels in the same
-order (so the same bits): the IMU segment up to the event (bias, z-rate and accelerometer
-compensation, strapdown, covariance steps), the GPS update
+order (so the same bits): the IMU segment up to the event (bias, gyro and accelerometer
+scale-factor and misalignment compensation, strapdown, covariance steps), the GPS update
 (:func:`navreplay.filters.gnss_models.gps_update`), the estimate when the event is the last of
 its time. The first event that fails any check is undone and the call returns: the engine
 replays that event one by one, which names the problem.
@@ -16,12 +16,18 @@ so that an event is undone by copying it back.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from navreplay.filters import gnss_models as gnss
 from navreplay.filters.ins_time_update import (
     _TIME_TOL,
+    Imu,
+    Model,
+    Open,
+    Work,
     _close_step,
     _propagate_segment,
     compensate_accel,
@@ -42,6 +48,61 @@ time."""
 PACKED = 57
 
 
+class Events(NamedTuple):
+    """The events of a run (:class:`navreplay.filters.base.EventRun`, codes mapped to the
+    kernel's): IMU segment ends (E,), :data:`TICK`, ``gnss.POSITION`` or ``gnss.VELOCITY``
+    (E,), sample rows (E,), times [s] (E,), whether an estimate is recorded (E,)."""
+
+    ends: np.ndarray
+    codes: np.ndarray
+    rows: np.ndarray
+    t_ev: np.ndarray
+    record: np.ndarray
+
+
+class Gnss(NamedTuple):
+    """The GNSS samples of a run: positions and their sigmas (K, 3), velocities and their
+    sigmas (L, 3), and the sigma scales of each."""
+
+    pos: np.ndarray
+    pos_sigma: np.ndarray
+    vel: np.ndarray
+    vel_sigma: np.ndarray
+    pos_scale: float
+    vel_scale: float
+
+
+class Options(NamedTuple):
+    """The filter's options a run needs: lever-arm states, the first GNSS Gauss-Markov state
+    (-1: none) and the model of that error, and the relative tolerance of the covariance
+    checks."""
+
+    lever_states: bool
+    gp: int
+    gauss_markov: gnss.GaussMarkov
+    rtol: float
+
+
+class Rows(NamedTuple):
+    """The rows the estimates go to: times (E,), states (E, n), covariances (E, n, n),
+    navigation vectors (E, 10)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    nav: np.ndarray
+
+
+class Updates(NamedTuple):
+    """The rows the innovations go to: measurement code (U,), time (U,), nu (U, 3),
+    S (U, 3, 3)."""
+
+    code: np.ndarray
+    t: np.ndarray
+    nu: np.ndarray
+    S: np.ndarray
+
+
 @numba.njit(cache=True)
 def _any(a: np.ndarray) -> bool:
     for v in a:
@@ -52,30 +113,30 @@ def _any(a: np.ndarray) -> bool:
 
 @numba.njit(cache=True)
 def run_events(
-    nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray,
-    t: np.ndarray, omega: np.ndarray, f: np.ndarray,
-    ends: np.ndarray, codes: np.ndarray, rows: np.ndarray, t_ev: np.ndarray,
-    record: np.ndarray,
-    gps_pos: np.ndarray, gps_pos_sigma: np.ndarray, gps_vel: np.ndarray,
-    gps_vel_sigma: np.ndarray, pos_scale: float, vel_scale: float,
-    lever_states: bool, gp: int, gm_tau: float, gm_var: np.ndarray,
-    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, ng: int, na: int, rate: np.ndarray, F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray,
-    cols: np.ndarray, mean: np.ndarray, rtol: float,
-    t_out: np.ndarray, x_out: np.ndarray, P_out: np.ndarray, nav_out: np.ndarray,
-    inn_code: np.ndarray, inn_t: np.ndarray, inn_nu: np.ndarray, inn_S: np.ndarray,
+    nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray, imu: Imu, events: Events,
+    gnss_samples: Gnss, options: Options, step: float, model: Model, work: Work, out: Rows,
+    updates: Updates,
 ) -> tuple[int, int, int, np.ndarray, np.ndarray, float]:
-    """Apply events ``0 .. len(codes) - 1`` (see the module docstring).
+    """Apply the events of ``events`` in order (see the module docstring).
 
-    ``ends[e]`` is the end of the IMU segment handed over before event e (indices into t,
-    omega, f); ``codes[e]`` :data:`TICK`, ``gnss.POSITION`` or ``gnss.VELOCITY`` with the
-    sample in row ``rows[e]`` of its columns; ``record[e]`` asks for an estimate after it.
-    Estimates go to rows of ``t_out, x_out, P_out, nav_out``, innovations to ``inn_*``.
+    ``ends[e]`` is the end of the IMU segment handed over before event e (indices into
+    ``imu``); ``codes[e]`` :data:`TICK`, ``gnss.POSITION`` or ``gnss.VELOCITY`` with the
+    sample in row ``rows[e]`` of its columns in ``gnss_samples``; ``record[e]`` asks for an
+    estimate after it. Estimates go to the rows of ``out``, innovations to ``updates``; ``s``
+    is the packed state (:data:`LAYOUT`), ``step``, ``model`` and ``work`` those of the
+    filter's :class:`~navreplay.filters.ins_time_update.TimeUpdate`.
 
     Returns (done, estimates, innovations, nav, P, t_nav): the events applied (all, or up to
     the first that failed, undone), the rows written and the state after them; ``s`` holds
     the packed state after them.
     """
+    t, omega, f = imu
+    ends, codes, rows, t_ev, record = events
+    gps_pos, gps_pos_sigma, gps_vel, gps_vel_sigma, pos_scale, vel_scale = gnss_samples
+    lever_states, gp, gauss_markov, rtol = options
+    t_out, x_out, P_out, nav_out = out
+    inn_code, inn_t, inn_nu, inn_S = updates
+    gz, ga, ng, na = model.gz, model.ga, model.ng, model.na
     n = P.shape[0]
     prev = s[0:6]
     open_nav = s[6:16]
@@ -86,9 +147,9 @@ def run_events(
     k_a = s[38:38 + 3 * na]
     lever = s[47:50]
     w_last = s[50:53]
+    open_step = Open(open_nav, open_sums)
     est = gnss.Estimates(b_a, b_g, lever, k_z, k_a, s[53:56], s[56:57])
     layout = gnss.Layout(lever_states, gz, ng, ga, na, gp)
-    gauss_markov = gnss.GaussMarkov(gm_tau, gm_var)
     gm_now = np.empty(3)
     snap = np.empty(s.shape[0])
     m = 0
@@ -112,9 +173,8 @@ def run_events(
                 first += 1
             if first < b - a:
                 code, nav_b, P_b = _propagate_segment(
-                    nav, P, t[a:b], t_nav, w, fb, b_a, b_g, first, b - a, prev, step, q, k_acc,
-                    k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav, open_sums, F, M, T, Q, cols,
-                    mean, w_last)
+                    nav, P, t[a:b], t_nav, w, fb, b_a, b_g, first, b - a, prev, step, model,
+                    open_step, work, w_last)
                 if code == -1:
                     nav, P, t_nav = nav_b, P_b, t[b - 1]
                     closes = open_sums[0] > 0.0 and (record[e] or (
@@ -126,8 +186,7 @@ def run_events(
         kind = codes[e]
         if ok and kind != TICK and not t_ev[e] < t_nav - 1e-6:
             if open_sums[0] > 0.0:
-                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav,
-                                open_sums, F, M, T, Q, cols, mean)
+                P = _close_step(P, model, open_step, work)
                 ok = _covariance_ok(P, rtol)
             if ok:
                 r = rows[e]
@@ -150,8 +209,7 @@ def run_events(
                     k += 1
         if ok and record[e]:
             if open_sums[0] > 0.0:
-                P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav,
-                                open_sums, F, M, T, Q, cols, mean)
+                P = _close_step(P, model, open_step, work)
                 ok = _covariance_ok(P, rtol)
             if ok:
                 t_out[m] = t_nav
@@ -167,7 +225,7 @@ def run_events(
                 for c in range(3 * na):
                     x_out[m, ga + c] = k_a[c]
                 if gp >= 0:
-                    gnss.gm_at(est.gm, est.gm_t[0], t_nav, gm_tau, gm_now)
+                    gnss.gm_at(est.gm, est.gm_t[0], t_nav, gauss_markov.tau, gm_now)
                     for c in range(3):
                         x_out[m, gp + c] = gm_now[c]
                 for r in range(n):

@@ -123,7 +123,9 @@ from navreplay.filters import imu_gap, kalman
 from navreplay.filters import ins_error as ie
 from navreplay.filters import ins_time_update as itu
 from navreplay.filters.base import (
+    TICK,
     Estimate,
+    EventRun,
     Filter,
     FilterContext,
     FilterParams,
@@ -134,6 +136,7 @@ from navreplay.filters.base import (
     State,
     TrueConstant,
     check_number,
+    overrides,
     state_names,
 )
 from navreplay.filters.registry import register_filter
@@ -655,23 +658,37 @@ class InsFilter(Filter):
             NavSolution.from_vector(self.nav),
         )
 
-    def propagate_outputs(
-        self, t: np.ndarray, imu: Mapping[str, np.ndarray], ends: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`propagate` over each segment ``[ends[j-1], ends[j])`` of an IMU block, each
-        followed by :meth:`estimate`, in one compiled call (the replay engine's batch of
-        output ticks); returns the estimates' columns (t, x, P, nav vectors)."""
-        t_out, nav_out, P_out, w_last = self._time_update.propagate_outputs(
-            self.nav, self.P, self.t, t, imu["omega_ib_b"], imu["f_b"], self.b_a, self.b_g,
-            ends, self._gyro_z_estimates(), self._accel_estimates(),
+    def run_events(self, run: EventRun) -> int:
+        """A run of output ticks (all of ``ins``'s events: it consumes no aiding stream) in one
+        compiled call of the time update
+        (:meth:`~navreplay.filters.ins_time_update.TimeUpdate.propagate_outputs`): for each tick,
+        :meth:`propagate` over its IMU segment and :meth:`estimate`, bit for bit. Other runs,
+        every run of a subclass that changes :meth:`propagate` or :meth:`estimate`, and those
+        of a filter with first-order Markov states (their estimates decay from tick to tick,
+        the kernel writes one state vector) go through the default."""
+        if (overrides(self, InsFilter, "propagate", "estimate")
+                or (run.codes != TICK).any() or not run.record.all()
+                or self._time_update.model.rate.any()):
+            return super().run_events(run)
+        m = len(run)
+        t_out, x_out, P_out, nav_out = run.out()
+        state = self._state_vector()
+        if x_out.shape[1:] != state.shape:  # the declarations do not fit: named by the default
+            return super().run_events(run)
+        _, _, _, w_last = self._time_update.propagate_outputs(
+            self.nav, self.P, self.t, run.t, run.imu["omega_ib_b"], run.imu["f_b"], self.b_a,
+            self.b_g, run.ends, self._gyro_z_estimates(), self._accel_estimates(),
+            out=(t_out, nav_out, P_out),
         )
-        self.nav = nav_out[-1].copy()
-        self.P = P_out[-1].copy()
-        self.t = float(t_out[-1])
+        self.nav = nav_out[m - 1].copy()
+        self.P = P_out[m - 1].copy()
+        self.t = float(t_out[m - 1])
         if not np.isnan(w_last[0]):
             self.omega_ib_b = w_last
-        x = np.broadcast_to(self._state_vector(), (len(t_out), self.P.shape[0]))
-        return t_out, x, P_out, nav_out
+        x_out[:m] = self._state_vector()
+        run.add_rows(m)
+        run.done = m
+        return m
 
     # -- covariance propagation ------------------------------------------------------------
 

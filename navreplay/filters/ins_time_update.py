@@ -3,8 +3,10 @@
 ``P <- Phi P Phi^T + Qd`` with ``Phi = I + F T + (F T)^2 / 2`` (kalman eqs. 3, 6) by the
 compiled kernels of :mod:`navreplay.filters.kalman` for a Phi that is the identity but for a
 few rows: F has non-zero rows only for position, velocity and attitude and non-zero columns
-only for the 15 states here and the optional three of eq. (22) (the states a larger filter
-adds are random constants or random walks), so only 9 rows and columns of P change.
+only for the 15 states here and the optional scale-factor and misalignment states of
+eqs. (22), (23) (the states a larger filter adds are random constants, random walks or
+first-order Markov processes, kalman eq. 5a), so only 9 rows and columns of P change (and the
+diagonal of the Markov states).
 :func:`propagate_covariance` steps over given points, :func:`accumulate_covariance` collects
 IMU samples into steps of a given length, and :class:`TimeUpdate` is the whole time update of
 an INS filter over an IMU block (bias compensation, :mod:`navreplay.strapdown`, covariance) in
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -45,23 +48,94 @@ _TIME_TOL = 1e-9
 """Slack [s] when comparing sample times with the time of the navigation solution."""
 
 
+class Model(NamedTuple):
+    """The error model as the compiled kernels take it (:func:`_model_args`): the process noise
+    per second ``q`` (n,), eq. (21)'s ``k_acc`` and ``k_gyro``, depth instead of height, the
+    curvature derivatives, the first gyro (``gz``) and accelerometer (``ga``) scale-factor and
+    misalignment state (-1 for none) and the columns they hold (``ng``, ``na``; 0 for none),
+    and 1 / tau of each first-order Markov state (``rate`` (n,), 0 for the others)."""
+
+    q: np.ndarray
+    k_acc: float
+    k_gyro: float
+    depth: bool
+    curvature: bool
+    gz: int
+    ga: int
+    ng: int
+    na: int
+    rate: np.ndarray
+
+
+class Work(NamedTuple):
+    """Scratch arrays of the covariance step (:func:`_scratch`): F (15, nc), M (9, nc),
+    T (9, n), Q (n, n), the columns ``cols`` (nc,) of the states F reaches, and the means
+    (2, 3) of an open step."""
+
+    F: np.ndarray
+    M: np.ndarray
+    T: np.ndarray
+    Q: np.ndarray
+    cols: np.ndarray
+    mean: np.ndarray
+
+
+class Open(NamedTuple):
+    """The open covariance step (:class:`OpenStep`): the navigation vector at its start (10,)
+    and the sums over its samples (7,), updated in place."""
+
+    nav: np.ndarray
+    sums: np.ndarray
+
+
+class Imu(NamedTuple):
+    """A block of IMU samples: times (k,) [s], body rates and specific forces (k, 3)."""
+
+    t: np.ndarray
+    omega: np.ndarray
+    f: np.ndarray
+
+
+class Compensation(NamedTuple):
+    """The estimates the IMU samples are compensated with: accelerometer and gyro biases (3,),
+    the gyro scale-factor and misalignment errors ``k_z`` (3 per column) of eq. (22) and the
+    accelerometer errors ``k_a`` (3 per column) of eq. (23) (zeros: none)."""
+
+    b_a: np.ndarray
+    b_g: np.ndarray
+    k_z: np.ndarray
+    k_a: np.ndarray
+
+
+class Outputs(NamedTuple):
+    """The rows a compiled time update writes: times (m,), navigation vectors (m, 10),
+    covariances (m, n, n), and the last compensated body rate (3,)."""
+
+    t: np.ndarray
+    nav: np.ndarray
+    P: np.ndarray
+    w_last: np.ndarray
+
+
 @numba.njit(cache=True)
 def _covariance_step(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int, ng: int, na: int, rate: np.ndarray,
-    F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
+    model: Model, work: Work,
 ) -> np.ndarray:
     """One step of kalman eqs. (3), (4), (6) with F from eqs. (6)-(19), (22), (23) and Qd from
     (20), (21); returns a new P.
 
     F has non-zero rows only for position, velocity and attitude and non-zero columns only for
-    the 15 navigation states, with ``gz >= 0`` the three gyro z-rate states at
-    ``gz .. gz + 2`` (eq. 22) and with ``ga >= 0`` the six accelerometer states at
-    ``ga .. ga + 5`` (eq. 23), listed in ``cols``: Phi is the identity but for its first
-    9 rows, and :func:`navreplay.filters.kalman.predict_rows_kernel` propagates P.
-    F (15, nc), M (9, nc), T (9, n) and Q (n, n, diagonal) are scratch (nc = 15, + 3 with
-    ``gz >= 0``, + 6 with ``ga >= 0``).
+    the 15 navigation states, the gyro states of ``ng`` columns at ``gz .. gz + 3 ng - 1``
+    (eq. 22) and the accelerometer states of ``na`` columns at ``ga .. ga + 3 na - 1``
+    (eq. 23), listed in ``cols``: Phi is the identity but for its first 9 rows and the
+    diagonal of the first-order Markov states (``rate`` > 0, kalman eq. 5a), and
+    :func:`navreplay.filters.kalman.predict_rows_kernel` and
+    :func:`navreplay.filters.kalman.markov_rows_kernel` propagate P. F (15, nc), M (9, nc),
+    T (9, n) and Q (n, n, diagonal) are scratch (nc = 15 + 3 ng + 3 na).
     """
+    q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate = model
+    F, M, T, Q, cols, _ = work
     n = P.shape[0]
     F[:, :] = 0.0
     C = kernels.quat_to_dcm(nav[6:10])
@@ -101,8 +175,7 @@ def _covariance_step(
     return P
 
 
-def _scratch(n: int, gz: int, ga: int, ng: int, na: int
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _scratch(n: int, gz: int, ga: int, ng: int, na: int) -> Work:
     """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro states of ``ng``
     columns at ``gz``, accelerometer states of ``na`` columns at ``ga``) and the means of
     :func:`_close_step`."""
@@ -110,38 +183,33 @@ def _scratch(n: int, gz: int, ga: int, ng: int, na: int
                            np.arange(gz, gz + 3 * ng, dtype=np.int64),
                            np.arange(ga, ga + 3 * na, dtype=np.int64)])
     nc = cols.shape[0]
-    return (np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
-            np.zeros((n, n)), cols, np.zeros((2, 3)))
+    return Work(np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
+                np.zeros((n, n)), cols, np.zeros((2, 3)))
 
 
 @numba.njit(cache=True)
 def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int, ng: int, na: int, rate: np.ndarray,
-    F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
+    model: Model, work: Work,
 ) -> np.ndarray:
     for k in range(dt.shape[0]):
-        P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], q, k_acc, k_gyro, depth,
-                             curvature, gz, ga, ng, na, rate, F, M, T, Q, cols)
+        P = _covariance_step(P, nav[k], f_b[k], omega_b[k], dt[k], model, work)
     return P
 
 
 @numba.njit(cache=True, inline="always")
-def _close_step(
-    P: np.ndarray, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, ng: int, na: int, rate: np.ndarray, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
-    T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray,
-) -> np.ndarray:
+def _close_step(P: np.ndarray, model: Model, open_step: Open, work: Work) -> np.ndarray:
     """P propagated over the open step, with F at its start and the mean specific force and
     body rate over it; the step is then cleared (P itself when none is open)."""
+    open_sums = open_step.sums
+    mean = work.mean
     dt = open_sums[0]
     if dt <= 0.0:
         return P
     for j in range(3):
         mean[0, j] = open_sums[1 + j] / dt
         mean[1, j] = open_sums[4 + j] / dt
-    P = _covariance_step(P, open_nav, mean[0], mean[1], dt, q, k_acc, k_gyro, depth, curvature,
-                         gz, ga, ng, na, rate, F, M, T, Q, cols)
+    P = _covariance_step(P, open_step.nav, mean[0], mean[1], dt, model, work)
     for j in range(open_sums.shape[0]):
         open_sums[j] = 0.0
     return P
@@ -150,10 +218,9 @@ def _close_step(
 @numba.njit(cache=True, inline="always")
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
-    step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool,
-    gz: int, ga: int, ng: int, na: int, rate: np.ndarray, open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray,
-    T: np.ndarray, Q: np.ndarray, cols: np.ndarray, mean: np.ndarray,
+    step: float, model: Model, open_step: Open, work: Work,
 ) -> np.ndarray:
+    open_nav, open_sums = open_step
     for k in range(dt.shape[0]):
         if open_sums[0] == 0.0:
             for j in range(open_nav.shape[0]):  # (loops: array assignment compiles a
@@ -163,8 +230,7 @@ def _accumulate_covariance(
             open_sums[1 + j] += f_b[k, j] * dt[k]
             open_sums[4 + j] += omega_b[k, j] * dt[k]
         if open_sums[0] >= step - 1e-9:
-            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav, open_sums,
-                            F, M, T, Q, cols, mean)
+            P = _close_step(P, model, open_step, work)
     return P
 
 
@@ -320,17 +386,16 @@ class OpenStep:
 
 def _model_args(
     shape: tuple[int, ...], noise: ProcessNoise, vertical: Vertical, curvature_derivatives: bool
-) -> tuple[np.ndarray, float, float, bool, bool, int, int]:
+) -> Model:
     """Check the shape of P against the model; the arguments the compiled kernels take."""
     n = noise.q.shape[0]
     if shape != (n, n) or n < N_STATES:
         raise ValueError(
             f"P must be (n, n) with n >= 15 the length of the process noise ({n}), got {shape}"
         )
-    ng, na = noise.columns
-    return (noise.q, noise.k_acc, noise.k_gyro, vertical is Vertical.DEPTH,
-            bool(curvature_derivatives), noise.gyro_z_states, noise.accel_states, ng, na,
-            noise.markov)
+    return Model(noise.q, noise.k_acc, noise.k_gyro, vertical is Vertical.DEPTH,
+                 bool(curvature_derivatives), noise.gyro_z_states, noise.accel_states,
+                 *noise.columns, noise.markov)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
@@ -388,9 +453,8 @@ def propagate_covariance(
             f"nav must be ({k}, 10), f_b and omega_b ({k}, 3) for {k} steps; got {nav.shape}, "
             f"{f_b.shape}, {omega_b.shape}"
         )
-    F, M, T, Q, cols, _ = _scratch(P.shape[0], *args[5:9])
-    return _propagate_covariance(_f64(P), _f64(nav), _f64(f_b), _f64(omega_b), _f64(dt), *args,
-                                 F, M, T, Q, cols)
+    return _propagate_covariance(_f64(P), _f64(nav), _f64(f_b), _f64(omega_b), _f64(dt), args,
+                                 _scratch(P.shape[0], args.gz, args.ga, args.ng, args.na))
 
 
 def accumulate_covariance(
@@ -439,8 +503,7 @@ def accumulate_covariance(
     P : ndarray, shape (n, n)
         Symmetric, not checked.
     """
-    q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate = _model_args(
-        P.shape, noise, vertical, curvature_derivatives)
+    model = _model_args(P.shape, noise, vertical, curvature_derivatives)
     k = dt.shape[0]
     if hist.shape != (k + 1, 10) or f_b.shape != (k, 3) or omega_b.shape != (k, 3):
         raise ValueError(
@@ -448,8 +511,9 @@ def accumulate_covariance(
             f"{f_b.shape}, {omega_b.shape}"
         )
     return _accumulate_covariance(
-        _f64(P), _f64(hist), _f64(f_b), _f64(omega_b), _f64(dt), float(step), q, k_acc, k_gyro,
-        depth, curvature, gz, ga, ng, na, rate, open_step.nav, open_step.sums, *_scratch(P.shape[0], gz, ga, ng, na),
+        _f64(P), _f64(hist), _f64(f_b), _f64(omega_b), _f64(dt), float(step), model,
+        Open(open_step.nav, open_step.sums),
+        _scratch(P.shape[0], model.gz, model.ga, model.ng, model.na),
     )
 
 
@@ -459,8 +523,8 @@ def close_step(
 ) -> np.ndarray:
     """Propagate P over the open step (if any) and clear it; P at the last sample's time."""
     model = _model_args(P.shape, noise, vertical, curvature_derivatives)
-    return _close_step(_f64(P), *model, open_step.nav, open_step.sums,
-                       *_scratch(P.shape[0], *model[5:9]))
+    return _close_step(_f64(P), model, Open(open_step.nav, open_step.sums),
+                       _scratch(P.shape[0], model.gz, model.ga, model.ng, model.na))
 
 
 class TimeUpdate:
@@ -490,8 +554,10 @@ class TimeUpdate:
     ) -> None:
         n = noise.q.shape[0]
         self._shape = (n, n)
-        self._model = _model_args(self._shape, noise, vertical, curvature_derivatives)
-        self._work = _scratch(n, *self._model[5:9])
+        self.model = _model_args(self._shape, noise, vertical, curvature_derivatives)
+        """The error model as the compiled kernels take it."""
+        self.work = _scratch(n, self.model.gz, self.model.ga, self.model.ng, self.model.na)
+        """Their scratch arrays."""
         self.step = float(step)
         self.prev = np.zeros(6)
         """Increments [dtheta, dv] of the last sample [rad, m/s]."""
@@ -558,13 +624,15 @@ class TimeUpdate:
         self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
         omega_ib_b: np.ndarray, f_b: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
         ends: np.ndarray, gyro_z: np.ndarray | None = None, accel_k: np.ndarray | None = None,
+        out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`propagate` over each segment ``[ends[j-1], ends[j])`` of a block followed by
         :meth:`close`, in one compiled call; the state after each segment is an output.
 
         The same arithmetic as the calls one by one (the gyro compensated first for the
         z-rate error estimates ``gyro_z`` (m_xz, m_yz, s_z) of eq. (22), the accelerometer for
-        the estimates ``accel_k`` (6,) of eq. (23), if given).
+        the estimates ``accel_k`` (6,) of eq. (23), if given). ``out``: arrays ``(t_out,
+        nav_out, P_out)`` of at least ``len(ends)`` rows to write into.
 
         Returns
         -------
@@ -581,7 +649,7 @@ class TimeUpdate:
         as :meth:`propagate` and :meth:`close`.
         """
         return self._run(nav, P, t_nav, t, omega_ib_b, f_b, b_a, b_g, ends, gyro_z, accel_k,
-                         True, DEFAULT_RTOL)
+                         True, DEFAULT_RTOL, out)
 
     def close(self, P: np.ndarray, t: float) -> np.ndarray:
         """P at the time t [s] of the last sample: propagated over the open covariance step,
@@ -600,23 +668,25 @@ class TimeUpdate:
         self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
         omega_ib_b: np.ndarray, f_b: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
         ends: np.ndarray, gyro_z: np.ndarray | None, accel_k: np.ndarray | None, close: bool,
-        rtol: float,
+        rtol: float, out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:func:`_propagate_outputs` with the arrays it takes (one compiled signature for
         every caller); raises the error of a failed segment."""
         m = ends.shape[0]
-        t_out = np.empty(m)
-        nav_out = np.empty((m, 10))
-        P_out = np.empty((m, *self._shape))
+        if out is None:
+            t_out, nav_out, P_out = np.empty(m), np.empty((m, 10)), np.empty((m, *self._shape))
+        else:
+            t_out, nav_out, P_out = (a[:m] for a in out)
         w_last = np.full(3, np.nan)
         k_z = _NO_GYRO_Z if gyro_z is None else _f64(gyro_z)
         k_a = _NO_ACCEL if accel_k is None else _f64(accel_k)
         t_nav = float(t_nav)
         code, j, first, _, P_j, t_j = _propagate_outputs(
-            _f64(nav), _f64(P), _f64(t), t_nav, _f64(omega_ib_b), _f64(f_b), _f64(b_a),
-            _f64(b_g), k_z, k_a, self.prev, self.step, *self._model, self.open_step.nav,
-            self.open_step.sums, *self._work, np.ascontiguousarray(ends, dtype=np.int64),
-            close, rtol, t_out, nav_out, P_out, w_last,
+            _f64(nav), _f64(P), t_nav, Imu(_f64(t), _f64(omega_ib_b), _f64(f_b)),
+            Compensation(_f64(b_a), _f64(b_g), k_z, k_a), self.prev, self.step, self.model,
+            Open(self.open_step.nav, self.open_step.sums), self.work,
+            np.ascontiguousarray(ends, dtype=np.int64), close, rtol,
+            Outputs(t_out, nav_out, P_out, w_last),
         )
         if code == -1:
             return t_out, nav_out, P_out, w_last
@@ -641,9 +711,7 @@ _NO_ACCEL = np.zeros(N_ACCEL_HF)
 def _propagate_segment(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, w: np.ndarray, f: np.ndarray,
     b_a: np.ndarray, b_g: np.ndarray, first: int, b: int, prev: np.ndarray, step: float,
-    q: np.ndarray, k_acc: float, k_gyro: float, depth: bool, curvature: bool, gz: int, ga: int, ng: int, na: int, rate: np.ndarray,
-    open_nav: np.ndarray, open_sums: np.ndarray, F: np.ndarray, M: np.ndarray, T: np.ndarray,
-    Q: np.ndarray, cols: np.ndarray, mean: np.ndarray, w_last: np.ndarray,
+    model: Model, open_step: Open, work: Work, w_last: np.ndarray,
 ) -> tuple[int, np.ndarray, np.ndarray]:
     """Strapdown and the covariance steps over the samples ``first .. b - 1`` (all after
     ``t_nav``, at least one) of the compensated rates ``w`` and specific forces ``f``, the
@@ -673,8 +741,7 @@ def _propagate_segment(
     for c in range(3):  # the last sample's increments: coning and sculling of the next
         prev[c] = wc[k - 1, c] * dt[k - 1]
         prev[3 + c] = fc[k - 1, c] * dt[k - 1]
-    P = _accumulate_covariance(P, hist, fc, wc, dt, step, q, k_acc, k_gyro, depth, curvature,
-                               gz, ga, ng, na, rate, open_nav, open_sums, F, M, T, Q, cols, mean)
+    P = _accumulate_covariance(P, hist, fc, wc, dt, step, model, open_step, work)
     for i in range(P.shape[0]):
         if not (P[i, i] >= 0.0 and math.isfinite(P[i, i])):
             return -3, nav, P
@@ -685,22 +752,18 @@ def _propagate_segment(
 
 @numba.njit(cache=True)
 def _propagate_outputs(
-    nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, omega: np.ndarray,
-    f: np.ndarray, b_a: np.ndarray, b_g: np.ndarray, k_z: np.ndarray, k_a: np.ndarray,
-    prev: np.ndarray, step: float, q: np.ndarray, k_acc: float, k_gyro: float, depth: bool,
-    curvature: bool, gz: int, ga: int, ng: int, na: int, rate: np.ndarray, open_nav: np.ndarray, open_sums: np.ndarray,
-    F: np.ndarray, M: np.ndarray, T: np.ndarray, Q: np.ndarray, cols: np.ndarray,
-    mean: np.ndarray, ends: np.ndarray, close: bool, rtol: float, t_out: np.ndarray,
-    nav_out: np.ndarray, P_out: np.ndarray, w_last: np.ndarray,
+    nav: np.ndarray, P: np.ndarray, t_nav: float, imu: Imu, comp: Compensation,
+    prev: np.ndarray, step: float, model: Model, open_step: Open, work: Work, ends: np.ndarray,
+    close: bool, rtol: float, out: Outputs,
 ) -> tuple[int, int, int, np.ndarray, np.ndarray, float]:
     """The whole time update of a block in one compiled call: bias compensation, strapdown
     and the covariance steps over the samples of each segment ``[ends[j-1], ends[j])`` after
     ``t_nav`` (the time of ``nav``), then, with ``close``, the open covariance step closed
     (:func:`_close_step`), and (t, nav, P) written into row j of the outputs.
 
-    The gyro samples are compensated first for the z-rate errors ``k_z`` (eq. 22):
-    ``omega - k_z (omega_z - b_g_z)``, the accelerometer samples for the errors ``k_a``
-    (eq. 23) (:func:`compensate_accel`); then the biases are subtracted. Returns
+    The gyro samples are compensated first for the scale-factor and misalignment errors
+    ``k_z`` (eq. 22, :func:`compensate_gyro`), the accelerometer samples for the errors ``k_a``
+    (eq. 23, :func:`compensate_accel`); then the biases are subtracted. Returns
     (code, j, first, nav, P, t_nav) with ``first`` the index of the first sample of segment j
     after ``t_nav``; code -1 when all went well, else for segment j: -5 when P is not (n, n)
     with n the length of q; the strapdown's codes (the index of the first invalid sample from
@@ -712,7 +775,10 @@ def _propagate_outputs(
     ``w_last`` receives the last compensated body rate. A segment with no sample after
     ``t_nav`` leaves the state as it is (its row repeats the previous one).
     """
-    n = q.shape[0]
+    t, omega, f = imu
+    b_a, b_g, k_z, k_a = comp
+    t_out, nav_out, P_out, w_last = out
+    n = model.q.shape[0]
     if P.shape[0] != n or P.shape[1] != n:
         return -5, 0, 0, nav, P, t_nav
     w = omega
@@ -732,18 +798,17 @@ def _propagate_outputs(
             first += 1
         if first < b:
             code, nav_b, P = _propagate_segment(
-                nav, P, t, t_nav, w, f, b_a, b_g, first, b, prev, step, q, k_acc, k_gyro, depth,
-                curvature, gz, ga, ng, na, rate, open_nav, open_sums, F, M, T, Q, cols, mean, w_last)
+                nav, P, t, t_nav, w, f, b_a, b_g, first, b, prev, step, model, open_step, work,
+                w_last)
             if code != -1:
                 return code, j, first, nav, P, t_nav
             nav = nav_b
             t_nav = t[b - 1]
-            if rtol >= 0.0 and open_sums[0] <= 0.0 and not _covariance_ok(P, rtol):
+            if rtol >= 0.0 and open_step.sums[0] <= 0.0 and not _covariance_ok(P, rtol):
                 return -6, j, first, nav, P, t_nav  # (else checked below)
         a = max(a, b)
-        if close and open_sums[0] > 0.0:
-            P = _close_step(P, q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate, open_nav, open_sums,
-                            F, M, T, Q, cols, mean)
+        if close and open_step.sums[0] > 0.0:
+            P = _close_step(P, model, open_step, work)
             if rtol >= 0.0 and not _covariance_ok(P, rtol):
                 return -7, j, a, nav, P, t_nav
         t_out[j] = t_nav

@@ -1,7 +1,12 @@
-"""Filter registry: built-ins, the ``navreplay.filters`` entry-point group, ``module:Class``."""
+"""Filter registry: built-ins, the ``navreplay.filters`` entry-point group, ``module:Class``.
+
+The entry points of the installed packages are scanned once per process (:func:`refresh`
+scans them again, for a package installed while the process runs).
+"""
 
 from __future__ import annotations
 
+import functools
 import importlib
 import warnings
 from importlib import metadata as _md
@@ -28,8 +33,10 @@ class FilterPluginWarning(UserWarning):
     """A plug-in of the ``navreplay.filters`` group that cannot be loaded (the others still are)."""
 
 
+@functools.cache
 def _load_entry_points() -> tuple[dict[str, type[Filter]], dict[str, str]]:
-    """Plug-in filters by name, and the reason each broken plug-in could not be loaded."""
+    """Plug-in filters by name, and the reason each broken plug-in could not be loaded (once
+    per process)."""
     found: dict[str, type[Filter]] = {}
     broken: dict[str, str] = {}
     for ep in _md.entry_points(group=ENTRY_POINT_GROUP):
@@ -43,6 +50,11 @@ def _load_entry_points() -> tuple[dict[str, type[Filter]], dict[str, str]]:
             continue
         found[ep.name] = cls
     return found, broken
+
+
+def refresh() -> None:
+    """Forget the plug-ins found so far: the next lookup scans the entry points again."""
+    _load_entry_points.cache_clear()
 
 
 def filters() -> dict[str, type[Filter]]:

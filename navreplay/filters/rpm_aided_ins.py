@@ -124,7 +124,7 @@ Initial covariance (§4.6): position, velocity and attitude sigmas from
 Examples
 --------
 >>> from navreplay.sim.scenario import simulate
->>> from navreplay.replay.engine import replay
+>>> from navreplay.replay import replay
 >>> rec = simulate("underwater-rpm", {"duration": 10.0}, seed=0)
 >>> res = replay(rec, RpmAidedIns, {"mode": "rpm_current"})
 >>> res.x.shape[1], sorted(res.innovations)

@@ -23,11 +23,13 @@ unit and frame.
 Writing is atomic and refuses to replace a file unless ``force=True``; reading is bulk (numpy) for
 the fixed-layout messages, salvages truncated files with a :class:`RecordingWarning`, and reports
 CRC mismatches and bad samples as :class:`RecordingError` naming the file, topic and time.
+:func:`open_recording` decides a file's kind once (MCAP file, rosbag2 bag) and reads it as time
+windows of its streams (:mod:`navreplay.io.source`); :func:`read_recording` reads it whole.
 """
 
 from navreplay.io.errors import RecordingError, RecordingExistsError, RecordingWarning
+from navreplay.io.files import open_recording, read_recording
 from navreplay.io.info import RecordingInfo, TopicInfo, format_info, recording_info
-from navreplay.io.reader import read_recording
 from navreplay.io.schemas import TOPICS
 from navreplay.io.writer import write_recording
 
@@ -39,6 +41,7 @@ __all__ = [
     "RecordingWarning",
     "TopicInfo",
     "format_info",
+    "open_recording",
     "read_recording",
     "recording_info",
     "write_recording",

@@ -5,21 +5,12 @@ that read without error. :func:`contents_problems` compares what a walk over the
 what the file itself claims: the summary's statistics (message counts per channel, first and last
 message time) and, for navreplay's own recordings, the metadata (start time and duration). Each
 disagreement is one phrase for the ``DAMAGED`` line of ``navreplay info``.
-
-:func:`read_salvaged` reads a recording and tells whether it was salvaged from a damaged file
-and what fraction of it survived (:func:`coverage`), for the summaries of ``navreplay run``.
 """
 
 from __future__ import annotations
 
-import os
-import warnings
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from typing import Any
-
-from navreplay.io.errors import SalvagedWarning
-from navreplay.streams import Recording
 
 TIME_SLACK_NS = 1_000_000_000
 """Messages may lie this far outside the metadata's [t0, t0 + duration] [ns]."""
@@ -72,43 +63,3 @@ def contents_problems(
                            f"{(lo[cid] - t0_ns) * 1e-9:.3f}..{(hi[cid] - t0_ns) * 1e-9:.3f} s, "
                            f"outside the recording's 0..{duration_s:g} s")
     return out
-
-
-@contextmanager
-def salvage_watch() -> Iterator[list[bool]]:
-    """A block that reads recordings: afterwards the yielded list holds one bool, whether
-    messages were lost to damage (warnings are passed on as they come)."""
-    lost = [False]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        yield lost
-    for w in caught:
-        if isinstance(w.message, SalvagedWarning) and not w.message.data_complete:
-            lost[0] = True
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-
-
-def read_salvaged(path: str | os.PathLike[str]) -> tuple[Recording, bool]:
-    """:func:`navreplay.io.read_recording`, and whether messages were lost to damage."""
-    from navreplay.io.reader import read_recording
-
-    with salvage_watch() as lost:
-        recording = read_recording(path)
-    return recording, lost[0]
-
-
-def coverage(recording: Recording, salvaged: bool) -> float | None:
-    """Fraction of the recording's duration that its streams cover: 1 for a complete file;
-    for a salvaged one the last message time over the metadata's duration (None when the file
-    does not say how long it was), and at most the fraction of its messages kept
-    (``metadata.extra["messages_kept"]``: a rosbag2 folder whose data files hold fewer
-    messages than its metadata.yaml counts)."""
-    if not salvaged:
-        return 1.0
-    duration = recording.metadata.params.get("duration")
-    ends = [int(s.t_ns[-1]) for s in recording.streams.values() if len(s)]
-    if not isinstance(duration, int | float) or not duration > 0 or not ends:
-        return None
-    covered = min(max((max(ends) - recording.t0_ns) * 1e-9 / float(duration), 0.0), 1.0)
-    kept = recording.metadata.extra.get("messages_kept")
-    return min(covered, float(kept)) if isinstance(kept, int | float) else covered

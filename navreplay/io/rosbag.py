@@ -1,24 +1,26 @@
 """rosbag2 folders and sqlite3 (``.db3``) bags, read with ``rosbags`` into the same streams.
 
-An MCAP file is read in bulk by :mod:`navreplay.io.reader`. A rosbag2 folder (``metadata.yaml``
+An MCAP file is read in bulk by :mod:`navreplay.io.mcapread`. A rosbag2 folder (``metadata.yaml``
 with MCAP or sqlite3 storage, one or several split files) is read with ``rosbags``' AnyReader,
 which also brings the message definitions stored in the bag; a ``.db3`` file is read from its
 folder when that has a ``metadata.yaml``, else straight from its sqlite tables with rosbags'
 standard type store. Messages are deserialised one by one (rosbags), their fields gathered by the
 same leaf paths as the bulk decoder (:mod:`navreplay.io.schemas`), and then decoded, converted
-and checked exactly like an MCAP topic (:func:`navreplay.io.reader.build_stream`).
+and checked exactly like an MCAP topic (:func:`navreplay.io.topics.build_stream`). A bag is
+one window (:class:`BagSource`).
 
 Times: ``header.stamp`` is the sample time, or the log (receive) time with ``--time log``; a
 topic whose stamps are zero or do not increase takes the log times, with a warning
-(:func:`navreplay.io.reader.sample_times`).
+(:func:`navreplay.io.topics.sample_times`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import sqlite3
 import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +30,10 @@ from navreplay.io.cdr import fields_of_messages
 from navreplay.io.checks import check_frame_ids
 from navreplay.io.convert import REDUCE, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
-from navreplay.io.schemas import KIND_BY_TYPE, SPECS, normalize_type_name
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
+from navreplay.io.schemas import SPECS, normalize_type_name
+from navreplay.io.source import COMPLETE, Source, Window
+from navreplay.io.topics import build_stream, candidate, choose_topics, sample_times, topic_map
+from navreplay.streams import Metadata, Stream, StreamKind
 
 
 def bag_folder(path: Path) -> Path | None:
@@ -135,87 +139,105 @@ def _open(path: Path) -> _Bag:
     return _Bag(path)
 
 
-def read_rosbag(
-    path: Path,
-    wanted: set[StreamKind],
-    explicit: bool,
-    topic_kinds: Mapping[str, StreamKind],
-    declared: Mapping[StreamKind, Convention],
-    validate: bool,
-    topics: Mapping[StreamKind | str, str] | None = None,
-    time: str = "header",
-) -> tuple[Recording, dict[StreamKind, Any]]:
-    """Read the streams of a rosbag2 folder or .db3 (arguments as in ``read_streams``)."""
-    from navreplay.io.reader import build_stream, check_named_topics, pick_topic, sample_times
+def accepts(path: Path) -> bool:
+    """Whether ``path`` is a rosbag2 folder, its metadata.yaml, or a sqlite3 ``.db3`` file."""
+    return path.is_dir() or path.suffix == ".db3" or path.name == "metadata.yaml"
 
-    where = str(path)
-    check = check_bag(path)
-    metadata = Metadata()
-    if check is not None and check.problems:
-        text = f"{where}: the data disagree with metadata.yaml: {'; '.join(check.problems)}"
-        if check.lost:
-            warnings.warn(SalvagedWarning(f"{text}; replaying what the data files hold",
-                                          data_complete=False), stacklevel=2)
-            if check.declared_duration_s:  # the part replayed (io.integrity.coverage)
-                metadata.params["duration"] = check.declared_duration_s
-            metadata.extra["messages_kept"] = check.kept
-        else:
-            warnings.warn(RecordingWarning(text), stacklevel=2)
-    with _open(path) as bag:
-        listing = bag.topics()
-        by_kind: dict[StreamKind, list[tuple[str, str, str, bool]]] = {}
-        for topic, type_name, fmt, _ in listing:
-            kind = topic_kinds.get(topic)
-            canonical = kind is not None
-            if kind is None:
-                by_type = KIND_BY_TYPE.get(type_name)
-                kind = by_type if by_type is not None and SPECS[by_type].by_schema else None
-            if kind is not None and kind in wanted:
-                by_kind.setdefault(kind, []).append((topic, type_name, fmt, canonical))
-        chosen: dict[StreamKind, str] = {}
-        for kind in SPECS:
-            cands = by_kind.get(kind, [])
-            i = pick_topic(where, kind, cands, explicit)
-            if i is not None:
-                chosen[kind] = cands[i][0]
-        available = ", ".join(f"{t} ({ty})" for t, ty, _, _ in listing) or "no topics"
-        check_named_topics(where, topics, chosen, available)
-        if explicit:
-            missing = [k.value for k in SPECS if k in wanted and k not in chosen]
-            if missing:
-                raise RecordingError(f"{where}: no topic for stream(s) {', '.join(missing)}; "
-                                     f"the bag has {available}")
-        gathered: dict[StreamKind, tuple[list[Any], list[int]]] = {}
-        for kind, topic in chosen.items():
-            msgs, times = [], []
-            for t, msg in bag.messages([topic]):
-                times.append(t)
-                msgs.append(msg)
-            gathered[kind] = (msgs, times)
-    # t0: first log time over the chosen topics
-    firsts = [min(ts) for _, ts in gathered.values() if ts]
-    t0_ns = min(firsts) if firsts else 0
-    streams: dict[StreamKind, Stream] = {}
-    sources: dict[StreamKind, Any] = {}
-    for kind, (msgs, log_t) in gathered.items():
-        topic = chosen[kind]
-        label = f"{where}: topic {topic} ({SPECS[kind].message.name})"
-        fields = _fields(msgs, kind, label)
-        log_ns = np.asarray(log_t, dtype=np.int64)
-        order = np.argsort(log_ns, kind="stable")
-        if np.any(order != np.arange(order.size)):
-            fields = {k: v[order] for k, v in fields.items()}
-            log_ns = log_ns[order]
-        fields["t_ns"] = sample_times(fields["t_ns"], log_ns, time, label)
-        frames = {m.header.frame_id for m in msgs}
-        frame_id = msgs[0].header.frame_id if msgs else SPECS[kind].frame_id
-        note = check_frame_ids(kind, label, frames, declared.get(kind), frame_id)
-        if note:
-            warnings.warn(RecordingWarning(f"{label}: {note}"), stacklevel=2)
-        others = tuple(sorted(c[0] for c in by_kind.get(kind, []) if c[0] != topic))
-        streams[kind], sources[kind] = build_stream(
-            kind, fields, frame_id, label, [], t0_ns, validate, declared.get(kind), topic, others)
-    return Recording(streams=streams, metadata=metadata, t0_ns=t0_ns), sources
+
+class BagSource(Source):
+    """The streams of a rosbag2 folder or ``.db3`` as one window (arguments as
+    :class:`navreplay.io.mcapread.McapSource`; bags are read whole)."""
+
+    kind = "rosbag2"
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        kinds: Iterable[StreamKind | str] | None = None,
+        explicit: bool = False,
+        topics: Mapping[StreamKind | str, str] | None = None,
+        frames: Mapping[StreamKind | str, Convention | str] | None = None,
+        time: str = "header",
+        validate: bool = True,
+        window: int | None = None,
+    ) -> None:
+        super().__init__(str(path))
+        self.path = Path(path)
+        self._wanted = set(SPECS) if kinds is None else {StreamKind(k) for k in kinds}
+        self._explicit = explicit
+        self._topics = topics
+        self._declared = {StreamKind(k): Convention(str(v).lower())
+                          for k, v in (frames or {}).items()}
+        self._time = time
+        self._validate = validate
+
+    def _windows(self) -> Iterator[Window]:
+        where = self.name
+        topic_kinds = topic_map(self._topics)
+        metadata = self._check()
+        with _open(self.path) as bag:
+            listing = bag.topics()
+            available = ", ".join(f"{t} ({ty})" for t, ty, _, _ in listing) or "no topics"
+            cands = [c for t, ty, fmt, _ in listing
+                     if (c := candidate(t, ty, fmt, topic_kinds)) is not None]
+            chosen = choose_topics(where, cands, self._wanted, explicit=self._explicit,
+                                   named=self._topics, available=available, what="bag")
+            with warnings.catch_warnings():  # (said once, for the streams read)
+                warnings.simplefilter("ignore", RecordingWarning)
+                present = choose_topics(where, cands, set(SPECS), explicit=False,
+                                        named=self._topics, available=available, what="bag")
+            gathered: dict[StreamKind, tuple[list[Any], list[int]]] = {}
+            for kind, (c, _) in chosen.items():
+                msgs, times = [], []
+                for t, msg in bag.messages([c.topic]):
+                    times.append(t)
+                    msgs.append(msg)
+                gathered[kind] = (msgs, times)
+        # t0: first log time over the chosen topics
+        firsts = [min(ts) for _, ts in gathered.values() if ts]
+        t0_ns = min(firsts) if firsts else 0
+        streams: dict[StreamKind, Stream] = {}
+        for kind, (msgs, log_t) in gathered.items():
+            topic, others = chosen[kind][0].topic, chosen[kind][1]
+            label = f"{where}: topic {topic} ({SPECS[kind].message.name})"
+            fields = _fields(msgs, kind, label)
+            log_ns = np.asarray(log_t, dtype=np.int64)
+            order = np.argsort(log_ns, kind="stable")
+            if np.any(order != np.arange(order.size)):
+                fields = {k: v[order] for k, v in fields.items()}
+                log_ns = log_ns[order]
+            fields["t_ns"] = sample_times(fields["t_ns"], log_ns, self._time, label)
+            frames = {m.header.frame_id for m in msgs}
+            frame_id = msgs[0].header.frame_id if msgs else SPECS[kind].frame_id
+            note = check_frame_ids(kind, label, frames, self._declared.get(kind), frame_id)
+            if note:
+                warnings.warn(RecordingWarning(f"{label}: {note}"), stacklevel=2)
+            streams[kind], self.sources[kind] = build_stream(
+                kind, fields, frame_id, label, [], t0_ns, self._validate,
+                self._declared.get(kind), topic, others)
+        yield Window(streams, dict.fromkeys(streams, COMPLETE), metadata, t0_ns,
+                     frozenset(present), final=True)
+
+    def _check(self) -> Metadata:
+        """The data files against metadata.yaml (:func:`check_bag`): a disagreement is a
+        warning, data lost a salvage (the part kept goes into the metadata:
+        :attr:`Source.coverage`)."""
+        check = check_bag(self.path)
+        metadata = Metadata()
+        if check is not None and check.problems:
+            text = (f"{self.name}: the data disagree with metadata.yaml: "
+                    f"{'; '.join(check.problems)}")
+            if check.lost:
+                self._salvaged = True
+                warnings.warn(SalvagedWarning(f"{text}; replaying what the data files hold",
+                                              data_complete=False), stacklevel=4)
+                if check.declared_duration_s:  # the part replayed (Source.coverage)
+                    metadata.params["duration"] = check.declared_duration_s
+                metadata.extra["messages_kept"] = check.kept
+            else:
+                warnings.warn(RecordingWarning(text), stacklevel=4)
+        return metadata
 
 
 def _fields(msgs: list[Any], kind: StreamKind, label: str) -> dict[str, np.ndarray]:

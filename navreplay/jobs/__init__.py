@@ -6,7 +6,7 @@ so the same jobs run from Python::
 
     from pathlib import Path
     from navreplay.jobs import RunJob, VizMode, VizOptions, run
-    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.replay.spec import FilterSpec
 
     job = RunJob(filters=(FilterSpec("gps-ins"),), recordings=(Path("x.mcap"),),
                  viz=VizOptions(VizMode.SAVE, Path("out/x.rrd")))

@@ -17,7 +17,7 @@ import numpy as np
 
 from navreplay import units
 from navreplay.io import RecordingError
-from navreplay.io.reader import read_streams
+from navreplay.io.files import read_streams
 from navreplay.outputs import atomic_path
 from navreplay.sensors import allan
 from navreplay.sensors.imu import ImuModel

@@ -10,8 +10,7 @@ from typing import Any
 from navreplay import params as _params
 from navreplay.filters.registry import load_filter
 from navreplay.filters.settings import ParamValues, Source
-from navreplay.replay.engine import build_params
-from navreplay.replay.ensemble import FilterSpec
+from navreplay.replay.spec import FilterSpec
 
 
 def split_filter_list(text: str) -> list[str]:
@@ -139,8 +138,7 @@ def filter_specs(
     for (label, ref, inline, cls), vals in zip(parsed, values, strict=True):
         vals.update(inline)
         vals.sources.update(dict.fromkeys(inline, Source.INLINE))
-        build_params(cls, vals)  # validate now
-        specs.append(FilterSpec(ref, vals, label))
+        specs.append(FilterSpec(ref, vals, label, cls=cls).resolve())  # typed and checked now
     return tuple(specs)
 
 

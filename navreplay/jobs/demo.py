@@ -10,8 +10,8 @@ from pathlib import Path
 from navreplay.jobs.report import DEFAULT_OUT
 from navreplay.jobs.run import RunJob, run
 from navreplay.jobs.simulate import SimulateJob, simulate
-from navreplay.replay.engine import Progress
-from navreplay.replay.ensemble import FilterSpec
+from navreplay.replay.session import Progress
+from navreplay.replay.spec import FilterSpec
 from navreplay.viz.options import VizMode, VizOptions, open_viewer
 
 DEMO_SCENARIO = "vehicle-drive"

@@ -8,11 +8,13 @@ from pathlib import Path
 from typing import Any
 
 from navreplay import params as _params
+from navreplay.campaign.tasks import monte_carlo_tasks
 from navreplay.jobs.config import check_scenario
 from navreplay.jobs.report import DEFAULT_OUT, RunReport
 from navreplay.jobs.run import campaign, outputs_of
-from navreplay.replay.engine import MissingStreamError, Progress
-from navreplay.replay.ensemble import FilterSpec, monte_carlo_tasks
+from navreplay.replay.errors import MissingStreamError
+from navreplay.replay.session import Progress
+from navreplay.replay.spec import FilterSpec
 from navreplay.viz.options import VizOptions
 
 
@@ -42,7 +44,7 @@ class MonteCarloJob:
         ``--export DIR`` (ensemble statistics as CSV) and ``--report FILE.html``.
     executor : str
         ``process``, ``dask`` or ``dask://HOST:PORT``
-        (:func:`navreplay.replay.ensemble.make_executor`).
+        (:func:`navreplay.campaign.executors.make_executor`).
     max_imu_gap : float, optional
         Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
     """
@@ -73,7 +75,7 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
 
     streams = set(get_scenario(job.scenario).streams)
     for spec in job.filters:
-        cls = spec.load()
+        cls = spec.filter_cls
         missing = [str(k) for k in cls.requires if k not in streams]
         if missing:
             raise MissingStreamError(

@@ -1,11 +1,11 @@
 """``--export DIR`` and ``--report FILE.html`` of ``navreplay run`` and ``navreplay montecarlo``.
 
 The jobs call :meth:`Outputs.check` before any work (existing files are refused unless
-``force``, so a long run does not end in a refusal). A run over one recording then calls
-:meth:`Outputs.start_run`, hands over the truth window by window and each filter's estimates
-and innovations block by block as they come (:meth:`Outputs.truth`, :meth:`Outputs.rows`,
-:meth:`Outputs.innovations`: the exports are written as they go, the report keeps envelopes),
-and ends with :meth:`Outputs.write_run` (or :meth:`Outputs.abort`); a campaign calls
+``force``, so a long run does not end in a refusal). Over one recording, :class:`Outputs` is a
+stage of the replay pipeline (:class:`navreplay.replay.Stage`): it is started, handed the truth
+window by window and each filter's estimates and innovations block by block as they come (the
+exports are written as they go, the report keeps envelopes), and ends with
+:meth:`Outputs.write_run` (or :meth:`Outputs.abort`); a campaign calls
 :meth:`Outputs.write_ensemble`. Both return the lines to print. matplotlib is imported only
 when a report is asked for.
 """
@@ -67,16 +67,18 @@ class Outputs:
                       else export.run_targets(self.export_dir, labels, has_reference))
         export.check_targets(paths, self.force)
 
-    def start_run(self, labels: Sequence[str], *, has_reference: bool, source: str) -> None:
-        """Open the exports and the report's series of filters replayed over one recording."""
+    def start(self, run: Any) -> None:
+        """Open the exports and the report's series of filters replayed over one recording
+        (a :class:`navreplay.replay.RunStart`), existing targets refused first."""
+        self.check(run.labels, ensemble=False, has_reference=run.has_truth)
         if self.export_dir is not None:
-            self._export = export.RunExport(self.export_dir, labels,
-                                            has_reference=has_reference, source=source,
+            self._export = export.RunExport(self.export_dir, run.labels,
+                                            has_reference=run.has_truth, source=run.source,
                                             force=self.force)
         if self.report_path is not None:
             from navreplay.report import RunSeries
 
-            self._series = {label: RunSeries(label) for label in labels}
+            self._series = {label: RunSeries(label) for label in run.labels}
 
     def truth(self, truth: Any) -> None:
         """A window of the truth stream (later than before)."""
@@ -84,12 +86,12 @@ class Outputs:
             with self._writing():
                 self._export.add_reference(truth)
 
-    def rows(self, rows: Any, metrics: Any = None) -> None:
+    def rows(self, rows: Any, metrics: Any = None, truth: Any = None) -> None:
         """A block of one filter's estimates (a RunResult, later than its blocks before) with
-        its metrics (None without a reference); innovations it carries are drawn too."""
+        its metrics (None without a reference)."""
         if not self.wanted:
             return
-        out = export.filter_output(rows, metrics=metrics)
+        out = export.filter_output(rows, metrics)
         if self._export is not None:
             with self._writing():
                 self._export.add(out)

@@ -9,24 +9,18 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from navreplay import params as _params
 from navreplay import tables
+from navreplay.campaign.ensemble import run_ensemble
+from navreplay.campaign.tasks import RunOutput, RunTask, default_extract, file_tasks
+from navreplay.filters.result import RunResult
 from navreplay.filters.settings import setting_notes, summary_entries
 from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
-from navreplay.replay.engine import Progress, check_streams, replay
-from navreplay.replay.ensemble import (
-    FilterSpec,
-    RunOutput,
-    RunTask,
-    default_extract,
-    file_tasks,
-    run_ensemble,
-)
-from navreplay.replay.result import RunResult
+from navreplay.replay.pipeline import replay_file
+from navreplay.replay.session import Progress
+from navreplay.replay.spec import FilterSpec
 from navreplay.streams import Recording, StreamKind, seconds
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
 
@@ -43,7 +37,7 @@ def campaign_extract(
     recording: Recording, results: dict[str, RunResult], task: RunTask
 ) -> PerRun:
     """Extractor of ``navreplay run`` over several recordings and ``navreplay montecarlo``."""
-    from navreplay.logs.reference import add_coverage, reference_coverage
+    from navreplay.metrics.coverage import add_coverage, reference_coverage
 
     scored = default_extract(recording, results, task)
     summaries = {label: {**m.summary(), **summary_entries(results[label].settings)}
@@ -96,7 +90,7 @@ class RunJob:
         Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
     executor : str
         Where several recordings run: ``process``, ``dask`` or ``dask://HOST:PORT``
-        (:func:`navreplay.replay.ensemble.make_executor`).
+        (:func:`navreplay.campaign.executors.make_executor`).
     """
 
     filters: tuple[FilterSpec, ...]
@@ -120,13 +114,9 @@ def outputs_of(job: Any) -> Outputs:
 
 
 def _check_files(paths: Sequence[Path]) -> None:
-    from navreplay.io.reader import is_rosbag
-
     for p in paths:
-        if not (Path(p).is_file() or (Path(p).is_dir() and is_rosbag(Path(p)))):
-            what = ("is a directory, not a recording or rosbag2 folder" if Path(p).is_dir()
-                    else "no such recording")
-            raise FileNotFoundError(f"{p}: {what}")
+        if not Path(p).exists():
+            raise FileNotFoundError(f"{p}: no such recording")
 
 
 def run(job: RunJob, progress: Progress | None = None) -> RunReport:
@@ -143,7 +133,7 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
     job = _with_needs(job)
     if len(job.recordings) == 1:
         with read_policy(job.log.policy):  # the IMU's range, --force-frame
-            return _run_streamed(job, progress) or _run_one(job, progress)
+            return _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
@@ -160,219 +150,60 @@ def _with_needs(job: RunJob) -> RunJob:
     from navreplay.filters.base import initial_parts
     from navreplay.logs.options import LogOptions
 
-    needs = initial_parts([spec.load() for spec in job.filters])
+    needs = initial_parts([spec.filter_cls for spec in job.filters])
     return dataclasses.replace(job, log=dataclasses.replace(job.log or LogOptions(), needs=needs))
 
 
-def _run_streamed(job: RunJob, progress: Progress | None) -> RunReport | None:
-    """Replay one intact MCAP file window by window (memory flat in its length): the .rrd or
-    the live view logged, the exports written and the report's series kept block by block;
-    None when the run needs the whole recording (a reference, paced replay, a rosbag2 folder
-    or a damaged file): :func:`_run_one` then reads it whole."""
-    from navreplay.filters.base import TruthColumn
-    from navreplay.io.reader import is_rosbag
-    from navreplay.io.windows import COMPLETE, NotStreamable, Window, read_windows, streamable
-    from navreplay.logs.options import LogOptions
-    from navreplay.logs.prepare import make_ready
-    from navreplay.logs.reference import CoverageCount, add_coverage
-    from navreplay.replay.engine import ReplaySession
-    from navreplay.replay.streaming import RunningSummary
-    from navreplay.streams import FIELDS, Stream
+def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
+    """Replay the filters over one recording, window by window (memory flat in its length):
+    the .rrd or the live view, the exports and the report's series fed block by block
+    (:func:`navreplay.replay.replay_file`)."""
+    from navreplay.logs.prepare import open_log, streams_needed
+    from navreplay.metrics.coverage import add_coverage
 
     path = Path(job.recordings[0])
-    options = job.log or LogOptions()
-    if (job.pacing is not None or options.reference is not None or is_rosbag(path)
-            or not streamable(path)):
-        return None
-    classes = [spec.load() for spec in job.filters]
-    sources: dict[StreamKind, Any] = {}
-    windows = read_windows(path, decoded_kinds(classes, options), topics=options.topics,
-                           frames=options.stream_frames, time=options.time, sources=sources)
-    try:
-        window: Window = next(windows)
-    except NotStreamable:
-        return None
-    metadata = window.metadata
-    metadata.extra.setdefault("source", str(path))
-    # every kind the file holds (empty if not decoded or not in the first window): the filters
-    # see the streams of the whole recording
-    empty = {k: Stream(k, np.zeros(0, np.int64),
-                       {c: np.zeros((0, *f.shape)) for c, f in FIELDS.get(k, {}).items()})
-             for k in window.present}
-    merged = {**empty, **window}
-    head = Recording({k: merged[k] for k in StreamKind if k in merged}, metadata,
-                     window.t0_ns)
-    notes = make_ready(head, sources, options)
-    has_truth = StreamKind.TRUTH in head
+    classes = [spec.filter_cls for spec in job.filters]
     labels = [spec.label for spec in job.filters]
+    source = open_log(path, job.log, kinds=streams_needed(classes, job.log))
+    try:
+        source.peek()  # read and made ready: the log's problems are raised before any output
+    except BaseException:
+        source.close()
+        raise
     outputs = outputs_of(job)
-    outputs.check(labels, ensemble=False, has_reference=has_truth)
-    sessions = [ReplaySession(head, cls, spec.params, label=spec.label, source=str(path),
-                              output_rate=job.output_rate, validate=False,
-                              max_imu_gap=job.max_imu_gap)
-                for spec, cls in zip(job.filters, classes, strict=True)]
-    t0_ns = head.t0_ns
-    del head
     sink = open_output(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
-
-    def scored(rows: RunResult, m: Any, truth: Any) -> None:
-        if sink is not None:
-            sink.log_block(rows, m, truth)
-        outputs.rows(rows, m)
-
-    scores = [RunningSummary(spec.label, t0_ns, metadata.true_errors, has_truth,
-                             scored=scored)
-              for spec in job.filters]
-    covers = [CoverageCount() for _ in job.filters]
-    columns = {st.truth.column: st.unit for session in sessions for st in session.states
-               if isinstance(st.truth, TruthColumn)}
-    duration = float(metadata.params.get("duration") or 0.0)
+    stages = [st for st in (sink, outputs) if st is not None]
     title = f"{', '.join(labels)} over {path.name}"
     try:
-        outputs.start_run(labels, has_reference=has_truth, source=str(path))
-        aiding: dict[StreamKind, Stream] = {}  # the first window's are in the sessions
-        while True:
-            following = next(windows, None)
-            final = following is None
-            imu, truth = window.get(StreamKind.IMU), window.get(StreamKind.TRUTH)
-            known = {k: (COMPLETE if final else t) for k, t in window.known.items()}
-            if sink is not None and truth is not None and len(truth):
-                sink.log_truth_window(truth, t0_ns, columns)
-            for session, score, cover in zip(sessions, scores, covers, strict=True):
-                block = session.feed(imu, final=final, aiding=aiding, known=known)
-                cover.outputs(block.t)
-                if truth is not None:
-                    cover.reference(seconds(truth.t_ns, t0_ns))
-                if sink is not None:
-                    sink.log_innovations(block)
-                outputs.innovations(block)
-                score.add(block)
-                score.add_truth(truth, final=final)
-                if final and not score.rows:  # no estimate at all: the files' headers
-                    outputs.rows(dataclasses.replace(block, innovations={}))
-            if truth is not None and len(truth):  # after the estimates it covers: written
-                outputs.truth(truth)              # at once, not queued behind them
-            if progress is not None and imu is not None and len(imu) and duration > 0:
-                done = (int(imu.t_ns[-1]) - t0_ns) * 1e-9
-                progress(min(int(done), int(duration)), int(duration))
-            if final:
-                break
-            window = following
-            aiding = window
-        summaries = {spec.label: {**score.summary(), **summary_entries(session.settings)}
-                     for spec, score, session in zip(job.filters, scores, sessions, strict=True)}
-        notes += setting_notes(summaries.values())
-        if has_truth:
-            for spec, cover in zip(job.filters, covers, strict=True):
-                add_coverage(summaries[spec.label], spec.label, cover.fraction(), "the truth")
-        notes += outputs.write_run(summaries, title=title)
+        done = replay_file(source, job.filters, stages=stages, output_rate=job.output_rate,
+                           pacing=job.pacing, max_imu_gap=job.max_imu_gap,
+                           live=job.viz.live or job.pacing is not None, progress=progress)
+        if done.has_truth:
+            ref = getattr(job.log, "reference", None)
+            for label, fraction in done.reference_coverage.items():
+                add_coverage(done.summaries[label], label, fraction,
+                             f"reference {ref}" if ref else "the truth")
+        notes = list(source.notes) + setting_notes(done.summaries.values())
+        if done.salvaged:
+            notes.append(salvaged_note(str(path), done.coverage))
+        notes += outputs.write_run(done.summaries, title=title)
         hint = close_output(sink, job.viz)
     except BaseException:
-        windows.close()  # the reader's warnings so far, before the error
         outputs.abort()
         if sink is not None:
             sink.abort()
         raise
-    summary = {"recording": str(path), "coverage": 1.0, "salvaged": False,
-               "filters": summaries}
+    summary = {"recording": str(path), "coverage": done.coverage, "salvaged": done.salvaged,
+               "filters": done.summaries}
+    has_truth = done.has_truth
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
         notes.append(f"Summary written to {job.summary_path}")
-    table = tables.format_summaries(summaries)
+    table = tables.format_summaries(done.summaries)
     if not has_truth:
         table = "(no truth or reference: innovation statistics only)\n\n" + table
     return RunReport(title=f"{', '.join(labels)} over {path}", table=table, summary=summary,
                      viz=hint, notes=notes, sink=sink if job.viz.mode is VizMode.SERVE else None)
-
-
-def decoded_kinds(classes: Sequence[type], options: Any) -> set[StreamKind]:
-    """The streams a streamed run decodes: IMU and truth, those the filters consume (all for
-    a filter that declares none) and those the frame checks and the initialisation read."""
-    from navreplay.replay.engine import consumed_streams
-
-    kinds = {StreamKind.IMU, StreamKind.TRUTH}
-    for cls in classes:
-        consumed = consumed_streams(cls)
-        kinds |= set(StreamKind) if consumed is None else set(consumed)
-    if options.check_frames or options.init is not None or options.initial:
-        kinds |= {StreamKind.GPS, StreamKind.GPS_VEL, StreamKind.MAG}
-    return kinds
-
-
-def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
-    from navreplay import metrics
-    from navreplay.io.integrity import coverage
-    from navreplay.logs.prepare import open_log
-    from navreplay.logs.reference import add_coverage, reference_coverage
-
-    path = Path(job.recordings[0])
-    classes = [spec.load() for spec in job.filters]
-    prepared = open_log(path, job.log)
-    recording = prepared.recording
-    for cls in classes:
-        check_streams(recording, cls, str(path))
-    has_truth = StreamKind.TRUTH in recording
-    outputs = outputs_of(job)
-    outputs.check([s.label for s in job.filters], ensemble=False, has_reference=has_truth)
-    n_filters = len(classes)
-    summaries: dict[str, dict[str, Any]] = {}
-    sink = open_output(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
-    try:
-        outputs.start_run([s.label for s in job.filters], has_reference=has_truth,
-                          source=str(path))
-        if has_truth:
-            outputs.truth(recording[StreamKind.TRUTH])
-        if sink is not None and has_truth:
-            sink.log_truth(recording)
-        for k, (spec, cls) in enumerate(zip(job.filters, classes, strict=True)):
-            def prog(done: int, total: int, k: int = k) -> None:
-                if progress is not None:
-                    progress(k * total + done, n_filters * total)
-
-            observer = None
-            if sink is not None and (job.viz.live or job.pacing is not None):
-                observer = sink.observer(recording if has_truth else None)
-            result = replay(
-                recording, cls, spec.params, label=spec.label, source=str(path),
-                output_rate=job.output_rate, pacing=job.pacing, validate=False,
-                progress=prog, observer=observer, max_imu_gap=job.max_imu_gap,
-            )
-            scored = metrics.run_metrics(result, recording)  # NIS only without a reference
-            summaries[spec.label] = {**scored.summary(), **summary_entries(result.settings)}
-            if has_truth:
-                add_coverage(summaries[spec.label], spec.label, reference_coverage(
-                    result.t, seconds(recording[StreamKind.TRUTH].t_ns, recording.t0_ns)),
-                    f"reference {ref}" if (ref := getattr(job.log, "reference", None))
-                    else "the truth")
-            outputs.rows(result, scored if has_truth else None)  # with its innovations
-            if sink is not None:
-                sink.log_run(result, truth=recording if has_truth else None,
-                             metrics=scored if has_truth else None)
-        hint = close_output(sink, job.viz)
-    except BaseException:
-        outputs.abort()
-        if sink is not None:
-            sink.abort()
-        raise
-    covered = coverage(recording, prepared.salvaged)
-    summary = {"recording": str(path), "coverage": covered, "salvaged": prepared.salvaged,
-               "filters": summaries}
-    notes = list(prepared.notes) + setting_notes(summaries.values())
-    if prepared.salvaged:
-        notes.append(salvaged_note(str(path), covered))
-    notes += outputs.write_run(summaries,
-                               title=f"{', '.join(s.label for s in job.filters)} over {path.name}")
-    if job.summary_path is not None:
-        write_json(job.summary_path, summary)
-        notes.append(f"Summary written to {job.summary_path}")
-    table = tables.format_summaries(summaries)
-    if not has_truth:
-        table = "(no truth or reference: innovation statistics only)\n\n" + table
-    return RunReport(
-        title=f"{', '.join(s.label for s in job.filters)} over {path}",
-        table=table, summary=summary, viz=hint, notes=notes,
-        sink=sink if job.viz.mode is VizMode.SERVE else None,
-    )
 
 
 def campaign(
@@ -438,7 +269,7 @@ def campaign(
         if sink is not None:
             from navreplay.viz.ensemble import log_ensemble, log_runs
 
-            declared = {spec.label: getattr(spec.load(), "states", None) for spec in filters}
+            declared = {spec.label: getattr(spec.filter_cls, "states", None) for spec in filters}
             for label, e in ens.items():
                 states = declared.get(label)
                 log_ensemble(sink, label, e, states if isinstance(states, tuple) else None)

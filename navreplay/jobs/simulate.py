@@ -9,10 +9,11 @@ from pathlib import Path
 from typing import Any
 
 from navreplay import params as _params
+from navreplay.campaign.ensemble import run_ensemble
+from navreplay.campaign.tasks import RunTask
+from navreplay.filters.result import RunResult
 from navreplay.jobs.config import check_scenario
-from navreplay.replay.engine import Progress
-from navreplay.replay.ensemble import RunTask, run_ensemble
-from navreplay.replay.result import RunResult
+from navreplay.replay.session import Progress
 from navreplay.streams import Recording
 
 

@@ -41,21 +41,17 @@ from typing import Any
 import numpy as np
 
 from navreplay import params as _params
+from navreplay.campaign.ensemble import RunFailedError, run_ensemble
+from navreplay.campaign.tasks import RunOutput, file_tasks
 from navreplay.io import RecordingWarning
 from navreplay.outputs import atomic_path
-from navreplay.replay.ensemble import (
-    FilterSpec,
-    RunFailedError,
-    RunOutput,
-    file_tasks,
-    run_ensemble,
-)
 from navreplay.replay.holdout import (
     held_out_errors,
     held_out_truth_errors,
     hold_out,
     outage_windows,
 )
+from navreplay.replay.spec import FilterSpec
 from navreplay.sensors.specs import SensorSpecs
 from navreplay.streams import Recording, StreamKind, seconds
 

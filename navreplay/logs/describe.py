@@ -11,8 +11,8 @@ from pathlib import Path
 
 from navreplay.io.checks import gap_report, read_policy
 from navreplay.io.errors import RecordingError
+from navreplay.io.files import file_kind, read_streams
 from navreplay.io.info import format_info, recording_info
-from navreplay.io.reader import is_rosbag, read_streams
 from navreplay.logs.options import LogOptions
 from navreplay.logs.reference import REFERENCE_TYPES
 from navreplay.streams import seconds
@@ -59,7 +59,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     options = options or LogOptions()
     path = Path(path)
     damage = None
-    if is_rosbag(path):
+    if file_kind(path).name == "rosbag2":
         from navreplay.io.rosbag import bag_topics, check_bag
 
         check = check_bag(path)

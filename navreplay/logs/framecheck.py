@@ -22,7 +22,7 @@ import numpy as np
 from navreplay.io.checks import named_convention
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.reader import TopicSource
+from navreplay.io.topics import TopicSource
 from navreplay.streams import Recording, StreamKind, seconds
 
 STILL_BLOCK = 1.0

@@ -1,15 +1,25 @@
-"""A log ready to replay: streams in NED/FRD, frames checked, reference and initial solution."""
+"""A log ready to replay: streams in NED/FRD, frames checked, reference and initial solution.
+
+:func:`open_log` opens a recording file (:func:`navreplay.io.files.open_recording`) as a
+:class:`LogSource`: the same windows, the first made ready before it is handed out (frames
+checked, the initial solution set in ``metadata.initial_nav``, the ``[sensors.*]`` tables of
+the configuration written over the sensor specifications, and with ``--reference`` the
+reference as its truth stream: a log with a reference is read in one window). Every window is
+read under the options' :class:`~navreplay.io.checks.ReadPolicy`.
+"""
 
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
 
+from navreplay.filters.base import Filter, consumed_streams
 from navreplay.io.checks import read_policy
-from navreplay.io.integrity import salvage_watch
-from navreplay.io.reader import TopicSource, read_streams
+from navreplay.io.files import open_recording
+from navreplay.io.source import COMPLETE, Source, Window
+from navreplay.io.topics import TopicSource
 from navreplay.logs.framecheck import check_frames
 from navreplay.logs.initial import initial_nav
 from navreplay.logs.options import REFERENCE, LogOptions
@@ -17,45 +27,105 @@ from navreplay.logs.reference import read_reference, reference_stream
 from navreplay.streams import Recording, StreamKind
 
 
-@dataclasses.dataclass
-class PreparedLog:
-    """What :func:`open_log` returns.
+class LogSource(Source):
+    """The windows of a log, the first made ready to replay (see the module docstring).
 
     Attributes
     ----------
-    recording : Recording
-        Its truth stream is the reference (if any); ``metadata.initial_nav`` the chosen start.
-    sources : dict[StreamKind, TopicSource]
     notes : list[str]
-        One line per check, reference and initialisation, for the report.
-    salvaged : bool
-        Messages were lost to damage (the file was salvaged).
+        One line per check, reference and initialisation, for the report (filled when the
+        first window is read: every problem is raised then, before any replay).
     """
 
-    recording: Recording
-    sources: dict[StreamKind, TopicSource]
-    notes: list[str]
-    salvaged: bool = False
+    def __init__(self, inner: Source, path: Path, options: LogOptions) -> None:
+        super().__init__(inner.name)
+        self.kind = inner.kind
+        self.inner = inner
+        self.path = path
+        self.options = options
+        self.sources = inner.sources
+        self.notes: list[str] = []
+
+    @property
+    def salvaged(self) -> bool:
+        return self.inner.salvaged
+
+    def coverage(self) -> float | None:
+        return self.inner.coverage()
+
+    def close(self) -> None:
+        super().close()
+        self.inner.close()
+
+    def _windows(self) -> Iterator[Window]:
+        """Each window read under the log's :class:`~navreplay.io.checks.ReadPolicy` (the
+        IMU's range, ``--force-frame``), which the reader's checks consult."""
+        windows = self._ready()
+        while True:
+            with read_policy(self.options.policy):
+                window = next(windows, None)
+            if window is None:
+                return
+            yield window
+
+    def _ready(self) -> Iterator[Window]:
+        first = next(self.inner)
+        first.metadata.extra.setdefault("source", str(self.path))
+        if self.options.reference is not None:
+            recording = first.recording()
+            ref = read_reference(self.options.reference, self.path, recording,
+                                 self.options.frames.get(REFERENCE), self.options.time)
+            stream, note = reference_stream(ref, recording, self.options.initial)
+            first[StreamKind.TRUTH] = stream
+            first.known[StreamKind.TRUTH] = COMPLETE
+            first.present = first.present | {StreamKind.TRUTH}
+            self.notes.append(note)
+        self.notes += make_ready(first.recording(), self.sources, self.options)
+        yield first
+        yield from self.inner
 
 
-def open_log(path: str | Path, options: LogOptions | None = None) -> PreparedLog:
-    """Read a log and make it ready to replay; every problem is raised before any replay."""
+def open_log(path: str | Path, options: LogOptions | None = None, *,
+             kinds: Iterable[StreamKind] | None = None, whole: bool = False) -> LogSource:
+    """Open a log to replay it (see the module docstring).
+
+    Parameters
+    ----------
+    path : path-like
+    options : LogOptions, optional
+        Topics, frames, time source, initialisation and reference.
+    kinds : iterable of StreamKind, optional
+        Streams to read (all when None; those the log lacks are left out).
+    whole : bool
+        Read it in one window (always so with a reference).
+    """
     options = options or LogOptions()
     path = Path(path)
-    with read_policy(options.policy):
-        with salvage_watch() as lost:
-            recording, sources = read_streams(path, topics=options.topics,
-                                              frames=options.stream_frames, time=options.time)
-        recording.metadata.extra.setdefault("source", str(path))
-        notes: list[str] = []
-        if options.reference is not None:
-            ref = read_reference(options.reference, path, recording,
-                                 options.frames.get(REFERENCE), options.time)
-            stream, note = reference_stream(ref, recording, options.initial)
-            recording.streams[StreamKind.TRUTH] = stream
-            notes.append(note)
-        notes += make_ready(recording, sources, options)
-    return PreparedLog(recording, sources, notes, salvaged=lost[0])
+    inner = open_recording(path, kinds=kinds, topics=options.topics,
+                           frames=options.stream_frames, time=options.time,
+                           whole=whole or options.reference is not None)
+    return LogSource(inner, path, options)
+
+
+def streams_needed(classes: Iterable[type[Filter]], options: LogOptions | None = None
+                   ) -> set[StreamKind]:
+    """The streams a replay of ``classes`` reads: IMU and truth, those the filters consume (all
+    for a filter that declares none) and those the frame checks and the initialisation read."""
+    options = options or LogOptions()
+    kinds = {StreamKind.IMU, StreamKind.TRUTH}
+    for cls in classes:
+        consumed = consumed_streams(cls)
+        kinds |= set(StreamKind) if consumed is None else set(consumed)
+    if options.check_frames or options.init is not None or options.initial:
+        kinds |= {StreamKind.GPS, StreamKind.GPS_VEL, StreamKind.MAG}
+    return kinds
+
+
+def read_log(path: str | Path, options: LogOptions | None = None, *,
+             kinds: Iterable[StreamKind] | None = None) -> tuple[Recording, list[str]]:
+    """A log read whole (one window) and made ready, with its notes."""
+    with open_log(path, options, kinds=kinds, whole=True) as source:
+        return next(source).recording(), source.notes
 
 
 def make_ready(recording: Recording, sources: dict[StreamKind, TopicSource],

@@ -48,8 +48,16 @@ from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
 from navreplay.io.checks import current_policy, named_convention
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.reader import is_rosbag, sample_times
+from navreplay.io.files import file_kind
 from navreplay.io.schemas import normalize_type_name
+from navreplay.io.topics import sample_times
+from navreplay.metrics.coverage import (  # noqa: F401  (their home is the scoring)
+    COVERAGE_WARNING,
+    CoverageCount,
+    add_coverage,
+    coverage_warning,
+    reference_coverage,
+)
 from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -161,7 +169,7 @@ def _xyz(v: Any) -> list[float]:
 def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
                   declared: Convention | None, time: str = "header") -> Reference:
     """A reference from decoded messages (log time, message) of one topic, in log-time order;
-    times as ``--time`` says (:func:`navreplay.io.reader.sample_times`)."""
+    times as ``--time`` says (:func:`navreplay.io.topics.sample_times`)."""
     _check_type(source, type_name)
     if not items:
         raise ReferenceError(f"reference {source}: the topic has no messages")
@@ -208,7 +216,7 @@ def _check_type(source: str, type_name: str) -> None:
 
 def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
     """Type name and (log time, decoded message) of one topic of a bag or MCAP file."""
-    if is_rosbag(path):
+    if file_kind(path).name == "rosbag2":
         from navreplay.io.rosbag import bag_topics, iter_messages
 
         types = {t: ty for t, ty, _, _ in bag_topics(path)}
@@ -454,92 +462,3 @@ def reference_stream(ref: Reference, recording: Recording, initial: Mapping[str,
         raise ReferenceError(f"reference {ref.source}: "
                              + (f"non-finite {', '.join(bad)}" if bad else "fewer than 2 samples"))
     return stream, f"reference {ref.source}: {', '.join(ref.has)}{note}"
-
-
-# --------------------------------------------------------------------------------------------
-# coverage: the part of a run that a reference scores
-
-COVERAGE_WARNING = 0.9
-"""Below this fraction of a filter's outputs scored by the reference, the run warns that its
-scores describe only part of it."""
-
-
-class CoverageCount:
-    """The fraction of a filter's outputs that a reference scores, fed piece by piece.
-
-    An output is scored when it lies within the reference's span, widened by half its median
-    sample interval at each end (the rule of :meth:`navreplay.metrics.Reference.at`; times
-    further outside are not scored). Outputs and reference samples arrive in increasing time,
-    window by window; only the outputs after the reference's last sample so far are kept, so
-    memory stays flat when the reference covers the run.
-    """
-
-    def __init__(self) -> None:
-        self.total = 0
-        self.covered = 0
-        self._first: float | None = None
-        self._last = -math.inf
-        self._half = 0.0
-        self._pending: list[np.ndarray] = []  # outputs after the reference's end so far
-
-    def reference(self, t: np.ndarray) -> None:
-        """More reference sample times [s since the recording start], later than before."""
-        t = np.asarray(t, dtype=float)
-        if not t.size:
-            return
-        if self._first is None:
-            self._first = float(t[0])
-            self._half = 0.5 * float(np.median(np.diff(t))) if t.size > 1 else 0.0
-        self._last = max(self._last, float(t[-1]))
-        self._settle()
-
-    def outputs(self, t: np.ndarray) -> None:
-        """More output times [s since the recording start], later than before."""
-        t = np.asarray(t, dtype=float)
-        self.total += t.size
-        if t.size:
-            self._pending.append(t)
-            self._settle()
-
-    def _settle(self) -> None:
-        if self._first is None or not self._pending:
-            return
-        t = np.concatenate(self._pending)
-        lo, hi = self._first - self._half, self._last + self._half
-        inside = (t >= lo) & (t <= hi)
-        self.covered += int(inside.sum())
-        self._pending = [t[t > hi]]
-
-    def fraction(self) -> float:
-        """Outputs scored over outputs (1.0 for a run without outputs)."""
-        return self.covered / self.total if self.total else 1.0
-
-
-def reference_coverage(t: np.ndarray, t_ref: np.ndarray) -> float:
-    """The fraction of outputs at times ``t`` that a reference sampled at ``t_ref`` scores
-    (both [s since the recording start]; :class:`CoverageCount`)."""
-    count = CoverageCount()
-    count.reference(t_ref)
-    count.outputs(t)
-    return count.fraction()
-
-
-def coverage_warning(label: str, fraction: float, source: str = "the reference") -> str | None:
-    """The warning for a filter whose outputs ``source`` scores only in part, or None."""
-    if fraction >= COVERAGE_WARNING:
-        return None
-    return (f"{source} covers {100 * fraction:.1f} % of the outputs of {label} (below "
-            f"{100 * COVERAGE_WARNING:.0f} %): its scores describe that part of the run only "
-            "(reference_coverage in the summary)")
-
-
-def add_coverage(summary: dict[str, Any], label: str, fraction: float,
-                 source: str = "the reference") -> None:
-    """Put ``reference_coverage`` into a filter's summary and warn below
-    :data:`COVERAGE_WARNING` (:func:`coverage_warning`)."""
-    import warnings
-
-    summary["reference_coverage"] = fraction
-    text = coverage_warning(label, fraction, source)
-    if text is not None:
-        warnings.warn(text, stacklevel=2)

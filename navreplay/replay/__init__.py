@@ -1,61 +1,50 @@
-"""Replaying filters over recordings: the event loop (:mod:`~navreplay.replay.engine`), many
-runs in parallel (:mod:`~navreplay.replay.ensemble`) and the columnar result
-(:mod:`~navreplay.replay.result`).
+"""Replaying filters over recordings.
+
+:func:`replay_file` (:mod:`~navreplay.replay.pipeline`) is the one pipeline: a recording's
+windows through one :class:`ReplaySession` per filter (:mod:`~navreplay.replay.session`, the
+event loop over the plan of :mod:`~navreplay.replay.plan`), the scoring and the output stages,
+block by block; :func:`replay` the same over a recording in memory. What to replay is a
+:class:`FilterSpec` (:mod:`~navreplay.replay.spec`); checks before a replay are in
+:mod:`~navreplay.replay.checks`, the estimates' columns and their checks in
+:mod:`~navreplay.replay.columns`, IMU gaps in :mod:`~navreplay.replay.gaps`, the errors in
+:mod:`~navreplay.replay.errors`. Campaigns of many runs are :mod:`navreplay.campaign`.
 """
 
-from navreplay.replay.engine import (
-    STREAM_PRIORITY,
+from navreplay.filters.result import InnovationSeries, RunResult
+from navreplay.replay.checks import check_streams, validate_recording
+from navreplay.replay.errors import (
     FilterFailedError,
     FilterInitError,
     FilterOutputError,
     InvalidRecordingError,
     MissingStreamError,
     ReplayError,
-    check_streams,
-    plan_events,
-    replay,
-    validate_recording,
 )
-from navreplay.replay.ensemble import (
-    EnsembleRun,
-    Executor,
-    FilterSpec,
-    InlineExecutor,
-    RunFailedError,
-    RunOutput,
-    RunTask,
-    file_tasks,
-    make_executor,
-    monte_carlo_tasks,
-    replay_filters,
-    run_ensemble,
-)
-from navreplay.replay.result import InnovationSeries, RunResult
+from navreplay.replay.pipeline import Collect, FileRun, RunStart, Stage, replay, replay_file
+from navreplay.replay.plan import STREAM_PRIORITY, plan_events
+from navreplay.replay.session import Progress, ReplaySession
+from navreplay.replay.spec import FilterSpec
 
 __all__ = [
     "STREAM_PRIORITY",
-    "EnsembleRun",
-    "Executor",
+    "Collect",
+    "FileRun",
     "FilterFailedError",
     "FilterInitError",
     "FilterOutputError",
     "FilterSpec",
-    "InlineExecutor",
     "InnovationSeries",
     "InvalidRecordingError",
     "MissingStreamError",
+    "Progress",
     "ReplayError",
-    "RunFailedError",
-    "RunOutput",
+    "ReplaySession",
     "RunResult",
-    "RunTask",
+    "RunStart",
+    "Stage",
     "check_streams",
-    "file_tasks",
-    "make_executor",
-    "monte_carlo_tasks",
     "plan_events",
     "replay",
-    "replay_filters",
-    "run_ensemble",
+    "replay_file",
     "validate_recording",
 ]

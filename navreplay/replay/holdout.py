@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from navreplay.replay.result import RunResult
+from navreplay.filters.result import RunResult
 from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 HELD_OUT = "held_out"

@@ -21,10 +21,10 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from navreplay.replay.engine import Progress
+from navreplay.replay.session import Progress
 
 if TYPE_CHECKING:
-    from navreplay.replay.ensemble import FilterSpec
+    from navreplay.replay.spec import FilterSpec
 
 __all__ = ["Check", "Progress", "Report", "Reproduction", "available", "get", "save_view",
            "slashed", "warm_up"]
@@ -167,12 +167,12 @@ def save_view(
 def warm_up(scenario: str, duration: float, filters: Iterable[FilterSpec]) -> None:
     """Replay the filters over a short recording once, so that the numba kernels are compiled
     before a process pool forks its workers."""
-    from navreplay.replay.engine import replay
+    from navreplay.replay.pipeline import replay
     from navreplay.sim.scenario import simulate
 
     recording = simulate(scenario, {"duration": duration}, seed=0)
     for spec in filters:
-        replay(recording, spec.load(), spec.params)
+        replay(recording, spec)
 
 
 def slashed(values: Sequence[float] | Any) -> str:

@@ -3,7 +3,7 @@
 The published results and acceptance bands of docs/methods/rpm-aided-ins.md §6 (Choi, JANT
 23(3), 2019; Table 3, Figs. 3-5). The campaign simulates ``runs`` recordings of the
 ``underwater-rpm`` scenario (run i with seed ``seed + i``, the convention of
-:func:`navreplay.replay.ensemble.monte_carlo_tasks`, so ``navreplay simulate underwater-rpm
+:func:`navreplay.campaign.tasks.monte_carlo_tasks`, so ``navreplay simulate underwater-rpm
 --seed S+i`` reproduces any single run) and replays the ``rpm-aided-ins`` filter over each in
 its three modes:
 
@@ -22,7 +22,7 @@ the depth update): north and east errors ``x_lat = (L_hat - L)(R_M - d)``,
 true 3-D path length; the run-averaged 2-dof position NEES with its 95 % chi-square band;
 the RMS of the current-estimate error per axis. Table 3 is evaluated at t = 480 s.
 
-Everything runs in memory over a process pool (:func:`navreplay.replay.ensemble.run_ensemble`);
+Everything runs in memory over a process pool (:func:`navreplay.campaign.ensemble.run_ensemble`);
 each worker reduces its run to 1-Hz metrics before sending them back.
 
 Examples
@@ -42,17 +42,13 @@ from typing import Any
 import numpy as np
 
 from navreplay import consistency
+from navreplay.campaign.ensemble import run_ensemble
+from navreplay.campaign.tasks import RunOutput, RunTask, monte_carlo_tasks
+from navreplay.filters.result import RunResult
 from navreplay.filters.rpm_aided_ins import Mode
 from navreplay.metrics import EnsembleResult, EnsembleStats, RunMetrics, run_metrics
 from navreplay.params import build
-from navreplay.replay.ensemble import (
-    FilterSpec,
-    RunOutput,
-    RunTask,
-    monte_carlo_tasks,
-    run_ensemble,
-)
-from navreplay.replay.result import RunResult
+from navreplay.replay.spec import FilterSpec
 from navreplay.reproduce import Check, Progress, Report, Reproduction, warm_up
 from navreplay.sim.scenarios.underwater import UnderwaterRpmParams
 from navreplay.streams import Recording
@@ -120,7 +116,7 @@ class RunScores:
 
 
 def extract(recording: Recording, results: dict[str, RunResult], task: RunTask) -> RunScores:
-    """Extractor of :func:`navreplay.replay.ensemble.run_ensemble` (runs in the worker)."""
+    """Extractor of :func:`navreplay.campaign.ensemble.run_ensemble` (runs in the worker)."""
     out = RunScores({label: run_metrics(at_update_epochs(res), recording)
                      for label, res in results.items()})
     if task.index == 0 and "rpm-current" in results:

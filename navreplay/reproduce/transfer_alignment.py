@@ -19,7 +19,7 @@ the bands are the paper's claims about its filters, which model no flexure. The 
 sigma is compared with the error (:func:`consistency`).
 
 Run i of every condition simulates with seed ``seed + i`` (the convention of
-:func:`navreplay.replay.ensemble.monte_carlo_tasks`): the conditions share every random draw
+:func:`navreplay.campaign.tasks.monte_carlo_tasks`): the conditions share every random draw
 except the flexure, so they compare like with like, and
 ``navreplay simulate ship-transfer-alignment --seed S+i`` reproduces any single run.
 
@@ -27,7 +27,7 @@ The metric is the alignment error phi (:func:`navreplay.geo.attitude_error`,
 ``C_nb_hat C_nb^T = I - [phi x]``) of the filter's navigation solution against the truth, at
 every GINS sample; the filter's predicted 1 sigma of phi (extras ``attitude_sigma_n``,
 ``Sigma_phi = 4 R^T P_qq R``) is averaged as the root mean of the variances. Everything runs
-in memory over a process pool (:func:`navreplay.replay.ensemble.run_ensemble`).
+in memory over a process pool (:func:`navreplay.campaign.ensemble.run_ensemble`).
 
 Examples
 --------
@@ -45,18 +45,14 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.campaign.ensemble import run_ensemble
+from navreplay.campaign.executors import make_executor
+from navreplay.campaign.tasks import RunOutput, RunTask, monte_carlo_tasks
+from navreplay.filters.result import RunResult
 from navreplay.filters.transfer_alignment import flexure_rate_sigma
 from navreplay.geo.rotations import attitude_error, quat_to_dcm
 from navreplay.metrics import rms, truth_at
-from navreplay.replay.ensemble import (
-    FilterSpec,
-    RunOutput,
-    RunTask,
-    make_executor,
-    monte_carlo_tasks,
-    run_ensemble,
-)
-from navreplay.replay.result import RunResult
+from navreplay.replay.spec import FilterSpec
 from navreplay.reproduce import Check, Progress, Report, Reproduction, slashed, warm_up
 from navreplay.sim.scenarios.ship_transfer_alignment import ShipTransferAlignmentParams
 from navreplay.streams import Recording
@@ -160,7 +156,7 @@ def alignment_errors(result: RunResult, recording: Recording) -> RunErrors:
 def extract(
     recording: Recording, results: dict[str, RunResult], task: RunTask
 ) -> dict[str, RunErrors]:
-    """Extractor of :func:`navreplay.replay.ensemble.run_ensemble`: errors per variant label."""
+    """Extractor of :func:`navreplay.campaign.ensemble.run_ensemble`: errors per variant label."""
     return {label: alignment_errors(res, recording) for label, res in results.items()}
 
 

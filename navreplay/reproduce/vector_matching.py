@@ -14,7 +14,7 @@ recordings. Attitude errors are ZYX Euler-angle differences, estimate minus trut
 and yaw wrapped to +-180 deg (:func:`euler_errors`).
 
 Seeds: run i of every sweep point and of every yaw case uses seed ``seed + i`` (the convention
-of :func:`navreplay.replay.ensemble.monte_carlo_tasks`), so
+of :func:`navreplay.campaign.tasks.monte_carlo_tasks`), so
 ``navreplay simulate gimpo-accel-sweep --seed S+i -p axis=N -p accel_g=-0.8`` reproduces any
 single run, and the points of a sweep share their sensor-error draws (common random numbers:
 the curves over acceleration are smooth).
@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.campaign.executors import make_executor
 from navreplay.filters.vector_matching import (
     MatchModel,
     Variant,
@@ -52,7 +53,6 @@ from navreplay.filters.vector_matching import (
 from navreplay.geo.earth import gravity
 from navreplay.geo.rotations import quat_to_euler, wrap_angle
 from navreplay.metrics import rms
-from navreplay.replay.ensemble import make_executor
 from navreplay.reproduce import Check, Progress, Report, Reproduction, slashed
 from navreplay.sim.scenarios.gimpo import (
     Axis,

@@ -2,12 +2,16 @@
 
 Open a sink, log truth, runs and ensembles, close::
 
+    from navreplay.replay import replay_file
     from navreplay.viz import Save, open_sink
 
     with open_sink(Save("out.rrd"), recording_name="ship.mcap") as sink:
-        for result in results:                      # a RunResult per filter label
-            sink.log_run(result, truth=recording)   # overlaid in the same plots
+        replay_file(source, specs, stages=[sink])   # truth, each filter's blocks, overlaid
     # out.rrd appears only now, complete, with the default blueprint inside
+
+A sink is a stage of the replay pipeline (:class:`navreplay.replay.Stage`): ``start``, then the
+truth window by window (``truth``), each filter's estimates with their scores (``rows``) and
+innovations (``innovations``) block by block; a whole run is one block.
 
 Modules: :mod:`~navreplay.viz.targets` (:class:`Save`, default, headless, atomic;
 :class:`Spawn`, :class:`Connect`, :class:`Serve`, which check that the viewer can be reached

@@ -33,7 +33,7 @@ Each filter label keeps one colour in every plot and tab (:meth:`Sink.color_of`)
 Examples
 --------
 >>> import tempfile, pathlib, numpy as np
->>> from navreplay.replay.result import RunResult
+>>> from navreplay.filters.result import RunResult
 >>> t = np.arange(5) * 0.1
 >>> from navreplay.filters.base import Quantity, State
 >>> b_g = (State("b_g_x", "rad/s", Quantity.GYRO_BIAS),)
@@ -41,7 +41,7 @@ Examples
 >>> out = pathlib.Path(tempfile.mkdtemp()) / "demo.rrd"
 >>> from navreplay.viz import Save, open_sink
 >>> with open_sink(Save(out)) as sink:
-...     sink.log_run(r)
+...     sink.rows(r)
 >>> out.exists()
 True
 """
@@ -52,7 +52,6 @@ import copy
 import dataclasses
 import os
 import time
-import warnings
 import weakref
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -64,11 +63,11 @@ import rerun.blueprint as rrb
 
 from navreplay import metrics as _metrics
 from navreplay.filters.base import Nav, NavError, State, TruthColumn
+from navreplay.filters.result import RunResult
 from navreplay.geo import quat_wxyz_to_xyzw, radii
 from navreplay.metrics import RunMetrics, nav_errors
 from navreplay.outputs import OutputError, release
-from navreplay.replay.result import RunResult
-from navreplay.streams import Recording, Stream, StreamKind
+from navreplay.streams import Stream
 from navreplay.viz import convert
 from navreplay.viz.blueprint import Catalog, build_blueprint
 from navreplay.viz.naming import (
@@ -212,13 +211,10 @@ class _Run:
     cov_t: float = -np.inf
     axes: bool = False
     yaw: float | None = None
-    finished: bool = False
     geo_t: float = -np.inf
     track: _Track = dataclasses.field(default_factory=lambda: _Track())
-
-
-Truth = Recording | Stream
-Metrics = Mapping[str, np.ndarray | tuple[np.ndarray, np.ndarray | None]] | RunMetrics
+    extent_box: tuple[np.ndarray, np.ndarray] | None = None
+    """NED box of the true track up to this run's last block (its ellipsoids' caps)."""
 
 
 class Sink:
@@ -278,11 +274,8 @@ class Sink:
         self._truth_log: _TruthLog | None = None
         # extent of the true track up to each time (ellipsoid caps): times [s], extents [m]
         self._extent_curve: tuple[np.ndarray, np.ndarray] | None = None
-        self._extent_box: tuple[np.ndarray, np.ndarray] | None = None  # up to the last block
-        self._streamed = False
+        self._t0_ns = 0
         self._truth_wanted: dict[str, str] = {}
-        self._truth_stream: Stream | None = None
-        self._truth_keep: tuple[np.ndarray, int, str] | None = None
         self._truth_columns: set[str] = set()
         self._closed = False
         self._world_coords = False
@@ -326,16 +319,15 @@ class Sink:
             return
         if plan:
             saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
-                     self._extent, self._truth, self._truth_yaw, self._truth_stream,
-                     self._world_coords, set(self._truth_columns), self._box,
-                     copy.deepcopy(self._truth_log), self._extent_box)
+                     self._extent, self._truth, self._truth_yaw, self._world_coords,
+                     set(self._truth_columns), self._box, copy.deepcopy(self._truth_log))
             self._rec = _NullStream()  # type: ignore[assignment]
             try:
                 log()
             finally:
                 (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
-                 self._truth_yaw, self._truth_stream, self._world_coords,
-                 self._truth_columns, self._box, self._truth_log, self._extent_box) = saved
+                 self._truth_yaw, self._world_coords, self._truth_columns, self._box,
+                 self._truth_log) = saved
             if self.catalog.signature() != self._sent:
                 self.send_blueprint()
         log()
@@ -497,43 +489,6 @@ class Sink:
 
     # -- truth ---------------------------------------------------------------------------
 
-    def log_truth(
-        self,
-        truth: Truth,
-        t0_ns: int | None = None,
-        entity: str = "/truth",
-        *,
-        rate_hz: float | None = TRUTH_RATE_HZ,
-    ) -> None:
-        """Log the true navigation state (and other truth columns) once per sink.
-
-        Parameters
-        ----------
-        truth : Recording or Stream
-            A recording with a truth stream, or the truth stream itself (columns ``pos``
-            [lat, lon rad, h m], ``v_n`` [m/s], ``q_nb`` scalar first).
-        t0_ns : int, optional
-            Recording start [ns]; default ``Recording.t0_ns`` or the stream's first timestamp.
-        entity : str
-            Root of the truth entities (the 3D trajectory goes to ``/world/<root name>``).
-        rate_hz : float or None
-            Decimate the time series to this rate [Hz]; None keeps every row. Errors are always
-            computed against the full-rate truth.
-        """
-        if self._truth_stream is not None or self._truth_log is not None:
-            raise ValueError("truth is already logged in this sink (one recording per sink)")
-
-        def log() -> None:
-            stream, t0 = _truth_stream(truth, t0_ns)
-            self._truth_stream = stream
-            keep = self._log_truth_rows(stream, t0, entity, rate_hz)
-            self._truth = _truth_nav(stream, t0)
-            self._extent_curve = self._track_extent(self._truth)[:2]
-            self._truth_keep = (keep, t0, "/" + entity.strip("/"))
-            self._finish_truth()
-
-        self._layout_first(log)
-
     def _log_truth_rows(
         self, stream: Stream, t0: int, entity: str, rate_hz: float | None
     ) -> np.ndarray:
@@ -597,18 +552,11 @@ class Sink:
         self._log_track(log.root.strip("/"), log.track, TRUTH_COLOR, 1.5, 1.5)
 
     def _truth_column(self, column: str, unit: str) -> str | None:
-        """Entity of a truth column (all components, in the display unit of ``unit``), logged
-        on first use; None when the truth lacks it or has more than 3 components."""
+        """Entity of a truth column logged with the truth (:meth:`start` named it), or None
+        when the truth lacks it or it has more than 3 components."""
         if column in self._truth_columns and self._truth_log is not None:
             return f"{self._truth_log.root}/extra/{entity_path(column)[1:]}"
-        stream = self._truth_stream
-        if stream is None or self._truth_keep is None:
-            return None
-        keep, t0, root = self._truth_keep
-        if not self._truth_column_rows(stream, keep, t0, root, column, unit):
-            return None
-        self._truth_columns.add(column)
-        return f"{root}/extra/{entity_path(column)[1:]}"
+        return None
 
     def _truth_column_rows(self, stream: Stream, keep: np.ndarray, t0: int, root: str,
                            column: str, unit: str) -> bool:
@@ -629,164 +577,58 @@ class Sink:
         self._scalars(path, self._indexes(t, t0), flat * u.scale)
         return True
 
-    def _ensure_truth(self, truth: Truth, t0_ns: int) -> None:
-        """Log ``truth`` unless this sink already holds it; refuse a different recording's."""
-        stream, _ = _truth_stream(truth, t0_ns)
-        if self._truth_stream is None:
-            self.log_truth(truth, t0_ns)
-        elif stream is not self._truth_stream and not np.array_equal(
-            stream.t_ns, self._truth_stream.t_ns
-        ):
-            raise ValueError(
-                "this sink already holds another recording's truth; open one sink per recording"
-            )
+    # -- a replay's stage -----------------------------------------------------------------
 
-    # -- runs ----------------------------------------------------------------------------
+    def start(self, run: Any) -> None:
+        """A replay over one recording starts (a :class:`navreplay.replay.RunStart`: its start
+        time and the truth columns the declared states are scored against)."""
+        self._t0_ns = int(run.t0_ns)
+        self._truth_wanted = dict(run.truth_columns)
 
-    def observer(
-        self, truth: Truth | None = None, *, units: Mapping[str, str] | None = None
-    ) -> Callable[[RunResult], None]:
-        """A live observer for :func:`navreplay.replay.engine.replay`: logs the rows added
-        since its previous call (states, sigmas, navigation, errors vs truth, 3D).
-
-        Finish each run with :meth:`log_run` (innovations, metrics, trajectories), which logs
-        only the rows the observer has not.
-        """
-
-        def observe(result: RunResult) -> None:
-            if truth is not None:
-                self._ensure_truth(truth, result.t0_ns)
-            run = self._run(result.label, units)
-            if run.finished:
-                raise ValueError(f"run {result.label!r} is already logged in this sink")
-            self._layout_first(
-                lambda: self._log_rows(self._runs[result.label], result,
-                                       self._runs[result.label].rows, result.t.shape[0]),
-                plan=run.rows == 0,
-            )
-
-        return observe
-
-    def log_run(
-        self,
-        result: RunResult,
-        truth: Truth | None = None,
-        metrics: Metrics | None = None,
-        *,
-        units: Mapping[str, str] | None = None,
-    ) -> None:
-        """Log one filter's results; several runs (labels) share the tabs, each label with its
-        own colour and its own error panes.
-
-        Parameters
-        ----------
-        result : RunResult
-            Entities go under ``/<result.label>``; units, tabs and groups come from
-            ``result.states`` and ``result.scored_extras``.
-        truth : Recording or truth Stream, optional
-            Logged under /truth (once per sink) and used for the navigation errors
-            (:func:`navreplay.metrics.nav_errors`: position N/E/D [m], velocity, attitude phi)
-            of a result with a navigation solution, with +-3 sigma from the declared
-            navigation-error states.
-        metrics : RunMetrics or mapping, optional
-            The run's scores (:func:`navreplay.metrics.run_metrics`): the errors of the scored
-            states with their sigmas, the errors of the scored extras and the NEES with its
-            95 % band. Or a mapping of errors (estimate minus truth, SI) of named outputs at
-            ``result.t``: ``name -> error`` or ``name -> (error, sigma)``, arrays (M,) or
-            (M, k); a state name takes its sigma from P; the navigation-error names
-            (``p_N``.., ``v_N``.., ``phi_N``..) replace the computed errors.
-        units : mapping, optional
-            SI unit of undeclared extras or measurement names (``"rad"``, ``"m/s^2"``, ...);
-            names neither declared nor given are guessed from the naming conventions.
-        """
-        if truth is not None:
-            self._ensure_truth(truth, result.t0_ns)
-        run = self._run(result.label, units)
-        if run.finished:
-            raise ValueError(f"run {result.label!r} is already logged in this sink")
-        nees = None
-        if isinstance(metrics, RunMetrics):
-            errors, nees = _from_run_metrics(result, metrics)
-        else:
-            errors = _metric_columns(result, metrics or {})
-        nav_override = {} if isinstance(metrics, RunMetrics) else {
-            n: errors.pop(n) for n in _NAV_ERRORS if n in errors
-        }
-        if nav_override and run.rows:
-            warnings.warn(
-                f"{result.label}: navigation errors were already logged live from the truth; "
-                f"metrics {sorted(nav_override)} ignored",
-                stacklevel=2,
-            )
-            nav_override = {}
-
-        def log() -> None:
-            r = self._runs[result.label]
-            self._log_rows(r, result, r.rows, result.t.shape[0], nav_override)
-            self._log_errors(r, result, errors)
-            if nees is not None:
-                self._log_nees(r, result, *nees)
-            self._log_innovations(r, result)
-            self._finish_run(r)
-
-        self._layout_first(log)
-        run.finished = True
-
-    # -- streamed runs -------------------------------------------------------------------
-
-    def log_truth_window(self, truth: Stream, t0_ns: int,
-                         columns: Mapping[str, str] | None = None) -> None:
-        """Log a window of the truth stream (rows later than those logged before), for a run
-        logged block by block (:meth:`log_block`); the trajectory and map track follow on
-        :meth:`close`.
-
-        Parameters
-        ----------
-        truth : Stream
-            Truth rows (columns ``pos``, ``v_n``, ``q_nb``).
-        t0_ns : int
-            Recording start [ns].
-        columns : mapping, optional
-            Truth columns that declared states are scored against (column -> SI unit), logged
-            alongside (those with up to 3 components).
-        """
-        if self._truth_stream is not None:
-            raise ValueError("truth is already logged whole in this sink")
-        self._streamed = True
+    def truth(self, truth: Stream) -> None:
+        """Log a window of the truth stream (rows later than those logged before; columns
+        ``pos``, ``v_n``, ``q_nb``, and those :meth:`start` named, of up to 3 components); the
+        trajectory and map track follow on :meth:`close`."""
+        t0_ns = self._t0_ns
 
         def log() -> None:
             keep = self._log_truth_rows(truth, t0_ns, "/truth", TRUTH_RATE_HZ)
             root = self._truth_log.root if self._truth_log is not None else "/truth"
-            for column, unit in (columns or {}).items():
+            for column, unit in self._truth_wanted.items():
                 if self._truth_column_rows(truth, keep, t0_ns, root, column, unit):
                     self._truth_columns.add(column)
 
         self._layout_first(log, plan=self._truth_log is None)
 
-    def log_block(self, rows: RunResult, metrics: RunMetrics | None = None,
-                  truth: Stream | None = None) -> None:
-        """Log a block of one run's estimates, later than its blocks before (a run streamed
-        block by block: the same entities as :meth:`log_run` of the whole run).
+    def rows(self, rows: RunResult, metrics: RunMetrics | None = None,
+             truth: Stream | None = None) -> None:
+        """Log a block of one run's estimates, later than its blocks before: states, sigmas,
+        the navigation solution, errors with their ±3σ and the NEES (a whole run is one block).
+        Several runs (labels) share the tabs, each label with its own colour and its own error
+        panes.
 
         Parameters
         ----------
         rows : RunResult
-            The block's rows (its innovations go to :meth:`log_innovations`).
+            The block's rows (its innovations go to :meth:`innovations`); entities go under
+            ``/<rows.label>``, units, tabs and groups come from ``rows.states`` and
+            ``rows.scored_extras``.
         metrics : RunMetrics, optional
-            The scores of these rows (:func:`navreplay.metrics.run_metrics`).
+            The scores of these rows (:func:`navreplay.metrics.run_metrics`): the errors of the
+            scored states with their sigmas, the errors of the scored extras, the NEES with its
+            95 % band.
         truth : Stream, optional
             Truth rows around the block (for the navigation errors).
         """
-        self._streamed = True
+        if not rows.t.shape[0]:
+            return
         run = self._run(rows.label, None)
-        if run.finished:
-            raise ValueError(f"run {rows.label!r} is already logged in this sink")
         errors, nees = _from_run_metrics(rows, metrics) if metrics is not None else ({}, None)
 
         def log() -> None:
             r = self._runs[rows.label]
             self._truth = None if truth is None else _truth_nav(truth, rows.t0_ns)
-            box = self._extent_box
+            box = r.extent_box
             if self._truth is not None and rows.t.shape[0]:
                 t, ext, lo, hi = self._track_extent(self._truth, box)
                 self._extent_curve = (t, ext)
@@ -794,19 +636,17 @@ class Sink:
                 if k >= 0:
                     box = (lo[k], hi[k])
             self._log_rows(r, rows, 0, rows.t.shape[0])
-            self._extent_box = box
+            r.extent_box = box
             self._log_errors(r, rows, errors)
             if nees is not None:
                 self._log_nees(r, rows, *nees)
 
         self._layout_first(log, plan=run.rows == 0)
 
-    def log_innovations(self, block: RunResult) -> None:
-        """Log the innovations of a block of a run streamed block by block."""
-        self._streamed = True
-        run = self._run(block.label, None)
-        if run.finished:
-            raise ValueError(f"run {block.label!r} is already logged in this sink")
+    def innovations(self, block: RunResult) -> None:
+        """Log the innovations of a block of one run: ``nu`` with ``±3 sqrt(S_ii)`` per row
+        and the NIS in its chi-square band, per measurement."""
+        self._run(block.label, None)
         if any(s.t.shape[0] for s in block.innovations.values()):
             self._layout_first(lambda: self._log_innovations(self._runs[block.label], block))
 
@@ -881,7 +721,6 @@ class Sink:
         result: RunResult,
         a: int,
         b: int,
-        nav_override: Mapping[str, Any] | None = None,
     ) -> None:
         if b <= a:
             return
@@ -939,7 +778,7 @@ class Sink:
             self.catalog.add("states", f"extra:{key}", f"{key} [{label}]", path,
                              rank=_RANK_EXTRA)
         if any(result.has(part) for part in ("pos", "v_n", "q_nb")):
-            self._log_nav(run, result, a, b, idx, nav_override or {})
+            self._log_nav(run, result, a, b, idx)
         run.rows = b
 
     def _log_nav(
@@ -949,7 +788,6 @@ class Sink:
         a: int,
         b: int,
         idx: list[rr.TimeColumn],
-        nav_override: Mapping[str, tuple[np.ndarray, np.ndarray | None, str]],
     ) -> None:
         """Navigation solution rows [a, b): values, errors vs truth, 3D; of the parts the filter
         outputs only (an attitude-only filter has no position, velocity or 3D trajectory)."""
@@ -973,7 +811,7 @@ class Sink:
             self._style(path, [L], [run.color], [1.5])
             self._scalars(path, idx, v * u.scale)
             self.catalog.add(quantity_of(n).value, f"nav:{n}", title(n, u), path, rank=_RANK_NAV)
-        part = _rows(result, a, b)
+        part = result.rows(a, b)
         sig = _metrics.nav_sigma(part)
         nav_sigma = {f"{p}_{ax}": sig[k][:, i]
                      for k, p in (("pos_ned", "p"), ("v_n", "v"), ("phi", "phi"))
@@ -988,8 +826,6 @@ class Sink:
                     continue
                 s = nav_sigma[n]
                 errors[n] = (e, s if np.isfinite(s).any() else None)
-        for n, (e, s, _) in nav_override.items():
-            errors[n] = (e[a:b], nav_sigma.get(n) if s is None else s[a:b])
         for n, (e, s) in errors.items():
             u = display_unit(NAV_UNITS[n])
             path = entity_path(L, "error", n)
@@ -1046,10 +882,6 @@ class Sink:
                 columns=rr.Transform3D.columns(translation=ned[w], quaternion=_xyzw(nav.q_nb[w])),
             )
             run.world_t = float(nav.t[w[-1]])
-            if not run.axes and not self._streamed:
-                extent = self._extent or float(np.max(np.ptp(ned[w], axis=0)))
-                self._axes(entity_path("world", L, "body", "axes"), _axis_size(extent))
-                run.axes = True
         P_ned = _position_cov(run, result, a, b)
         if P_ned is None:
             return
@@ -1347,29 +1179,6 @@ def _thin(pts: np.ndarray) -> np.ndarray:
     return np.concatenate([pts[::step], pts[-1:]]) if (pts.shape[0] - 1) % step else pts[::step]
 
 
-def _rows(result: RunResult, a: int, b: int) -> RunResult:
-    """The rows [a, b) of a result (the columns the navigation sigmas need)."""
-    def cut(v: np.ndarray | None) -> np.ndarray | None:
-        return None if v is None else v[a:b]
-
-    return dataclasses.replace(
-        result, t=result.t[a:b], x=result.x[a:b], P=result.P[a:b], nav_pos=cut(result.nav_pos),
-        nav_v_n=cut(result.nav_v_n), nav_q_nb=cut(result.nav_q_nb), extras={}, innovations={},
-    )
-
-
-def _truth_stream(truth: Truth, t0_ns: int | None) -> tuple[Stream, int]:
-    if isinstance(truth, Recording):
-        if StreamKind.TRUTH not in truth:
-            raise ValueError(f"the recording has no truth stream (streams: {truth.kinds()})")
-        return truth[StreamKind.TRUTH], truth.t0_ns if t0_ns is None else int(t0_ns)
-    if isinstance(truth, Stream):
-        if t0_ns is None:
-            t0_ns = int(truth.t_ns[0]) if len(truth) else 0
-        return truth, int(t0_ns)
-    raise TypeError(f"truth must be a Recording or a truth Stream, not {type(truth).__name__}")
-
-
 def _truth_nav(stream: Stream, t0_ns: int) -> convert.NavColumns:
     """The truth's solution; parts a reference lacks (a position-only one) are NaN."""
     n = len(stream)
@@ -1411,51 +1220,6 @@ def _from_run_metrics(
             out[key if cols.shape[1] == 1 else f"{key}_{j}"] = (cols[:, j], None, key)
     nees = (m.t, m.nees, len(m.nees_states)) if m.nees_states else None
     return out, nees
-
-
-def _metric_columns(
-    result: RunResult, metrics: Mapping[str, Any]
-) -> dict[str, tuple[np.ndarray, np.ndarray | None, str]]:
-    """Validate metrics and split them into columns: ``name -> (error, sigma or None, key)``.
-
-    An (M, k) entry ``key`` becomes ``key_0 .. key_{k-1}``; a state name without a sigma takes
-    it from P. Raises before anything is logged if a shape does not match ``result.t``.
-    """
-    m = result.t.shape[0]
-    state_index = {n: i for i, n in enumerate(result.state_names)}
-    out: dict[str, tuple[np.ndarray, np.ndarray | None, str]] = {}
-    sigma_all: np.ndarray | None = None
-    for key, val in metrics.items():
-        if isinstance(val, tuple):
-            if len(val) != 2:
-                raise ValueError(f"{result.label}: metric {key!r} is not an (error, sigma) pair")
-            err, sig = val
-        else:
-            err, sig = val, None
-        err = np.asarray(err, dtype=np.float64)
-        if err.ndim == 0 or err.shape[0] != m:
-            raise ValueError(
-                f"{result.label}: metric {key!r} has shape {err.shape}, the result has {m} rows"
-            )
-        cols = err.reshape(m, int(np.prod(err.shape[1:], dtype=np.int64)))
-        sig_cols = None
-        if sig is not None:
-            sig = np.asarray(sig, dtype=np.float64)
-            if sig.size != err.size:
-                raise ValueError(
-                    f"{result.label}: sigma of metric {key!r} has shape {sig.shape}, "
-                    f"the error {err.shape}"
-                )
-            sig_cols = sig.reshape(cols.shape)
-        k = cols.shape[1]
-        for j in range(k):
-            name = key if k == 1 else f"{key}_{j}"
-            s = None if sig_cols is None else sig_cols[:, j]
-            if s is None and name in state_index:
-                sigma_all = result.sigma if sigma_all is None else sigma_all
-                s = sigma_all[:, state_index[name]]
-            out[name] = (cols[:, j], s, name if name in state_index else key)
-    return out
 
 
 _POSITION_STATES = ((Nav.LAT, Nav.LON, Nav.H, -1.0), (Nav.LAT, Nav.LON, Nav.DEPTH, 1.0))

@@ -9,9 +9,12 @@ import distributed
 import pytest
 from click.testing import CliRunner
 
+from navreplay.campaign.dask_executor import DaskExecutor, DaskExecutorError
+from navreplay.campaign.ensemble import run_ensemble
+from navreplay.campaign.executors import make_executor
+from navreplay.campaign.tasks import monte_carlo_tasks
 from navreplay.cli import cli
-from navreplay.replay.dask_executor import DaskExecutor, DaskExecutorError
-from navreplay.replay.ensemble import FilterSpec, make_executor, monte_carlo_tasks, run_ensemble
+from navreplay.replay.spec import FilterSpec
 
 SPECS = (FilterSpec("gps-ins"),)
 VALUES = {"duration": 15.0}

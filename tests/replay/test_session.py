@@ -1,22 +1,41 @@
-"""Replay engine: merge order, IMU block delivery, output ticks, checks and errors."""
+"""The replay session: merge order, IMU block delivery, output ticks, checks and errors; and a
+recording fed in windows (as a file is read) makes exactly the filter calls of one window holding
+all of it: the same bits, window sizes notwithstanding, also across an IMU gap, with aiding
+samples at window boundaries, aiding streams that start late or pause."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 import pytest
+from same_bits import assert_same_results
 
-from navreplay.filters.base import Estimate, Filter, Innovation, NavSolution, Quantity, State
-from navreplay.filters.kalman import FilterDivergedError
-from navreplay.replay.engine import (
-    STREAM_PRIORITY,
+from navreplay.filters.base import (
     TICK,
+    Estimate,
+    Filter,
+    Innovation,
+    NavSolution,
+    Quantity,
+    State,
+)
+from navreplay.filters.gps_ins import GpsInsFilter
+from navreplay.filters.ins import InsFilter
+from navreplay.filters.kalman import FilterDivergedError
+from navreplay.filters.result import RunResult, concat
+from navreplay.io.source import COMPLETE, MemorySource
+from navreplay.replay import (
+    STREAM_PRIORITY,
+    FilterSpec,
     InvalidRecordingError,
     MissingStreamError,
+    ReplaySession,
     plan_events,
     replay,
 )
+from navreplay.sim.scenario import simulate
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 T0 = 1_700_000_000_000_000_000
@@ -303,9 +322,10 @@ def test_pacing_follows_the_recording_clock():
 
 def test_observer_and_progress_called():
     seen, prog = [], []
-    replay(make_recording(), Recorder, observer=lambda r: seen.append(len(r.t)),
-           progress=lambda d, n: prog.append((d, n)), observe_interval=0.0)
-    assert seen and seen[-1] == seen[-1] and prog[-1][0] == prog[-1][1]
+    res = replay(make_recording(), Recorder, observer=lambda r: seen.append(len(r.t)),
+                 progress=lambda d, n: prog.append((d, n)), observe_interval=0.0)
+    assert seen and sum(seen) == len(res.t)  # every row once, as it came
+    assert prog[-1][0] == prog[-1][1] and all(d <= n for d, n in prog)
 
 
 def test_params_from_strings_are_typed():
@@ -313,3 +333,145 @@ def test_params_from_strings_are_typed():
 
     with pytest.raises(ParamError, match="unknown parameter"):
         replay(make_recording(), Recorder, {"gain": "2"})
+
+
+# --------------------------------------------------------------------------------------------
+# a recording fed in windows
+
+
+@pytest.fixture(scope="module")
+def drive() -> Recording:
+    return simulate("vehicle-drive", {"duration": 60.0}, seed=5)
+
+
+def _session(rec: Recording, cls: type, **kw) -> ReplaySession:
+    """A session started on the recording's first window with no samples yet (every stream
+    present, empty): the samples come in the windows fed."""
+    head = next(MemorySource(Recording({k: s.slice(0, 0) for k, s in rec.streams.items()},
+                                       rec.metadata, rec.t0_ns)))
+    return ReplaySession(head, FilterSpec.of(cls), source="drive", **kw)
+
+
+def _imu_windows(rec: Recording, cls: type, sizes: list[int], **kw) -> RunResult:
+    """The aiding streams whole in the first window, the IMU in windows of ``sizes``."""
+    imu = rec[StreamKind.IMU]
+    session = _session(rec, cls, **kw)
+    aiding = {k: s for k, s in rec.streams.items() if k is not StreamKind.IMU}
+    blocks, a = [], 0
+    for k, n in enumerate(sizes):
+        b = len(imu) if k == len(sizes) - 1 else min(a + n, len(imu))
+        blocks.append(session.feed({**aiding, StreamKind.IMU: imu.slice(a, b)},
+                                   final=k == len(sizes) - 1))
+        aiding, a = {}, b
+    return concat(blocks)
+
+
+def _time_windows(rec: Recording, cls: type, ends_ns: list[int], **kw) -> RunResult:
+    """Every stream fed in the windows (previous end, end] of time, each aiding kind known up
+    to its last sample so far (complete once all of it is fed), as a file's reader hands
+    them."""
+    session = _session(rec, cls, **kw)
+    blocks, lo = [], None
+    for k, hi in enumerate(ends_ns):
+        final = k == len(ends_ns) - 1
+        part, known = {}, {}
+        for kind, s in rec.streams.items():
+            a = 0 if lo is None else int(np.searchsorted(s.t_ns, lo, side="right"))
+            b = len(s) if final else int(np.searchsorted(s.t_ns, hi, side="right"))
+            part[kind] = s.slice(a, b)
+            known[kind] = (COMPLETE if b == len(s) else
+                           int(s.t_ns[b - 1]) if b else -COMPLETE)
+        blocks.append(session.feed(part, final=final, known=known))
+        lo = hi
+    return concat(blocks)
+
+
+def _ends(rec: Recording, seconds: list[float]) -> list[int]:
+    return [rec.t0_ns + round(s * 1e9) for s in seconds] + [rec.t0_ns + 10**12]
+
+
+def _without(rec: Recording, kind: StreamKind, lo: float, hi: float) -> Recording:
+    """The recording without the samples of ``kind`` in (lo, hi] [s after t0]."""
+    s = rec[kind]
+    t = (s.t_ns - rec.t0_ns) * 1e-9
+    keep = (t <= lo) | (t > hi)
+    cut = dataclasses.replace(s, t_ns=s.t_ns[keep],
+                              columns={k: v[keep] for k, v in s.columns.items()})
+    return Recording({**rec.streams, kind: cut}, rec.metadata, rec.t0_ns)
+
+
+@pytest.mark.parametrize("filter_cls", [GpsInsFilter, InsFilter])
+def test_imu_windows_give_the_bits_of_one_window(drive: Recording, filter_cls: type) -> None:
+    whole = replay(drive, filter_cls, {}, output_rate=10.0)
+    rng = np.random.default_rng(1)
+    sizes = [int(s) for s in rng.integers(1, 700, size=40)]  # windows of 1 to 699 samples
+    assert_same_results(_imu_windows(drive, filter_cls, sizes, output_rate=10.0), whole)
+
+
+@pytest.mark.parametrize("filter_cls", [GpsInsFilter, InsFilter])
+def test_time_windows_give_the_bits_of_one_window(drive: Recording, filter_cls: type) -> None:
+    whole = replay(drive, filter_cls, {}, output_rate=10.0)
+    rng = np.random.default_rng(2)
+    cuts = np.cumsum(rng.uniform(0.003, 4.0, size=60))  # 3 ms to 4 s windows, odd boundaries
+    got = _time_windows(drive, filter_cls, _ends(drive, list(cuts[cuts < 59.0])),
+                        output_rate=10.0)
+    assert_same_results(got, whole)
+    if filter_cls is GpsInsFilter:  # GPS updates were applied
+        assert sum(len(s.t) for s in got.innovations.values()) > 50
+
+
+def test_windows_across_an_imu_gap(drive: Recording) -> None:
+    rec = _without(drive, StreamKind.IMU, 20.0, 20.45)  # bridged, with fixes and ticks inside
+    whole = replay(rec, GpsInsFilter, {}, output_rate=20.0)
+    t = (rec[StreamKind.IMU].t_ns - rec.t0_ns) * 1e-9
+    cut = int(np.searchsorted(t, 20.0))  # a window ends at the last sample before the gap
+    sizes = [cut - 7, 7, 150, 3, 10_000]
+    assert_same_results(_imu_windows(rec, GpsInsFilter, sizes, output_rate=20.0), whole)
+
+
+def test_the_nominal_interval_of_a_short_first_window_is_that_of_the_whole_stream(
+        drive: Recording) -> None:
+    """The bridge ends one nominal interval (the median of the first window's) before the
+    next sample: a first window of a few samples of a regular clock gives the same bits."""
+    rec = _without(drive, StreamKind.IMU, 45.0, 45.4)
+    whole = replay(rec, GpsInsFilter, {}, output_rate=10.0)
+    for first in (12, 37, 401):
+        assert_same_results(_imu_windows(rec, GpsInsFilter, [first, 10**6], output_rate=10.0),
+                            whole)
+
+
+def test_a_window_boundary_between_an_imu_sample_and_a_gps_fix(drive: Recording) -> None:
+    """Fixes 1 ns after and 1 ns before an IMU sample that ends a window: the fix after it
+    waits for the next window, the IMU samples after the one before it wait too."""
+    imu, gps = drive[StreamKind.IMU], drive[StreamKind.GPS]
+    t_gps = gps.t_ns.copy()
+    k1, k2 = 10, 20
+    j1 = int(np.searchsorted(imu.t_ns, t_gps[k1]))
+    j2 = int(np.searchsorted(imu.t_ns, t_gps[k2]))
+    t_gps[k1] = imu.t_ns[j1] + 1
+    t_gps[k2] = imu.t_ns[j2] - 1
+    moved = dataclasses.replace(gps, t_ns=t_gps)
+    rec = Recording({**drive.streams, StreamKind.GPS: moved}, drive.metadata, drive.t0_ns)
+    whole = replay(rec, GpsInsFilter, {}, output_rate=10.0)
+    ends = sorted({int(imu.t_ns[j1]), int(imu.t_ns[j1]) + 1, int(t_gps[k2]),
+                   int(imu.t_ns[j2]) - 2, int(imu.t_ns[j2]), rec.t0_ns + 10**12})
+    assert_same_results(_time_windows(rec, GpsInsFilter, ends, output_rate=10.0), whole)
+
+
+def test_an_aiding_stream_that_starts_late(drive: Recording) -> None:
+    rec = _without(drive, StreamKind.GPS, -1.0, 25.0)
+    whole = replay(rec, GpsInsFilter, {}, output_rate=10.0)
+    got = _time_windows(rec, GpsInsFilter, _ends(rec, [3.0, 7.5, 24.999, 25.0, 40.0, 55.5]),
+                        output_rate=10.0)
+    assert_same_results(got, whole)
+
+
+def test_a_window_without_samples_applies_nothing(drive: Recording) -> None:
+    imu = drive[StreamKind.IMU]
+    session = _session(drive, GpsInsFilter)
+    aiding = {k: s for k, s in drive.streams.items() if k is not StreamKind.IMU}
+    first = session.feed({**aiding, StreamKind.IMU: imu.slice(0, 500)})
+    assert first.t.size and first.t[-1] <= (imu.t_ns[499] - drive.t0_ns) * 1e-9
+    assert session.feed({StreamKind.IMU: imu.slice(500, 500)}).t.size == 0
+    rest = session.feed({StreamKind.IMU: imu.slice(500, len(imu))}, final=True)
+    assert rest.t[0] > first.t[-1]

@@ -1,11 +1,11 @@
-"""Campaigns on a Dask cluster: the executor seam of :mod:`navreplay.replay.ensemble` over
+"""Campaigns on a Dask cluster: the executor seam of :mod:`navreplay.campaign.executors` over
 ``dask.distributed``.
 
 ``--executor dask`` starts a :class:`distributed.LocalCluster` of ``--workers`` single-threaded
 worker processes on this machine; ``--executor dask://HOST:PORT`` (or ``tcp://HOST:PORT``)
 connects to a running scheduler, whose workers must have navreplay (and any plug-in filter)
 installed. Workers are started once and keep their imports and compiled kernels from one run
-to the next; each run is one task (:func:`navreplay.replay.ensemble.run_task`) that returns only
+to the next; each run is one task (:func:`navreplay.campaign.tasks.run_task`) that returns only
 its compact metrics, so the scheduler's memory holds a window of results, not the campaign.
 
 ``distributed`` is imported only when a Dask executor is made.

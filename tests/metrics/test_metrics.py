@@ -5,8 +5,8 @@ import pytest
 
 from navreplay import metrics, tables
 from navreplay.filters.base import Nav, NavError, Quantity, State, TrueConstant, TruthColumn
+from navreplay.filters.result import InnovationSeries, RunResult
 from navreplay.geo import earth, rotations
-from navreplay.replay.result import InnovationSeries, RunResult
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 LAT0, LON0, H0 = np.deg2rad(36.0), np.deg2rad(130.0), 10.0

@@ -9,8 +9,8 @@ import pytest
 
 from navreplay import metrics, tables
 from navreplay.filters.base import MeasurementKind
-from navreplay.replay.result import InnovationSeries, RunResult
-from navreplay.replay.streaming import RunningSummary
+from navreplay.filters.result import InnovationSeries, RunResult
+from navreplay.metrics import RunScorer
 
 T0_NS = 1_700_000_000 * 10**9
 
@@ -66,13 +66,13 @@ def test_rows_scored_block_by_block_are_those_scored_whole() -> None:
     nu = rng.normal(size=(K, 3))
     whole = _result(nu, S)
     want = metrics.run_metrics(whole, None).summary()
-    running = RunningSummary("syn", T0_NS, {}, has_truth=False)
+    running = RunScorer("syn", T0_NS, {}, has_truth=False)
     for a in range(0, K, 77):
         b = min(a + 77, K)
         s = whole.innovations["gps_pos"]
         block = _result(nu[a:b], S[a:b], t=s.t[a:b])
         running.add(block)
-    got = running.summary()
+    got = running.result()
     rows = {k for k in want if ".N" in k or ".E" in k or ".D" in k}
     assert len(rows) == 9 and rows <= got.keys()
     for k in rows | {"nis_mean_gps_pos"}:

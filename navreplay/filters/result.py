@@ -1,8 +1,10 @@
-"""Columnar result of replaying one filter over one recording."""
+"""A filter's estimates over a recording, in columns: what a replay hands back and what scoring,
+the view and the exports read."""
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -109,3 +111,45 @@ class RunResult:
     def sigma(self) -> np.ndarray:
         """1-sigma of each state, (M, n)."""
         return np.sqrt(np.clip(np.diagonal(self.P, axis1=1, axis2=2), 0.0, None))
+
+    def rows(self, a: int, b: int) -> RunResult:
+        """Rows [a, b) of the estimates, without the innovations (views)."""
+        def cut(v: np.ndarray | None) -> np.ndarray | None:
+            return None if v is None else v[a:b]
+
+        return dataclasses.replace(
+            self, t=self.t[a:b], x=self.x[a:b], P=self.P[a:b], nav_pos=cut(self.nav_pos),
+            nav_v_n=cut(self.nav_v_n), nav_q_nb=cut(self.nav_q_nb),
+            extras={k: v[a:b] for k, v in self.extras.items()}, innovations={},
+        )
+
+
+def concat(blocks: Sequence[RunResult]) -> RunResult:
+    """The blocks of one run, in time order, as one result (their estimates and innovations
+    joined)."""
+    full = [b for b in blocks if b.t.size] or [blocks[0]]
+    first = full[0]
+
+    def cat(name: str) -> np.ndarray | None:
+        if getattr(first, name) is None:
+            return None
+        return np.concatenate([getattr(b, name) for b in full])
+
+    innovations = concat_innovations(blocks)
+    return dataclasses.replace(
+        first, t=cat("t"), x=cat("x"), P=cat("P"), nav_pos=cat("nav_pos"),
+        nav_v_n=cat("nav_v_n"), nav_q_nb=cat("nav_q_nb"),
+        extras={k: np.concatenate([b.extras[k] for b in full]) for k in first.extras},
+        innovations=innovations,
+    )
+
+
+def concat_innovations(blocks: Sequence[RunResult]) -> dict[str, InnovationSeries]:
+    """The innovations of the blocks of one run, joined per measurement."""
+    names = dict.fromkeys(n for b in blocks for n in b.innovations)
+    return {
+        name: InnovationSeries(*(np.concatenate([getattr(b.innovations[name], f)
+                                                 for b in blocks if name in b.innovations])
+                                 for f in ("t", "nu", "S", "nis")))
+        for name in names
+    }

@@ -8,14 +8,10 @@ import time
 import numpy as np
 import pytest
 
-from navreplay.replay.ensemble import (
-    FilterSpec,
-    InlineExecutor,
-    RunFailedError,
-    file_tasks,
-    monte_carlo_tasks,
-    run_ensemble,
-)
+from navreplay.campaign.ensemble import RunFailedError, run_ensemble
+from navreplay.campaign.executors import InlineExecutor
+from navreplay.campaign.tasks import file_tasks, monte_carlo_tasks
+from navreplay.replay.spec import FilterSpec
 
 
 def final_velocity_error(recording, results, task):

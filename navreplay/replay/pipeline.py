@@ -1,0 +1,428 @@
+"""The one pipeline of a replay: a recording's windows through the filters, the scoring and
+every output stage, block by block.
+
+:func:`replay_file` reads a :class:`~navreplay.io.source.Source` window by window (an intact
+MCAP file is many windows; a damaged file, a rosbag2 bag or a recording in memory is one),
+feeds each window to one :class:`~navreplay.replay.session.ReplaySession` per filter, scores
+each block of estimates as the truth around it arrives
+(:class:`~navreplay.metrics.RunScorer`) and hands truth, scored rows and innovations to the
+output stages (:class:`Stage`: the Rerun view, the exports, the report's series, or
+:class:`Collect`), which keep nothing that grows with the recording unless they mean to. A
+whole run is one block. :func:`replay` is the same over a recording in memory, collected into
+a :class:`~navreplay.filters.result.RunResult`.
+
+Examples
+--------
+>>> import numpy as np
+>>> from navreplay.sim.scenario import simulate
+>>> rec = simulate("vehicle-drive", {"duration": 20.0}, seed=1)
+>>> result = replay(rec, FilterSpec("gps-ins"))
+>>> result.label, result.x.shape[1], sorted(result.innovations)
+('gps-ins', 33, ['gps_pos', 'gps_vel'])
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Protocol
+
+from navreplay.filters.base import Filter, FilterParams, TruthColumn
+from navreplay.filters.result import RunResult, concat, concat_innovations
+from navreplay.filters.settings import summary_entries
+from navreplay.io.source import COMPLETE, MemorySource, Source, Window
+from navreplay.metrics import RunMetrics, RunScorer
+from navreplay.replay.checks import validate_recording
+from navreplay.replay.session import Progress, ReplaySession
+from navreplay.replay.spec import FilterSpec
+from navreplay.streams import Metadata, Recording, Stream, StreamKind
+
+
+@dataclasses.dataclass(frozen=True)
+class RunStart:
+    """What the stages know before the first block.
+
+    Attributes
+    ----------
+    source : str
+        The recording, in messages.
+    labels : tuple of str
+        The filters' labels, in order.
+    t0_ns : int
+        Recording start [ns].
+    has_truth : bool
+        A truth (or reference) stream comes with the windows.
+    metadata : Metadata
+    truth_columns : dict[str, str]
+        Truth columns that declared states are scored against, with their SI units.
+    """
+
+    source: str
+    labels: tuple[str, ...]
+    t0_ns: int
+    has_truth: bool
+    metadata: Metadata
+    truth_columns: dict[str, str] = dataclasses.field(default_factory=dict)
+
+
+class Stage(Protocol):
+    """An output of a replay, fed block by block (the Rerun view
+    :class:`navreplay.viz.Sink`, the exports and report :class:`navreplay.jobs.results.Outputs`,
+    :class:`Collect`). Calls come in this order: :meth:`start`; per window, :meth:`truth`, then
+    per filter :meth:`innovations` and :meth:`rows` as the estimates are scored; :meth:`abort`
+    when the replay fails. Finishing (closing files) is the caller's."""
+
+    def start(self, run: RunStart) -> None: ...
+
+    def truth(self, truth: Stream) -> None:
+        """A window of the truth stream (later than before)."""
+
+    def rows(self, rows: RunResult, metrics: RunMetrics | None, truth: Stream | None) -> None:
+        """A block of one filter's estimates (later than its rows before), without its
+        innovations, with its scores and the truth around it (None without a truth)."""
+
+    def innovations(self, block: RunResult) -> None:
+        """The innovations of a block of one filter's run."""
+
+    def abort(self) -> None: ...
+
+
+class Collect:
+    """A stage that keeps every filter's blocks: :meth:`results` joins them per label."""
+
+    def __init__(self) -> None:
+        self._rows: dict[str, list[RunResult]] = {}
+        self._innovations: dict[str, list[RunResult]] = {}
+
+    def start(self, run: RunStart) -> None:
+        self._rows = {label: [] for label in run.labels}
+        self._innovations = {label: [] for label in run.labels}
+
+    def truth(self, truth: Stream) -> None:
+        return None
+
+    def rows(self, rows: RunResult, metrics: RunMetrics | None, truth: Stream | None) -> None:
+        if rows.t.size or not self._rows[rows.label]:
+            self._rows[rows.label].append(rows)
+
+    def innovations(self, block: RunResult) -> None:
+        if block.innovations:
+            self._innovations[block.label].append(block)
+
+    def abort(self) -> None:
+        return None
+
+    def results(self) -> dict[str, RunResult]:
+        """The whole run of each filter (its blocks' estimates and innovations)."""
+        out = {}
+        for label, blocks in self._rows.items():
+            full = [b for b in blocks if b.t.size] or blocks[:1]
+            rows = full[0] if len(full) == 1 else concat(full)
+            out[label] = dataclasses.replace(
+                rows, innovations=concat_innovations(self._innovations[label]))
+        return out
+
+
+@dataclasses.dataclass
+class FileRun:
+    """What :func:`replay_file` hands back.
+
+    Attributes
+    ----------
+    summaries : dict[str, dict]
+        Each filter's summary (:meth:`navreplay.metrics.RunSummary.result`, then its settings:
+        :func:`navreplay.filters.settings.summary_entries`), by label; empty without scoring.
+    has_truth : bool
+        A truth (or reference) stream was scored against.
+    salvaged : bool
+        Messages were lost to damage.
+    coverage : float or None
+        Fraction of the recording replayed (:meth:`navreplay.io.source.Source.coverage`).
+    reference_coverage : dict[str, float]
+        With a truth: the fraction of each filter's outputs that it scores, by label
+        (:func:`navreplay.metrics.coverage.add_coverage` puts it into a summary).
+    """
+
+    summaries: dict[str, dict[str, Any]]
+    has_truth: bool
+    salvaged: bool
+    coverage: float | None
+    reference_coverage: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+def replay_file(
+    source: Source,
+    specs: Sequence[FilterSpec],
+    *,
+    stages: Sequence[Stage] = (),
+    output_rate: float | None = 10.0,
+    pacing: float | None = None,
+    max_imu_gap: float | None = None,
+    live: bool = False,
+    observe_interval: float = 0.25,
+    progress: Progress | None = None,
+    score: bool = True,
+) -> FileRun:
+    """Replay every filter over a recording, window by window, feeding the stages.
+
+    Parameters
+    ----------
+    source : Source
+        The recording (:func:`navreplay.io.open_recording`,
+        :func:`navreplay.logs.prepare.open_log`, :class:`~navreplay.io.source.MemorySource`);
+        read here, once, and closed.
+    specs : sequence of FilterSpec
+        The filters (labels unique); each filter is built, and its streams checked, before
+        any replays.
+    stages : sequence of Stage
+        The outputs, fed block by block.
+    output_rate : float or None
+        Output tick rate [Hz] where no aiding sample falls.
+    pacing : float, optional
+        Replay at this multiple of real time (live viewing).
+    max_imu_gap : float, optional
+        Longest IMU gap [s] a filter bridges.
+    live : bool
+        Hand the estimates to the stages as they come (about every ``observe_interval``
+        seconds of wall time), not only window by window.
+    progress : callable, optional
+        ``progress(done, total)``: seconds of the recording replayed by all filters so far,
+        over their total (events when the recording's length is not known).
+    score : bool
+        Score the estimates against the truth (without: the stages get the rows unscored and
+        there is no summary).
+
+    Returns
+    -------
+    FileRun
+
+    Raises
+    ------
+    RecordingError, ReplayError, FilterDivergedError, ParamError
+        As the source and :class:`~navreplay.replay.session.ReplaySession` raise them; the
+        stages are aborted first and the source closed.
+    """
+    labels = [s.label for s in specs]
+    dupes = sorted({x for x in labels if labels.count(x) > 1})
+    if dupes:
+        raise ValueError(f"filter labels must be unique; repeated: {', '.join(dupes)}")
+    try:
+        first = next(source)
+        t0_ns, metadata = first.t0_ns, first.metadata
+        has_truth = StreamKind.TRUTH in first
+        tracker = _Progress(progress, len(specs), first)
+        scorers: list[RunScorer | None] = []
+        sessions = []
+        for k, spec in enumerate(specs):
+            scorer = (RunScorer(spec.label, t0_ns, metadata.true_errors, has_truth,
+                                scored=_fan_out(stages)) if score else None)
+            scorers.append(scorer)
+            sessions.append(ReplaySession(
+                first, spec, source=source.name, output_rate=output_rate, pacing=pacing,
+                max_imu_gap=max_imu_gap, observe_interval=observe_interval,
+                live=_live(scorer, stages) if live else None,
+                progress=tracker.of(k) if progress is not None else None))
+        columns = {st.truth.column: st.unit for s in sessions for st in s.states
+                   if isinstance(st.truth, TruthColumn)}
+        start = RunStart(source.name, tuple(labels), t0_ns, has_truth, metadata, columns)
+        for stage in stages:
+            stage.start(start)
+        estimates = [0] * len(specs)
+        window: Window | None = first
+        while window is not None:
+            known = {k: (COMPLETE if window.final else t) for k, t in window.known.items()}
+            truth = window.get(StreamKind.TRUTH)
+            if truth is not None and len(truth):
+                for stage in stages:
+                    stage.truth(truth)
+            for k, (session, scorer) in enumerate(zip(sessions, scorers, strict=True)):
+                if scorer is not None:
+                    scorer.add_truth(truth, final=window.final)
+                block = session.feed(window, final=window.final, known=known)
+                estimates[k] += block.t.shape[0] + session.live_rows
+                for stage in stages:
+                    stage.innovations(block)
+                if scorer is not None:
+                    scorer.add(block)
+                else:
+                    rows = block.rows(0, block.t.shape[0])
+                    for stage in stages:
+                        stage.rows(rows, None, None)
+                if window.final and estimates[k] == 0:
+                    empty = block.rows(0, 0)  # no estimate at all: the outputs' headers
+                    for stage in stages:
+                        stage.rows(empty, None, None)
+            tracker.window(window)
+            window = None if window.final else next(source)
+        summaries = {spec.label: {**scorer.result(), **summary_entries(session.settings)}
+                     for spec, scorer, session in zip(specs, scorers, sessions, strict=True)
+                     if scorer is not None}
+        covered = {spec.label: scorer.coverage()
+                   for spec, scorer in zip(specs, scorers, strict=True)
+                   if scorer is not None and has_truth}
+    except BaseException:
+        source.close()  # the reader's warnings so far, before the error
+        for stage in stages:
+            stage.abort()
+        raise
+    source.close()
+    return FileRun(summaries, has_truth, source.salvaged, source.coverage(), covered)
+
+
+def _fan_out(stages: Sequence[Stage]
+             ) -> Callable[[RunResult, RunMetrics | None, Stream | None], None]:
+    def scored(rows: RunResult, m: RunMetrics | None, truth: Stream | None) -> None:
+        for stage in stages:
+            stage.rows(rows, m, truth)
+
+    return scored
+
+
+def _live(scorer: RunScorer | None, stages: Sequence[Stage]) -> Callable[[RunResult], None]:
+    """The live view of a session: its rows, scored as far as the truth allows."""
+    def rows(block: RunResult) -> None:
+        if scorer is not None:
+            scorer.add(block)
+        else:
+            for stage in stages:
+                stage.rows(block, None, None)
+
+    return rows
+
+
+class _Progress:
+    """Progress over the filters: seconds of the recording replayed, over the filters' total
+    (events, when the recording's length is unknown)."""
+
+    def __init__(self, progress: Progress | None, n: int, first: Window) -> None:
+        self.progress, self.n = progress, n
+        duration = first.metadata.params.get("duration")
+        if not isinstance(duration, int | float) or not duration > 0:
+            duration = ((first.end_ns - first.t0_ns) * 1e-9 if first.end_ns is not None
+                        else None)
+        self.duration = duration
+        self.t0_ns = first.t0_ns
+        self.done = [0.0] * n
+        self.events = [(0, 0)] * n
+
+    def of(self, k: int) -> Progress:
+        def report(done: int, total: int) -> None:
+            self.events[k] = (done, total)
+            if self.duration is None and self.progress is not None:
+                d = sum(e[0] for e in self.events)
+                self.progress(d, max(d, sum(e[1] for e in self.events) or 1))
+
+        return report
+
+    def window(self, window: Window) -> None:
+        if self.progress is None or self.duration is None:
+            return
+        imu = window.get(StreamKind.IMU)
+        if window.final:
+            done = self.duration
+        elif imu is not None and len(imu):
+            done = min((int(imu.t_ns[-1]) - self.t0_ns) * 1e-9, self.duration)
+        else:
+            return
+        total = int(self.n * self.duration)
+        self.progress(min(int(self.n * done), total), total)
+
+
+def replay(
+    recording: Recording,
+    filter: FilterSpec | type[Filter],
+    params: FilterParams | Mapping[str, Any] | None = None,
+    *,
+    label: str | None = None,
+    source: str | None = None,
+    output_rate: float | None = 10.0,
+    pacing: float | None = None,
+    validate: bool = True,
+    progress: Progress | None = None,
+    observer: Callable[[RunResult], None] | None = None,
+    observe_interval: float = 0.25,
+    max_imu_gap: float | None = None,
+) -> RunResult:
+    """Replay one filter over a recording in memory (the pipeline of :func:`replay_file` over
+    one window, collected).
+
+    Parameters
+    ----------
+    recording : Recording
+        The streams; a file read with :func:`navreplay.io.read_recording` is already validated
+        (pass ``validate=False`` to skip the second check).
+    filter : FilterSpec or type[Filter]
+        The filter: a spec, or a class (see :func:`navreplay.filters.registry.load_filter`).
+    params : FilterParams or mapping, optional
+        With a class: an instance of its ``Params``, or ``{name: value}`` (strings as from
+        ``-p key=value`` are converted), or None for the defaults.
+    label : str, optional
+        Display label of the run (default: the filter's name).
+    source : str, optional
+        Name of the recording in messages and in the result (default: ``scenario#seed=N``).
+    output_rate : float or None
+        Output tick rate [Hz] where no aiding sample falls (:mod:`navreplay.replay.plan`);
+        None or 0 for outputs at aiding samples only.
+    pacing : float, optional
+        Replay at this multiple of real time (1.0 = real time), for live viewing.
+    validate : bool
+        Check the recording for non-finite samples and non-increasing timestamps first.
+    progress : callable, optional
+        ``progress(done, total)``, every few thousand events and at the end.
+    observer : callable, optional
+        Called with the estimates as they come (views valid during the call), about every
+        ``observe_interval`` seconds of wall time.
+    max_imu_gap : float, optional
+        Longest IMU gap [s] the filter may bridge (:mod:`navreplay.replay.gaps`).
+
+    Returns
+    -------
+    RunResult
+        Estimates at every event (times from :attr:`Estimate.t`), innovations per measurement
+        with their NIS.
+
+    Raises
+    ------
+    MissingStreamError, InvalidRecordingError, ParamError, FilterInitError, FilterFailedError,
+    FilterOutputError, FilterDivergedError
+        With one line naming the filter, the recording and the time
+        (:mod:`navreplay.replay.errors`).
+    """
+    if isinstance(filter, FilterSpec):
+        spec = filter if label is None else dataclasses.replace(filter, label=label)
+    else:
+        spec = FilterSpec.of(filter, params, label)
+    name = source or ""
+    src = MemorySource(recording, name)
+    if validate:
+        validate_recording(recording, src.name)
+    stages: list[Stage] = [collect := Collect()]
+    if observer is not None:
+        stages.append(_Observer(observer))
+    replay_file(src, [spec], stages=stages, output_rate=output_rate, pacing=pacing,
+                max_imu_gap=max_imu_gap, live=observer is not None,
+                observe_interval=observe_interval, progress=progress, score=False)
+    return collect.results()[spec.label]
+
+
+class _Observer:
+    """The rows of a replay handed to a callable as they come."""
+
+    def __init__(self, fn: Callable[[RunResult], None]) -> None:
+        self.fn = fn
+
+    def start(self, run: RunStart) -> None:
+        return None
+
+    def truth(self, truth: Stream) -> None:
+        return None
+
+    def rows(self, rows: RunResult, metrics: RunMetrics | None, truth: Stream | None) -> None:
+        if rows.t.size:
+            self.fn(rows)
+
+    def innovations(self, block: RunResult) -> None:
+        return None
+
+    def abort(self) -> None:
+        return None
