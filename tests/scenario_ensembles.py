@@ -29,12 +29,10 @@ Run as a script to print the table of docs/methods/ins.md §5::
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 from typing import Any
 
 import grade_ensembles as ge
-import numpy as np
 
 from navreplay import consistency
 
@@ -91,18 +89,11 @@ def run(case: Case, seed: int, runs: int, length: float, *, fast: bool = False,
                         lengths={}, scenario=case.values(fast))
 
 
-def outage_ratios(e: ge.Ensemble) -> list[tuple[float, float]]:
-    """Per GNSS outage of the drive: (end [s], RMS over the runs of the horizontal error at
-    the end over the RMS predicted horizontal sigma there)."""
-    res = e.stats
-    ends = [end for _, end in res.outages] if getattr(res, "outages", None) else []
-    out = []
-    for end in ends:
-        i = int(np.searchsorted(res.t, end - 1e-6)) - 1  # the last estimate before the fix
-        rms = math.hypot(*res.rms["pos_ned"][i, :2])
-        sigma = math.hypot(*res.sigma["pos_ned"][i, :2])
-        out.append((float(res.t[i]), rms / sigma))
-    return out
+def outages(e: ge.Ensemble) -> list[dict]:
+    """The ensemble's scores of each GNSS outage of the drive (the summary's ``gnss_outages``,
+    :func:`navreplay.metrics.outages.ensemble_outages`): the RMS over the runs of the
+    horizontal error at the end over the RMS predicted horizontal sigma there, in its band."""
+    return e.stats.summary().get("gnss_outages", [])
 
 
 def problems(e: ge.Ensemble) -> list[str]:
@@ -121,13 +112,12 @@ def problems(e: ge.Ensemble) -> list[str]:
         if not check.passed:
             out.append(f"{name}: RMS / sigma {s.ratio:.2f} outside "
                        f"{check.band[0]:.2f}-{check.band[1]:.2f}")
-    ratios = outage_ratios(e)
-    if ratios:
-        lo, hi = consistency.mean_band(1, e.runs, consistency.CHECK_FALSE_ALARM / len(ratios))
-        for end, r in ratios:
-            if not math.sqrt(lo) <= r <= math.sqrt(hi):
-                out.append(f"outage ending at {end:.0f} s: horizontal RMS / sigma {r:.2f} "
-                           f"outside {math.sqrt(lo):.2f}-{math.sqrt(hi):.2f}")
+    for o in outages(e):
+        if "t_end" not in o:
+            out.append(f"outage {o['start']:g}-{o['end']:g} s: no estimate inside")
+        elif not o["passed"]:
+            out.append(f"outage ending at {o['end']:g} s: horizontal RMS / sigma "
+                       f"{o['ratio_end_h']:.2f} outside {o['band'][0]:.2f}-{o['band'][1]:.2f}")
     return out
 
 
@@ -139,10 +129,10 @@ def row(case: Case, e: ge.Ensemble) -> str:
     gm = " ".join(f"{others[k]:.2f}" for k in ("gm_N", "gm_E", "gm_D") if k in others)
     rest = {k: v for k, v in others.items() if not k.startswith("gm_")}
     span = f"{min(rest.values()):.2f}-{max(rest.values()):.2f}" if rest else ""
-    outages = " ".join(f"{v:.2f}" for _, v in outage_ratios(e))
+    ends = " ".join(f"{o['ratio_end_h']:.2f}" for o in outages(e) if "t_end" in o)
     return (f"| {case.name} | {e.filter} | {e.runs} x {e.duration:.0f} s | {e.seed}-"
             f"{e.seed + e.runs - 1} | {e.nees_dof:.3f} | {e.nees_band[0]:.3f}-"
-            f"{e.nees_band[1]:.3f} | {r} | {span} | {gm} | {outages} |")
+            f"{e.nees_band[1]:.3f} | {r} | {span} | {gm} | {ends} |")
 
 
 def main(argv: list[str]) -> int:

@@ -34,6 +34,8 @@ def test_consistent_where_the_simulator_goes(name):
     for f in case.filters:
         e = _fast(name)[f]
         assert not se.problems(e), (se.row(case, e), se.problems(e))
+        if "gps_outages" in case.scenario:  # each outage's end is checked
+            assert [o["end"] for o in se.outages(e) if "t_end" in o] == [60.0, 140.0]
 
 
 @pytest.mark.parametrize("name", POWER)

@@ -30,11 +30,13 @@ from typing import Any, Protocol
 from navreplay.filters.base import Filter, FilterParams, TruthColumn
 from navreplay.filters.result import RunResult, concat, concat_innovations
 from navreplay.filters.settings import summary_entries
+from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, MemorySource, Source, Window
 from navreplay.metrics import RunMetrics, RunScorer
 from navreplay.replay.checks import validate_recording
 from navreplay.replay.session import Progress, ReplaySession
 from navreplay.replay.spec import FilterSpec
+from navreplay.sensors.gps import recorded_outages
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 
@@ -55,6 +57,8 @@ class RunStart:
     metadata : Metadata
     truth_columns : dict[str, str]
         Truth columns that declared states are scored against, with their SI units.
+    gnss_outages : tuple of (start, end)
+        The recording's GNSS outages [s since its start] (``metadata.extra["gnss_outages"]``).
     """
 
     source: str
@@ -63,6 +67,7 @@ class RunStart:
     has_truth: bool
     metadata: Metadata
     truth_columns: dict[str, str] = dataclasses.field(default_factory=dict)
+    gnss_outages: tuple[tuple[float, float], ...] = ()
 
 
 class Stage(Protocol):
@@ -210,12 +215,16 @@ def replay_file(
         first = next(source)
         t0_ns, metadata = first.t0_ns, first.metadata
         has_truth = StreamKind.TRUTH in first
+        try:
+            outages = recorded_outages(metadata.extra)
+        except ValueError as e:
+            raise RecordingError(f"{source.name}: {e}") from None
         tracker = _Progress(progress, len(specs), first)
         scorers: list[RunScorer | None] = []
         sessions = []
         for k, spec in enumerate(specs):
             scorer = (RunScorer(spec.label, t0_ns, metadata.true_errors, has_truth,
-                                scored=_fan_out(stages)) if score else None)
+                                outages=outages, scored=_fan_out(stages)) if score else None)
             scorers.append(scorer)
             sessions.append(ReplaySession(
                 first, spec, source=source.name, output_rate=output_rate, pacing=pacing,
@@ -224,7 +233,8 @@ def replay_file(
                 progress=tracker.of(k) if progress is not None else None))
         columns = {st.truth.column: st.unit for s in sessions for st in s.states
                    if isinstance(st.truth, TruthColumn)}
-        start = RunStart(source.name, tuple(labels), t0_ns, has_truth, metadata, columns)
+        start = RunStart(source.name, tuple(labels), t0_ns, has_truth, metadata, columns,
+                         outages)
         for stage in stages:
             stage.start(start)
         estimates = [0] * len(specs)
