@@ -18,7 +18,7 @@ Examples
 >>> rec = simulate("vehicle-drive", {"duration": 20.0}, seed=1)
 >>> result = replay(rec, FilterSpec("gps-ins"))
 >>> result.label, result.x.shape[1], sorted(result.innovations)
-('gps-ins', 24, ['gps_pos', 'gps_vel'])
+('gps-ins', 33, ['gps_pos', 'gps_vel'])
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from navreplay.filters.base import Filter, FilterParams, TruthColumn
 from navreplay.filters.result import RunResult, concat, concat_innovations
 from navreplay.filters.settings import summary_entries
 from navreplay.filters.smoothable import is_smoothable
+from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, MemorySource, Source, Window
 from navreplay.metrics import RunMetrics, RunScorer
 from navreplay.replay.checks import validate_recording
@@ -46,6 +47,7 @@ from navreplay.replay.smoothing import (
     smoothed_label,
 )
 from navreplay.replay.spec import FilterSpec
+from navreplay.sensors.gps import recorded_outages
 from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 
@@ -70,6 +72,8 @@ class RunStart:
         Labels whose rows all come after the last window (the smoothed runs), each with the
         label of the run it follows (the same states and parts of the solution): a stage must
         not hold the other labels' rows until they come.
+    gnss_outages : tuple of (start, end)
+        The recording's GNSS outages [s since its start] (``metadata.extra["gnss_outages"]``).
     """
 
     source: str
@@ -79,6 +83,7 @@ class RunStart:
     metadata: Metadata
     truth_columns: dict[str, str] = dataclasses.field(default_factory=dict)
     late: dict[str, str] = dataclasses.field(default_factory=dict)
+    gnss_outages: tuple[tuple[float, float], ...] = ()
 
 
 class Stage(Protocol):
@@ -262,12 +267,16 @@ def _replay_file(
         first = next(source)
         t0_ns, metadata = first.t0_ns, first.metadata
         has_truth = StreamKind.TRUTH in first
+        try:
+            outages = recorded_outages(metadata.extra)
+        except ValueError as e:
+            raise RecordingError(f"{source.name}: {e}") from None
         tracker = _Progress(progress, len(specs), first, len(stores))
         scorers: list[RunScorer | None] = []
         sessions = []
         for k, spec in enumerate(specs):
             scorer = (RunScorer(spec.label, t0_ns, metadata.true_errors, has_truth,
-                                scored=_fan_out(stages)) if score else None)
+                                outages=outages, scored=_fan_out(stages)) if score else None)
             scorers.append(scorer)
             sessions.append(ReplaySession(
                 first, spec, source=source.name, output_rate=output_rate, pacing=pacing,
@@ -279,7 +288,7 @@ def _replay_file(
                    if isinstance(st.truth, TruthColumn)}
         late = {smoothed_label(sessions[k].label): sessions[k].label for k in stores}
         start = RunStart(source.name, tuple(all_labels), t0_ns, has_truth, metadata, columns,
-                         late)
+                         late, outages)
         for stage in stages:
             stage.start(start)
         estimates = [0] * len(specs)

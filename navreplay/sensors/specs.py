@@ -78,6 +78,7 @@ from navreplay.sensors.imu import ImuGrade, ImuModel, imu_grade
 from navreplay.sensors.magnetometer import MagnetometerModel
 from navreplay.sensors.master_ins import MasterInsModel
 from navreplay.sensors.speed_log import SpeedLogModel
+from navreplay.streams import StreamKind
 from navreplay.units import UnitError
 
 SPEC_KINDS: dict[str, type] = {
@@ -90,6 +91,16 @@ SPEC_KINDS: dict[str, type] = {
 }
 """Sensor kinds (the ``[sensors.KIND]`` tables, the keys of ``Metadata.sensors``) and their
 records."""
+
+SPEC_STREAMS: dict[str, tuple[StreamKind, ...]] = {
+    "imu": (StreamKind.IMU,),
+    "gps": (StreamKind.GPS, StreamKind.GPS_VEL),
+    "mag": (StreamKind.MAG,),
+    "speed_log": (StreamKind.SPEED_LOG,),
+    "depth": (StreamKind.DEPTH,),
+    "master_ins": (StreamKind.MASTER_INS,),
+}
+"""The streams each sensor kind's record describes."""
 
 SOURCE_KEY = "source"
 """The key of a kind's entry in ``Metadata.sensors`` that says where the record came from."""
@@ -191,6 +202,23 @@ class SensorSpecs:
         return self.sources.get(kind, "")
 
     # -- combining -------------------------------------------------------------------------
+
+    def present_terms(self, kind: str) -> dict[str, str]:
+        """The error terms (:attr:`~navreplay.sensors.imu.ImuModel.error_terms`) of ``kind``
+        that are stated and not zero (on some axis), each with what it is; empty when the kind
+        is absent."""
+        model = self.models.get(kind)
+        if model is None:
+            return {}
+        terms = getattr(type(model), "error_terms", {})
+        known = self.known_fields(kind)
+        out = {}
+        for name, what in terms.items():
+            value = getattr(model, name)
+            values = value if isinstance(value, tuple) else (value,)
+            if name in known and any(v != 0.0 for v in values):
+                out[name] = what
+        return out
 
     def with_model(self, kind: str, model: Any, source: str,
                    known: Iterable[str] | None = None) -> SensorSpecs:

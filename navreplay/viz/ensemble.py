@@ -3,11 +3,12 @@
 Per filter, in the filter's colour (the same as in the single-run tabs): the RMS over runs of
 each error component (solid) and the mean predicted sigma (thinner, lighter), one pane per
 filter and component so that each filter is read at its own scale; the run-averaged NEES and
-NIS with their 95 % band; per axis the ratio RMS/sigma of the normalised errors over the runs
-at each epoch, in its 95 % band for that many runs, titled with the ensemble's check
-(docs/methods/consistency.md §7). Tabs: "Ensemble position",
-"... velocity", "... attitude", "... states" (the scored states that are not navigation
-errors), "Ensemble NEES / NIS", "Ensemble RMS/σ" (the NEES states and any axis that fails).
+NIS with their 95 % band; the GNSS outages shaded under the position errors; per axis the
+ratio RMS/sigma of the normalised errors over the runs at each epoch, in its 95 % band for
+that many runs, titled with the ensemble's check (docs/methods/consistency.md §7). Tabs:
+"Ensemble position", "... velocity", "... attitude", "... states" (the scored states that are
+not navigation errors), "Ensemble NEES / NIS", "Ensemble RMS/σ" (the NEES states and any axis
+that fails).
 With the runs' metrics (``navreplay montecarlo --keep``), "Ensemble runs" shows every run's
 navigation errors, one thin line per run, to find the runs behind an RMS.
 """
@@ -72,7 +73,8 @@ def log_ensemble(
                 series[f"{label} σ"] = sigma[:, i] * scale
                 styles[f"{label} σ"] = sigma_style
             sink.log_ensemble(f"{label}: {what} error {axis}, RMS and σ", t, series, unit=unit,
-                              styles=styles, tab=tab, tab_title=tab_title, rank=order)
+                              styles=styles, tab=tab, tab_title=tab_title, rank=order,
+                              shaded=ens.outages if key == "pos_ned" else ())
     declared = {s.name: s for s in states or ()}
     tab, tab_title = _tab("states")
     for j, name in enumerate(ens.state_names):

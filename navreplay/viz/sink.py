@@ -13,6 +13,7 @@ Entity tree
     /<label>/sigma/<name>                        1-sigma from the diagonal of P
     /<label>/error/<name>                        estimate - truth, +3 sigma, -3 sigma
     /<label>/error/{p_N..p_D,v_N..v_D,phi_N..phi_D}   navigation errors (metrics.nav_errors)
+    /<label>/error/{p_N,p_E,p_D}/gnss_outage/<k>  the ±3σ band shaded in the k-th GNSS outage
     /<label>/nav/<roll..p_D>                     navigation solution (as /truth/nav)
     /<label>/extra/<key>[_<i>]                   RunResult.extras
     /<label>/nees, /<label>/nees/band            NEES of the declared NEES states, 95 % band
@@ -20,6 +21,7 @@ Entity tree
     /<label>/innovation/<meas>/nis[/band]        NIS, 95 % chi-square band
     /world                                       NED, metres from the reference point
     /world/truth/trajectory, /world/<label>/trajectory    LineStrips3D (static)
+    /world/truth/gnss_outages, /map/truth/gnss_outages    the true track in the GNSS outages
     /world/{truth,<label>}/body                  Transform3D over time (q_nb as xyzw)
     /world/{truth,<label>}/body/axes             body FRD axes (Arrows3D, static)
     /world/<label>/covariance                    3-sigma position Ellipsoids3D, 1 Hz
@@ -53,7 +55,7 @@ import dataclasses
 import os
 import time
 import weakref
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +68,7 @@ from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import quat_wxyz_to_xyzw, radii
 from navreplay.metrics import RunMetrics, nav_errors
+from navreplay.metrics import outages as _outages
 from navreplay.outputs import OutputError, release
 from navreplay.streams import Stream
 from navreplay.viz import convert
@@ -117,6 +120,8 @@ BAND_WIDTH = 8.0
 """Width of each band line [px]."""
 
 TRUTH_COLOR = (150, 150, 150)
+OUTAGE_COLOR = (235, 160, 40)
+"""GNSS outages: the true track inside them, and (dimmed) the bands that shade them."""
 PALETTE = (
     (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
     (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207),
@@ -276,6 +281,7 @@ class Sink:
         self._extent_curve: tuple[np.ndarray, np.ndarray] | None = None
         self._t0_ns = 0
         self._truth_wanted: dict[str, str] = {}
+        self._outages: tuple[tuple[float, float], ...] = ()
         self._truth_columns: set[str] = set()
         self._closed = False
         self._world_coords = False
@@ -550,6 +556,7 @@ class Sink:
         if log.track.t.shape[0]:
             self._axes(f"{world}/body/axes", _axis_size(self._extent))
         self._log_track(log.root.strip("/"), log.track, TRUTH_COLOR, 1.5, 1.5)
+        self._log_outage_track(log.root, log.track)
 
     def _truth_column(self, column: str, unit: str) -> str | None:
         """Entity of a truth column logged with the truth (:meth:`start` named it), or None
@@ -584,6 +591,7 @@ class Sink:
         time and the truth columns the declared states are scored against)."""
         self._t0_ns = int(run.t0_ns)
         self._truth_wanted = dict(run.truth_columns)
+        self._outages = tuple(run.gnss_outages)
 
     def truth(self, truth: Stream) -> None:
         """Log a window of the truth stream (rows later than those logged before; columns
@@ -624,6 +632,8 @@ class Sink:
             return
         run = self._run(rows.label, None)
         errors, nees = _from_run_metrics(rows, metrics) if metrics is not None else ({}, None)
+        if metrics is not None and metrics.outages:
+            self._outages = metrics.outages
 
         def log() -> None:
             r = self._runs[rows.label]
@@ -831,9 +841,10 @@ class Sink:
             path = entity_path(L, "error", n)
             self._bounded(path, idx, e * u.scale, None if s is None else s * u.scale, L, run.color)
             bounds = "" if s is None else ", ±3σ"
-            self.catalog.add(quantity_of(n).value, f"error:{n}@{L}",
-                             f"{L}: {title(n, u, 'error')}{bounds}", path,
-                             rank=_RANK_ERROR + run.order, legend=False)
+            plot = (quantity_of(n).value, f"error:{n}@{L}", f"{L}: {title(n, u, 'error')}{bounds}")
+            self.catalog.add(*plot, path, rank=_RANK_ERROR + run.order, legend=False)
+            if s is not None and nav_part(n) == "pos":
+                self._shade_outages(path, plot, t, result.t0_ns, N_SIGMA * s * u.scale)
         if "pos" not in parts:
             return
         self._log_world(run, result, nav, a, b, values)
@@ -841,6 +852,38 @@ class Sink:
                       nav.pos)
         self._geo(L, t, nav.pos, result.t0_ns, run.color, after=run.geo_t)
         run.geo_t = float(t[-1])
+
+    def _shade_outages(self, path: str, plot: tuple[str, str, str], t: np.ndarray, t0_ns: int,
+                       bound: np.ndarray) -> None:
+        """Shade each GNSS outage in a plot of rows at times ``t`` [s]: a band between
+        ``-bound`` and ``bound`` (the ±3σ of the error) under the series, one entity per
+        outage (``<path>/gnss_outage/<k>``, k from 1)."""
+        for k, outage in enumerate(self._outages):
+            inside = _outages.inside(t, outage)
+            if not inside.any():
+                continue
+            band = f"{path}/gnss_outage/{k + 1}"
+            self.band(band, self._indexes(t[inside], t0_ns), -bound[inside], bound[inside],
+                      OUTAGE_COLOR, "GNSS outage")
+            self.catalog.add(*plot, band, legend=False, behind=True)
+
+    def _log_outage_track(self, root: str, track: _Track) -> None:
+        """The true track inside the GNSS outages, over the trajectory (3D) and the map
+        track."""
+        parts = [k for k in (np.flatnonzero(_outages.inside(track.t, o)) for o in self._outages)
+                 if k.shape[0] >= 2]
+        if not parts:
+            return
+        strips = [_thin(track.ned[k]) for k in parts]
+        self._rec.log(f"/world{root}/gnss_outages",
+                      rr.LineStrips3D(strips, colors=[OUTAGE_COLOR], radii=[-2.5]), static=True)
+        geo = [np.degrees(track.pos[k, :2]) for k in parts]
+        geo = [g[np.isfinite(g).all(axis=1)] for g in geo]
+        geo = [g for g in geo if g.shape[0] >= 2]
+        if geo:
+            self._rec.log(f"/map{root}/gnss_outages",
+                          rr.GeoLineStrings(lat_lon=geo, colors=[OUTAGE_COLOR],
+                                            radii=rr.Radius.ui_points(2.5)), static=True)
 
     def _unwrap_yaw(self, run: _Run, t: np.ndarray, yaw: np.ndarray) -> np.ndarray:
         """Yaw without +-180 deg jumps, continuing the previous rows, on the truth's branch."""
@@ -1012,6 +1055,7 @@ class Sink:
         timeline: str | None = None,
         rank: int = 0,
         legend: bool = True,
+        shaded: Sequence[tuple[float, float]] = (),
     ) -> None:
         """Log one Monte Carlo plot under ``/ensemble/<name>/<series>``.
 
@@ -1041,16 +1085,23 @@ class Sink:
             Order of the plot in its tab.
         legend : bool
             Whether the plot shows its legend.
+        shaded : sequence of (start, end)
+            Spans of ``t`` (GNSS outages) shaded under the series, each
+            ``/ensemble/<name>/gnss_outage/<k>``.
         """
         t = np.asarray(t, dtype=np.float64)
-        if timeline is None:
-            idx = [rr.TimeColumn(TIMELINE, duration=np.rint(t * 1e9).astype("timedelta64[ns]"))]
-        else:
-            idx = [rr.TimeColumn(timeline, sequence=np.rint(t).astype(np.int64))]
-            if self.catalog.timeline == TIMELINE and not any(
-                p for k, plots in self.catalog.plots.items() for p in plots
-            ):
-                self.catalog.timeline = timeline
+
+        def index(tt: np.ndarray) -> list[rr.TimeColumn]:
+            if timeline is None:
+                return [rr.TimeColumn(TIMELINE,
+                                      duration=np.rint(tt * 1e9).astype("timedelta64[ns]"))]
+            return [rr.TimeColumn(timeline, sequence=np.rint(tt).astype(np.int64))]
+
+        idx = index(t)
+        if timeline is not None and self.catalog.timeline == TIMELINE and not any(
+            p for k, plots in self.catalog.plots.items() for p in plots
+        ):
+            self.catalog.timeline = timeline
         root = entity_path("ensemble", name)
         plot_title = f"{name} [{unit}]" if unit else name
         styles = styles or {}
@@ -1073,6 +1124,17 @@ class Sink:
             self._scalars(path, idx, values)
             self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
                              legend=legend, tab_title=tab_title)
+        if shaded and series:
+            top = np.fmax.reduce([np.asarray(v, dtype=np.float64) for v in series.values()])
+            for k, span in enumerate(shaded):
+                inside = _outages.inside(t, span) & np.isfinite(top)
+                if not inside.any():
+                    continue
+                path = f"{root}/gnss_outage/{k + 1}"
+                self.band(path, index(t[inside]), np.zeros(int(inside.sum())), top[inside],
+                          OUTAGE_COLOR, "GNSS outage")
+                self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
+                                 legend=legend, tab_title=tab_title, behind=True)
 
     def _variant_style(self, key: str) -> tuple[tuple[int, int, int], float]:
         """Colour and width of an ensemble series named ``"<variant>[ RMS| sigma| σ]"``: the
