@@ -70,9 +70,13 @@ class RunExport:
     """
 
     def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
-                 source: str = "", force: bool = False) -> None:
+                 source: str = "", force: bool = False,
+                 late: Mapping[str, str] | None = None) -> None:
         self.out_dir = Path(out_dir)
         self.labels = tuple(labels)
+        self.late = dict(late or {})
+        """Labels whose rows come after every other's (smoothed runs), each with the label whose
+        solution parts it shares: nothing waits for them."""
         self.has_reference = has_reference
         self.source = source
         self.force = force
@@ -99,6 +103,12 @@ class RunExport:
         """A window of the truth stream (``pos``, ``v_n``, ``q_nb``), later than before."""
         if not len(truth):
             return
+        if "pos" not in truth.columns:
+            # no pose to write (its velocity or attitude scores the CSV's errors): the frame
+            # is the first filter's, as without a reference
+            self.has_reference = False
+            self._feed("ref", None)
+            return
         if self._frame is None:
             p = truth["pos"][0]
             self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
@@ -113,6 +123,9 @@ class RunExport:
             self._empty.setdefault(out.label, out)
             return
         self._nav.setdefault(out.label, out.has_nav)
+        for late, follows in self.late.items():
+            if follows == out.label:
+                self._nav.setdefault(late, out.has_nav)
         if (self._frame is None and not self.has_reference and out.has_nav
                 and self._first_nav() == out.label):
             assert out.nav_pos is not None  # has_nav
@@ -179,8 +192,11 @@ class RunExport:
         return None
 
     def _feed(self, kind: str, item: Any) -> None:
+        if item is None and self._started:
+            return
         if not self._started:
-            self._held.append((kind, item))
+            if item is not None:
+                self._held.append((kind, item))
             # the frame comes from the reference when there is one (else from the first
             # filter with a position): wait for it, whatever the filters output
             if len(self._nav) == len(self.labels) and (
@@ -223,7 +239,8 @@ class RunExport:
         if topics:
             target = self.out_dir / ODOMETRY_FILE
             tmp = temporary_path(target)
-            self._odometry = OdometryWriter(tmp, topics)
+            self._odometry = OdometryWriter(
+                tmp, topics, late=[self._topics[x] for x in self.late if x in self._topics])
             self._tmp[target] = (tmp, self._odometry)
         held, self._held = self._held, []
         # estimates first: the reference then goes out piece by piece instead of queueing

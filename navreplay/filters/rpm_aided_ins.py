@@ -175,6 +175,7 @@ from navreplay.filters.ins import (
     initial_sigma,
     initial_solution,
 )
+from navreplay.filters.ins_smoothing import InsSmoothing
 from navreplay.filters.registry import register_filter
 from navreplay.filters.rpm_aided_ins_model import (
     ACCEL,
@@ -386,7 +387,7 @@ class _Schedule:
 
 
 @register_filter
-class RpmAidedIns(Filter):
+class RpmAidedIns(Filter, InsSmoothing):
     """33-state RPM velocity-aided INS with sea-current estimation (see the module docstring)."""
 
     name: ClassVar[str] = "rpm-aided-ins"
@@ -405,6 +406,7 @@ class RpmAidedIns(Filter):
     )
 
     params: RpmAidedInsParams
+    smoothing_vertical: ClassVar[ie.Vertical] = ie.Vertical.DEPTH
 
     @classmethod
     def settings_from_sensors(cls, sensors: SensorSpecs) -> dict[str, Any]:
@@ -578,6 +580,7 @@ class RpmAidedIns(Filter):
             _, cov = rpm_second_order(self.nav, u_hat, self.k_rpm, self.m_rpm, v_c, self.P)
             measurement = kalman.Measurement(z, H, measurement.R + cov)
         # shapes are fixed by construction and R by the parameters; P is checked below
+        self._smoothing_prior()
         c = kalman.correct(np.zeros(N_STATES), self.P, *measurement, frozen=self._frozen, t=t,
                            check=False)
         kalman.check_covariance(c.P, name="corrected P", t=t)
@@ -623,6 +626,7 @@ class RpmAidedIns(Filter):
     def _feedback(self, dx: np.ndarray) -> None:
         """Subtract the estimated errors (docs/methods/rpm-aided-ins.md §4.7, step 4); the error
         state is then 0."""
+        self._smoothing_feedback(dx)
         self.nav = ie.apply_correction(self.nav, dx, ie.Vertical.DEPTH)
         self.b_a = self.b_a - dx[BA]
         self.b_g = self.b_g - dx[BG]

@@ -1,8 +1,9 @@
 """Recording files: which kind a path is, decided once, and the file opened once.
 
 :func:`open_recording` asks each kind of :data:`FILE_KINDS` in turn whether it takes the path
-and opens it as that kind's :class:`~navreplay.io.source.Source`: a rosbag2 folder, its
-``metadata.yaml`` or a ``.db3`` file (:mod:`navreplay.io.rosbag`), else an MCAP file
+and opens it as that kind's :class:`~navreplay.io.source.Source`: a ROS 1 bag
+(:mod:`navreplay.io.rosbag1`), a rosbag2 folder, its ``metadata.yaml`` or a ``.db3`` file
+(:mod:`navreplay.io.rosbag`), else an MCAP file
 (:mod:`navreplay.io.mcapread`, the last, which takes any file). Another kind of log is one
 module with an ``accepts(path)`` function and a ``Source`` class, and one line in
 :data:`FILE_KINDS`.
@@ -18,7 +19,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from navreplay.core.streams import Recording, StreamKind
-from navreplay.io import mcapread, rosbag
+from navreplay.io import gins, mcapread, rosbag, rosbag1
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import Source
 from navreplay.io.topics import FrameNames, TopicNames, TopicSource
@@ -34,10 +35,15 @@ class FileKind:
 
 
 FILE_KINDS: tuple[FileKind, ...] = (
+    FileKind("rosbag1", rosbag1.accepts, rosbag1.Bag1Source),
+    FileKind("gins", gins.accepts, gins.GinsSource),
     FileKind("rosbag2", rosbag.accepts, rosbag.BagSource),
     FileKind("mcap", mcapread.accepts, mcapread.McapSource),
 )
 """The kinds of recording file, asked in this order (the first that accepts a path reads it)."""
+
+BAGS = ("rosbag1", "rosbag2")
+"""The kinds read through rosbags (:mod:`navreplay.io.rosbag`)."""
 
 
 def file_kind(path: str | os.PathLike[str]) -> FileKind:

@@ -74,7 +74,7 @@ class Outputs:
         if self.export_dir is not None:
             self._export = export.RunExport(self.export_dir, run.labels,
                                             has_reference=run.has_truth, source=run.source,
-                                            force=self.force)
+                                            force=self.force, late=getattr(run, "late", {}))
         if self.report_path is not None:
             from navreplay.report import RunSeries
 
@@ -109,8 +109,10 @@ class Outputs:
             for name, s in block.innovations.items():
                 series.add_nis(name, s.t, s.nis, int(s.nu.shape[1]))
 
-    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str) -> list[str]:
-        """Finish the exports and write the report of filters replayed over one recording."""
+    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str,
+                  log_notes: Sequence[str] = ()) -> list[str]:
+        """Finish the exports and write the report of filters replayed over one recording
+        (``log_notes``: the log's reference, checks and initial state, for the report)."""
         notes = []
         if self._export is not None:
             with self._writing():
@@ -123,7 +125,7 @@ class Outputs:
             from navreplay import report
 
             report.write_run_report(self.report_path, list(self._series.values()), summaries,
-                                    title=title, force=self.force)
+                                    title=title, force=self.force, log_notes=log_notes)
             notes.append(f"Report written to {self.report_path}")
         return notes
 

@@ -18,6 +18,7 @@ from navreplay.filters.settings import setting_notes, summary_entries
 from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
+from navreplay.jobs.smooth import scratch_dir, unsmoothed_notes
 from navreplay.metrics import tables
 from navreplay.replay.pipeline import replay_file
 from navreplay.replay.session import Progress
@@ -91,6 +92,8 @@ class RunJob:
     executor : str
         Where several recordings run: ``process``, ``dask`` or ``dask://HOST:PORT``
         (:func:`navreplay.campaign.executors.make_executor`).
+    smooth : bool
+        Also smooth the filters that can be (``LABEL/rts``; :mod:`navreplay.jobs.smooth`).
     """
 
     filters: tuple[FilterSpec, ...]
@@ -106,6 +109,7 @@ class RunJob:
     force: bool = False
     max_imu_gap: float | None = None
     executor: str = "process"
+    smooth: bool = False
 
 
 def outputs_of(job: Any) -> Outputs:
@@ -136,6 +140,8 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
             return _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
+    if job.smooth:
+        raise _params.ParamError("--smooth needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
@@ -177,16 +183,18 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     try:
         done = replay_file(source, job.filters, stages=stages, output_rate=job.output_rate,
                            pacing=job.pacing, max_imu_gap=job.max_imu_gap,
-                           live=job.viz.live or job.pacing is not None, progress=progress)
+                           live=job.viz.live or job.pacing is not None, progress=progress,
+                           smooth=job.smooth, scratch=scratch_dir(job.export_dir))
         if done.has_truth:
             ref = getattr(job.log, "reference", None)
             for label, fraction in done.reference_coverage.items():
                 add_coverage(done.summaries[label], label, fraction,
                              f"reference {ref}" if ref else "the truth")
-        notes = list(source.notes) + setting_notes(done.summaries.values())
+        notes = (list(source.notes) + setting_notes(done.summaries.values())
+                 + (unsmoothed_notes(job.filters) if job.smooth else []))
         if done.salvaged:
             notes.append(salvaged_note(str(path), done.coverage))
-        notes += outputs.write_run(done.summaries, title=title)
+        notes += outputs.write_run(done.summaries, title=title, log_notes=source.notes)
         hint = close_output(sink, job.viz)
     except BaseException:
         outputs.abort()

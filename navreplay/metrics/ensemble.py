@@ -11,6 +11,7 @@ import numpy as np
 
 from navreplay.filters.base import State
 from navreplay.metrics.consistency import ConsistencyStats, EnsembleConsistency
+from navreplay.metrics.outages import ensemble_outages
 from navreplay.metrics.run import RunMetrics
 from navreplay.metrics.stats import CEP50_FACTOR, chi2_bounds_per_count, rms
 
@@ -95,6 +96,9 @@ class EnsembleResult:
     consistency : EnsembleConsistency or None
         Per-axis RMS/sigma with intervals and checks, and the per-run time-averaged NEES tests
         (:mod:`navreplay.metrics.consistency`).
+    outages : tuple of (start, end)
+        The GNSS outages [s] the runs share (none when their recordings differ in them),
+        scored one by one in the summary (:func:`navreplay.metrics.outages.ensemble_outages`).
     """
 
     label: str
@@ -117,6 +121,7 @@ class EnsembleResult:
     distance: np.ndarray
     nis_rows_mean: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
     consistency: EnsembleConsistency | None = None
+    outages: tuple[tuple[float, float], ...] = ()
 
     @property
     def dt_cep50(self) -> np.ndarray:
@@ -151,6 +156,10 @@ class EnsembleResult:
                 _chi2_summary(out, "nis", f"_{name}.{row}", v, c, 1, probability)
         if self.consistency is not None:
             out.update(self.consistency.summary())
+        if self.outages and "pos_ned" in self.rms:
+            out["gnss_outages"] = ensemble_outages(self.t, self.rms["pos_ned"],
+                                                   self.sigma["pos_ned"], self.runs,
+                                                   self.outages)
         return out
 
 
@@ -187,6 +196,7 @@ class EnsembleStats:
         self._state_names: tuple[str, ...] | None = None
         self._nees_states: tuple[str, ...] | None = None
         self._states: tuple[State, ...] = ()
+        self._outages: tuple[tuple[float, float], ...] | None = None  # None: no run yet
 
     def add(self, m: RunMetrics) -> None:
         """Add one run's metrics."""
@@ -203,6 +213,8 @@ class EnsembleStats:
             self.label = self.label or m.label
         elif m.state_names != self._state_names or m.nees_states != self._nees_states:
             raise ValueError(f"run {self.runs + 1} ({m.label}) scores other states")
+        # outages are scored over the ensemble when every run has the same
+        self._outages = m.outages if self._outages in (None, m.outages) else ()
         if m.nav is not None:
             for k, acc in self._nav.items():
                 acc.add(getattr(m.nav, k))
@@ -277,6 +289,7 @@ class EnsembleStats:
                            for name, rows in self._nis_rows.items()},
             consistency=self._consistency.result(self._state_names or (),
                                                  self._nees_states or ()),
+            outages=self._outages or (),
         )
 
 

@@ -59,6 +59,9 @@ class RunMetrics:
     states : tuple of State
         The declarations of the scored states (``state_names``, same order): units and
         quantities for tables, exports and plots.
+    outages : tuple of (start, end)
+        The GNSS outages of the recording [s] (:attr:`Reference.outages`), scored one by one
+        in the summary.
     """
 
     label: str
@@ -75,6 +78,7 @@ class RunMetrics:
     extra_error: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     states: tuple[State, ...] = ()
     nis_rows: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
+    outages: tuple[tuple[float, float], ...] = ()
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
         """Scalar scores (SI; see :data:`navreplay.metrics.tables.SUMMARY_UNITS`) for tables and JSON:
@@ -172,4 +176,5 @@ def run_metrics(
         distance=np.asarray(ref.distance(result.t)),
         states=tuple(by_name[n] for n in names),
         extra_error=extra_errors(result, truth, ref.true_errors),
+        outages=ref.outages,
     )

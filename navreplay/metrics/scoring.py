@@ -39,6 +39,8 @@ class RunScorer:
         Whether a truth stream follows (else: innovation statistics only).
     probability : float
         Of the chi-square bounds.
+    outages : tuple of (start, end)
+        The recording's GNSS outages [s] (:attr:`Reference.outages`), scored one by one.
     scored : callable, optional
         Called with each block of rows as it is scored (:data:`Scored`): what the view, the
         exports and the report take block by block.
@@ -46,12 +48,14 @@ class RunScorer:
 
     def __init__(self, label: str, t0_ns: int, true_errors: Mapping[str, Any],
                  has_truth: bool, probability: float = 0.95,
+                 outages: tuple[tuple[float, float], ...] = (),
                  scored: Scored | None = None) -> None:
         self.label = label
         self.scored = scored
         self.t0_ns = t0_ns
         self.true_errors = true_errors
         self.has_truth = has_truth
+        self.outages = outages
         self.summary = RunSummary(probability)
         self._truth: Stream | None = None
         self._truth_done = False
@@ -105,7 +109,7 @@ class RunScorer:
             if self.scored is not None:
                 self.scored(rows, None, None)
             return
-        ref = Reference(self._truth, self.t0_ns, self.true_errors)
+        ref = Reference(self._truth, self.t0_ns, self.true_errors, self.outages)
         m = run_metrics(rows, ref)
         if self.scored is not None:
             self.scored(rows, m, self._truth)

@@ -28,7 +28,7 @@ import numpy as np
 from navreplay import __version__
 from navreplay.export import FilterOutput, check_targets, write_text
 from navreplay.metrics import chi2_bounds, chi2_bounds_per_count
-from navreplay.metrics.tables import summary_unit
+from navreplay.metrics.tables import outage_cells, summary_unit
 from navreplay.report.envelope import Envelope
 
 _DEG = 180.0 / math.pi
@@ -81,6 +81,19 @@ def summary_table(summaries: Mapping[str, Mapping[str, Any]]) -> str:
                 cells.append("<td>–</td>")
         rows.append(f"<tr><td>{html.escape(label)}</td>{''.join(cells)}</tr>")
     return f"<table><tr><th>filter</th>{head}</tr>{''.join(rows)}</table>"
+
+
+def outage_table(summaries: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """The GNSS outages of the recording scored one by one
+    (:func:`navreplay.metrics.tables.outage_cells`), as a heading and an HTML table; nothing without
+    outages."""
+    rows = outage_cells(summaries)
+    if not rows:
+        return []
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in rows[0])
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>"
+                   for r in rows[1:])
+    return ["<h3>GNSS outages</h3>", f"<table><tr>{head}</tr>{body}</table>"]
 
 
 def settings_section(summary: Mapping[str, Any] | None) -> list[str]:
@@ -278,14 +291,20 @@ def run_figures(series: RunSeries, color: str,
 
 def write_run_report(path: Path, runs: Sequence[RunSeries],
                      summaries: Mapping[str, Mapping[str, Any]], *, title: str,
-                     force: bool = False) -> Path:
-    """Write the HTML report of filters replayed over one recording (their series)."""
+                     force: bool = False, log_notes: Sequence[str] = ()) -> Path:
+    """Write the HTML report of filters replayed over one recording (their series);
+    ``log_notes``: what the log's preparation said (reference, frame checks, the initial
+    state and its source), one line each."""
     from navreplay.viz import figures
 
     check_targets([Path(path)], force, "--report")
     body = ["<h2>Summary</h2>"]
+    if log_notes:
+        body.insert(0, "<h2>The log</h2><ul>" + "".join(
+            f"<li>{html.escape(n)}</li>" for n in log_notes) + "</ul>")
     if summaries:
         body.append(summary_table(summaries))
+        body += outage_table(summaries)
     else:
         body.append("<p class='note'>The recording has no reference: no errors to score; "
                     "the NIS below needs none.</p>")
@@ -346,7 +365,7 @@ def write_ensemble_report(path: Path, ensembles: Mapping[str, Any],
     from navreplay.viz import figures
 
     check_targets([Path(path)], force, "--report")
-    body = ["<h2>Ensemble summary</h2>", summary_table(summaries)]
+    body = ["<h2>Ensemble summary</h2>", summary_table(summaries), *outage_table(summaries)]
     for i, (label, ens) in enumerate(ensembles.items()):
         body.append(f"<h2>{html.escape(label)}</h2>")
         body += settings_section(summaries.get(label))

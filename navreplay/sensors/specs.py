@@ -71,6 +71,7 @@ from typing import Any, TypeVar
 
 from navreplay.core import units
 from navreplay.core.params import ParamError, describe
+from navreplay.core.streams import StreamKind
 from navreplay.core.units import UnitError
 from navreplay.sensors._common import FieldUnit
 from navreplay.sensors.depth import DepthModel
@@ -92,6 +93,16 @@ SPEC_KINDS: dict[str, type] = {
 records."""
 
 M = TypeVar("M")
+
+SPEC_STREAMS: dict[str, tuple[StreamKind, ...]] = {
+    "imu": (StreamKind.IMU,),
+    "gps": (StreamKind.GPS, StreamKind.GPS_VEL),
+    "mag": (StreamKind.MAG,),
+    "speed_log": (StreamKind.SPEED_LOG,),
+    "depth": (StreamKind.DEPTH,),
+    "master_ins": (StreamKind.MASTER_INS,),
+}
+"""The streams each sensor kind's record describes."""
 
 SOURCE_KEY = "source"
 """The key of a kind's entry in ``Metadata.sensors`` that says where the record came from."""
@@ -202,6 +213,23 @@ class SensorSpecs:
         return self.sources.get(kind, "")
 
     # -- combining -------------------------------------------------------------------------
+
+    def present_terms(self, kind: str) -> dict[str, str]:
+        """The error terms (:attr:`~navreplay.sensors.imu.ImuModel.error_terms`) of ``kind``
+        that are stated and not zero (on some axis), each with what it is; empty when the kind
+        is absent."""
+        model = self.models.get(kind)
+        if model is None:
+            return {}
+        terms = getattr(type(model), "error_terms", {})
+        known = self.known_fields(kind)
+        out = {}
+        for name, what in terms.items():
+            value = getattr(model, name)
+            values = value if isinstance(value, tuple) else (value,)
+            if name in known and any(v != 0.0 for v in values):
+                out[name] = what
+        return out
 
     def with_model(self, kind: str, model: Any, source: str,
                    known: Iterable[str] | None = None) -> SensorSpecs:

@@ -113,9 +113,11 @@ class Catalog:
         rank: int = 0,
         legend: bool = True,
         tab_title: str | None = None,
+        behind: bool = False,
     ) -> None:
         """Put the series at ``path`` into plot ``plot`` (created with ``title``, ``rank`` and
-        ``legend``) of ``tab`` (created with ``tab_title`` if it is not one of :data:`TABS`)."""
+        ``legend``) of ``tab`` (created with ``tab_title`` if it is not one of :data:`TABS`);
+        ``behind``: before the series already there (drawn under them, as a shaded band)."""
         if tab not in self.plots:
             self.plots[tab] = {}
             self.tab_titles[tab] = tab_title or tab
@@ -124,7 +126,7 @@ class Catalog:
             plots[plot] = Plot(title, [], rank, legend)
         paths = plots[plot].paths
         if path not in paths:
-            paths.append(path)
+            paths.insert(0 if behind else len(paths), path)
             self._paths.add(path)
 
     def discard(self, tab: str, plot: str, path: str) -> None:

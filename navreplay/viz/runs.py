@@ -15,6 +15,7 @@ from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import radii
 from navreplay.metrics import nav_errors
+from navreplay.metrics import outages as _outages
 from navreplay.viz import convert
 from navreplay.viz.naming import (
     NAV_ERROR_NAMES,
@@ -29,7 +30,16 @@ from navreplay.viz.naming import (
     tab_of,
     title,
 )
-from navreplay.viz.style import RANK_ERROR, RANK_EXTRA, RANK_NAV, RANK_SIGMA, RANK_STATE, lighter
+from navreplay.viz.style import (
+    N_SIGMA,
+    OUTAGE_COLOR,
+    RANK_ERROR,
+    RANK_EXTRA,
+    RANK_NAV,
+    RANK_SIGMA,
+    RANK_STATE,
+    lighter,
+)
 from navreplay.viz.truth import TruthView
 from navreplay.viz.world import Track, axis_size
 
@@ -227,9 +237,10 @@ class RunView(TruthView):
             self._bounded(path, idx, e * u.scale, None if sd is None else sd * u.scale, L,
                           run.color)
             bounds = "" if sd is None else ", ±3σ"
-            self.catalog.add(quantity_of(n).value, f"error:{n}@{L}",
-                             f"{L}: {title(n, u, 'error')}{bounds}", path,
-                             rank=RANK_ERROR + run.order, legend=False)
+            plot = (quantity_of(n).value, f"error:{n}@{L}", f"{L}: {title(n, u, 'error')}{bounds}")
+            self.catalog.add(*plot, path, rank=RANK_ERROR + run.order, legend=False)
+            if sd is not None and nav_part(n) == "pos":
+                self._shade_outages(path, plot, t, result.t0_ns, N_SIGMA * sd * u.scale)
         if "pos" not in parts:
             return
         self._log_world(run, result, nav, a, b, values)
@@ -237,6 +248,20 @@ class RunView(TruthView):
                       nav.pos)
         self._geo(L, t, nav.pos, result.t0_ns, run.color, after=run.geo_t)
         run.geo_t = float(t[-1])
+
+    def _shade_outages(self, path: str, plot: tuple[str, str, str], t: np.ndarray, t0_ns: int,
+                       bound: np.ndarray) -> None:
+        """Shade each GNSS outage in a plot of rows at times ``t`` [s]: a band between
+        ``-bound`` and ``bound`` (the ±3σ of the error) under the series, one entity per
+        outage (``<path>/gnss_outage/<k>``, k from 1)."""
+        for k, outage in enumerate(self._outages):
+            inside = _outages.inside(t, outage)
+            if not inside.any():
+                continue
+            band = f"{path}/gnss_outage/{k + 1}"
+            self.band(band, self._indexes(t[inside], t0_ns), -bound[inside], bound[inside],
+                      OUTAGE_COLOR, "GNSS outage")
+            self.catalog.add(*plot, band, legend=False, behind=True)
 
     def _unwrap_yaw(self, run: RunState, t: np.ndarray, yaw: np.ndarray) -> np.ndarray:
         """Yaw without +-180 deg jumps, continuing the previous rows, on the truth's branch."""

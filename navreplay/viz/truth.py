@@ -103,6 +103,7 @@ class TruthView(WorldView):
         if log.track.t.shape[0]:
             self._axes(f"{world}/body/axes", axis_size(self._extent))
         self._log_track(log.root.strip("/"), log.track, TRUTH_COLOR, 1.5, 1.5)
+        self._log_outage_track(log.root, log.track)
 
     def _truth_column(self, column: str, unit: str) -> str | None:
         """Entity of a truth column logged with the truth (:meth:`start` named it), or None
