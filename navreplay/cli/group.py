@@ -76,7 +76,7 @@ class _Group(click.Group):
         with (warnings.catch_warnings(), handle_signals(),
               contextlib.ExitStack() as stack):
             stack.callback(release_locks)
-            warnings.showwarning = _show_warning  # type: ignore[assignment]
+            warnings.showwarning = _show_warning
             try:
                 return super().invoke(ctx)
             except click.exceptions.Exit:

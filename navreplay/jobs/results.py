@@ -77,7 +77,7 @@ class Outputs:
         if self.export_dir is not None:
             self._export = export.RunExport(self.export_dir, run.labels,
                                             has_reference=run.has_truth, source=run.source,
-                                            force=self.force)
+                                            force=self.force, late=getattr(run, "late", {}))
         if self.report_path is not None:
             from navreplay.report import RunSeries, run_context
 
@@ -119,20 +119,24 @@ class Outputs:
                 series.add_innovations(name, s.t, s.nu, s.S,
                                        innovation_rows(name, dim, block.measurement(name)))
 
-    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str) -> list[str]:
-        """Finish the exports and write the report of filters replayed over one recording."""
+    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str,
+                  log_notes: Sequence[str] = ()) -> list[str]:
+        """Finish the exports and write the report of filters replayed over one recording
+        (``log_notes``: the log's reference, checks and initial state, for the report)."""
         notes = []
         if self._export is not None:
             with self._writing():
                 written = self._export.close()
             self._export = None
+            assert self.export_dir is not None  # an export was asked for
             notes.append(f"Exported {len(written)} files to {self.export_dir} "
                          f"(see {self.export_dir / export.MANIFEST})")
         if self.report_path is not None:
             from navreplay import report
 
             report.write_run_report(self.report_path, list(self._series.values()), summaries,
-                                    title=title, context=self._context, force=self.force)
+                                    title=title, context=self._context, force=self.force,
+                                    log_notes=log_notes)
             notes.append(f"Report written to {self.report_path}")
         return notes
 

@@ -35,7 +35,7 @@ from navreplay import __version__
 from navreplay.export import FilterOutput, check_targets, write_text
 from navreplay.metrics import chi2_bounds, chi2_bounds_per_count
 from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors, headline_rows
-from navreplay.metrics.tables import format_summaries, summary_unit
+from navreplay.metrics.tables import format_summaries, outage_cells, summary_unit
 from navreplay.report.envelope import Envelope
 
 _DEG = 180.0 / math.pi
@@ -82,16 +82,18 @@ def summary_table(summaries: Mapping[str, Mapping[str, Any]]) -> str:
         cells = "".join(f"<td>{'<b>' if i == pick else ''}{_num(v)}{'</b>' if i == pick else ''}"
                         "</td>" for i, v in enumerate(values))
         rows.append(f"<tr><td>{html.escape(name)}</td>{cells}</tr>")
-    all_rows = []
+    all_rows: list[str] = []
     for k in keys:
         unit, factor = summary_unit(k)
-        cells = []
+        entries = []
         for s in summaries.values():
             v = s.get(k)
-            ok = isinstance(v, int | float) and not isinstance(v, bool)
-            cells.append(f"<td>{_num(float(v) * factor) if ok else '–'}</td>")
+            if isinstance(v, int | float) and not isinstance(v, bool):
+                entries.append(f"<td>{_num(float(v) * factor)}</td>")
+            else:
+                entries.append("<td>–</td>")
         all_rows.append(f"<tr><td>{html.escape(k)}{html.escape(f' [{unit}]' if unit else '')}"
-                        f"</td>{''.join(cells)}</tr>")
+                        f"</td>{''.join(entries)}</tr>")
     out = []
     if rows:
         out.append(f"<table><tr><th>metric</th>{head}</tr>{''.join(rows)}</table>")
@@ -155,6 +157,19 @@ def versions() -> str:
 
 def _short(v: Any) -> str:
     return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+
+def outage_table(summaries: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """The GNSS outages of the recording scored one by one
+    (:func:`navreplay.metrics.tables.outage_cells`), as a heading and an HTML table; nothing without
+    outages."""
+    rows = outage_cells(summaries)
+    if not rows:
+        return []
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in rows[0])
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>"
+                   for r in rows[1:])
+    return ["<h3>GNSS outages</h3>", f"<table><tr>{head}</tr>{body}</table>"]
 
 
 def settings_section(summary: Mapping[str, Any] | None) -> list[str]:
@@ -324,8 +339,10 @@ class RunSeries:
             k = 0
             for key, _, axes, _, _, row in groups:
                 for i in range(len(axes)):
-                    self.nav[k].value.add(m.t, getattr(m.nav, key)[:, i])
-                    self.nav[k].sigma.add(m.t, sig[:, row + i])
+                    trace = self.nav[k]
+                    assert trace.sigma is not None  # made with one
+                    trace.value.add(m.t, getattr(m.nav, key)[:, i])
+                    trace.sigma.add(m.t, sig[:, row + i])
                     k += 1
             for key, v in compared_errors(m.nav.pos_ned, m.nav.v_n, m.nav.phi).items():
                 if np.isfinite(v).any():
@@ -337,6 +354,7 @@ class RunSeries:
             self.states = [_Trace(name, *_display(units.get(name, "-")), sigma=Envelope())
                            for _, name in others]
         for trace, (j, _) in zip(self.states, others, strict=True):
+            assert trace.sigma is not None  # made with one
             trace.value.add(m.t, m.state_error[:, j])
             trace.sigma.add(m.t, np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
         if m.nees_states:
@@ -361,8 +379,10 @@ class RunSeries:
             if key not in self.innovations:
                 self.innovations[key] = _Trace(f"{name} {row}", u.label, u.scale,
                                                sigma=Envelope())
-            self.innovations[key].value.add(t, nu[:, i])
-            self.innovations[key].sigma.add(t, sd[:, i])
+            trace = self.innovations[key]
+            assert trace.sigma is not None  # made with one
+            trace.value.add(t, nu[:, i])
+            trace.sigma.add(t, sd[:, i])
 
     def add_nis(self, name: str, t: np.ndarray, nis: np.ndarray, dof: int) -> None:
         """NIS of one measurement at its update times [s] (later than before)."""
@@ -447,17 +467,25 @@ def comparison_figures(runs: Sequence[RunSeries], colors: Mapping[str, str]) -> 
 
 def write_run_report(path: Path, runs: Sequence[RunSeries],
                      summaries: Mapping[str, Mapping[str, Any]], *, title: str,
-                     context: Mapping[str, Any] | None = None, force: bool = False) -> Path:
+                     context: Mapping[str, Any] | None = None, force: bool = False,
+                     log_notes: Sequence[str] = ()) -> Path:
     """Write the report of filters replayed over one recording (their series): HTML, or PDF
-    for a ``.pdf`` path. ``context``: the command and :func:`run_context`."""
+    for a ``.pdf`` path. ``context``: the command and :func:`run_context`; ``log_notes``: what
+    the log's preparation said (reference, frame checks, the initial state and its source),
+    one line each."""
     from navreplay.viz import figures
 
     colors = figures.filter_colors([r.label for r in runs])
 
     def draw() -> list[str]:
-        body = [context_section(context or {}), "<h2>Summary</h2>"]
+        body = [context_section(context or {})]
+        if log_notes:
+            body.append("<h2>The log</h2><ul>" + "".join(
+                f"<li>{html.escape(n)}</li>" for n in log_notes) + "</ul>")
+        body.append("<h2>Summary</h2>")
         if summaries:
             body.append(summary_table(summaries))
+            body += outage_table(summaries)
         else:
             body.append("<p class='note'>The recording has no reference: no errors to score; "
                         "the NIS below needs none.</p>")
@@ -471,6 +499,7 @@ def write_run_report(path: Path, runs: Sequence[RunSeries],
         return body
 
     text = [f"{k}: {v}" for k, v in (context or {}).items() if v not in (None, "", {})]
+    text += list(log_notes)
     text += ["", format_summaries(summaries) if summaries else "(no reference)"]
     return _publish(path, title, "filter run report", draw, text, force)
 
@@ -557,7 +586,7 @@ def write_ensemble_report(path: Path, ensembles: Mapping[str, Any],
 
     def draw() -> list[str]:
         body = [context_section({"versions": versions()}), "<h2>Ensemble summary</h2>",
-                summary_table(summaries)]
+                summary_table(summaries), *outage_table(summaries)]
         for label, ens in ensembles.items():
             body.append(f"<h2>{html.escape(label)}</h2>")
             body += settings_section(summaries.get(label))

@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 
 def sample_sigma(density: float, dt: float) -> float:
@@ -128,6 +127,8 @@ def gauss_markov(
     x = rng.standard_normal((n, dims))
     x[0] = x[0] * sigma if x0 is None else x0
     x[1:] *= sigma * math.sqrt(-math.expm1(-2.0 * dt / tau))
+    from scipy.signal import lfilter  # scipy.signal costs a second at start-up: only here
+
     return lfilter([1.0], [1.0, -a], x, axis=0)
 
 

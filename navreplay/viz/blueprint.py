@@ -128,10 +128,12 @@ class Catalog:
         kind: str = "series",
         column: str | None = None,
         row: str | None = None,
+        behind: bool = False,
     ) -> None:
         """Put the series at ``path`` into plot ``plot`` (created with ``title``, ``rank``,
         ``legend``, ``kind``, ``column`` and ``row``) of ``tab`` (created with ``tab_title`` if
-        it is not one of :data:`TABS`)."""
+        it is not one of :data:`TABS`); ``behind``: before the series already there (drawn
+        under them, as a shaded band)."""
         if tab not in self.plots:
             self.plots[tab] = {}
             self.tab_titles[tab] = tab_title or tab
@@ -140,7 +142,7 @@ class Catalog:
             plots[plot] = Plot(title, [], rank, legend, kind, column, row)
         paths = plots[plot].paths
         if path not in paths:
-            paths.append(path)
+            paths.insert(0 if behind else len(paths), path)
             self._paths.add(path)
 
     def discard(self, tab: str, plot: str, path: str) -> None:
@@ -170,7 +172,8 @@ class Catalog:
 
     def signature(self) -> tuple:
         """What the blueprint depends on (to resend it only when this changes)."""
-        world = None if self.world is None else tuple(np.round(np.r_[self.world], 1))
+        world = (None if self.world is None
+                 else tuple(float(v) for v in np.round(np.concatenate(self.world), 1)))
         return (
             tuple((t, k, len(p.paths)) for t, plots in self.plots.items() for k, p in plots.items()),
             world,

@@ -89,6 +89,7 @@ class Channel:
         self._extent_curve: tuple[np.ndarray, np.ndarray] | None = None
         self._t0_ns = 0
         self._truth_wanted: dict[str, str] = {}
+        self._outages: tuple[tuple[float, float], ...] = ()
         self._truth_columns: set[str] = set()
         self._closed = False
         self._world_coords = False

@@ -16,6 +16,7 @@ from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import radii
 from navreplay.metrics import nav_errors
+from navreplay.metrics import outages as _outages
 from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors
 from navreplay.viz import convert
 from navreplay.viz.naming import (
@@ -31,7 +32,16 @@ from navreplay.viz.naming import (
     tab_of,
     title,
 )
-from navreplay.viz.style import RANK_ERROR, RANK_EXTRA, RANK_NAV, RANK_SIGMA, RANK_STATE, lighter
+from navreplay.viz.style import (
+    N_SIGMA,
+    OUTAGE_COLOR,
+    RANK_ERROR,
+    RANK_EXTRA,
+    RANK_NAV,
+    RANK_SIGMA,
+    RANK_STATE,
+    lighter,
+)
 from navreplay.viz.truth import TruthView
 from navreplay.viz.world import Track, axis_size
 
@@ -215,8 +225,8 @@ class RunView(TruthView):
             label, scale = self._unit(run, key, result, a, b)
             path = entity_path(L, "extra", key)
             k = flat.shape[1]
-            legend = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
-            self._style(path, legend, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
+            names = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
+            self._style(path, names, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
             self._scalars(path, idx, flat * scale)
             self.catalog.add("states", f"extra:{key}@{L}", f"{L}: {key} [{label}]", path,
                              rank=RANK_EXTRA, column=L, row=key)
@@ -237,6 +247,8 @@ class RunView(TruthView):
         L = run.label
         t = result.t[a:b]
         parts = result.navigation
+        assert result.nav_pos is not None and result.nav_v_n is not None
+        assert result.nav_q_nb is not None  # logged for a result with a navigation solution
         nav = convert.NavColumns(t, result.nav_pos[a:b], result.nav_v_n[a:b], result.nav_q_nb[a:b])
         if self._ref is None and "pos" in parts:
             finite = np.flatnonzero(np.isfinite(nav.pos).all(axis=1))
@@ -270,14 +282,16 @@ class RunView(TruthView):
                 s = nav_sigma[n]
                 errors[n] = (e, s if np.isfinite(s).any() else None)
             self._log_compare(run, idx, ne)
-        for n, (e, s) in errors.items():
+        for n, (e, sd) in errors.items():
             u = display_unit(NAV_UNITS[n])
             path = entity_path(L, "error", n)
-            self._bounded(path, idx, e * u.scale, None if s is None else s * u.scale, L, run.color)
-            bounds = "" if s is None else ", ±3σ"
-            self.catalog.add(quantity_of(n).value, f"error:{n}@{L}",
-                             f"{L}: {title(n, u, 'error')}{bounds}", path,
-                             rank=RANK_ERROR + run.order, legend=False)
+            self._bounded(path, idx, e * u.scale, None if sd is None else sd * u.scale, L,
+                          run.color)
+            bounds = "" if sd is None else ", ±3σ"
+            plot = (quantity_of(n).value, f"error:{n}@{L}", f"{L}: {title(n, u, 'error')}{bounds}")
+            self.catalog.add(*plot, path, rank=RANK_ERROR + run.order, legend=False)
+            if sd is not None and nav_part(n) == "pos":
+                self._shade_outages(path, plot, t, result.t0_ns, N_SIGMA * sd * u.scale)
         if "pos" not in parts:
             return
         self._log_world(run, result, nav, a, b, values)
@@ -285,6 +299,20 @@ class RunView(TruthView):
                       nav.pos)
         self._geo(L, t, nav.pos, result.t0_ns, run.color, after=run.geo_t)
         run.geo_t = float(t[-1])
+
+    def _shade_outages(self, path: str, plot: tuple[str, str, str], t: np.ndarray, t0_ns: int,
+                       bound: np.ndarray) -> None:
+        """Shade each GNSS outage in a plot of rows at times ``t`` [s]: a band between
+        ``-bound`` and ``bound`` (the ±3σ of the error) under the series, one entity per
+        outage (``<path>/gnss_outage/<k>``, k from 1)."""
+        for k, outage in enumerate(self._outages):
+            inside = _outages.inside(t, outage)
+            if not inside.any():
+                continue
+            band = f"{path}/gnss_outage/{k + 1}"
+            self.band(band, self._indexes(t[inside], t0_ns), -bound[inside], bound[inside],
+                      OUTAGE_COLOR, "GNSS outage")
+            self.catalog.add(*plot, band, legend=False, behind=True)
 
     def _unwrap_yaw(self, run: RunState, t: np.ndarray, yaw: np.ndarray) -> np.ndarray:
         """Yaw without +-180 deg jumps, continuing the previous rows, on the truth's branch."""

@@ -13,6 +13,7 @@ Entity tree
     /<label>/sigma/<name>                        1-sigma from the diagonal of P
     /<label>/error/<name>                        estimate - truth, +3 sigma, -3 sigma
     /<label>/error/{p_N..p_D,v_N..v_D,phi_N..phi_D}   navigation errors (metrics.nav_errors)
+    /<label>/error/{p_N,p_E,p_D}/gnss_outage/<k>  the ±3σ band shaded in the k-th GNSS outage
     /<label>/nav/<roll..p_D>                     navigation solution (as /truth/nav)
     /<label>/extra/<key>[_<i>]                   RunResult.extras
     /<label>/nees, /<label>/nees/band            NEES of the declared NEES states, 95 % band
@@ -20,6 +21,7 @@ Entity tree
     /<label>/innovation/<meas>/nis[/band]        NIS, 95 % chi-square band
     /world                                       NED, metres from the reference point
     /world/truth/trajectory, /world/<label>/trajectory    LineStrips3D (static)
+    /world/truth/gnss_outages, /map/truth/gnss_outages    the true track in the GNSS outages
     /world/{truth,<label>}/body                  Transform3D over time (q_nb as xyzw)
     /world/{truth,<label>}/body/axes             body FRD axes (Arrows3D, static)
     /world/<label>/covariance                    3-sigma position Ellipsoids3D, 1 Hz
@@ -118,6 +120,7 @@ class Sink(RunView, EnsemblePlots):
         time and the truth columns the declared states are scored against)."""
         self._t0_ns = int(run.t0_ns)
         self._truth_wanted = dict(run.truth_columns)
+        self._outages = tuple(run.gnss_outages)
 
     def truth(self, truth: Stream) -> None:
         """Log a window of the truth stream (rows later than those logged before; columns
@@ -158,6 +161,8 @@ class Sink(RunView, EnsemblePlots):
             return
         run = self._run(rows.label, None)
         errors, nees = _from_run_metrics(rows, metrics) if metrics is not None else ({}, None)
+        if metrics is not None and metrics.outages:
+            self._outages = metrics.outages
 
         def log() -> None:
             r = self._runs[rows.label]

@@ -22,6 +22,10 @@ BAND_WIDTH = 8.0
 TRUTH_COLOR = (150, 150, 150)
 
 
+OUTAGE_COLOR = (235, 160, 40)
+"""GNSS outages: the true track inside them, and (dimmed) the bands that shade them."""
+
+
 PALETTE = (
     (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
     (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207),
