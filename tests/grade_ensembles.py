@@ -64,6 +64,11 @@ class Ensemble:
     ratios: dict[str, np.ndarray]
     ratio_band: tuple[float, float]
     stats: Any
+    state_ratios: dict[str, float] = dataclasses.field(default_factory=dict)
+    """RMS / sigma of every other scored state (biases, scale factors, GNSS errors), as the
+    navigation axes: averaged over the epochs from :data:`START`."""
+    nis: dict[str, float] = dataclasses.field(default_factory=dict)
+    """NIS / dof of each measurement over every update of the runs from :data:`START`."""
 
     @property
     def nees_inside(self) -> bool:
@@ -101,35 +106,54 @@ def ratio_band(runs: int) -> tuple[float, float]:
     return math.sqrt(lo), math.sqrt(hi)
 
 
-def ensembles(grade: str, seed: int, runs: int, filters: tuple[str, ...] = FILTERS,
+Variant = tuple[str, str, Any]
+"""(label, filter name, parameters) of an ensemble: one filter run with given settings."""
+
+
+def ensembles(grade: str, seed: int, runs: int, filters: tuple[str | Variant, ...] = FILTERS,
               params: dict[str, Any] | None = None, length: float = DEFAULT_DURATION,
-              lengths: Mapping[tuple[str, str], float] = DURATION) -> dict[str, Ensemble]:
-    """Run ``filters`` with their derived settings (or ``params`` by filter name) over
-    ``runs`` drives of ``grade`` (``length`` s, or as ``lengths`` says) simulated with seeds
-    ``seed``, ``seed + 1``, ...; the filters of one drive length share the recordings."""
+              lengths: Mapping[tuple[str, str], float] = DURATION,
+              scenario: Mapping[str, Any] | None = None) -> dict[str, Ensemble]:
+    """Run ``filters`` with their derived settings (or ``params`` by filter name; a
+    :data:`Variant` names its own label and parameters) over ``runs`` drives of ``grade``
+    (``length`` s, or as ``lengths`` says; the other ``vehicle-drive`` parameters as
+    ``scenario`` says) simulated with seeds ``seed``, ``seed + 1``, ...; the filters of one
+    drive length share the recordings. The ensembles by label (a filter's name)."""
     params = params or {}
     out: dict[str, Ensemble] = {}
-    groups: dict[float, list[str]] = {}
-    for name in filters:
-        groups.setdefault(duration(grade, name, length, lengths), []).append(name)
-    for length, names in groups.items():
-        stats = {n: metrics.EnsembleStats(n) for n in names}
-        nees: dict[str, list[float]] = {n: [] for n in names}
+    groups: dict[float, list[Variant]] = {}
+    for f in filters:
+        label, name, p = (f, f, params.get(f)) if isinstance(f, str) else f
+        groups.setdefault(duration(grade, name, length, lengths), []).append((label, name, p))
+    for length, variants in groups.items():
+        stats = {label: metrics.EnsembleStats(label) for label, _, _ in variants}
+        nees: dict[str, list[float]] = {label: [] for label, _, _ in variants}
         for s in range(seed, seed + runs):
-            rec = simulate("vehicle-drive", {"duration": length, "imu_grade": grade}, seed=s)
-            for n in names:
-                m = metrics.run_metrics(replay(rec, load_filter(n), params.get(n),
-                                               output_rate=1.0), rec)
-                nees[n].append(float(np.mean(m.nees[m.t >= START])))
-                stats[n].add(m)
-        for n in names:
-            e = stats[n].result()
+            rec = simulate("vehicle-drive", {**(scenario or {}), "duration": length,
+                                             "imu_grade": grade}, seed=s)
+            for label, name, p in variants:
+                m = metrics.run_metrics(replay(rec, load_filter(name), p, output_rate=1.0), rec)
+                nees[label].append(float(np.mean(m.nees[m.t >= START])))
+                stats[label].add(m)
+        for label, _, _ in variants:
+            e = stats[label].result()
             sel = e.t >= START
             ratios = {key: np.mean(e.rms[key][sel] / e.sigma[key][sel], axis=0)
                       for key in AXES}
             band = consistency.mean_band(DOF, runs)
-            out[n] = Ensemble(grade, n, seed, runs, length, float(np.mean(nees[n])) / DOF,
-                              (band[0] / DOF, band[1] / DOF), ratios, ratio_band(runs), e)
+            nav = {s.name for s in e.states if s.nees}
+            with np.errstate(invalid="ignore", divide="ignore"):
+                z = e.state_rms[sel] / e.state_sigma[sel]
+            others = {name: float(np.mean(z[:, i])) for i, name in enumerate(e.state_names)
+                      if name not in nav and np.all(np.isfinite(z[:, i]))}
+            nis = {}
+            for name, (t, mean, count, dof) in e.nis_mean.items():
+                u = t >= START
+                nis[name] = float(np.sum(mean[u] * count[u]) / np.sum(count[u]) / dof)
+            out[label] = Ensemble(grade, label, seed, runs, length,
+                                  float(np.mean(nees[label])) / DOF,
+                                  (band[0] / DOF, band[1] / DOF), ratios, ratio_band(runs), e,
+                                  others, nis)
     return out
 
 

@@ -1,4 +1,5 @@
-"""Independent ROS 2 bags for the real-log tests, written with rosbags (not navreplay's writer).
+"""Independent ROS 2 and ROS 1 bags for the real-log tests, written with rosbags (not
+navreplay's writer).
 
 The motion comes from navreplay.sim (a still start of 60 s, then a drive with turns); the bag
 holds a sensor_msgs/Imu, a NavSatFix, and the truth as nav_msgs/Odometry (local positions from
@@ -13,6 +14,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -21,6 +23,7 @@ from navreplay.geo.rotations import quat_mult
 from navreplay.sim.trajectory import Channel, Manoeuvre, Route, generate
 
 STORE = get_typestore(Stores.ROS2_HUMBLE)
+STORE1 = get_typestore(Stores.ROS1_NOETIC)
 T = STORE.types
 T0_NS = 1_750_000_000_000_000_000
 LAT, LON, H = math.radians(45.0), math.radians(7.0), 300.0
@@ -55,7 +58,29 @@ def _stamp(t_ns: int):
 
 
 def _header(t_ns: int, frame: str):
+    if T is STORE1.types:  # a ROS 1 header has a sequence number
+        return T["std_msgs/msg/Header"](seq=0, stamp=_stamp(t_ns), frame_id=frame)
     return T["std_msgs/msg/Header"](stamp=_stamp(t_ns), frame_id=frame)
+
+
+class _Ros1Bag:
+    """rosbags' ROS 1 writer behind the calls write_bag makes of the ROS 2 one."""
+
+    def __init__(self, path: Path) -> None:
+        self._writer = Writer1(path)
+
+    def __enter__(self):
+        self._writer.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._writer.close()
+
+    def add_connection(self, topic: str, msgtype: str, typestore=None):
+        return self._writer.add_connection(topic, msgtype, typestore=STORE1)
+
+    def write(self, conn, t: int, data: bytes) -> None:
+        self._writer.write(conn, t, data)
 
 
 def _v3(v):
@@ -81,7 +106,7 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
               imu_frame_after: tuple[float, str] | None = None,
               gyro_spike: tuple[float, float] | None = None,
               world_frame: str | None = None, imu: bool = True,
-              text_topic: str | None = None) -> Path:
+              text_topic: str | None = None, ros1: bool = False) -> Path:
     """Write a rosbag2 folder at ``path``.
 
     ``imu_frame`` overrides the IMU frame id (a mislabelled FRD IMU: ``ned=True,
@@ -93,8 +118,26 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
     ``imu_frame_after`` (t [s], frame id): the IMU's frame id from that time on; ``gyro_spike``
     (t [s], rate [rad/s]): the gyro x sample at that time replaced; ``world_frame``: the
     Odometry's frame id; ``imu=False``: no IMU topic; ``text_topic``: a std_msgs/String topic
-    of that name beside the others.
+    of that name beside the others; ``ros1``: a ROS 1 bag file at ``path`` (rosbags' rosbag1
+    writer, ROS 1 serialisation) instead of a rosbag2 folder.
     """
+    global T
+    T = (STORE1 if ros1 else STORE).types
+    try:
+        return _write_bag(path, ned=ned, noisy=noisy, storage=storage, imu_frame=imu_frame,
+                          duration=duration, rate=rate, seed=seed, imu_grade=imu_grade,
+                          gyro_bias_dph=gyro_bias_dph, mag=mag, mag_frame=mag_frame,
+                          mag_bias_nT=mag_bias_nT, poses=poses, imu_lag=imu_lag,
+                          imu_zero_stamps=imu_zero_stamps, imu_frame_after=imu_frame_after,
+                          gyro_spike=gyro_spike, world_frame=world_frame, imu=imu,
+                          text_topic=text_topic, ros1=ros1)
+    finally:
+        T = STORE.types
+
+
+def _write_bag(path: Path, *, ned, noisy, storage, imu_frame, duration, rate, seed, imu_grade,
+               gyro_bias_dph, mag, mag_frame, mag_bias_nT, poses, imu_lag, imu_zero_stamps,
+               imu_frame_after, gyro_spike, world_frame, imu, text_topic, ros1) -> Path:
     rng = np.random.default_rng(seed)
     tr = trajectory(duration, rate)
     t_ns = T0_NS + np.rint(tr.t * 1e9).astype(np.int64)
@@ -121,7 +164,9 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
         w, f, v_b, m_b = w * FLIP, f * FLIP, v_b * FLIP, m_b * FLIP
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     gps_sigma = np.array([1.5, 1.5, 3.0]) if noisy else np.array([0.01, 0.01, 0.01])
-    with Writer(path, version=9, storage_plugin=plugin) as bag:
+    store = STORE1 if ros1 else STORE
+    serialize = store.serialize_ros1 if ros1 else store.serialize_cdr
+    with (_Ros1Bag(path) if ros1 else Writer(path, version=9, storage_plugin=plugin)) as bag:
         c_imu = bag.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=STORE)
         c_fix = bag.add_connection("/gnss/fix", "sensor_msgs/msg/NavSatFix", typestore=STORE)
         c_odo = bag.add_connection("/ground_truth/odom", "nav_msgs/msg/Odometry",
@@ -142,7 +187,7 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
             c_text = bag.add_connection(text_topic, "std_msgs/msg/String", typestore=STORE)
             for k in range(0, len(t_ns), int(rate)):
                 msg = T["std_msgs/msg/String"](data=f"status {k}")
-                bag.write(c_text, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+                bag.write(c_text, int(t_ns[k]), serialize(msg, msg.__msgtype__))
         for k in range(1, len(t_ns) if imu else 0):
             frame = imu_frame
             if imu_frame_after is not None and tr.t[k] >= imu_frame_after[0]:
@@ -153,7 +198,7 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
                 orientation_covariance=ocov, angular_velocity=_v3(w[k - 1]),
                 angular_velocity_covariance=zero9, linear_acceleration=_v3(f[k - 1]),
                 linear_acceleration_covariance=zero9)
-            bag.write(c_imu, int(t_ns[k]) + lag, STORE.serialize_cdr(msg, msg.__msgtype__))
+            bag.write(c_imu, int(t_ns[k]) + lag, serialize(msg, msg.__msgtype__))
         if mag:
             c_mag = bag.add_connection("/imu/mag", "sensor_msgs/msg/MagneticField",
                                        typestore=STORE)
@@ -162,7 +207,7 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
                 msg = T["sensor_msgs/msg/MagneticField"](
                     header=_header(t_ns[k], frame), magnetic_field=_v3(m_b[k]),
                     magnetic_field_covariance=zero9)
-                bag.write(c_mag, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+                bag.write(c_mag, int(t_ns[k]), serialize(msg, msg.__msgtype__))
         step = int(rate)
         for k in range(0, len(t_ns), step):
             pos = tr.pos[k].copy()
@@ -176,7 +221,7 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
                 status=T["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
                 latitude=math.degrees(pos[0]), longitude=math.degrees(pos[1]), altitude=pos[2],
                 position_covariance=cov, position_covariance_type=2)
-            bag.write(c_fix, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+            bag.write(c_fix, int(t_ns[k]), serialize(msg, msg.__msgtype__))
         for k in range(0, len(t_ns), step // 10):
             pose = T["geometry_msgs/msg/PoseWithCovariance"](
                 pose=T["geometry_msgs/msg/Pose"](
@@ -188,14 +233,14 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
                 covariance=np.zeros(36))
             msg = T["nav_msgs/msg/Odometry"](header=_header(t_ns[k], world), child_frame_id=body,
                                              pose=pose, twist=twist)
-            bag.write(c_odo, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+            bag.write(c_odo, int(t_ns[k]), serialize(msg, msg.__msgtype__))
             if poses:
                 for conn, msg in (
                         (c_pose, T["geometry_msgs/msg/PoseStamped"](
                             header=_header(t_ns[k], world), pose=pose.pose)),
                         (c_pcov, T["geometry_msgs/msg/PoseWithCovarianceStamped"](
                             header=_header(t_ns[k], world), pose=pose))):
-                    bag.write(conn, int(t_ns[k]), STORE.serialize_cdr(msg, msg.__msgtype__))
+                    bag.write(conn, int(t_ns[k]), serialize(msg, msg.__msgtype__))
     return path
 
 

@@ -33,6 +33,10 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
         (rf"^(strapdown\.propagate|ins|gps-ins), .+ +{_N} +{_N} +{_N}$", 4),
         (rf"^(kalman|ins_error|ins_time_update)\..+ +{_N}$", 6),
     ],
+    "bench_smoothing": [
+        (rf"^ +{_N}s ratios: backward / forward = {_N}, forward with --smooth / without = "
+         rf"{_N}, peak with / without = {_N}; ", 1),
+    ],
     "bench_io": [
         (rf"^write Imu .*: ratio {_N}x \(target >= 5x\)$", 1),
         (rf"^read\+decode Imu .*: ratio {_N}x \(target >= 10x\); identical columns: True$", 1),

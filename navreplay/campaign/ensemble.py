@@ -104,7 +104,8 @@ def run_ensemble(
     for spec in filters:  # fail on an unknown filter or bad parameters before any work
         spec.resolve()
     own = executor is None or isinstance(executor, str)
-    ex = make_executor(workers, executor or "process") if own else executor
+    ex = (make_executor(workers, executor or "process")
+          if executor is None or isinstance(executor, str) else executor)
     parallelism = getattr(ex, "parallelism", workers)
     window = 1 if isinstance(ex, InlineExecutor) else 2 * max(parallelism, 1)
     total = len(tasks)

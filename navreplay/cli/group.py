@@ -30,12 +30,13 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
         from navreplay.filters.registry import FilterLoadError
         from navreplay.io import RecordingError
         from navreplay.io.outputs import OutputError
+        from navreplay.jobs.compare import SummaryError
         from navreplay.replay.errors import ReplayError
         from navreplay.viz import VizUnavailableError
 
         EXPECTED_ERRORS = (
             RecordingError, OutputError, ParamError, FilterLoadError, FilterDivergedError,
-            ReplayError, RunFailedError, VizUnavailableError, KeyError, FileExistsError,
+            ReplayError, RunFailedError, VizUnavailableError, SummaryError, KeyError, FileExistsError,
             FileNotFoundError, IsADirectoryError, PermissionError,
         )
     return EXPECTED_ERRORS
@@ -60,7 +61,12 @@ def _message(e: BaseException) -> str:
 
 
 class _Group(click.Group):
-    """Turns the project's expected errors into one line and shows warnings as one line."""
+    """Turns the project's expected errors into one line and shows warnings as one line; keeps
+    the arguments as typed (``ctx.meta["argv"]``, the command line of reports)."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        ctx.meta["argv"] = list(args)
+        return super().parse_args(ctx, args)
 
     def invoke(self, ctx: click.Context) -> Any:
         from navreplay.io.lifecycle import Terminated, handle_signals, interrupted_by
@@ -70,7 +76,7 @@ class _Group(click.Group):
         with (warnings.catch_warnings(), handle_signals(),
               contextlib.ExitStack() as stack):
             stack.callback(release_locks)
-            warnings.showwarning = _show_warning  # type: ignore[assignment]
+            warnings.showwarning = _show_warning
             try:
                 return super().invoke(ctx)
             except click.exceptions.Exit:

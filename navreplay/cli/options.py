@@ -166,12 +166,14 @@ def output_of(path: str | Path | None, option: str, **kw: Any) -> Any:
     return None if path is None else Output(Path(path), option, **kw)
 
 
-def export_output(path: str | None, specs: Sequence[Any]) -> Any:
-    """The ``--export DIR`` output, with the names of the files it writes for these filters."""
+def export_output(path: str | None, specs: Sequence[Any], smooth: bool = False) -> Any:
+    """The ``--export DIR`` output, with the names of the files it writes for these filters
+    (and their smoothed runs with ``smooth``)."""
     from navreplay.jobs.results import export_names
+    from navreplay.jobs.smooth import output_labels
 
     return output_of(path, "--export", directory=True,
-                writes=export_names([spec.label for spec in specs]))
+                     writes=export_names(output_labels(specs, smooth)))
 
 
 def viz_output(save: str | None, no_viz: bool, live: bool) -> Any:
@@ -222,6 +224,10 @@ def log_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
                      show_default=True,
                      help="Sample times: header stamps (log times where the stamps are zero "
                           "or do not increase, with a warning), or the log (receive) times."),
+        click.option("--start", "start", metavar="T",
+                     help="Read from this time on: s from the recording start, UNIX s, or a "
+                          "UTC time (2025-06-15T14:02:00Z); the filters start there."),
+        click.option("--end", "end", metavar="T", help="Read up to this time (as --start)."),
         click.option("--imu-range", "imu_range", metavar="gyro=DEG_PER_S,accel=G",
                      help="The IMU's measurement range per axis (datasheet); a sample beyond "
                           "it stops the run [default: gyro=20000,accel=200; or an [imu_range] "
@@ -253,6 +259,13 @@ def show_value(value: Any) -> str:
     if isinstance(value, tuple | list):
         return ",".join(show_value(v) for v in value)
     return str(value)
+
+
+def command_line() -> str:
+    """The command as typed (``navreplay ARGS``, shell-quoted), for reports."""
+    import shlex
+
+    return shlex.join(["navreplay", *click.get_current_context().meta.get("argv", [])])
 
 
 def is_file(path: str | None) -> bool:

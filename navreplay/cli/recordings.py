@@ -84,7 +84,8 @@ def simulate(scenario: str, output: str, seed: int, duration: float | None,
 @click.option("--config", type=click.Path(dir_okay=False), metavar="FILE.toml",
               help="TOML file with [topics] and [frames] tables.")
 def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_frame: bool,
-         time: str, imu_range: str | None, config: str | None) -> None:
+         time: str, start: str | None, end: str | None, imu_range: str | None,
+         config: str | None) -> None:
     """Topics, types, frames, rates, gaps and metadata of a RECORDING (MCAP file, rosbag2
     folder or .db3), and which stream each topic feeds.
 
@@ -99,9 +100,10 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_fra
 
     described = describe_log(recording, log_options(
         topics, frames, config=load_config(config, "topics", "frames", "imu_range"),
-        time=time, imu_range_text=imu_range, force_frames=force_frame))
+        time=time, imu_range_text=imu_range, force_frames=force_frame, start=start,
+        end=end))
     click.echo(described.text)
-    report = None if file_kind(recording).name == "rosbag2" else recording_info(recording)
+    report = recording_info(recording) if file_kind(recording).name == "mcap" else None
     if described.damage:
         count = f"{report.message_count} messages readable; " if report is not None else ""
         raise click.ClickException(f"{recording}: DAMAGED ({count}see above)")
@@ -114,9 +116,9 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_fra
 @cli.command()
 @click.argument("recording", type=click.Path())
 @click.option("--topic", metavar="TOPIC", help="The IMU topic (default: the recording's IMU).")
-@click.option("--start", type=float, metavar="S", help="Segment start [s from the recording "
-              "start].")
-@click.option("--end", type=float, metavar="S", help="Segment end [s from the recording start].")
+@click.option("--start", metavar="T", help="Segment start: s from the recording start, UNIX s, "
+              "or a UTC time (2025-06-15T14:02:00Z).")
+@click.option("--end", metavar="T", help="Segment end (as --start).")
 @click.option("-o", "--output", "spec", type=click.Path(dir_okay=False), metavar="SPEC.toml",
               help="Write the fitted noise as a [sensors.imu] table (for simulate/run --config).")
 @click.option("--plot", type=click.Path(dir_okay=False), metavar="FIG.png|FIG.svg",
@@ -129,7 +131,7 @@ def info(recording: str, topics: Sequence[str], frames: Sequence[str], force_fra
 @click.option("--time", "time", type=click.Choice(["header", "log"]), default="header",
               show_default=True, help="Sample times: header stamps or log (receive) times.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
-def allan(recording: str, topic: str | None, start: float | None, end: float | None,
+def allan(recording: str, topic: str | None, start: str | None, end: str | None,
           spec: str | None, plot: str | None, save: str | None, bootstrap: int, time: str,
           force: bool) -> None:
     """Allan deviation of a still IMU segment and the noise terms fitted to it.
@@ -152,7 +154,7 @@ def allan(recording: str, topic: str | None, start: float | None, end: float | N
         except ValueError as e:
             raise click.BadParameter(str(e), param_hint="--plot") from None
     check_command_outputs(force, [recording], output_of(spec, "-o"), output_of(plot, "--plot"),
-                   output_of(save, "--save"))
+                          output_of(save, "--save"))
     job = AllanJob(recording=Path(recording), topic=topic, start=start, end=end,
                    spec_path=Path(spec) if spec else None, plot_path=Path(plot) if plot else None,
                    view_path=Path(save) if save else None, bootstrap=bootstrap, time=time)

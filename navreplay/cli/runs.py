@@ -1,4 +1,5 @@
-"""Replaying filters: ``run`` (recordings, rosbag2 bags) and ``montecarlo`` (simulated campaigns)."""
+"""Replaying filters: ``run`` (recordings, rosbag2 bags) and ``montecarlo`` (simulated
+campaigns)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from navreplay.cli.options import (
     Progress,
     check_command_outputs,
     check_executor,
+    command_line,
     export_output,
     finish,
     is_file,
@@ -63,6 +65,10 @@ from navreplay.cli.options import (
               help="Skip the gravity and magnetic-dip checks of the frames.")
 @result_flags
 @max_imu_gap_option
+@click.option("--smooth", is_flag=True,
+              help="Also smooth every filter that can be (fixed-interval RTS smoother, "
+                   "docs/smoothing.md): its result LABEL/rts is scored, shown and exported "
+                   "as a filter's.")
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, bind: str | None,
@@ -70,9 +76,10 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         summary: str | None, workers: int, executor: str, rate: float | None,
         output_rate: float,
         topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
+        start: str | None, end: str | None,
         imu_range: str | None, init: str | None, reference: str | None, no_frame_check: bool,
         export: str | None, report: str | None, max_imu_gap: float | None,
-        force: bool) -> None:
+        smooth: bool, force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b
@@ -83,6 +90,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
       navreplay run --filter mypkg.myfilter:MyFilter drive.mcap
       navreplay run gps-ins runs/*.mcap --workers 2      # ensemble statistics
       navreplay run ins,gps-ins drive.mcap --export out/drive --report out/drive.html
+      navreplay run gps-ins drive.mcap --smooth --export out/drive   # + gps-ins/rts
     """
     from navreplay import jobs
 
@@ -97,9 +105,9 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
     cfg = load_config(config, "filter", "topics", "frames", "initial", "sensors", "imu_range")
     specs = jobs.filter_specs(names, refs, params, cfg)
     check_command_outputs(force, [*args, config, reference if is_file(reference) else None],
-                   viz_output(save, no_viz, spawn or serve or bool(connect)),
-                   output_of(summary, "--summary"), export_output(export, specs),
-                   output_of(report, "--report"))
+                          viz_output(save, no_viz, spawn or serve or bool(connect)),
+                          output_of(summary, "--summary"), export_output(export, specs, smooth),
+                          output_of(report, "--report"))
     job = jobs.RunJob(
         filters=specs,
         recordings=tuple(Path(a) for a in args),
@@ -109,14 +117,15 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         max_imu_gap=max_imu_gap,
         log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
                         sensors=sensor_config(config, cfg), imu_range_text=imu_range,
-                        force_frames=force_frame),
+                        force_frames=force_frame, start=start, end=end),
         export_dir=Path(export) if export else None,
-        report_path=Path(report) if report else None, force=force,
+        report_path=Path(report) if report else None, force=force, smooth=smooth,
+        command=command_line(),
     )
     label = "replay" if len(args) == 1 else f"replay {len(args)} recordings"
     with Progress(label) as progress:
-        report = jobs.run(job, progress)
-    finish(report)
+        done = jobs.run(job, progress)
+    finish(done)
 
 
 @cli.command()
@@ -169,10 +178,11 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     filter_items = [p for p in params if not p.startswith("scenario.")]
     cfg = load_config(config, "scenario", "filter", "sensors")
     specs = jobs.filter_specs(filter_names, refs, filter_items, cfg)
-    check_command_outputs(force, [config], output_of(keep, "--keep", directory=True, writes=("*.mcap",)),
-                   viz_output(save, no_viz, spawn or serve or bool(connect)),
-                   output_of(summary, "--summary"), export_output(export, specs),
-                   output_of(report, "--report"))
+    check_command_outputs(force, [config],
+                          output_of(keep, "--keep", directory=True, writes=("*.mcap",)),
+                          viz_output(save, no_viz, spawn or serve or bool(connect)),
+                          output_of(summary, "--summary"), export_output(export, specs),
+                          output_of(report, "--report"))
     job = jobs.MonteCarloJob(
         scenario=scenario,
         filters=specs,
@@ -187,5 +197,37 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         max_imu_gap=max_imu_gap,
     )
     with Progress(f"montecarlo {scenario}") as progress:
-        report = jobs.montecarlo(job, progress)
-    finish(report)
+        done = jobs.montecarlo(job, progress)
+    finish(done)
+
+
+@cli.command()
+@click.argument("summaries", nargs=-1, required=True, metavar="SUMMARY.json...",
+                type=click.Path(dir_okay=False))
+@viz_flags
+@click.option("--report", "report", type=click.Path(dir_okay=False), metavar="OUT.html|OUT.pdf",
+              help="Write the comparison as a self-contained HTML report (or a PDF).")
+@click.option("--force", is_flag=True, help=FORCE_HELP)
+def compare(summaries: Sequence[str], save: str | None, spawn: bool, connect: str | None,
+            serve: bool, bind: str | None, web_port: int | None, grpc_port: int | None,
+            no_viz: bool, report: str | None, force: bool) -> None:
+    """Compare the headline metrics of saved summaries (``run``/``montecarlo --summary``):
+    a row per metric, a column per filter (``FILE/label`` when labels repeat), the best marked.
+
+    \b
+    Examples:
+      navreplay compare day1.json day2.json
+      navreplay compare day1.json day2.json --save cmp.rrd --report cmp.html
+    """
+    from navreplay import jobs
+
+    view = save is not None or spawn or serve or connect is not None
+    check_command_outputs(force, list(summaries),
+                          output_of(save, "--save") if save is not None else None,
+                          output_of(report, "--report"))
+    job = jobs.CompareJob(
+        summaries=tuple(Path(s) for s in summaries),
+        viz=viz_options(save, spawn, connect, serve, no_viz or not view, bind, web_port,
+                        grpc_port),
+        report_path=Path(report) if report else None, force=force)
+    finish(jobs.compare(job))

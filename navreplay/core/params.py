@@ -164,27 +164,41 @@ def _line(text: str, dotted: str, top: bool = False) -> int:
     return 1
 
 
-def _coerce(name: str, tp: Any, value: Any) -> Any:
+def _coerce(name: str, tp: Any, value: Any, nested: bool = False) -> Any:
+    """``value`` (text, or a TOML value) as type ``tp``. A sequence in text separates its
+    items by commas (or semicolons); a sequence of sequences (``tuple[tuple[float, float],
+    ...]``) its inner items by colons: ``"120:30,300:60"``."""
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        members = [a for a in typing.get_args(tp) if a is not type(None)]
         if value is None or (isinstance(value, str) and value.lower() in ("none", "null", "")):
-            if len(args) < len(typing.get_args(tp)):
+            if len(members) < len(typing.get_args(tp)):
                 return None
-        return _coerce(name, args[0], value)
+        return _coerce(name, members[0], value)
     if origin in (tuple, list):
         args = typing.get_args(tp)
         if isinstance(value, str):
-            parts = [p for p in value.replace(";", ",").split(",") if p.strip()]
+            seps = ":" if nested else ",;"
+            for sep in seps[1:]:
+                value = value.replace(sep, seps[0])
+            parts = [p for p in value.split(seps[0]) if p.strip()]
+        elif isinstance(value, int | float) and args and args[-1] is Ellipsis:
+            parts = [value]  # one number for a list of any length
         else:
-            parts = list(value)
+            try:
+                parts = list(value)
+            except TypeError:
+                raise ParamError(f"parameter {name}: expected a list, got {value!r}") from None
         if origin is tuple and args and args[-1] is not Ellipsis:
             if len(parts) != len(args):
-                raise ParamError(f"parameter {name}: expected {len(args)} values, got {len(parts)}")
+                how = " separated by ':'" if nested and isinstance(value, str) else ""
+                raise ParamError(f"parameter {name}: expected {len(args)} values{how}, got "
+                                 f"{len(parts)}" + (f" ({value!r})" if how else ""))
             elem_types = list(args)
         else:
             elem_types = [args[0] if args else float] * len(parts)
-        return origin(_coerce(name, t, p) for t, p in zip(elem_types, parts, strict=True))
+        return origin(_coerce(name, t, p, nested=True)
+                      for t, p in zip(elem_types, parts, strict=True))
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         try:
             return tp(value) if not isinstance(value, tp) else value

@@ -199,6 +199,8 @@ class Recording:
         return self.streams[StreamKind(kind)]
 
     def __contains__(self, kind: object) -> bool:
+        if not isinstance(kind, str):
+            return False
         try:
             return StreamKind(kind) in self.streams
         except ValueError:

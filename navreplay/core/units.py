@@ -82,7 +82,7 @@ class Unit(NamedTuple):
     factor: float
     dims: Dims
 
-    def __mul__(self, other: object) -> Unit:  # type: ignore[override]
+    def __mul__(self, other: object) -> Unit:
         if not isinstance(other, Unit):
             return NotImplemented
         return Unit(self.factor * other.factor,

@@ -50,16 +50,20 @@ def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
     cols = [Column("stamp", "ns", "absolute estimate time", out.stamps_ns, "%d"),
             Column("t", "s", "time since the recording start", out.t)]
     if out.has("pos"):
-        cols += [Column("lat", "deg", "geodetic latitude (WGS84)", out.nav_pos[:, 0] * _RAD_TO_DEG,
+        pos = out.nav_pos
+        assert pos is not None  # has("pos")
+        cols += [Column("lat", "deg", "geodetic latitude (WGS84)", pos[:, 0] * _RAD_TO_DEG,
                         "%.10f"),
-                 Column("lon", "deg", "longitude", out.nav_pos[:, 1] * _RAD_TO_DEG, "%.10f"),
-                 Column("h", "m", "height above the ellipsoid", out.nav_pos[:, 2], "%.4f")]
+                 Column("lon", "deg", "longitude", pos[:, 1] * _RAD_TO_DEG, "%.10f"),
+                 Column("h", "m", "height above the ellipsoid", pos[:, 2], "%.4f")]
         if frame is not None:
-            p = frame.position(out.nav_pos)
+            p = frame.position(pos)
             cols += [Column(a, "m", f"position {a} in the local ENU frame", p[:, i], "%.4f")
                      for i, a in enumerate(("east", "north", "up"))]
     if out.has("v_n"):
-        cols += [Column(f"v_{a}", "m/s", f"velocity {a} (NED)", out.nav_v_n[:, i])
+        v_n = out.nav_v_n
+        assert v_n is not None  # has("v_n")
+        cols += [Column(f"v_{a}", "m/s", f"velocity {a} (NED)", v_n[:, i])
                  for i, a in enumerate("NED")]
     if out.has("q_nb"):
         euler = quat_to_euler(out.nav_q_nb) * _RAD_TO_DEG
@@ -94,9 +98,9 @@ def run_columns(out: FilterOutput, frame: LocalFrame | None) -> list[Column]:
                 v = getattr(m.nav, key)
                 cols += [Column(f"error_{n}", unit, f"{what} {n}, estimate minus reference",
                                 v[:, i] * scale) for i, n in enumerate(names)]
-        units = dict(zip(out.state_names, out.state_units, strict=True))
+        state_units = dict(zip(out.state_names, out.state_units, strict=True))
         for j, name in enumerate(m.state_names):
-            cols.append(Column(f"error.{name}", units.get(name, "-"),
+            cols.append(Column(f"error.{name}", state_units.get(name, "-"),
                                f"estimation error of state {name} against the reference",
                                m.state_error[:, j]))
         if m.nees_states:
@@ -187,7 +191,8 @@ def innovation_rows(kind: MeasurementKind | None, dim: int) -> tuple[tuple[str, 
         return tuple(str(i) for i in range(dim)), (UNKNOWN_UNIT,) * dim
     if kind.dim != dim:
         raise ValueError(f"measurement {kind.name}: {dim} innovation rows, {kind.dim} declared")
-    return kind.rows, kind.units
+    units = kind.units  # a tuple once the declaration is made
+    return kind.rows, ((units,) * dim if isinstance(units, str) else units)
 
 
 def innovation_columns(t0_ns: int, series: InnovationSeries, rows: Sequence[str],

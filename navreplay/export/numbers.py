@@ -142,7 +142,7 @@ def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
             break
     else:
         return 0, e, True
-    r = np.int64(np.rint(m))
+    r = int(np.rint(m))
     if r == _POW10_INT[p]:
         r = _POW10_INT[p - 1]
         e += 1
@@ -187,7 +187,7 @@ def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int,
         m = ax * _POW10[p]
         if not m < 9e14 or _tie(m):
             return -1
-        r = np.int64(np.rint(m))
+        r = int(np.rint(m))
         pos = _put_uint(buf, pos, r // _POW10_INT[p], 0)
         if p:
             buf[pos] = 46  # "."

@@ -99,10 +99,12 @@ class OdometryWriter:
     in the order the topics were registered), each topic's poses handed over in time order.
 
     A message is written once every topic has poses later than it; the rest wait (a window's
-    worth), :meth:`finish` writes them all.
+    worth), :meth:`finish` writes them all. The ``late`` topics (of runs whose poses all come
+    after the others', the smoothed runs) are written as they come, after the others' up to
+    then: nothing waits for them.
     """
 
-    def __init__(self, path: Path, topics: Sequence[str]) -> None:
+    def __init__(self, path: Path, topics: Sequence[str], late: Sequence[str] = ()) -> None:
         from mcap.writer import CompressionType, Writer
 
         from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
@@ -116,17 +118,25 @@ class OdometryWriter:
                      for topic in topics}
         # per topic: (stamps, CDR messages as rows of bytes) not yet written
         self._queue: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {t: [] for t in topics}
-        self._last: dict[str, int | None] = dict.fromkeys(topics)
+        self._late = frozenset(late)
+        self._last: dict[str, int | None] = dict.fromkeys(t for t in topics if t not in late)
 
     def add(self, topic: str, poses: Poses) -> None:
         if not len(poses.stamps_ns):
             return
         rec = encode_odometry(poses)  # as rows of bytes (concatenating records repacks them)
+        if topic in self._late:
+            add, cid = self._w.add_message, self._ids[topic]
+            rows = rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)
+            for ti, row in zip(poses.stamps_ns.tolist(), rows, strict=True):
+                add(cid, ti, row.tobytes(), ti)
+            return
         self._queue[topic].append((poses.stamps_ns,
                                    rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)))
         self._last[topic] = int(poses.stamps_ns[-1])
-        if all(v is not None for v in self._last.values()):
-            self._write(min(self._last.values()))
+        stamps = [v for v in self._last.values() if v is not None]
+        if len(stamps) == len(self._last):
+            self._write(min(stamps))
 
     def _write(self, limit: int | None) -> None:
         """Write the queued messages earlier than ``limit`` (all with None)."""

@@ -138,6 +138,7 @@ def _nav_covariance(result: RunResult) -> np.ndarray:
     """Covariance (M, 9, 9) of the navigation errors from the states declared as navigation
     errors (lat/lon scaled to metres, height negated to down); NaN where none is."""
     M = result.t.shape[0]
+    assert result.nav_pos is not None  # a result with a navigation solution
     lat, h = result.nav_pos[:, 0], result.nav_pos[:, 2]
     R_M, R_N = earth.radii(lat)
     scale_of = {Nav.LAT: R_M + h, Nav.LON: (R_N + h) * np.cos(lat), Nav.H: -np.ones(M)}

@@ -70,9 +70,13 @@ class RunExport:
     """
 
     def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
-                 source: str = "", force: bool = False) -> None:
+                 source: str = "", force: bool = False,
+                 late: Mapping[str, str] | None = None) -> None:
         self.out_dir = Path(out_dir)
         self.labels = tuple(labels)
+        self.late = dict(late or {})
+        """Labels whose rows come after every other's (smoothed runs), each with the label whose
+        solution parts it shares: nothing waits for them."""
         self.has_reference = has_reference
         self.source = source
         self.force = force
@@ -99,6 +103,12 @@ class RunExport:
         """A window of the truth stream (``pos``, ``v_n``, ``q_nb``), later than before."""
         if not len(truth):
             return
+        if "pos" not in truth.columns:
+            # no pose to write (its velocity or attitude scores the CSV's errors): the frame
+            # is the first filter's, as without a reference
+            self.has_reference = False
+            self._feed("ref", None)
+            return
         if self._frame is None:
             p = truth["pos"][0]
             self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
@@ -113,8 +123,12 @@ class RunExport:
             self._empty.setdefault(out.label, out)
             return
         self._nav.setdefault(out.label, out.has_nav)
+        for late, follows in self.late.items():
+            if follows == out.label:
+                self._nav.setdefault(late, out.has_nav)
         if (self._frame is None and not self.has_reference and out.has_nav
                 and self._first_nav() == out.label):
+            assert out.nav_pos is not None  # has_nav
             p = out.nav_pos[0]
             self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
                                      f"first navigation estimate of {out.label}")
@@ -178,8 +192,11 @@ class RunExport:
         return None
 
     def _feed(self, kind: str, item: Any) -> None:
+        if item is None and self._started:
+            return
         if not self._started:
-            self._held.append((kind, item))
+            if item is not None:
+                self._held.append((kind, item))
             # the frame comes from the reference when there is one (else from the first
             # filter with a position): wait for it, whatever the filters output
             if len(self._nav) == len(self.labels) and (
@@ -222,7 +239,8 @@ class RunExport:
         if topics:
             target = self.out_dir / ODOMETRY_FILE
             tmp = temporary_path(target)
-            self._odometry = OdometryWriter(tmp, topics)
+            self._odometry = OdometryWriter(
+                tmp, topics, late=[self._topics[x] for x in self.late if x in self._topics])
             self._tmp[target] = (tmp, self._odometry)
         held, self._held = self._held, []
         # estimates first: the reference then goes out piece by piece instead of queueing
@@ -239,6 +257,7 @@ class RunExport:
                 truth = item.slice(a, min(a + _REFERENCE_ROWS, len(item)))
                 poses = reference_poses(frame, truth)
                 self._file(f"{REFERENCE_LABEL}.tum").write(tum_lines(poses))
+                assert self._odometry is not None  # opened with the first rows
                 self._odometry.add(self._topics[REFERENCE_LABEL], poses)
             return
         out: FilterOutput = item
@@ -249,6 +268,8 @@ class RunExport:
             self._open(entry["csv"]).write(csv_header(cols))
         self._file(entry["csv"]).write(csv_rows(cols))
         if "tum" in entry and out.has_nav:
+            assert frame is not None and self._odometry is not None  # the first navigation rows
+            assert out.nav_pos is not None and out.nav_v_n is not None and out.nav_q_nb is not None
             poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
                               out.nav_cov)
             self._file(entry["tum"]).write(tum_lines(poses))

@@ -68,7 +68,7 @@ import abc
 import dataclasses
 import enum
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -92,6 +92,8 @@ class Quantity(enum.StrEnum):
     ACCEL_MISALIGNMENT = "accel_misalignment"
     GYRO_MISALIGNMENT = "gyro_misalignment"
     LEVER_ARM = "lever_arm"
+    GNSS_ERROR = "gnss_error"
+    """A time-correlated error of a GNSS receiver's solution."""
     MISALIGNMENT = "misalignment"
     """Mounting / boresight misalignment between two frames."""
     SPEED_SCALE_FACTOR = "speed_scale_factor"
@@ -625,6 +627,14 @@ class Filter(abc.ABC):
     default_sensors() -> SensorSpecs  (classmethod)
         The sensors the defaults of ``Params`` stand for (e.g. a tactical IMU): a run whose
         recording does not state them says once that it uses these defaults. Empty by default.
+    modelled_terms(params) -> mapping or None  (classmethod)
+        The error terms of the sensor specifications (the fields of each record's
+        ``error_terms``, e.g. ``ImuModel.error_terms``) that the filter models with ``params``,
+        by sensor kind: ``{"imu": {"gyro_arw", ...}, "gps": {"pos_sigma", ...}}``. A run whose
+        recording states a term (not zero) of a sensor the filter consumes that the filter
+        does not model says so once ("gps-ins does not model the gps time-correlated velocity
+        error (vel_gm_sigma)"; :func:`navreplay.filters.settings.build_params`). None (the
+        default): not declared, nothing said.
 
     Optional method
     ---------------
@@ -668,6 +678,12 @@ class Filter(abc.ABC):
         from navreplay.sensors.specs import SensorSpecs
 
         return SensorSpecs()
+
+    @classmethod
+    def modelled_terms(cls, params: FilterParams) -> Mapping[str, Collection[str]] | None:
+        """The error terms of the sensor specifications the filter models with ``params``, by
+        sensor kind (see the class docstring); None here: not declared."""
+        return None
 
     def __init__(self, params: FilterParams, context: FilterContext) -> None:
         self.params = params

@@ -4,8 +4,8 @@
 :meth:`~navreplay.filters.gps_ins.GpsInsFilter.propagate`,
 :meth:`~navreplay.filters.gps_ins.GpsInsFilter.update` and
 :meth:`~navreplay.filters.gps_ins.GpsInsFilter.estimate`, with the same kernels in the same
-order (so the same bits): the IMU segment up to the event (bias, z-rate and accelerometer
-compensation, strapdown, covariance steps), the GPS update
+order (so the same bits): the IMU segment up to the event (bias, gyro and accelerometer
+scale-factor and misalignment compensation, strapdown, covariance steps), the GPS update
 (:func:`navreplay.filters.gnss_models.gps_update`), the estimate when the event is the last of
 its time. The first event that fails any check is undone and the call returns: the engine
 replays that event one by one, which names the problem.
@@ -31,7 +31,7 @@ from navreplay.filters.ins_time_update import (
     _close_step,
     _propagate_segment,
     compensate_accel,
-    compensate_gyro_z,
+    compensate_gyro,
 )
 from navreplay.filters.kalman import _covariance_ok
 
@@ -39,11 +39,13 @@ TICK = 0
 """Event code: no measurement (an output tick or a stream the filter does not use)."""
 
 LAYOUT = {"prev": (0, 6), "open_nav": (6, 16), "open_sums": (16, 23), "b_a": (23, 26),
-          "b_g": (26, 29), "k_z": (29, 32), "k_a": (32, 38), "lever": (38, 41),
-          "omega": (41, 44)}
+          "b_g": (26, 29), "k_g": (29, 38), "k_a": (38, 47), "lever": (47, 50),
+          "omega": (50, 53), "gm": (53, 56), "gm_t": (56, 57)}
 """Slices of the packed state: coning/sculling increments, the open covariance step, the
-bias, z-rate, accelerometer and lever-arm estimates, the last compensated body rate."""
-PACKED = 44
+bias, gyro and accelerometer scale-factor and misalignment (up to three columns each),
+lever-arm estimates, the last compensated body rate, the GNSS Gauss-Markov estimate and its
+time."""
+PACKED = 57
 
 
 class Events(NamedTuple):
@@ -71,12 +73,13 @@ class Gnss(NamedTuple):
 
 
 class Options(NamedTuple):
-    """The filter's options a run needs: lever-arm states, gyro z-rate states, accelerometer
-    states, and the relative tolerance of the covariance checks."""
+    """The filter's options a run needs: lever-arm states, the first GNSS Gauss-Markov state
+    (-1: none) and the model of that error, and the relative tolerance of the covariance
+    checks."""
 
     lever_states: bool
-    has_gz: bool
-    has_ga: bool
+    gp: int
+    gauss_markov: gnss.GaussMarkov
     rtol: float
 
 
@@ -130,21 +133,24 @@ def run_events(
     t, omega, f = imu
     ends, codes, rows, t_ev, record = events
     gps_pos, gps_pos_sigma, gps_vel, gps_vel_sigma, pos_scale, vel_scale = gnss_samples
-    lever_states, has_gz, has_ga, rtol = options
+    lever_states, gp, gauss_markov, rtol = options
     t_out, x_out, P_out, nav_out = out
     inn_code, inn_t, inn_nu, inn_S = updates
-    gz, ga = model.gz, model.ga
+    gz, ga, ng, na = model.gz, model.ga, model.ng, model.na
     n = P.shape[0]
     prev = s[0:6]
     open_nav = s[6:16]
     open_sums = s[16:23]
     b_a = s[23:26]
     b_g = s[26:29]
-    k_z = s[29:32]
-    k_a = s[32:38]
-    lever = s[38:41]
-    w_last = s[41:44]
+    k_z = s[29:29 + 3 * ng]
+    k_a = s[38:38 + 3 * na]
+    lever = s[47:50]
+    w_last = s[50:53]
     open_step = Open(open_nav, open_sums)
+    est = gnss.Estimates(b_a, b_g, lever, k_z, k_a, s[53:56], s[56:57])
+    layout = gnss.Layout(lever_states, gz, ng, ga, na, gp)
+    gm_now = np.empty(3)
     snap = np.empty(s.shape[0])
     m = 0
     k = 0
@@ -157,10 +163,10 @@ def run_events(
         b = ends[e]
         if b > a:
             w = omega[a:b]
-            if has_gz and _any(k_z):
-                w = compensate_gyro_z(w, b_g, k_z)
+            if _any(k_z):
+                w = compensate_gyro(w, b_g, k_z)
             fb = f[a:b]
-            if has_ga and _any(k_a):
+            if _any(k_a):
                 fb = compensate_accel(fb, b_a, k_a)
             first = 0
             while first < b - a and t[a + first] <= t_nav + _TIME_TOL:
@@ -187,12 +193,12 @@ def run_events(
                 if kind == gnss.POSITION:
                     lag = max(t_ev[e] - t_nav, 0.0)
                     ok, nav, P, nu, S = gnss.gps_update(
-                        kind, nav, P, gps_pos[r], gps_pos_sigma[r], pos_scale, lag, w_last,
-                        b_a, b_g, lever, lever_states, k_z, gz, k_a, ga, rtol)
+                        kind, nav, P, t_nav, gps_pos[r], gps_pos_sigma[r], pos_scale, lag,
+                        w_last, est, layout, gauss_markov, rtol)
                 else:
                     ok, nav, P, nu, S = gnss.gps_update(
-                        kind, nav, P, gps_vel[r], gps_vel_sigma[r], vel_scale, 0.0, w_last,
-                        b_a, b_g, lever, lever_states, k_z, gz, k_a, ga, rtol)
+                        kind, nav, P, t_nav, gps_vel[r], gps_vel_sigma[r], vel_scale, 0.0,
+                        w_last, est, layout, gauss_markov, rtol)
                 if ok:
                     inn_code[k] = kind
                     inn_t[k] = t_ev[e]
@@ -214,12 +220,14 @@ def run_events(
                     x_out[m, 12 + c] = b_g[c]
                     if lever_states:
                         x_out[m, 15 + c] = lever[c]
-                if has_gz:
+                for c in range(3 * ng):
+                    x_out[m, gz + c] = k_z[c]
+                for c in range(3 * na):
+                    x_out[m, ga + c] = k_a[c]
+                if gp >= 0:
+                    gnss.gm_at(est.gm, est.gm_t[0], t_nav, gauss_markov.tau, gm_now)
                     for c in range(3):
-                        x_out[m, gz + c] = k_z[c]
-                if has_ga:
-                    for c in range(6):
-                        x_out[m, ga + c] = k_a[c]
+                        x_out[m, gp + c] = gm_now[c]
                 for r in range(n):
                     for c in range(n):
                         P_out[m, r, c] = P[r, c]

@@ -19,6 +19,9 @@ adds the growth of that variance as a random walk of intensity ``q_a = s_a^2 (ta
     Q[phi, phi] = s_w^2 (tau_2^2 - tau_1^2)                                      (4)
     P <- Phi P Phi^T + Q + diag(q) T                                             (5)
 
+with, for first-order Markov states (``markov``: 1 / tau > 0), their own transition and noise
+(:func:`navreplay.filters.kalman.markov_transition`) in Phi and in place of ``q T``.
+
 with r in metres N, E, D (converted to the position states by
 :func:`navreplay.filters.ins_error.position_scale`) and ``diag(q) T`` the filter's own process
 noise (sensor noise and bias random walks). The first IMU sample after the gap is then
@@ -37,6 +40,7 @@ import math
 import numpy as np
 
 from navreplay.filters import ins_error as ie
+from navreplay.filters import kalman
 from navreplay.geo import earth, strapdown
 
 
@@ -72,6 +76,8 @@ def bridge(
     rate_sigma: float,
     q: np.ndarray,
     vertical: ie.Vertical = ie.Vertical.HEIGHT,
+    markov: np.ndarray | None = None,
+    phi_out: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The navigation vector and covariance after a piece of a gap (eqs. 1-5).
 
@@ -90,6 +96,10 @@ def bridge(
     q : ndarray, shape (n,)
         Process noise density diagonal of the filter [state^2/s].
     vertical : Vertical
+    markov : ndarray, shape (n,), optional
+        1 / tau [1/s] of the first-order Markov states, 0 for the others.
+    phi_out : ndarray, shape (n, n), optional
+        Receives the transition Phi of (2) (for a smoother).
 
     Returns
     -------
@@ -108,11 +118,15 @@ def bridge(
                           lon + v_n[1] * T / ((float(R_N) + h) * math.cos(lat)),
                           h - v_n[2] * T)  # (1)
     n = P.shape[0]
-    Phi = np.eye(n)
+    rate = np.zeros(n) if markov is None else np.asarray(markov, dtype=np.float64)
+    a, qd = kalman.markov_transition(rate, q, T)
+    Phi = np.diag(a)
     Phi[ie.POS, ie.VEL] = np.diag(_per_metre(nav, vertical) * T)  # (2)
-    Q = np.diag(np.asarray(q, dtype=np.float64) * T)
+    Q = np.diag(qd)
     Q += motion_noise(nav, n, (t1, t2), accel_sigma, rate_sigma, vertical)  # (3), (4)
     P = Phi @ P @ Phi.T + Q  # (5)
+    if phi_out is not None:
+        phi_out[:, :] = Phi
     return nav, 0.5 * (P + P.T)
 
 

@@ -3,7 +3,8 @@
 The baseline every aided filter is compared to. It integrates the IMU with
 :mod:`navreplay.geo.strapdown` from the initial solution in ``metadata.initial_nav`` and
 propagates the covariance of the 15 navigation error states of
-:mod:`navreplay.filters.ins_error` and of the three gyro errors the yaw rate drives with the IMU
+:mod:`navreplay.filters.ins_error` and of the gyro and accelerometer scale factors and
+misalignments (the columns of ``S + M`` that a drive or a banked turn excites) with the IMU
 error model, both by
 :class:`navreplay.filters.ins_time_update.TimeUpdate`. It makes no measurement update. The class is
 the base of :class:`navreplay.filters.gps_ins.GpsInsFilter` (feedback of estimated errors,
@@ -23,14 +24,20 @@ index name                   frame     unit       value in ``Estimate.x``
 g     m_g_xz                 b (FRD)   rad        gyro misalignment M[0, 2] (z rate into x)
 g+1   m_g_yz                 b (FRD)   rad        gyro misalignment M[1, 2] (z rate into y)
 g+2   s_g_z                  b (FRD)   -          gyro z scale-factor error
+g+3.. s_g_x, m_g_yx, m_g_zx, b (FRD)   -, rad     columns x and y of S_g + M_g
+      m_g_xy, s_g_y, m_g_zy                       (``gyro_roll_pitch_states``)
+a..   s_a_x, m_a_yx, ...     b (FRD)   -, rad     columns x, y (and z) of S_a + M_a
+                                                  (``accel_motion_states``,
+                                                  ``accel_load_states``)
 ===== ====================== ========= ========== ==========================================
 
-The gyro z-rate states (``gyro_misalignment_states``, on by default) follow the 15 (g = 15;
-in ``gps-ins`` after its lever-arm states when it estimates them).
+The gyro z-rate states (``gyro_misalignment_states``) follow the 15 (g = 15; in ``gps-ins``
+after its lever-arm states when it estimates them), the columns x and y of the gyro follow
+them, then the accelerometer columns; all are on by default.
 
-``Estimate.P`` is the covariance of the errors of the navigation solution and of the bias and
-z-rate estimates in these units. A free INS has nothing to feed back: its navigation error
-states stay 0 and its bias and z-rate estimates stay at their initial value (0).
+``Estimate.P`` is the covariance of the errors of the navigation solution and of the bias,
+scale-factor and misalignment estimates in these units. A free INS has nothing to feed back:
+its navigation error states stay 0 and its other estimates at their initial value (0).
 
 Errors (signs)
 --------------
@@ -51,8 +58,13 @@ Models
     gyro z-rate states k = (m_xz, m_yz, s_z), random constants (F = 0, Q = 0 for them):
       omega_hat = omega_meas - b_g_hat - k_hat (omega_meas_z - b_g_hat_z)
       F[phi, k_j] = +C_nb_hat[:, j] omega_hat_z   (ins_error eq. 22); s_g = 0 in (5a)      (5b)
-    accelerometer states (accel_motion_states, off here, on in gps-ins): the columns x, y
-      of S_a + M_a, F[v, k_j[i]] = -C_nb_hat[:, i] f_hat_j (ins_error eq. 23); s_a = 0    (5c)
+    accelerometer states (accel_motion_states): the columns x, y of S_a + M_a,
+      F[v, k_j[i]] = -C_nb_hat[:, i] f_hat_j (ins_error eq. 23); s_a = 0 in (5a)          (5c)
+    roll, pitch and load-factor states (gyro_roll_pitch_states, accel_load_states): the
+      gyro columns x, y, F[phi, k_j[i]] = +C_nb_hat[:, i] omega_hat_j,
+      and the accelerometer column z on f_z + g0, F[v, k_z[i]] = -C_nb_hat[:, i] (f_hat_z
+      + g0), its states correlated with the z-column part of the effective bias:
+      cov(b_a_i, k_z[i]) = -g0 sigma(k_z[i])^2 (ins_error eqs. 22, 23)                   (5d)
     P0  = diag(sigma_N^2/(R_M+h)^2, sigma_E^2/((R_N+h) cos lat)^2, sigma_D^2,
                sigma_v^2, sigma_phi^2, sigma_ba^2, sigma_bg^2,
                sigma_m^2, sigma_m^2, sigma_s^2)                                            (6)
@@ -80,11 +92,13 @@ tilt ``m (sin psi - sin psi_0, cos psi_0 - cos psi)``, and s_z adds ``s_z dpsi``
 White noise of the same size (5a) would instead add about 1 mrad (in quadrature) to the sigma
 of every attitude axis with each 90-deg turn: it made ``ins`` about twice under-confident in
 tilt after ten minutes of driving (docs/methods/ins.md). The other scale-factor and
-misalignment errors act only under roll and pitch rates, or as ``(S_a + M_a) a`` while the
-vehicle accelerates or turns, about a tenth of the effective bias on a drive: ``gps-ins``
-carries the latter as states (5c); ``ins`` leaves them out (they change its sigma by less than
-1 %), and ``accel_sf_mis`` and, without the states, ``gyro_sf_mis`` enter them as the white
-motion noise (5a) (ins_error eq. 21) with a correlation time tau.
+misalignment errors act under roll and pitch rates and a load factor (a banked turn: the body
+turns about its y axis at ``psi_dot sin(bank)`` and the specific force grows to ``g /
+cos(bank)``), or as ``(S_a + M_a) a`` while the vehicle accelerates or turns, about a tenth of
+the effective bias on a drive: both filters carry all of them as states (5c, 5d; without
+them a free INS banking at 60 m/s is about 15 % over-confident in NEES, docs/methods/ins.md
+§5), and ``accel_sf_mis`` and ``gyro_sf_mis`` enter them as the white motion noise (5a)
+(ins_error eq. 21) with a correlation time tau when the states are turned off.
 
 Scoring (:mod:`navreplay.metrics`): the navigation error states are scored by the errors of the
 navigation solution (``nav:`` truth keys), the biases by the truth stream's effective biases
@@ -126,10 +140,11 @@ from navreplay.filters.base import (
     overrides,
     state_names,
 )
+from navreplay.filters.ins_smoothing import InsSmoothing
 from navreplay.filters.registry import register_filter
 from navreplay.geo import strapdown
 from navreplay.geo.earth import OMEGA_IE
-from navreplay.sensors.imu import ImuGrade, imu_grade
+from navreplay.sensors.imu import ImuGrade, ImuModel, imu_grade
 from navreplay.sensors.specs import SensorSpecs
 
 
@@ -259,15 +274,25 @@ class InsParams(FilterParams):
     gyro_sf_mis: float = 0.5e-3
     """Unmodelled gyro scale-factor / misalignment, 1-sigma [-] (eq. 5a; 0: off); used only
     without ``gyro_misalignment_states``."""
-    accel_motion_states: bool = False
+    accel_motion_states: bool = True
     """Carry the accelerometer errors driven by the x and y specific force (the columns x and
     y of S_a + M_a) as six random-constant states (eq. 5c); the motion noise of
-    ``accel_sf_mis`` is then off. Off in ``ins``: they change its tilt and velocity sigma by
-    less than 1 %; on in ``gps-ins``."""
+    ``accel_sf_mis`` is then off."""
     accel_scale_factor_sigma: float = _DEFAULT["accel_scale_factor_sigma"]
-    """Initial 1-sigma of s_a_x, s_a_y [-] (``tactical`` grade: 300 ppm)."""
+    """Initial 1-sigma of s_a_x, s_a_y (and s_a_z) [-] (``tactical`` grade: 300 ppm)."""
     accel_misalignment_sigma: float = _DEFAULT["accel_misalignment_sigma"]
-    """Initial 1-sigma of m_a_yx, m_a_zx, m_a_xy, m_a_zy [rad] (``tactical``: 0.5 mrad)."""
+    """Initial 1-sigma of m_a_yx, m_a_zx, m_a_xy, m_a_zy (and m_a_xz, m_a_yz) [rad]
+    (``tactical``: 0.5 mrad)."""
+    gyro_roll_pitch_states: bool = True
+    """Carry the gyro errors driven by the x and y (roll and pitch) rates, the columns x and
+    y of S_g + M_g (s_g_x, m_g_yx, m_g_zx, m_g_xy, s_g_y, m_g_zy), as random-constant states
+    (eq. 5d): what a banked turn excites. They extend ``gyro_misalignment_states``: without
+    those, there are no gyro states at all."""
+    accel_load_states: bool = True
+    """Carry the accelerometer errors driven by the load factor, the column z of S_a + M_a
+    acting on ``f_z + g0`` (m_a_xz, m_a_yz, s_a_z), as random-constant states (eq. 5d; with
+    ``accel_motion_states``, whose states they extend; without those, none): what a banked
+    turn or a pull-up excites."""
     sf_mis_time: float = 30.0
     """Correlation time tau of eq. (5a) [s]: a manoeuvre and the time its error persists."""
     cov_step: float = 0.1
@@ -401,6 +426,17 @@ GYRO_Z_STATES: tuple[State, ...] = (
 scale factor S[2, 2] of :mod:`navreplay.sensors.imu`, scored against the constants in
 ``metadata.true_errors["imu"]``."""
 GYRO_Z_NAMES: tuple[str, ...] = state_names(GYRO_Z_STATES)
+GYRO_XY_STATES: tuple[State, ...] = tuple(
+    State(f"s_g_{a}", "-", Quantity.GYRO_SCALE_FACTOR,
+          TrueConstant("imu.gyro_scale_factor", (i,))) if i == j else
+    State(f"m_g_{a}{b}", "rad", Quantity.GYRO_MISALIGNMENT,
+          TrueConstant("imu.gyro_misalignment", (i, j)))
+    for j, b in enumerate("xy") for i, a in enumerate("xyz"))
+"""The gyro roll- and pitch-rate states (``gyro_roll_pitch_states``): the columns x and y of
+S + M (s_g_x, m_g_yx, m_g_zx, m_g_xy, s_g_y, m_g_zy)."""
+GYRO_STATES: tuple[State, ...] = GYRO_Z_STATES + GYRO_XY_STATES
+"""Every gyro scale-factor and misalignment state, in the order of the columns
+:data:`~navreplay.filters.ins_error.GYRO_COLUMNS`."""
 ACCEL_MOTION_STATES: tuple[State, ...] = tuple(
     State(f"s_a_{a}", "-", Quantity.ACCEL_SCALE_FACTOR,
           TrueConstant("imu.accel_scale_factor", (i,))) if i == j else
@@ -410,16 +446,40 @@ ACCEL_MOTION_STATES: tuple[State, ...] = tuple(
 """The accelerometer states (``accel_motion_states``): the columns x and y of S_a + M_a of
 :mod:`navreplay.sensors.imu` (s_a_x, m_a_yx, m_a_zx, m_a_xy, s_a_y, m_a_zy), scored against the
 constants in ``metadata.true_errors["imu"]``."""
+ACCEL_LOAD_STATES: tuple[State, ...] = (
+    State("m_a_xz", "rad", Quantity.ACCEL_MISALIGNMENT,
+          TrueConstant("imu.accel_misalignment", (0, 2))),
+    State("m_a_yz", "rad", Quantity.ACCEL_MISALIGNMENT,
+          TrueConstant("imu.accel_misalignment", (1, 2))),
+    State("s_a_z", "-", Quantity.ACCEL_SCALE_FACTOR, TrueConstant("imu.accel_scale_factor", (2,))),
+)
+"""The accelerometer load-factor states (``accel_load_states``): the column z of S_a + M_a
+acting on ``f_z + g0``."""
+ACCEL_STATES: tuple[State, ...] = ACCEL_MOTION_STATES + ACCEL_LOAD_STATES
+"""Every accelerometer scale-factor and misalignment state, in the order of the columns
+:data:`~navreplay.filters.ins_error.ACCEL_COLUMNS`."""
+
+
+def column_sigmas(columns: tuple[int, ...], scale_factor: float,
+                  misalignment: float) -> np.ndarray:
+    """The 1-sigma of the states of the given columns of ``S + M``, three per column (rows x,
+    y, z): the scale factor on the diagonal, the misalignment off it, shape (3 columns,).
+
+    >>> column_sigmas((2, 0), 1e-4, 5e-4).tolist()
+    [0.0005, 0.0005, 0.0001, 0.0001, 0.0005, 0.0005]
+    """
+    return np.array([scale_factor if i == j else misalignment
+                     for j in columns for i in range(3)])
 
 
 @register_filter
-class InsFilter(Filter):
+class InsFilter(Filter, InsSmoothing):
     """Free-inertial navigation with the predicted error covariance (see the module docstring)."""
 
     name: ClassVar[str] = "ins"
     summary: ClassVar[str] = (
         "free-inertial strapdown INS from metadata.initial_nav, 15-state error covariance"
-        " with the gyro z-rate misalignment and scale-factor states"
+        " with the gyro and accelerometer scale-factor and misalignment states"
     )
     requires: ClassVar[tuple[StreamKind, ...]] = (StreamKind.IMU,)
     Params: ClassVar[type[FilterParams]] = InsParams
@@ -435,6 +495,14 @@ class InsFilter(Filter):
     @classmethod
     def default_sensors(cls) -> SensorSpecs:
         return TACTICAL
+
+    @classmethod
+    def modelled_terms(cls, params: FilterParams) -> dict[str, frozenset[str]]:
+        """Every IMU error term: white noise and bias random walks in Q, turn-on bias,
+        instability, scale factor, misalignment and g-sensitivity in the initial sigmas of the
+        effective biases (:func:`imu_settings`) and in the scale-factor and misalignment
+        states."""
+        return {"imu": frozenset(ImuModel.error_terms)}
 
     def __init__(self, params: InsParams, context: FilterContext) -> None:
         super().__init__(params, context)
@@ -452,24 +520,31 @@ class InsFilter(Filter):
             p.gyro_bias_sigma,
         )
         extra = self._extra_declarations()
+        ng = (3 if p.gyro_roll_pitch_states else 1) if p.gyro_misalignment_states else 0
+        na = (3 if p.accel_load_states else 2) if p.accel_motion_states else 0
         gz = ie.N_STATES + len(extra)
-        self._gz = slice(gz, gz + ie.N_GYRO_Z) if p.gyro_misalignment_states else None
-        self.gyro_z = np.zeros(3)  # estimates of m_xz, m_yz, s_z
-        ga = gz + (ie.N_GYRO_Z if self._gz is not None else 0)
-        self._ga = slice(ga, ga + ie.N_ACCEL_HF) if p.accel_motion_states else None
-        self.accel_k = np.zeros(ie.N_ACCEL_HF)  # estimates of the columns x, y of S_a + M_a
-        self.states = (NAV_STATES + extra + (GYRO_Z_STATES if self._gz is not None else ())
-                       + (ACCEL_MOTION_STATES if self._ga is not None else ()))
+        self._gz = slice(gz, gz + 3 * ng) if ng else None
+        self.gyro_z = np.zeros(3 * ng)  # estimates of the columns z (x, y) of S_g + M_g
+        ga = gz + 3 * ng
+        self._ga = slice(ga, ga + 3 * na) if na else None
+        self.accel_k = np.zeros(3 * na)  # estimates of the columns x, y (z) of S_a + M_a
+        self.states = (NAV_STATES + extra + GYRO_STATES[:3 * ng] + ACCEL_STATES[:3 * na]
+                       + self._late_declarations())
         n = len(self.states)
         self.P = np.zeros((n, n))
         self.P[: ie.N_STATES, : ie.N_STATES] = P0
         if self._gz is not None:
-            self.P[self._gz, self._gz] = np.diag(np.array(
-                [p.gyro_misalignment_sigma, p.gyro_misalignment_sigma,
-                 p.gyro_scale_factor_sigma]) ** 2)
+            self.P[self._gz, self._gz] = np.diag(column_sigmas(
+                ie.GYRO_COLUMNS[:ng], p.gyro_scale_factor_sigma, p.gyro_misalignment_sigma) ** 2)
         if self._ga is not None:
-            s_a, m_a = p.accel_scale_factor_sigma, p.accel_misalignment_sigma
-            self.P[self._ga, self._ga] = np.diag(np.array([s_a, m_a, m_a, m_a, s_a, m_a]) ** 2)
+            sigma = column_sigmas(ie.ACCEL_COLUMNS[:na], p.accel_scale_factor_sigma,
+                                  p.accel_misalignment_sigma)
+            self.P[self._ga, self._ga] = np.diag(sigma**2)
+            if na == 3:  # the column z is part of the effective bias: b_a_i holds -g0 k_z[i]
+                for i in range(3):
+                    b, k = ie.BA.start + i, ga + 6 + i
+                    cov = -min(G0 * sigma[6 + i], math.sqrt(self.P[b, b])) * sigma[6 + i]
+                    self.P[b, k] = self.P[k, b] = cov
         self._noise = self._process_noise(n)
         self._time_update = itu.TimeUpdate(self._noise, p.cov_step)
         self.omega_ib_b = np.zeros(3)  # compensated body rate of the last IMU sample
@@ -481,6 +556,11 @@ class InsFilter(Filter):
     def _extra_declarations(self) -> tuple[State, ...]:
         """Declarations of the states after the 15 and before the gyro z-rate states (random
         constants; F = 0, Q = 0 for them)."""
+        return ()
+
+    def _late_declarations(self) -> tuple[State, ...]:
+        """Declarations of the states after the IMU error states (outside F: random constants,
+        random walks or first-order Markov processes of their own)."""
         return ()
 
     def _init_extra(self) -> None:
@@ -495,9 +575,11 @@ class InsFilter(Filter):
         accelerometer states (eq. 5c) its accelerometer motion noise."""
         noise = self.params.process_noise(n)
         if self._gz is not None:
-            noise = dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start)
+            noise = dataclasses.replace(noise, k_gyro=0.0, gyro_z_states=self._gz.start,
+                                        gyro_columns=len(self.gyro_z) // 3)
         if self._ga is not None:
-            noise = dataclasses.replace(noise, k_acc=0.0, accel_states=self._ga.start)
+            noise = dataclasses.replace(noise, k_acc=0.0, accel_states=self._ga.start,
+                                        accel_columns=len(self.accel_k) // 3)
         return noise
 
     def _gyro_z_estimates(self) -> np.ndarray | None:
@@ -523,7 +605,7 @@ class InsFilter(Filter):
         k_z = self._gyro_z_estimates()
         if k_z is None or not k_z.any():
             return omega_ib_b
-        return itu.compensate_gyro_z(omega_ib_b, self.b_g, k_z)
+        return itu.compensate_gyro(omega_ib_b, self.b_g, k_z)
 
     def _state_vector(self) -> np.ndarray:
         """``Estimate.x``: zeros for the error states, the bias and extra estimates."""
@@ -563,8 +645,12 @@ class InsFilter(Filter):
             return
         self._sync_covariance()
         p = self.params
+        phi = np.empty(self.P.shape) if self._smoothing is not None else None
         self.nav, self.P = imu_gap.bridge(self.nav, self.P, (self.t - since, t - since),
-                                          p.gap_accel_sigma, p.gap_rate_sigma, self._noise.q)
+                                          p.gap_accel_sigma, p.gap_rate_sigma, self._noise.q,
+                                          markov=self._noise.markov, phi_out=phi)
+        if phi is not None:
+            self._smoothing_transition(phi)
         self.t = t
         self._time_update.prev[:] = 0.0  # no coning/sculling across the gap
         kalman.check_covariance(self.P, t=self.t)
@@ -581,10 +667,12 @@ class InsFilter(Filter):
         compiled call of the time update
         (:meth:`~navreplay.filters.ins_time_update.TimeUpdate.propagate_outputs`): for each tick,
         :meth:`propagate` over its IMU segment and :meth:`estimate`, bit for bit. Other runs,
-        and every run of a subclass that changes :meth:`propagate` or :meth:`estimate`, go
-        through the default."""
-        if (overrides(self, InsFilter, "propagate", "estimate")
-                or (run.codes != TICK).any() or not run.record.all()):
+        every run of a subclass that changes :meth:`propagate` or :meth:`estimate`, of a
+        smoothed filter, and those of a filter with first-order Markov states (their estimates
+        decay from tick to tick, the kernel writes one state vector) go through the default."""
+        if (overrides(self, InsFilter, "propagate", "estimate") or self._smoothing is not None
+                or (run.codes != TICK).any() or not run.record.all()
+                or self._time_update.model.rate.any()):
             return super().run_events(run)
         m = len(run)
         t_out, x_out, P_out, nav_out = run.out()
@@ -616,6 +704,7 @@ class InsFilter(Filter):
 
     def _feedback(self, dx: np.ndarray) -> None:
         """Subtract estimated errors (n,) from the navigation solution and the estimates."""
+        self._smoothing_feedback(dx)
         self.nav = ie.apply_correction(self.nav, dx)
         self.b_a = self.b_a - dx[ie.BA]
         self.b_g = self.b_g - dx[ie.BG]

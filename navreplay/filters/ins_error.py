@@ -86,34 +86,46 @@ under motion (an error ``(S + M) omega`` of 1-sigma ``sigma |omega|`` per axis).
 white over a correlation time tau (about the length of a turn) gives ``k = sigma^2 tau``, so
 a turn of that length collects the variance ``(sigma |omega| tau)^2`` of the constant error.
 
-Gyro z-rate errors (optional, ``ProcessNoise.gyro_z_states``). The gyro measures
-``omega_meas = (I + S + M) omega + b + n`` (:mod:`navreplay.sensors.imu`), so the yaw rate of a
-land vehicle leaks into the measured x and y rates through the misalignments ``m_xz = M[0, 2]``,
-``m_yz = M[1, 2]`` and into z through the scale factor ``s_z``: a tilt and heading error of
-constant sign per turn, which white noise (21) cannot represent. A filter may estimate
-``k = (m_xz, m_yz, s_z)`` as random constants (three states from index ``gz``) and compensate
-``omega_hat = omega_meas - b_g_hat - k_hat (omega_meas_z - b_g_hat_z)`` per axis. With
-``dk = k_hat - k`` (estimate minus truth, as the biases) ``domega_ib_b = -db_g - dk omega_z``
-(first order), and since ``phi' = -C_nb_hat domega_ib_b + ...`` (the sign of eq. 16)::
+Gyro scale-factor and misalignment errors (optional, ``ProcessNoise.gyro_z_states`` and
+``gyro_columns``). The gyro measures ``omega_meas = (I + S + M) omega + b + n``
+(:mod:`navreplay.sensors.imu`), so each body rate leaks through its column of
+``K_g = S + M`` into all three measured rates. The yaw rate of a land vehicle drives the
+column z: the misalignments ``m_xz = M[0, 2]``, ``m_yz = M[1, 2]`` leak it into x and y and
+the scale factor ``s_z`` mis-scales it, a tilt and heading error of constant sign per turn,
+which white noise (21) cannot represent. A banked (coordinated) turn turns the body about its
+y axis as well (``omega_y = psi_dot sin(bank)``, of one sign in left and right turns alike)
+and rolls it in and out about x: the columns x and y. A filter may estimate the columns
+``k_j = K_g[:, j]`` as random constants, three states per column in the order
+:data:`GYRO_COLUMNS` (z, then x and y), and compensate
+``omega_hat = omega_meas - b_g_hat - sum_j k_j_hat (omega_meas_j - b_g_hat_j)``. With
+``dk = k_hat - k`` (estimate minus truth, as the biases) ``domega_ib_b = -db_g - sum_j dk_j
+omega_j`` (first order), and since ``phi' = -C_nb_hat domega_ib_b + ...`` (the sign of
+eq. 16)::
 
-    F[phi, gz + j] = +C_nb_hat[:, j] omega_z,   j = 0, 1, 2 (m_xz, m_yz, s_z)             (22)
+    F[phi, (k_j)_i] = +C_nb_hat[:, i] omega_j,   i = 0, 1, 2                            (22)
 
-with omega_z the mean compensated z rate of the step. The other six terms (scale factors of x
-and y, misalignments on the x and y rates) act only under roll and pitch rates.
+with omega the mean compensated body rate of the step. The column z alone (three states) is
+the land-vehicle model; the columns x and y are what roll and pitch rates excite.
 
-Accelerometer errors driven by the horizontal specific force (optional,
-``ProcessNoise.accel_states``). The accelerometer measures ``f_meas = (I + S_a + M_a) f + b``;
-of ``S_a + M_a`` the column z meets gravity, constant while the vehicle is level and part of the
-effective bias, while the columns x and y, ``k_x = (s_x, m_yx, m_zx)`` and
-``k_y = (m_xy, s_y, m_zy)`` (``k_j[i] = (S_a + M_a)[i, j]``), act on the accelerations and
-turns of the vehicle: an error in a fixed direction of the body at each speed change and
-turn. A filter may estimate them as random constants (six states from index ``ga``, k_x then
-k_y) and compensate ``f_hat = f_meas - b_a_hat - k_x_hat (f_x - b_a_x) - k_y_hat (f_y -
-b_a_y)``. With ``dk = k_hat - k``, ``df_b = -db_a - dk_x f_x - dk_y f_y`` and so::
+Accelerometer scale-factor and misalignment errors (optional, ``ProcessNoise.accel_states``
+and ``accel_columns``). The accelerometer measures ``f_meas = (I + S_a + M_a) f + b``. The
+columns x and y of ``K_a = S_a + M_a``, ``k_x = (s_x, m_yx, m_zx)`` and ``k_y = (m_xy, s_y,
+m_zy)`` (``k_j[i] = K_a[i, j]``), act on the accelerations and turns of the vehicle: an error in
+a fixed direction of the body at each speed change and flat turn. The column z meets the 1 g
+of gravity, a constant while the vehicle's specific force stays ``(0, 0, -g)``, so it is part
+of the effective bias (:func:`navreplay.sensors.imu.effective_biases`); what changes with the
+load factor of a banked turn or a pull-up, ``f_z + g0`` (``g0`` standard gravity: the
+constant ``k_z (-g0)`` stays in the bias), is the rest. A filter may estimate the columns as
+random constants, three states per column in the order :data:`ACCEL_COLUMNS` (x, y, then z),
+and compensate ``f_hat = f_meas - b_a_hat - sum_j k_j_hat u_j`` with ``u_x = f_x - b_a_x``,
+``u_y = f_y - b_a_y`` and ``u_z = f_z - b_a_z + g0``. With ``dk = k_hat - k``,
+``df_b = -db_a - sum_j dk_j u_j`` and so::
 
-    F[v, ga + 3 j + i] = -C_nb_hat[:, i] f_j,   j = 0, 1 (x, y), i = 0, 1, 2             (23)
+    F[v, (k_j)_i] = -C_nb_hat[:, i] u_j,   i = 0, 1, 2                                 (23)
 
-with f the mean compensated specific force of the step.
+with u from the mean compensated specific force of the step. The z column's states start
+correlated with the effective z-column bias they are part of: ``cov(b_a_i, k_z[i]) =
+-g0 sigma(k_z[i])^2`` (the bias holds ``k_z (-g0)``).
 
 Every block was checked against central finite differences of (2)-(4) and of
 :func:`navreplay.geo.strapdown.propagate` (tests/filters/test_ins_filter.py).
@@ -129,6 +141,7 @@ import math
 import numba
 import numpy as np
 
+from navreplay.core.units import G0
 from navreplay.filters.base import Nav, NavError, Quantity, State, TruthColumn
 from navreplay.geo import earth, kernels, strapdown
 from navreplay.geo.rotations import (
@@ -156,6 +169,13 @@ N_GYRO_Z = 3
 """Gyro z-rate error states of eq. (22): misalignments m_xz, m_yz and scale factor s_z."""
 N_ACCEL_HF = 6
 """Accelerometer error states of eq. (23): the columns x and y of S_a + M_a."""
+GYRO_COLUMNS = (2, 0, 1)
+"""The columns of ``S_g + M_g`` (the body rate each multiplies) in the order of the gyro
+states, three states each: z (the yaw rate of a land vehicle), then x and y (roll and pitch
+rates)."""
+ACCEL_COLUMNS = (0, 1, 2)
+"""The columns of ``S_a + M_a`` in the order of the accelerometer states: x and y (forward and
+lateral specific force), then z (the load factor, ``f_z + g0``)."""
 
 # -- noise layout (columns of G) --------------------------------------------------------------
 
@@ -338,12 +358,25 @@ def system_matrix(
 
 
 def gyro_z_rate_matrix(C_nb: np.ndarray, omega_z: float) -> np.ndarray:
-    """``F[phi, (dm_xz, dm_yz, ds_z)] = C_nb_hat omega_z``, eq. (22), shape (3, 3).
+    """``F[phi, (dm_xz, dm_yz, ds_z)] = C_nb_hat omega_z``, eq. (22) of the column z, shape
+    (3, 3).
 
     Column j is the attitude-error rate per unit error of the gyro z-rate coefficient of body
     axis j (m_xz, m_yz, s_z) at the body rate ``omega_z`` [rad/s].
     """
     return np.asarray(C_nb, dtype=float) * float(omega_z)
+
+
+def gyro_error_matrix(C_nb: np.ndarray, omega_b: np.ndarray, columns: int = 3) -> np.ndarray:
+    """``F[phi, (k_j)_i] = C_nb_hat[:, i] omega_j``, eq. (22), for the first ``columns`` gyro
+    columns of :data:`GYRO_COLUMNS`, shape (3, 3 columns).
+
+    Column ``3 c + i`` is the attitude-error rate per unit error of ``(S_g + M_g)[i, j]``,
+    ``j = GYRO_COLUMNS[c]``, at the body rate ``omega_b`` [rad/s].
+    """
+    C = np.asarray(C_nb, dtype=float)
+    w = np.asarray(omega_b, dtype=float)
+    return np.hstack([C * w[j] for j in GYRO_COLUMNS[:columns]])
 
 
 def accel_motion_matrix(C_nb: np.ndarray, f_b: np.ndarray) -> np.ndarray:
@@ -353,9 +386,17 @@ def accel_motion_matrix(C_nb: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     Column ``3 j + i`` is the velocity-error rate per unit error of the coefficient
     ``(S_a + M_a)[i, j]`` at the specific force ``f_b`` [m/s^2].
     """
+    return accel_error_matrix(C_nb, f_b, 2)
+
+
+def accel_error_matrix(C_nb: np.ndarray, f_b: np.ndarray, columns: int = 3) -> np.ndarray:
+    """``F[v, (k_j)_i] = -C_nb_hat[:, i] u_j``, eq. (23), for the first ``columns``
+    accelerometer columns of :data:`ACCEL_COLUMNS` (``u = f_b`` but ``u_z = f_z + g0``),
+    shape (3, 3 columns)."""
     C = np.asarray(C_nb, dtype=float)
-    f = np.asarray(f_b, dtype=float)
-    return np.hstack((-C * f[0], -C * f[1]))
+    u = np.array(f_b, dtype=float)
+    u[2] += G0
+    return np.hstack([-C * u[j] for j in ACCEL_COLUMNS[:columns]])
 
 
 def noise_matrix(C_nb: np.ndarray, *, out: np.ndarray | None = None) -> np.ndarray:

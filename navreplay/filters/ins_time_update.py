@@ -3,8 +3,10 @@
 ``P <- Phi P Phi^T + Qd`` with ``Phi = I + F T + (F T)^2 / 2`` (kalman eqs. 3, 6) by the
 compiled kernels of :mod:`navreplay.filters.kalman` for a Phi that is the identity but for a
 few rows: F has non-zero rows only for position, velocity and attitude and non-zero columns
-only for the 15 states here and the optional three of eq. (22) (the states a larger filter
-adds are random constants or random walks), so only 9 rows and columns of P change.
+only for the 15 states here and the optional scale-factor and misalignment states of
+eqs. (22), (23) (the states a larger filter adds are random constants, random walks or
+first-order Markov processes, kalman eq. 5a), so only 9 rows and columns of P change (and the
+diagonal of the Markov states).
 :func:`propagate_covariance` steps over given points, :func:`accumulate_covariance` collects
 IMU samples into steps of a given length, and :class:`TimeUpdate` is the whole time update of
 an INS filter over an IMU block (bias compensation, :mod:`navreplay.geo.strapdown`, covariance) in
@@ -20,8 +22,11 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from navreplay.core.units import G0
 from navreplay.filters import kalman
 from navreplay.filters.ins_error import (
+    ACCEL_COLUMNS,
+    GYRO_COLUMNS,
     N_ACCEL_HF,
     N_GYRO_Z,
     N_STATES,
@@ -45,8 +50,9 @@ _TIME_TOL = 1e-9
 class Model(NamedTuple):
     """The error model as the compiled kernels take it (:func:`_model_args`): the process noise
     per second ``q`` (n,), eq. (21)'s ``k_acc`` and ``k_gyro``, depth instead of height, the
-    curvature derivatives, and the first gyro z-rate (``gz``) and accelerometer (``ga``) state,
-    -1 for none."""
+    curvature derivatives, the first gyro (``gz``) and accelerometer (``ga``) scale-factor and
+    misalignment state (-1 for none) and the columns they hold (``ng``, ``na``; 0 for none),
+    and 1 / tau of each first-order Markov state (``rate`` (n,), 0 for the others)."""
 
     q: np.ndarray
     k_acc: float
@@ -55,12 +61,16 @@ class Model(NamedTuple):
     curvature: bool
     gz: int
     ga: int
+    ng: int
+    na: int
+    rate: np.ndarray
 
 
 class Work(NamedTuple):
     """Scratch arrays of the covariance step (:func:`_scratch`): F (15, nc), M (9, nc),
     T (9, n), Q (n, n), the columns ``cols`` (nc,) of the states F reaches, and the means
-    (2, 3) of an open step."""
+    (2, 3) of an open step; ``Phi`` (n, n) the product of the steps' transitions when it is
+    kept for a smoother (:meth:`TimeUpdate.keep_transition`), else (0, 0)."""
 
     F: np.ndarray
     M: np.ndarray
@@ -68,6 +78,7 @@ class Work(NamedTuple):
     Q: np.ndarray
     cols: np.ndarray
     mean: np.ndarray
+    Phi: np.ndarray
 
 
 class Open(NamedTuple):
@@ -88,8 +99,8 @@ class Imu(NamedTuple):
 
 class Compensation(NamedTuple):
     """The estimates the IMU samples are compensated with: accelerometer and gyro biases (3,),
-    the gyro z-rate errors ``k_z`` (3,) of eq. (22) and the accelerometer errors ``k_a`` (6,)
-    of eq. (23) (zeros: none)."""
+    the gyro scale-factor and misalignment errors ``k_z`` (3 per column) of eq. (22) and the
+    accelerometer errors ``k_a`` (3 per column) of eq. (23) (zeros: none)."""
 
     b_a: np.ndarray
     b_g: np.ndarray
@@ -116,33 +127,43 @@ def _covariance_step(
     (20), (21); returns a new P.
 
     F has non-zero rows only for position, velocity and attitude and non-zero columns only for
-    the 15 navigation states, with ``gz >= 0`` the three gyro z-rate states at
-    ``gz .. gz + 2`` (eq. 22) and with ``ga >= 0`` the six accelerometer states at
-    ``ga .. ga + 5`` (eq. 23), listed in ``cols``: Phi is the identity but for its first
-    9 rows, and :func:`navreplay.filters.kalman.predict_rows_kernel` propagates P.
-    F (15, nc), M (9, nc), T (9, n) and Q (n, n, diagonal) are scratch (nc = 15, + 3 with
-    ``gz >= 0``, + 6 with ``ga >= 0``).
+    the 15 navigation states, the gyro states of ``ng`` columns at ``gz .. gz + 3 ng - 1``
+    (eq. 22) and the accelerometer states of ``na`` columns at ``ga .. ga + 3 na - 1``
+    (eq. 23), listed in ``cols``: Phi is the identity but for its first 9 rows and the
+    diagonal of the first-order Markov states (``rate`` > 0, kalman eq. 5a), and
+    :func:`navreplay.filters.kalman.predict_rows_kernel` and
+    :func:`navreplay.filters.kalman.markov_rows_kernel` propagate P. F (15, nc), M (9, nc),
+    T (9, n) and Q (n, n, diagonal) are scratch (nc = 15 + 3 ng + 3 na).
     """
-    q, k_acc, k_gyro, depth, curvature, gz, ga = model
-    F, M, T, Q, cols, _ = work
+    q, k_acc, k_gyro, depth, curvature, gz, ga, ng, na, rate = model
+    F, M, T, Q, cols = work.F, work.M, work.T, work.Q, work.cols
     n = P.shape[0]
     F[:, :] = 0.0
     C = kernels.quat_to_dcm(nav[6:10])
     fill_system_matrix(nav[0], nav[2], nav[3], nav[4], nav[5], C, f_b, depth, curvature, F)
     c = N_STATES
-    if gz >= 0:  # (22): F[phi, (dm_xz, dm_yz, ds_z)] = C_nb_hat[:, j] omega_z
+    for k in range(ng):  # (22): F[phi, (k_j)_i] = C_nb_hat[:, i] omega_j, j = z, x, y
+        w = omega_b[GYRO_COLUMNS[k]]
         for i in range(3):
-            for j in range(3):
-                F[6 + i, c + j] = C[i, j] * omega_b[2]
-        c += N_GYRO_Z
-    if ga >= 0:  # (23): F[v, dk_ij] = -C_nb_hat[:, i] f_j, j = x, y
-        for j in range(2):
-            for i in range(3):
-                for r in range(3):
-                    F[3 + r, c + 3 * j + i] = -C[r, i] * f_b[j]
+            for r in range(3):
+                F[6 + r, c + 3 * k + i] = C[r, i] * w
+    c += 3 * ng
+    for k in range(na):  # (23): F[v, (k_j)_i] = -C_nb_hat[:, i] u_j, j = x, y, z
+        j = ACCEL_COLUMNS[k]
+        u = f_b[j] + G0 if j == 2 else f_b[j]
+        for i in range(3):
+            for r in range(3):
+                F[3 + r, c + 3 * k + i] = -C[r, i] * u
     kalman.transition_rows_kernel(F, M.shape[0], dt, M)  # kalman (3)
+    if work.Phi.shape[0] == n:  # kept for a smoother: Phi <- Phi_step Phi, T as scratch
+        _chain_transition(work.Phi, M, cols, T)
+        for i in range(n):  # the Markov states' diagonal of Phi_step (kalman eq. 5a)
+            if rate[i] > 0.0:
+                a = math.exp(-rate[i] * dt)
+                for j in range(n):
+                    work.Phi[i, j] *= a
     for i in range(n):
-        Q[i, i] = q[i] * dt  # kalman (4), diagonal (20)
+        Q[i, i] = q[i] * dt if rate[i] == 0.0 else 0.0  # kalman (4), diagonal (20)
     if k_acc > 0.0:  # (21): |a_n|^2 = |C f_b + g_n|^2, g on the ellipsoid
         g = kernels.gravity(nav[0], 0.0)
         a2 = 0.0
@@ -157,21 +178,42 @@ def _covariance_step(
         w2 = omega_b[0] ** 2 + omega_b[1] ** 2 + omega_b[2] ** 2
         for i in range(6, 9):
             Q[i, i] += k_gyro * w2 * dt
-    return kalman.predict_rows_kernel(P, M, cols, Q, T)  # kalman (6)
+    P = kalman.predict_rows_kernel(P, M, cols, Q, T)  # kalman (6)
+    kalman.markov_rows_kernel(P, rate, q, dt)  # kalman (5a), (6)
+    return P
 
 
-def _scratch(n: int, gz: int, ga: int) -> Work:
-    """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro z-rate states at
-    ``gz``, accelerometer states at ``ga``, or none for -1) and the means of
+@numba.njit(cache=True, inline="always")
+def _chain_transition(Phi: np.ndarray, M: np.ndarray, cols: np.ndarray, T: np.ndarray) -> None:
+    """``Phi <- Phi_step Phi`` for a step transition that is the identity but for its first r
+    rows, ``Phi_step[0:r, cols] = M`` (as :func:`navreplay.filters.kalman.predict_rows_kernel`
+    takes it): only rows 0..r-1 of Phi change. T (r, n) is scratch."""
+    n = Phi.shape[0]
+    r, nc = M.shape
+    for i in range(r):
+        for j in range(n):
+            T[i, j] = 0.0
+        for k in range(nc):
+            a = M[i, k]
+            if a != 0.0:
+                p = cols[k]
+                for j in range(n):
+                    T[i, j] += a * Phi[p, j]
+    for i in range(r):
+        for j in range(n):
+            Phi[i, j] = T[i, j]
+
+
+def _scratch(n: int, gz: int, ga: int, ng: int, na: int) -> Work:
+    """F, M, T, Q, cols of :func:`_covariance_step` for n states (gyro states of ``ng``
+    columns at ``gz``, accelerometer states of ``na`` columns at ``ga``) and the means of
     :func:`_close_step`."""
-    cols = np.arange(N_STATES, dtype=np.int64)
-    if gz >= 0:
-        cols = np.concatenate([cols, np.arange(gz, gz + N_GYRO_Z, dtype=np.int64)])
-    if ga >= 0:
-        cols = np.concatenate([cols, np.arange(ga, ga + N_ACCEL_HF, dtype=np.int64)])
+    cols = np.concatenate([np.arange(N_STATES, dtype=np.int64),
+                           np.arange(gz, gz + 3 * ng, dtype=np.int64),
+                           np.arange(ga, ga + 3 * na, dtype=np.int64)])
     nc = cols.shape[0]
     return Work(np.zeros((N_STATES, nc)), np.zeros((N_NAV, nc)), np.zeros((N_NAV, n)),
-                np.zeros((n, n)), cols, np.zeros((2, 3)))
+                np.zeros((n, n)), cols, np.zeros((2, 3)), np.zeros((0, 0)))
 
 
 @numba.njit(cache=True)
@@ -222,41 +264,61 @@ def _accumulate_covariance(
 
 
 @numba.njit(cache=True)
-def compensate_gyro_z(omega: np.ndarray, b_g: np.ndarray, k_z: np.ndarray) -> np.ndarray:
-    """Gyro samples (k, 3) compensated for the z-rate errors k_z = (m_xz, m_yz, s_z) of
-    ins_error eq. (22): ``omega - k_z (omega_z - b_g_z)`` (the bias itself is subtracted by
-    the time update)."""
+def compensate_gyro(omega: np.ndarray, b_g: np.ndarray, k_g: np.ndarray) -> np.ndarray:
+    """Gyro samples (k, 3) compensated for the scale-factor and misalignment errors of
+    ins_error eq. (22), ``k_g`` the estimates of the first ``len(k_g) / 3`` columns of
+    :data:`~navreplay.filters.ins_error.GYRO_COLUMNS` (z, x, y), three per column:
+    ``omega - sum_j k_j (omega_j - b_g_j)`` (the bias itself is subtracted by the time
+    update)."""
     out = np.empty(omega.shape)
+    ng = k_g.shape[0] // 3
     for i in range(omega.shape[0]):
-        w_z = omega[i, 2] - b_g[2]
         for c in range(3):
-            out[i, c] = omega[i, c] - w_z * k_z[c]
+            acc = omega[i, c]
+            for k in range(ng):
+                j = GYRO_COLUMNS[k]
+                acc -= (omega[i, j] - b_g[j]) * k_g[3 * k + c]
+            out[i, c] = acc
     return out
+
+
+compensate_gyro_z = compensate_gyro
+"""The gyro compensation of the column z alone (``k_g`` of three: m_xz, m_yz, s_z)."""
 
 
 @numba.njit(cache=True)
 def compensate_accel(f: np.ndarray, b_a: np.ndarray, k_a: np.ndarray) -> np.ndarray:
-    """Accelerometer samples (k, 3) compensated for the errors k_a = (k_x (3), k_y (3)) of
-    ins_error eq. (23) that the x and y specific force drives: ``f - k_x (f_x - b_a_x) - k_y
-    (f_y - b_a_y)`` (the bias itself is subtracted by the time update)."""
+    """Accelerometer samples (k, 3) compensated for the errors of ins_error eq. (23), ``k_a``
+    the estimates of the first ``len(k_a) / 3`` columns of
+    :data:`~navreplay.filters.ins_error.ACCEL_COLUMNS` (x, y, z), three per column:
+    ``f - sum_j k_j u_j``, ``u_x = f_x - b_a_x``, ``u_y = f_y - b_a_y``, ``u_z = f_z - b_a_z +
+    g0`` (the bias itself is subtracted by the time update)."""
     out = np.empty(f.shape)
+    na = k_a.shape[0] // 3
     for i in range(f.shape[0]):
-        fx = f[i, 0] - b_a[0]
-        fy = f[i, 1] - b_a[1]
         for c in range(3):
-            out[i, c] = f[i, c] - fx * k_a[c] - fy * k_a[3 + c]
+            acc = f[i, c]
+            for k in range(na):
+                j = ACCEL_COLUMNS[k]
+                u = f[i, j] - b_a[j]
+                if j == 2:
+                    u += G0
+                acc -= u * k_a[3 * k + c]
+            out[i, c] = acc
     return out
 
 
 @dataclasses.dataclass(frozen=True)
 class ProcessNoise:
-    """Process noise of the covariance propagation, per second.
+    """Process noise of the covariance propagation, per second, and the optional states the
+    time update moves.
 
     Attributes
     ----------
     q : ndarray, shape (n,)
         Diagonal of ``G Qc G^T`` (isotropic triad noise, :func:`process_noise_diagonal` with
-        dt = 1), units of state^2/s; entries beyond 15 belong to a larger filter's states.
+        dt = 1), units of state^2/s; entries beyond 15 belong to a larger filter's states (for
+        a first-order Markov state the density of its driving noise, ``2 sigma^2 / tau``).
     k_acc : float
         Velocity noise per unit squared acceleration, eq. (21) [(m/s)^2/s per (m/s^2)^2 = s].
     k_gyro : float
@@ -267,35 +329,60 @@ class ProcessNoise:
     k_acc: float = 0.0
     k_gyro: float = 0.0
     gyro_z_states: int = -1
-    """Index of the first of the three gyro z-rate error states (dm_xz, dm_yz, ds_z) of
-    eq. (22), which a larger filter places after the 15; -1: none."""
+    """Index of the first gyro scale-factor and misalignment state of eq. (22), which a larger
+    filter places after the 15; -1: none."""
     accel_states: int = -1
-    """Index of the first of the six accelerometer error states of eq. (23) (the columns x and
-    y of S_a + M_a), after the 15 and the gyro z-rate states; -1: none."""
+    """Index of the first accelerometer scale-factor and misalignment state of eq. (23), after
+    the 15 and the gyro states; -1: none."""
+    gyro_columns: int = 1
+    """Columns of ``S_g + M_g`` the gyro states hold, three states each, in the order of
+    :data:`~navreplay.filters.ins_error.GYRO_COLUMNS`: 1 (z: m_xz, m_yz, s_z) or 3 (z, x, y)."""
+    accel_columns: int = 2
+    """Columns of ``S_a + M_a`` the accelerometer states hold, in the order of
+    :data:`~navreplay.filters.ins_error.ACCEL_COLUMNS`: 2 (x, y) or 3 (x, y, z)."""
+    markov: np.ndarray | None = None
+    """1 / tau [1/s] of each state that is a first-order Markov process (kalman eq. 5a), 0 for
+    the others, shape (n,); None: none. Such states must be outside F (after the 15 and the
+    IMU error states)."""
 
     def __post_init__(self) -> None:
         q = np.ascontiguousarray(self.q, dtype=np.float64)
+        n = q.shape[0]
         if q.ndim != 1 or not np.all(np.isfinite(q)) or np.any(q < 0.0):
             raise ValueError(f"process noise q must be a vector of values >= 0, got {q}")
-        gz = self.gyro_z_states
-        if not (gz == -1 or N_STATES <= gz <= q.shape[0] - N_GYRO_Z):
-            raise ValueError(
-                f"gyro_z_states must be -1 or an index in 15..{q.shape[0] - N_GYRO_Z} (three "
-                f"states within the {q.shape[0]}), got {gz!r}"
-            )
-        object.__setattr__(self, "gyro_z_states", int(gz))
-        ga = self.accel_states
-        if not (ga == -1 or N_STATES <= ga <= q.shape[0] - N_ACCEL_HF):
-            raise ValueError(
-                f"accel_states must be -1 or an index in 15..{q.shape[0] - N_ACCEL_HF} (six "
-                f"states within the {q.shape[0]}), got {ga!r}"
-            )
-        object.__setattr__(self, "accel_states", int(ga))
+        end = N_STATES
+        for name, columns, allowed in (("gyro_z_states", "gyro_columns", (1, 3)),
+                                       ("accel_states", "accel_columns", (2, 3))):
+            k = getattr(self, columns)
+            if k not in allowed:
+                raise ValueError(f"{columns} must be one of {allowed}, got {k!r}")
+            first = getattr(self, name)
+            if not (first == -1 or end <= first <= n - 3 * k):
+                raise ValueError(
+                    f"{name} must be -1 or an index in {end}..{n - 3 * k} ({3 * k} states "
+                    f"within the {n}), got {first!r}")
+            object.__setattr__(self, name, int(first))
+            if first >= 0:
+                end = first + 3 * k
         for name in ("k_acc", "k_gyro"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        rate = np.zeros(n) if self.markov is None else np.ascontiguousarray(
+            self.markov, dtype=np.float64)
+        if rate.shape != (n,) or not np.all(np.isfinite(rate)) or np.any(rate < 0.0):
+            raise ValueError(f"markov must be {n} rates >= 0 [1/s], got {self.markov!r}")
+        if np.any(rate[:end] > 0.0):
+            raise ValueError(f"markov: the states F reaches (0..{end - 1}) cannot be Markov "
+                             "states")
+        object.__setattr__(self, "markov", rate)
         object.__setattr__(self, "q", q)
+
+    @property
+    def columns(self) -> tuple[int, int]:
+        """Columns of the gyro and of the accelerometer states (0 without them)."""
+        return (self.gyro_columns if self.gyro_z_states >= 0 else 0,
+                self.accel_columns if self.accel_states >= 0 else 0)
 
     @staticmethod
     def motion_coefficient(sigma: float, correlation_time: float) -> float:
@@ -335,8 +422,10 @@ def _model_args(
         raise ValueError(
             f"P must be (n, n) with n >= 15 the length of the process noise ({n}), got {shape}"
         )
+    assert noise.markov is not None  # an array once the noise is made
     return Model(noise.q, noise.k_acc, noise.k_gyro, vertical is Vertical.DEPTH,
-                 bool(curvature_derivatives), noise.gyro_z_states, noise.accel_states)
+                 bool(curvature_derivatives), noise.gyro_z_states, noise.accel_states,
+                 *noise.columns, noise.markov)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
@@ -395,7 +484,7 @@ def propagate_covariance(
             f"{f_b.shape}, {omega_b.shape}"
         )
     return _propagate_covariance(_f64(P), _f64(nav), _f64(f_b), _f64(omega_b), _f64(dt), args,
-                                 _scratch(P.shape[0], args.gz, args.ga))
+                                 _scratch(P.shape[0], args.gz, args.ga, args.ng, args.na))
 
 
 def accumulate_covariance(
@@ -453,7 +542,8 @@ def accumulate_covariance(
         )
     return _accumulate_covariance(
         _f64(P), _f64(hist), _f64(f_b), _f64(omega_b), _f64(dt), float(step), model,
-        Open(open_step.nav, open_step.sums), _scratch(P.shape[0], model.gz, model.ga),
+        Open(open_step.nav, open_step.sums),
+        _scratch(P.shape[0], model.gz, model.ga, model.ng, model.na),
     )
 
 
@@ -464,7 +554,7 @@ def close_step(
     """Propagate P over the open step (if any) and clear it; P at the last sample's time."""
     model = _model_args(P.shape, noise, vertical, curvature_derivatives)
     return _close_step(_f64(P), model, Open(open_step.nav, open_step.sums),
-                       _scratch(P.shape[0], model.gz, model.ga))
+                       _scratch(P.shape[0], model.gz, model.ga, model.ng, model.na))
 
 
 class TimeUpdate:
@@ -496,12 +586,29 @@ class TimeUpdate:
         self._shape = (n, n)
         self.model = _model_args(self._shape, noise, vertical, curvature_derivatives)
         """The error model as the compiled kernels take it."""
-        self.work = _scratch(n, noise.gyro_z_states, noise.accel_states)
+        self.work = _scratch(n, self.model.gz, self.model.ga, self.model.ng, self.model.na)
         """Their scratch arrays."""
         self.step = float(step)
         self.prev = np.zeros(6)
         """Increments [dtheta, dv] of the last sample [rad, m/s]."""
         self.open_step = OpenStep()
+
+    def keep_transition(self) -> None:
+        """From now on, keep the product of the covariance steps' transitions (for a
+        smoother): :meth:`take_transition` hands it over."""
+        n = self._shape[0]
+        self.work = self.work._replace(Phi=np.eye(n))
+
+    def take_transition(self) -> np.ndarray:
+        """The transition of the error state over the covariance steps since the last call
+        (or :meth:`keep_transition`), and start the next; the steps of the open one are not in
+        it yet (close it first)."""
+        Phi = self.work.Phi
+        if Phi.shape[0] != self._shape[0]:
+            raise RuntimeError("the transition is not kept: call keep_transition first")
+        out = Phi.copy()
+        Phi[:, :] = np.eye(Phi.shape[0])
+        return out
 
     def propagate(
         self, nav: np.ndarray, P: np.ndarray, t_nav: float, t: np.ndarray,
@@ -647,7 +754,7 @@ _ZERO3 = _NO_GYRO_Z
 _NO_ACCEL = np.zeros(N_ACCEL_HF)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _propagate_segment(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, w: np.ndarray, f: np.ndarray,
     b_a: np.ndarray, b_g: np.ndarray, first: int, b: int, prev: np.ndarray, step: float,
@@ -701,9 +808,9 @@ def _propagate_outputs(
     ``t_nav`` (the time of ``nav``), then, with ``close``, the open covariance step closed
     (:func:`_close_step`), and (t, nav, P) written into row j of the outputs.
 
-    The gyro samples are compensated first for the z-rate errors ``k_z`` (eq. 22):
-    ``omega - k_z (omega_z - b_g_z)``, the accelerometer samples for the errors ``k_a``
-    (eq. 23) (:func:`compensate_accel`); then the biases are subtracted. Returns
+    The gyro samples are compensated first for the scale-factor and misalignment errors
+    ``k_z`` (eq. 22, :func:`compensate_gyro`), the accelerometer samples for the errors ``k_a``
+    (eq. 23, :func:`compensate_accel`); then the biases are subtracted. Returns
     (code, j, first, nav, P, t_nav) with ``first`` the index of the first sample of segment j
     after ``t_nav``; code -1 when all went well, else for segment j: -5 when P is not (n, n)
     with n the length of q; the strapdown's codes (the index of the first invalid sample from
@@ -722,8 +829,10 @@ def _propagate_outputs(
     if P.shape[0] != n or P.shape[1] != n:
         return -5, 0, 0, nav, P, t_nav
     w = omega
-    if k_z[0] != 0.0 or k_z[1] != 0.0 or k_z[2] != 0.0:
-        w = compensate_gyro_z(omega, b_g, k_z)
+    for c in range(k_z.shape[0]):
+        if k_z[c] != 0.0:
+            w = compensate_gyro(omega, b_g, k_z)
+            break
     for c in range(k_a.shape[0]):
         if k_a[c] != 0.0:
             f = compensate_accel(f, b_a, k_a)

@@ -14,6 +14,13 @@ Continuous error dynamics and their discrete form over a step dt::
     Qd    = Phi B12,  [[B11, B12], [0, B22]] = expm([[-F, G Qc G^T], [0, F^T]] dt)
                                                  (Van Loan, exact for constant F) (5)
 
+First-order Markov (Gauss-Markov) states, ``x_i' = -x_i / tau_i + w_i`` with ``E[w_i^2] = q_i``
+(``q_i = 2 sigma_i^2 / tau_i`` for a stationary sigma) and no other state in their rows or
+columns of F, have the exact transition and noise::
+
+    Phi_ii = a_i = exp(-dt / tau_i),   Qd_ii = q_i tau_i (1 - a_i^2) / 2 = sigma_i^2 (1 - a_i^2)
+                                                                                 (5a)
+
 Prediction and correction (Joseph form, valid for any gain, hence for frozen states)::
 
     x^- = Phi x,   P^- = Phi P Phi^T + Qd                                        (6)
@@ -54,6 +61,7 @@ Scalar random constant, measured once with unit noise:
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numba
@@ -220,7 +228,7 @@ def check_covariance(
     C = P / s[:, None] / s[None, :]
     asym = np.abs(C - C.T)
     if asym.max(initial=0.0) > rtol:
-        i, j = np.unravel_index(int(np.argmax(asym)), asym.shape)
+        i, j = (int(v) for v in np.unravel_index(int(np.argmax(asym)), asym.shape))
         raise FilterDivergedError(
             f"{name} is not symmetric: {name}[{i},{j}] = {P[i, j]:.6e} vs "
             f"{name}[{j},{i}] = {P[j, i]:.6e}",
@@ -274,6 +282,47 @@ def transition_rows_kernel(F: np.ndarray, r: int, dt: float, M: np.ndarray) -> N
         for j in range(nc):
             M[i, j] = F[i, j] * dt + h * M[i, j]
         M[i, i] += 1.0
+
+
+@numba.njit(cache=True, inline="always")
+def markov_rows_kernel(P: np.ndarray, rate: np.ndarray, q: np.ndarray, dt: float) -> None:
+    """Eqs. (5a), (6) in place for the first-order Markov states of ``P``: those with
+    ``rate[i] = 1 / tau_i > 0`` (the others are left as they are), whose rows and columns of
+    F hold nothing else: ``P <- A P A + Qd``, A the identity but ``a_i`` on their diagonal, and
+    ``Qd_ii = q_i (1 - a_i^2) / (2 rate_i)`` with ``q_i`` the density of their white noise.
+    Applied after the prediction of the other states (the two transitions commute), it gives
+    the prediction of the whole state."""
+    n = P.shape[0]
+    for i in range(n):
+        b = rate[i]
+        if b > 0.0:
+            a = math.exp(-b * dt)
+            for j in range(n):  # row and column i; the diagonal scaled twice: a^2
+                P[i, j] *= a
+                P[j, i] *= a
+            P[i, i] += q[i] * -math.expm1(-2.0 * b * dt) / (2.0 * b)
+
+
+def markov_transition(rate: np.ndarray, q: np.ndarray, dt: float
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The diagonal of Phi and of Qd of eq. (5a) over ``dt`` [s] for states of Markov rates
+    ``rate`` [1/s] (n,) and white-noise densities ``q`` (n,); a state of rate 0 gets 1 and
+    ``q dt`` (a random walk or a constant).
+
+    A random walk and a Markov state of sigma 3 and tau 100 s, over 10^4 s (the latter forgets
+    its start and reaches its stationary variance):
+
+    >>> a, qd = markov_transition(np.array([0.0, 0.01]), np.array([2.0, 2 * 3.0**2 * 0.01]), 1e4)
+    >>> a.round(6).tolist(), qd.round(6).tolist()
+    ([1.0, 0.0], [20000.0, 9.0])
+    """
+    rate = np.asarray(rate, dtype=float)
+    q = np.asarray(q, dtype=float)
+    markov = rate > 0.0
+    safe = np.where(markov, rate, 1.0)
+    a = np.where(markov, np.exp(-safe * dt), 1.0)
+    qd = np.where(markov, q * -np.expm1(-2.0 * safe * dt) / (2.0 * safe), q * dt)
+    return a, qd
 
 
 @numba.njit(cache=True)

@@ -19,7 +19,9 @@ source        where the value came from
 A filter whose defaults stand for some sensors (:meth:`Filter.default_sensors
 <navreplay.filters.base.Filter.default_sensors>`, e.g. a tactical IMU for ``ins``) and that
 runs on a recording whose specifications do not give those settings gets a note saying so once
-(:attr:`FilterSettings.note`).
+(:attr:`FilterSettings.note`). So does a filter that declares the error terms it models
+(:meth:`Filter.modelled_terms <navreplay.filters.base.Filter.modelled_terms>`) when the
+specifications of a sensor it consumes state one it leaves out (:func:`unmodelled_terms`).
 """
 
 from __future__ import annotations
@@ -28,13 +30,14 @@ import dataclasses
 import enum
 import functools
 import re
+import typing
 from collections.abc import Iterable, Mapping
 from typing import Any
 
 from navreplay.core import params as _params
 from navreplay.core.streams import jsonable
 from navreplay.filters.base import Filter, FilterParams
-from navreplay.sensors.specs import SensorSpecs
+from navreplay.sensors.specs import SPEC_STREAMS, SensorSpecs
 
 
 class Source(enum.StrEnum):
@@ -91,7 +94,7 @@ class FilterSettings:
     def summary(self) -> dict[str, Any]:
         """The ``settings`` entry of a run summary: per field ``{"value", "source", "unit"}``
         (SI, JSON values), in the order of the ``Params`` fields."""
-        units = field_units(type(self.params))
+        units = field_units(typing.cast(type, type(self.params)))
         out = {}
         for f in dataclasses.fields(self.params):
             entry = {"value": jsonable(getattr(self.params, f.name)),
@@ -202,11 +205,44 @@ def build_params(
     used = [k for k in sensors.models if derived and filter_cls.settings_from_sensors(
         SensorSpecs({k: sensors.get(k)}, {k: sensors.known_fields(k)}))]
     described = "; ".join(f"{k}: {sensors.source(k) or 'stated'}" for k in used)
-    notes = [_note(filter_cls, name, sensors, sources)]
+    notes = [_note(filter_cls, name, sensors, sources),
+             _unmodelled_note(name, unmodelled_terms(filter_cls, p, sensors))]
     if refused:
         notes.append(f"{name}: the sensor specifications give {'; '.join(refused.values())}: "
                      f"{', '.join(refused)} keep the defaults")
     return FilterSettings(p, sources, described, "; ".join(n for n in notes if n))
+
+
+def unmodelled_terms(filter_cls: type[Filter], params: FilterParams,
+                     sensors: SensorSpecs) -> dict[str, dict[str, str]]:
+    """The error terms the specifications state (not zero) for the sensors whose streams
+    ``filter_cls`` consumes and that it does not model with ``params``, by sensor kind: field
+    -> what it is. Empty when the filter declares nothing (:meth:`Filter.modelled_terms
+    <navreplay.filters.base.Filter.modelled_terms>` returns None)."""
+    modelled = filter_cls.modelled_terms(params)
+    if modelled is None:
+        return {}
+    consumed = set(filter_cls.requires) | set(filter_cls.optional)
+    out: dict[str, dict[str, str]] = {}
+    for kind in sensors.models:
+        if not consumed & set(SPEC_STREAMS.get(kind, ())):
+            continue
+        left = {k: v for k, v in sensors.present_terms(kind).items()
+                if k not in modelled.get(kind, ())}
+        if left:
+            out[kind] = left
+    return out
+
+
+def _unmodelled_note(name: str, terms: Mapping[str, Mapping[str, str]]) -> str:
+    """``gps-ins does not model the gps time-correlated (Gauss-Markov) velocity error
+    (vel_gm_sigma) that the sensor specifications state``, or ``""``."""
+    parts = [f"the {kind} {what} ({field})" for kind, fields in terms.items()
+             for field, what in fields.items()]
+    if not parts:
+        return ""
+    listed = parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+    return f"{name} does not model {listed} that the sensor specifications state"
 
 
 def _invalid(cls: type, derived: Mapping[str, Any]) -> dict[str, str]:

@@ -499,11 +499,11 @@ def propagate(
     ValueError
         On wrong shapes, non-finite values, or dt <= 0 (naming the sample).
     """
-    nav, omega, f, dt, p = _inputs(nav, omega_ib_b, f_b, dt, prev)
+    nav0, omega, f, steps, p = _inputs(nav, omega_ib_b, f_b, dt, prev)
     out = np.empty(NAV_SIZE)
-    bad = propagate_kernel(nav, omega, f, dt, p, out)
+    bad = propagate_kernel(nav0, omega, f, steps, p, out)
     if bad != -1:
-        _raise_bad(bad, omega, f, dt)
+        _raise_bad(bad, omega, f, steps)
     return out
 
 
@@ -524,11 +524,11 @@ def integrate(
     ndarray, shape (k+1, 10)
         Row 0 is ``nav0``, row k the state after sample k.
     """
-    nav0, omega, f, dt, p = _inputs(nav0, omega_ib_b, f_b, dt, prev)
-    hist = np.empty((dt.shape[0] + 1, NAV_SIZE))
-    bad = integrate_kernel(nav0, omega, f, dt, p, hist)
+    start, omega, f, steps, p = _inputs(nav0, omega_ib_b, f_b, dt, prev)
+    hist = np.empty((steps.shape[0] + 1, NAV_SIZE))
+    bad = integrate_kernel(start, omega, f, steps, p, hist)
     if bad != -1:
-        _raise_bad(bad, omega, f, dt)
+        _raise_bad(bad, omega, f, steps)
     return hist
 
 
@@ -592,10 +592,10 @@ def propagate_reference(
     It is built from :mod:`navreplay.geo` and serves as the cross-check of the numba kernel and
     as the baseline of the benchmark. Parameters and return as :func:`propagate`.
     """
-    nav, omega, f, dt, p = _inputs(nav, omega_ib_b, f_b, dt, prev)
+    state, omega, f, steps, p = _inputs(nav, omega_ib_b, f_b, dt, prev)
     dtheta_prev, dv_prev = p[:3], p[3:]
-    for k in range(dt.shape[0]):
-        dtheta, dv = omega[k] * dt[k], f[k] * dt[k]
-        nav = _ref_step(nav, dtheta, dv, dtheta_prev, dv_prev, dt[k])
+    for k in range(steps.shape[0]):
+        dtheta, dv = omega[k] * steps[k], f[k] * steps[k]
+        state = _ref_step(state, dtheta, dv, dtheta_prev, dv_prev, steps[k])
         dtheta_prev, dv_prev = dtheta, dv
-    return nav
+    return state

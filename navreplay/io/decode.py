@@ -277,7 +277,7 @@ def file_metadata(contents: FileContents, where: str) -> tuple[Metadata, int, li
     """The recording's metadata, start [ns] and auxiliary columns: the ``navreplay`` record,
     else ``Metadata()`` starting at the first message (by the statistics of an intact file)."""
     records = [m for m in contents.metadata if m.name == METADATA_NAME]
-    meta, t0_ns, aux = Metadata(), None, []
+    meta, t0_ns, aux = Metadata(), None, list[AuxColumn]()
     if records:
         meta, t0_ns, aux = decode_metadata(records[-1].metadata, where)
     if t0_ns is None:

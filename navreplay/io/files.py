@@ -1,8 +1,9 @@
 """Recording files: which kind a path is, decided once, and the file opened once.
 
 :func:`open_recording` asks each kind of :data:`FILE_KINDS` in turn whether it takes the path
-and opens it as that kind's :class:`~navreplay.io.source.Source`: a rosbag2 folder, its
-``metadata.yaml`` or a ``.db3`` file (:mod:`navreplay.io.rosbag`), else an MCAP file
+and opens it as that kind's :class:`~navreplay.io.source.Source`: a ROS 1 bag
+(:mod:`navreplay.io.rosbag1`), a rosbag2 folder, its ``metadata.yaml`` or a ``.db3`` file
+(:mod:`navreplay.io.rosbag`), else an MCAP file
 (:mod:`navreplay.io.mcapread`, the last, which takes any file). Another kind of log is one
 module with an ``accepts(path)`` function and a ``Source`` class, and one line in
 :data:`FILE_KINDS`.
@@ -14,15 +15,14 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from navreplay.core.streams import Recording, StreamKind
-from navreplay.io import mcapread, rosbag
-from navreplay.io.convert import Convention
+from navreplay.io import gins, mcapread, rosbag, rosbag1
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import Source
-from navreplay.io.topics import TopicSource
+from navreplay.io.topics import FrameNames, TopicNames, TopicSource
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,10 +35,15 @@ class FileKind:
 
 
 FILE_KINDS: tuple[FileKind, ...] = (
+    FileKind("rosbag1", rosbag1.accepts, rosbag1.Bag1Source),
+    FileKind("gins", gins.accepts, gins.GinsSource),
     FileKind("rosbag2", rosbag.accepts, rosbag.BagSource),
     FileKind("mcap", mcapread.accepts, mcapread.McapSource),
 )
 """The kinds of recording file, asked in this order (the first that accepts a path reads it)."""
+
+BAGS = ("rosbag1", "rosbag2")
+"""The kinds read through rosbags (:mod:`navreplay.io.rosbag`)."""
 
 
 def file_kind(path: str | os.PathLike[str]) -> FileKind:
@@ -52,8 +57,8 @@ def open_recording(
     *,
     kinds: Iterable[StreamKind | str] | None = None,
     explicit: bool = False,
-    topics: Mapping[StreamKind | str, str] | None = None,
-    frames: Mapping[StreamKind | str, Convention | str] | None = None,
+    topics: TopicNames | None = None,
+    frames: FrameNames | None = None,
     time: str = "header",
     validate: bool = True,
     whole: bool = False,
@@ -109,8 +114,8 @@ def read_streams(
     *,
     kinds: Iterable[StreamKind | str] | None = None,
     validate: bool = True,
-    topics: Mapping[StreamKind | str, str] | None = None,
-    frames: Mapping[StreamKind | str, Convention | str] | None = None,
+    topics: TopicNames | None = None,
+    frames: FrameNames | None = None,
     time: str = "header",
 ) -> tuple[Recording, dict[StreamKind, TopicSource]]:
     """Read a recording whole into columnar streams (see :func:`open_recording`; a kind asked
@@ -144,8 +149,8 @@ def read_recording(
     *,
     kinds: Iterable[StreamKind | str] | None = None,
     validate: bool = True,
-    topics: Mapping[StreamKind | str, str] | None = None,
-    frames: Mapping[StreamKind | str, Convention | str] | None = None,
+    topics: TopicNames | None = None,
+    frames: FrameNames | None = None,
     time: str = "header",
 ) -> Recording:
     """Read a recording whole into columnar streams (see :func:`read_streams`)."""

@@ -20,7 +20,7 @@ import dataclasses
 import os
 import sqlite3
 import warnings
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -31,9 +31,20 @@ from navreplay.io.cdr import fields_of_messages
 from navreplay.io.checks import check_frame_ids
 from navreplay.io.convert import REDUCE, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
-from navreplay.io.schemas import SPECS, normalize_type_name
+from navreplay.io.schemas import MESSAGE_ENCODING, SPECS, normalize_type_name
 from navreplay.io.source import COMPLETE, Source, Window
-from navreplay.io.topics import build_stream, candidate, choose_topics, sample_times, topic_map
+from navreplay.io.topics import (
+    FrameNames,
+    TopicNames,
+    build_stream,
+    candidate,
+    choose_topics,
+    sample_times,
+    topic_map,
+)
+
+ROS1_FORMAT = "ros1"
+"""The serialisation of a ROS 1 bag's messages."""
 
 
 def bag_folder(path: Path) -> Path | None:
@@ -66,18 +77,21 @@ class _Bag:
         self.where = str(path)
         self._reader: Any = None
         self._db: sqlite3.Connection | None = None
+        self._store: Any = None
 
     def __enter__(self) -> _Bag:
-        folder = bag_folder(self.path)
+        folder = bag_folder(self.path) if self.path.suffix != ".bag" else None
         if not self.path.exists():
             raise RecordingError(f"{self.where}: no such file or folder")
         if folder is not None:
             bag_metadata(folder)  # a garbled metadata.yaml: one line that says where
+        from navreplay.io.rosbag1 import is_rosbag1
+
         try:
-            if folder is not None:
+            if folder is not None or is_rosbag1(self.path):
                 from rosbags.highlevel import AnyReader
 
-                self._reader = AnyReader([folder])
+                self._reader = AnyReader([folder or self.path])
                 self._reader.open()
             else:
                 from rosbags.typesys import Stores, get_typestore
@@ -88,7 +102,8 @@ class _Bag:
         except RecordingError:
             raise
         except Exception as exc:  # rosbags and sqlite raise many types on foreign data
-            raise RecordingError(f"{self.where}: not a readable rosbag2 bag "
+            what = "ROS 1 bag" if is_rosbag1(self.path) else "rosbag2 bag"
+            raise RecordingError(f"{self.where}: not a readable {what} "
                                  f"({' '.join(str(exc).split()) or type(exc).__name__})") from None
         return self
 
@@ -102,8 +117,8 @@ class _Bag:
         if self._reader is not None:
             out: dict[str, list[Any]] = {}
             for c in self._reader.connections:
-                row = out.setdefault(c.topic, [c.topic, normalize_type_name(c.msgtype),
-                                               c.ext.serialization_format, 0])
+                fmt = getattr(c.ext, "serialization_format", ROS1_FORMAT)
+                row = out.setdefault(c.topic, [c.topic, normalize_type_name(c.msgtype), fmt, 0])
                 row[3] += c.msgcount
             return sorted(tuple(r) for r in out.values())
         assert self._db is not None
@@ -156,8 +171,8 @@ class BagSource(Source):
         *,
         kinds: Iterable[StreamKind | str] | None = None,
         explicit: bool = False,
-        topics: Mapping[StreamKind | str, str] | None = None,
-        frames: Mapping[StreamKind | str, Convention | str] | None = None,
+        topics: TopicNames | None = None,
+        frames: FrameNames | None = None,
         time: str = "header",
         validate: bool = True,
         window: int | None = None,
@@ -179,8 +194,10 @@ class BagSource(Source):
         with _open(self.path) as bag:
             listing = bag.topics()
             available = ", ".join(f"{t} ({ty})" for t, ty, _, _ in listing) or "no topics"
+            # rosbags deserialises ROS 1 messages into the types of the ROS 2 ones
             cands = [c for t, ty, fmt, _ in listing
-                     if (c := candidate(t, ty, fmt, topic_kinds)) is not None]
+                     if (c := candidate(t, ty, MESSAGE_ENCODING if fmt == ROS1_FORMAT else fmt,
+                                        topic_kinds)) is not None]
             chosen = choose_topics(where, cands, self._wanted, explicit=self._explicit,
                                    named=self._topics, available=available, what="bag")
             with warnings.catch_warnings():  # (said once, for the streams read)
@@ -442,7 +459,7 @@ def _count_file(path: Path, storage: str) -> tuple[dict[str, int], int | None, i
     from navreplay.io.info import recording_info
 
     info = recording_info(path)
-    counts: dict[str, int] = {}
+    per_topic: dict[str, int] = {}
     for t in info.topics:
-        counts[t.topic] = counts.get(t.topic, 0) + t.count
-    return counts, info.start_ns, info.end_ns, info.damage
+        per_topic[t.topic] = per_topic.get(t.topic, 0) + t.count
+    return per_topic, info.start_ns, info.end_ns, info.damage

@@ -20,6 +20,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Self
 
 from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.io.topics import TopicSource
@@ -149,7 +150,7 @@ class Source:
         if self._iterator is not None and hasattr(self._iterator, "close"):
             self._iterator.close()
 
-    def __enter__(self) -> Source:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

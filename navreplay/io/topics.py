@@ -23,6 +23,12 @@ from navreplay.io.convert import DECODERS, AuxColumn, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning
 from navreplay.io.schemas import KIND_BY_TYPE, MESSAGE_ENCODING, SPECS
 
+TopicNames = Mapping[StreamKind, str] | Mapping[str, str] | Mapping[StreamKind | str, str]
+"""The topic chosen for a stream, by its kind or the kind's name (``--topic``)."""
+FrameNames = (Mapping[StreamKind, Convention] | Mapping[str, Convention | str]
+              | Mapping[StreamKind | str, Convention | str])
+"""The axes convention of a stream (``--frame``), by its kind or the kind's name."""
+
 TIME_SOURCES = ("header", "log")
 """``--time``: sample times from the header stamps (default) or the log (receive) times."""
 
@@ -84,7 +90,7 @@ class Candidate:
     named: bool
 
 
-def topic_map(topics: Mapping[StreamKind | str, str] | None) -> dict[str, StreamKind]:
+def topic_map(topics: TopicNames | None) -> dict[str, StreamKind]:
     """Topic -> stream kind: the canonical topics, with ``topics`` (kind -> topic) replacing
     them kind by kind."""
     topic_kinds = {spec.topic: kind for kind, spec in SPECS.items()}
@@ -146,7 +152,7 @@ def choose_topics(
     wanted: Iterable[StreamKind],
     *,
     explicit: bool,
-    named: Mapping[StreamKind | str, str] | None,
+    named: TopicNames | None,
     available: str,
     what: str = "file",
 ) -> dict[StreamKind, tuple[Candidate, tuple[str, ...]]]:
@@ -185,13 +191,13 @@ def choose_topics(
         if c is not None:
             others = tuple(sorted(o.topic for o in of_kind if o.topic != c.topic))
             chosen[kind] = (c, others)
-    for kind, topic in (named or {}).items():
-        if StreamKind(kind) not in wanted:
+    for key, topic in (named or {}).items():
+        if StreamKind(key) not in wanted:
             continue
-        got = chosen.get(StreamKind(kind))
+        got = chosen.get(StreamKind(key))
         if got is None or got[0].topic != topic:
             raise RecordingError(
-                f"{where}: topic {topic} named for stream {StreamKind(kind).value} is not in "
+                f"{where}: topic {topic} named for stream {StreamKind(key).value} is not in "
                 f"the {what}; it has {available}"
             )
     if explicit:

@@ -132,7 +132,9 @@ def _write_mcap(out: BinaryIO, recording: Recording, plan: list[_Topic]) -> None
     add = writer.add_message
     bounds = _windows(plan)
     for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
-        times, channels, payloads = [], [], []
+        times: list[np.ndarray] = []
+        channels: list[np.ndarray] = []
+        payloads: list[bytes] = []
         for topic, cid, a, b in zip(plan, channel_ids, lo, hi, strict=True):
             if b <= a:
                 continue

@@ -20,6 +20,7 @@ from navreplay.core.streams import StreamKind
 from navreplay.io import RecordingError
 from navreplay.io.files import read_streams
 from navreplay.io.outputs import atomic_path
+from navreplay.io.span import TimeSpan, TimeSpanError
 from navreplay.sensors import allan
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.specs import SensorSpecs, specs_toml
@@ -70,8 +71,9 @@ class AllanJob:
         MCAP file or rosbag2 folder.
     topic : str or None
         The IMU topic (default: the one the reader picks for the IMU stream).
-    start, end : float or None
-        Segment [s from the recording start]; default: all of it.
+    start, end : float or str or None
+        Segment: seconds from the recording start, UNIX seconds or a UTC date and time
+        (:func:`navreplay.io.span.parse_time`); default: all of it.
     spec_path, plot_path, view_path : Path or None
         The ``[sensors.imu]`` TOML, the figure (PNG or SVG by suffix), the .rrd view.
     bootstrap : int
@@ -82,8 +84,8 @@ class AllanJob:
 
     recording: Path
     topic: str | None = None
-    start: float | None = None
-    end: float | None = None
+    start: float | str | None = None
+    end: float | str | None = None
     spec_path: Path | None = None
     plot_path: Path | None = None
     view_path: Path | None = None
@@ -208,16 +210,19 @@ def read_segment(job: AllanJob) -> Segment:
     imu = recording[StreamKind.IMU]
     topic = sources[StreamKind.IMU].topic
     t = (imu.t_ns - recording.t0_ns) * 1e-9
-    if job.start is not None and job.end is not None and not job.start < job.end:
-        raise RecordingError(f"{path}: topic {topic}: --start {job.start:g} s is not before "
-                             f"--end {job.end:g} s")
-    start = t[0] if job.start is None else job.start
-    end = t[-1] if job.end is None else job.end
-    span = f"t = {t[0]:.6g} to {t[-1]:.6g} s"
+    try:
+        span = TimeSpan.parse(None if job.start is None else str(job.start),
+                              None if job.end is None else str(job.end))
+        lo, hi = span.bounds(recording.t0_ns) if span is not None else (None, None)
+    except TimeSpanError as e:
+        raise RecordingError(f"{path}: topic {topic}: {e}") from None
+    start = t[0] if lo is None else (lo - recording.t0_ns) * 1e-9
+    end = t[-1] if hi is None else (hi - recording.t0_ns) * 1e-9
+    covered = f"t = {t[0]:.6g} to {t[-1]:.6g} s"
     sel = (t >= start) & (t <= end)
     if sel.sum() < 2:
         raise RecordingError(f"{path}: topic {topic}: no IMU samples in t = {start:g} to "
-                             f"{end:g} s (the topic covers {span})")
+                             f"{end:g} s (the topic covers {covered})")
     ts = t[sel]
     where = f"{path}: topic {topic}, t = {ts[0]:.6g} to {ts[-1]:.6g} s"
     dt = np.diff(ts)
@@ -295,7 +300,8 @@ def _show(field: str, value: float) -> str:
 
 def triad_table(triad: Triad, a: allan.TriadAnalysis) -> list[str]:
     """The fitted terms of one triad: per axis, the triad value and its interval."""
-    rows = [(f"{triad.name}", "x", "y", "z", "triad", f"{allan.CONFIDENCE:.0%} interval")]
+    rows: list[tuple[str, ...]] = [
+        (f"{triad.name}", "x", "y", "z", "triad", f"{allan.CONFIDENCE:.0%} interval")]
     for key, field in triad.fields.items():
         unit = ImuModel.field_units[field].datasheet
         shown = [_value(f.values()[key], field, f, key) for f in a.axis_fits]

@@ -48,7 +48,10 @@ class Outputs:
     export_dir: Path | None = None
     report_path: Path | None = None
     force: bool = False
+    command: str | None = None
+    """The command line, for the report."""
     _export: export.RunExport | None = None
+    _context: dict[str, Any] = dataclasses.field(default_factory=dict)
     _series: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
@@ -74,11 +77,13 @@ class Outputs:
         if self.export_dir is not None:
             self._export = export.RunExport(self.export_dir, run.labels,
                                             has_reference=run.has_truth, source=run.source,
-                                            force=self.force)
+                                            force=self.force, late=getattr(run, "late", {}))
         if self.report_path is not None:
-            from navreplay.report import RunSeries
+            from navreplay.report import RunSeries, run_context
 
             self._series = {label: RunSeries(label) for label in run.labels}
+            self._context = {"command": self.command,
+                             **run_context(getattr(run, "metadata", None), run.source)}
 
     def truth(self, truth: Any) -> None:
         """A window of the truth stream (later than before)."""
@@ -106,23 +111,32 @@ class Outputs:
                                              block.measurements)
         series = self._series.get(block.label)
         if series is not None:
-            for name, s in block.innovations.items():
-                series.add_nis(name, s.t, s.nis, int(s.nu.shape[1]))
+            from navreplay.viz.naming import innovation_rows
 
-    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str) -> list[str]:
-        """Finish the exports and write the report of filters replayed over one recording."""
+            for name, s in block.innovations.items():
+                dim = int(s.nu.shape[1])
+                series.add_nis(name, s.t, s.nis, dim)
+                series.add_innovations(name, s.t, s.nu, s.S,
+                                       innovation_rows(name, dim, block.measurement(name)))
+
+    def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str,
+                  log_notes: Sequence[str] = ()) -> list[str]:
+        """Finish the exports and write the report of filters replayed over one recording
+        (``log_notes``: the log's reference, checks and initial state, for the report)."""
         notes = []
         if self._export is not None:
             with self._writing():
                 written = self._export.close()
             self._export = None
+            assert self.export_dir is not None  # an export was asked for
             notes.append(f"Exported {len(written)} files to {self.export_dir} "
                          f"(see {self.export_dir / export.MANIFEST})")
         if self.report_path is not None:
             from navreplay import report
 
             report.write_run_report(self.report_path, list(self._series.values()), summaries,
-                                    title=title, force=self.force)
+                                    title=title, context=self._context, force=self.force,
+                                    log_notes=log_notes)
             notes.append(f"Report written to {self.report_path}")
         return notes
 

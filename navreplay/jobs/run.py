@@ -18,6 +18,7 @@ from navreplay.filters.settings import setting_notes, summary_entries
 from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
+from navreplay.jobs.smooth import scratch_dir, unsmoothed_notes
 from navreplay.metrics import tables
 from navreplay.replay.pipeline import replay_file
 from navreplay.replay.session import Progress
@@ -91,6 +92,10 @@ class RunJob:
     executor : str
         Where several recordings run: ``process``, ``dask`` or ``dask://HOST:PORT``
         (:func:`navreplay.campaign.executors.make_executor`).
+    command : str, optional
+        The command line (shown in the report).
+    smooth : bool
+        Also smooth the filters that can be (``LABEL/rts``; :mod:`navreplay.jobs.smooth`).
     """
 
     filters: tuple[FilterSpec, ...]
@@ -106,11 +111,14 @@ class RunJob:
     force: bool = False
     max_imu_gap: float | None = None
     executor: str = "process"
+    command: str | None = None
+    smooth: bool = False
 
 
 def outputs_of(job: Any) -> Outputs:
     """The ``--export`` / ``--report`` outputs of a run or Monte Carlo job."""
-    return Outputs(job.export_dir, job.report_path, job.force)
+    return Outputs(job.export_dir, job.report_path, job.force,
+                   command=getattr(job, "command", None))
 
 
 def _check_files(paths: Sequence[Path]) -> None:
@@ -136,6 +144,8 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
             return _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
+    if job.smooth:
+        raise _params.ParamError("--smooth needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
@@ -177,16 +187,20 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     try:
         done = replay_file(source, job.filters, stages=stages, output_rate=job.output_rate,
                            pacing=job.pacing, max_imu_gap=job.max_imu_gap,
-                           live=job.viz.live or job.pacing is not None, progress=progress)
+                           live=job.viz.live or job.pacing is not None, progress=progress,
+                           smooth=job.smooth, scratch=scratch_dir(job.export_dir))
         if done.has_truth:
             ref = getattr(job.log, "reference", None)
             for label, fraction in done.reference_coverage.items():
                 add_coverage(done.summaries[label], label, fraction,
                              f"reference {ref}" if ref else "the truth")
-        notes = list(source.notes) + setting_notes(done.summaries.values())
+        notes = (list(source.notes) + setting_notes(done.summaries.values())
+                 + (unsmoothed_notes(job.filters) if job.smooth else []))
         if done.salvaged:
             notes.append(salvaged_note(str(path), done.coverage))
-        notes += outputs.write_run(done.summaries, title=title)
+        notes += outputs.write_run(done.summaries, title=title, log_notes=source.notes)
+        if sink is not None and done.has_truth:
+            sink.summaries(done.summaries)
         hint = close_output(sink, job.viz)
     except BaseException:
         outputs.abort()
@@ -270,22 +284,18 @@ def campaign(
             from navreplay.viz.ensemble import log_ensemble, log_runs
 
             declared = {spec.label: getattr(spec.filter_cls, "states", None) for spec in filters}
-            for label, e in ens.items():
+            for label, result in ens.items():
                 states = declared.get(label)
-                log_ensemble(sink, label, e, states if isinstance(states, tuple) else None)
+                log_ensemble(sink, label, result, states if isinstance(states, tuple) else None)
             log_runs(sink, drill)
         hint = close_output(sink, viz_options)
     except BaseException:
         if sink is not None:
             sink.abort()
         raise
-    summary = {
-        "runs": rows,
-        "ensemble": {label: {**e.summary(), **settings.get(label, {})}
-                     for label, e in ens.items()},
-        "wall_seconds": done.seconds,
-    }
-    notes += outputs.write_ensemble(ens, summary["ensemble"], title=title)
+    ensemble = {label: {**e.summary(), **settings.get(label, {})} for label, e in ens.items()}
+    summary = {"runs": rows, "ensemble": ensemble, "wall_seconds": done.seconds}
+    notes += outputs.write_ensemble(ens, ensemble, title=title)
     if summary_path is not None:
         write_json(summary_path, summary)
     parts = []

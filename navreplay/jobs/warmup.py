@@ -57,9 +57,9 @@ def warm_filter(name: str, directory: str) -> tuple[str, float]:
 
         replay(read_recording(path), load_filter(name))
     else:
-        export = {"export_dir": Path(directory) / "export"} if name == EXPORTS else {}
         run(RunJob(filters=(FilterSpec(name),), recordings=(path,),
-                   viz=VizOptions(VizMode.NONE), **export))
+                   viz=VizOptions(VizMode.NONE),
+                   export_dir=Path(directory) / "export" if name == EXPORTS else None))
     return name, time.process_time() - start
 
 

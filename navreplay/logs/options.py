@@ -14,6 +14,7 @@ from navreplay.core.params import ParamError
 from navreplay.core.streams import StreamKind
 from navreplay.io.checks import STANDARD_GRAVITY, ImuRange, ReadPolicy
 from navreplay.io.convert import Convention
+from navreplay.io.span import TimeSpan, TimeSpanError
 
 REFERENCE = "reference"
 """The key of ``--frame`` for a reference's world frame (``reference=enu|ned``)."""
@@ -104,6 +105,8 @@ class LogOptions:
         The IMU's measurement range: a sample beyond it stops the run (``--imu-range``).
     force_frames : bool
         ``--force-frame``: ``--frame`` wins over frame ids that name other axes.
+    span : TimeSpan or None
+        ``--start`` / ``--end``: the part of the log read (:mod:`navreplay.io.span`).
     """
 
     topics: Mapping[StreamKind, str] = dataclasses.field(default_factory=dict)
@@ -117,6 +120,7 @@ class LogOptions:
     sensors: Any = None
     imu_range: ImuRange = ImuRange()
     force_frames: bool = False
+    span: TimeSpan | None = None
 
     @property
     def stream_frames(self) -> dict[StreamKind, Convention]:
@@ -222,6 +226,8 @@ def log_options(
     sensors: Any = None,
     imu_range_text: str | None = None,
     force_frames: bool = False,
+    start: str | None = None,
+    end: str | None = None,
 ) -> LogOptions:
     """Parse ``--topic``/``--frame``/``--imu-range`` items and the TOML tables into
     :class:`LogOptions`; every value is checked for its type and range here (``sensors``: the
@@ -262,7 +268,11 @@ def log_options(
     time = time or "header"
     if time not in ("header", "log"):
         raise ParamError(f"--time {time}: use header or log")
+    try:
+        span = TimeSpan.parse(start, end)
+    except TimeSpanError as e:
+        raise ParamError(str(e)) from None
     return LogOptions(topic_map, frame_map, method, dict(initial), reference, check_frames,
                       time, sensors=sensors or None,
                       imu_range=imu_range(imu_range_text, config.get("imu_range")),
-                      force_frames=force_frames)
+                      force_frames=force_frames, span=span)

@@ -20,6 +20,7 @@ from navreplay.filters.base import Filter, consumed_streams
 from navreplay.io.checks import read_policy
 from navreplay.io.files import open_recording
 from navreplay.io.source import COMPLETE, Source, Window
+from navreplay.io.span import cut_windows
 from navreplay.io.topics import TopicSource
 from navreplay.logs.framecheck import check_frames
 from navreplay.logs.initial import initial_nav
@@ -69,7 +70,10 @@ class LogSource(Source):
             yield window
 
     def _ready(self) -> Iterator[Window]:
-        first = next(self.inner)
+        inner: Iterator[Window] = self.inner
+        if self.options.span is not None:
+            inner = cut_windows(inner, self.options.span, self.name)
+        first = next(inner)
         first.metadata.extra.setdefault("source", str(self.path))
         if self.options.reference is not None:
             recording = first.recording()
@@ -81,8 +85,10 @@ class LogSource(Source):
             first.present = first.present | {StreamKind.TRUTH}
             self.notes.append(note)
         self.notes += make_ready(first.recording(), self.sources, self.options)
+        if self.options.span is not None:
+            self.notes.append(f"replayed {self.options.span.describe(first.t0_ns)}")
         yield first
-        yield from self.inner
+        yield from inner
 
 
 def open_log(path: str | Path, options: LogOptions | None = None, *,

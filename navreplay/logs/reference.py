@@ -24,7 +24,9 @@ CSV file (``.csv``)
     A header row naming the columns; ``t`` [s, UNIX or since the start as for TUM] or ``t_ns``
     [ns UNIX]; position as ``lat_deg, lon_deg, h`` or local ``x, y, z``; optional velocity
     ``v_N, v_E, v_D`` [m/s]; optional attitude ``roll_deg, pitch_deg, yaw_deg`` (FRD -> NED) or
-    ``qw, qx, qy, qz`` (body -> world, as for TUM).
+    ``qw, qx, qy, qz`` (body -> world, as for TUM). Names with their unit in brackets, as
+    ``navreplay run --export`` writes them (``stamp [ns]``, ``lat [deg]``, ``v_N [m/s]``), are
+    read as ``t_ns``, ``lat_deg``, ``v_N``: an exported run (a smoothed one) is a reference.
 
 Local positions need the geodetic position of the world origin: ``lat_deg``/``lon_deg``/``h``
 of the ``[initial]`` table when given, else a fit to the log's NavSatFix stream: the origin is the
@@ -37,6 +39,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -49,7 +52,8 @@ from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
 from navreplay.io.checks import current_policy, named_convention
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.files import file_kind
+from navreplay.io.files import BAGS, file_kind
+from navreplay.io.gins import NAV_TYPE, file_type, read_table, seconds_to_ns
 from navreplay.io.schemas import normalize_type_name
 from navreplay.io.topics import sample_times
 from navreplay.metrics.coverage import (  # noqa: F401  (their home is the scoring)
@@ -216,7 +220,7 @@ def _check_type(source: str, type_name: str) -> None:
 
 def _iter_topic(path: Path, topic: str) -> tuple[str, list[tuple[int, Any]]]:
     """Type name and (log time, decoded message) of one topic of a bag or MCAP file."""
-    if file_kind(path).name == "rosbag2":
+    if file_kind(path).name in BAGS:
         from navreplay.io.rosbag import bag_topics, iter_messages
 
         types = {t: ty for t, ty, _, _ in bag_topics(path)}
@@ -261,15 +265,24 @@ def _table(path: Path, csv_header: bool
     where = f"reference {path}"
     try:
         with open(path, newline="") as f:
-            lines = [(n, line.strip()) for n, line in enumerate(f, start=1)
-                     if line.strip() and not line.lstrip().startswith("#")]
+            text = [(n, line.strip()) for n, line in enumerate(f, start=1) if line.strip()]
+        lines = [(n, line) for n, line in text if not line.startswith("#")]
+        start = lines[0][0] if lines else math.inf
+        comments = [line for n, line in text if line.startswith("#") and n < start]
     except (OSError, UnicodeDecodeError) as exc:
         raise ReferenceError(f"{where}: cannot be read ({exc})") from None
     header = None
     if csv_header:
         if not lines:
             raise ReferenceError(f"{where}: no header row")
-        header = [c.strip() for c in next(csv.reader([lines.pop(0)[1]]))]
+        first = lines[0][1]
+        names = [c.strip() for c in next(csv.reader([first]))]
+        if _numeric(names) and comments:
+            # the header is the last comment line before the data (``# t, lat, lon, h``)
+            names = [c.strip() for c in next(csv.reader([comments[-1].lstrip("#% ")]))]
+        else:
+            lines.pop(0)
+        header = column_names(names, where)
     rows = (csv.reader(line for _, line in lines) if csv_header
             else (line.split() for _, line in lines))
     width = len(header) if header is not None else None
@@ -306,6 +319,60 @@ def _table(path: Path, csv_header: bool
     return header, np.array(out), np.array(t_ns, dtype=np.int64) if exact else None
 
 
+COLUMN_NAMES: dict[str, tuple[str, ...]] = {
+    "t_ns": ("t_ns", "time_ns", "timestamp_ns", "stamp_ns", "%time"),
+    "t": ("t", "time", "timestamp", "stamp", "t_s", "time_s"),
+    "lat_deg": ("lat_deg", "lat", "latitude", "latitude_deg"),
+    "lon_deg": ("lon_deg", "lon", "lng", "long", "longitude", "longitude_deg"),
+    "h": ("h", "h_m", "alt", "alt_m", "altitude", "height", "height_m", "h_ell"),
+    "x": ("x", "x_m", "pos_x", "px", "tx"),
+    "y": ("y", "y_m", "pos_y", "py", "ty"),
+    "z": ("z", "z_m", "pos_z", "pz", "tz"),
+    "v_N": ("v_n", "vn", "vel_n", "vel_north", "v_north"),
+    "v_E": ("v_e", "ve", "vel_e", "vel_east", "v_east"),
+    "v_D": ("v_d", "vd", "vel_d", "vel_down", "v_down"),
+    "roll_deg": ("roll_deg", "roll"),
+    "pitch_deg": ("pitch_deg", "pitch"),
+    "yaw_deg": ("yaw_deg", "yaw", "heading", "heading_deg"),
+    "qw": ("qw", "q_w", "quat_w", "ori_w"),
+    "qx": ("qx", "q_x", "quat_x", "ori_x"),
+    "qy": ("qy", "q_y", "quat_y", "ori_y"),
+    "qz": ("qz", "q_z", "quat_z", "ori_z"),
+}
+"""The CSV reference columns and the names each is recognised by (compared in lower case,
+a trailing unit in brackets or parentheses dropped: ``lat [deg]``, ``Altitude(m)``; a time
+in ``[ns]`` is ``t_ns``); other
+columns are ignored."""
+
+_ALIASES = {alias: name for name, aliases in COLUMN_NAMES.items() for alias in aliases}
+
+
+def column_names(names: list[str], where: str) -> list[str]:
+    """A CSV header's names as :data:`COLUMN_NAMES` (others kept as they are); two columns for
+    the same quantity are an error."""
+    out: list[str] = []
+    seen: dict[str, str] = {}
+    for raw in names:
+        m = re.fullmatch(r"(.*?)\s*[\[(](.*)[\])]", raw.strip())
+        key, unit = (m.group(1), m.group(2).strip().lower()) if m else (raw.strip(), "")
+        name = _ALIASES.get(key.strip().lower(), raw.strip())
+        if name == "t" and unit == "ns":  # ``stamp [ns]``, as navreplay's exports write it
+            name = "t_ns"
+        if name in seen:
+            raise ReferenceError(f"{where}: columns {seen[name]!r} and {raw!r} both give {name}")
+        seen[name] = raw
+        out.append(name)
+    return out
+
+
+def _numeric(fields: list[str]) -> bool:
+    try:
+        [float(f) for f in fields]
+    except ValueError:
+        return False
+    return True
+
+
 def _times(t: np.ndarray, t0_ns: int) -> np.ndarray:
     """Seconds (UNIX, or since the log start when below 1e9) -> int64 ns."""
     if t.size and np.nanmax(np.abs(t)) < 1e9:
@@ -326,6 +393,22 @@ def from_file(path: Path, t0_ns: int, declared: Convention | None) -> Reference:
     local, q_nb = to_ned(world, data[:, 1:4], data[:, 4:8], world is Convention.NED)
     return Reference(str(path), _times(data[:, 0], t0_ns), local_ned=local, q_nb=q_nb,
                      world=world, world_reason=_file_world(declared))
+
+
+def from_gins_nav(path: Path) -> Reference:
+    """A reference from a GINS navigation file (week, seconds of week, lat, lon [deg], h [m],
+    v north, east, down [m/s], roll, pitch, yaw [deg]: :mod:`navreplay.io.gins`), on the
+    seconds of the week as the GINS logs are."""
+    try:
+        data = read_table(path, 11)
+    except RecordingError as exc:
+        raise ReferenceError(f"reference {exc}") from None
+    if len(data) < 2:
+        raise ReferenceError(f"reference {path}: fewer than 2 rows")
+    return Reference(str(path), seconds_to_ns(data[:, 1]),
+                     pos=np.column_stack([np.radians(data[:, 2]), np.radians(data[:, 3]),
+                                          data[:, 4]]),
+                     v_n=data[:, 5:8].copy(), q_nb=euler_to_quat(np.radians(data[:, 8:11])))
 
 
 def _file_world(declared: Convention | None) -> str:
@@ -367,6 +450,11 @@ def read_reference(spec: str, log: Path, recording: Recording,
                    declared: Convention | None, time: str = "header") -> Reference:
     """Read ``spec`` (a file when one exists by that name, else a topic of ``log``)."""
     path = Path(spec)
+    folder = log if log.is_dir() else log.parent
+    if not path.exists() and not spec.startswith("/") and (folder / spec).is_file():
+        path = folder / spec  # a file of the log's folder (a GINS truth file), by its name
+    if path.is_file() and file_type(path) == NAV_TYPE:
+        return from_gins_nav(path)
     if path.is_file() and path.suffix.lower() in (".csv", ".tum", ".txt"):
         return from_file(path, recording.t0_ns, declared)
     if not spec.startswith("/") and not path.exists():
@@ -378,6 +466,7 @@ def read_reference(spec: str, log: Path, recording: Recording,
 
 def origin_from_gnss(ref: Reference, recording: Recording) -> np.ndarray:
     """Geodetic origin (lat, lon, h) of a local reference fitted to the GNSS fixes."""
+    assert ref.local_ned is not None  # a local reference
     return _gnss_fit(ref, ref.local_ned, recording)[0]
 
 
@@ -461,4 +550,10 @@ def reference_stream(ref: Reference, recording: Recording, initial: Mapping[str,
     if bad or len(stream) < 2:
         raise ReferenceError(f"reference {ref.source}: "
                              + (f"non-finite {', '.join(bad)}" if bad else "fewer than 2 samples"))
-    return stream, f"reference {ref.source}: {', '.join(ref.has)}{note}"
+    lacks = [PARTS[k] for k in PARTS if k not in ref.has]
+    said = f"; no {' or '.join(lacks)}: not scored, not drawn" if lacks else ""
+    return stream, f"reference {ref.source}: {', '.join(ref.has)}{note}{said}"
+
+
+PARTS = {"pos": "position", "v_n": "velocity", "q_nb": "attitude"}
+"""The parts a reference may give, by column."""

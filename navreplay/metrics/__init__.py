@@ -6,8 +6,9 @@ One module per concept: :mod:`~navreplay.metrics.stats` (RMS, CEP50, NEES, chi-s
 :mod:`~navreplay.metrics.errors` (errors of the solution and the declared states),
 :mod:`~navreplay.metrics.run` (the scores of one run, :func:`run_metrics`),
 :mod:`~navreplay.metrics.summary` (its scalar summary, block by block),
-:mod:`~navreplay.metrics.scoring` (a run scored as its estimates and truth arrive) and
-:mod:`~navreplay.metrics.ensemble` (Monte Carlo statistics).
+:mod:`~navreplay.metrics.scoring` (a run scored as its estimates and truth arrive),
+:mod:`~navreplay.metrics.ensemble` (Monte Carlo statistics) and
+:mod:`~navreplay.metrics.outages` (each GNSS outage of a recording scored on its own).
 
 All errors are estimate minus truth. Position errors are north, east, down in metres; the
 attitude error is the phi angle of :func:`navreplay.geo.attitude_error`

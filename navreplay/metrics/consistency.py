@@ -282,6 +282,7 @@ class LagProducts:
         if self.sums is None:
             self.sums, self.counts = sums, counts
             return
+        assert self.counts is not None  # created with the sums
         n = max(self.sums.shape[0], sums.shape[0])
         pad = [(0, n - self.sums.shape[0]), (0, 0)]
         self.sums, self.counts = np.pad(self.sums, pad), np.pad(self.counts, pad)
@@ -290,7 +291,7 @@ class LagProducts:
 
     def _rho2(self) -> np.ndarray:
         """Squared autocorrelation of each axis, shape (L, k)."""
-        if self.sums is None:
+        if self.sums is None or self.counts is None:
             return np.zeros((0, 0))
         with np.errstate(invalid="ignore", divide="ignore"):
             c = self.sums / self.counts
@@ -393,6 +394,7 @@ class ConsistencyStats:
         if self.sum_sq is None:
             self.sum_sq = np.zeros(z.shape[1])
             self.z2_sum, self.z2_n = np.zeros(z.shape), np.zeros(z.shape, dtype=np.int64)
+        assert self.z2_sum is not None and self.z2_n is not None  # created with sum_sq
         self.sum_sq += z2.sum(axis=0)
         m = z.shape[0]
         if m > self.z2_sum.shape[0]:
@@ -430,11 +432,11 @@ class ConsistencyStats:
             tau = self.lags.time_of_mean(self.in_nees)
             means = np.array([m for m, _ in self.nees_runs])
             epochs = np.array([n for _, n in self.nees_runs])
-            samples = effective_samples(epochs, tau)
+            run_samples = np.broadcast_to(effective_samples(epochs, tau), epochs.shape)
             failed = sum(not mean_check(float(m), dof, float(k), self.false_alarm).passed
-                         for m, k in zip(means, samples, strict=True))
+                         for m, k in zip(means, run_samples, strict=True))
             nees = mean_check(float(np.sum(means * epochs) / np.sum(epochs)), dof,
-                              float(np.sum(samples)), self.false_alarm)
+                              float(np.sum(run_samples)), self.false_alarm)
         return EnsembleConsistency(
             names=names, nees_names=tuple(nees_names), scale=scale, z2_mean=z2_mean,
             z2_count=self.z2_n if self.z2_n is not None else np.zeros((0, len(names)), int),

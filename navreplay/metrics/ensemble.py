@@ -11,6 +11,7 @@ import numpy as np
 
 from navreplay.filters.base import State
 from navreplay.metrics.consistency import ConsistencyStats, EnsembleConsistency
+from navreplay.metrics.outages import ensemble_outages
 from navreplay.metrics.run import RunMetrics
 from navreplay.metrics.stats import CEP50_FACTOR, chi2_bounds_per_count, rms
 
@@ -31,6 +32,7 @@ class _Acc:
             self.sum = np.zeros_like(v)
             self.sq = np.zeros_like(v)
             self.n = np.zeros(v.shape, dtype=np.int64)
+        assert self.sq is not None and self.n is not None  # created with the sum
         m = v.shape[0]
         if m > self.sum.shape[0]:
             grow = ((0, m - self.sum.shape[0]),) + ((0, 0),) * (v.ndim - 1)
@@ -43,13 +45,19 @@ class _Acc:
         self.sq[:m] += v * v
         self.n[:m] += ok
 
+    def counts(self) -> np.ndarray:
+        """Samples per index (a run added first)."""
+        if self.n is None:
+            raise ValueError("no run added")
+        return self.n
+
     def mean(self) -> np.ndarray:
         with np.errstate(invalid="ignore", divide="ignore"):
-            return self.sum / self.n
+            return np.asarray(self.sum) / self.counts()
 
     def rms(self) -> np.ndarray:
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.sqrt(self.sq / self.n)
+            return np.sqrt(np.asarray(self.sq) / self.counts())
 
 
 @dataclasses.dataclass
@@ -88,6 +96,9 @@ class EnsembleResult:
     consistency : EnsembleConsistency or None
         Per-axis RMS/sigma with intervals and checks, and the per-run time-averaged NEES tests
         (:mod:`navreplay.metrics.consistency`).
+    outages : tuple of (start, end)
+        The GNSS outages [s] the runs share (none when their recordings differ in them),
+        scored one by one in the summary (:func:`navreplay.metrics.outages.ensemble_outages`).
     """
 
     label: str
@@ -110,6 +121,7 @@ class EnsembleResult:
     distance: np.ndarray
     nis_rows_mean: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
     consistency: EnsembleConsistency | None = None
+    outages: tuple[tuple[float, float], ...] = ()
 
     @property
     def dt_cep50(self) -> np.ndarray:
@@ -144,6 +156,10 @@ class EnsembleResult:
                 _chi2_summary(out, "nis", f"_{name}.{row}", v, c, 1, probability)
         if self.consistency is not None:
             out.update(self.consistency.summary())
+        if self.outages and "pos_ned" in self.rms:
+            out["gnss_outages"] = ensemble_outages(self.t, self.rms["pos_ned"],
+                                                   self.sigma["pos_ned"], self.runs,
+                                                   self.outages)
         return out
 
 
@@ -180,6 +196,7 @@ class EnsembleStats:
         self._state_names: tuple[str, ...] | None = None
         self._nees_states: tuple[str, ...] | None = None
         self._states: tuple[State, ...] = ()
+        self._outages: tuple[tuple[float, float], ...] | None = None  # None: no run yet
 
     def add(self, m: RunMetrics) -> None:
         """Add one run's metrics."""
@@ -196,6 +213,8 @@ class EnsembleStats:
             self.label = self.label or m.label
         elif m.state_names != self._state_names or m.nees_states != self._nees_states:
             raise ValueError(f"run {self.runs + 1} ({m.label}) scores other states")
+        # outages are scored over the ensemble when every run has the same
+        self._outages = m.outages if self._outages in (None, m.outages) else ()
         if m.nav is not None:
             for k, acc in self._nav.items():
                 acc.add(getattr(m.nav, k))
@@ -228,7 +247,7 @@ class EnsembleStats:
         nan3 = np.full((M, 3), np.nan)
         # errors never scored (a part of the solution the filters do not output, a column the
         # reference lacks) are absent
-        scored = {k: a for k, a in self._nav.items() if a.sum is not None and a.n.any()}
+        scored = {k: a for k, a in self._nav.items() if a.sum is not None and a.counts().any()}
         rms_ = {k: a.rms() for k, a in scored.items()}
         mean = {k: a.mean() for k, a in scored.items()}
         sigma = {k: np.sqrt(a.mean()) if a.sum is not None else nan3
@@ -262,7 +281,7 @@ class EnsembleStats:
             nees_count=nees_count,
             nees_dof=dof,
             nees_bounds=(lo, hi),
-            nis_mean={name: (tref[0], acc.mean(), acc.n, d)
+            nis_mean={name: (tref[0], acc.mean(), acc.counts(), d)
                       for name, (acc, tref, d) in self._nis.items()},
             cep50=c50,
             distance=self._dist.mean(),
@@ -270,6 +289,7 @@ class EnsembleStats:
                            for name, rows in self._nis_rows.items()},
             consistency=self._consistency.result(self._state_names or (),
                                                  self._nees_states or ()),
+            outages=self._outages or (),
         )
 
 

@@ -14,6 +14,7 @@ import numpy as np
 from navreplay.core.streams import Recording, Stream, StreamKind, seconds
 from navreplay.geo.rotations import wrap_angle
 from navreplay.metrics.errors import position_error_ned
+from navreplay.sensors.gps import recorded_outages
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,11 +30,16 @@ class Reference:
         Recording start [ns]: filter time 0.
     true_errors : mapping
         The constants ``TrueConstant`` states name (``metadata.true_errors``).
+    outages : tuple of (start, end)
+        The recording's GNSS outages [s since its start] (``metadata.extra["gnss_outages"]``,
+        :func:`navreplay.sensors.gps.recorded_outages`), scored one by one
+        (:mod:`navreplay.metrics.outages`).
     """
 
     stream: Stream
     t0_ns: int
     true_errors: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    outages: tuple[tuple[float, float], ...] = ()
 
     @classmethod
     def of(cls, source: Recording | Reference) -> Reference:
@@ -42,7 +48,8 @@ class Reference:
             return source
         if StreamKind.TRUTH not in source:
             raise ValueError("the recording has no truth stream to score against")
-        return cls(source[StreamKind.TRUTH], source.t0_ns, source.metadata.true_errors)
+        return cls(source[StreamKind.TRUTH], source.t0_ns, source.metadata.true_errors,
+                   recorded_outages(source.metadata.extra))
 
     def __contains__(self, column: str) -> bool:
         return column in self.stream.columns

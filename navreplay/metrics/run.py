@@ -59,6 +59,9 @@ class RunMetrics:
     states : tuple of State
         The declarations of the scored states (``state_names``, same order): units and
         quantities for tables, exports and plots.
+    outages : tuple of (start, end)
+        The GNSS outages of the recording [s] (:attr:`Reference.outages`), scored one by one
+        in the summary.
     """
 
     label: str
@@ -75,6 +78,7 @@ class RunMetrics:
     extra_error: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     states: tuple[State, ...] = ()
     nis_rows: dict[str, dict[str, np.ndarray]] = dataclasses.field(default_factory=dict)
+    outages: tuple[tuple[float, float], ...] = ()
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
         """Scalar scores (SI; see :data:`navreplay.metrics.tables.SUMMARY_UNITS`) for tables and JSON:
@@ -146,6 +150,7 @@ def run_metrics(
     truth = ref.at(result.t)
     nav = None
     if result.nav_pos is not None:
+        assert result.nav_v_n is not None and result.nav_q_nb is not None  # with the position
         nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth,
                          result.navigation)
     nav_for_states = nav if nav is not None else NavErrors(*(np.full((M, 3), np.nan),) * 4)
@@ -171,4 +176,5 @@ def run_metrics(
         distance=np.asarray(ref.distance(result.t)),
         states=tuple(by_name[n] for n in names),
         extra_error=extra_errors(result, truth, ref.true_errors),
+        outages=ref.outages,
     )

@@ -39,6 +39,8 @@ class RunScorer:
         Whether a truth stream follows (else: innovation statistics only).
     probability : float
         Of the chi-square bounds.
+    outages : tuple of (start, end)
+        The recording's GNSS outages [s] (:attr:`Reference.outages`), scored one by one.
     scored : callable, optional
         Called with each block of rows as it is scored (:data:`Scored`): what the view, the
         exports and the report take block by block.
@@ -46,12 +48,14 @@ class RunScorer:
 
     def __init__(self, label: str, t0_ns: int, true_errors: Mapping[str, Any],
                  has_truth: bool, probability: float = 0.95,
+                 outages: tuple[tuple[float, float], ...] = (),
                  scored: Scored | None = None) -> None:
         self.label = label
         self.scored = scored
         self.t0_ns = t0_ns
         self.true_errors = true_errors
         self.has_truth = has_truth
+        self.outages = outages
         self.summary = RunSummary(probability)
         self._truth: Stream | None = None
         self._truth_done = False
@@ -105,7 +109,7 @@ class RunScorer:
             if self.scored is not None:
                 self.scored(rows, None, None)
             return
-        ref = Reference(self._truth, self.t0_ns, self.true_errors)
+        ref = Reference(self._truth, self.t0_ns, self.true_errors, self.outages)
         m = run_metrics(rows, ref)
         if self.scored is not None:
             self.scored(rows, m, self._truth)
@@ -116,7 +120,8 @@ class RunScorer:
         keep = max(int(np.searchsorted(ts, self.t0_ns + round(t[-1] * 1e9), side="right")) - 1,
                    0)
         if keep:
-            self._offset += float(ref.distance(np.array([(int(ts[keep]) - self.t0_ns) * 1e-9]))[0])
+            self._offset += float(np.asarray(
+                ref.distance(np.array([(int(ts[keep]) - self.t0_ns) * 1e-9])))[0])
             self._truth = self._truth.slice(keep, len(self._truth))
 
     def coverage(self) -> float:

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from navreplay.metrics.outages import OutageScores
 from navreplay.metrics.stats import chi2_bounds
 
 if TYPE_CHECKING:
@@ -89,6 +90,7 @@ class RunSummary:
         self._has_pos = self._has_vel = self._has_att = False
         self._nees: _Chi2 | None = None
         self._nis: dict[str, _Chi2] = {}
+        self._outages: OutageScores | None = None
 
     def add_nis(self, name: str, nis: np.ndarray, dof: int,
                 rows: Mapping[str, np.ndarray] | None = None) -> None:
@@ -122,6 +124,10 @@ class RunSummary:
         self._distance = distance_offset + float(m.distance[-1])
         if m.nav is not None:
             p = m.nav.pos_ned
+            if m.outages:
+                if self._outages is None:
+                    self._outages = OutageScores(m.outages)
+                self._outages.add(m.t, p, m.nav_sigma["pos_ned"])
             if np.isfinite(p).any():
                 self._has_pos = True
                 h = np.hypot(p[:, 0], p[:, 1])
@@ -144,7 +150,8 @@ class RunSummary:
     def result(self) -> dict[str, Any]:
         """The summary: duration, distance, position, velocity and attitude RMS, final position
         error (and per cent of the distance), NEES and NIS with the fraction inside their
-        chi-square bounds (SI)."""
+        chi-square bounds, and with GNSS outages in the recording each outage's scores
+        (``gnss_outages``, :meth:`navreplay.metrics.outages.OutageScores.result`) (SI)."""
         out: dict[str, Any] = {"duration": float(self._t[1] - self._t[0]) if self.rows else 0.0}
         if not self.rows:
             out["distance"] = 0.0
@@ -156,6 +163,8 @@ class RunSummary:
             out["pos_rms_v"] = self._v.rms()
             if out.get("distance", 0.0) > 0.0:
                 out["pos_err_final_dt"] = 100.0 * out["pos_err_final_h"] / out["distance"]
+            if self._outages is not None:
+                out["gnss_outages"] = self._outages.result()
         if self._has_vel:
             out["vel_rms"] = self._vel.rms()
         if self._has_att:

@@ -18,13 +18,16 @@ Examples
 >>> rec = simulate("vehicle-drive", {"duration": 20.0}, seed=1)
 >>> result = replay(rec, FilterSpec("gps-ins"))
 >>> result.label, result.x.shape[1], sorted(result.innovations)
-('gps-ins', 24, ['gps_pos', 'gps_vel'])
+('gps-ins', 33, ['gps_pos', 'gps_vel'])
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -33,11 +36,21 @@ from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.filters.base import Filter, FilterParams, TruthColumn
 from navreplay.filters.result import RunResult, concat, concat_innovations
 from navreplay.filters.settings import summary_entries
+from navreplay.filters.smoothable import is_smoothable
+from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, MemorySource, Source, Window
 from navreplay.metrics import RunMetrics, RunScorer
 from navreplay.replay.checks import validate_recording
 from navreplay.replay.session import Progress, ReplaySession
+from navreplay.replay.smoothing import (
+    ForwardStore,
+    TruthStore,
+    backward,
+    smoothed_blocks,
+    smoothed_label,
+)
 from navreplay.replay.spec import FilterSpec
+from navreplay.sensors.gps import recorded_outages
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,6 +70,12 @@ class RunStart:
     metadata : Metadata
     truth_columns : dict[str, str]
         Truth columns that declared states are scored against, with their SI units.
+    late : dict[str, str]
+        Labels whose rows all come after the last window (the smoothed runs), each with the
+        label of the run it follows (the same states and parts of the solution): a stage must
+        not hold the other labels' rows until they come.
+    gnss_outages : tuple of (start, end)
+        The recording's GNSS outages [s since its start] (``metadata.extra["gnss_outages"]``).
     """
 
     source: str
@@ -65,6 +84,8 @@ class RunStart:
     has_truth: bool
     metadata: Metadata
     truth_columns: dict[str, str] = dataclasses.field(default_factory=dict)
+    late: dict[str, str] = dataclasses.field(default_factory=dict)
+    gnss_outages: tuple[tuple[float, float], ...] = ()
 
 
 class Stage(Protocol):
@@ -164,6 +185,8 @@ def replay_file(
     observe_interval: float = 0.25,
     progress: Progress | None = None,
     score: bool = True,
+    smooth: bool = False,
+    scratch: Path | None = None,
 ) -> FileRun:
     """Replay every filter over a recording, window by window, feeding the stages.
 
@@ -193,6 +216,13 @@ def replay_file(
     score : bool
         Score the estimates against the truth (without: the stages get the rows unscored and
         there is no summary).
+    smooth : bool
+        Also smooth every filter that declares
+        :class:`~navreplay.filters.smoothable.Smoothable` (a fixed-interval RTS smoother,
+        :mod:`navreplay.replay.smoothing`): its smoothed run, labelled ``LABEL/rts``, follows
+        its forward run through the scoring and the stages once the last window is replayed.
+        The forward pass is stored on disk in chunks, in a temporary directory under
+        ``scratch`` (the system's temporary directory by default), removed at the end.
 
     Returns
     -------
@@ -205,28 +235,62 @@ def replay_file(
         stages are aborted first and the source closed.
     """
     labels = [s.label for s in specs]
-    dupes = sorted({x for x in labels if labels.count(x) > 1})
+    smoothed = [k for k, spec in enumerate(specs)
+                if smooth and is_smoothable(spec.filter_cls)] if smooth else []
+    all_labels = [x for k, label in enumerate(labels)
+                  for x in ((label, smoothed_label(label)) if k in smoothed else (label,))]
+    dupes = sorted({x for x in all_labels if all_labels.count(x) > 1})
     if dupes:
         raise ValueError(f"filter labels must be unique; repeated: {', '.join(dupes)}")
+    with contextlib.ExitStack() as temporary:
+        stores: dict[int, ForwardStore] = {}
+        truth_store: TruthStore | None = None
+        if smoothed:
+            tmp = Path(temporary.enter_context(tempfile.TemporaryDirectory(
+                prefix="navreplay-rts-", dir=scratch)))
+            truth_store = TruthStore(tmp)
+            for k in smoothed:
+                (tmp / str(k)).mkdir()
+                stores[k] = ForwardStore(tmp / str(k))
+        return _replay_file(source, specs, all_labels, stages, stores, truth_store,
+                            output_rate=output_rate, pacing=pacing, max_imu_gap=max_imu_gap,
+                            live=live, observe_interval=observe_interval, progress=progress,
+                            score=score)
+    raise AssertionError("unreachable")
+
+
+def _replay_file(
+    source: Source, specs: Sequence[FilterSpec], all_labels: list[str],
+    stages: Sequence[Stage], stores: dict[int, ForwardStore], truth_store: TruthStore | None,
+    *, output_rate: float | None, pacing: float | None, max_imu_gap: float | None,
+    live: bool, observe_interval: float, progress: Progress | None, score: bool,
+) -> FileRun:
     try:
         first = next(source)
         t0_ns, metadata = first.t0_ns, first.metadata
         has_truth = StreamKind.TRUTH in first
-        tracker = _Progress(progress, len(specs), first)
+        try:
+            outages = recorded_outages(metadata.extra)
+        except ValueError as e:
+            raise RecordingError(f"{source.name}: {e}") from None
+        tracker = _Progress(progress, len(specs), first, len(stores))
         scorers: list[RunScorer | None] = []
         sessions = []
         for k, spec in enumerate(specs):
             scorer = (RunScorer(spec.label, t0_ns, metadata.true_errors, has_truth,
-                                scored=_fan_out(stages)) if score else None)
+                                outages=outages, scored=_fan_out(stages)) if score else None)
             scorers.append(scorer)
             sessions.append(ReplaySession(
                 first, spec, source=source.name, output_rate=output_rate, pacing=pacing,
                 max_imu_gap=max_imu_gap, observe_interval=observe_interval,
                 live=_live(scorer, stages) if live else None,
-                progress=tracker.of(k) if progress is not None else None))
+                progress=tracker.of(k) if progress is not None else None,
+                smoothing=stores.get(k)))
         columns = {st.truth.column: st.unit for s in sessions for st in s.states
                    if isinstance(st.truth, TruthColumn)}
-        start = RunStart(source.name, tuple(labels), t0_ns, has_truth, metadata, columns)
+        late = {smoothed_label(sessions[k].label): sessions[k].label for k in stores}
+        start = RunStart(source.name, tuple(all_labels), t0_ns, has_truth, metadata, columns,
+                         late, outages)
         for stage in stages:
             stage.start(start)
         estimates = [0] * len(specs)
@@ -241,6 +305,8 @@ def replay_file(
                 if truth is not None and len(truth):
                     for stage in stages:
                         stage.truth(truth)
+                    if truth_store is not None:
+                        truth_store.add(truth)
                 for k, (session, scorer) in enumerate(zip(sessions, scorers, strict=True)):
                     if scorer is not None:
                         scorer.add_truth(truth, final=final)
@@ -268,6 +334,22 @@ def replay_file(
         covered = {spec.label: scorer.coverage()
                    for spec, scorer in zip(specs, scorers, strict=True)
                    if scorer is not None and has_truth}
+        for i, (k, store) in enumerate(stores.items()):
+            session = sessions[k]
+            label = smoothed_label(session.label)
+            scorer = (RunScorer(label, t0_ns, metadata.true_errors, has_truth,
+                                scored=_fan_out(stages)) if score else None)
+            paths = backward(store, session.filter,  # type: ignore[arg-type]
+                             tracker.backward(i, store.epochs))
+            meta = {**session._meta, "label": label, "scored_extras": (), "measurements": (),
+                    "navigation": session.navigation}
+            _feed_smoothed(smoothed_blocks(paths, meta), truth_store, scorer, stages,
+                           has_truth)
+            if scorer is not None:
+                summaries[label] = {**scorer.result(), **summary_entries(session.settings)}
+                if has_truth:
+                    covered[label] = scorer.coverage()
+        summaries = {x: summaries[x] for x in all_labels if x in summaries}
     except BaseException:
         source.close()  # the reader's warnings so far, before the error
         for stage in stages:
@@ -311,6 +393,36 @@ def _pieces(window: Window, known: dict[StreamKind, int], output_rate: float | N
             yield streams, {k: min(t, cut) for k, t in known.items()}, False
 
 
+def _feed_smoothed(blocks: Iterator[RunResult], truth: TruthStore | None,
+                   scorer: RunScorer | None, stages: Sequence[Stage], has_truth: bool) -> None:
+    """A smoothed run through its scorer and the stages, its blocks interleaved with the truth
+    windows stored by the forward pass (so that the scorer keeps only the truth around them)."""
+    def add(block: RunResult) -> None:
+        for stage in stages:
+            stage.innovations(block)
+        if scorer is not None:
+            scorer.add(block)
+        else:
+            for stage in stages:
+                stage.rows(block, None, None)
+
+    pending = next(blocks, None)
+    if pending is None:
+        return
+    if scorer is not None and has_truth and truth is not None:
+        t0_ns = pending.t0_ns
+        for window in truth:
+            scorer.add_truth(window)
+            limit = (int(window.t_ns[-1]) - t0_ns) * 1e-9
+            while pending is not None and (not pending.t.size or pending.t[0] <= limit):
+                add(pending)
+                pending = next(blocks, None)
+        scorer.add_truth(None, final=True)
+    while pending is not None:
+        add(pending)
+        pending = next(blocks, None)
+
+
 def _fan_out(stages: Sequence[Stage]
              ) -> Callable[[RunResult, RunMetrics | None, Stream | None], None]:
     def scored(rows: RunResult, m: RunMetrics | None, truth: Stream | None) -> None:
@@ -336,8 +448,9 @@ class _Progress:
     """Progress over the filters: seconds of the recording replayed, over the filters' total
     (events, when the recording's length is unknown)."""
 
-    def __init__(self, progress: Progress | None, n: int, first: Window) -> None:
-        self.progress, self.n = progress, n
+    def __init__(self, progress: Progress | None, n: int, first: Window,
+                 smoothed: int = 0) -> None:
+        self.progress, self.n, self.smoothed = progress, n, smoothed
         duration = first.metadata.params.get("duration")
         if not isinstance(duration, int | float) or not duration > 0:
             duration = ((first.end_ns - first.t0_ns) * 1e-9 if first.end_ns is not None
@@ -366,8 +479,24 @@ class _Progress:
             done = min((int(imu.t_ns[-1]) - self.t0_ns) * 1e-9, self.duration)
         else:
             return
-        total = int(self.n * self.duration)
+        total = int((self.n + self.smoothed) * self.duration)
         self.progress(min(int(self.n * done), total), total)
+
+    def backward(self, i: int, epochs: int) -> Callable[[int], None] | None:
+        """The progress of the backward pass of the i-th smoothed filter over ``epochs``: each
+        counts for the recording's length after the forward passes."""
+        if self.progress is None or self.duration is None or epochs <= 0:
+            return None
+        progress, duration = self.progress, self.duration
+        total = int((self.n + self.smoothed) * duration)
+        base = (self.n + i) * duration
+        seen = [0]
+
+        def report(done: int) -> None:
+            seen[0] += done
+            progress(min(int(base + duration * seen[0] / epochs), total), total)
+
+        return report
 
 
 def replay(

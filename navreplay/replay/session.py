@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +52,7 @@ from navreplay.filters.base import (
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.filters.result import RunResult
 from navreplay.filters.settings import FilterSettings, build_params
+from navreplay.filters.smoothable import Smoothable
 from navreplay.io.errors import RecordingError
 from navreplay.io.lifecycle import from_signal
 from navreplay.io.source import COMPLETE, Window
@@ -69,6 +71,7 @@ from navreplay.replay.errors import (
 )
 from navreplay.replay.gaps import MIN_IMU_SAMPLES, ImuFeeder, find_gaps
 from navreplay.replay.plan import EventPlan, aiding_kinds, merge_streams, window_plan
+from navreplay.replay.smoothing import ForwardStore
 from navreplay.replay.spec import FilterSpec
 from navreplay.sensors.specs import SensorSpecs
 
@@ -137,6 +140,7 @@ class ReplaySession:
         live: Rows | None = None,
         observe_interval: float = 0.25,
         progress: Progress | None = None,
+        smoothing: ForwardStore | None = None,
     ) -> None:
         filter_cls = spec.filter_cls
         label = spec.label
@@ -163,6 +167,13 @@ class ReplaySession:
                                   f"{one_line(e)} (a filter raises an Exception; it never "
                                   "ends the process)") from None
         self.filter: Filter = filt
+        self.smoothing = smoothing
+        """Where the forward pass is stored for the smoother (None: not smoothed)."""
+        if smoothing is not None:
+            if not isinstance(filt, Smoothable):
+                raise ReplayError(f"filter {label!r} cannot be smoothed (it does not declare "
+                                  "navreplay.filters.smoothable.Smoothable)")
+            filt.start_smoothing()
         self.states: tuple[State, ...] = check_states(filt.states, f"filter {label!r}: states")
         try:
             self.navigation = navigation_parts(filter_cls, self.states)
@@ -185,7 +196,7 @@ class ReplaySession:
         self._imu_required = StreamKind.IMU in filter_cls.requires
         self._pacing, self._progress, self._live = pacing, progress, live
         self._observe_interval = observe_interval
-        self._meta = dict(
+        self._meta: dict[str, Any] = dict(
             filter_name=filter_cls.name,
             label=label,
             recording=source,
@@ -202,6 +213,9 @@ class ReplaySession:
         self._first_imu_ns: int | None = None
         self._nominal: float | None = None
         self._done_to_ns: int | None = None  # events up to this time are applied
+        # the filter starts at its initial solution's time: the samples before it are not its
+        start_ns = first.metadata.initial_nav.get("t_ns")
+        self._start_ns: int | None = int(start_ns) if start_ns is not None else None
         self._events = 0
         self._wall0 = time.perf_counter()
         self._t_first: float | None = None
@@ -240,6 +254,8 @@ class ReplaySession:
         t0_ns = self._t0_ns
         self._add_aiding(window, known or {})
         imu_t_ns, imu_columns, start = self._window_imu(window.get(StreamKind.IMU))
+        if self._start_ns is not None and len(imu_t_ns):
+            imu_t_ns, imu_columns, start = self._skip_to_start(imu_t_ns, imu_columns, start)
         if self._first_imu_ns is None and len(imu_t_ns):
             self._first_imu_ns = int(imu_t_ns[0])
         hi = None if final else (int(imu_t_ns[-1]) if len(imu_t_ns) > start else None)
@@ -299,6 +315,23 @@ class ReplaySession:
             )
         return t_ns, cols, start
 
+    def _skip_to_start(self, t_ns: np.ndarray, cols: dict[str, np.ndarray], start: int
+                       ) -> tuple[np.ndarray, dict[str, np.ndarray], int]:
+        """The IMU samples from the last one before the filter's start on (that one handed
+        over), so that neither the propagation nor the output ticks run before the start;
+        until a sample at or after the start arrives, the last one is kept as handed over."""
+        assert self._start_ns is not None
+        k = int(np.searchsorted(t_ns, self._start_ns, side="left"))
+        if k == 0:  # no sample before the start: nothing to skip, now or after
+            self._start_ns = None
+            return t_ns, cols, start
+        t_ns, cols = t_ns[k - 1:], {name: v[k - 1:] for name, v in cols.items()}
+        if len(t_ns) == 1:
+            self._last, self._pending = (t_ns, cols), None
+        else:
+            self._start_ns = None
+        return t_ns, cols, 1
+
     def _feeder(self, imu_t: np.ndarray, imu_cols: list[tuple[str, np.ndarray]],
                 start: int) -> ImuFeeder:
         """The IMU block feeder of a window; refuses IMU streams too short or with too long
@@ -327,6 +360,8 @@ class ReplaySession:
         for c, kind in enumerate(kinds):
             self._known[kind] = int(known.get(kind, COMPLETE))
             new = window.get(kind)
+            if new is not None and len(new) and self._start_ns is not None:
+                new = new.slice(int(np.searchsorted(new.t_ns, self._start_ns)), len(new))
             if new is not None and len(new):
                 self._aiding[c] = _join(self._aiding[c], new)
         self._known = {k: t for k, t in self._known.items() if t < COMPLETE}
@@ -480,6 +515,8 @@ class _Events:
             self.columns = Columns(est, self.upper, navigation=s.navigation)
         columns = self.columns
         columns.add(est)
+        if s.smoothing is not None:
+            s.smoothing.add(est, s.filter.smoothing_step())  # type: ignore[attr-defined]
         if columns.m - self.checked >= CHECK_EVERY:
             columns.check(self.checked, s.label, s.source, s._names)
             self.checked = columns.m
@@ -492,6 +529,10 @@ class _Events:
 
     def written(self, m: int, nav: np.ndarray, checked: bool) -> None:
         s = self.session
+        if s.smoothing is not None:
+            raise ReplayError(f"filter {s.label!r}: a compiled run wrote estimates while "
+                              "smoothing; a Smoothable filter takes its events one by one "
+                              "once start_smoothing is called")
         columns = self.columns
         assert columns is not None
         m0 = columns.m

@@ -83,8 +83,10 @@ class Envelope:
         assert self.base is not None
         shift = self.base % 2  # the first bin is the odd half of a merged bin
         n = self.cap
-        lo, hi = np.full(n + 2, np.nan), np.full(n + 2, np.nan)
-        t_lo, t_hi = np.full(n + 2, np.nan), np.full(n + 2, np.nan)
+        lo: np.ndarray = np.full(n + 2, np.nan)
+        hi: np.ndarray = np.full(n + 2, np.nan)
+        t_lo: np.ndarray = np.full(n + 2, np.nan)
+        t_hi: np.ndarray = np.full(n + 2, np.nan)
         lo[shift:shift + n], hi[shift:shift + n] = self.lo, self.hi
         t_lo[shift:shift + n], t_hi[shift:shift + n] = self.t_lo, self.t_hi
         lo, hi = lo.reshape(-1, 2), hi.reshape(-1, 2)

@@ -1,10 +1,15 @@
 """A self-contained HTML report of a run or a Monte Carlo campaign (``--report out.html``).
 
-One page, no network: the summary table, then per filter the figures an engineer puts in a
-paper, drawn by :mod:`navreplay.viz.figures` and embedded as base64 PNG:
+One page, no network: how it was made (the command, the recording's scenario, seed and initial
+state, the versions), the headline metrics (a row per metric, a column per filter, the best in
+bold) and the full summary, then the figures an engineer puts in a paper, drawn by
+:mod:`navreplay.viz.figures` and embedded as SVG (a ``.pdf`` path writes the same figures and
+tables as the pages of a PDF):
 
-* a run: navigation errors with +-3 sigma (one figure per filter, each at its own scale), the
-  other scored states' errors with +-3 sigma, NEES and NIS with their shaded chi-square bands;
+* a run: the filters' horizontal and vertical position, velocity and heading errors overlaid
+  and their CDFs; per filter, navigation errors with +-3 sigma (each at its own scale), the
+  other scored states' errors with +-3 sigma, NEES and NIS with their shaded chi-square bands,
+  the innovations with +-3 sqrt(S) and their settings with the source of each;
 * a campaign: RMS error vs mean predicted sigma per filter, NEES and NIS averaged over the runs
   with their bands.
 
@@ -15,10 +20,11 @@ series, so the report of a day-long log takes the memory of a short one.
 
 from __future__ import annotations
 
-import base64
+import contextvars
 import dataclasses
 import html
 import math
+import platform
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -28,7 +34,8 @@ import numpy as np
 from navreplay import __version__
 from navreplay.export import FilterOutput, check_targets, write_text
 from navreplay.metrics import chi2_bounds, chi2_bounds_per_count
-from navreplay.metrics.tables import summary_unit
+from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors, headline_rows
+from navreplay.metrics.tables import format_summaries, outage_cells, summary_unit
 from navreplay.report.envelope import Envelope
 
 _DEG = 180.0 / math.pi
@@ -60,7 +67,8 @@ figcaption { font-size: 0.9em; color: #555; }
 
 
 def summary_table(summaries: Mapping[str, Mapping[str, Any]]) -> str:
-    """An HTML table of summary dicts (one row per filter; units under the names)."""
+    """The headline metrics (a row per metric, a column per filter, the best of a row in bold),
+    then every numeric entry of the summaries the same way, folded."""
     keys: list[str] = []
     for s in summaries.values():
         for k, v in s.items():
@@ -68,17 +76,100 @@ def summary_table(summaries: Mapping[str, Mapping[str, Any]]) -> str:
                 keys.append(k)
     if not keys:
         return "<p class='note'>(nothing to score)</p>"
-    head = "".join(f"<th>{html.escape(k)}<br>{html.escape(summary_unit(k)[0] and f'[{summary_unit(k)[0]}]')}"
-                   "</th>" for k in keys)
+    head = "".join(f"<th>{html.escape(label)}</th>" for label in summaries)
     rows = []
-    for label, s in summaries.items():
-        cells = []
-        for k in keys:
+    for name, values, pick in headline_rows(summaries):
+        cells = "".join(f"<td>{'<b>' if i == pick else ''}{_num(v)}{'</b>' if i == pick else ''}"
+                        "</td>" for i, v in enumerate(values))
+        rows.append(f"<tr><td>{html.escape(name)}</td>{cells}</tr>")
+    all_rows: list[str] = []
+    for k in keys:
+        unit, factor = summary_unit(k)
+        entries = []
+        for s in summaries.values():
             v = s.get(k)
-            ok = isinstance(v, int | float) and math.isfinite(float(v))
-            cells.append(f"<td>{f'{float(v) * summary_unit(k)[1]:.4g}' if ok else '–'}</td>")
-        rows.append(f"<tr><td>{html.escape(label)}</td>{''.join(cells)}</tr>")
-    return f"<table><tr><th>filter</th>{head}</tr>{''.join(rows)}</table>"
+            if isinstance(v, int | float) and not isinstance(v, bool):
+                entries.append(f"<td>{_num(float(v) * factor)}</td>")
+            else:
+                entries.append("<td>–</td>")
+        all_rows.append(f"<tr><td>{html.escape(k)}{html.escape(f' [{unit}]' if unit else '')}"
+                        f"</td>{''.join(entries)}</tr>")
+    out = []
+    if rows:
+        out.append(f"<table><tr><th>metric</th>{head}</tr>{''.join(rows)}</table>")
+    out.append(f"<details><summary>Every entry of the summary ({len(keys)})</summary><table>"
+               f"<tr><th>key [unit]</th>{head}</tr>{''.join(all_rows)}</table></details>")
+    return "".join(out)
+
+
+def _num(v: float) -> str:
+    return f"{v:.4g}" if math.isfinite(v) else "–"
+
+
+def context_section(context: Mapping[str, Any]) -> str:
+    """How the results were made: the command, the recording, its scenario, seed and initial
+    state, the versions (``context``: :func:`run_context` and the job's ``command``)."""
+    rows = []
+    for key, value in context.items():
+        if value in (None, "", {}):
+            continue
+        shown = (f"<code>{html.escape(str(value))}</code>" if key == "command"
+                 else html.escape(str(value)))
+        rows.append(f"<tr><td>{html.escape(key)}</td><td style='text-align:left'>{shown}</td></tr>")
+    return f"<table>{''.join(rows)}</table>" if rows else ""
+
+
+def run_context(metadata: Any, source: str) -> dict[str, Any]:
+    """The recording's part of a report's context: file, scenario, seed, scenario parameters,
+    initial state (latitude, longitude [deg], height [m], NED velocity [m/s], roll, pitch, yaw
+    [deg]) and the version that wrote it, with this one's versions."""
+    out: dict[str, Any] = {"recording": source}
+    if metadata is not None:
+        out["scenario"] = metadata.scenario or None
+        out["seed"] = metadata.seed
+        out["scenario parameters"] = ", ".join(
+            f"{k}={_short(v)}" for k, v in (metadata.params or {}).items()) or None
+        init = metadata.initial_nav or {}
+        if init.get("pos") is not None:
+            from navreplay.geo.rotations import quat_to_euler
+
+            lat, lon, h = (float(x) for x in init["pos"])
+            text = f"{lat * _DEG:.6f}° N, {lon * _DEG:.6f}° E, {h:.1f} m"
+            if init.get("v_n") is not None:
+                text += "; v_NED " + ", ".join(f"{float(x):.2f}" for x in init["v_n"]) + " m/s"
+            if init.get("q_nb") is not None:
+                e = np.asarray(quat_to_euler(np.asarray(init["q_nb"], dtype=float))) * _DEG
+                text += f"; roll {e[0]:.2f}°, pitch {e[1]:.2f}°, yaw {e[2]:.2f}°"
+            out["initial state"] = text
+        out["recorded by"] = (f"navreplay {metadata.navreplay_version}"
+                              if metadata.navreplay_version else None)
+    out["versions"] = versions()
+    return out
+
+
+def versions() -> str:
+    """navreplay, Python, numpy and matplotlib versions."""
+    import matplotlib
+
+    return (f"navreplay {__version__}, Python {platform.python_version()}, numpy "
+            f"{np.__version__}, matplotlib {matplotlib.__version__}")
+
+
+def _short(v: Any) -> str:
+    return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+
+def outage_table(summaries: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """The GNSS outages of the recording scored one by one
+    (:func:`navreplay.metrics.tables.outage_cells`), as a heading and an HTML table; nothing without
+    outages."""
+    rows = outage_cells(summaries)
+    if not rows:
+        return []
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in rows[0])
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>"
+                   for r in rows[1:])
+    return ["<h3>GNSS outages</h3>", f"<table><tr>{head}</tr>{body}</table>"]
 
 
 def settings_section(summary: Mapping[str, Any] | None) -> list[str]:
@@ -120,12 +211,22 @@ def _display(unit: str) -> tuple[str, float]:
     return (unit, 1.0) if u.label == "SI" else (u.label, u.scale)
 
 
+_PDF_PAGES: contextvars.ContextVar[list[Any] | None] = contextvars.ContextVar(
+    "_PDF_PAGES", default=None)
+"""The figures of a PDF report being drawn (None while an HTML page is)."""
+
+
 def _figure(fig: Any, caption: str) -> str:
+    """A figure as inline SVG with its caption (or kept as a page of the PDF being drawn)."""
     from navreplay.viz import figures
 
-    data = base64.b64encode(figures.png(fig)).decode("ascii")
-    alt = html.escape(caption, quote=True)
-    return (f"<figure><img alt=\"{alt}\" src=\"data:image/png;base64,{data}\">"
+    pages = _PDF_PAGES.get()
+    if pages is not None:
+        fig.text(0.01, 0.002, caption, fontsize=7, va="bottom", wrap=True)
+        pages.append(fig)
+        return ""
+    svg = figures.svg(fig)
+    return (f"<figure role='img' aria-label=\"{html.escape(caption, quote=True)}\">{svg}"
             f"<figcaption>{html.escape(caption)}</figcaption></figure>")
 
 
@@ -142,6 +243,28 @@ def _write(path: Path, text: str, force: bool) -> Path:
     path = Path(path)
     check_targets([path], force, "--report")
     write_text(path, text)
+    return path
+
+
+def _publish(path: Path, title: str, subtitle: str, draw: Any, text: Sequence[str],
+             force: bool) -> Path:
+    """Write a report: ``draw()`` returns the HTML body (its figures inline SVG); for a
+    ``.pdf`` path the same figures are drawn as pages after a page of ``text`` (the tables)."""
+    path = Path(path)
+    check_targets([path], force, "--report")
+    if path.suffix.lower() != ".pdf":
+        return _write(path, _page(title, subtitle, draw()), force)
+    from navreplay.io.outputs import atomic_path
+    from navreplay.viz import figures
+
+    pages: list[Any] = [figures.text_page(f"{title} ({subtitle})", text)]
+    token = _PDF_PAGES.set(pages)
+    try:
+        draw()
+    finally:
+        _PDF_PAGES.reset(token)
+    with atomic_path(path) as tmp:
+        figures.pdf(pages, str(tmp), title)
     return path
 
 
@@ -191,6 +314,12 @@ class RunSeries:
         self.nees: _Trace | None = None
         self.nees_dof = 0
         self.nis: dict[str, tuple[_Trace, int]] = {}
+        self.compare: dict[str, Envelope] = {}
+        """Envelopes of the compared error magnitudes (:data:`COMPARED`), SI."""
+        self.quantiles: dict[str, Quantiles] = {}
+        """Their distributions over the whole run (the CDFs)."""
+        self.innovations: dict[tuple[str, int], _Trace] = {}
+        """Per measurement and row: nu with sqrt(S_ii) as its sigma."""
 
     def add(self, out: FilterOutput) -> None:
         """A block of rows (later than before) with its metrics, and its NIS if it has any."""
@@ -210,15 +339,22 @@ class RunSeries:
             k = 0
             for key, _, axes, _, _, row in groups:
                 for i in range(len(axes)):
-                    self.nav[k].value.add(m.t, getattr(m.nav, key)[:, i])
-                    self.nav[k].sigma.add(m.t, sig[:, row + i])
+                    trace = self.nav[k]
+                    assert trace.sigma is not None  # made with one
+                    trace.value.add(m.t, getattr(m.nav, key)[:, i])
+                    trace.sigma.add(m.t, sig[:, row + i])
                     k += 1
+            for key, v in compared_errors(m.nav.pos_ned, m.nav.v_n, m.nav.phi).items():
+                if np.isfinite(v).any():
+                    self.compare.setdefault(key, Envelope()).add(m.t, v)
+                    self.quantiles.setdefault(key, Quantiles()).add(v)
         others = [(j, name) for j, name in enumerate(m.state_names) if name not in out.nav_states]
         if not self.states and others:
             units = dict(zip(out.state_names, out.state_units, strict=True))
             self.states = [_Trace(name, *_display(units.get(name, "-")), sigma=Envelope())
                            for _, name in others]
         for trace, (j, _) in zip(self.states, others, strict=True):
+            assert trace.sigma is not None  # made with one
             trace.value.add(m.t, m.state_error[:, j])
             trace.sigma.add(m.t, np.sqrt(np.clip(m.state_var[:, j], 0.0, None)))
         if m.nees_states:
@@ -226,6 +362,27 @@ class RunSeries:
                 self.nees_dof = len(m.nees_states)
                 self.nees = _Trace(f"NEES ({self.nees_dof} dof)", "-", 1.0)
             self.nees.value.add(m.t, m.nees)
+
+    def add_innovations(self, name: str, t: np.ndarray, nu: np.ndarray, S: np.ndarray,
+                        rows: Sequence[tuple[str, Any]]) -> None:
+        """The innovations of one measurement at its update times [s] (later than before):
+        ``nu`` (K, m), ``S`` (K, m, m), ``rows`` the title and display unit of each row
+        (:func:`navreplay.viz.naming.innovation_rows`)."""
+        k = len(t)
+        if not k:
+            return
+        nu = np.asarray(nu, dtype=np.float64).reshape(k, -1)
+        sd = np.sqrt(np.clip(np.diagonal(np.asarray(S).reshape(k, nu.shape[1], nu.shape[1]),
+                                         axis1=1, axis2=2), 0.0, None))
+        for i, (row, u) in enumerate(rows):
+            key = (name, i)
+            if key not in self.innovations:
+                self.innovations[key] = _Trace(f"{name} {row}", u.label, u.scale,
+                                               sigma=Envelope())
+            trace = self.innovations[key]
+            assert trace.sigma is not None  # made with one
+            trace.value.add(t, nu[:, i])
+            trace.sigma.add(t, sd[:, i])
 
     def add_nis(self, name: str, t: np.ndarray, nis: np.ndarray, dof: int) -> None:
         """NIS of one measurement at its update times [s] (later than before)."""
@@ -265,30 +422,115 @@ def run_figures(series: RunSeries, color: str,
         parts.append(_figure(
             figures.consistency(f"{label}: consistency", cons, color),
             f"{label}: NEES and NIS per epoch with the 95 % chi-square band of one sample."))
+    if series.innovations:
+        parts.append(_figure(
+            figures.bounded_errors(f"{label}: innovations",
+                                   [tr.panel() for tr in series.innovations.values()], color),
+            f"{label}: innovations of each measurement row with ±3√S_ii (the bounds the "
+            "filter predicts)."))
     if not parts:
         parts.append("<p class='note'>No reference and no measurement updates: nothing to "
                      "plot.</p>")
     return parts
 
 
+def comparison_figures(runs: Sequence[RunSeries], colors: Mapping[str, str]) -> list[str]:
+    """The filters' error magnitudes overlaid over time and their CDFs (with truth only)."""
+    from navreplay.viz import figures
+    from navreplay.viz.naming import display_unit
+
+    over, dist = [], []
+    for key, name, unit in COMPARED:
+        u = display_unit(unit)
+        curves, cdf = [], []
+        for r in runs:
+            if key in r.compare and r.compare[key].count:
+                t, v = r.compare[key].points()
+                curves.append(figures.Curve(r.label, t, v * u.scale, colors[r.label]))
+                x, frac = r.quantiles[key].cdf()
+                cdf.append(figures.Curve(r.label, x * u.scale, frac, colors[r.label]))
+        if curves:
+            over.append((name, u.label, curves))
+            dist.append((name, u.label, cdf))
+    if not over:
+        return []
+    return [
+        _figure(figures.overlay("errors of every filter", over),
+                "Horizontal and vertical position, velocity and heading error magnitudes of "
+                "every filter (y range set by the last 90 % of the run when a start-up "
+                "transient would flatten it)."),
+        _figure(figures.cdfs("error distributions", dist),
+                "Cumulative distributions of the same errors over the whole run: the curve "
+                "further left and higher is the better filter."),
+    ]
+
+
 def write_run_report(path: Path, runs: Sequence[RunSeries],
                      summaries: Mapping[str, Mapping[str, Any]], *, title: str,
-                     force: bool = False) -> Path:
-    """Write the HTML report of filters replayed over one recording (their series)."""
+                     context: Mapping[str, Any] | None = None, force: bool = False,
+                     log_notes: Sequence[str] = ()) -> Path:
+    """Write the report of filters replayed over one recording (their series): HTML, or PDF
+    for a ``.pdf`` path. ``context``: the command and :func:`run_context`; ``log_notes``: what
+    the log's preparation said (reference, frame checks, the initial state and its source),
+    one line each."""
     from navreplay.viz import figures
 
-    check_targets([Path(path)], force, "--report")
-    body = ["<h2>Summary</h2>"]
-    if summaries:
-        body.append(summary_table(summaries))
-    else:
-        body.append("<p class='note'>The recording has no reference: no errors to score; "
-                    "the NIS below needs none.</p>")
-    for i, series in enumerate(runs):
-        body.append(f"<h2>{html.escape(series.label)}</h2>")
-        body += settings_section(summaries.get(series.label))
-        body += run_figures(series, figures.filter_color(i), summaries.get(series.label))
-    return _write(path, _page(title, "filter run report", body), force)
+    colors = figures.filter_colors([r.label for r in runs])
+
+    def draw() -> list[str]:
+        body = [context_section(context or {})]
+        if log_notes:
+            body.append("<h2>The log</h2><ul>" + "".join(
+                f"<li>{html.escape(n)}</li>" for n in log_notes) + "</ul>")
+        body.append("<h2>Summary</h2>")
+        if summaries:
+            body.append(summary_table(summaries))
+            body += outage_table(summaries)
+        else:
+            body.append("<p class='note'>The recording has no reference: no errors to score; "
+                        "the NIS below needs none.</p>")
+        cmp = comparison_figures(runs, colors)
+        if cmp:
+            body += ["<h2>Comparison</h2>", *cmp]
+        for series in runs:
+            body.append(f"<h2>{html.escape(series.label)}</h2>")
+            body += settings_section(summaries.get(series.label))
+            body += run_figures(series, colors[series.label], summaries.get(series.label))
+        return body
+
+    text = [f"{k}: {v}" for k, v in (context or {}).items() if v not in (None, "", {})]
+    text += list(log_notes)
+    text += ["", format_summaries(summaries) if summaries else "(no reference)"]
+    return _publish(path, title, "filter run report", draw, text, force)
+
+
+def write_compare_report(path: Path, summaries: Mapping[str, Mapping[str, Any]], *,
+                         sources: Sequence[str], force: bool = False) -> Path:
+    """Write the comparison of saved summaries (``navreplay compare``): the headline table and
+    a bar chart per metric; HTML, or PDF for a ``.pdf`` path."""
+    from navreplay.metrics.compare import format_comparison
+    from navreplay.viz import figures
+
+    colors = figures.filter_colors(list(summaries))
+    rows = headline_rows(summaries)
+
+    def draw() -> list[str]:
+        body = [context_section({"summaries": ", ".join(sources), "versions": versions()}),
+                "<h2>Headline metrics</h2>", summary_table(summaries)]
+        if rows:
+            body.append(_figure(
+                figures.metric_bars([(n, v) for n, v, _ in rows], list(summaries),
+                                    [colors[label] for label in summaries]),
+                "The headline metrics of each filter (a missing bar: not in its summary)."))
+        for label, s in summaries.items():
+            if s.get("settings"):
+                body.append(f"<h2>{html.escape(label)}</h2>")
+                body += settings_section(s)
+        return body
+
+    return _publish(path, "Comparison of saved runs", "comparison report", draw,
+                    [f"summaries: {', '.join(sources)}", "", format_comparison(summaries)],
+                    force)
 
 
 # --------------------------------------------------------------------------------------------
@@ -340,10 +582,16 @@ def write_ensemble_report(path: Path, ensembles: Mapping[str, Any],
     """Write the HTML report of a Monte Carlo campaign (EnsembleResult per filter label)."""
     from navreplay.viz import figures
 
-    check_targets([Path(path)], force, "--report")
-    body = ["<h2>Ensemble summary</h2>", summary_table(summaries)]
-    for i, (label, ens) in enumerate(ensembles.items()):
-        body.append(f"<h2>{html.escape(label)}</h2>")
-        body += settings_section(summaries.get(label))
-        body += ensemble_figures(ens, figures.filter_color(i))
-    return _write(path, _page(title, "Monte Carlo report", body), force)
+    colors = figures.filter_colors(list(ensembles))
+
+    def draw() -> list[str]:
+        body = [context_section({"versions": versions()}), "<h2>Ensemble summary</h2>",
+                summary_table(summaries), *outage_table(summaries)]
+        for label, ens in ensembles.items():
+            body.append(f"<h2>{html.escape(label)}</h2>")
+            body += settings_section(summaries.get(label))
+            body += ensemble_figures(ens, colors[label])
+        return body
+
+    return _publish(path, title, "Monte Carlo report", draw, [format_summaries(summaries)],
+                    force)

@@ -29,6 +29,7 @@ def as_vec3(owner: object, name: str) -> None:
     A scalar applies to all three axes; anything else must have exactly three elements.
     """
     value = getattr(owner, name)
+    vec: tuple[float, ...]
     if isinstance(value, int | float):
         vec = (float(value),) * 3
     else:

@@ -29,6 +29,9 @@ class DepthModel:
         "bias": FieldUnit("m", "m"), "noise": FieldUnit("m", "m"), "rate": FieldUnit("Hz", "Hz"),
     }
     """Unit of each field in SI and in datasheets."""
+    error_terms: ClassVar[Mapping[str, str]] = {"bias": "depth bias", "noise": "depth noise"}
+    """The fields that are error magnitudes, each with what it is
+    (:attr:`navreplay.sensors.imu.ImuModel.error_terms`)."""
 
     bias: float = 0.0
     """Bias, random constant [m]."""

@@ -8,6 +8,16 @@ steady-state sigma, one correlation time each) model the slowly wandering errors
 receiver (multipath, atmosphere). The reported ``pos_sigma`` and ``vel_sigma`` are the total
 stationary 1-sigma per axis, sqrt(white^2 + gm^2).
 
+Outages
+    A schedule of ``(start, length)`` pairs [s since the recording start] during which the
+    receiver gives nothing: every epoch in ``[start, start + length)`` is dropped from the
+    fixes and the velocities (:func:`outage_mask`); the Gauss-Markov errors keep wandering
+    underneath. Scenarios with GNSS take it as the parameter ``gps_outages``
+    (``-p gps_outages=120:30,300:60``, or ``gps_outages = [[120, 30], [300, 60]]`` in TOML;
+    :func:`check_outages`) and record it in ``metadata.extra["gnss_outages"]`` as
+    ``[[start, end], ...]`` [s] (:data:`OUTAGES_KEY`, :func:`recorded_outages`), where the
+    scoring and the view find it whatever the scenario.
+
 Examples
 --------
 >>> import numpy as np
@@ -22,8 +32,9 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
-from typing import ClassVar
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -47,6 +58,14 @@ class GpsModel:
         "rate": FieldUnit("Hz", "Hz"),
     }
     """Unit of each field in SI and in datasheets."""
+    error_terms: ClassVar[Mapping[str, str]] = {
+        "pos_sigma": "white position noise",
+        "pos_gm_sigma": "time-correlated (Gauss-Markov) position error",
+        "vel_sigma": "white velocity noise",
+        "vel_gm_sigma": "time-correlated (Gauss-Markov) velocity error",
+    }
+    """The fields that are error magnitudes, each with what it is
+    (:attr:`navreplay.sensors.imu.ImuModel.error_terms`)."""
 
     pos_sigma: float | Vec3 = (2.5, 2.5, 5.0)
     """White position noise per axis N, E, D [m]."""
@@ -132,6 +151,7 @@ class GpsModel:
             vel_sigma=np.array(vel_sigma),
             pos_error_ned=err_ned,
             vel_error_n=vel_err,
+            pos_gm_ned=gm,
         )
 
 
@@ -166,6 +186,8 @@ class GpsMeasurement:
         True position error N, E, D [m] (measured minus true).
     vel_error_n : ndarray, shape (M, 3)
         True velocity error NED [m/s].
+    pos_gm_ned : ndarray, shape (M, 3)
+        Its Gauss-Markov part N, E, D [m] (part of ``pos_error_ned``).
     """
 
     pos: np.ndarray
@@ -174,6 +196,7 @@ class GpsMeasurement:
     vel_sigma: np.ndarray
     pos_error_ned: np.ndarray
     vel_error_n: np.ndarray
+    pos_gm_ned: np.ndarray
 
     def fix_columns(self) -> dict[str, np.ndarray]:
         """Columns of the GPS stream (``FIELDS[StreamKind.GPS]``)."""
@@ -182,3 +205,85 @@ class GpsMeasurement:
     def velocity_columns(self) -> dict[str, np.ndarray]:
         """Columns of the GPS velocity stream (``FIELDS[StreamKind.GPS_VEL]``)."""
         return {"v_n": self.v_n, "vel_sigma": self.vel_sigma}
+
+
+# -- outages ----------------------------------------------------------------------------------
+
+OUTAGES_KEY = "gnss_outages"
+"""The key of ``Metadata.extra`` holding a recording's GNSS outages, ``[[start, end], ...]``
+[s since the recording start]."""
+
+Outages = tuple[tuple[float, float], ...]
+"""A GNSS outage schedule: ``(start, length)`` pairs [s since the recording start]."""
+
+
+def check_outages(outages: Iterable[Iterable[float]], duration: float,
+                  name: str = "gps_outages") -> Outages:
+    """An outage schedule as ``((start, length), ...)``, checked against a recording of
+    ``duration`` [s]: each outage starts at or after 0, lasts more than 0 s, ends by the end of
+    the recording (its end error is scored there), and starts after the previous one ended.
+    Raises ``ValueError`` naming ``name`` and the outage.
+
+    >>> check_outages([(120, 30), (300, 60.0)], 600.0)
+    ((120.0, 30.0), (300.0, 60.0))
+    >>> check_outages([(120, 30), (140, 10)], 600.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: gps_outages: the outage 140:10 starts before the previous one ends (150 s)
+    """
+    out: list[tuple[float, float]] = []
+    end = 0.0
+    for item in outages:
+        pair = tuple(item)
+        text = ":".join(f"{v:g}" if isinstance(v, int | float) else str(v) for v in pair)
+        if len(pair) != 2 or not all(isinstance(v, int | float) and math.isfinite(v)
+                                     for v in pair):
+            raise ValueError(f"{name}: an outage is START:LENGTH in seconds, got {text!r}")
+        start, length = float(pair[0]), float(pair[1])
+        if start < 0.0 or length <= 0.0:
+            raise ValueError(f"{name}: the outage {text} must start at or after 0 s and last "
+                             "more than 0 s")
+        if start + length > duration + 1e-9:
+            raise ValueError(f"{name}: the outage {text} ends after the recording "
+                             f"({duration:g} s)")
+        if out and start < end:
+            raise ValueError(f"{name}: the outage {text} starts before the previous one ends "
+                             f"({end:g} s)")
+        out.append((start, length))
+        end = start + length
+    return tuple(out)
+
+
+def outage_mask(t: np.ndarray, outages: Outages) -> np.ndarray:
+    """Which of the epochs ``t`` [s since the recording start] fall in an outage
+    ``[start, start + length)``, shape of ``t``, bool."""
+    t = np.asarray(t, dtype=float)
+    inside = np.zeros(t.shape, dtype=bool)
+    for start, length in outages:
+        inside |= (t >= start - 1e-9) & (t < start + length - 1e-9)
+    return inside
+
+
+def outages_extra(outages: Outages) -> list[list[float]]:
+    """The ``metadata.extra`` entry (:data:`OUTAGES_KEY`) of a schedule: ``[[start, end], ...]``
+    [s]."""
+    return [[start, start + length] for start, length in outages]
+
+
+def recorded_outages(extra: Mapping[str, Any]) -> tuple[tuple[float, float], ...]:
+    """The GNSS outages a recording's ``metadata.extra`` holds, as ``((start, end), ...)`` [s
+    since the recording start]; empty when it holds none. Raises ``ValueError`` on an entry
+    that is not a list of increasing ``[start, end]`` pairs."""
+    raw = extra.get(OUTAGES_KEY) or []
+    out = []
+    for item in raw:
+        try:
+            start, end = (float(v) for v in item)
+        except (TypeError, ValueError):
+            raise ValueError(f"metadata.extra[{OUTAGES_KEY!r}]: {item!r} is not a [start, end] "
+                             "pair [s]") from None
+        if not (math.isfinite(start) and math.isfinite(end) and end > start):
+            raise ValueError(f"metadata.extra[{OUTAGES_KEY!r}]: {item!r} is not a [start, end] "
+                             "pair with end > start [s]")
+        out.append((start, end))
+    return tuple(out)

@@ -46,7 +46,7 @@ import numpy as np
 from navreplay.core import units
 from navreplay.core.params import check_nonnegative, check_positive
 from navreplay.geo import earth
-from navreplay.geo.rotations import quat_to_dcm
+from navreplay.geo.rotations import euler_to_quat, quat_to_dcm, quat_to_euler
 from navreplay.sensors._common import FieldUnit, RealisedErrors, draw_misalignment, triad_matrix
 from navreplay.sensors.noise import gauss_markov, random_walk, sample_sigma
 
@@ -78,6 +78,24 @@ class ImuModel:
         "accel_rw": FieldUnit("m/s^2/sqrt(s)", "ug/sqrt(s)"),
     }
     """Unit of each field in SI and in datasheets (``gyro_arw``: rad/sqrt(s), deg/sqrt(h))."""
+    error_terms: ClassVar[Mapping[str, str]] = {
+        "gyro_bias": "gyro turn-on bias",
+        "gyro_bias_instability": "gyro bias instability",
+        "gyro_scale_factor": "gyro scale factor",
+        "gyro_misalignment": "gyro misalignment",
+        "gyro_g_sensitivity": "gyro g-sensitivity",
+        "gyro_arw": "gyro angle random walk",
+        "gyro_rrw": "gyro rate random walk",
+        "accel_bias": "accelerometer turn-on bias",
+        "accel_bias_instability": "accelerometer bias instability",
+        "accel_scale_factor": "accelerometer scale factor",
+        "accel_misalignment": "accelerometer misalignment",
+        "accel_vrw": "accelerometer velocity random walk",
+        "accel_rw": "accelerometer bias random walk",
+    }
+    """The fields that are error magnitudes (the others, correlation times, parametrise them),
+    each with what it is; a filter declares those it models
+    (:meth:`navreplay.filters.base.Filter.modelled_terms`)."""
 
     gyro_bias: float = 0.0
     """Gyro bias, random constant [rad/s]."""
@@ -312,17 +330,23 @@ class ImuMeasurement:
 
 
 def effective_biases(
-    errors: ImuErrors, meas: ImuMeasurement, q_nb: np.ndarray, pos: np.ndarray
+    errors: ImuErrors, meas: ImuMeasurement, q_nb: np.ndarray, pos: np.ndarray, *,
+    level: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The biases a filter without scale-factor and misalignment states estimates.
 
-    A bias state absorbs every error that is constant while the vehicle is level and at rest:
-    the true total bias plus the scale-factor, misalignment (and, for the gyro, g-sensitivity)
-    errors acting on the rest values of the inputs, the gravity reaction
-    ``f_0^b = -C_bn g^n`` and the earth rate ``w_ie^b = C_bn w_ie^n``::
+    A bias state absorbs every error that is constant while the vehicle is at rest: the true
+    total bias plus the scale-factor, misalignment (and, for the gyro, g-sensitivity) errors
+    acting on the rest values of the inputs, the gravity reaction ``f_0^b = -C_bn g^n`` and the
+    earth rate ``w_ie^b = C_bn w_ie^n``::
 
         b_a,eff = b_a + (S_a + M_a) f_0^b
         b_g,eff = b_g + (S_g + M_g) w_ie^b + K_g f_0^b
+
+    ``C_bn`` is the true attitude's, or with ``level`` that of the level attitude at the true
+    heading (roll and pitch 0): the rest values of a vehicle whose specific force stays along
+    its z axis while it drives up a slope or banks into a coordinated turn, so the bias is the
+    one it has at 1 g; then ``f_0^b = (0, 0, -g)``.
 
     Parameters
     ----------
@@ -333,12 +357,18 @@ def effective_biases(
         True attitude.
     pos : ndarray, shape (M + 1, 3)
         True latitude, longitude [rad] and height [m].
+    level : bool
+        The rest values of the level attitude at the true heading.
 
     Returns
     -------
     gyro_bias_eff, accel_bias_eff : ndarray, shape (M + 1, 3)
         [rad/s] and [m/s^2].
     """
+    if level:
+        euler = quat_to_euler(q_nb)
+        euler[:, :2] = 0.0
+        q_nb = euler_to_quat(euler)
     C_bn = np.swapaxes(quat_to_dcm(q_nb), -1, -2)
     f0 = -np.einsum("kij,kj->ki", C_bn, earth.gravity_n(pos[:, 0], pos[:, 2]))
     w_ie = np.einsum("kij,kj->ki", C_bn, earth.omega_ie_n(pos[:, 0]))

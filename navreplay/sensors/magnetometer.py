@@ -146,6 +146,11 @@ class MagnetometerModel:
         "rate": FieldUnit("Hz", "Hz"),
     }
     """Unit of each field in SI and in datasheets."""
+    error_terms: ClassVar[Mapping[str, str]] = {
+        "scale_factor": "magnetometer scale factor", "misalignment": "magnetometer misalignment",
+        "bias": "magnetometer hard-iron bias", "noise": "magnetometer noise"}
+    """The fields that are error magnitudes, each with what it is
+    (:attr:`navreplay.sensors.imu.ImuModel.error_terms`)."""
 
     scale_factor: float = 0.0
     """Scale-factor error, random constant per axis [-]."""

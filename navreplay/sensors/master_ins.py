@@ -53,6 +53,12 @@ class MasterInsModel:
         "rate": FieldUnit("Hz", "Hz"),
     }
     """Unit of each field in SI and in datasheets."""
+    error_terms: ClassVar[Mapping[str, str]] = {
+        "tilt": "master platform tilt", "synchro_bias": "master synchro bias",
+        "synchro_noise": "master synchro noise", "vel_bias": "master velocity bias",
+        "vel_noise": "master velocity noise"}
+    """The fields that are error magnitudes, each with what it is
+    (:attr:`navreplay.sensors.imu.ImuModel.error_terms`)."""
 
     tilt: float | Vec3 = 0.0
     """Platform tilt eps_N, eps_E, eps_D, random constant [rad]."""

@@ -127,7 +127,7 @@ def gauss_markov(
     x = rng.standard_normal((n, dims))
     x[0] = x[0] * sigma if x0 is None else x0
     x[1:] *= sigma * math.sqrt(-math.expm1(-2.0 * dt / tau))
-    from scipy.signal import lfilter  # scipy.signal (and scipy.stats): only when simulating
+    from scipy.signal import lfilter  # scipy.signal costs a second at start-up: only here
 
     return lfilter([1.0], [1.0, -a], x, axis=0)
 

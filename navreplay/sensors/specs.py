@@ -67,10 +67,11 @@ import difflib
 import math
 import typing
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 from navreplay.core import units
 from navreplay.core.params import ParamError, describe
+from navreplay.core.streams import StreamKind
 from navreplay.core.units import UnitError
 from navreplay.sensors._common import FieldUnit
 from navreplay.sensors.depth import DepthModel
@@ -90,6 +91,18 @@ SPEC_KINDS: dict[str, type] = {
 }
 """Sensor kinds (the ``[sensors.KIND]`` tables, the keys of ``Metadata.sensors``) and their
 records."""
+
+M = TypeVar("M")
+
+SPEC_STREAMS: dict[str, tuple[StreamKind, ...]] = {
+    "imu": (StreamKind.IMU,),
+    "gps": (StreamKind.GPS, StreamKind.GPS_VEL),
+    "mag": (StreamKind.MAG,),
+    "speed_log": (StreamKind.SPEED_LOG,),
+    "depth": (StreamKind.DEPTH,),
+    "master_ins": (StreamKind.MASTER_INS,),
+}
+"""The streams each sensor kind's record describes."""
 
 SOURCE_KEY = "source"
 """The key of a kind's entry in ``Metadata.sensors`` that says where the record came from."""
@@ -152,6 +165,15 @@ class SensorSpecs:
         """The record of ``kind``, or None."""
         return self.models.get(kind)
 
+    def require(self, model: type[M]) -> M:
+        """The record of the kind whose class is ``model`` (``specs.require(GpsModel)``), for
+        code that cannot run without it; a ValueError naming the kind when there is none."""
+        kind = next(k for k, cls in SPEC_KINDS.items() if cls is model)
+        found = self.models.get(kind)
+        if found is None:
+            raise ValueError(f"no {kind} specification (sensors: {', '.join(self.models) or 'none'})")
+        return found  # checked against SPEC_KINDS on creation
+
     @property
     def imu(self) -> ImuModel | None:
         return self.models.get("imu")
@@ -191,6 +213,23 @@ class SensorSpecs:
         return self.sources.get(kind, "")
 
     # -- combining -------------------------------------------------------------------------
+
+    def present_terms(self, kind: str) -> dict[str, str]:
+        """The error terms (:attr:`~navreplay.sensors.imu.ImuModel.error_terms`) of ``kind``
+        that are stated and not zero (on some axis), each with what it is; empty when the kind
+        is absent."""
+        model = self.models.get(kind)
+        if model is None:
+            return {}
+        terms = getattr(type(model), "error_terms", {})
+        known = self.known_fields(kind)
+        out = {}
+        for name, what in terms.items():
+            value = getattr(model, name)
+            values = value if isinstance(value, tuple) else (value,)
+            if name in known and any(v != 0.0 for v in values):
+                out[name] = what
+        return out
 
     def with_model(self, kind: str, model: Any, source: str,
                    known: Iterable[str] | None = None) -> SensorSpecs:
@@ -295,7 +334,7 @@ def _split_key(cls: type, key: str) -> tuple[str, str | None]:
     return name, units.key_unit(key[len(name) + 1:])
 
 
-def _value(cls: type, name: str, raw: Any, key_unit: str | None) -> Any:
+def _value(cls: Any, name: str, raw: Any, key_unit: str | None) -> Any:
     """The value of field ``name`` in its own unit from a TOML value."""
     si = cls.field_units[name].si
 
@@ -391,7 +430,7 @@ def spec_from_table(
     return model, known, source
 
 
-def _expected(cls: type, name: str) -> str:
+def _expected(cls: Any, name: str) -> str:
     """How field ``name`` is written, e.g. ``rad/s^(1/2), such as "0.1 deg/sqrt(h)"``."""
     unit = cls.field_units[name]
     dims = units.dimension_phrase(units.parse_unit(unit.si).dims)

@@ -49,6 +49,11 @@ class SpeedLogModel:
         "rate": FieldUnit("Hz", "Hz"),
     }
     """Unit of each field in SI and in datasheets (the noise in rev/min, as the stream)."""
+    error_terms: ClassVar[Mapping[str, str]] = {
+        "scale_factor": "RPM scale factor", "misalignment": "RPM-axis misalignment",
+        "noise": "RPM noise"}
+    """The fields that are error magnitudes, each with what it is
+    (:attr:`navreplay.sensors.imu.ImuModel.error_terms`)."""
 
     scale_factor: float = 0.02
     """RPM scale-factor error k, random constant [-]."""

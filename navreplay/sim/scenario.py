@@ -191,18 +191,20 @@ def truth_stream(
     t0_ns: int,
     index: np.ndarray | None = None,
     errors: ImuErrors | None = None,
+    *,
+    level_biases: bool = False,
     **columns: np.ndarray,
 ) -> Stream:
     """The truth stream of a route: ``pos``, ``v_n``, ``q_nb``, ``euler``, the scenario's own
     ``columns`` (truth-rate arrays, N rows), then the true total IMU biases ``gyro_bias`` and
     ``accel_bias`` and, given the run's ``errors``, the effective biases ``gyro_bias_eff`` and
-    ``accel_bias_eff`` (:func:`navreplay.sensors.imu.effective_biases`); at the truth samples
-    ``index`` (default: all)."""
+    ``accel_bias_eff`` (:func:`navreplay.sensors.imu.effective_biases`, at the level attitude
+    with ``level_biases``); at the truth samples ``index`` (default: all)."""
     cols = {"pos": traj.pos, "v_n": traj.v_n, "q_nb": traj.q_nb, "euler": traj.euler,
             **columns, "gyro_bias": meas.gyro_bias, "accel_bias": meas.accel_bias}
     if errors is not None:
         cols["gyro_bias_eff"], cols["accel_bias_eff"] = effective_biases(
-            errors, meas, traj.q_nb, traj.pos)
+            errors, meas, traj.q_nb, traj.pos, level=level_biases)
     t = traj.t
     if index is not None:
         t = t[index]

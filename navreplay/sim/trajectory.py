@@ -321,6 +321,51 @@ class Route:
         return _rotate_zyx(euler, d) * speed[:, None] + np.asarray(self.current_n)
 
 
+_PEAK_RATE = {Ramp.LINEAR: 1.0, Ramp.SMOOTH: 2.0}
+"""Peak rate of a ramp over its mean rate (change / duration)."""
+
+
+def bank_limited(route: Route, max_bank: float) -> Route:
+    """``route`` with each heading manoeuvre lengthened (same start, same change) so that a
+    coordinated turn banks at most ``max_bank`` [rad]: a pilot flies a turn no steeper than
+    the bank limit, and a sharp heading change simply takes longer.
+
+    The peak bank of a turn of change dpsi over T seconds is at most
+    ``atan(u_max k |dpsi| / (T g))`` with u_max the largest speed over the window, k the
+    ramp's peak-to-mean rate (2 for :attr:`Ramp.SMOOTH`) and g the gravity at the start; a
+    turn above the limit gets ``T = k |dpsi| u_max / (g tan(max_bank))``. Turns already within
+    it, and every manoeuvre of a flat-turning route, are unchanged. Overlapping heading
+    manoeuvres are limited one by one.
+
+    >>> r = Route(lat=0.6, lon=2.2, speed=60.0, turn_mode=TurnMode.COORDINATED,
+    ...           manoeuvres=(Manoeuvre(channel=Channel.HEADING, start=10.0, duration=16.0,
+    ...                                 change=math.pi / 2),))
+    >>> round(bank_limited(r, math.radians(45.0)).manoeuvres[0].duration, 2)
+    19.24
+    """
+    if route.turn_mode is not TurnMode.COORDINATED:
+        return route
+    if not 0.0 < max_bank < 0.5 * math.pi:
+        raise ValueError(f"max_bank must be within (0, 90) deg, got {math.degrees(max_bank)!r}")
+    g = float(gravity(route.lat, route.h))
+    speeds = [m for m in route.manoeuvres if m.channel is Channel.SPEED]
+    out = []
+    for m in route.manoeuvres:
+        if m.channel is Channel.HEADING and m.change != 0.0:
+            k = _PEAK_RATE[m.ramp] * abs(m.change)
+            duration = m.duration
+            for _ in range(20):  # the window grows, and with it perhaps its top speed
+                grid = np.linspace(m.start, m.start + duration, 401)
+                u = float(np.max(channel_profile(grid, route.speed, speeds)[0]))
+                needed = k * u / (g * math.tan(max_bank))
+                if needed <= duration * (1.0 + 1e-12):
+                    break
+                duration = needed
+            m = dataclasses.replace(m, duration=duration)
+        out.append(m)
+    return dataclasses.replace(route, manoeuvres=tuple(out))
+
+
 def _rotate_zyx(euler: np.ndarray, d: np.ndarray) -> np.ndarray:
     """``Rz(yaw) Ry(pitch) Rx(roll) d`` for a fixed vector d, shape (N, 3), without (N, 3, 3)."""
     cr, sr = np.cos(euler[:, 0]), np.sin(euler[:, 0])

@@ -23,6 +23,7 @@ from navreplay.viz.style import (
     N_SIGMA,
     PALETTE,
     TRUTH_COLOR,
+    color_index,
     dimmer,
     lighter,
 )
@@ -88,6 +89,7 @@ class Channel:
         self._extent_curve: tuple[np.ndarray, np.ndarray] | None = None
         self._t0_ns = 0
         self._truth_wanted: dict[str, str] = {}
+        self._outages: tuple[tuple[float, float], ...] = ()
         self._truth_columns: set[str] = set()
         self._closed = False
         self._world_coords = False
@@ -95,9 +97,11 @@ class Channel:
 
     def color_of(self, label: str) -> tuple[int, int, int]:
         """The colour of a filter label (or an ensemble variant) in every plot of this sink:
-        :data:`PALETTE` in order of first use."""
+        picked from :data:`PALETTE` by its name (:func:`~navreplay.viz.style.color_index`), the
+        same in every run."""
         if label not in self._colors:
-            self._colors[label] = PALETTE[len(self._colors) % len(PALETTE)]
+            taken = {PALETTE.index(c) for c in self._colors.values()}
+            self._colors[label] = PALETTE[color_index(label, taken)]
         return self._colors[label]
 
     def order_of(self, label: str) -> int:

@@ -3,11 +3,12 @@
 Per filter, in the filter's colour (the same as in the single-run tabs): the RMS over runs of
 each error component (solid) and the mean predicted sigma (thinner, lighter), one pane per
 filter and component so that each filter is read at its own scale; the run-averaged NEES and
-NIS with their 95 % band; per axis the ratio RMS/sigma of the normalised errors over the runs
-at each epoch, in its 95 % band for that many runs, titled with the ensemble's check
-(docs/methods/consistency.md §7). Tabs: "Ensemble position",
-"... velocity", "... attitude", "... states" (the scored states that are not navigation
-errors), "Ensemble NEES / NIS", "Ensemble RMS/σ" (the NEES states and any axis that fails).
+NIS with their 95 % band; the GNSS outages shaded under the position errors; per axis the
+ratio RMS/sigma of the normalised errors over the runs at each epoch, in its 95 % band for
+that many runs, titled with the ensemble's check (docs/methods/consistency.md §7). Tabs:
+"Ensemble position", "... velocity", "... attitude", "... states" (the scored states that are
+not navigation errors), "Ensemble NEES / NIS", "Ensemble RMS/σ" (the NEES states and any axis
+that fails).
 With the runs' metrics (``navreplay montecarlo --keep``), "Ensemble runs" shows every run's
 navigation errors, one thin line per run, to find the runs behind an RMS.
 """
@@ -23,9 +24,10 @@ import rerun as rr
 
 from navreplay.filters.base import NavError, State
 from navreplay.metrics import EnsembleResult, RunMetrics, chi2_bounds_per_count
+from navreplay.metrics import outages as _outages
 from navreplay.viz.channel import TIMELINE, Channel
 from navreplay.viz.naming import Tab, display_unit, entity_path, quantity_of, resolve_unit
-from navreplay.viz.style import SIGMA_SHADE, TRUTH_COLOR, lighter
+from navreplay.viz.style import OUTAGE_COLOR, SIGMA_SHADE, TRUTH_COLOR, lighter
 
 if TYPE_CHECKING:
     from navreplay.viz.sink import Sink
@@ -78,7 +80,8 @@ def log_ensemble(
                 series[f"{label} σ"] = sigma[:, i] * scale
                 styles[f"{label} σ"] = sigma_style
             sink.log_ensemble(f"{label}: {what} error {axis}, RMS and σ", t, series, unit=unit,
-                              styles=styles, tab=tab, tab_title=tab_title, rank=order)
+                              styles=styles, tab=tab, tab_title=tab_title, rank=order,
+                              shaded=ens.outages if key == "pos_ned" else ())
     declared = {s.name: s for s in states or ()}
     tab, tab_title = _tab("states")
     for j, name in enumerate(ens.state_names):
@@ -183,6 +186,7 @@ class EnsemblePlots(Channel):
         timeline: str | None = None,
         rank: int = 0,
         legend: bool = True,
+        shaded: Sequence[tuple[float, float]] = (),
     ) -> None:
         """Log one Monte Carlo plot under ``/ensemble/<name>/<series>``.
 
@@ -212,16 +216,23 @@ class EnsemblePlots(Channel):
             Order of the plot in its tab.
         legend : bool
             Whether the plot shows its legend.
+        shaded : sequence of (start, end)
+            Spans of ``t`` (GNSS outages) shaded under the series, each
+            ``/ensemble/<name>/gnss_outage/<k>``.
         """
         t = np.asarray(t, dtype=np.float64)
-        if timeline is None:
-            idx = [rr.TimeColumn(TIMELINE, duration=np.rint(t * 1e9).astype("timedelta64[ns]"))]
-        else:
-            idx = [rr.TimeColumn(timeline, sequence=np.rint(t).astype(np.int64))]
-            if self.catalog.timeline == TIMELINE and not any(
-                p for k, plots in self.catalog.plots.items() for p in plots
-            ):
-                self.catalog.timeline = timeline
+
+        def index(tt: np.ndarray) -> list[rr.TimeColumn]:
+            if timeline is None:
+                return [rr.TimeColumn(TIMELINE,
+                                      duration=np.rint(tt * 1e9).astype("timedelta64[ns]"))]
+            return [rr.TimeColumn(timeline, sequence=np.rint(tt).astype(np.int64))]
+
+        idx = index(t)
+        if timeline is not None and self.catalog.timeline == TIMELINE and not any(
+            p for k, plots in self.catalog.plots.items() for p in plots
+        ):
+            self.catalog.timeline = timeline
         root = entity_path("ensemble", name)
         plot_title = f"{name} [{unit}]" if unit else name
         styles = styles or {}
@@ -244,6 +255,17 @@ class EnsemblePlots(Channel):
             self._scalars(path, idx, values)
             self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
                              legend=legend, tab_title=tab_title)
+        if shaded and series:
+            top = np.fmax.reduce([np.asarray(v, dtype=np.float64) for v in series.values()])
+            for k, span in enumerate(shaded):
+                inside = _outages.inside(t, span) & np.isfinite(top)
+                if not inside.any():
+                    continue
+                path = f"{root}/gnss_outage/{k + 1}"
+                self.band(path, index(t[inside]), np.zeros(int(inside.sum())), top[inside],
+                          OUTAGE_COLOR, "GNSS outage")
+                self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
+                                 legend=legend, tab_title=tab_title, behind=True)
 
     def _variant_style(self, key: str) -> tuple[tuple[int, int, int], float]:
         """Colour and width of an ensemble series named ``"<variant>[ RMS| sigma| σ]"``: the

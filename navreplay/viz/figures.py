@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import re
 from collections.abc import Sequence
 
 import matplotlib
@@ -33,9 +34,102 @@ PANEL_SIZE = (4.2, 2.4)
 """Width and height of one panel [in]."""
 
 
-def filter_color(index: int) -> str:
-    """The colour of the index-th filter of a command."""
-    return COLORS[index % len(COLORS)]
+def filter_color(label: str, taken: Sequence[str] = ()) -> str:
+    """The colour of a filter label: the Rerun view's (:func:`navreplay.viz.style.color_index`,
+    by name), ``taken`` the colours of the labels before it in the same figure."""
+    from navreplay.viz.style import color_index
+
+    return COLORS[color_index(label, {COLORS.index(c) for c in taken})]
+
+
+def filter_colors(labels: Sequence[str]) -> dict[str, str]:
+    """The colours of several labels drawn together (distinct while the palette lasts)."""
+    out: dict[str, str] = {}
+    for label in labels:
+        out[label] = filter_color(label, list(out.values()))
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class Curve:
+    """One filter's line in an overlay: ``x`` (time [s], or the error of a CDF), ``y``."""
+
+    label: str
+    x: np.ndarray
+    y: np.ndarray
+    color: str
+
+
+def overlay(title: str, panels: Sequence[tuple[str, str, Sequence[Curve]]],
+            cols: int = 2) -> plt.Figure:
+    """Several filters' errors in one panel per quantity (``(title, unit, curves)``), each
+    filter in its colour; the legend below the panels, off the data."""
+    fig, axes = _grid(len(panels), cols, title)
+    for k, (ax, (name, unit, curves)) in enumerate(zip(axes, panels, strict=True)):
+        for c in curves:
+            ax.plot(c.x, c.y, color=c.color, linewidth=1.0, label=c.label)
+        _robust_ylim(ax, [c.y for c in curves])
+        _style(ax, Panel(name, unit, np.empty(0), np.empty(0)), k >= len(panels) - cols)
+    _legend_below(fig, axes)
+    return fig
+
+
+def cdfs(title: str, panels: Sequence[tuple[str, str, Sequence[Curve]]],
+         cols: int = 2) -> plt.Figure:
+    """Empirical CDFs (``x`` the error, ``y`` the fraction) of several filters in one panel
+    per quantity; the error axis logarithmic when the filters differ by more than 30 times."""
+    fig, axes = _grid(len(panels), cols, title)
+    for ax, (name, unit, curves) in zip(axes, panels, strict=True):
+        for c in curves:
+            ax.step(c.x, 100.0 * c.y, where="post", color=c.color, linewidth=1.2, label=c.label)
+        pos = np.concatenate([c.x[np.isfinite(c.x) & (c.x > 0)] for c in curves] or [[]])
+        if pos.size and pos.max() > 30.0 * np.percentile(pos, 5):
+            ax.set_xscale("log")
+        ax.set_title(f"CDF of the {name}", fontsize=10)
+        ax.set_xlabel(f"[{unit}]")
+        ax.set_ylabel("[%]")
+        ax.set_ylim(0, 100)
+        ax.grid(True, which="both", color="0.9", linewidth=0.8)
+        ax.set_axisbelow(True)
+    _legend_below(fig, axes)
+    return fig
+
+
+def metric_bars(rows: Sequence[tuple[str, Sequence[float]]], labels: Sequence[str],
+                colors: Sequence[str], cols: int = 3) -> plt.Figure:
+    """One bar chart per metric (``(title [unit], values)``), a bar per label in its colour."""
+    fig, axes = _grid(len(rows), cols, "")
+    x = np.arange(len(labels))
+    for ax, (name, values) in zip(axes, rows, strict=True):
+        v = np.asarray(values, dtype=float)
+        ax.bar(x, np.where(np.isfinite(v), v, 0.0), color=colors)
+        ax.set_title(name, fontsize=10)
+        ax.set_xticks(x, labels, rotation=20, ha="right", fontsize=8)
+        ax.grid(True, axis="y", color="0.9", linewidth=0.8)
+        ax.set_axisbelow(True)
+    return fig
+
+
+def _robust_ylim(ax: plt.Axes, series: Sequence[np.ndarray]) -> None:
+    """A y range that a start-up transient does not set: up to 1.2 x the 99th percentile of
+    the last 90 % of each series (the whole series when short)."""
+    tails = [y[len(y) // 10:] for y in series if y.size]
+    v = np.concatenate(tails) if tails else np.empty(0)
+    v = v[np.isfinite(v)]
+    if v.size >= 10:
+        hi = float(np.percentile(np.abs(v), 99))
+        if hi > 0 and np.nanmax(np.abs(np.concatenate(series))) > 1.5 * hi:
+            lo = float(np.min(v))
+            ax.set_ylim(min(0.0, 1.2 * lo) if lo < 0 else 0.0, 1.2 * hi)
+
+
+def _legend_below(fig: plt.Figure, axes: Sequence[plt.Axes]) -> None:
+    if not axes:
+        return
+    handles, names = axes[0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, names, loc="outside lower center", ncols=min(len(names), 6),
+                   fontsize=8, frameon=False)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -253,6 +347,37 @@ def save(fig: plt.Figure, path: str, fmt: str) -> None:
     fig.savefig(path, format=fmt, dpi=DPI, metadata={"Software": None} if fmt == "png"
                 else {"Date": None})
     plt.close(fig)
+
+
+def svg(fig: plt.Figure) -> str:
+    """The figure as an ``<svg>`` element to put inside an HTML page: no XML header, no
+    metadata, no namespace URLs (the HTML parser supplies them), text kept as text."""
+    buf = io.StringIO()
+    with plt.rc_context({"svg.fonttype": "none"}):
+        fig.savefig(buf, format="svg", metadata={"Date": None})
+    plt.close(fig)
+    text = buf.getvalue()
+    text = text[text.index("<svg"):]
+    text = re.sub(r"<metadata>.*?</metadata>\s*", "", text, flags=re.S)
+    return re.sub(r'\s+xmlns(:\w+)?="[^"]*"', "", text)
+
+
+def pdf(figs: Sequence[plt.Figure], path: str, title: str) -> None:
+    """Write figures as the pages of one PDF (matplotlib's PDF backend) and close them."""
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    with PdfPages(path, metadata={"Title": title, "CreationDate": None}) as out:
+        for fig in figs:
+            out.savefig(fig)
+            plt.close(fig)
+
+
+def text_page(title: str, lines: Sequence[str]) -> plt.Figure:
+    """A page of monospaced text (the tables of a PDF report)."""
+    fig = plt.figure(figsize=(8.27, 11.69))
+    fig.text(0.05, 0.97, title, fontsize=13, va="top")
+    fig.text(0.05, 0.93, "\n".join(lines), family="monospace", fontsize=7, va="top")
+    return fig
 
 
 def png(fig: plt.Figure) -> bytes:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -15,6 +16,8 @@ from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import radii
 from navreplay.metrics import nav_errors
+from navreplay.metrics import outages as _outages
+from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors
 from navreplay.viz import convert
 from navreplay.viz.naming import (
     NAV_ERROR_NAMES,
@@ -29,7 +32,16 @@ from navreplay.viz.naming import (
     tab_of,
     title,
 )
-from navreplay.viz.style import RANK_ERROR, RANK_EXTRA, RANK_NAV, RANK_SIGMA, RANK_STATE, lighter
+from navreplay.viz.style import (
+    N_SIGMA,
+    OUTAGE_COLOR,
+    RANK_ERROR,
+    RANK_EXTRA,
+    RANK_NAV,
+    RANK_SIGMA,
+    RANK_STATE,
+    lighter,
+)
 from navreplay.viz.truth import TruthView
 from navreplay.viz.world import Track, axis_size
 
@@ -52,9 +64,20 @@ class RunState:
     track: Track = dataclasses.field(default_factory=lambda: Track())
     extent_box: tuple[np.ndarray, np.ndarray] | None = None
     """NED box of the true track up to this run's last block (its ellipsoids' caps)."""
+    quantiles: dict[str, Quantiles] = dataclasses.field(default_factory=dict)
+    """The distributions of the compared error magnitudes (the Compare tab's CDFs)."""
 
 
 _NAV_ERRORS = tuple(n for names in NAV_ERROR_NAMES.values() for n in names)
+
+def _row(name: str) -> str:
+    """The row of a state's pane in a per-filter column: its name without the last
+    ``_part`` (``b_a_x``, ``b_a_y`` -> ``b_a``; ``m_a_xy``, ``m_a_zx`` -> ``m_a``)."""
+    return name.rsplit("_", 1)[0] if "_" in name.strip("_") else name
+
+
+CDF_POINTS = 200
+"""Percentiles drawn per CDF."""
 
 
 class RunView(TruthView):
@@ -80,6 +103,41 @@ class RunView(TruthView):
                 self._axes(entity_path("world", run.label, "body", "axes"), axis_size(extent))
                 run.axes = True
         self._log_track(run.label, run.track, run.color, 2.5, 3.0)
+        self._log_cdfs(run)
+
+    def _log_compare(self, run: RunState, idx: list[rr.TimeColumn], errors: Any) -> None:
+        """The run's error magnitudes in the Compare tab, overlaid with the other filters'
+        (one plot per quantity), and into the distributions of its CDFs."""
+        mags = compared_errors(errors.pos_ned, errors.v_n, errors.phi)
+        for rank, (key, name, unit) in enumerate(COMPARED):
+            v = mags[key]
+            if not np.isfinite(v).any():
+                continue
+            run.quantiles.setdefault(key, Quantiles()).add(v)
+            u = display_unit(unit)
+            path = entity_path("compare", key, run.label)
+            self._style(path, [run.label], [run.color], [1.5])
+            self._scalars(path, idx, v * u.scale)
+            self.catalog.add("compare", f"compare:{key}", f"{name} [{u.label}]", path,
+                             rank=rank)
+
+    def _log_cdfs(self, run: RunState) -> None:
+        """The CDF of each compared error magnitude over the whole run: a bar per percentile
+        (its height) at the error value below which that fraction of the run lies."""
+        for rank, (key, name, unit) in enumerate(COMPARED):
+            q = run.quantiles.get(key)
+            if q is None or not q.n:
+                continue
+            u = display_unit(unit)
+            value, frac = q.cdf(CDF_POINTS)
+            path = entity_path("compare", "cdf", key, run.label)
+            span = float(value[-1] - value[0]) or float(value[-1]) or 1.0
+            self._rec.log(path, rr.BarChart(100.0 * frac, abscissa=value * u.scale,
+                                            color=run.color,
+                                            widths=np.full(frac.shape, 0.004 * span * u.scale)),
+                          static=True)
+            self.catalog.add("compare", f"cdf:{key}", f"CDF of the {name} [%] vs [{u.label}]",
+                             path, rank=len(COMPARED) + rank, kind="bars")
 
     def _declare(self, run: RunState, result: RunResult) -> None:
         run.states = {s.name: s for s in (*result.states, *result.scored_extras)}
@@ -143,33 +201,35 @@ class RunView(TruthView):
             # an error state that feedback keeps at zero is logged but gets no plot of its own
             # (its error against the truth and its sigma are what is worth looking at)
             st = run.states.get(n)
+            # a column per filter in the State estimates tab, a row per group
             if np.any(result.x[a:b, i] != 0.0):
-                self.catalog.add("states", f"state:{g}", f"{g} [{label}]", p_state,
-                                 rank=RANK_STATE)
+                self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]", p_state,
+                                 rank=RANK_STATE, column=L, row=g)
                 if st is not None and isinstance(st.truth, TruthColumn):
                     p_true = self._truth_column(st.truth.column, st.unit)
                     if p_true is not None:
-                        self.catalog.add("states", f"state:{g}", f"{g} [{label}]", p_true,
-                                         rank=RANK_STATE)
+                        self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]",
+                                         p_true, rank=RANK_STATE, column=L, row=g)
             p_sig = entity_path(L, "sigma", n)
             self._style(p_sig, [f"σ {legend}"], [shade], [1.5])
             self._scalars(p_sig, idx, sigma[:, i] * scale)
             nav_state = st is not None and isinstance(st.truth, NavError)
-            if not nav_state and not self.catalog.has(entity_path(L, "error", n)):
+            frozen = not np.any(sigma[:, i] > 0.0)  # a disabled or frozen state: left out
+            if not (nav_state or frozen or self.catalog.has(entity_path(L, "error", n))):
                 # sigma of an unscored state; a navigation-error state's is in the nav bounds
                 self.catalog.add("states", f"sigma:{g}@{L}", f"{L}: σ {g} [{label}]", p_sig,
-                                 rank=RANK_SIGMA + run.order)
+                                 rank=RANK_SIGMA, column=L, row=f"σ {g}")
         for key, arr in result.extras.items():
             arr = np.asarray(arr[a:b], dtype=np.float64)
             flat = arr.reshape(b - a, int(np.prod(arr.shape[1:], dtype=np.int64)))
             label, scale = self._unit(run, key, result, a, b)
             path = entity_path(L, "extra", key)
             k = flat.shape[1]
-            legend = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
-            self._style(path, legend, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
+            names = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
+            self._style(path, names, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
             self._scalars(path, idx, flat * scale)
-            self.catalog.add("states", f"extra:{key}", f"{key} [{label}]", path,
-                             rank=RANK_EXTRA)
+            self.catalog.add("states", f"extra:{key}@{L}", f"{L}: {key} [{label}]", path,
+                             rank=RANK_EXTRA, column=L, row=key)
         if any(result.has(part) for part in ("pos", "v_n", "q_nb")):
             self._log_nav(run, result, a, b, idx)
         run.rows = b
@@ -187,6 +247,8 @@ class RunView(TruthView):
         L = run.label
         t = result.t[a:b]
         parts = result.navigation
+        assert result.nav_pos is not None and result.nav_v_n is not None
+        assert result.nav_q_nb is not None  # logged for a result with a navigation solution
         nav = convert.NavColumns(t, result.nav_pos[a:b], result.nav_v_n[a:b], result.nav_q_nb[a:b])
         if self._ref is None and "pos" in parts:
             finite = np.flatnonzero(np.isfinite(nav.pos).all(axis=1))
@@ -219,14 +281,17 @@ class RunView(TruthView):
                     continue
                 s = nav_sigma[n]
                 errors[n] = (e, s if np.isfinite(s).any() else None)
-        for n, (e, s) in errors.items():
+            self._log_compare(run, idx, ne)
+        for n, (e, sd) in errors.items():
             u = display_unit(NAV_UNITS[n])
             path = entity_path(L, "error", n)
-            self._bounded(path, idx, e * u.scale, None if s is None else s * u.scale, L, run.color)
-            bounds = "" if s is None else ", ±3σ"
-            self.catalog.add(quantity_of(n).value, f"error:{n}@{L}",
-                             f"{L}: {title(n, u, 'error')}{bounds}", path,
-                             rank=RANK_ERROR + run.order, legend=False)
+            self._bounded(path, idx, e * u.scale, None if sd is None else sd * u.scale, L,
+                          run.color)
+            bounds = "" if sd is None else ", ±3σ"
+            plot = (quantity_of(n).value, f"error:{n}@{L}", f"{L}: {title(n, u, 'error')}{bounds}")
+            self.catalog.add(*plot, path, rank=RANK_ERROR + run.order, legend=False)
+            if sd is not None and nav_part(n) == "pos":
+                self._shade_outages(path, plot, t, result.t0_ns, N_SIGMA * sd * u.scale)
         if "pos" not in parts:
             return
         self._log_world(run, result, nav, a, b, values)
@@ -234,6 +299,20 @@ class RunView(TruthView):
                       nav.pos)
         self._geo(L, t, nav.pos, result.t0_ns, run.color, after=run.geo_t)
         run.geo_t = float(t[-1])
+
+    def _shade_outages(self, path: str, plot: tuple[str, str, str], t: np.ndarray, t0_ns: int,
+                       bound: np.ndarray) -> None:
+        """Shade each GNSS outage in a plot of rows at times ``t`` [s]: a band between
+        ``-bound`` and ``bound`` (the ±3σ of the error) under the series, one entity per
+        outage (``<path>/gnss_outage/<k>``, k from 1)."""
+        for k, outage in enumerate(self._outages):
+            inside = _outages.inside(t, outage)
+            if not inside.any():
+                continue
+            band = f"{path}/gnss_outage/{k + 1}"
+            self.band(band, self._indexes(t[inside], t0_ns), -bound[inside], bound[inside],
+                      OUTAGE_COLOR, "GNSS outage")
+            self.catalog.add(*plot, band, legend=False, behind=True)
 
     def _unwrap_yaw(self, run: RunState, t: np.ndarray, yaw: np.ndarray) -> np.ndarray:
         """Yaw without +-180 deg jumps, continuing the previous rows, on the truth's branch."""
@@ -275,6 +354,9 @@ class RunView(TruthView):
                 and result.nav_pos is not None and not np.any(result.x[:, states[n]] != 0.0)
             ):
                 continue
+            if s is not None and not np.any(s > 0.0) and not self.catalog.has(
+                    entity_path(L, "error", n)):
+                continue  # a disabled or frozen state (zero sigma) gets no pane
             label, scale = self._unit(run, key, result, 0, M)
             tab = self._tab(run, key)
             # a state named like a navigation error (phi_N) keeps its own entity
@@ -282,8 +364,10 @@ class RunView(TruthView):
             sig = None if s is None else s * scale
             self._bounded(path, idx, e * scale, sig, L, run.color)
             bounds = "" if s is None else ", ±3σ"
+            # Sensor errors: a column per filter, a row per group of components
             self.catalog.add(tab, f"error:{n}@{L}", f"{L}: {n} error [{label}]{bounds}", path,
-                             rank=RANK_ERROR + run.order, legend=False)
+                             rank=RANK_ERROR + run.order, legend=False,
+                             column=L if tab == "sensor" else None, row=_row(key))
             if n in states:
                 self.catalog.discard("states", f"sigma:{group_of(n)}@{L}",
                                      entity_path(L, "sigma", n))

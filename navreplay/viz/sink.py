@@ -13,6 +13,7 @@ Entity tree
     /<label>/sigma/<name>                        1-sigma from the diagonal of P
     /<label>/error/<name>                        estimate - truth, +3 sigma, -3 sigma
     /<label>/error/{p_N..p_D,v_N..v_D,phi_N..phi_D}   navigation errors (metrics.nav_errors)
+    /<label>/error/{p_N,p_E,p_D}/gnss_outage/<k>  the ±3σ band shaded in the k-th GNSS outage
     /<label>/nav/<roll..p_D>                     navigation solution (as /truth/nav)
     /<label>/extra/<key>[_<i>]                   RunResult.extras
     /<label>/nees, /<label>/nees/band            NEES of the declared NEES states, 95 % band
@@ -20,6 +21,7 @@ Entity tree
     /<label>/innovation/<meas>/nis[/band]        NIS, 95 % chi-square band
     /world                                       NED, metres from the reference point
     /world/truth/trajectory, /world/<label>/trajectory    LineStrips3D (static)
+    /world/truth/gnss_outages, /map/truth/gnss_outages    the true track in the GNSS outages
     /world/{truth,<label>}/body                  Transform3D over time (q_nb as xyzw)
     /world/{truth,<label>}/body/axes             body FRD axes (Arrows3D, static)
     /world/<label>/covariance                    3-sigma position Ellipsoids3D, 1 Hz
@@ -55,16 +57,20 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import rerun as rr
 
 from navreplay.core.streams import Stream
 from navreplay.filters.result import RunResult
 from navreplay.io.outputs import OutputError
 from navreplay.metrics import RunMetrics
+from navreplay.metrics.compare import headline_rows, markdown_comparison
 from navreplay.viz.ensemble import EnsemblePlots
+from navreplay.viz.naming import entity_path
 from navreplay.viz.runs import RunView
 from navreplay.viz.targets import (
     Serve,
@@ -114,6 +120,7 @@ class Sink(RunView, EnsemblePlots):
         time and the truth columns the declared states are scored against)."""
         self._t0_ns = int(run.t0_ns)
         self._truth_wanted = dict(run.truth_columns)
+        self._outages = tuple(run.gnss_outages)
 
     def truth(self, truth: Stream) -> None:
         """Log a window of the truth stream (rows later than those logged before; columns
@@ -154,6 +161,8 @@ class Sink(RunView, EnsemblePlots):
             return
         run = self._run(rows.label, None)
         errors, nees = _from_run_metrics(rows, metrics) if metrics is not None else ({}, None)
+        if metrics is not None and metrics.outages:
+            self._outages = metrics.outages
 
         def log() -> None:
             r = self._runs[rows.label]
@@ -179,6 +188,29 @@ class Sink(RunView, EnsemblePlots):
         self._run(block.label, None)
         if any(s.t.shape[0] for s in block.innovations.values()):
             self._layout_first(lambda: self._log_innovations(self._runs[block.label], block))
+
+    def summaries(self, summaries: Mapping[str, Mapping[str, Any]]) -> None:
+        """Log the headline metrics of the filters' summaries (label -> summary dict, SI) as a
+        table in the Compare tab (a row per metric, a column per filter, the best in bold)."""
+        text = markdown_comparison(summaries)
+        self._rec.log("/compare/summary", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN),
+                      static=True)
+        self.catalog.add("compare", "summary", "headline metrics", "/compare/summary",
+                         rank=10_000, kind="text")
+
+    def comparison(self, summaries: Mapping[str, Mapping[str, Any]]) -> None:
+        """Saved summaries side by side (``navreplay compare``): the table of headline metrics
+        and a bar chart per metric, a bar per label in its colour."""
+        self.summaries(summaries)
+        for rank, (name, values, _) in enumerate(headline_rows(summaries)):
+            for i, (label, v) in enumerate(zip(summaries, values, strict=True)):
+                if not np.isfinite(v):
+                    continue
+                path = entity_path("compare", "metric", name, label)
+                self._rec.log(path, rr.BarChart([v], abscissa=[float(i)],
+                                                color=self.color_of(label)), static=True)
+                self.catalog.add("compare", f"metric:{name}", name, path, rank=rank,
+                                 kind="bars")
 
     def flush(self, timeout: float = 30.0) -> None:
         """Wait until the logged data has left the process (raises VizUnavailableError)."""

@@ -53,6 +53,7 @@ class TruthView(WorldView):
         nav = truth_nav(stream, t0)
         if self._ref is None and nav.t.shape[0]:
             self._ref = nav.pos[0].copy()
+        assert self._ref is not None, "the first truth window has rows"
         ned = convert.local_ned(nav.pos, self._ref)
         finite = ned[np.isfinite(ned).all(axis=1)]
         if finite.shape[0]:
@@ -102,6 +103,7 @@ class TruthView(WorldView):
         if log.track.t.shape[0]:
             self._axes(f"{world}/body/axes", axis_size(self._extent))
         self._log_track(log.root.strip("/"), log.track, TRUTH_COLOR, 1.5, 1.5)
+        self._log_outage_track(log.root, log.track)
 
     def _truth_column(self, column: str, unit: str) -> str | None:
         """Entity of a truth column logged with the truth (:meth:`start` named it), or None

@@ -13,12 +13,13 @@ import rerun as rr
 from navreplay.filters.base import Nav, NavError
 from navreplay.filters.result import RunResult
 from navreplay.geo import quat_wxyz_to_xyzw
+from navreplay.metrics import outages as _outages
 from navreplay.viz import convert
 from navreplay.viz.channel import Channel
 from navreplay.viz.naming import (
     entity_path,
 )
-from navreplay.viz.style import AXIS_COLORS, N_SIGMA
+from navreplay.viz.style import AXIS_COLORS, N_SIGMA, OUTAGE_COLOR
 
 if TYPE_CHECKING:
     from navreplay.viz.runs import RunState
@@ -222,6 +223,24 @@ class WorldView(Channel):
             ),
         )
         run.cov_t = float(nav.t[c[-1]])
+
+    def _log_outage_track(self, root: str, track: Track) -> None:
+        """The true track inside the GNSS outages, over the trajectory (3D) and the map
+        track."""
+        parts = [k for k in (np.flatnonzero(_outages.inside(track.t, o)) for o in self._outages)
+                 if k.shape[0] >= 2]
+        if not parts:
+            return
+        strips = [_thin(track.ned[k]) for k in parts]
+        self._rec.log(f"/world{root}/gnss_outages",
+                      rr.LineStrips3D(strips, colors=[OUTAGE_COLOR], radii=[-2.5]), static=True)
+        geo = [np.degrees(track.pos[k, :2]) for k in parts]
+        geo = [g[np.isfinite(g).all(axis=1)] for g in geo]
+        geo = [g for g in geo if g.shape[0] >= 2]
+        if geo:
+            self._rec.log(f"/map{root}/gnss_outages",
+                          rr.GeoLineStrings(lat_lon=geo, colors=[OUTAGE_COLOR],
+                                            radii=rr.Radius.ui_points(2.5)), static=True)
 
 
 def _thin(pts: np.ndarray) -> np.ndarray:

@@ -97,7 +97,7 @@ def test_a_copy_of_gps_ins_is_scored_like_the_built_in(plugins, drive, tmp_path)
 
 @pytest.mark.parametrize(("cls", "what"), [
     ("NegativeVariance", "negative variance"),
-    ("ShortState", "declares 24 states"),
+    ("ShortState", "declares 33 states"),
     ("NanInnovation", "innovation 'gps_pos': nu is not finite"),
     ("Raises", "RuntimeError: lookup table exhausted"),
 ])

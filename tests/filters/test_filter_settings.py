@@ -75,6 +75,8 @@ def test_the_scenarios_of_the_reproductions_give_the_defaults(name):
             if key in ("gps_pos_sigma", "gps_vel_sigma"):
                 continue  # only for fixes without their own sigma
             assert _same(value, expected), (key, value, expected)
+        elif isinstance(default, tuple):
+            assert value == default, (key, value, default)
         else:
             assert math.isclose(value, default, rel_tol=1e-15), (key, value, default)
 
@@ -251,3 +253,60 @@ def test_a_bad_derivation_is_one_line(plugin_module):
     with pytest.raises(ParamError, match="filter bad-settings: settings_from_sensors gives "
                                          "unknown parameter.s. no_such_setting"):
         build_params(cls, None, SensorSpecs({"imu": imu_grade("mems")}))
+
+
+def test_a_term_the_specification_states_and_the_filter_does_not_model_is_said_once(tmp_path):
+    """A filter declares the error terms it models (``modelled_terms``); a run whose recording
+    states another term, not zero, of a sensor whose stream the filter consumes says so once,
+    in the summary's ``settings_note`` and at the end of the run."""
+    values = {"duration": 20.0, "sensors": {"gps": {"vel_gm_sigma": "0.03 m/s"}}}
+    rec = simulate("vehicle-drive", values, seed=1)
+    sensors = SensorSpecs.from_metadata(rec.metadata.sensors)
+    note = build_params(GpsInsFilter, None, sensors).note
+    assert note == ("gps-ins does not model the gps time-correlated (Gauss-Markov) velocity "
+                    "error (vel_gm_sigma) that the sensor specifications state")
+    assert build_params(GpsInsFilter, {"use_gps_vel": False}, sensors).note == ""  # not used
+    assert build_params(InsFilter, None, sensors).note == ""  # ins consumes no GNSS
+    clean = SensorSpecs.from_metadata(simulate("vehicle-drive", {"duration": 20.0},
+                                               seed=1).metadata.sensors)
+    assert build_params(GpsInsFilter, None, clean).note == ""  # its gps terms: white, modelled
+    path = tmp_path / "d.mcap"
+    write_recording(path, rec)
+    res = CliRunner().invoke(cli, ["run", "ins,gps-ins", str(path), str(path), "--no-viz",
+                                   "--summary", str(tmp_path / "s.json")])
+    assert res.exit_code == 0, res.output
+    assert [line for line in res.output.splitlines() if "does not model" in line] == [note]
+    s = json.loads((tmp_path / "s.json").read_text())["runs"]
+    assert {r["filters"]["gps-ins"]["settings_note"] for r in s} == {note}
+
+
+def test_the_declaration_is_data_any_filter_can_give(plugin_module):
+    """The note comes from the declaration and the records' ``error_terms``, whatever the
+    filter: a plug-in consuming the magnetometer that models only its noise hears of the rest;
+    one that declares nothing hears nothing."""
+    name = plugin_module("mag_terms", """
+        from navreplay.filters.ins import InsFilter
+        from navreplay.core.streams import StreamKind
+
+        class MagTerms(InsFilter):
+            name = "mag-terms"
+            optional = (StreamKind.MAG,)
+
+            @classmethod
+            def modelled_terms(cls, params):
+                return {**super().modelled_terms(params), "mag": {"noise"}}
+
+        class Silent(MagTerms):
+            name = "silent"
+
+            @classmethod
+            def modelled_terms(cls, params):
+                return None
+        """)
+    sensors = SensorSpecs.from_metadata(simulate("vehicle-drive", {"duration": 10.0},
+                                                 seed=1).metadata.sensors)
+    note = build_params(load_filter(f"{name}:MagTerms"), None, sensors).note
+    assert note == ("mag-terms does not model the mag magnetometer scale factor (scale_factor) "
+                    "and the mag magnetometer hard-iron bias (bias) that the sensor "
+                    "specifications state")
+    assert build_params(load_filter(f"{name}:Silent"), None, sensors).note == ""

@@ -65,6 +65,39 @@ def test_H_matches_finite_differences(kind):
     np.testing.assert_allclose(H * STEPS, H_num * STEPS, rtol=1e-5, atol=1e-8)
 
 
+def test_the_gyro_columns_and_the_gnss_gauss_markov_states_match_finite_differences():
+    """Velocity: the gyro scale-factor and misalignment columns z, x, y (18 + 9 states)
+    enter through the lever arm's rotation, ``omega_hat = omega - dK omega`` (eq. 10a).
+    Position: the Gauss-Markov estimate shifts the predicted fix (eq. 6a); R is the fix's
+    variance less the Gauss-Markov one (eq. 7a)."""
+    n, gz = 27, 18
+    _, H, _ = gps_velocity_model(NAV, LEVER_B, OMEGA_B, NAV[3:6], np.ones(3), n,
+                                 lever_states=True, gyro_z_states=gz, gyro_columns=3)
+    omega_true = OMEGA_B  # the compensated rate a column error dK leaves: OMEGA_B - dK omega
+    for c, j in enumerate(ie.GYRO_COLUMNS):
+        for i in range(3):
+            dk = np.zeros((3, 3))
+            dk[i, j] = 1e-4
+
+            def z(sign, dk=dk):
+                w = omega_true - sign * dk @ omega_true
+                return gps_velocity_model(NAV, LEVER_B, w, NAV[3:6], np.ones(3), n,
+                                          lever_states=True)[0]
+            np.testing.assert_allclose(H[:, gz + 3 * c + i] * 1e-4, (z(1) - z(-1)) / 2,
+                                       rtol=1e-6, atol=1e-13)
+    gm, gm_var = np.array([0.4, -1.1, 0.7]), np.array([1.0, 1.0, 4.0])
+    sigma = np.array([2.0, 2.0, 5.0])
+    z0, H, R = gps_position_model(NAV, LEVER_B, NAV[:3], sigma, 18, gm_states=15, gm=gm,
+                                  gm_var=gm_var)
+    z_plain, _, R_plain = gps_position_model(NAV, LEVER_B, NAV[:3], sigma, 18)
+    np.testing.assert_allclose(z0 - z_plain, gm, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(H[:, 15:18], np.eye(3))
+    np.testing.assert_allclose(R, R_plain - gm_var)
+    _, _, R = gps_position_model(NAV, LEVER_B, NAV[:3], np.full(3, 0.5), 18, gm_states=15,
+                                 gm=gm, gm_var=gm_var)  # a fix that claims less: the floor
+    np.testing.assert_allclose(R, 0.01 * 0.25)
+
+
 def test_position_residual_is_ins_minus_gps_in_ned_metres():
     R_M, _ = earth.radii(NAV[0])
     gps = NAV[:3] + [1.0 / (R_M + NAV[2]), 0.0, 2.0]  # GPS 1 m north and 2 m up
@@ -168,8 +201,10 @@ def test_lever_arm_estimated():
     params = {"estimate_lever_arm": "true", "lever_arm_sigma": "2.0", "use_gps_vel": "false"}
     res = replay(rec, GpsInsFilter, params, output_rate=1.0)
     assert res.state_names[15:18] == ("l_x", "l_y", "l_z")
-    assert res.state_names[18:21] == ("m_g_xz", "m_g_yz", "s_g_z")
-    assert res.state_names[21:] == ("s_a_x", "m_a_yx", "m_a_zx", "m_a_xy", "s_a_y", "m_a_zy")
+    assert res.state_names[18:27] == ("m_g_xz", "m_g_yz", "s_g_z", "s_g_x", "m_g_yx", "m_g_zx",
+                                      "m_g_xy", "s_g_y", "m_g_zy")
+    assert res.state_names[27:] == ("s_a_x", "m_a_yx", "m_a_zx", "m_a_xy", "s_a_y", "m_a_zy",
+                                    "m_a_xz", "m_a_yz", "s_a_z")
     est, sig = res.x[-1, 15:18], res.sigma[-1, 15:18]
     assert np.all(np.abs(est - lever) < 3.0 * sig), (est, sig)
     # horizontal offsets become observable through the turns; the vertical one needs roll or

@@ -116,8 +116,9 @@ def test_gps_ins_nees_and_tilt_sigma_are_honest(drives):
     assert ok, (mean, band)
     tilt, tilt_end = _tilt_ratios(e)
     assert 0.8 <= tilt <= 1.2 and 0.8 <= tilt_end <= 1.2, (tilt, tilt_end)
-    # the accelerometer states are scored against metadata.true_errors and consistent
-    k = [i for i, s in enumerate(e.states) if s.name.startswith(("s_a_", "m_a_"))]
-    assert len(k) == 6
+    # the scale-factor and misalignment states are scored against metadata.true_errors and
+    # consistent
+    k = [i for i, s in enumerate(e.states) if s.name.startswith(("s_a_", "m_a_", "s_g_", "m_g_"))]
+    assert len(k) == 18
     ratio = e.state_rms[-1, k] / e.state_sigma[-1, k]
     assert np.all((ratio > 0.6) & (ratio < 1.4)), ratio

@@ -390,3 +390,75 @@ def test_ins_params_validated():
         InsFilter.Params(cov_step=0.0)
     with pytest.raises(ValueError, match="gyro_arw"):
         InsFilter.Params(gyro_arw=-1.0)
+
+
+def test_propagate_covariance_with_every_column_and_markov_states_equals_the_dense_prediction():
+    """Eqs. (22), (23) for all three columns of the gyro and accelerometer S + M (the column z
+    of the accelerometer on f_z + g0), then three first-order Markov states outside F (kalman
+    eq. 5a): the compiled step equals the dense prediction with Phi = discretize(F) but the
+    Markov diagonal exp(-dt / tau) and their noise sigma^2 (1 - a^2)."""
+    rng = np.random.default_rng(8)
+    gz, ga, gp = 15, 24, 33
+    n, k = 36, 4
+    A = rng.normal(size=(n, n)) * 1e-3
+    P = A @ A.T + np.diag(np.r_[np.full(3, 1e-12), np.full(12, 1e-4), np.full(n - 15, 1e-6)])
+    nav = np.zeros((k, 10))
+    nav[:, 0] = 0.6
+    nav[:, 3:6] = [40.0, 4.0, -0.3]
+    nav[:, 6:10] = rotations.euler_to_quat(np.c_[np.linspace(0.2, 0.7, k),
+                                                 np.full(k, 0.03), -0.4 * np.arange(k)])
+    f_b = np.c_[np.linspace(-1.0, 1.2, k), np.linspace(0.3, -0.2, k), np.linspace(-9.8, -13.5, k)]
+    w_b = np.c_[np.linspace(0.1, -0.05, k), np.full(k, 0.12), np.full(k, 0.15)]
+    dt = np.full(k, 0.1)
+    tau = np.array([60.0, 60.0, 300.0])
+    q = np.r_[np.zeros(3), np.full(3, 1e-6), np.full(3, 1e-10), np.full(6, 1e-14),
+              np.zeros(18), 2.0 * np.array([1.0, 1.0, 4.0]) / tau]
+    rate = np.r_[np.zeros(gp), 1.0 / tau]
+    noise = itu.ProcessNoise(q, gyro_z_states=gz, gyro_columns=3, accel_states=ga,
+                             accel_columns=3, markov=rate)
+    P_ref = P.copy()
+    for i in range(k):
+        F = np.zeros((n, n))
+        C = rotations.quat_to_dcm(nav[i, 6:])
+        ie.system_matrix(nav[i, :3], nav[i, 3:6], C, f_b[i], out=F)
+        F[ie.ATT, gz:gz + 9] = ie.gyro_error_matrix(C, w_b[i])
+        F[ie.VEL, ga:ga + 9] = ie.accel_error_matrix(C, f_b[i])
+        Phi = kalman.discretize(F, dt[i])
+        a, qd = kalman.markov_transition(rate, q, dt[i])
+        Phi[gp:, gp:] = np.diag(a[gp:])
+        _, P_ref = kalman.predict(np.zeros(n), P_ref, Phi, np.diag(qd))
+    np.testing.assert_allclose(itu.propagate_covariance(P, nav, f_b, w_b, dt, noise), P_ref,
+                               rtol=1e-10, atol=1e-24)
+    with pytest.raises(ValueError, match="markov"):
+        itu.ProcessNoise(q, gyro_z_states=gz, gyro_columns=3, markov=np.r_[np.ones(1),
+                                                                           np.zeros(n - 1)])
+    with pytest.raises(ValueError, match="gyro_columns"):
+        itu.ProcessNoise(q, gyro_z_states=gz, gyro_columns=2)
+
+
+@pytest.mark.parametrize("triad", ["gyro", "accel"])
+def test_every_column_block_matches_the_strapdown(triad):
+    """Eqs. (22), (23): compensating with K_hat = K + dK leaves ``-dK omega`` in the rate and
+    ``-dK u`` in the specific force (u_z = f_z + g0 for the accelerometer's column z); the
+    attitude or velocity error they cause over a short interval, against F T."""
+    nav0 = strapdown.nav_vector([np.deg2rad(40.0), 0.5, 120.0], [45.0, -9.0, 0.4],
+                                rotations.euler_to_quat([0.6, -0.03, 2.4]))
+    k, dt = 10, 0.01
+    f_b = np.tile([1.4, -0.3, -13.2], (k, 1))  # a banked turn's load factor
+    w_b = np.tile([0.05, 0.12, 0.15], (k, 1))
+    nav_T = strapdown.propagate(nav0, w_b, f_b, dt)
+    zero = np.zeros(3)
+
+    def err_after(dk):
+        if triad == "gyro":
+            est = strapdown.propagate(nav0, itu.compensate_gyro(w_b, zero, dk), f_b, dt)
+            return ie.nav_error(est, nav_T)[6:9]
+        est = strapdown.propagate(nav0, w_b, itu.compensate_accel(f_b, zero, dk), dt)
+        return ie.nav_error(est, nav_T)[3:6]
+
+    num = np.array([(err_after(e) - err_after(-e)) / 2e-5 for e in np.eye(9) * 1e-5]).T
+    C = ie.nav_dcm(nav0)
+    F = ie.gyro_error_matrix(C, w_b[0]) if triad == "gyro" else ie.accel_error_matrix(C, f_b[0])
+    # F at the start of the step; the body turns by about 2 mrad over it
+    scale = np.abs(F).max()
+    np.testing.assert_allclose(num / (k * dt), F, rtol=0.02, atol=0.02 * scale)

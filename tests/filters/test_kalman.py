@@ -287,3 +287,28 @@ def test_measurement_shape_and_innovation_record():
     np.testing.assert_array_equal(rec.S, c.S[:2, :2])
     whole = c.innovation("all", 1.5)
     np.testing.assert_array_equal(whole.S, c.S)
+
+
+def test_markov_states_are_van_loans_exact_discretisation():
+    """Eq. (5a) in place on the Markov rows and columns of a full P equals the dense
+    prediction with Van Loan's exact Phi and Qd for F = diag(0, ..., -1/tau) (a random walk,
+    a random constant and two Markov states of other time constants); a single state reaches
+    its stationary variance."""
+    rng = np.random.default_rng(4)
+    n = 4
+    A = rng.normal(size=(n, n))
+    P = A @ A.T
+    rate = np.array([0.0, 0.0, 1.0 / 60.0, 1.0 / 600.0])
+    q = np.array([0.3, 0.0, 2.0 * 4.0 / 60.0, 2.0 * 0.25 / 600.0])
+    dt = 7.0
+    Phi, Qd = kalman.van_loan(np.diag(-rate), np.eye(n), q, dt)
+    _, ref = kalman.predict(np.zeros(n), P, Phi, Qd)
+    got = P.copy()
+    for i in (0, 1):  # the random walk and the constant: Phi = 1, Qd = q dt
+        got[i, i] += q[i] * dt
+    kalman.markov_rows_kernel(got, rate, q, dt)
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-14)
+    one = np.array([[9.0]])
+    for _ in range(200):
+        kalman.markov_rows_kernel(one, np.array([0.1]), np.array([2.0 * 4.0 * 0.1]), 1.0)
+    np.testing.assert_allclose(one, [[4.0]], rtol=1e-8)

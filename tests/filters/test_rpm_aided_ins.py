@@ -18,6 +18,7 @@ from navreplay.filters import ins_error as ie
 from navreplay.filters import ins_time_update as itu
 from navreplay.filters import kalman
 from navreplay.filters import rpm_aided_ins as rai
+from navreplay.filters import rpm_aided_ins_model as raim
 from navreplay.filters.registry import load_filter
 from navreplay.geo import earth, kernels, rotations
 from navreplay.metrics import position_error_ned
@@ -32,8 +33,8 @@ from navreplay.sim.scenarios.underwater import ROUTE, UnderwaterRpmParams
 
 STEPS = np.r_[1e-6, 1e-6, 1.0, np.full(3, 1e-2), np.full(3, 1e-5), np.full(3, 1e-4),
               np.full(3, 1e-6), 1e-3, 1e-4, 1e-4, 1e-2, 1e-2, 1e-4, 1e-4, 1e-4, 1e-3]
-BLOCKS = {"p": rai.POS, "v": rai.VEL, "phi": rai.ATT, "ba": rai.BA, "bg": rai.BG,
-          "k": rai.K_RPM, "m": rai.M_RPM, "vc": rai.CURRENT, "mu": rai.MOUNT, "T": rai.DELAY}
+BLOCKS = {"p": raim.POS, "v": raim.VEL, "phi": raim.ATT, "ba": raim.BA, "bg": raim.BG,
+          "k": raim.K_RPM, "m": raim.M_RPM, "vc": raim.CURRENT, "mu": raim.MOUNT, "T": raim.DELAY}
 
 
 def _system_matrix(nav, f_b, *, curvature_derivatives=True):
@@ -205,7 +206,7 @@ def test_enu_to_ned_conversion_of_the_papers_equations_worked_example():
     # the measurement matrix (27) converts by right-multiplication with the same map
     m_hat = np.array([1e-3, -2e-3])
     vc_ned = np.array([0.2, -0.1])
-    _, H, _ = rai.rpm_measurement(nav, 14.0, 0.01, m_hat, vc_ned, 0.05, 0.002)
+    _, H, _ = raim.rpm_measurement(nav, 14.0, 0.01, m_hat, vc_ned, 0.05, 0.002)
     w_enu = v_enu - T @ np.r_[vc_ned, 0.0]
     C_bn_enu = C_enu.T
     np.testing.assert_allclose(H[:, 3:6], C_bn_enu @ T, atol=1e-15)
@@ -228,7 +229,7 @@ def test_H_rpm_matches_finite_differences_of_eq25():
     _, nav = _state(36.0, 70.0, [8.0, 11.0, -0.4], [0.01, 0.06, 0.95])
     v, C = nav[3:6], rotations.quat_to_dcm(nav[6:10])
     v_rpm, k, m, v_c = 13.7, 0.018, np.array([1.2e-3, -2.1e-3]), np.array([0.21, -0.13])
-    z, H, _ = rai.rpm_measurement(nav, v_rpm, k, m, v_c, 0.05, 0.002)
+    z, H, _ = raim.rpm_measurement(nav, v_rpm, k, m, v_c, 0.05, 0.002)
     np.testing.assert_allclose(z, _eq25(v, C, v_rpm, k, m, v_c), atol=1e-14)
 
     def z_of(dx):  # the estimate carrying the extra error dx
@@ -254,13 +255,13 @@ def test_second_order_terms_of_the_rpm_residual():
     v, C = nav[3:6], rotations.quat_to_dcm(nav[6:10])
     v_rpm, k, m, v_c = 13.7, 0.018, np.array([1.2e-3, -2.1e-3]), np.array([0.21, -0.13])
     u_hat = v_rpm / (1 + k)
-    z0, H, _ = rai.rpm_measurement(nav, v_rpm, k, m, v_c, 0.05, 0.002)
+    z0, H, _ = raim.rpm_measurement(nav, v_rpm, k, m, v_c, 0.05, 0.002)
 
     def z_of(dx):
         C_hat = rotations.rotvec_to_dcm(-dx[6:9]) @ C
         return _eq25(v + dx[3:6], C_hat, v_rpm, k + dx[15], m + dx[16:18], v_c + dx[18:20])
 
-    sub, h = rai._SECOND_ORDER, 1e-4
+    sub, h = raim._SECOND_ORDER, 1e-4
     for a in sub:
         for b in sub:
             ea, eb = np.zeros(24), np.zeros(24)
@@ -268,8 +269,8 @@ def test_second_order_terms_of_the_rpm_residual():
             hess = (z_of(ea + eb) - z_of(ea - eb) - z_of(eb - ea) + z_of(-ea - eb)) / (4 * h * h)
             # the quadratic form of row i at (a, b) by polarisation of the mean
             x, y = ea / h + eb / h, ea / h - eb / h
-            q = (rai.rpm_second_order(nav, u_hat, k, m, v_c, np.outer(x, x))[0]
-                 - rai.rpm_second_order(nav, u_hat, k, m, v_c, np.outer(y, y))[0]) / 4
+            q = (raim.rpm_second_order(nav, u_hat, k, m, v_c, np.outer(x, x))[0]
+                 - raim.rpm_second_order(nav, u_hat, k, m, v_c, np.outer(y, y))[0]) / 4
             np.testing.assert_allclose(2 * q, hess, atol=0.03, err_msg=f"{a}, {b}")
     sig = np.zeros(24)
     sig[3:6], sig[6:9], sig[15], sig[16:18], sig[18:20] = 0.1, [7e-4, 7e-4, 3e-3], 0.02, 1.7e-3, 0.18
@@ -277,7 +278,7 @@ def test_second_order_terms_of_the_rpm_residual():
     P[6 + 2, 16 + 1] = P[16 + 1, 6 + 2] = 0.5 * sig[8] * sig[17]  # heading and m_z correlated
     dx = np.random.default_rng(5).multivariate_normal(np.zeros(24), P, size=20_000)
     r = np.array([z_of(d) for d in dx]) - z0 - dx @ H[:, :24].T
-    mean, cov = rai.rpm_second_order(nav, u_hat, k, m, v_c, P)
+    mean, cov = raim.rpm_second_order(nav, u_hat, k, m, v_c, P)
     assert np.all(np.abs(r.mean(axis=0) - mean) < 4 * np.sqrt(np.diag(cov) / 20_000))
     np.testing.assert_allclose(np.cov(r.T), cov, rtol=0.1, atol=1e-3 * np.abs(cov).max())
     assert 2e-4 < np.sqrt(cov[1, 1]) < 2e-3  # across the axis: a fraction of a mm/s
@@ -287,7 +288,7 @@ def test_H_rpm_is_the_printed_form_at_zero_rpm_errors():
     _, nav = _state(36.0, 70.0, [8.0, 11.0, -0.4], [0.01, 0.06, 0.95])
     C = rotations.quat_to_dcm(nav[6:10])
     u = 13.7
-    _, H, _ = rai.rpm_measurement(nav, u, 0.0, np.zeros(2), np.zeros(2), 0.05, 0.002)
+    _, H, _ = raim.rpm_measurement(nav, u, 0.0, np.zeros(2), np.zeros(2), 0.05, 0.002)
     np.testing.assert_allclose(H[:, 15], [u, 0, 0])
     np.testing.assert_allclose(H[:, 16], [0, 0, u])
     np.testing.assert_allclose(H[:, 17], [0, -u, 0], atol=1e-15)
@@ -302,9 +303,9 @@ def test_rpm_residual_vanishes_for_a_consistent_truth_and_depth_measurement():
     v_c = np.array([0.2, 0.1])
     u, k = 14.0, -0.02
     nav[3:6] = C @ rotations.rotvec_to_dcm(np.r_[0.0, m])[:, 0] * u + np.r_[v_c, 0.0]
-    z, _, _ = rai.rpm_measurement(nav, (1 + k) * u, k, m, v_c, 0.05, 0.002)
+    z, _, _ = raim.rpm_measurement(nav, (1 + k) * u, k, m, v_c, 0.05, 0.002)
     np.testing.assert_allclose(z, 0.0, atol=1e-13)
-    z, H, R = rai.depth_measurement(nav, 69.5, 0.1)
+    z, H, R = raim.depth_measurement(nav, 69.5, 0.1)
     assert z[0] == pytest.approx(0.5) and H[0, 2] == 1.0 and H.sum() == 1.0
     assert R == pytest.approx([0.01])
 
@@ -316,14 +317,14 @@ def test_rpm_noise_covariance_is_the_speed_noise_along_the_rpm_axis():
     m, k, u, sigma = np.array([0.02, -0.03]), 0.05, 14.0, 0.05
     nav[3:6] = C @ rotations.rotvec_to_dcm(np.r_[0.0, m])[:, 0] * u
     noise = np.random.default_rng(3).standard_normal(4000) * sigma
-    z = np.array([rai.rpm_measurement(nav, (1 + k) * u + n, k, m, np.zeros(2), sigma, 0.0)[0]
+    z = np.array([raim.rpm_measurement(nav, (1 + k) * u + n, k, m, np.zeros(2), sigma, 0.0)[0]
                   for n in noise])
-    R = rai.rpm_noise_covariance(m, k, sigma, 0.0)
+    R = raim.rpm_noise_covariance(m, k, sigma, 0.0)
     np.testing.assert_allclose(np.cov(z.T), R, atol=0.06 * sigma**2)
     # the rows across the axis see the speed noise through the misalignment (~ m sigma)
     assert np.sqrt(R[1, 1]) == pytest.approx(abs(m[1]) * sigma / (1 + k), rel=0.01)
     # without misalignment: diag(speed, constraint, constraint)
-    np.testing.assert_allclose(rai.rpm_noise_covariance(np.zeros(2), 0.0, 0.05, 0.002),
+    np.testing.assert_allclose(raim.rpm_noise_covariance(np.zeros(2), 0.0, 0.05, 0.002),
                                np.diag([0.05, 0.002, 0.002]) ** 2, atol=1e-18)
 
 
@@ -464,7 +465,7 @@ def test_registered_and_parameters():
                           ({"update_rate": 0}, "update_rate")):
         with pytest.raises(ParamError, match=match):
             build(rai.RpmAidedInsParams, values)
-    assert len(rai.STATE_NAMES) == rai.N_STATES == 33
+    assert len(rai.STATE_NAMES) == raim.N_STATES == 33
     assert [s.name for s in rai.STATES] == list(rai.STATE_NAMES)
     assert [s.name for s in rai.STATES if s.nees] == ["dlat", "dlon"]
 
@@ -502,10 +503,10 @@ def test_modes_share_one_path_and_freeze_what_they_should():
     assert pure.innovations == {} and not pure.x.any()
     assert pure.sigma[-1, 0] > 5 * pure.sigma[0, 0]
     # rpm: the current block stays frozen at 0; inert states stay 0 in every mode
-    assert not rpm.x[:, rai.CURRENT].any() and not rpm.P[:, rai.CURRENT, :].any()
+    assert not rpm.x[:, raim.CURRENT].any() and not rpm.P[:, raim.CURRENT, :].any()
     for res in out.values():
-        assert not res.P[:, rai.INERT, :].any() and not res.x[:, rai.INERT].any()
-    assert np.abs(cur.x[-1, rai.CURRENT]).max() > 0.0
+        assert not res.P[:, raim.INERT, :].any() and not res.x[:, raim.INERT].any()
+    assert np.abs(cur.x[-1, raim.CURRENT]).max() > 0.0
     # innovations: RPM (3) and depth (1) at 1 Hz, consistent on average
     for res in (rpm, cur):
         assert set(res.innovations) == {"rpm", "depth"}
@@ -540,12 +541,12 @@ def test_gyro_z_rate_states_are_estimated_in_the_turns_or_frozen(rec):
     imu = rec.metadata.true_errors["imu"]
     truth = np.array([imu["gyro_misalignment"][0][2], imu["gyro_misalignment"][1][2],
                       imu["gyro_scale_factor"][2]])
-    sig = res.sigma[-1, rai.GYRO_Z]
-    assert np.all(np.abs(res.x[-1, rai.GYRO_Z] - truth) < 4 * sig)
-    assert np.all(sig[:2] < 0.8 * res.sigma[0, rai.GYRO_Z][:2])
+    sig = res.sigma[-1, raim.GYRO_Z]
+    assert np.all(np.abs(res.x[-1, raim.GYRO_Z] - truth) < 4 * sig)
+    assert np.all(sig[:2] < 0.8 * res.sigma[0, raim.GYRO_Z][:2])
     off = replay(rec, rai.RpmAidedIns, {"mode": "rpm_current", "gyro_z_states": False},
                  output_rate=1.0)
-    assert not off.x[:, rai.GYRO_Z].any() and not off.sigma[:, rai.GYRO_Z].any()
+    assert not off.x[:, raim.GYRO_Z].any() and not off.sigma[:, raim.GYRO_Z].any()
     k = np.searchsorted(res.t, 95.0)  # the first turn ends at 90 s
     assert np.all(res.sigma[k, 6:8] > 1.05 * off.sigma[k, 6:8])
 
@@ -573,18 +574,18 @@ def test_accelerometer_states_are_estimated_in_the_turns_or_frozen(rec):
     against metadata.true_errors["imu"], stay within 4 sigma of it, and the lateral-force
     terms (m_a_zx... driven by the turns' centripetal force) are learnt; off, they stay 0."""
     res = replay(rec, rai.RpmAidedIns, {"mode": "rpm_current"}, output_rate=1.0)
-    assert res.state_names[rai.ACCEL] == ("s_a_x", "m_a_yx", "m_a_zx", "m_a_xy", "s_a_y",
+    assert res.state_names[raim.ACCEL] == ("s_a_x", "m_a_yx", "m_a_zx", "m_a_xy", "s_a_y",
                                           "m_a_zy")
     imu = rec.metadata.true_errors["imu"]
     truth = np.array([imu["accel_scale_factor"][0], imu["accel_misalignment"][1][0],
                       imu["accel_misalignment"][2][0], imu["accel_misalignment"][0][1],
                       imu["accel_scale_factor"][1], imu["accel_misalignment"][2][1]])
-    sig = res.sigma[-1, rai.ACCEL]
-    assert np.all(np.abs(res.x[-1, rai.ACCEL] - truth) < 4 * sig), (res.x[-1, rai.ACCEL], truth)
-    assert sig.min() < 0.8 * res.sigma[0, rai.ACCEL].min()
+    sig = res.sigma[-1, raim.ACCEL]
+    assert np.all(np.abs(res.x[-1, raim.ACCEL] - truth) < 4 * sig), (res.x[-1, raim.ACCEL], truth)
+    assert sig.min() < 0.8 * res.sigma[0, raim.ACCEL].min()
     off = replay(rec, rai.RpmAidedIns, {"mode": "rpm_current", "accel_states": False},
                  output_rate=1.0)
-    assert not off.x[:, rai.ACCEL].any() and not off.sigma[:, rai.ACCEL].any()
+    assert not off.x[:, raim.ACCEL].any() and not off.sigma[:, raim.ACCEL].any()
 
 
 def test_few_seeded_runs_order_pure_rpm_and_rpm_current():

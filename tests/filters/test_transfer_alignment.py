@@ -15,6 +15,7 @@ from navreplay.core.streams import StreamKind
 from navreplay.core.units import ARCMIN, DEG, FOOT
 from navreplay.filters import kalman
 from navreplay.filters import transfer_alignment as ta
+from navreplay.filters import transfer_alignment_model as tam
 from navreplay.filters.registry import load_filter
 from navreplay.geo import earth, kernels, strapdown
 from navreplay.geo.rotations import (
@@ -65,8 +66,8 @@ def test_quaternion_matrices_are_the_hamilton_products():
         p, q, w = unit(rng), unit(rng), rng.standard_normal(3)
         w0 = np.concatenate([[0.0], w])
         np.testing.assert_allclose(kernels.quat_left_matrix(p), quat_left_matrix(p), atol=0)
-        np.testing.assert_allclose(ta.rmat(q) @ w, quat_mult(w0, q), atol=1e-15)  # R(q)
-        np.testing.assert_allclose(ta.tmat(q) @ w, quat_mult(q, w0), atol=1e-15)  # T(q)
+        np.testing.assert_allclose(tam.rmat(q) @ w, quat_mult(w0, q), atol=1e-15)  # R(q)
+        np.testing.assert_allclose(tam.tmat(q) @ w, quat_mult(q, w0), atol=1e-15)  # T(q)
         np.testing.assert_allclose(kernels.quat_to_dcm(q), quat_to_dcm(q), atol=1e-15)
         e = rng.uniform(-1.0, 1.0, 3)
         qe = kernels.euler_to_quat(e)
@@ -79,7 +80,7 @@ def test_rate_matrix_is_right_w_ib_minus_left_w_in():
     w_ib, w_in, q = rng.standard_normal(3), rng.standard_normal(3), unit(rng)
     # q' = 1/2 q (x) w_ib - 1/2 w_in (x) q, eq. (2)
     q_dot = 0.5 * quat_mult(q, np.r_[0.0, w_ib]) - 0.5 * quat_mult(np.r_[0.0, w_in], q)
-    np.testing.assert_allclose(0.5 * ta.rate_matrix(w_ib, w_in) @ q, q_dot, atol=1e-15)
+    np.testing.assert_allclose(0.5 * tam.rate_matrix(w_ib, w_in) @ q, q_dot, atol=1e-15)
 
 
 def test_eq11_recovers_component_2_of_qm_conj_times_qbn():
@@ -121,8 +122,8 @@ def _model_point(seed=4):
     v = np.array([4.4, 2.6, 0.3]) + rng.standard_normal(3)
     w_ib = 0.1 * rng.standard_normal(3)
     f_b = np.array([0.3, -0.2, -9.8]) + 0.5 * rng.standard_normal(3)
-    R, w_in = ta.earth_terms(LAT, H, v)
-    A, G = ta.system_matrix(q, v, LAT, R, w_ib, w_in, f_b, 9)
+    R, w_in = tam.earth_terms(LAT, H, v)
+    A, G = tam.system_matrix(q, v, LAT, R, w_ib, w_in, f_b, 9)
     return q, v, w_ib, f_b, R, A, G
 
 
@@ -178,7 +179,7 @@ def test_a_qv_and_a_qq_match_finite_differences():
 
     np.testing.assert_allclose(A[2:6, 0:2], _jacobian(f_v, v[:2], 1.0), rtol=1e-7,
                                atol=1e-18)
-    _, w_in = ta.earth_terms(LAT, H, v)
+    _, w_in = tam.earth_terms(LAT, H, v)
     J = _jacobian(lambda qq: _q_dot(qq, w_in, w_ib), q, 1.0)  # q' is linear in q
     np.testing.assert_allclose(A[2:6, 2:6], J, rtol=1e-12, atol=1e-16)
     assert not A[:, 6:].any() and not A[6:].any()  # dQ_br: random constant, eq. (9)
@@ -187,7 +188,7 @@ def test_a_qv_and_a_qq_match_finite_differences():
 def test_noise_input_g():
     q, v, _, f_b, R, A, G = _model_point()
     np.testing.assert_allclose(G[0:2, 0:3], quat_to_dcm(q)[0:2], atol=1e-15)
-    np.testing.assert_allclose(G[2:6, 3:6], 0.5 * ta.tmat(q), atol=0)
+    np.testing.assert_allclose(G[2:6, 3:6], 0.5 * tam.tmat(q), atol=0)
     assert not G[0:2, 3:].any() and not G[2:6, :3].any() and not G[6:].any()
 
 
@@ -197,7 +198,7 @@ def test_phi_is_minus_two_r_transpose_dq():
     dq = 1e-6 * rng.standard_normal(4)
     q_hat = (q + dq) / np.linalg.norm(q + dq)
     phi = attitude_error(quat_to_dcm(q_hat), quat_to_dcm(q))
-    np.testing.assert_allclose(phi, -2.0 * ta.rmat(q).T @ dq, rtol=1e-5, atol=1e-16)
+    np.testing.assert_allclose(phi, -2.0 * tam.rmat(q).T @ dq, rtol=1e-5, atol=1e-16)
 
 
 def test_lever_velocity_is_c_nb_omega_nb_cross_lever_b():
@@ -207,7 +208,7 @@ def test_lever_velocity_is_c_nb_omega_nb_cross_lever_b():
     C_nb = quat_to_dcm(q_bn)
     w_nb_b = w_ib - C_nb.T @ w_in
     L_b = C_nb.T @ quat_to_dcm(q_m) @ L_r
-    np.testing.assert_allclose(ta.lever_velocity(q_bn, q_m, w_ib, w_in, L_r),
+    np.testing.assert_allclose(tam.lever_velocity(q_bn, q_m, w_ib, w_in, L_r),
                                C_nb @ np.cross(w_nb_b, L_b), rtol=1e-12, atol=1e-12)
 
 
@@ -228,13 +229,13 @@ def test_prediction_and_measurement_match_the_shared_kalman_math():
     lever, dt = np.array([45.7, 15.2, 12.2]), 0.1
     qc = np.r_[[5e-4**2] * 3, [3e-5**2] * 3]
     v_r = np.array([4.3, 2.5, 0.0])
-    P, z, H_, R2, q_m2, w_now, w_in = ta.predict_and_measure(
+    P, z, H_, R2, q_m2, w_now, w_in = tam.predict_and_measure(
         nav, q_rb, P0, s, -q_m, v_r, sums, 10, w_last, w_prev, lever, dt, qc, 1e-12,
         0, 0.0, np.eye(2), np.zeros((2, 2)), np.zeros(3), 0.0)
     assert not R2.any()  # no flexure states, no Euler noise: the paper's R (the caller's)
     np.testing.assert_allclose(q_m2, q_m, atol=0)  # the sign of §2.2
-    R, w_in_ref = ta.earth_terms(LAT, H, nav[3:6])
-    A, G = ta.system_matrix(nav[6:], nav[3:6], LAT, R, sums[:3] / 10, w_in_ref, sums[3:] / 10, n)
+    R, w_in_ref = tam.earth_terms(LAT, H, nav[3:6])
+    A, G = tam.system_matrix(nav[6:], nav[3:6], LAT, R, sums[:3] / 10, w_in_ref, sums[3:] / 10, n)
     Qd = kalman.discrete_noise(G, qc, dt)
     Qd[np.arange(6, n), np.arange(6, n)] += 1e-12 * dt
     _, P_ref = kalman.predict(np.zeros(n), P0, kalman.discretize(A, dt), Qd)
@@ -244,17 +245,17 @@ def test_prediction_and_measurement_match_the_shared_kalman_math():
     np.testing.assert_allclose(H_[2:, 2:6], Lc[s], atol=0)
     np.testing.assert_allclose(H_[2:, 6:], -np.eye(3), atol=0)
     np.testing.assert_allclose(z[2:], (Lc @ nav[6:])[s] - q_rb[s], atol=1e-16)
-    lever_v = ta.lever_velocity(nav[6:], q_m, w_now, w_in, lever)
+    lever_v = tam.lever_velocity(nav[6:], q_m, w_now, w_in, lever)
     np.testing.assert_allclose(z[:2], (nav[3:6] - v_r - lever_v)[:2], atol=1e-14)
     # the velocity rows' attitude columns: the lever-arm term turns with an attitude error
     # (finite differences of z along rotations of the SDINS attitude, phi = -2 R^T dQ)
-    rq = ta.rmat(nav[6:])
+    rq = tam.rmat(nav[6:])
     for k in range(3):
         phi = np.zeros(3)
         phi[k] = 1e-6
         dq = -0.5 * rq @ phi  # the dQ_bn of a small phi (R^T R = I)
-        up = ta.lever_velocity(nav[6:] + dq, q_m, w_now, w_in, lever)
-        down = ta.lever_velocity(nav[6:] - dq, q_m, w_now, w_in, lever)
+        up = tam.lever_velocity(nav[6:] + dq, q_m, w_now, w_in, lever)
+        down = tam.lever_velocity(nav[6:] - dq, q_m, w_now, w_in, lever)
         np.testing.assert_allclose(H_[:2, 2:6] @ dq, -(up - down)[:2] / 2, rtol=1e-6,
                                    atol=1e-14)
 
@@ -272,7 +273,7 @@ def test_quaternion_noise_is_the_euler_noise_through_the_measurement():
         return quat_mult(quat_conj(euler_to_quat(e)), q_bn)
 
     J = np.column_stack([(z(euler + d) - z(euler - d)) / 2e-6 for d in 1e-6 * np.eye(3)])
-    R = ta.quaternion_noise(z(euler), euler, sigma)
+    R = tam.quaternion_noise(z(euler), euler, sigma)
     np.testing.assert_allclose(R, sigma**2 * J @ J.T, rtol=1e-6, atol=1e-22)
     draws = np.array([z(euler + n) for n in sigma * rng.standard_normal((20000, 3))])
     np.testing.assert_allclose(np.cov(draws.T), R, rtol=0.05, atol=0.03 * R[1, 1])
@@ -297,7 +298,7 @@ def test_initial_covariance_holds_the_noise_of_the_starting_attitude():
     A[:, 2:6] = np.eye(4)  # q_br2's share in it, the start adds the noise
     A[:, 6:] = -quat_left_matrix(q_m)[:, s]
     Lu = quat_left_matrix(q_m)[:, 2]
-    Tm = ta.tmat(q_m)
+    Tm = tam.tmat(q_m)
     np.testing.assert_allclose(A @ paper @ A.T, 6.9e-4 * np.outer(Lu, Lu), atol=1e-18)
     np.testing.assert_allclose(A @ (P0 - paper) @ A.T, var * Tm @ Tm.T, atol=1e-20)
     assert not (P0 - paper)[6:].any() and not (P0 - paper)[:2].any()
@@ -307,7 +308,7 @@ def test_initial_covariance_holds_the_noise_of_the_starting_attitude():
     cov = np.cov((q_meas - q_m).T)
     np.testing.assert_allclose(cov, var * Tm @ Tm.T, atol=0.05 * var)
     # the attitude sigma at the start: 2 x 0.5 arcmin per axis on top of the paper's
-    extra = ta.attitude_sigma(q_m, P0) ** 2 - ta.attitude_sigma(q_m, paper) ** 2
+    extra = tam.attitude_sigma(q_m, P0) ** 2 - tam.attitude_sigma(q_m, paper) ** 2
     np.testing.assert_allclose(extra, [ARCMIN**2] * 3, rtol=1e-9)
 
 
@@ -332,7 +333,7 @@ def test_flexure_states_bend_the_predicted_misalignment(s):
     args = (nav, q_rb, P0, s, q_m, np.array([4.3, 2.5, 0.0]), np.r_[0.1, 0.2, 0.0, 0.0, 0.0, -98.0],
             10, np.zeros(3), np.zeros(3), np.array([45.7, 15.2, 12.2]), dt,
             np.r_[[5e-4**2] * 3, [3e-5**2] * 3], 1e-12, 2)
-    P, z, H_, R2, *_ = ta.predict_and_measure(*args, theta, phi_f, qd_f, np.zeros(3), 0.0)
+    P, z, H_, R2, *_ = tam.predict_and_measure(*args, theta, phi_f, qd_f, np.zeros(3), 0.0)
     expected = phi_f @ P0[-2:, -2:] @ phi_f.T + qd_f
     # the off-diagonal of a nearly decoupled block rounds to ~1e-20 (or 0) by CPU kernel: an
     # absolute floor at 1e-12 of the block's scale
@@ -340,11 +341,11 @@ def test_flexure_states_bend_the_predicted_misalignment(s):
                                atol=1e-12 * np.abs(expected).max())
     assert not P[-2:, :-2].any()  # no coupling before the first update
     recovered = 2 not in s
-    q_pred = ta.flexed(q_rb, theta, recovered)[1]
+    q_pred = tam.flexed(q_rb, theta, recovered)[1]
     Lc = quat_left_matrix(quat_conj(q_m))
     np.testing.assert_allclose(z[2:], (Lc @ nav[6:])[s] - q_pred[s], atol=1e-15)
     h = 1e-6
-    dz = (ta.flexed(q_rb, theta + h, recovered)[1] - ta.flexed(q_rb, theta - h, recovered)[1]) / (2 * h)
+    dz = (tam.flexed(q_rb, theta + h, recovered)[1] - tam.flexed(q_rb, theta - h, recovered)[1]) / (2 * h)
     np.testing.assert_allclose(H_[2:, -2], -dz[s], atol=1e-9)
     assert not H_[2:, -1].any()
     if recovered:  # q_br0, q_br2 are not bent: rows 0 (and 2) carry no theta
@@ -617,7 +618,7 @@ def test_flexure_rate_sigma_matches_the_simulated_flexure():
     normals = np.random.default_rng(3).standard_normal((n, 2))
     theta, rate = sc.flexure_state(n, dt, p.flexure_sigma, p.flexure_zeta, p.flexure_wn, normals)
     missed = rate[1:] - np.diff(theta) / dt
-    want = ta.flexure_rate_sigma(p.flexure_sigma, p.flexure_zeta, p.flexure_wn, p.imu_rate)
+    want = tam.flexure_rate_sigma(p.flexure_sigma, p.flexure_zeta, p.flexure_wn, p.imu_rate)
     assert np.std(missed) == pytest.approx(want, rel=0.03)
     assert want == pytest.approx(ta.TransferAlignmentParams().flexure_rate_sigma, rel=0.01)
     # the rate integrates to the angle (trapezoid, one interval)
@@ -684,7 +685,7 @@ def test_attitude_sigma_with_the_consider_terms_is_honest():
         e = rep.alignment_errors(res, rec)
         phi.append(e.phi[-1])
         sigma.append(e.sigma[-1])
-        sigma_p.append(ta.attitude_sigma(res.nav_q_nb[-1], res.P[-1]))
+        sigma_p.append(tam.attitude_sigma(res.nav_q_nb[-1], res.P[-1]))
     rms = np.sqrt(np.mean(np.square(phi), axis=0))
     ratio = rms / np.sqrt(np.mean(np.square(sigma), axis=0))
     assert np.all((ratio > 0.6) & (ratio < 1.3)), ratio

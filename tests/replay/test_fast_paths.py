@@ -17,13 +17,22 @@ from navreplay.core.streams import Recording, StreamKind
 from navreplay.filters.base import Filter
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.filters.ins import InsFilter
-from navreplay.replay import replay
+from navreplay.replay import replay, session
 from navreplay.sim.scenario import simulate
 
 
 @pytest.fixture(scope="module")
 def drive() -> Recording:
     return simulate("vehicle-drive", {"duration": 120.0}, seed=3)
+
+
+@pytest.fixture(scope="module")
+def banked() -> Recording:
+    """Coordinated turns at 40 m/s, a time-correlated GNSS error and a GNSS outage: every
+    state of the full models moves."""
+    return simulate("vehicle-drive", {"duration": 120.0, "turn_mode": "coordinated",
+                                      "cruise_speed": 40.0, "gps_pos_gm_sigma": 1.5,
+                                      "gps_pos_gm_tau": 60.0, "gps_outages": "50:20"}, seed=4)
 
 
 def _one_by_one(monkeypatch: pytest.MonkeyPatch, *args: Any, **kw: Any) -> Any:
@@ -48,6 +57,32 @@ def test_compiled_runs_are_bitwise_the_events_one_by_one(
     assert_same_results(fast, slow)
     if filter_cls is GpsInsFilter:
         assert ("gps_vel" in fast.innovations) is params.get("use_gps_vel", True)
+
+
+FULL_INS = {"gyro_roll_pitch_states": True, "accel_motion_states": True,
+            "accel_load_states": True}
+
+
+@pytest.mark.parametrize("filter_cls, params", [
+    (GpsInsFilter, {"estimate_lever_arm": True}),
+    (GpsInsFilter, {"use_gps_vel": False, "gps_pos_gm_tau": 200.0}),
+    (InsFilter, FULL_INS),
+])
+def test_the_full_models_are_bitwise_the_events_one_by_one(
+    banked: Recording, monkeypatch: pytest.MonkeyPatch, filter_cls: type, params: dict,
+) -> None:
+    """The gyro and accelerometer scale-factor and misalignment columns, the GNSS
+    Gauss-Markov states (from the recording's specification) and a GNSS outage: the compiled
+    runs of ticks and of events give the bits of the events one by one."""
+    fast = replay(banked, filter_cls, params, output_rate=20.0)
+    slow = _one_by_one(monkeypatch, banked, filter_cls, params, output_rate=20.0)
+    assert_same_results(fast, slow)
+    names = fast.state_names
+    assert {"s_g_x", "m_g_zy", "s_a_z"} <= set(names)
+    assert ("gm_N" in names) is (filter_cls is GpsInsFilter)
+    if filter_cls is GpsInsFilter:  # (a free INS feeds nothing back)
+        moved = np.ptp(fast.x, axis=0) > 0.0
+        assert moved[[names.index(n) for n in ("s_g_x", "m_g_zy", "s_a_z", "gm_N")]].all()
 
 
 def test_compiled_runs_around_an_imu_gap(drive: Recording,
@@ -96,3 +131,25 @@ def test_live_views_see_compiled_runs_as_they_come(drive: Recording) -> None:
                     observer=lambda rows: seen.append(len(rows.t)))
     assert len(seen) >= 3 and sum(seen) == len(result.t)
     assert seen[0] < len(result.t)  # not only the end: runs of at most 1024 events
+
+
+def test_a_subclass_keeps_the_decay_of_the_markov_states(
+        banked: Recording, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A ``gps-ins`` subclass that changes ``update`` runs its ticks through the time update's
+    kernel only where no state is a first-order Markov process: the GNSS Gauss-Markov
+    estimates decay from tick to tick as one by one (runs of at most 8 events, as a replay
+    that reports its progress cuts them: runs of ticks alone between the fixes)."""
+
+    class Changed(GpsInsFilter):
+        name = "changed-gps-ins"
+
+        def update(self, *args: Any, **kw: Any) -> Any:
+            return super().update(*args, **kw)
+
+    monkeypatch.setattr(session, "CHECK_EVERY", 8)
+    kw = {"output_rate": 20.0, "progress": lambda done, total: None}
+    params = {"gps_pos_gm_tau": 200.0}
+    fast = replay(banked, Changed, params, **kw)
+    assert_same_results(fast, _one_by_one(monkeypatch, banked, Changed, params, **kw))
+    gm = fast.x[:, fast.state_names.index("gm_N")]
+    assert np.count_nonzero(np.diff(gm)) > 0.9 * (len(gm) - 1)  # not held between fixes

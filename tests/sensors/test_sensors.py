@@ -194,6 +194,38 @@ def test_imu_ideal_grade_is_exact_and_measure_is_pure():
     json.dumps(model.draw(rng(4)).as_dict())
 
 
+def test_effective_biases_at_the_true_or_the_level_attitude():
+    """At rest the errors ``(S + M) f`` and ``K_g f`` of the gravity reaction add to the bias: at
+    the true attitude ``f_0 = -C_bn g_n``; in the level attitude of the same heading
+    ``(0, 0, -g)`` whatever the roll and pitch (the 1-g bias of a banked coordinated turn)."""
+    from navreplay.geo.earth import gravity, omega_ie_n
+    from navreplay.sensors.imu import effective_biases
+
+    model = imu_grade("mems")
+    errors = model.draw(rng(21))
+    euler = np.array([[0.6, 0.1, 1.2], [-0.7, 0.0, -2.0], [0.0, 0.0, 0.4]])
+    q = euler_to_quat(euler)
+    pos = np.tile([0.65, 2.2, 100.0], (3, 1))
+    meas = model.measure(errors, np.zeros((2, 3)), np.zeros((2, 3)), 0.01, rng(22))
+    g = gravity(0.65, 100.0)
+    eye = np.eye(3)
+    for level in (False, True):
+        gyro, accel = effective_biases(errors, meas, q, pos, level=level)
+        rest = euler.copy()
+        if level:
+            rest[:, :2] = 0.0
+        C_bn = np.swapaxes(quat_to_dcm(euler_to_quat(rest)), 1, 2)
+        f0 = -C_bn @ [0.0, 0.0, g]
+        w_ie = C_bn @ omega_ie_n(0.65)
+        np.testing.assert_allclose(
+            accel, meas.accel_bias + f0 @ (errors.accel_matrix() - eye).T, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(
+            gyro, meas.gyro_bias + w_ie @ (errors.gyro_matrix() - eye).T
+            + f0 @ errors.gyro_g_sensitivity.T, rtol=0, atol=1e-18)
+        if level:
+            np.testing.assert_allclose(f0, np.tile([0.0, 0.0, -g], (3, 1)), atol=1e-12)
+
+
 @pytest.mark.parametrize(
     ("cls", "kwargs", "field"),
     [

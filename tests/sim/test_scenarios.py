@@ -121,6 +121,57 @@ def test_imu_errors_match_truth_columns():
     assert np.abs(rec["truth"]["gyro_bias"] - b).max() < 0.5 * np.abs(b).max()
 
 
+@pytest.mark.parametrize("outages", ["100:30,200:60", [[100, 30], [200, 60]], ["100:30", "200:60"]])
+def test_gnss_outages_drop_every_epoch_inside_and_are_recorded(outages):
+    """``-p gps_outages=START:LEN,...`` or a TOML list: no fix and no velocity in [start,
+    start + length); the schedule in the parameters and, as [start, end], in
+    ``extra["gnss_outages"]``; the Gauss-Markov error wanders on underneath."""
+    values = {"duration": 300.0, "gps_pos_gm_sigma": 2.0, "gps_pos_gm_tau": 60.0}
+    full = simulate("vehicle-drive", values, seed=5)
+    rec = simulate("vehicle-drive", {**values, "gps_outages": outages}, seed=5)
+    assert rec.metadata.params["gps_outages"] == [[100.0, 30.0], [200.0, 60.0]]
+    assert rec.metadata.extra["gnss_outages"] == [[100.0, 130.0], [200.0, 260.0]]
+    assert full.metadata.extra["gnss_outages"] == []
+    for kind in ("gps", "gps_vel"):
+        t = (rec[kind].t_ns - rec.t0_ns) * 1e-9
+        t_full = (full[kind].t_ns - full.t0_ns) * 1e-9
+        gone = ((t_full >= 100.0) & (t_full < 130.0)) | ((t_full >= 200.0) & (t_full < 260.0))
+        assert gone.sum() == 90 and np.array_equal(t, t_full[~gone])
+        for name, column in rec[kind].columns.items():  # the others are the same samples
+            assert np.array_equal(column, full[kind][name][~gone])
+    for name in rec["truth"].columns:
+        assert np.array_equal(rec["truth"][name], full["truth"][name])
+    assert np.abs(np.diff(rec["truth"]["gps_pos_gm"][::100], axis=0)).max() > 0.0
+
+
+def test_gnss_outages_of_the_gimpo_scenarios():
+    from navreplay.sim.scenarios import gimpo
+
+    rec = simulate("gimpo-accel-yaw", {"gps_outages": "12:4"}, seed=2)
+    t = (rec["gps_vel"].t_ns - rec.t0_ns) * 1e-9
+    assert len(t) == len(rec["imu"]) - 16 and not ((t >= 12.0) & (t < 16.0)).any()
+    assert rec.metadata.extra["gnss_outages"] == [[12.0, 16.0]]
+    p = gimpo.GimpoAccelYawParams(gps_outages=((12.0, 4.0),))
+    with pytest.raises(ValueError, match="outages"):
+        gimpo.simulate_runs(p, gimpo.GimpoAccelYaw().truth(p), [1, 2])
+
+
+def test_the_gps_pos_gm_truth_column_is_the_gnss_error_s_correlated_part():
+    """At the GNSS epochs the truth column is the Gauss-Markov part of the fix's error: the
+    rest, fix minus truth minus that column, is the white noise of the specification."""
+    rec = simulate("vehicle-drive", {"duration": 600.0, "gps_pos_gm_sigma": 3.0,
+                                     "gps_pos_sigma_h": 1.0, "gps_pos_sigma_v": 1.5}, seed=8)
+    truth, gps = rec["truth"], rec["gps"]
+    idx = np.searchsorted(truth.t_ns, gps.t_ns)
+    assert np.array_equal(truth.t_ns[idx], gps.t_ns)
+    err = lla_to_ned_offset(*truth["pos"][idx].T, *gps["pos"].T)
+    white = err - truth["gps_pos_gm"][idx]
+    np.testing.assert_allclose(np.std(white, axis=0), [1.0, 1.0, 1.5], rtol=0.1)
+    assert 1.5 < np.std(truth["gps_pos_gm"][idx]) < 4.5
+    lag1 = [np.corrcoef(white[:-1, k], white[1:, k])[0, 1] for k in range(3)]
+    assert np.abs(lag1).max() < 0.15
+
+
 def test_stationary_initial_tilt():
     rec = simulate("stationary", {"duration": 5.0, "init_attitude_error": "1e-3, -2e-3, 0"}, seed=0)
     assert rec.metadata.true_errors["initial_nav"]["phi"] == [1e-3, -2e-3, 0.0]
@@ -138,6 +189,12 @@ def test_stationary_initial_tilt():
         ("vehicle-drive", {"duration": 10.005}, "duration"),
         ("vehicle-drive", {"turn_mode": "sideways"}, "turn_mode"),
         ("vehicle-drive", {"warp": 1}, "unknown"),
+        ("vehicle-drive", {"duration": 60.0, "gps_outages": "50:20"}, "ends after"),
+        ("vehicle-drive", {"gps_outages": "100:30,120:10"}, "before the previous"),
+        ("vehicle-drive", {"gps_outages": "100"}, "2 values separated by .:."),
+        ("vehicle-drive", {"gps_outages": "100:0"}, "more than 0 s"),
+        ("vehicle-drive", {"max_bank_deg": 90.0}, "max_bank_deg"),
+        ("gimpo-accel-yaw", {"gps_outages": "28:5"}, "ends after"),
         ("stationary", {"lat_deg": 91.0}, "lat_deg"),
         ("stationary", {"init_tilt_sigma": -1.0}, "init_tilt_sigma"),
     ],

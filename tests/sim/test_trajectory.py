@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -26,6 +27,7 @@ from navreplay.sim.trajectory import (
     Route,
     Segment,
     TurnMode,
+    bank_limited,
     channel_profile,
     generate,
     initial_nav,
@@ -113,6 +115,45 @@ def test_coordinated_turns_bank_without_lateral_force(drive):
     assert np.abs(coord.euler[:, 0]).max() > 10 * DEG
     # bank atan(u psi_dot / g) cancels the centripetal force up to earth-rate / slope effects
     assert np.abs(coord.f_b[:, 1]).max() < 0.05
+
+
+@pytest.mark.parametrize("speed", [40.0, 60.0, 80.0])
+def test_coordinated_turns_bank_at_most_the_limit(speed):
+    """A turn that would bank beyond the limit is flown longer (same change, same start) and
+    peaks at the limit; the turns within it, and flat turns, are left as they are."""
+    limit = 45.0 * DEG
+    route = Route(lat=LAT, lon=LON, h=H, manoeuvres=drive_manoeuvres(150.0, speed),
+                  turn_mode=TurnMode.COORDINATED)
+    limited = bank_limited(route, limit)
+    roll = generate(limited, 150.0, 50.0, ideal_imu=False).euler[:, 0]
+    free = generate(route, 150.0, 50.0, ideal_imu=False).euler[:, 0]
+    assert np.abs(roll).max() <= limit + 1e-9
+    g = gravity(LAT, H)
+    for before, after in zip(route.manoeuvres, limited.manoeuvres, strict=True):
+        assert (before.start, before.change, before.channel) == (
+            after.start, after.change, after.channel)
+        if before.channel is not Channel.HEADING:
+            assert after == before
+            continue
+        # the peak bank of a smooth turn at the window's top speed u: atan(2 u |dpsi| / (T g))
+        grid = np.linspace(after.start, after.end, 401)
+        u = channel_profile(grid, 0.0, [m for m in route.manoeuvres
+                                         if m.channel is Channel.SPEED])[0].max()
+        peak = math.atan(2.0 * u * abs(before.change) / (before.duration * g))
+        if peak <= limit:
+            assert after == before
+        else:
+            assert after.duration > before.duration
+            assert math.atan(2.0 * u * abs(after.change) / (after.duration * g)) == (
+                pytest.approx(limit, abs=1e-9))
+    if speed == 40.0:
+        assert limited == route and np.abs(free).max() < limit  # 38.7 deg: nothing to do
+    else:
+        assert np.abs(free).max() > limit + 3.0 * DEG and np.abs(roll).max() > limit - 1.0 * DEG
+    flat = dataclasses.replace(route, turn_mode=TurnMode.FLAT)
+    assert bank_limited(flat, limit) is flat
+    with pytest.raises(ValueError, match="max_bank"):
+        bank_limited(route, 0.5 * math.pi)
 
 
 def test_perfect_imu_reproduces_truth_through_strapdown(drive):

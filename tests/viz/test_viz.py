@@ -38,7 +38,7 @@ from navreplay.viz import (
     targets,
 )
 from navreplay.viz.blueprint import Catalog, build_blueprint
-from navreplay.viz.style import BAND_LINES, PALETTE, TRUTH_COLOR
+from navreplay.viz.style import BAND_LINES, PALETTE, TRUTH_COLOR, color_index
 
 STATES = tuple(dataclasses.replace(s, name=s.name.replace("b_", "db_", 1))
                if s.name.startswith("b_") else s for s in ie.nav_states())
@@ -133,6 +133,8 @@ def saved(tmp_path_factory):
         sink.log_ensemble(
             "NEES", a.t, {"gps-ins": np.full(M, 15.2)}, unit="-", bounds=chi2_bounds(15, 50)
         )
+        sink.summaries({"gps-ins": {"pos_rms_h": 1.5, "att_rms_heading": 2e-3},
+                        "gps-ins[q=2]": {"pos_rms_h": 0.5}})
         recording_id = sink.recording_id
     return path, truth, a, b, err, recording_id, sink, read_rrd(path)
 
@@ -251,17 +253,24 @@ def test_ensemble_bounds(saved):
 
 
 def test_blueprint_adapts_to_what_was_logged(saved):
-    *_, sink, _ = saved
+    path, *_, sink, _ = saved
     plots = sink.catalog.plots
     assert list(plots["attitude"])[:3] == ["nav:roll", "nav:pitch", "nav:yaw"]
     # errors: one pane per filter (own scale), the filter named in the title, no legend
     pane = plots["attitude"]["error:phi_N@gps-ins"]
     assert pane.title == "gps-ins: attitude phi_N error [deg], ±3σ" and not pane.legend
     assert plots["position"]["error:p_N@gps-ins[q=2]"].title.startswith("gps-ins[q=2]: position N")
-    # components of a prefix share one plot; both filters overlay
-    paths = plots["states"]["state:db_g"].paths
-    assert len([p for p in paths if "/state/" in p]) == 6
-    assert "/truth/extra/gyro_bias_eff" in paths  # the truth the states are scored against
+    # components of a prefix share one plot, a column per filter
+    for label in ("gps-ins", "gps-ins[q=2]"):
+        pane = plots["states"][f"state:db_g@{label}"]
+        assert pane.column == label and pane.row == "db_g"
+        assert len([p for p in pane.paths if "/state/" in p]) == 3
+        assert "/truth/extra/gyro_bias_eff" in pane.paths  # the truth they are scored against
+    sensor = [p for p in plots["sensor"].values()]
+    assert sensor and all(p.column in ("gps-ins", "gps-ins[q=2]") for p in sensor)
+    tabs, _ = read_blueprint(path)
+    assert tabs["Sensor errors"][:2] == ["gps-ins: db_g_x error [deg/h], ±3σ",
+                                         "gps-ins: db_g_y error [deg/h], ±3σ"]
     # a state with an error plot leaves the sigma plot (its bounds are in the error plot)
     # (the gyro biases are scored, the accelerometer biases are not: the truth lacks them)
     assert "sigma:db_g@gps-ins" not in plots["states"]
@@ -477,7 +486,7 @@ def first_color(data, path) -> tuple[int, int, int]:
 def test_blueprint_in_the_file_has_tabs_units_and_per_filter_panes(saved):
     path, *_ = saved
     tabs, views = read_blueprint(path)
-    assert list(tabs)[:3] == ["Attitude", "Velocity", "Position"]
+    assert list(tabs)[:4] == ["Compare", "Attitude", "Velocity", "Position"]
     assert {"Sensor errors", "State estimates", "NEES / NIS", "Innovations", "Trajectory",
             "Map", "Ensemble"} <= set(tabs)
     for name, (kind, _) in views.items():
@@ -506,10 +515,13 @@ def test_each_filter_keeps_its_colour_in_every_error_plot(saved):
                 if p.endswith("/band"):
                     continue
                 colors.setdefault(label, set()).add(first_color(data, p))
-    assert colors["gps-ins"] == {PALETTE[0]} and colors["gps-ins[q=2]"] == {PALETTE[1]}
+    gps, q2 = PALETTE[color_index("gps-ins")], PALETTE[color_index("gps-ins[q=2]")]
+    assert gps != q2
+    assert colors["gps-ins"] == {gps} and colors["gps-ins[q=2]"] == {q2}
     # overlays: each filter in its colour, truth grey
-    assert first_color(data, "/gps-ins/nav/roll") == PALETTE[0]
-    assert first_color(data, "/gps-ins\\[q\\=2\\]/nav/roll") == PALETTE[1]
+    assert first_color(data, "/gps-ins/nav/roll") == gps
+    assert first_color(data, "/gps-ins\\[q\\=2\\]/nav/roll") == q2
+    assert first_color(data, "/compare/pos_h/gps-ins") == gps
     assert first_color(data, "/truth/nav/roll") == TRUTH_COLOR
 
 
@@ -572,7 +584,8 @@ def test_ensemble_view_colours_tabs_and_bands(tmp_path):
         root = naming.entity_path("ensemble", f"{label}: position error N, RMS and σ")
         rms = first_color(data, f"{root}/{label}\\ RMS")
         sigma = first_color(data, f"{root}/{label}\\ σ")
-        assert rms == PALETTE[i] and sigma == lighter(PALETTE[i], SIGMA_SHADE)
+        c = PALETTE[color_index(label)]
+        assert rms == c and sigma == lighter(c, SIGMA_SHADE)
         nees = naming.entity_path("ensemble", f"{label}: NEES (9 states, 3 runs), 95 % band")
         band = scalars(data, f"{nees}/bounds")
         assert band.shape[1] == BAND_LINES and np.all(band[:, -1] > band[:, 0])
@@ -661,3 +674,68 @@ def read_rrd_any(path, timeline: str) -> dict[str, dict[str, np.ndarray]]:
         if timeline in rb.schema.names:
             out[chunk.entity_path] = {timeline: rb.column(timeline).to_numpy()}
     return out
+
+
+def test_compare_tab_first_overlays_every_filter_with_cdfs_and_the_table(saved):
+    path, truth, a, b, *_, data = saved
+    tabs, views = read_blueprint(path)
+    assert list(tabs)[0] == "Compare"
+    assert tabs["Compare"][:4] == ["horizontal position error [m]", "vertical position error [m]",
+                                   "velocity error [m/s]", "heading error [deg]"]
+    assert "CDF of the horizontal position error [%] vs [m]" in tabs["Compare"]
+    assert tabs["Compare"][-1] == "headline metrics"
+    assert views["headline metrics"][0] == "TextDocument"
+    assert views["CDF of the heading error [%] vs [deg]"][0] == "BarChart"
+    # both filters overlaid in one plot, each its own entity
+    assert set(views["horizontal position error [m]"][1]) == {
+        "+ /compare/pos_h/gps-ins", "+ " + naming.entity_path("compare", "pos_h", "gps-ins[q=2]")}
+    # the magnitudes are those of the per-filter error panes
+    e_n = scalars(data, "/gps-ins/error/p_N")[:, 0]
+    e_e = scalars(data, "/gps-ins/error/p_E")[:, 0]
+    np.testing.assert_allclose(scalars(data, "/compare/pos_h/gps-ins")[:, 0], np.hypot(e_n, e_e),
+                               rtol=1e-9, atol=1e-12)
+    phi_d = scalars(data, "/gps-ins/error/phi_D")[:, 0]
+    np.testing.assert_allclose(scalars(data, "/compare/heading/gps-ins")[:, 0], np.abs(phi_d),
+                               rtol=1e-9, atol=1e-12)
+    # the CDF: a bar per percentile, at rising errors (its accuracy: tests/metrics/test_compare)
+    cdf = data["static"]["/compare/cdf/heading/gps-ins"].to_pydict()
+    x = np.asarray(cdf["BarChart:abscissa"][0][0]["buffer"], dtype=float)
+    assert x.shape == (200,) and np.all(np.diff(x) >= 0)
+    # the table: metrics as rows, filters as columns, the best in bold
+    text = data["static"]["/compare/summary"].to_pydict()["TextDocument:text"][0][0]
+    assert "| metric | gps-ins | gps-ins\\[q=2\\] |" in text
+    assert "| horizontal position RMS [m] | 1.5 | **0.5** |" in text
+    assert "| heading RMS [mrad] | 2 | - |" in text
+
+
+def test_filter_colours_follow_their_names_not_their_order(tmp_path):
+    truth = make_truth(duration=20.0)
+    runs = [make_result(label, k, truth, m=200) for k, label in enumerate(("ins", "gps-ins"))]
+    colours = []
+    for name, order in (("a", runs), ("b", runs[::-1]), ("c", runs[1:])):
+        path = tmp_path / f"{name}.rrd"
+        with open_sink(path) as sink:
+            log_runs(sink, order, truth)
+        data = read_rrd(path)
+        colours.append({r.label: first_color(data, naming.entity_path(r.label, "nav", "roll"))
+                        for r in order})
+    assert colours[0] == colours[1] and colours[2]["gps-ins"] == colours[0]["gps-ins"]
+    assert colours[0]["ins"] != colours[0]["gps-ins"]
+
+
+def test_a_frozen_state_gets_no_pane(tmp_path):
+    """A state with zero sigma all run (disabled, or frozen by its filter) is logged but gets
+    no plot; one with a sigma does, in its filter's column."""
+    from navreplay.filters.base import Quantity, State
+
+    t = np.arange(50) * 0.1
+    states = (State("b_g_x", "rad/s", Quantity.GYRO_BIAS),
+              State("b_a_x", "m/s^2", Quantity.ACCEL_BIAS))
+    P = np.zeros((50, 2, 2))
+    P[:, 0, 0] = 1e-10  # b_a_x frozen: zero variance
+    r = RunResult("f", "f", "demo", 0, t, states, np.full((50, 2), 1e-6), P)
+    with open_sink(tmp_path / "f.rrd") as sink:
+        sink.rows(r)
+    plots = sink.catalog.plots["states"]
+    assert "sigma:b_g@f" in plots and plots["sigma:b_g@f"].column == "f"
+    assert not any("/f/sigma/b_a_x" in p.paths for p in plots.values())

@@ -43,7 +43,8 @@ Sensors (§3.1, paper Table 1; 1-sigma Gaussian draws per run)
     WMM2015 at 2017.0 by default, within 50 nT of the IGRF 2017.0 value of §3.1,
     :data:`IGRF_FIELD_N`).
     The field is a constant vector over the few hundred metres travelled.
-    GPS velocity: :class:`navreplay.sensors.gps.GpsModel`, white noise per NED axis, no latency.
+    GPS velocity: :class:`navreplay.sensors.gps.GpsModel`, white noise per NED axis, no latency;
+    none inside the outages of ``gps_outages`` (recorded in ``extra["gnss_outages"]``).
 
 Metadata
     ``true_errors``: the drawn accelerometer and magnetometer errors; the truth stream carries
@@ -72,7 +73,7 @@ import datetime
 import enum
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -81,7 +82,13 @@ from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.core.units import DEG, G0, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 from navreplay.geo.earth import gravity, gravity_n, ned_offset_to_lla, omega_en_n, omega_ie_n
 from navreplay.geo.rotations import euler_to_quat
-from navreplay.sensors.gps import GpsModel
+from navreplay.sensors.gps import (
+    OUTAGES_KEY,
+    GpsModel,
+    check_outages,
+    outage_mask,
+    outages_extra,
+)
 from navreplay.sensors.imu import ImuErrors, ImuModel
 from navreplay.sensors.magnetometer import (
     MagnetometerErrors,
@@ -117,7 +124,8 @@ class Axis(enum.StrEnum):
         return cls.__members__.get(value.upper()) if isinstance(value, str) else None
 
     @property
-    def index(self) -> int:
+    def column(self) -> int:
+        """The column of the axis in a NED vector."""
         return "NED".index(self.value)
 
 
@@ -132,7 +140,8 @@ class BodyAxis(enum.StrEnum):
         return cls.__members__.get(value.upper()) if isinstance(value, str) else None
 
     @property
-    def index(self) -> int:
+    def column(self) -> int:
+        """The column of the body axis in a vector."""
         return "xy".index(self.value)
 
 
@@ -173,8 +182,13 @@ class GimpoParams:
     """Magnetometer white-noise density [T/sqrt(Hz)] (100 uG/sqrt(Hz))."""
     gps_vel_sigma: float = 0.05
     """GPS velocity white noise, 1-sigma per NED axis [m/s]."""
+    gps_outages: tuple[tuple[float, float], ...] = ()
+    """GNSS outages, (start, length) pairs [s]: no GPS velocity inside each (``-p
+    gps_outages=6:2``; :func:`navreplay.sensors.gps.check_outages`)."""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "gps_outages", check_outages(
+            self.gps_outages, getattr(self, "duration", math.inf)))
         check_positive(self, "rate", "accel_bias_tau")
         check_nonnegative(self, "accel_scale_factor", "accel_bias", "accel_bias_instability",
                           "accel_noise_density", "mag_scale_factor", "mag_bias",
@@ -449,17 +463,17 @@ def truth_from_segments(
 def sweep_segments(p: GimpoAccelSweepParams) -> list[Segment]:
     """Rest, then ``accel_g`` along the navigation axis (= body axis: yaw stays 0)."""
     a_b = [0.0, 0.0, 0.0]
-    a_b[p.axis.index] = p.accel_g * G0
-    return [Segment(p.rest, p.duration, 0.0, tuple(a_b))]
+    a_b[p.axis.column] = p.accel_g * G0
+    return [Segment(p.rest, p.duration, 0.0, (a_b[0], a_b[1], a_b[2]))]
 
 
 def yaw_segments(p: GimpoAccelYawParams) -> list[Segment]:
     """+A along the body axis while turning +90 deg; coast; -A while turning back."""
     a_b = [0.0, 0.0, 0.0]
-    a_b[p.case.index] = p.accel_g * G0
-    minus = tuple(-a for a in a_b)
+    a_b[p.case.column] = p.accel_g * G0
+    minus = (-a_b[0], -a_b[1], -a_b[2])
     return [
-        Segment(10.0, 10.0 + YAW_WINDOW, YAW_RATE, tuple(a_b)),
+        Segment(10.0, 10.0 + YAW_WINDOW, YAW_RATE, (a_b[0], a_b[1], a_b[2])),
         Segment(20.0, 20.0 + YAW_WINDOW, -YAW_RATE, minus),
     ]
 
@@ -545,7 +559,8 @@ def simulate_runs(p: GimpoParams, truth: Truth, seeds: Sequence[int],
     """Sensor data of many runs, stacked on a leading run axis.
 
     Run i is identical to the streams of ``simulate(scenario, values, seeds[i])``: the same
-    generator seeding and the same calls as :meth:`GimpoScenario.simulate`.
+    generator seeding and the same calls as :meth:`GimpoScenario.simulate` (without GNSS
+    outages: the stacked runs keep every epoch, so ``p.gps_outages`` must be empty).
 
     Parameters
     ----------
@@ -561,6 +576,9 @@ def simulate_runs(p: GimpoParams, truth: Truth, seeds: Sequence[int],
     SensorData
         Arrays (B, N, 3); ``errors`` a list of B pairs.
     """
+    if p.gps_outages:
+        raise ValueError("simulate_runs stacks runs of every epoch: GNSS outages "
+                         f"({p.gps_outages}) need the scenario's own simulate")
     models = models or p.sensor_models()
     runs = [measure(models, p.dt, truth, np.random.default_rng(s)) for s in seeds]
     return SensorData(
@@ -569,7 +587,7 @@ def simulate_runs(p: GimpoParams, truth: Truth, seeds: Sequence[int],
         v_n=np.stack([r.v_n for r in runs]),
         vel_sigma=np.stack([r.vel_sigma for r in runs]),
         accel_bias=np.stack([r.accel_bias for r in runs]),
-        errors=[r.errors for r in runs],
+        errors=[cast(tuple[ImuErrors, MagnetometerErrors], r.errors) for r in runs],
     )
 
 
@@ -602,14 +620,17 @@ class GimpoScenario(Scenario):
                 raise ValueError(f"the {kind} rate of gimpo recordings is the scenario's rate "
                                  f"({p.rate:g} Hz), got {sensors.get(kind).rate:g} Hz")
         truth = self.truth(p)
-        data = measure(SensorModels(sensors.imu, sensors.mag, sensors.gps), p.dt, truth, rng)
+        data = measure(SensorModels(sensors.require(ImuModel), sensors.require(MagnetometerModel),
+                                    sensors.require(GpsModel)), p.dt, truth, rng)
         t0_ns = utc_ns(p.start)
         t_ns = nanoseconds(truth.t, t0_ns)
+        up = ~outage_mask(truth.t, p.gps_outages)  # epochs with a GNSS solution
         streams = {
             StreamKind.IMU: Stream(StreamKind.IMU, t_ns, {"f_b": data.f_b}, frame_id="body_frd"),
             StreamKind.MAG: Stream(StreamKind.MAG, t_ns, {"m_b": data.m_b}, frame_id="body_frd"),
             StreamKind.GPS_VEL: Stream(
-                StreamKind.GPS_VEL, t_ns, {"v_n": data.v_n, "vel_sigma": data.vel_sigma},
+                StreamKind.GPS_VEL, t_ns[up], {"v_n": data.v_n[up],
+                                               "vel_sigma": data.vel_sigma[up]},
                 frame_id="ned",
             ),
             StreamKind.TRUTH: Stream(
@@ -644,6 +665,7 @@ class GimpoScenario(Scenario):
                 "earth_field_model": str(WmmEpoch.for_year(p.decimal_year)),
                 "earth_field_n": truth.h_n,
                 "gravity": g_site,
+                OUTAGES_KEY: outages_extra(p.gps_outages),
                 "truth_columns": {
                     "pos": "position [rad, rad, m]",
                     "v_n": "velocity NED [m/s]",

@@ -353,7 +353,7 @@ class ShipTransferAlignment(Scenario):
         sensors: SensorSpecs,
     ) -> Recording:
         p = params
-        gins, imu = sensors.master_ins, sensors.imu
+        gins, imu = sensors.require(MasterInsModel), sensors.require(ImuModel)
         n = int(round(p.duration * p.imu_rate))
         dt = 1.0 / p.imu_rate
         t = np.arange(n + 1) * dt  # truth grid; IMU sample k covers (t[k-1], t[k]]

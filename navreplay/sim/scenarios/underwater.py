@@ -391,7 +391,8 @@ class UnderwaterRpm(Scenario):
         else:
             direction = math.radians(p.current_direction_deg) % (2.0 * math.pi)
         v_c = current_velocity(p.current_speed, direction)
-        log_model, depth_model, imu_model = sensors.speed_log, sensors.depth, sensors.imu
+        log_model = sensors.require(SpeedLogModel)
+        depth_model, imu_model = sensors.require(DepthModel), sensors.require(ImuModel)
         log_errors = log_model.draw(rng_log)
         depth_errors = depth_model.draw(rng_depth)
         imu_errors = imu_model.draw(rng_imu)
@@ -405,6 +406,7 @@ class UnderwaterRpm(Scenario):
         n = time_grid(p.duration, p.imu_rate).size
         v_sway = sway_heave(n, p.imu_rate, p.sway_heave_sigma, p.sway_heave_tau, rng_sway)
         traj = generate(route, p.duration, p.imu_rate, body_velocity=v_sway)
+        assert traj.omega_ib_b is not None and traj.f_b is not None  # generate's ideal IMU
         imu_meas = imu_model.measure(imu_errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate,
                                      rng_imu)
 

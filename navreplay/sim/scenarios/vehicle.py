@@ -6,7 +6,12 @@
     2 deg slope, speed up by a third, turn left 45 deg while going down a 1.5 deg slope, slow
     down, turn right 45 deg and stop.
     Each block turns the vehicle by +90 deg, so four blocks drive a loop. Turns are flat (car)
-    or coordinated (``turn_mode``). Streams: imu, gps, gps_vel, mag, truth.
+    or coordinated (``turn_mode``, aircraft-like: the vehicle banks by ``atan(u psi_dot / g)``
+    and its load factor rises to ``1 / cos(bank)``); a coordinated turn banks at most
+    ``max_bank_deg`` and is flown longer where it would bank more
+    (:func:`navreplay.sim.trajectory.bank_limited`). ``gps_outages`` drops every GNSS fix and
+    velocity inside the given spans (:func:`navreplay.sensors.gps.check_outages`). Streams: imu,
+    gps, gps_vel, mag, truth.
 
 ``stationary``
     A level IMU at rest at a chosen site and heading, for free-inertial tests, gyro-compassing
@@ -15,7 +20,11 @@
 Both record the truth at the IMU rate with the extra columns ``euler`` (roll, pitch, yaw [rad]),
 ``gyro_bias`` [rad/s] and ``accel_bias`` [m/s^2] (the true total IMU biases, including the
 Gauss-Markov instability, at each truth sample; see :class:`navreplay.sensors.ImuMeasurement`),
-described in ``metadata.extra["truth_columns"]``.
+the effective biases ``gyro_bias_eff`` and ``accel_bias_eff`` of the IMU at rest in the level
+attitude of the current heading (:func:`navreplay.sensors.imu.effective_biases`: a land
+vehicle's or a coordinated turn's specific force stays along the body z axis), and for the drive
+``gps_pos_gm``, the Gauss-Markov part of the GNSS position error; all described in
+``metadata.extra["truth_columns"]``.
 
 Sensors
     ``sensor_specs``: the IMU of grade ``imu_grade``; for the drive the GNSS and magnetometer
@@ -30,7 +39,8 @@ Metadata
     ``initial_nav``: truth at t0 plus those errors, with ``sigma`` = {``pos_ned``, ``v_n``,
     ``phi``} (1-sigma per axis) for a filter's P0. ``extra``: ``site``, ``date``,
     ``decimal_year``, ``rates`` [Hz], ``truth_columns``, and for the drive ``mag_field_n``
-    [T, NED] (the WMM field at the start, used for every magnetometer sample) and ``wmm``.
+    [T, NED] (the WMM field at the start, used for every magnetometer sample), ``wmm`` and
+    ``gnss_outages`` (``[[start, end], ...]`` [s], :data:`navreplay.sensors.gps.OUTAGES_KEY`).
 ``t0_ns`` is the scenario date (UTC) in UNIX nanoseconds; the streams start there.
 """
 
@@ -50,7 +60,13 @@ from navreplay.core.params import (
 )
 from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.core.units import DEG
-from navreplay.sensors.gps import GpsModel
+from navreplay.sensors.gps import (
+    OUTAGES_KEY,
+    GpsModel,
+    check_outages,
+    outage_mask,
+    outages_extra,
+)
 from navreplay.sensors.imu import ImuErrors, ImuGrade, ImuMeasurement, ImuModel, imu_grade
 from navreplay.sensors.magnetometer import (
     MagnetometerModel,
@@ -73,6 +89,7 @@ from navreplay.sim.trajectory import (
     Route,
     Trajectory,
     TurnMode,
+    bank_limited,
     generate,
     initial_nav,
     parse_utc,
@@ -87,9 +104,14 @@ _TRUTH_COLUMNS = {
     "euler": "true roll, pitch, yaw (ZYX) [rad], yaw in [-pi, pi)",
     "gyro_bias": "true total gyro bias (constant + Gauss-Markov + random walk), FRD [rad/s]",
     "accel_bias": "true total accelerometer bias, FRD [m/s^2]",
-    "gyro_bias_eff": "effective gyro bias: + (S + M) w_ie^b + K_g f_0^b, FRD [rad/s]",
-    "accel_bias_eff": "effective accelerometer bias: + (S + M) f_0^b (gravity reaction),"
-                      " FRD [m/s^2]",
+    "gyro_bias_eff": "effective gyro bias: + (S + M) w_ie^b + K_g f_0^b at rest in the level"
+                     " attitude of the current heading, FRD [rad/s]",
+    "accel_bias_eff": "effective accelerometer bias: + (S + M) f_0^b (gravity reaction, 1 g"
+                      " along z: the level attitude of the current heading), FRD [m/s^2]",
+}
+_GNSS_TRUTH_COLUMNS = {
+    "gps_pos_gm": "Gauss-Markov part of the GNSS position error N, E, D [m] (at the GNSS"
+                  " epochs, also inside outages; linear between them)",
 }
 
 
@@ -124,6 +146,9 @@ class VehicleDriveParams:
     """Cruise speed of the route [m/s]."""
     turn_mode: TurnMode = TurnMode.FLAT
     """Flat turns (car) or coordinated, banked turns (aircraft-like)."""
+    max_bank_deg: float = 45.0
+    """Largest bank of a coordinated turn [deg]: a turn that would bank more is flown over a
+    longer time (the same heading change)."""
     imu_grade: ImuGrade = ImuGrade.TACTICAL
     """IMU error level (see :func:`navreplay.sensors.imu_grade`)."""
     imu_rate: float = 100.0
@@ -140,6 +165,9 @@ class VehicleDriveParams:
     """GPS Gauss-Markov correlation time [s]."""
     gps_vel_sigma: float = 0.05
     """GPS velocity noise per axis [m/s]."""
+    gps_outages: tuple[tuple[float, float], ...] = ()
+    """GNSS outages, (start, length) pairs [s]: no fix and no velocity inside each (``-p
+    gps_outages=120:30,300:60``; TOML ``[[120, 30], [300, 60]]``)."""
     mag_rate: float = 10.0
     """Magnetometer rate [Hz]; must divide imu_rate."""
     mag_noise: float = 100e-9
@@ -164,6 +192,9 @@ class VehicleDriveParams:
                           "gps_vel_sigma", "mag_noise", "mag_bias", "mag_scale_factor")
         check_divides(self, "imu_rate", "gps_rate")
         check_divides(self, "imu_rate", "mag_rate")
+        if not 0.0 < self.max_bank_deg < 90.0:
+            raise ValueError(f"max_bank_deg must be within (0, 90), got {self.max_bank_deg!r}")
+        object.__setattr__(self, "gps_outages", check_outages(self.gps_outages, self.duration))
         try:
             WmmEpoch.for_year(decimal_year(parse_utc(self.date)))
         except ValueError as e:
@@ -218,6 +249,7 @@ def _imu(
 ) -> tuple[Trajectory, ImuErrors, ImuMeasurement]:
     """Truth at the IMU rate and the IMU ``model`` on it."""
     traj = generate(route, p.duration, p.imu_rate)
+    assert traj.omega_ib_b is not None and traj.f_b is not None  # generate's ideal IMU
     errors = model.draw(rng)
     return traj, errors, model.measure(errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate, rng)
 
@@ -275,25 +307,30 @@ class VehicleDrive(Scenario):
     def simulate(self, params: VehicleDriveParams, rng: np.random.Generator, seed: int,
                  sensors: SensorSpecs) -> Recording:
         p = params
-        gps_model, mag_model = sensors.gps, sensors.mag
+        gps_model, mag_model = sensors.require(GpsModel), sensors.require(MagnetometerModel)
         check_sensor_rate("gps", gps_model.rate, p.imu_rate)
         check_sensor_rate("mag", mag_model.rate, p.imu_rate)
         rng_imu, rng_gps, rng_mag, rng_init = rng.spawn(4)
         start = parse_utc(p.date)
         t0_ns = utc_ns(start)
         year = decimal_year(start)
-        route = Route(
+        route = bank_limited(Route(
             lat=p.lat_deg * DEG, lon=p.lon_deg * DEG, h=p.h, heading=p.heading_deg * DEG,
             speed=0.0, manoeuvres=drive_manoeuvres(p.duration, p.cruise_speed),
             turn_mode=p.turn_mode,
-        )
-        traj, imu_errors, imu_meas = _imu(p, sensors.imu, route, rng_imu)
+        ), p.max_bank_deg * DEG)
+        traj, imu_errors, imu_meas = _imu(p, sensors.require(ImuModel), route, rng_imu)
         n = traj.t.shape[0]
 
         gi = sample_indices(n, p.imu_rate, gps_model.rate)
         gps_errors = gps_model.draw(rng_gps)
         gps_meas = gps_model.measure(gps_errors, traj.pos[gi], traj.v_n[gi], rng_gps)
-        t_gps = nanoseconds(traj.t[gi], t0_ns)
+        gm_truth = np.column_stack([np.interp(traj.t, traj.t[gi], gps_meas.pos_gm_ned[:, k])
+                                    for k in range(3)])
+        up = ~outage_mask(traj.t[gi], p.gps_outages)  # the receiver's epochs with a solution
+        t_gps = nanoseconds(traj.t[gi][up], t0_ns)
+        fix = {k: v[up] for k, v in gps_meas.fix_columns().items()}
+        vel = {k: v[up] for k, v in gps_meas.velocity_columns().items()}
 
         h_n = earth_field_n(route.lat, route.lon, route.h, year)
         mi = sample_indices(n, p.imu_rate, mag_model.rate)
@@ -303,12 +340,12 @@ class VehicleDrive(Scenario):
         nav0, init_errors = _initial_nav(p, traj, t0_ns, rng_init)
         streams = {
             StreamKind.IMU: imu_stream(traj.t, imu_meas, t0_ns),
-            StreamKind.GPS: Stream(StreamKind.GPS, t_gps, gps_meas.fix_columns(), "wgs84"),
-            StreamKind.GPS_VEL: Stream(StreamKind.GPS_VEL, t_gps, gps_meas.velocity_columns(),
-                                       "ned"),
+            StreamKind.GPS: Stream(StreamKind.GPS, t_gps, fix, "wgs84"),
+            StreamKind.GPS_VEL: Stream(StreamKind.GPS_VEL, t_gps, vel, "ned"),
             StreamKind.MAG: Stream(StreamKind.MAG, nanoseconds(traj.t[mi], t0_ns), mag_cols,
                                    "mag_frd"),
-            StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, errors=imu_errors),
+            StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, errors=imu_errors,
+                                           level_biases=True, gps_pos_gm=gm_truth),
         }
         meta = self.metadata(
             p, seed,
@@ -328,7 +365,8 @@ class VehicleDrive(Scenario):
                 "mag_field_n": h_n,
                 "rates": {"imu": p.imu_rate, "gps": gps_model.rate, "gps_vel": gps_model.rate,
                           "mag": mag_model.rate, "truth": p.imu_rate},
-                "truth_columns": _TRUTH_COLUMNS,
+                "truth_columns": {**_TRUTH_COLUMNS, **_GNSS_TRUTH_COLUMNS},
+                OUTAGES_KEY: outages_extra(p.gps_outages),
             },
         )
         return Recording(streams=streams, metadata=meta, t0_ns=t0_ns)
@@ -395,7 +433,7 @@ class Stationary(Scenario):
         start = parse_utc(p.date)
         t0_ns = utc_ns(start)
         route = Route(lat=p.lat_deg * DEG, lon=p.lon_deg * DEG, h=p.h, heading=p.heading_deg * DEG)
-        traj, imu_errors, imu_meas = _imu(p, sensors.imu, route, rng_imu)
+        traj, imu_errors, imu_meas = _imu(p, sensors.require(ImuModel), route, rng_imu)
         nav0, init_errors = _initial_nav(p, traj, t0_ns, rng_init, p.init_attitude_error)
         meta = self.metadata(
             p, seed,
@@ -411,5 +449,6 @@ class Stationary(Scenario):
             },
         )
         streams = {StreamKind.IMU: imu_stream(traj.t, imu_meas, t0_ns),
-                   StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, errors=imu_errors)}
+                   StreamKind.TRUTH: truth_stream(traj, imu_meas, t0_ns, errors=imu_errors,
+                                                  level_biases=True)}
         return Recording(streams=streams, metadata=meta, t0_ns=t0_ns)

@@ -1,0 +1,161 @@
+"""The smoother's side of a replay: the forward pass stored on disk in chunks, the backward
+pass over them latest first, and the smoothed run handed back in time order.
+
+A filter that declares :class:`~navreplay.filters.smoothable.Smoothable` and is replayed with
+``smooth=True`` (:func:`navreplay.replay.pipeline.replay_file`) records, at every estimate, the
+estimate and its :class:`~navreplay.filters.smoothable.SmoothingStep` into a
+:class:`ForwardStore`: rows are collected into chunks of :data:`CHUNK` epochs, each written as
+one ``.npz`` file into a temporary directory. :func:`smoothed_blocks` runs the backward pass
+(:func:`navreplay.filters.rts.backward_chunk`) over the chunks from the last to the first,
+writes each smoothed chunk beside its forward one, and then reads them back in time order as
+blocks of a :class:`~navreplay.filters.result.RunResult`. The truth windows the forward pass
+saw are stored the same way (:class:`TruthStore`), so the smoothed run is scored as the
+forward one, window by window. One chunk at a time is in memory: the memory does not grow
+with the log.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from navreplay.core.streams import Stream, StreamKind
+from navreplay.filters import rts
+from navreplay.filters.base import Estimate
+from navreplay.filters.result import RunResult
+from navreplay.filters.smoothable import Smoothable, SmoothingStep
+
+CHUNK = 1024
+"""Epochs per stored chunk."""
+SUFFIX = "/rts"
+"""The label of a smoothed run: its filter's label and this."""
+
+
+def smoothed_label(label: str) -> str:
+    """The label of the smoothed run of the filter labelled ``label``."""
+    return label + SUFFIX
+
+
+class ForwardStore:
+    """The forward pass of one filter, on disk in chunks of :data:`CHUNK` epochs.
+
+    Parameters
+    ----------
+    directory : Path
+        Where the chunks go (an existing, private directory).
+    chunk : int
+    """
+
+    def __init__(self, directory: Path, chunk: int = CHUNK) -> None:
+        self.directory = directory
+        self.chunk = int(chunk)
+        self.paths: list[Path] = []
+        self.epochs = 0
+        self._buf: dict[str, np.ndarray] | None = None
+        self._m = 0
+
+    def _alloc(self, est: Estimate, step: SmoothingStep) -> dict[str, np.ndarray]:
+        n, c = est.x.shape[0], self.chunk
+        buf = {"t": np.empty(c), "x": np.empty((c, n)), "P": np.empty((c, n, n)),
+               "phi": np.empty((c, n, n)), "P_prior": np.empty((c, n, n)),
+               "dx": np.empty((c, n))}
+        if est.nav is not None:
+            buf["nav"] = np.empty((c, 10))
+        if step.reset is not None:
+            buf["reset"] = np.empty((c, n, n))
+        return buf
+
+    def add(self, est: Estimate, step: SmoothingStep) -> None:
+        """The estimate of one epoch and what the smoother needs of it."""
+        if self._buf is None:
+            self._buf = self._alloc(est, step)
+        b, i = self._buf, self._m
+        b["t"][i] = est.t
+        b["x"][i] = est.x
+        b["P"][i] = est.P
+        b["phi"][i] = step.phi
+        b["P_prior"][i] = step.P_prior
+        b["dx"][i] = step.dx
+        if "nav" in b:
+            nav = est.nav
+            assert nav is not None
+            b["nav"][i, 0:3], b["nav"][i, 3:6], b["nav"][i, 6:10] = nav.pos, nav.v_n, nav.q_nb
+        if "reset" in b:
+            b["reset"][i] = np.eye(est.x.shape[0]) if step.reset is None else step.reset
+        self._m += 1
+        self.epochs += 1
+        if self._m == self.chunk:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the rows collected so far as a chunk."""
+        if self._buf is None or self._m == 0:
+            return
+        path = self.directory / f"forward-{len(self.paths):06d}.npz"
+        arrays: dict[str, Any] = {k: v[:self._m] for k, v in self._buf.items()}
+        np.savez(path, **arrays)
+        self.paths.append(path)
+        self._m = 0
+
+
+class TruthStore:
+    """The truth windows of a replay, on disk one file each, to be read again in order."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+        self.paths: list[Path] = []
+        self.frame_id = ""
+
+    def add(self, truth: Stream) -> None:
+        path = self.directory / f"truth-{len(self.paths):06d}.npz"
+        arrays: dict[str, Any] = {f"c_{k}": v for k, v in truth.columns.items()}
+        np.savez(path, t_ns=truth.t_ns, **arrays)
+        self.frame_id = truth.frame_id
+        self.paths.append(path)
+
+    def __iter__(self) -> Iterator[Stream]:
+        for path in self.paths:
+            with np.load(path) as f:
+                yield Stream(StreamKind.TRUTH, f["t_ns"],
+                             {k[2:]: f[k] for k in f.files if k.startswith("c_")},
+                             self.frame_id)
+
+
+def backward(store: ForwardStore, filt: Smoothable,
+             progress: Callable[[int], None] | None = None) -> list[Path]:
+    """The backward pass over a stored forward pass, latest chunk first; each smoothed chunk is
+    written beside its forward one (their paths, in time order). ``progress(epochs)`` after
+    each chunk."""
+    store.flush()
+    out: list[Path] = [store.directory / f"smoothed-{i:06d}.npz" for i in range(len(store.paths))]
+    carry: rts.Carry | None = None
+    for i in reversed(range(len(store.paths))):
+        with np.load(store.paths[i]) as f:
+            c = {k: f[k] for k in f.files}
+        d, P_s, carry = rts.backward_chunk(c["P"], c["phi"], c["P_prior"], c["dx"], carry,
+                                           c.get("reset"))
+        x_s, nav_s = filt.apply_smoothed(c["x"], c.get("nav"), d)
+        arrays = {"t": c["t"], "x": x_s, "P": P_s}
+        if nav_s is not None:
+            arrays["nav"] = nav_s
+        np.savez(out[i], **arrays)
+        if progress is not None:
+            progress(c["t"].shape[0])
+    return out
+
+
+def smoothed_blocks(paths: list[Path], meta: dict[str, Any]) -> Iterator[RunResult]:
+    """The smoothed chunks, in time order, as blocks of a result with the fields ``meta``
+    (label, states, settings, ...: those of the forward run, with its smoothed label)."""
+    for path in paths:
+        with np.load(path) as f:
+            nav = f["nav"] if "nav" in f.files else None
+            yield RunResult(
+                t=f["t"], x=f["x"], P=f["P"],
+                nav_pos=None if nav is None else nav[:, 0:3],
+                nav_v_n=None if nav is None else nav[:, 3:6],
+                nav_q_nb=None if nav is None else nav[:, 6:10],
+                **{**meta, "navigation": meta.get("navigation") if nav is not None else ()})

@@ -1,0 +1,259 @@
+"""The ordinary workflow on logs navreplay did not write (rosbags-written bags, text files):
+references with part of a solution, topics named on the command line, time windows."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from rosbag_maker import truth_table, write_bag
+
+from navreplay.cli import cli
+
+DRIVE = 90.0
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 90 s rosbag2 drive (60 s still, then 10 m/s with turns): tactical IMU, 1.5 m GNSS."""
+    return write_bag(tmp_path_factory.mktemp("drive") / "drive", noisy=True, duration=DRIVE,
+                     seed=3)
+
+
+def invoke(*args: str) -> tuple[int, str]:
+    res = CliRunner().invoke(cli, list(args))
+    return res.exit_code, res.output
+
+
+def _reference_csv(path: Path, header: str, rows: list[str]) -> Path:
+    path.write_text("\n".join([header, *rows]) + "\n")
+    return path
+
+
+def _rows(parts: str) -> list[str]:
+    tab = truth_table(DRIVE)
+    out = []
+    for t, p, v, e in zip(tab["t_ns"], tab["lla"], tab["v_n"], tab["euler"], strict=True):
+        cols = {"t": [f"{t * 1e-9:.4f}"], "t_ns": [str(t)],
+                "pos": [f"{math.degrees(p[0]):.10f}", f"{math.degrees(p[1]):.10f}",
+                        f"{p[2]:.4f}"],
+                "vel": [f"{x:.6f}" for x in v],
+                "att": [f"{math.degrees(x):.6f}" for x in e]}
+        out.append(",".join(x for part in parts.split() for x in cols[part]))
+    return out
+
+
+@pytest.mark.parametrize(("name", "header", "parts", "scored", "unscored", "lacks"), [
+    # a header in a comment line, common names with units: position only
+    ("pos", "# RTK drive\n# Time [s], Latitude, Longitude, Altitude (m)", "t pos",
+     ["pos_rms_h"], ["vel_rms", "att_rms_heading"], "no velocity or attitude"),
+    ("vel", "t_ns,vel_n,vel_e,vel_d", "t_ns vel", ["vel_rms"], ["pos_rms_h", "att_rms_heading"],
+     "no position or attitude"),
+    ("att", "time,roll,pitch,heading", "t att", ["att_rms_heading"], ["pos_rms_h", "vel_rms"],
+     "no position or velocity"),
+])
+def test_partial_reference_everywhere(drive: Path, tmp_path: Path, name: str, header: str,
+                                      parts: str, scored: list[str], unscored: list[str],
+                                      lacks: str) -> None:
+    """A reference with one part of a solution: the summary scores that part only, the view,
+    the exports and the report are written, and what it lacks is said once."""
+    ref = _reference_csv(tmp_path / f"{name}.csv", header, _rows(parts))
+    code, out = invoke("run", "gps-ins", str(drive), "--reference", str(ref), "--init", "align",
+                       "--export", str(tmp_path / "exp"), "--report", str(tmp_path / "r.html"),
+                       "--save", str(tmp_path / "v.rrd"), "--summary", str(tmp_path / "s.json"))
+    assert code == 0, out
+    s = json.loads((tmp_path / "s.json").read_text())["filters"]["gps-ins"]
+    for key in scored:
+        assert math.isfinite(s[key]), key
+    for key in unscored:
+        assert key not in s
+    assert out.count(f"{lacks}: not scored, not drawn") == 1
+    assert (tmp_path / "v.rrd").stat().st_size > 0
+    page = (tmp_path / "r.html").read_text()
+    assert f"{lacks}: not scored, not drawn" in page
+    manifest = json.loads((tmp_path / "exp" / "manifest.json").read_text())
+    assert ("reference" in manifest) == (name == "pos")  # poses need a position
+    assert manifest["origin"] is not None
+    if name == "pos":  # the reference drives 200 m; the filter ends within a few metres
+        assert s["distance"] > 150.0 and s["pos_err_final_h"] < 5.0
+
+
+def test_reference_csv_columns_refused_in_one_line(drive: Path, tmp_path: Path) -> None:
+    """Two columns for one quantity, or no usable column, name the file."""
+    ref = _reference_csv(tmp_path / "dup.csv", "t,lat,latitude,lon,h", ["0,45,45,7,300"] * 2)
+    code, out = invoke("run", "gps-ins", str(drive), "--reference", str(ref), "--init", "align",
+                       "--no-viz")
+    assert code == 1 and f"{ref}: columns 'lat' and 'latitude' both give lat_deg" in out
+    ref = _reference_csv(tmp_path / "none.csv", "t,speed", ["0,1", "1,2"])
+    code, out = invoke("run", "gps-ins", str(drive), "--reference", str(ref), "--init", "align",
+                       "--no-viz")
+    assert code == 1 and str(ref) in out and "no position, velocity or attitude" in out
+
+
+@pytest.mark.parametrize("command", [
+    ["run", "gps-ins", "{bag}", "--init", "align", "--no-viz"],
+    ["run", "ins", "{bag}", "--reference", "/ground_truth/odom", "--init", "reference",
+     "--no-frame-check", "--no-viz"],  # the named stream is not one the run reads
+    ["run", "ins", "{bag}", "{bag}", "--reference", "/ground_truth/odom", "--init",
+     "reference", "--no-viz"],
+    ["info", "{bag}"],
+])
+@pytest.mark.parametrize(("named", "expect"), [
+    ("imu=/imu", "topic /imu named for stream imu is not in the bag"),
+    ("mag=/imu/mag", "topic /imu/mag named for stream mag is not in the bag"),
+    ("gps_vel=/gnss/fix", "topic /gnss/fix has schema 'sensor_msgs/msg/NavSatFix'"),
+])
+def test_every_named_topic_must_exist_with_its_type(drive: Path, tmp_path: Path,
+                                                    command: list[str], named: str,
+                                                    expect: str) -> None:
+    args = [a.replace("{bag}", str(drive)) for a in command]
+    code, out = invoke(*args, "--topic", named)
+    assert code == 1, out
+    last = out.strip().splitlines()[-1]
+    assert last.startswith("Error: ") and str(drive) in last and expect in last
+
+
+def test_allan_topic_must_be_an_imu(drive: Path) -> None:
+    code, out = invoke("allan", str(drive), "--topic", "/gnss/fix", "--end", "50")
+    assert code == 1 and str(drive) in out and "/gnss/fix has schema" in out
+    code, out = invoke("allan", str(drive), "--topic", "/imu")
+    assert code == 1 and "topic /imu named for stream imu is not in the bag" in out
+
+
+def test_export_rows_do_not_repeat(drive: Path, tmp_path: Path) -> None:
+    """Each exported estimate time appears once."""
+    code, out = invoke("run", "gps-ins", str(drive), "--init", "align", "--no-viz",
+                       "--export", str(tmp_path / "exp"))
+    assert code == 0, out
+    stamps = np.loadtxt(tmp_path / "exp" / "gps-ins.csv", delimiter=",", skiprows=1,
+                        usecols=0, dtype=np.int64)
+    assert len(stamps) > 100 and np.all(np.diff(stamps) > 0)
+
+
+def test_info_over_a_span(drive: Path) -> None:
+    """--start/--end in seconds from the start or as a UTC time: the IMU rows counted over
+    the span (50 Hz over 30 s), one line for a span the log does not have."""
+    for start, end in (("30", "60"), ("2025-06-15T15:07:10Z", "1750000060")):
+        code, out = invoke("info", str(drive), "--start", start, "--end", end)
+        assert code == 0, out
+        row = next(ln.split() for ln in out.splitlines() if ln.startswith("/imu/data"))
+        assert row[5:9] == ["1501", "50.000", "30.000", "60.000"], row
+    code, out = invoke("info", str(drive), "--start", "60", "--end", "30")
+    assert code == 1 and "--start 60 is not before --end 30" in out
+    code, out = invoke("run", "gps-ins", str(drive), "--start", "200", "--init", "align",
+                       "--no-viz")
+    assert code == 1 and f"{drive}: no IMU sample in t = 200.000 to end s" in out
+
+
+def test_run_over_a_span_starts_there(drive: Path, tmp_path: Path) -> None:
+    """--start 30 --end 85 with --init align: aligned over the still 30..62 s, exported from
+    the end of the alignment to 85 s, once per time; --init table at 70 s lands on the truth."""
+    code, out = invoke("run", "gps-ins", str(drive), "--start", "30", "--end", "85", "--init",
+                       "align", "--no-viz", "--export", str(tmp_path / "exp"))
+    assert code == 0, out
+    assert "align over the still start (32.0 s)" in out and "replayed t = 30.000 to 85.000 s" in out
+    t = np.loadtxt(tmp_path / "exp" / "gps-ins.csv", delimiter=",", skiprows=1, usecols=1)
+    assert t[0] == pytest.approx(62.0) and t[-1] == pytest.approx(85.0)
+    assert np.all(np.diff(t) > 0)
+    tab = truth_table(DRIVE)
+    k = int(np.searchsorted(tab["t_ns"], tab["t_ns"][0] + 70 * 10**9))
+    lat, lon, h = (float(x) for x in tab["lla"][k])
+    roll, pitch, yaw = (float(x) for x in np.degrees(tab["euler"][k]))
+    config = tmp_path / "init.toml"
+    config.write_text(
+        f"[initial]\nlat_deg = {math.degrees(lat)!r}\nlon_deg = {math.degrees(lon)!r}\n"
+        f"h = {h!r}\nv_n = {[float(v) for v in tab['v_n'][k]]!r}\nroll_deg = {roll!r}\n"
+        f"pitch_deg = {pitch!r}\nyaw_deg = {yaw!r}\npos_sigma = 0.5\nvel_sigma = 0.05\n"
+        "att_sigma_deg = [0.1, 0.1, 0.5]\n")
+    ref = _reference_csv(tmp_path / "ref.csv", "t_ns,lat,lon,h,vn,ve,vd", _rows("t_ns pos vel"))
+    code, out = invoke("run", "ins", str(drive), "--start", "70", "--end", "75", "--init",
+                       "table", "--config", str(config), "--reference", str(ref),
+                       "--no-viz", "--summary", str(tmp_path / "s.json"))
+    assert code == 0, out
+    s = json.loads((tmp_path / "s.json").read_text())["filters"]["ins"]
+    assert s["duration"] == pytest.approx(5.0, abs=0.05)
+    assert s["pos_err_final_h"] < 0.1 and s["vel_rms"] < 0.05
+
+
+def test_allan_over_an_absolute_span(drive: Path, tmp_path: Path) -> None:
+    """allan's --start/--end take UNIX seconds as run's do (the still 5..55 s of the drive;
+    its IMU topic starts 0.02 s after the bag's first message)."""
+    code, out = invoke("allan", str(drive), "--start", "1750000005", "--end", "55",
+                       "--bootstrap", "0")
+    assert code == 0, out
+    assert "t = 4.98 to 55 s (50.02 s, 50 Hz, 2502 samples): still" in out
+
+
+@pytest.fixture(scope="module")
+def drive_ros1(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The same drive as :func:`drive` in a ROS 1 bag (rosbags' rosbag1 writer)."""
+    return write_bag(tmp_path_factory.mktemp("ros1") / "drive.bag", noisy=True,
+                     duration=DRIVE, seed=3, ros1=True)
+
+
+def test_ros1_bag_replays_like_the_ros2_bag(drive: Path, drive_ros1: Path,
+                                            tmp_path: Path) -> None:
+    """A ROS 1 bag of the same messages gives the ROS 2 bag's summary to the last bit (same
+    conversions, same pipeline); info, --topic and --start work on it as on any log."""
+    summaries = []
+    for bag in (drive, drive_ros1):
+        code, out = invoke("run", "gps-ins", str(bag), "--init", "align", "--reference",
+                           "/ground_truth/odom", "--start", "10", "--no-viz", "--force",
+                           "--summary", str(tmp_path / "s.json"))
+        assert code == 0, out
+        summaries.append(json.loads((tmp_path / "s.json").read_text())["filters"]["gps-ins"])
+    assert summaries[0]["pos_rms_h"] < 2.0 and summaries[0]["att_rms_heading"] < 0.2
+    for key in ("pos_rms_h", "vel_rms", "att_rms_heading", "nees_mean", "nis_mean_gps_pos"):
+        assert summaries[1][key] == summaries[0][key], key
+    code, out = invoke("info", str(drive_ros1))
+    assert code == 0 and "(rosbag1, 5492 messages)" in out
+    assert "/imu/data           sensor_msgs/msg/Imu        imu" in out
+    code, out = invoke("run", "ins", str(drive_ros1), "--topic", "imu=/imu", "--no-viz")
+    assert code == 1 and f"{drive_ros1}: topic /imu named for stream imu is not in the bag" in out
+    broken = tmp_path / "cut.bag"
+    broken.write_bytes(drive_ros1.read_bytes()[:5000])
+    code, out = invoke("run", "ins", str(broken), "--no-viz")
+    assert code == 1 and f"{broken}: not a readable ROS 1 bag" in out and "Traceback" not in out
+
+
+@pytest.fixture(scope="module")
+def gins_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from gins_maker import write_gins
+
+    return write_gins(tmp_path_factory.mktemp("gins") / "drive")
+
+
+def test_gins_text_log_replays_against_its_truth(gins_log: Path, tmp_path: Path) -> None:
+    """A KF-GINS style folder (IMU increments, GNSS with std, an 11-column truth): info lists
+    the files as topics, gps-ins aligns and scores against truth.nav to GNSS-aided accuracy;
+    the IMU file alone opens the folder; a bad row and a wrong --topic are one line."""
+    code, out = invoke("info", str(gins_log))
+    assert code == 0, out
+    rows = {ln.split()[0]: ln.split() for ln in out.splitlines() if ".txt" in ln or ".nav" in ln}
+    assert rows["IMU.txt"][1:5] == ["gins/ImuIncrements", "imu", "imu_frd", "FRD"]
+    assert rows["IMU.txt"][5:7] == ["9000", "100.000"] and rows["truth.nav"][2] == "(reference)"
+    summaries = []
+    for path in (gins_log, gins_log / "IMU.txt"):
+        code, out = invoke("run", "gps-ins", str(path), "--init", "align", "--reference",
+                           "truth.nav", "--no-viz", "--force", "--summary",
+                           str(tmp_path / "s.json"), "--export", str(tmp_path / "exp"))
+        assert code == 0, out
+        summaries.append(json.loads((tmp_path / "s.json").read_text())["filters"]["gps-ins"])
+    s = summaries[0]
+    assert s["distance"] > 150.0 and s["pos_rms_h"] < 2.0 and s["vel_rms"] < 0.3
+    assert s["att_rms_level"] < 0.05 and summaries[1]["pos_rms_h"] == s["pos_rms_h"]
+    code, out = invoke("run", "gps-ins", str(gins_log), "--topic", "gps=GNSS.txt", "--no-viz")
+    assert code == 1 and "topic GNSS.txt named for stream gps is not in the folder" in out
+    code, out = invoke("run", "gps-ins", str(gins_log), "--topic", "gps=IMU.txt", "--no-viz")
+    assert code == 1 and "topic IMU.txt has type gins/ImuIncrements; stream gps needs" in out
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    lines = (gins_log / "IMU.txt").read_text().splitlines()
+    lines[100] = lines[100].replace(" ", " x", 1)
+    (bad / "IMU.txt").write_text("\n".join(lines) + "\n")
+    code, out = invoke("run", "ins", str(bad / "IMU.txt"), "--no-viz")
+    assert code == 1 and f"{bad / 'IMU.txt'}, line 101: not a number" in out
