@@ -136,7 +136,7 @@ def test_the_outages_are_shaded_in_the_view(outage_drive, tmp_path) -> None:
     from rrd import read_rrd, scalars
 
     from navreplay.jobs.montecarlo import MonteCarloJob, montecarlo
-    from navreplay.viz.sink import BAND_LINES
+    from navreplay.viz.style import BAND_LINES
 
     rec, path = outage_drive
     out = tmp_path / "run.rrd"
