@@ -18,8 +18,11 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/navreplay demo
 
-test: $(STAMP)
+lint: $(STAMP)
 	$(BIN)/ruff check navreplay tests benchmarks docs
+	$(BIN)/mypy
+
+test: lint
 	$(BIN)/python -m pytest -q
 
 reproduce-tests: $(STAMP)

@@ -7,7 +7,7 @@ the same run:
   the position and velocity updates and an estimate; and the same with an estimate every
   0.1 s (IMU blocks of 10 samples, as the engine's 10 Hz output ticks give);
 - ``ins`` (free inertial: strapdown + covariance propagation, estimates at 10 Hz);
-- baselines: :func:`navreplay.strapdown.integrate` over the whole record in one call (the
+- baselines: :func:`navreplay.geo.strapdown.integrate` over the whole record in one call (the
   arithmetic floor) and in 10-sample blocks (the cost of one compiled call per block);
 - per-call cost of ``kalman.predict`` and ``kalman.correct`` (15 states, 3 measurements) and
   of the compiled 15-state covariance step.
@@ -31,8 +31,8 @@ from benchmarks import best
 def _driver(recording: Any, filter_cls: type, block_period: float) -> Callable[[], Any]:
     """A minimal replay loop over pre-sliced inputs: blocks of IMU samples ending every
     ``block_period`` seconds, the aiding samples at their times, an estimate after each."""
+    from navreplay.core.streams import StreamKind, seconds
     from navreplay.filters.base import FilterContext
-    from navreplay.streams import StreamKind, seconds
 
     imu = recording[StreamKind.IMU]
     t_imu = seconds(imu.t_ns, recording.t0_ns)
@@ -78,14 +78,14 @@ def _driver(recording: Any, filter_cls: type, block_period: float) -> Callable[[
 
 
 def main(duration: float = 3600.0, *, quick: bool = False) -> None:
-    from navreplay import strapdown
+    from navreplay.core.streams import StreamKind
     from navreplay.filters import ins_error as ie
     from navreplay.filters import ins_time_update as itu
     from navreplay.filters import kalman
     from navreplay.filters.gps_ins import GpsInsFilter
     from navreplay.filters.ins import InsFilter
+    from navreplay.geo import strapdown
     from navreplay.sim.scenario import simulate
-    from navreplay.streams import StreamKind
 
     if quick:  # the same paths on a short drive, one repeat, few calls
         duration = 20.0

@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import peak_rss
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.io import TOPICS, read_recording, write_recording
 from navreplay.io.schemas import SPECS
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 T0_NS = 1_700_000_000_000_000_000
 RATE_HZ = 200

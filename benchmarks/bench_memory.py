@@ -54,9 +54,9 @@ def paused_recording(hours: float, pause: float, directory: Path) -> Path:
     :data:`PAUSE_START` (made when missing)."""
     import dataclasses
 
+    from navreplay.core.streams import Recording, StreamKind
     from navreplay.io import read_recording
     from navreplay.io.writer import write_recording
-    from navreplay.streams import Recording, StreamKind
 
     path = directory / f"drive_{hours:g}h_gps_pause_{pause:g}s.mcap"
     if not path.exists():

@@ -51,8 +51,8 @@ def _timed(fn: Callable[[], Any], repeat: int = 1) -> tuple[float, Any]:
 
 def _null_filter() -> type:
     """A filter that does nothing: what remains is the engine's own cost per event."""
+    from navreplay.core.streams import StreamKind
     from navreplay.filters.base import Estimate, Filter, NavSolution, Quantity, State
-    from navreplay.streams import StreamKind
 
     class Null(Filter):
         name = "null"
@@ -135,8 +135,8 @@ def _read_streamed(path: Path) -> int:
 
 def _throughput(path: Path) -> tuple[Any, Any, float]:
     """Print the replay timings; return the gps-ins result, the recording and the filter time."""
-    from navreplay import strapdown
     from navreplay.filters.registry import load_filter
+    from navreplay.geo import strapdown
     from navreplay.io import read_recording
     from navreplay.replay import replay
 
@@ -202,9 +202,9 @@ def _throughput(path: Path) -> tuple[Any, Any, float]:
 def log_one_block(sink: Any, result: Any, recording: Any, metrics: Any) -> None:
     """A whole run into a sink as the replay pipeline hands a recording of one window over: the
     truth, the innovations, the rows with their scores."""
+    from navreplay.core.streams import StreamKind
     from navreplay.filters.base import TruthColumn
     from navreplay.replay import RunStart
-    from navreplay.streams import StreamKind
 
     truth = recording[StreamKind.TRUTH]
     columns = {st.truth.column: st.unit for st in result.states

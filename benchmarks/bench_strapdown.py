@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks import best
-from navreplay import strapdown
+from navreplay.geo import strapdown
 from navreplay.geo.rotations import euler_to_quat
 from navreplay.sim import kinematics
 

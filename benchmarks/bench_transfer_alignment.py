@@ -6,7 +6,7 @@ Measured in one run on the ``ship-transfer-alignment`` scenario (100 s, 100 Hz I
 * replay: each variant of the ``transfer-alignment`` filter through the replay engine, in IMU
   samples per second and as a multiple of real time, against two baselines replayed over the
   same recording: the engine alone (a filter that does nothing) and a free strapdown INS
-  (:func:`navreplay.strapdown.propagate` only);
+  (:func:`navreplay.geo.strapdown.propagate` only);
 * step at a GINS sample: each part (numba model and prediction, the shared correction with its
   checks, numba feedback), and the numpy discretisation and prediction of
   :mod:`navreplay.filters.kalman` as a baseline for the first;
@@ -26,15 +26,15 @@ import time
 import numpy as np
 
 from benchmarks import best
-from navreplay import strapdown
+from navreplay.core.streams import StreamKind
 from navreplay.filters import kalman
 from navreplay.filters import transfer_alignment as ta
+from navreplay.filters import transfer_alignment_model as tam
 from navreplay.filters.base import Estimate, Filter, Quantity, State
-from navreplay.geo import kernels
+from navreplay.geo import kernels, strapdown
 from navreplay.replay import replay
 from navreplay.reproduce.transfer_alignment import REPRODUCTION
 from navreplay.sim.scenario import simulate
-from navreplay.streams import StreamKind
 
 SCENARIO = "ship-transfer-alignment"
 
@@ -87,7 +87,7 @@ def kf_step(repeat: int, number: int = 2000) -> dict[str, float]:
     sums = np.r_[w, f] * 10
 
     def model():
-        return ta.predict_and_measure(nav, q_rb, P0, s, q_m, v_r, sums, 10, w, w, lever, 0.1,
+        return tam.predict_and_measure(nav, q_rb, P0, s, q_m, v_r, sums, 10, w, w, lever, 0.1,
                                       qc, 1e-12, 0, 0.0, np.eye(2), np.zeros((2, 2)),
                                       np.zeros(3), 0.0)
 
@@ -95,12 +95,12 @@ def kf_step(repeat: int, number: int = 2000) -> dict[str, float]:
     c = kalman.correct(np.zeros(9), P, z, H, r, check=False)
 
     def feedback():
-        ta.feedback(nav.copy(), q_rb.copy(), c.x, c.P, s, u, qm, v_r, nav[0:3], w_now, w_in,
+        tam.feedback(nav.copy(), q_rb.copy(), c.x, c.P, s, u, qm, v_r, nav[0:3], w_now, w_in,
                     lever)
 
     def numpy_model():
-        R, w_in = ta.earth_terms(nav[0], nav[2], nav[3:6])
-        A, G = ta.system_matrix(q_m, nav[3:6], nav[0], R, w, w_in, f, 9)
+        R, w_in = tam.earth_terms(nav[0], nav[2], nav[3:6])
+        A, G = tam.system_matrix(q_m, nav[3:6], nav[0], R, w, w_in, f, 9)
         kalman.predict(np.zeros(9), P0, kalman.discretize(A, 0.1),
                        kalman.discrete_noise(G, qc, 0.1), check=False)
 

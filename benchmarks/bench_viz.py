@@ -26,11 +26,11 @@ import numpy as np
 import rerun as rr
 
 from benchmarks.bench_replay import log_one_block
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.filters.ins import InsFilter
 from navreplay.geo import gravity, omega_ie_n
 from navreplay.metrics import run_metrics
 from navreplay.replay import replay
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.viz import Save, open_sink
 
 T0_NS = 1_700_000_000_000_000_000

@@ -20,7 +20,7 @@ Attitude
 Units
     SI and radians internally. Names carry a suffix only when they deviate: ``lat_deg``, ``t_ns``,
     ``bias_dph``. Datasheet units are converted once, at the configuration boundary, with the
-    constants of :mod:`navreplay.units`.
+    constants of :mod:`navreplay.core.units`.
 
 Position
     Geodetic latitude and longitude in radians and ellipsoidal height in metres (WGS84);

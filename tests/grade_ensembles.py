@@ -30,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from navreplay import consistency, metrics
+from navreplay import metrics
 from navreplay.filters.registry import load_filter
+from navreplay.metrics import consistency
 from navreplay.replay import replay
 from navreplay.sim.scenario import simulate
 

@@ -1,11 +1,10 @@
 """The nonlinear NED mechanization and the error dynamics it implies, written independently of
 the code under test: the reference for the finite-difference checks of the INS error models
-(tests/test_ins_filter.py, tests/test_rpm_aided_ins.py)."""
+(tests/filters/test_ins_filter.py, tests/filters/test_rpm_aided_ins.py)."""
 
 import numpy as np
 
-from navreplay import strapdown
-from navreplay.geo import earth, rotations
+from navreplay.geo import earth, rotations, strapdown
 
 
 def rates(lat, lon, h, v, C, f_b, w_ib_b):

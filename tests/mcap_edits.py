@@ -1,15 +1,18 @@
 """MCAP files for the reader and pipeline tests: written in small chunks (many windows in a
-short file), and copies with the IMU header stamps zeroed (a driver that never sets them)."""
+short file), and copies with the IMU header stamps zeroed (a driver that never sets them), and uncompressed
+copies (to damage a file at a known place)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
 
+from navreplay.core.streams import Recording
 from navreplay.io import writer as writer_module
 from navreplay.io.writer import write_recording
-from navreplay.streams import Recording
 
 CHUNK = 1 << 17
 """Chunk size [bytes]: about 2 s of a vehicle drive per chunk."""
@@ -51,4 +54,25 @@ def zero_imu_stamps(src: Path, dst: Path, *, at: int | None = None, latency: int
                     data = data[:4] + bytes(8) + data[12:]
                 log += latency
             w.add_message(channels[channel.id], log, data, m.publish_time, m.sequence)
+        w.finish()
+
+
+def uncompressed_copy(src: Path, dst: Path, chunk_size: int = 1 << 15, *, crcs: bool = False,
+                      data_crc: bool = False) -> None:
+    """The recording rewritten uncompressed, metadata first; without CRCs unless ``crcs``
+    (chunk CRCs) and ``data_crc`` (the data-section CRC) ask for them."""
+    with src.open("rb") as f, dst.open("wb") as out:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        w = Writer(out, compression=CompressionType.NONE, enable_crcs=crcs,
+                   enable_data_crcs=data_crc, chunk_size=chunk_size)
+        w.start(profile=reader.get_header().profile, library="test")
+        for m in reader.iter_metadata():
+            w.add_metadata(m.name, m.metadata)
+        ids = {sid: w.register_schema(s.name, s.encoding, s.data)
+               for sid, s in summary.schemas.items()}
+        cids = {cid: w.register_channel(c.topic, c.message_encoding, ids[c.schema_id])
+                for cid, c in summary.channels.items()}
+        for _, channel, msg in reader.iter_messages(log_time_order=False):
+            w.add_message(cids[channel.id], msg.log_time, msg.data, msg.publish_time)
         w.finish()

@@ -34,7 +34,7 @@ from typing import Any
 
 import grade_ensembles as ge
 
-from navreplay import consistency
+from navreplay.metrics import consistency
 
 FAST_SEED = 8100
 SLOW_SEED = 9300

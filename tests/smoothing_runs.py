@@ -6,11 +6,11 @@ import dataclasses
 import numpy as np
 
 from navreplay import metrics
+from navreplay.core.streams import Recording, Stream, StreamKind
 from navreplay.io.source import MemorySource
 from navreplay.replay.pipeline import Collect, replay_file
 from navreplay.replay.spec import FilterSpec
 from navreplay.sim.scenario import simulate
-from navreplay.streams import Recording, Stream, StreamKind
 
 DURATION = 300.0
 OUTAGES = ((100.0, 30.0), (180.0, 60.0))

@@ -50,6 +50,13 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
     "bench_memory": [
         (rf"^ *{_N}[hs] +(streamed|rrd|outputs|whole) +{_N} MiB +1\.00x +{_N}$", 4),
     ],
+    "bench_outputs": [
+        (rf"^ +{_N} Hz +(no-viz|export|rrd) +{_N} +{_N}$", 6),
+        (rf"^(export|rrd) / no-viz CPU at {_N} Hz: {_N}x \(target <= {_N}x: (met|NOT met)\)$",
+         4),
+        (rf"^(no-viz|export|rrd) peak RSS 100 Hz / 10 Hz: {_N}x \(target <= 1\.2x: "
+         r"(met|NOT met)\)$", 3),
+    ],
     "bench_replay": [
         (rf"^end to end \(decode \+ gps-ins \+ summary\) +{_N} s +{_N}k IMU samples/s", 1),
         (rf"^ratios: end to end / strapdown = {_N}$", 1),

@@ -7,10 +7,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from navreplay import export
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.filters.result import RunResult
 from navreplay.metrics import run_metrics
 from navreplay.report import RunSeries
-from navreplay.streams import Recording, StreamKind
+from navreplay.viz.naming import innovation_rows
 
 
 def export_runs(out_dir: Path, results: list[RunResult], rec: Recording | None, *,
@@ -39,5 +40,8 @@ def run_series(result: RunResult, rec: Recording | None) -> RunSeries:
     has_ref = rec is not None and StreamKind.TRUTH in rec
     series.add(export.filter_output(rows, run_metrics(rows, rec) if has_ref else None))
     for name, s in result.innovations.items():
-        series.add_nis(name, s.t, s.nis, int(s.nu.shape[1]))
+        dim = int(s.nu.shape[1])
+        series.add_nis(name, s.t, s.nis, dim)
+        series.add_innovations(name, s.t, s.nu, s.S,
+                               innovation_rows(name, dim, result.measurement(name)))
     return series

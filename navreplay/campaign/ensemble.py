@@ -17,9 +17,9 @@ import dataclasses
 import time
 from collections.abc import Callable, Sequence
 
-from navreplay import lifecycle
 from navreplay.campaign.executors import Executor, Future, InlineExecutor, make_executor
 from navreplay.campaign.tasks import Extractor, RunOutput, RunTask, default_extract, run_task
+from navreplay.io import lifecycle
 from navreplay.replay.spec import FilterSpec
 
 
@@ -104,7 +104,8 @@ def run_ensemble(
     for spec in filters:  # fail on an unknown filter or bad parameters before any work
         spec.resolve()
     own = executor is None or isinstance(executor, str)
-    ex = make_executor(workers, executor or "process") if own else executor
+    ex = (make_executor(workers, executor or "process")
+          if executor is None or isinstance(executor, str) else executor)
     parallelism = getattr(ex, "parallelism", workers)
     window = 1 if isinstance(ex, InlineExecutor) else 2 * max(parallelism, 1)
     total = len(tasks)

@@ -15,7 +15,7 @@ import os
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from navreplay import lifecycle
+from navreplay.io import lifecycle
 
 
 class Future(Protocol):

@@ -25,12 +25,12 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from navreplay.core.streams import Recording
 from navreplay.filters.result import RunResult
 from navreplay.io.source import MemorySource
 from navreplay.replay.checks import validate_recording
 from navreplay.replay.pipeline import Collect, replay_file
 from navreplay.replay.spec import FilterSpec
-from navreplay.streams import Recording
 
 
 @dataclasses.dataclass(frozen=True)

@@ -73,7 +73,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from navreplay.streams import Metadata, StreamKind
+from navreplay.core.streams import Metadata, StreamKind
 
 if TYPE_CHECKING:
     from navreplay.sensors.specs import SensorSpecs
@@ -341,7 +341,7 @@ class NavSolution:
     @classmethod
     def from_vector(cls, nav: np.ndarray) -> NavSolution:
         """From a navigation vector ``[lat, lon, h, v_N, v_E, v_D, q0, q1, q2, q3]`` (10,), the
-        layout of :mod:`navreplay.strapdown`; the fields are views of ``nav``."""
+        layout of :mod:`navreplay.geo.strapdown`; the fields are views of ``nav``."""
         return cls(pos=nav[0:3], v_n=nav[3:6], q_nb=nav[6:10])
 
 
@@ -550,7 +550,7 @@ class EventRun(abc.ABC):
     @abc.abstractmethod
     def out(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For a compiled run: free rows ``(t (E,), x (E, n), P (E, n, n), nav (E, 10))`` to
-        write the estimates into (``nav`` the navigation vectors of :mod:`navreplay.strapdown`);
+        write the estimates into (``nav`` the navigation vectors of :mod:`navreplay.geo.strapdown`);
         :meth:`add_rows` then says how many were written."""
 
     @abc.abstractmethod
@@ -580,7 +580,7 @@ class Filter(abc.ABC):
         Streams used when present.
     required_columns : dict[StreamKind, tuple[str, ...]]
         For a required stream, the columns the filter needs when not all the standard ones of
-        :data:`navreplay.streams.FIELDS` (e.g. ``{StreamKind.IMU: ("f_b",)}`` for an
+        :data:`navreplay.core.streams.FIELDS` (e.g. ``{StreamKind.IMU: ("f_b",)}`` for an
         accelerometer-only filter); the engine checks them before running.
     Params : type[FilterParams]
         Parameter dataclass.

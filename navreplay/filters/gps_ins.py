@@ -111,8 +111,8 @@ innovation ``nu = z`` and ``S`` for NIS statistics (``"gps_pos"`` [m], ``"gps_ve
 
 (10) omits the derivatives of w_in with respect to position and velocity in the lever-arm term
 (below 1e-8 m/s for metre-level errors); everything else in (6), (6a), (10) and (10a) was
-checked against central differences of (4)-(5) and (8)-(9) in tests/test_gps_ins.py. Samples
-older than the INS solution (before the initial solution's time) are ignored.
+checked against central differences of (4)-(5) and (8)-(9) in tests/filters/test_gps_ins.py.
+Samples older than the INS solution (before the initial solution's time) are ignored.
 """
 
 from __future__ import annotations
@@ -124,6 +124,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from navreplay.core.streams import StreamKind
 from navreplay.filters import gnss_models as gnss
 from navreplay.filters import gps_ins_events as ev
 from navreplay.filters import ins_time_update as itu
@@ -144,7 +145,6 @@ from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.ins_time_update import Imu
 from navreplay.filters.registry import register_filter
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import StreamKind
 
 LEVER = slice(15, 18)
 """Lever-arm error states (present with ``estimate_lever_arm``)."""
@@ -369,16 +369,17 @@ class GpsInsFilter(InsFilter):
         """The IMU settings of ``ins``, the GNSS noise of fixes without their own sigma and the
         GNSS Gauss-Markov position error."""
         out = super().settings_from_sensors(sensors)
+        gps = sensors.get("gps")  # read only where stated
         if sensors.has("gps", "pos_gm_sigma"):
-            out["gps_pos_gm_sigma"] = tuple(float(v) for v in sensors.gps.pos_gm_sigma)
+            out["gps_pos_gm_sigma"] = tuple(float(v) for v in gps.pos_gm_sigma)
             if sensors.has("gps", "pos_gm_tau"):
-                out["gps_pos_gm_tau"] = float(sensors.gps.pos_gm_tau)
+                out["gps_pos_gm_tau"] = float(gps.pos_gm_tau)
         if sensors.has("gps", "pos_sigma"):
-            gm = sensors.gps.pos_gm_sigma if sensors.has("gps", "pos_gm_sigma") else 0.0
-            out["gps_pos_sigma"] = tuple(np.hypot(sensors.gps.pos_sigma, gm).tolist())
+            gm = gps.pos_gm_sigma if sensors.has("gps", "pos_gm_sigma") else 0.0
+            out["gps_pos_sigma"] = tuple(np.hypot(gps.pos_sigma, gm).tolist())
         if sensors.has("gps", "vel_sigma"):
-            gm = sensors.gps.vel_gm_sigma if sensors.has("gps", "vel_gm_sigma") else 0.0
-            out["gps_vel_sigma"] = tuple(np.hypot(sensors.gps.vel_sigma, gm).tolist())
+            gm = gps.vel_gm_sigma if sensors.has("gps", "vel_gm_sigma") else 0.0
+            out["gps_vel_sigma"] = tuple(np.hypot(gps.vel_sigma, gm).tolist())
         return out
 
     @classmethod
@@ -386,6 +387,7 @@ class GpsInsFilter(InsFilter):
         """The IMU terms of ``ins``, the GNSS white noise (R) and, with the Gauss-Markov
         states, the time-correlated position error; R holds the velocity's time-correlated
         error as white (where the velocities are used)."""
+        assert isinstance(params, GpsInsParams)  # the class's own Params
         gps = {"pos_sigma", "vel_sigma"}
         if any(params.gps_pos_gm_sigma):
             gps |= {"pos_gm_sigma"}
@@ -568,12 +570,13 @@ class GpsInsFilter(InsFilter):
         inn_code = np.zeros(n_inn, np.int64)
         inn_t, inn_nu, inn_S = np.empty(n_inn), np.empty((n_inn, 3)), np.empty((n_inn, 3, 3))
         f64 = np.ascontiguousarray
+        pos, pos_sigma = (f64(a, dtype=float) for a in cols[gnss.POSITION])
+        vel, vel_sigma = (f64(a, dtype=float) for a in cols[gnss.VELOCITY])
         done, m, k, self.nav, self.P, self.t = ev.run_events(
             self.nav, self.P, self.t, s,
             Imu(run.t, f64(run.imu["omega_ib_b"], dtype=float), f64(run.imu["f_b"], dtype=float)),
             ev.Events(run.ends, codes, run.rows, run.t_ev, run.record),
-            ev.Gnss(*(f64(a, dtype=float) for a in (*cols[gnss.POSITION], *cols[gnss.VELOCITY])),
-                    p.gps_pos_sigma_scale, p.gps_vel_sigma_scale),
+            ev.Gnss(pos, pos_sigma, vel, vel_sigma, p.gps_pos_sigma_scale, p.gps_vel_sigma_scale),
             ev.Options(p.estimate_lever_arm, -1 if self._gp is None else self._gp.start,
                        gnss.GaussMarkov(float(p.gps_pos_gm_tau), self._gm_var),
                        kalman.DEFAULT_RTOL),

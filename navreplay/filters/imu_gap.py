@@ -39,10 +39,9 @@ import math
 
 import numpy as np
 
-from navreplay import strapdown
 from navreplay.filters import ins_error as ie
 from navreplay.filters import kalman
-from navreplay.geo import earth
+from navreplay.geo import earth, strapdown
 
 
 def held_variance(sigma: float, tau: tuple[float, float]) -> float:
@@ -85,7 +84,7 @@ def bridge(
     Parameters
     ----------
     nav : ndarray, shape (10,)
-        Navigation vector (:mod:`navreplay.strapdown`) at the start of the piece.
+        Navigation vector (:mod:`navreplay.geo.strapdown`) at the start of the piece.
     P : ndarray, shape (n, n), n >= 15
         Error covariance at the start of the piece (the 15 states of ``ins_error`` first).
     tau : (float, float)

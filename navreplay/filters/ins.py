@@ -1,7 +1,7 @@
 """Free-inertial navigation ("ins"): the strapdown solution and its predicted error covariance.
 
 The baseline every aided filter is compared to. It integrates the IMU with
-:mod:`navreplay.strapdown` from the initial solution in ``metadata.initial_nav`` and
+:mod:`navreplay.geo.strapdown` from the initial solution in ``metadata.initial_nav`` and
 propagates the covariance of the 15 navigation error states of
 :mod:`navreplay.filters.ins_error` and of the gyro and accelerometer scale factors and
 misalignments (the columns of ``S + M`` that a drive or a banked turn excites) with the IMU
@@ -118,7 +118,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from navreplay import strapdown
+from navreplay.core.streams import StreamKind
+from navreplay.core.units import G0
 from navreplay.filters import imu_gap, kalman
 from navreplay.filters import ins_error as ie
 from navreplay.filters import ins_time_update as itu
@@ -141,11 +142,10 @@ from navreplay.filters.base import (
 )
 from navreplay.filters.ins_smoothing import InsSmoothing
 from navreplay.filters.registry import register_filter
+from navreplay.geo import strapdown
 from navreplay.geo.earth import OMEGA_IE
 from navreplay.sensors.imu import ImuGrade, ImuModel, imu_grade
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import StreamKind
-from navreplay.units import G0
 
 
 def imu_settings(sensors: SensorSpecs) -> dict[str, float]:

@@ -128,7 +128,7 @@ correlated with the effective z-column bias they are part of: ``cov(b_a_i, k_z[i
 -g0 sigma(k_z[i])^2`` (the bias holds ``k_z (-g0)``).
 
 Every block was checked against central finite differences of (2)-(4) and of
-:func:`navreplay.strapdown.propagate` (tests/test_ins_filter.py).
+:func:`navreplay.geo.strapdown.propagate` (tests/filters/test_ins_filter.py).
 
 The covariance propagation over this model is :mod:`navreplay.filters.ins_time_update`.
 """
@@ -141,15 +141,14 @@ import math
 import numba
 import numpy as np
 
-from navreplay import strapdown
+from navreplay.core.units import G0
 from navreplay.filters.base import Nav, NavError, Quantity, State, TruthColumn
-from navreplay.geo import earth, kernels
+from navreplay.geo import earth, kernels, strapdown
 from navreplay.geo.rotations import (
     attitude_error,
     quat_to_dcm,
     wrap_angle,
 )
-from navreplay.units import G0
 
 # -- state layout ----------------------------------------------------------------------------
 
@@ -190,7 +189,7 @@ W_BG = slice(9, 12)
 """Gyro bias random walk [(rad/s)/sqrt(s)]."""
 N_NOISE = 12
 
-# -- blocks of the navigation vector of navreplay.strapdown -----------------------------------
+# -- blocks of the navigation vector of navreplay.geo.strapdown -----------------------------------
 
 NAV_POS = strapdown.POS
 NAV_VEL = strapdown.VEL

@@ -17,6 +17,7 @@ error states of ``x`` stay 0.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import ClassVar
 
 import numpy as np
 
@@ -42,7 +43,7 @@ class InsSmoothing(Smoothable):
     P: np.ndarray
     _sync_covariance: Callable[[], None]
     _smoothing: _Log | None = None
-    smoothing_vertical: ie.Vertical = ie.Vertical.HEIGHT
+    smoothing_vertical: ClassVar[ie.Vertical] = ie.Vertical.HEIGHT
     """How the third error state is the error of the solution (height or depth)."""
 
     def start_smoothing(self) -> None:

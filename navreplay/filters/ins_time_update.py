@@ -9,7 +9,7 @@ first-order Markov processes, kalman eq. 5a), so only 9 rows and columns of P ch
 diagonal of the Markov states).
 :func:`propagate_covariance` steps over given points, :func:`accumulate_covariance` collects
 IMU samples into steps of a given length, and :class:`TimeUpdate` is the whole time update of
-an INS filter over an IMU block (bias compensation, :mod:`navreplay.strapdown`, covariance) in
+an INS filter over an IMU block (bias compensation, :mod:`navreplay.geo.strapdown`, covariance) in
 one compiled call; ``ins``, ``gps-ins`` and ``rpm-aided-ins`` use it.
 """
 
@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from navreplay import strapdown
+from navreplay.core.units import G0
 from navreplay.filters import kalman
 from navreplay.filters.ins_error import (
     ACCEL_COLUMNS,
@@ -39,8 +39,7 @@ from navreplay.filters.kalman import (
     _covariance_ok,
     check_covariance,
 )
-from navreplay.geo import kernels
-from navreplay.units import G0
+from navreplay.geo import kernels, strapdown
 
 N_NAV = 9
 """Rows of F that are not zero: position, velocity and attitude."""
@@ -423,6 +422,7 @@ def _model_args(
         raise ValueError(
             f"P must be (n, n) with n >= 15 the length of the process noise ({n}), got {shape}"
         )
+    assert noise.markov is not None  # an array once the noise is made
     return Model(noise.q, noise.k_acc, noise.k_gyro, vertical is Vertical.DEPTH,
                  bool(curvature_derivatives), noise.gyro_z_states, noise.accel_states,
                  *noise.columns, noise.markov)
@@ -513,7 +513,7 @@ def accumulate_covariance(
     P : ndarray, shape (n, n), n >= 15
     hist : ndarray, shape (k + 1, 10)
         Navigation states at the start of each sample and after the last (the output of
-        :func:`navreplay.strapdown.integrate`).
+        :func:`navreplay.geo.strapdown.integrate`).
     f_b : ndarray, shape (k, 3)
         Bias-compensated specific force of each sample, body [m/s^2].
     omega_b : ndarray, shape (k, 3)
@@ -562,7 +562,7 @@ class TimeUpdate:
 
     Each :meth:`propagate` compensates the IMU with the bias estimates (``f_hat = f_b - b_a``,
     ``omega_hat = omega_ib_b - b_g``), integrates it with
-    :func:`navreplay.strapdown.integrate_kernel` and propagates P as
+    :func:`navreplay.geo.strapdown.integrate_kernel` and propagates P as
     :func:`accumulate_covariance` does, in one compiled call. What carries over from one block
     to the next is kept here: the increments of the last sample (the coning and sculling terms
     of the next) and the open covariance step.

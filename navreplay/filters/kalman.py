@@ -67,8 +67,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from navreplay.core.lti import discrete_noise, discretize, van_loan  # noqa: F401  (part of this API)
 from navreplay.filters.base import Innovation
-from navreplay.lti import discrete_noise, discretize, van_loan  # noqa: F401  (part of this API)
 
 DEFAULT_RTOL = 1e-9
 """Default relative tolerance of the symmetry and PSD checks (on the correlation form)."""
@@ -228,7 +228,7 @@ def check_covariance(
     C = P / s[:, None] / s[None, :]
     asym = np.abs(C - C.T)
     if asym.max(initial=0.0) > rtol:
-        i, j = np.unravel_index(int(np.argmax(asym)), asym.shape)
+        i, j = (int(v) for v in np.unravel_index(int(np.argmax(asym)), asym.shape))
         raise FilterDivergedError(
             f"{name} is not symmetric: {name}[{i},{j}] = {P[i, j]:.6e} vs "
             f"{name}[{j},{i}] = {P[j, i]:.6e}",

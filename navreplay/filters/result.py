@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -16,6 +17,9 @@ from navreplay.filters.base import (
     check_states,
 )
 from navreplay.filters.settings import FilterSettings
+
+_EVERY_PART: tuple[str, ...] = tuple(["the parts of the solution the result holds"])
+"""The default of :attr:`RunResult.navigation` (a sentinel, replaced on creation)."""
 
 
 @dataclasses.dataclass
@@ -81,7 +85,7 @@ class RunResult:
     innovations: dict[str, InnovationSeries] = dataclasses.field(default_factory=dict)
     scored_extras: tuple[State, ...] = ()
     measurements: tuple[MeasurementKind, ...] = ()
-    navigation: tuple[str, ...] | None = None
+    navigation: tuple[str, ...] = dataclasses.field(default_factory=lambda: _EVERY_PART)
     settings: FilterSettings | None = None
 
     def __post_init__(self) -> None:
@@ -89,7 +93,8 @@ class RunResult:
         self.scored_extras = check_states(self.scored_extras, f"{self.label}: scored_extras")
         self.measurements = check_measurements(self.measurements,
                                                f"{self.label}: measurements") or ()
-        if self.navigation is None:  # not given: every part of the solution there is
+        if self.navigation is None or self.navigation is _EVERY_PART:
+            # not given: every part of the solution there is
             self.navigation = NAV_PARTS if self.nav_pos is not None else ()
         self.navigation = tuple(self.navigation)
 
@@ -130,7 +135,7 @@ def concat(blocks: Sequence[RunResult]) -> RunResult:
     full = [b for b in blocks if b.t.size] or [blocks[0]]
     first = full[0]
 
-    def cat(name: str) -> np.ndarray | None:
+    def cat(name: str) -> Any:
         if getattr(first, name) is None:
             return None
         return np.concatenate([getattr(b, name) for b in full])

@@ -30,13 +30,14 @@ import dataclasses
 import enum
 import functools
 import re
+import typing
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from navreplay import params as _params
+from navreplay.core import params as _params
+from navreplay.core.streams import jsonable
 from navreplay.filters.base import Filter, FilterParams
 from navreplay.sensors.specs import SPEC_STREAMS, SensorSpecs
-from navreplay.streams import jsonable
 
 
 class Source(enum.StrEnum):
@@ -93,7 +94,7 @@ class FilterSettings:
     def summary(self) -> dict[str, Any]:
         """The ``settings`` entry of a run summary: per field ``{"value", "source", "unit"}``
         (SI, JSON values), in the order of the ``Params`` fields."""
-        units = field_units(type(self.params))
+        units = field_units(typing.cast(type, type(self.params)))
         out = {}
         for f in dataclasses.fields(self.params):
             entry = {"value": jsonable(getattr(self.params, f.name)),
@@ -171,7 +172,7 @@ def build_params(
 
     Raises
     ------
-    navreplay.params.ParamError
+    navreplay.core.params.ParamError
         Values that do not fit ``filter_cls.Params``, or a derivation that fails, naming the
         filter.
     """

@@ -71,7 +71,7 @@ class Smoothable(abc.ABC):
     def apply_smoothed(self, x: np.ndarray, nav: np.ndarray | None, d: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray | None]:
         """Forward estimates of a chunk, ``x`` (m, n) and navigation vectors ``nav`` (m, 10)
-        of :mod:`navreplay.strapdown` (None without a solution), corrected by the smoothed
+        of :mod:`navreplay.geo.strapdown` (None without a solution), corrected by the smoothed
         error states ``d`` (m, n) as the filter's feedback would correct them; new arrays.
         Pure (called after the forward pass, possibly on another instance's data)."""
 

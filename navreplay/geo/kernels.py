@@ -16,7 +16,7 @@ Two kinds of kernels:
   :func:`quat_left_matrix` and :func:`quat_right_matrix` (4, 4), :func:`euler_to_quat` (4,),
   :func:`quat_to_euler` (3,).
 
-They are also callable from Python (numba dispatchers); tests/test_geo.py checks each
+They are also callable from Python (numba dispatchers); tests/geo/test_geo.py checks each
 against its numpy counterpart. Differences from the numpy functions, all deliberate:
 :func:`euler_to_quat` does not flip the sign to ``q0 >= 0``, :func:`quat_to_euler` takes the
 pitch from ``asin`` (valid away from gimbal lock), and :func:`rotvec_to_quat` has no series
@@ -54,7 +54,7 @@ import math
 import numba
 import numpy as np
 
-from navreplay import jit  # noqa: F401  (the collector rests while numba compiles)
+from navreplay.core import jit  # noqa: F401  (the collector rests while numba compiles)
 from navreplay.geo import earth
 
 __all__ = [

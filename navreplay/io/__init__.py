@@ -7,6 +7,7 @@ unit and frame.
 
 >>> import tempfile
 >>> import numpy as np
+>>> from navreplay.io import TOPICS, read_recording, recording_info, write_recording
 >>> from navreplay.io.synthetic import random_recording
 >>> rec = random_recording(np.random.default_rng(0), duration_s=1.0, kinds=["imu", "truth"])
 >>> with tempfile.TemporaryDirectory() as tmp:
@@ -27,11 +28,38 @@ CRC mismatches and bad samples as :class:`RecordingError` naming the file, topic
 windows of its streams (:mod:`navreplay.io.source`); :func:`read_recording` reads it whole.
 """
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from navreplay.io.errors import RecordingError, RecordingExistsError, RecordingWarning
-from navreplay.io.files import open_recording, read_recording
-from navreplay.io.info import RecordingInfo, TopicInfo, format_info, recording_info
-from navreplay.io.schemas import TOPICS
-from navreplay.io.writer import write_recording
+
+if TYPE_CHECKING:
+    from navreplay.io.files import open_recording, read_recording
+    from navreplay.io.info import RecordingInfo, TopicInfo, format_info, recording_info
+    from navreplay.io.schemas import TOPICS
+    from navreplay.io.writer import write_recording
+
+_LAZY = {
+    "open_recording": "navreplay.io.files",
+    "read_recording": "navreplay.io.files",
+    "RecordingInfo": "navreplay.io.info",
+    "TopicInfo": "navreplay.io.info",
+    "format_info": "navreplay.io.info",
+    "recording_info": "navreplay.io.info",
+    "TOPICS": "navreplay.io.schemas",
+    "write_recording": "navreplay.io.writer",
+}
+"""Names imported at their first use: the readers and writers load mcap and rosbags, which a
+command that only writes files (:mod:`navreplay.io.outputs`) or handles signals
+(:mod:`navreplay.io.lifecycle`) does not need."""
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'navreplay.io' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
+
 
 __all__ = [
     "TOPICS",

@@ -266,9 +266,10 @@ class GenericDecoder:
     """
 
     def __init__(self, schema: Schema) -> None:
-        self._decode = DecoderFactory().decoder_for("cdr", schema)
-        if self._decode is None:
+        decode = DecoderFactory().decoder_for("cdr", schema)
+        if decode is None:
             raise RecordingError(f"no ROS 2 decoder for schema {schema.name!r}")
+        self._decode = decode
 
     def decode(self, payloads: Sequence[bytes], message: MessageType) -> dict[str, np.ndarray]:
         """Decode payloads into the fields of :func:`records_to_fields`.

@@ -23,9 +23,9 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
+from navreplay.core.streams import Stream, StreamKind
 from navreplay.io.convert import BODY_KINDS, NAV_KINDS, Convention, assumed_convention
 from navreplay.io.errors import RecordingError
-from navreplay.streams import Stream, StreamKind
 
 GAP_FACTOR = 5.0
 """An interval longer than this many times a topic's median interval counts as a gap."""
@@ -138,9 +138,9 @@ def _beyond(kind: StreamKind, name: str, flat: np.ndarray,
             return None
         how, lo, hi, unit = spec
         if how == "abs":
-            return (np.abs(flat) > hi).any(axis=1), f"+-{hi:g} {unit}"
+            return np.asarray((np.abs(flat) > hi).any(axis=1)), f"+-{hi:g} {unit}"
         if how == "interval":
-            return ((flat < lo) | (flat > hi)).any(axis=1), f"{lo:g} .. {hi:g} {unit}"
+            return np.asarray(((flat < lo) | (flat > hi)).any(axis=1)), f"{lo:g} .. {hi:g} {unit}"
         bad = ((np.abs(flat[:, 0]) > hi) | (np.abs(flat[:, 1]) > 2 * math.pi)
                | (flat[:, 2] < -2e4) | (flat[:, 2] > 1e8))
         return bad, "latitude +-pi/2, longitude +-2 pi rad, height -2e4 .. 1e8 m"
@@ -181,7 +181,8 @@ def first_problem(stream: Stream, t0_ns: int, ranges: bool = True) -> str | None
             row = int(np.argmax(bad))
             if row < bad_row:
                 bad_row, bad_col = row, name
-                bad_what = what if not good[row] else f"value beyond {beyond[1]}"
+                bad_what = (what if not good[row] or beyond is None
+                            else f"value beyond {beyond[1]}")
     step = np.diff(t)
     back = np.flatnonzero(step <= 0)
     if back.size and back[0] + 1 <= bad_row:

@@ -1,8 +1,8 @@
 """Stream columns <-> message fields, per stream kind (units, frames and conventions of the wire).
 
-Encoding turns a :class:`~navreplay.streams.Stream` into the leaf arrays of its message type
+Encoding turns a :class:`~navreplay.core.streams.Stream` into the leaf arrays of its message type
 (:mod:`navreplay.io.schemas`); decoding turns decoded leaf arrays back into the standard columns of
-:data:`navreplay.streams.FIELDS`. Both sides are vectorised over all messages of a block.
+:data:`navreplay.core.streams.FIELDS`. Both sides are vectorised over all messages of a block.
 
 Conventions on the wire (see docs/recording-format.md):
 
@@ -29,8 +29,8 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from navreplay.core.streams import FIELDS, Stream, StreamKind
 from navreplay.io.errors import RecordingError
-from navreplay.streams import FIELDS, Stream, StreamKind
 
 NAV_SAT_STATUS_NO_FIX = -1
 NAV_SAT_STATUS_FIX = 0

@@ -15,6 +15,7 @@ import dataclasses
 import numpy as np
 from mcap.records import Channel, Schema
 
+from navreplay.core.streams import Metadata, StreamKind
 from navreplay.io import cdr
 from navreplay.io.convert import REDUCE, AuxColumn
 from navreplay.io.errors import RecordingError
@@ -28,7 +29,6 @@ from navreplay.io.schemas import (
     normalize_type_name,
 )
 from navreplay.io.topics import Candidate, candidate, decodable
-from navreplay.streams import Metadata, StreamKind
 
 
 class ChannelDecoder:
@@ -277,7 +277,7 @@ def file_metadata(contents: FileContents, where: str) -> tuple[Metadata, int, li
     """The recording's metadata, start [ns] and auxiliary columns: the ``navreplay`` record,
     else ``Metadata()`` starting at the first message (by the statistics of an intact file)."""
     records = [m for m in contents.metadata if m.name == METADATA_NAME]
-    meta, t0_ns, aux = Metadata(), None, []
+    meta, t0_ns, aux = Metadata(), None, list[AuxColumn]()
     if records:
         meta, t0_ns, aux = decode_metadata(records[-1].metadata, where)
     if t0_ns is None:

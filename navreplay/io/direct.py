@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
+from navreplay.core.streams import Metadata, Stream, StreamKind
 from navreplay.io.checks import first_problem, gap_report
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, Source, Window
 from navreplay.io.topics import TopicSource, warn
-from navreplay.streams import Metadata, Stream, StreamKind
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,15 +15,14 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.io import gins, mcapread, rosbag, rosbag1
-from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import Source
-from navreplay.io.topics import TopicSource
-from navreplay.streams import Recording, StreamKind
+from navreplay.io.topics import FrameNames, TopicNames, TopicSource
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,8 +57,8 @@ def open_recording(
     *,
     kinds: Iterable[StreamKind | str] | None = None,
     explicit: bool = False,
-    topics: Mapping[StreamKind | str, str] | None = None,
-    frames: Mapping[StreamKind | str, Convention | str] | None = None,
+    topics: TopicNames | None = None,
+    frames: FrameNames | None = None,
     time: str = "header",
     validate: bool = True,
     whole: bool = False,
@@ -115,8 +114,8 @@ def read_streams(
     *,
     kinds: Iterable[StreamKind | str] | None = None,
     validate: bool = True,
-    topics: Mapping[StreamKind | str, str] | None = None,
-    frames: Mapping[StreamKind | str, Convention | str] | None = None,
+    topics: TopicNames | None = None,
+    frames: FrameNames | None = None,
     time: str = "header",
 ) -> tuple[Recording, dict[StreamKind, TopicSource]]:
     """Read a recording whole into columnar streams (see :func:`open_recording`; a kind asked
@@ -150,8 +149,8 @@ def read_recording(
     *,
     kinds: Iterable[StreamKind | str] | None = None,
     validate: bool = True,
-    topics: Mapping[StreamKind | str, str] | None = None,
-    frames: Mapping[StreamKind | str, Convention | str] | None = None,
+    topics: TopicNames | None = None,
+    frames: FrameNames | None = None,
     time: str = "header",
 ) -> Recording:
     """Read a recording whole into columnar streams (see :func:`read_streams`)."""

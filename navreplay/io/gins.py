@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
+from navreplay.core.streams import StreamKind
 from navreplay.io.convert import Convention
 from navreplay.io.direct import Columns, DirectSource, Topic, body_axes
 from navreplay.io.errors import RecordingError
-from navreplay.streams import StreamKind
 
 IMU_TYPE = "gins/ImuIncrements"
 GNSS_TYPE = "gins/GnssPosition"

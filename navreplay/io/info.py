@@ -18,13 +18,14 @@ from typing import BinaryIO
 import numpy as np
 from mcap.opcode import Opcode
 
+from navreplay.core.streams import Metadata, StreamKind
 from navreplay.io.checks import when
+from navreplay.io.convert import AuxColumn
 from navreplay.io.errors import RecordingError
 from navreplay.io.integrity import contents_problems
 from navreplay.io.mcapfile import DAMAGE_ERRORS, FileContents, walk
 from navreplay.io.metadata import decode_metadata
 from navreplay.io.schemas import KIND_BY_TYPE, METADATA_NAME, SPECS, normalize_type_name
-from navreplay.streams import Metadata, StreamKind
 
 _INDEX_HEAD = struct.Struct("<BQHI")
 
@@ -197,7 +198,7 @@ def recording_info(path: str | os.PathLike[str]) -> RecordingInfo:
             else:
                 counts = indexed
     records = [m for m in contents.metadata if m.name == METADATA_NAME]
-    meta, t0_ns, aux = Metadata(), None, []
+    meta, t0_ns, aux = Metadata(), None, list[AuxColumn]()
     if records:
         meta, t0_ns, aux = decode_metadata(records[-1].metadata, where)
     topics = []
@@ -251,7 +252,7 @@ def recording_info(path: str | os.PathLike[str]) -> RecordingInfo:
     )
 
 
-def _size(n: int) -> str:
+def _size(n: float) -> str:
     for unit in ("B", "KiB", "MiB", "GiB"):
         if n < 1024 or unit == "GiB":
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"

@@ -252,7 +252,7 @@ _WALK_OK, _WALK_BAD_RECORD, _WALK_BAD_MESSAGE = 0, 1, 2
 def _u64(u8: np.ndarray, at: int) -> int:
     value = 0
     for b in range(7, -1, -1):
-        value = (value << 8) | np.int64(u8[at + b])
+        value = (value << 8) | int(u8[at + b])
     return value
 
 
@@ -361,13 +361,13 @@ class _StreamReader(StreamReader):
     tuple per message. Everything else (CRCs, limits, chunk records) is mcap's own.
     """
 
-    def __init__(self, f: BinaryIO, **kwargs) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, f: BinaryIO, **kwargs) -> None:
         super().__init__(f, **kwargs)
         self._file = f
         self.record_start = 0
         self.record_end = len(MAGIC)
 
-    def _read_record(self, opcode: int, length: int):  # type: ignore[no-untyped-def]
+    def _read_record(self, opcode: int, length: int):
         body = self._file.tell()
         self.record_start, self.record_end = body - 9, body + length
         if opcode in (Opcode.MESSAGE_INDEX, Opcode.CHUNK_INDEX):

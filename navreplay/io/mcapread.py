@@ -3,7 +3,7 @@
 A day of 100 Hz IMU and truth does not need to be in memory at once: :class:`McapSource`
 walks an intact file's chunks in order and hands out the decoded rows of the streams asked for
 every ``window`` messages of one stream, as a :class:`~navreplay.io.source.Window`: a checked
-:class:`~navreplay.streams.Stream` per stream (the conversions and checks of
+:class:`~navreplay.core.streams.Stream` per stream (the conversions and checks of
 :func:`navreplay.io.topics.build_stream`, time increasing across windows) and, per stream, the
 time up to which it is complete. Only the topics of the streams asked for are decoded
 (:mod:`navreplay.io.decode`).
@@ -30,12 +30,13 @@ from __future__ import annotations
 import os
 import re
 import warnings
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
 
+from navreplay.core.streams import Metadata, Stream, StreamKind
 from navreplay.io.checks import GAP_FACTOR, check_frame_ids, gap_text, when
 from navreplay.io.convert import AuxColumn, Convention
 from navreplay.io.decode import ChannelDecoder, Decoding, describe_topics, file_metadata
@@ -43,8 +44,14 @@ from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarnin
 from navreplay.io.mcapfile import FileContents, read_chunk, walk
 from navreplay.io.schemas import SPECS
 from navreplay.io.source import COMPLETE, Source, Window
-from navreplay.io.topics import build_stream, choose_topics, sample_times, topic_map
-from navreplay.streams import Metadata, Stream, StreamKind
+from navreplay.io.topics import (
+    FrameNames,
+    TopicNames,
+    build_stream,
+    choose_topics,
+    sample_times,
+    topic_map,
+)
 
 WINDOW_MESSAGES = 60_000
 """Messages of one stream per window (10 minutes of 100 Hz samples)."""
@@ -97,8 +104,8 @@ class McapSource(Source):
         *,
         kinds: Iterable[StreamKind | str] | None = None,
         explicit: bool = False,
-        topics: Mapping[StreamKind | str, str] | None = None,
-        frames: Mapping[StreamKind | str, Convention | str] | None = None,
+        topics: TopicNames | None = None,
+        frames: FrameNames | None = None,
         time: str = "header",
         validate: bool = True,
         window: int | None = WINDOW_MESSAGES,
@@ -135,8 +142,9 @@ class McapSource(Source):
                     if self._window is not None and contents.intact and reading is None:
                         reading = self._start(plan, contents)
                     plan.feed(contents, block)
-                    if reading is not None and any(
-                            d.rows() >= self._window for d in reading.chosen.values()):
+                    size = self._window  # reading: windows of this many rows
+                    if reading is not None and size is not None and any(
+                            d.rows() >= size for d in reading.chosen.values()):
                         yield reading.window()
                 if reading is None:  # read whole: every channel is known now
                     self._check_damage(contents)
@@ -178,6 +186,7 @@ class McapSource(Source):
             )
         _, t0_ns, _ = file_metadata(contents, where)
         last = contents.last_log_time
+        assert last is not None  # a complete message was read
         if damage.data_complete:
             message = (f"{where}: summary or footer missing or damaged at byte {damage.offset} "
                        f"of {contents.size} ({damage.reason}); all {contents.message_count} "
@@ -420,12 +429,12 @@ class _Collect(warnings.catch_warnings):
         super().__init__(record=True)
         self.tally, self.window = tally, window
 
-    def __enter__(self):  # type: ignore[no-untyped-def]
+    def __enter__(self):
         self.caught = super().__enter__()
         warnings.simplefilter("always")
         return self.caught
 
-    def __exit__(self, *exc) -> None:  # type: ignore[no-untyped-def]
+    def __exit__(self, *exc) -> None:
         super().__exit__(*exc)
         for w in self.caught or []:
             if isinstance(w.message, RecordingWarning):

@@ -1,4 +1,4 @@
-"""The ``navreplay`` MCAP metadata record: :class:`~navreplay.streams.Metadata` as string pairs.
+"""The ``navreplay`` MCAP metadata record: :class:`~navreplay.core.streams.Metadata` as string pairs.
 
 Keys (all values are strings; JSON where noted):
 
@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 
 from navreplay import __version__
+from navreplay.core.streams import Metadata
 from navreplay.io.convert import AuxColumn
 from navreplay.io.errors import RecordingError
 from navreplay.io.schemas import FORMAT_VERSION
-from navreplay.streams import Metadata
 
 _JSON_KEYS = ("params", "true_errors", "initial_nav", "extra", "sensors")
 

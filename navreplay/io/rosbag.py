@@ -20,20 +20,28 @@ import dataclasses
 import os
 import sqlite3
 import warnings
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Metadata, Stream, StreamKind
 from navreplay.io.cdr import fields_of_messages
 from navreplay.io.checks import check_frame_ids
 from navreplay.io.convert import REDUCE, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.schemas import MESSAGE_ENCODING, SPECS, normalize_type_name
 from navreplay.io.source import COMPLETE, Source, Window
-from navreplay.io.topics import build_stream, candidate, choose_topics, sample_times, topic_map
-from navreplay.streams import Metadata, Stream, StreamKind
+from navreplay.io.topics import (
+    FrameNames,
+    TopicNames,
+    build_stream,
+    candidate,
+    choose_topics,
+    sample_times,
+    topic_map,
+)
 
 ROS1_FORMAT = "ros1"
 """The serialisation of a ROS 1 bag's messages."""
@@ -163,8 +171,8 @@ class BagSource(Source):
         *,
         kinds: Iterable[StreamKind | str] | None = None,
         explicit: bool = False,
-        topics: Mapping[StreamKind | str, str] | None = None,
-        frames: Mapping[StreamKind | str, Convention | str] | None = None,
+        topics: TopicNames | None = None,
+        frames: FrameNames | None = None,
         time: str = "header",
         validate: bool = True,
         window: int | None = None,
@@ -451,7 +459,7 @@ def _count_file(path: Path, storage: str) -> tuple[dict[str, int], int | None, i
     from navreplay.io.info import recording_info
 
     info = recording_info(path)
-    counts: dict[str, int] = {}
+    per_topic: dict[str, int] = {}
     for t in info.topics:
-        counts[t.topic] = counts.get(t.topic, 0) + t.count
-    return counts, info.start_ns, info.end_ns, info.damage
+        per_topic[t.topic] = per_topic.get(t.topic, 0) + t.count
+    return per_topic, info.start_ns, info.end_ns, info.damage

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from navreplay.core.streams import Metadata
 from navreplay.io.rosbag import BagSource
-from navreplay.streams import Metadata
 
 MAGIC = b"#ROSBAG V2.0"
 """The first bytes of a ROS 1 bag (format 2.0, every ROS 1 release since 2010)."""

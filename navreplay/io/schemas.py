@@ -1,6 +1,6 @@
 """Topics and message schemas of a navreplay recording.
 
-One topic per :class:`~navreplay.streams.StreamKind`. Standard ROS 2 messages are used where their
+One topic per :class:`~navreplay.core.streams.StreamKind`. Standard ROS 2 messages are used where their
 meaning matches exactly; project messages (package ``navreplay_msgs``) carry what none fits. Every
 message starts with a ``std_msgs/Header`` whose stamp is the sample time (equal to the MCAP log
 time) and whose ``frame_id`` names the frame (REP-103 ``_frd`` / ``_ned`` suffixes).
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from navreplay.streams import StreamKind
+from navreplay.core.streams import StreamKind
 
 PROFILE = "ros2"
 """MCAP profile of a recording."""
@@ -24,7 +24,7 @@ MESSAGE_ENCODING = "cdr"
 SCHEMA_ENCODING = "ros2msg"
 """MCAP schema encoding."""
 METADATA_NAME = "navreplay"
-"""Name of the MCAP metadata record holding :class:`~navreplay.streams.Metadata`."""
+"""Name of the MCAP metadata record holding :class:`~navreplay.core.streams.Metadata`."""
 FORMAT_VERSION = "1"
 """Version of this layout, stored in the metadata record under ``format_version``."""
 

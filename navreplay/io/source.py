@@ -4,7 +4,7 @@ Whatever the recording is, a replay reads it the same way: as :class:`Window` ob
 with the rows of every stream since the previous window and, per stream, the time up to which
 the stream is complete. An intact MCAP file is many windows (memory flat in the log's length,
 :mod:`navreplay.io.mcapread`); a damaged MCAP file, a rosbag2 bag (:mod:`navreplay.io.rosbag`)
-or a :class:`~navreplay.streams.Recording` in memory (:class:`MemorySource`) is one. Files are
+or a :class:`~navreplay.core.streams.Recording` in memory (:class:`MemorySource`) is one. Files are
 opened by :func:`navreplay.io.files.open_recording`.
 
 Examples
@@ -20,9 +20,10 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Self
 
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.io.topics import TopicSource
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 COMPLETE = 2**63 - 1
 """The time [ns] a stream whose every sample has been read is complete up to."""
@@ -149,7 +150,7 @@ class Source:
         if self._iterator is not None and hasattr(self._iterator, "close"):
             self._iterator.close()
 
-    def __enter__(self) -> Source:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -157,7 +158,7 @@ class Source:
 
 
 class MemorySource(Source):
-    """A :class:`~navreplay.streams.Recording` in memory: one window holding every stream.
+    """A :class:`~navreplay.core.streams.Recording` in memory: one window holding every stream.
 
     Parameters
     ----------

@@ -25,9 +25,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from navreplay.core.streams import Stream, StreamKind
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, Window
-from navreplay.streams import StreamKind
 
 UNIX_FROM = 1e9
 """A number of seconds from this value on is a UNIX time, below it a time since the start."""
@@ -95,7 +95,8 @@ class TimeSpan:
         """Both ends [ns] for a recording starting at ``t0_ns``."""
         lo = self.start.ns(t0_ns) if self.start is not None else None
         hi = self.end.ns(t0_ns) if self.end is not None else None
-        if lo is not None and hi is not None and not lo < hi:
+        if (self.start is not None and self.end is not None and lo is not None and hi is not None
+                and not lo < hi):
             raise TimeSpanError(f"--start {self.start.text} is not before --end {self.end.text}"
                                 f" (t = {(lo - t0_ns) * 1e-9:.3f} and {(hi - t0_ns) * 1e-9:.3f}"
                                 " s from the recording start)")
@@ -123,7 +124,7 @@ def cut_window(window: Window, lo: int | None, hi: int | None) -> Window:
 def cut_windows(windows: Iterator[Window], span: TimeSpan, name: str) -> Iterator[Window]:
     """A source's windows cut to ``span`` (module docstring). A span the recording's IMU does
     not reach is one :class:`RecordingError` naming the recording and the span."""
-    empty: dict[StreamKind, object] = {}
+    empty: dict[StreamKind, Stream] = {}
     handed = False
     bounds = None
     for window in windows:

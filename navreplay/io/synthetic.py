@@ -15,7 +15,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 
 T0_NS = 1_700_000_000_000_000_000
 """Default recording start [ns since the UNIX epoch] (2023-11-14)."""

@@ -6,7 +6,7 @@ Topics map to stream kinds by name (:data:`~navreplay.io.schemas.TOPICS`, replac
 kind with ``--topic KIND=TOPIC``), or, in a recording from elsewhere, by message type when
 exactly one topic carries it (:func:`choose_topics`). Sample times are the header stamps or
 the log times (:func:`sample_times`); :func:`build_stream` converts the fields of one topic
-into a :class:`~navreplay.streams.Stream` in navreplay's conventions and checks it.
+into a :class:`~navreplay.core.streams.Stream` in navreplay's conventions and checks it.
 """
 
 from __future__ import annotations
@@ -17,11 +17,17 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
+from navreplay.core.streams import Stream, StreamKind
 from navreplay.io.checks import first_problem, gap_report
 from navreplay.io.convert import DECODERS, AuxColumn, Convention
 from navreplay.io.errors import RecordingError, RecordingWarning
 from navreplay.io.schemas import KIND_BY_TYPE, MESSAGE_ENCODING, SPECS
-from navreplay.streams import Stream, StreamKind
+
+TopicNames = Mapping[StreamKind, str] | Mapping[str, str] | Mapping[StreamKind | str, str]
+"""The topic chosen for a stream, by its kind or the kind's name (``--topic``)."""
+FrameNames = (Mapping[StreamKind, Convention] | Mapping[str, Convention | str]
+              | Mapping[StreamKind | str, Convention | str])
+"""The axes convention of a stream (``--frame``), by its kind or the kind's name."""
 
 TIME_SOURCES = ("header", "log")
 """``--time``: sample times from the header stamps (default) or the log (receive) times."""
@@ -84,7 +90,7 @@ class Candidate:
     named: bool
 
 
-def topic_map(topics: Mapping[StreamKind | str, str] | None) -> dict[str, StreamKind]:
+def topic_map(topics: TopicNames | None) -> dict[str, StreamKind]:
     """Topic -> stream kind: the canonical topics, with ``topics`` (kind -> topic) replacing
     them kind by kind."""
     topic_kinds = {spec.topic: kind for kind, spec in SPECS.items()}
@@ -146,7 +152,7 @@ def choose_topics(
     wanted: Iterable[StreamKind],
     *,
     explicit: bool,
-    named: Mapping[StreamKind | str, str] | None,
+    named: TopicNames | None,
     available: str,
     what: str = "file",
 ) -> dict[StreamKind, tuple[Candidate, tuple[str, ...]]]:
@@ -185,13 +191,13 @@ def choose_topics(
         if c is not None:
             others = tuple(sorted(o.topic for o in of_kind if o.topic != c.topic))
             chosen[kind] = (c, others)
-    for kind, topic in (named or {}).items():
-        if StreamKind(kind) not in wanted:
+    for key, topic in (named or {}).items():
+        if StreamKind(key) not in wanted:
             continue
-        got = chosen.get(StreamKind(kind))
+        got = chosen.get(StreamKind(key))
         if got is None or got[0].topic != topic:
             raise RecordingError(
-                f"{where}: topic {topic} named for stream {StreamKind(kind).value} is not in "
+                f"{where}: topic {topic} named for stream {StreamKind(key).value} is not in "
                 f"the {what}; it has {available}"
             )
     if explicit:

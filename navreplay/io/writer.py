@@ -1,4 +1,4 @@
-"""Write a :class:`~navreplay.streams.Recording` as an MCAP file, atomically and in bulk.
+"""Write a :class:`~navreplay.core.streams.Recording` as an MCAP file, atomically and in bulk.
 
 Messages of all streams are merged by time (ties in :class:`StreamKind` order) and written in
 windows of about :data:`WINDOW` messages: each window's messages are CDR-encoded per stream as one
@@ -18,11 +18,13 @@ import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from navreplay import __version__
+from navreplay.core.streams import Recording, Stream, StreamKind
 from navreplay.io import cdr
 from navreplay.io.checks import first_problem
 from navreplay.io.convert import ENCODERS, AuxColumn, aux_columns, check_columns
 from navreplay.io.errors import RecordingError, RecordingExistsError
 from navreplay.io.metadata import encode_metadata
+from navreplay.io.outputs import fsync_path, release, temporary_path
 from navreplay.io.schemas import (
     MESSAGE_ENCODING,
     METADATA_NAME,
@@ -31,8 +33,6 @@ from navreplay.io.schemas import (
     SPECS,
     TopicSpec,
 )
-from navreplay.outputs import fsync_path, release, temporary_path
-from navreplay.streams import Recording, Stream, StreamKind
 
 WINDOW = 16_384
 """Messages encoded per window."""
@@ -132,7 +132,9 @@ def _write_mcap(out: BinaryIO, recording: Recording, plan: list[_Topic]) -> None
     add = writer.add_message
     bounds = _windows(plan)
     for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
-        times, channels, payloads = [], [], []
+        times: list[np.ndarray] = []
+        channels: list[np.ndarray] = []
+        payloads: list[bytes] = []
         for topic, cid, a, b in zip(plan, channel_ids, lo, hi, strict=True):
             if b <= a:
                 continue

@@ -18,6 +18,7 @@ One module per command (:mod:`~navreplay.jobs.simulate`, :mod:`~navreplay.jobs.r
 a ``progress(done, total)`` callback.
 """
 
+from navreplay.jobs.compare import CompareJob, compare
 from navreplay.jobs.config import check_scenario, filter_specs, scenario_values, split_filter_list
 from navreplay.jobs.demo import DemoJob, DemoReport, demo
 from navreplay.jobs.montecarlo import MonteCarloJob, montecarlo
@@ -27,7 +28,7 @@ from navreplay.jobs.simulate import SimulateJob, simulate
 from navreplay.viz.options import VizMode, VizOptions
 
 __all__ = [
-    "DEFAULT_OUT", "DemoJob", "DemoReport", "MonteCarloJob", "RunJob", "RunReport",
-    "SimulateJob", "VizMode", "VizOptions", "check_scenario", "demo", "filter_specs",
+    "CompareJob", "DEFAULT_OUT", "DemoJob", "DemoReport", "MonteCarloJob", "RunJob", "RunReport",
+    "SimulateJob", "VizMode", "VizOptions", "check_scenario", "compare", "demo", "filter_specs",
     "montecarlo", "run", "scenario_values", "simulate", "split_filter_list", "write_json",
 ]

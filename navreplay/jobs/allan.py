@@ -15,15 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from navreplay import units
+from navreplay.core import units
+from navreplay.core.streams import StreamKind
 from navreplay.io import RecordingError
 from navreplay.io.files import read_streams
+from navreplay.io.outputs import atomic_path
 from navreplay.io.span import TimeSpan, TimeSpanError
-from navreplay.outputs import atomic_path
 from navreplay.sensors import allan
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.specs import SensorSpecs, specs_toml
-from navreplay.streams import StreamKind
 
 MAX_GAP = 1.0
 """Longest gap in the IMU samples of a segment [s]: the Allan variance needs them contiguous."""
@@ -174,7 +174,7 @@ def run_allan(job: AllanJob) -> AllanReport:
             tmp.write_text(spec_text(specs, triads, segment), encoding="utf-8")
         written.append(("sensor specification", job.spec_path))
     if job.plot_path is not None:
-        from navreplay import figures
+        from navreplay.viz import figures
 
         fig = figures.allan_deviation(panels, title=segment.where)
         with atomic_path(job.plot_path) as tmp:
@@ -218,11 +218,11 @@ def read_segment(job: AllanJob) -> Segment:
         raise RecordingError(f"{path}: topic {topic}: {e}") from None
     start = t[0] if lo is None else (lo - recording.t0_ns) * 1e-9
     end = t[-1] if hi is None else (hi - recording.t0_ns) * 1e-9
-    span = f"t = {t[0]:.6g} to {t[-1]:.6g} s"
+    covered = f"t = {t[0]:.6g} to {t[-1]:.6g} s"
     sel = (t >= start) & (t <= end)
     if sel.sum() < 2:
         raise RecordingError(f"{path}: topic {topic}: no IMU samples in t = {start:g} to "
-                             f"{end:g} s (the topic covers {span})")
+                             f"{end:g} s (the topic covers {covered})")
     ts = t[sel]
     where = f"{path}: topic {topic}, t = {ts[0]:.6g} to {ts[-1]:.6g} s"
     dt = np.diff(ts)
@@ -300,7 +300,8 @@ def _show(field: str, value: float) -> str:
 
 def triad_table(triad: Triad, a: allan.TriadAnalysis) -> list[str]:
     """The fitted terms of one triad: per axis, the triad value and its interval."""
-    rows = [(f"{triad.name}", "x", "y", "z", "triad", f"{allan.CONFIDENCE:.0%} interval")]
+    rows: list[tuple[str, ...]] = [
+        (f"{triad.name}", "x", "y", "z", "triad", f"{allan.CONFIDENCE:.0%} interval")]
     for key, field in triad.fields.items():
         unit = ImuModel.field_units[field].datasheet
         shown = [_value(f.values()[key], field, f, key) for f in a.axis_fits]
@@ -343,8 +344,8 @@ def _value(value: float, field: str, fit: allan.NoiseFit | None = None,
 
 
 def figure_panels(triads: dict[str, allan.TriadAnalysis]) -> list[Any]:
-    """One :class:`navreplay.figures.AllanPanel` per triad, in display units."""
-    from navreplay.figures import AllanPanel, AllanTerm
+    """One :class:`navreplay.viz.figures.AllanPanel` per triad, in display units."""
+    from navreplay.viz.figures import AllanPanel, AllanTerm
 
     panels = []
     for triad in TRIADS:

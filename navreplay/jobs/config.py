@@ -7,7 +7,8 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from navreplay import params as _params
+from navreplay.core import params as _params
+from navreplay.filters.base import Filter
 from navreplay.filters.registry import load_filter
 from navreplay.filters.settings import ParamValues, Source
 from navreplay.replay.spec import FilterSpec
@@ -19,7 +20,9 @@ def split_filter_list(text: str) -> list[str]:
     >>> split_filter_list("ins,gps-ins[gps_pos_sigma_scale=2,lever_arm_b=0.1,0,0]")
     ['ins', 'gps-ins[gps_pos_sigma_scale=2,lever_arm_b=0.1,0,0]']
     """
-    items, depth, cur = [], 0, []
+    items: list[str] = []
+    cur: list[str] = []
+    depth = 0
     for ch in text:
         if ch == "[":
             depth += 1
@@ -90,7 +93,7 @@ def filter_specs(
     mistakes surface before any work.
     """
     items = split_filter_list(names) if names else []
-    parsed: list[tuple[str, str, dict[str, Any], type]] = []  # label, ref, inline, cls
+    parsed: list[tuple[str, str, dict[str, Any], type[Filter]]] = []  # label, ref, inline, cls
     for item in items:
         ref, inline = _inline_params(item)
         parsed.append((item, ref, inline, load_filter(ref)))
@@ -182,7 +185,7 @@ def scenario_values(
 
 
 def check_scenario(scenario: str, values: Mapping[str, Any]) -> None:
-    """Raise :class:`navreplay.params.ParamError` (one line) unless ``values`` make a run of
+    """Raise :class:`navreplay.core.params.ParamError` (one line) unless ``values`` make a run of
     ``scenario`` (parameters and ``[sensors.*]`` tables)."""
     from navreplay.sim.scenario import get_scenario, scenario_inputs
 

@@ -7,8 +7,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from navreplay import params as _params
 from navreplay.campaign.tasks import monte_carlo_tasks
+from navreplay.core import params as _params
 from navreplay.jobs.config import check_scenario
 from navreplay.jobs.report import DEFAULT_OUT, RunReport
 from navreplay.jobs.run import campaign, outputs_of

@@ -7,8 +7,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from navreplay.outputs import atomic_path
-from navreplay.streams import jsonable
+from navreplay.core.streams import jsonable
+from navreplay.io.outputs import atomic_path
 
 DEFAULT_OUT = Path("out")
 """Where derived outputs (.rrd, summaries, demo recordings) go by default."""

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from navreplay import export
-from navreplay.outputs import writing
+from navreplay.io.outputs import writing
 
 
 def export_names(labels: Sequence[str]) -> tuple[str, ...]:
@@ -26,7 +26,7 @@ def export_names(labels: Sequence[str]) -> tuple[str, ...]:
     a run's or a campaign's: the manifest, the Odometry MCAP, the reference's TUM and
     ``STEM.*`` per filter (CSV, TUM, innovations, ensemble and NIS files; ``STEM_2.*``... for
     repeated labels). An input or another output there is refused before any work
-    (:func:`navreplay.outputs.check_outputs`)."""
+    (:func:`navreplay.io.outputs.check_outputs`)."""
     names = [export.MANIFEST, export.ODOMETRY_FILE, f"{export.REFERENCE_LABEL}.tum"]
     for stem in dict.fromkeys(export.file_stem(label) for label in labels):
         names += [f"{stem}.*", f"{stem}_[0-9]*.*"]
@@ -48,7 +48,10 @@ class Outputs:
     export_dir: Path | None = None
     report_path: Path | None = None
     force: bool = False
+    command: str | None = None
+    """The command line, for the report."""
     _export: export.RunExport | None = None
+    _context: dict[str, Any] = dataclasses.field(default_factory=dict)
     _series: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
@@ -76,9 +79,11 @@ class Outputs:
                                             has_reference=run.has_truth, source=run.source,
                                             force=self.force, late=getattr(run, "late", {}))
         if self.report_path is not None:
-            from navreplay.report import RunSeries
+            from navreplay.report import RunSeries, run_context
 
             self._series = {label: RunSeries(label) for label in run.labels}
+            self._context = {"command": self.command,
+                             **run_context(getattr(run, "metadata", None), run.source)}
 
     def truth(self, truth: Any) -> None:
         """A window of the truth stream (later than before)."""
@@ -106,8 +111,13 @@ class Outputs:
                                              block.measurements)
         series = self._series.get(block.label)
         if series is not None:
+            from navreplay.viz.naming import innovation_rows
+
             for name, s in block.innovations.items():
-                series.add_nis(name, s.t, s.nis, int(s.nu.shape[1]))
+                dim = int(s.nu.shape[1])
+                series.add_nis(name, s.t, s.nis, dim)
+                series.add_innovations(name, s.t, s.nu, s.S,
+                                       innovation_rows(name, dim, block.measurement(name)))
 
     def write_run(self, summaries: Mapping[str, Mapping[str, Any]], *, title: str,
                   log_notes: Sequence[str] = ()) -> list[str]:
@@ -118,13 +128,15 @@ class Outputs:
             with self._writing():
                 written = self._export.close()
             self._export = None
+            assert self.export_dir is not None  # an export was asked for
             notes.append(f"Exported {len(written)} files to {self.export_dir} "
                          f"(see {self.export_dir / export.MANIFEST})")
         if self.report_path is not None:
             from navreplay import report
 
             report.write_run_report(self.report_path, list(self._series.values()), summaries,
-                                    title=title, force=self.force, log_notes=log_notes)
+                                    title=title, context=self._context, force=self.force,
+                                    log_notes=log_notes)
             notes.append(f"Report written to {self.report_path}")
         return notes
 

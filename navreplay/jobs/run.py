@@ -9,20 +9,20 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from navreplay import params as _params
-from navreplay import tables
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.tasks import RunOutput, RunTask, default_extract, file_tasks
+from navreplay.core import params as _params
+from navreplay.core.streams import Recording, StreamKind, seconds
 from navreplay.filters.result import RunResult
 from navreplay.filters.settings import setting_notes, summary_entries
 from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
 from navreplay.jobs.smooth import scratch_dir, unsmoothed_notes
+from navreplay.metrics import tables
 from navreplay.replay.pipeline import replay_file
 from navreplay.replay.session import Progress
 from navreplay.replay.spec import FilterSpec
-from navreplay.streams import Recording, StreamKind, seconds
 from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
 
 
@@ -92,6 +92,8 @@ class RunJob:
     executor : str
         Where several recordings run: ``process``, ``dask`` or ``dask://HOST:PORT``
         (:func:`navreplay.campaign.executors.make_executor`).
+    command : str, optional
+        The command line (shown in the report).
     smooth : bool
         Also smooth the filters that can be (``LABEL/rts``; :mod:`navreplay.jobs.smooth`).
     """
@@ -109,12 +111,14 @@ class RunJob:
     force: bool = False
     max_imu_gap: float | None = None
     executor: str = "process"
+    command: str | None = None
     smooth: bool = False
 
 
 def outputs_of(job: Any) -> Outputs:
     """The ``--export`` / ``--report`` outputs of a run or Monte Carlo job."""
-    return Outputs(job.export_dir, job.report_path, job.force)
+    return Outputs(job.export_dir, job.report_path, job.force,
+                   command=getattr(job, "command", None))
 
 
 def _check_files(paths: Sequence[Path]) -> None:
@@ -195,6 +199,8 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
         if done.salvaged:
             notes.append(salvaged_note(str(path), done.coverage))
         notes += outputs.write_run(done.summaries, title=title, log_notes=source.notes)
+        if sink is not None and done.has_truth:
+            sink.summaries(done.summaries)
         hint = close_output(sink, job.viz)
     except BaseException:
         outputs.abort()
@@ -278,22 +284,18 @@ def campaign(
             from navreplay.viz.ensemble import log_ensemble, log_runs
 
             declared = {spec.label: getattr(spec.filter_cls, "states", None) for spec in filters}
-            for label, e in ens.items():
+            for label, result in ens.items():
                 states = declared.get(label)
-                log_ensemble(sink, label, e, states if isinstance(states, tuple) else None)
+                log_ensemble(sink, label, result, states if isinstance(states, tuple) else None)
             log_runs(sink, drill)
         hint = close_output(sink, viz_options)
     except BaseException:
         if sink is not None:
             sink.abort()
         raise
-    summary = {
-        "runs": rows,
-        "ensemble": {label: {**e.summary(), **settings.get(label, {})}
-                     for label, e in ens.items()},
-        "wall_seconds": done.seconds,
-    }
-    notes += outputs.write_ensemble(ens, summary["ensemble"], title=title)
+    ensemble = {label: {**e.summary(), **settings.get(label, {})} for label, e in ens.items()}
+    summary = {"runs": rows, "ensemble": ensemble, "wall_seconds": done.seconds}
+    notes += outputs.write_ensemble(ens, ensemble, title=title)
     if summary_path is not None:
         write_json(summary_path, summary)
     parts = []

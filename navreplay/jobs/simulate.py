@@ -8,13 +8,13 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from navreplay import params as _params
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.tasks import RunTask
+from navreplay.core import params as _params
+from navreplay.core.streams import Recording
 from navreplay.filters.result import RunResult
 from navreplay.jobs.config import check_scenario
 from navreplay.replay.session import Progress
-from navreplay.streams import Recording
 
 
 @dataclasses.dataclass(frozen=True)
@@ -170,7 +170,7 @@ def simulate(job: SimulateJob, progress: Progress | None = None) -> list[Path]:
     """Simulate ``runs`` recordings and write them (atomically); returns their paths.
 
     Raises ``FileExistsError`` naming the first existing target, and
-    :class:`~navreplay.params.ParamError` for recordings that would not fit on disk or in
+    :class:`~navreplay.core.params.ParamError` for recordings that would not fit on disk or in
     memory (:func:`check_size`), before simulating anything (unless ``force``).
 
     The runs go to worker processes (one at least): a stop signal reaches this process at
@@ -180,7 +180,7 @@ def simulate(job: SimulateJob, progress: Progress | None = None) -> list[Path]:
     """
     import concurrent.futures as cf
 
-    from navreplay import lifecycle, outputs
+    from navreplay.io import lifecycle, outputs
 
     if job.runs < 1:
         raise _params.ParamError(f"--runs must be at least 1, got {job.runs}")

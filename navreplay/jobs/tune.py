@@ -6,7 +6,7 @@ Two objectives (docs/tuning.md):
 ``truth`` (a scenario, or recordings with a truth stream)
     ``J = mean_i (ln r_i)^2 + (ln NEES/dof)^2 + 0.1 mean_i ln RMS_i`` over the NEES states i of
     the ensemble: ``r_i`` the ratio RMS/sigma of the normalised errors and NEES/dof the
-    time-averaged NEES (:mod:`navreplay.consistency`), then accuracy (the RMS errors, whose
+    time-averaged NEES (:mod:`navreplay.metrics.consistency`), then accuracy (the RMS errors, whose
     logarithms make the weight independent of units) among consistent settings.
 ``held-out`` (recordings without truth, or asked for)
     GNSS fixes are dropped in windows (``--outage`` seconds every ``--outage-period``,
@@ -40,11 +40,12 @@ from typing import Any
 
 import numpy as np
 
-from navreplay import params as _params
 from navreplay.campaign.ensemble import RunFailedError, run_ensemble
 from navreplay.campaign.tasks import RunOutput, file_tasks
+from navreplay.core import params as _params
+from navreplay.core.streams import Recording, StreamKind, seconds
 from navreplay.io import RecordingWarning
-from navreplay.outputs import atomic_path
+from navreplay.io.outputs import atomic_path
 from navreplay.replay.holdout import (
     held_out_errors,
     held_out_truth_errors,
@@ -53,7 +54,6 @@ from navreplay.replay.holdout import (
 )
 from navreplay.replay.spec import FilterSpec
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import Recording, StreamKind, seconds
 
 VALIDATION_SEEDS = 1000
 """Offset of a scenario's validation seeds from its tuning seeds."""
@@ -198,7 +198,7 @@ class Score:
         The objective (smaller is better).
     parts : dict[str, float]
         What it is made of, for the report: ``NEES/dof`` (time-averaged), ``NEES in band``
-        (1 or 0, :mod:`navreplay.consistency` at its false alarm), ``worst RMS/σ`` (the NEES
+        (1 or 0, :mod:`navreplay.metrics.consistency` at its false alarm), ``worst RMS/σ`` (the NEES
         state's ratio furthest from 1) and the ensemble summary's ``pos_rms_h`` [m],
         ``att_rms_level`` and ``att_rms_heading`` [rad] (truth); ``held-out RMS [m]`` and ``NIS/dof <name>``
         per measurement (held-out).
@@ -228,7 +228,7 @@ class TuneReport:
         source = j.scenario or ", ".join(p.name for p in j.recordings)
         lines = [f"tune {j.filter} on {source}, objective {self.objective}: {self.trials} trials"
                  + (f" ({self.resumed} resumed from {j.storage})" if self.resumed else "")]
-        rows = [("parameter", "start", "chosen", "range")]
+        rows: list[tuple[str, ...]] = [("parameter", "start", "chosen", "range")]
         for r in j.ranges:
             rows.append((r.name, f"{self.start[r.name]:.4g}", f"{self.best[r.name]:.4g}",
                          r.text()))
@@ -377,8 +377,10 @@ def _prepare(job: TuneJob, tmp: Path) -> Data:
     if job.scenario is not None:
         from navreplay.sim.scenario import simulate
 
+        scenario = job.scenario
+
         def load(seed: int) -> Recording:
-            return simulate(job.scenario, dict(job.values), seed)
+            return simulate(scenario, dict(job.values), seed)
 
         search_ids = [job.seed + i for i in range(job.runs)]
         valid_ids = [job.seed + VALIDATION_SEEDS + i for i in range(job.validation_runs)]
@@ -419,7 +421,8 @@ def _prepare(job: TuneJob, tmp: Path) -> Data:
     items = [load(s) for s in search_ids] if job.scenario is not None else recordings
     names = ([f"seed {s}" for s in search_ids] if job.scenario is not None
              else [p.name for p in job.recordings])
-    search, validation = [], []
+    held_search: list[Path] = []
+    held_validation: list[Path] = []
     counts = [0, 0]
     for k, (name, rec) in enumerate(zip(names, items, strict=True)):
         imu = rec[StreamKind.IMU]
@@ -432,13 +435,13 @@ def _prepare(job: TuneJob, tmp: Path) -> Data:
                 f"every {job.outage_period:g} s (one for the search, one for the validation); "
                 "shorten --outage-period")
         try:
-            search.append(write(f"search_{k}", hold_out(rec, windows[0::2])))
-            validation.append(write(f"validation_{k}", hold_out(rec, windows[1::2])))
+            held_search.append(write(f"search_{k}", hold_out(rec, windows[0::2])))
+            held_validation.append(write(f"validation_{k}", hold_out(rec, windows[1::2])))
         except ValueError as e:
             raise _params.ParamError(f"{name}: {e}") from None
         counts[0] += len(windows[0::2])
         counts[1] += len(windows[1::2])
-    return Data(objective, tuple(search), tuple(validation),
+    return Data(objective, tuple(held_search), tuple(held_validation),
                 (f"{counts[0]} GNSS outages of {job.outage:g} s (every "
                  f"{2 * job.outage_period:g} s) in {', '.join(names)}",
                  f"the {counts[1]} outages between them"), _sensors(items[0]))

@@ -9,14 +9,15 @@ import dataclasses
 import warnings
 from pathlib import Path
 
+from navreplay.core.streams import seconds
 from navreplay.io.checks import gap_report, read_policy
+from navreplay.io.direct import DirectSource
 from navreplay.io.errors import RecordingError
 from navreplay.io.files import BAGS, file_kind, read_streams
 from navreplay.io.gins import NAV_TYPE
 from navreplay.io.info import format_info, recording_info
 from navreplay.logs.options import LogOptions
 from navreplay.logs.reference import REFERENCE_TYPES
-from navreplay.streams import seconds
 
 
 def _sensor_lines(sensors: dict, where: str) -> list[str]:
@@ -60,21 +61,23 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     options = options or LogOptions()
     path = Path(path)
     damage = None
-    kind = file_kind(path)
-    if kind.name in BAGS:
+    listing: list[tuple[str, str, int, int | None, int | None]]
+    container = file_kind(path)
+    if container.name in BAGS:
         from navreplay.io.rosbag import bag_topics, check_bag
 
         check = check_bag(path)
         found = check.found if check is not None and check.found is not None else {}
         listing = [(t, ty, found.get(t, n), None, None) for t, ty, _, n in bag_topics(path)]
-        lines = [f"{path}  ({kind.name}, {sum(r[2] for r in listing)} messages)"]
+        lines = [f"{path}  ({container.name}, {sum(r[2] for r in listing)} messages)"]
         if check is not None and check.problems:
             damage = "; ".join(check.problems)
             lines.append(f"DAMAGED: the data files disagree with metadata.yaml: {damage}")
-    elif kind.name != "mcap":  # a log read straight into streams (io.direct)
-        listing = [(t.name, t.type_name, t.count, None, None)
-                   for t in kind.source(path).topics()]
-        lines = [f"{path}  ({kind.name}, {sum(r[2] for r in listing)} messages)"]
+    elif container.name != "mcap":  # a log read straight into streams (io.direct)
+        direct = container.source(path)
+        assert isinstance(direct, DirectSource)  # the kinds read straight into streams
+        listing = [(t.name, t.type_name, t.count, None, None) for t in direct.topics()]
+        lines = [f"{path}  ({container.name}, {sum(r[2] for r in listing)} messages)"]
     else:
         info = recording_info(path)
         listing = [(t.topic, t.schema or "-", t.count, t.start_ns, t.end_ns)
@@ -99,10 +102,10 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             raise RecordingError(f"{path}: {exc}") from None
         lines.append("--start/--end: the streams below over "
                      f"{options.span.describe(recording.t0_ns)}")
-        for kind, s in list(recording.streams.items()):
+        for stream_kind, s in list(recording.streams.items()):
             a = 0 if lo is None else int(s.t_ns.searchsorted(lo))
             b = len(s) if hi is None else int(s.t_ns.searchsorted(hi, side="right"))
-            recording.streams[kind] = s.slice(a, max(a, b))
+            recording.streams[stream_kind] = s.slice(a, max(a, b))
     by_topic = {src.topic: kind for kind, src in sources.items()}
     rows = [("topic", "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
              "end [s]", "gaps")]
@@ -134,6 +137,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     if problem is not None:
         return LogDescription("\n".join([*lines, "", f"streams: cannot be read: {problem}"]),
                               damage, problem)
+    assert recording is not None  # read, or a problem above
     lines += ["", f"streams (what `navreplay run` replays; times from {options.time} "
                   f"{'stamps' if options.time == 'header' else 'times'}):"]
     for kind, src in sources.items():
@@ -141,9 +145,9 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         axes = (f"{src.convention.value.upper()}: {src.reason}" if src.convention
                 else "no axes to convert")
         lines.append(f"  {kind.value:<8} <- {src.topic}: {axes}{picked}")
-        gaps = gap_report(recording[kind], recording.t0_ns)
-        if gaps:
-            lines.append(f"  {'':<8}    {gaps}")
+        stream_gaps = gap_report(recording[kind], recording.t0_ns)
+        if stream_gaps:
+            lines.append(f"  {'':<8}    {stream_gaps}")
     for w in caught:
         text = str(w.message)
         if "several topics" in text or "header stamps" in text:

@@ -19,11 +19,11 @@ import math
 
 import numpy as np
 
+from navreplay.core.streams import Recording, StreamKind, seconds
 from navreplay.io.checks import named_convention
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
 from navreplay.io.topics import TopicSource
-from navreplay.streams import Recording, StreamKind, seconds
 
 STILL_BLOCK = 1.0
 """Block length of the stillness test [s]."""
@@ -88,8 +88,8 @@ def check_accelerometer(recording: Recording, source: TopicSource | None) -> str
             else f"{span(imu.t_ns, recording.t0_ns)} (averaged)")
     f = imu["f_b"][window].mean(axis=0)
     g = 9.80665
-    other = {Convention.FLU: "frd", Convention.FRD: "flu"}.get(
-        source.convention if source else None, "frd")
+    other = ({Convention.FLU: "frd", Convention.FRD: "flu"}.get(source.convention, "frd")
+             if source and source.convention else "frd")
     if f[2] > 0.5 * g:
         raise FrameError(
             f"{recording_where(recording)}: {_where(source, 'IMU')}: over {what} the "
@@ -140,8 +140,8 @@ def check_magnetometer(recording: Recording, source: TopicSource | None,
     if abs(expected) < 0.2 * np.linalg.norm(field):
         return "magnetometer: not checked (the field is nearly horizontal here)"
     if np.sign(measured) != np.sign(expected):
-        other = {Convention.FLU: "frd", Convention.FRD: "flu"}.get(
-            source.convention if source else None, "frd")
+        other = ({Convention.FLU: "frd", Convention.FRD: "flu"}.get(source.convention, "frd")
+                 if source and source.convention else "frd")
         raise FrameError(
             f"{recording_where(recording)}: {_where(source, 'magnetometer')}: the field along "
             f"down is {measured * 1e9:+.0f} nT but the World Magnetic Model gives "

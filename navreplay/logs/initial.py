@@ -40,14 +40,14 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Recording, Stream, StreamKind, seconds
+from navreplay.core.units import DEG_PER_HOUR, MICRO_G
 from navreplay.filters.base import NAV_PARTS
 from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_dcm, euler_to_quat, quat_to_euler, wrap_angle
 from navreplay.io.errors import RecordingError
 from navreplay.logs.framecheck import still_window, wmm_field_ned
 from navreplay.logs.options import InitMethod
-from navreplay.streams import Recording, Stream, StreamKind, seconds
-from navreplay.units import DEG_PER_HOUR, MICRO_G
 
 GYROCOMPASS_MAX_SIGMA = math.radians(5.0)
 MAG_HEADING_SIGMA = math.radians(3.0)

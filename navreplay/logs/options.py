@@ -10,11 +10,11 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from navreplay.core.params import ParamError
+from navreplay.core.streams import StreamKind
 from navreplay.io.checks import STANDARD_GRAVITY, ImuRange, ReadPolicy
 from navreplay.io.convert import Convention
 from navreplay.io.span import TimeSpan, TimeSpanError
-from navreplay.params import ParamError
-from navreplay.streams import StreamKind
 
 REFERENCE = "reference"
 """The key of ``--frame`` for a reference's world frame (``reference=enu|ned``)."""

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.filters.base import Filter, consumed_streams
 from navreplay.io.checks import read_policy
 from navreplay.io.files import open_recording
@@ -25,7 +26,6 @@ from navreplay.logs.framecheck import check_frames
 from navreplay.logs.initial import initial_nav
 from navreplay.logs.options import REFERENCE, LogOptions
 from navreplay.logs.reference import read_reference, reference_stream
-from navreplay.streams import Recording, StreamKind
 
 
 class LogSource(Source):

@@ -1,6 +1,6 @@
 """References to score against: a topic of the log or a TUM / CSV file, as a truth-like stream.
 
-The result is a :class:`~navreplay.streams.Stream` of kind ``truth`` holding whichever of
+The result is a :class:`~navreplay.core.streams.Stream` of kind ``truth`` holding whichever of
 ``pos`` (lat, lon, h), ``v_n`` (NED) and ``q_nb`` (FRD -> NED) the reference has; scoring uses
 what is there (docs/real-logs.md).
 
@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Recording, Stream, StreamKind, seconds
 from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_normalize
 from navreplay.io.checks import current_policy, named_convention
@@ -62,7 +63,6 @@ from navreplay.metrics.coverage import (  # noqa: F401  (their home is the scori
     coverage_warning,
     reference_coverage,
 )
-from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE = "geometry_msgs/msg/PoseStamped"
@@ -466,6 +466,7 @@ def read_reference(spec: str, log: Path, recording: Recording,
 
 def origin_from_gnss(ref: Reference, recording: Recording) -> np.ndarray:
     """Geodetic origin (lat, lon, h) of a local reference fitted to the GNSS fixes."""
+    assert ref.local_ned is not None  # a local reference
     return _gnss_fit(ref, ref.local_ned, recording)[0]
 
 

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from navreplay.consistency import ConsistencyStats, EnsembleConsistency
 from navreplay.filters.base import State
+from navreplay.metrics.consistency import ConsistencyStats, EnsembleConsistency
 from navreplay.metrics.outages import ensemble_outages
 from navreplay.metrics.run import RunMetrics
 from navreplay.metrics.stats import CEP50_FACTOR, chi2_bounds_per_count, rms
@@ -32,6 +32,7 @@ class _Acc:
             self.sum = np.zeros_like(v)
             self.sq = np.zeros_like(v)
             self.n = np.zeros(v.shape, dtype=np.int64)
+        assert self.sq is not None and self.n is not None  # created with the sum
         m = v.shape[0]
         if m > self.sum.shape[0]:
             grow = ((0, m - self.sum.shape[0]),) + ((0, 0),) * (v.ndim - 1)
@@ -44,13 +45,19 @@ class _Acc:
         self.sq[:m] += v * v
         self.n[:m] += ok
 
+    def counts(self) -> np.ndarray:
+        """Samples per index (a run added first)."""
+        if self.n is None:
+            raise ValueError("no run added")
+        return self.n
+
     def mean(self) -> np.ndarray:
         with np.errstate(invalid="ignore", divide="ignore"):
-            return self.sum / self.n
+            return np.asarray(self.sum) / self.counts()
 
     def rms(self) -> np.ndarray:
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.sqrt(self.sq / self.n)
+            return np.sqrt(np.asarray(self.sq) / self.counts())
 
 
 @dataclasses.dataclass
@@ -88,7 +95,7 @@ class EnsembleResult:
         Mean true distance travelled [m].
     consistency : EnsembleConsistency or None
         Per-axis RMS/sigma with intervals and checks, and the per-run time-averaged NEES tests
-        (:mod:`navreplay.consistency`).
+        (:mod:`navreplay.metrics.consistency`).
     outages : tuple of (start, end)
         The GNSS outages [s] the runs share (none when their recordings differ in them),
         scored one by one in the summary (:func:`navreplay.metrics.outages.ensemble_outages`).
@@ -240,7 +247,7 @@ class EnsembleStats:
         nan3 = np.full((M, 3), np.nan)
         # errors never scored (a part of the solution the filters do not output, a column the
         # reference lacks) are absent
-        scored = {k: a for k, a in self._nav.items() if a.sum is not None and a.n.any()}
+        scored = {k: a for k, a in self._nav.items() if a.sum is not None and a.counts().any()}
         rms_ = {k: a.rms() for k, a in scored.items()}
         mean = {k: a.mean() for k, a in scored.items()}
         sigma = {k: np.sqrt(a.mean()) if a.sum is not None else nan3
@@ -274,7 +281,7 @@ class EnsembleStats:
             nees_count=nees_count,
             nees_dof=dof,
             nees_bounds=(lo, hi),
-            nis_mean={name: (tref[0], acc.mean(), acc.n, d)
+            nis_mean={name: (tref[0], acc.mean(), acc.counts(), d)
                       for name, (acc, tref, d) in self._nis.items()},
             cep50=c50,
             distance=self._dist.mean(),

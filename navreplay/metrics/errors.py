@@ -118,6 +118,7 @@ def _nav_quantity(q: Nav, result: RunResult, truth: Mapping[str, np.ndarray],
     if not result.has(column) or column not in truth:
         return None
     if column == "pos":
+        assert result.nav_pos is not None  # has("pos")
         d = result.nav_pos[:, i] - truth["pos"][:, i]
         return sign * (wrap_angle(d) if i == 1 else d)
     if column == "v_n":
@@ -144,7 +145,8 @@ def reference_value(state: State, truth: Mapping[str, np.ndarray],
         if t.column not in truth:
             return None
         v = truth[t.column]
-        return v[(slice(None), *t.index)] if t.index else v
+        columns: tuple[Any, ...] = (slice(None), *t.index)
+        return v[columns] if t.index else v
     if isinstance(t, TrueConstant):
         return _constant(t, true_errors)
     return None
@@ -201,7 +203,8 @@ def state_errors(
     if not names:
         return (), np.zeros((M, 0)), np.zeros((M, 0, 0))
     ix = np.array(idx)
-    return tuple(names), np.stack(cols, axis=1), result.P[:, ix[:, None], ix[None, :]]
+    P = np.take(np.take(result.P, ix, axis=1), ix, axis=2)  # twice as fast as P[:, ix, ix.T]
+    return tuple(names), np.stack(cols, axis=1), P
 
 
 def extra_errors(result: RunResult, truth: Mapping[str, np.ndarray],
@@ -234,6 +237,7 @@ def nav_sigma(result: RunResult, states: tuple[State, ...] | None = None) -> dic
     var = np.diagonal(result.P, axis1=1, axis2=2)
     scale = None
     if result.has("pos"):
+        assert result.nav_pos is not None  # has("pos")
         lat, h = result.nav_pos[:, 0], result.nav_pos[:, 2]
         R_M, R_N = earth.radii(lat)
         scale = {Nav.LAT: R_M + h, Nav.LON: (R_N + h) * np.cos(lat)}

@@ -9,7 +9,7 @@ A run's scores accumulate block by block (:class:`OutageScores`, inside
 epoch (:func:`ensemble_outages`): the RMS over the runs of the error at each outage's end over
 the RMS predicted sigma there, checked as a mean of one chi-square(1) sample per run (a
 horizontal error has between one and two degrees of freedom: the band is conservative), at the
-false alarm :data:`navreplay.consistency.CHECK_FALSE_ALARM` for the outages together.
+false alarm :data:`navreplay.metrics.consistency.CHECK_FALSE_ALARM` for the outages together.
 
 Examples
 --------
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from navreplay import consistency
+from navreplay.metrics import consistency
 
 Outage = tuple[float, float]
 """A GNSS outage: start and end [s since the recording start]; no fix at or after the start and
@@ -92,8 +92,9 @@ class OutageScores:
         out = []
         for i, (start, end) in enumerate(self.outages):
             row: dict[str, float] = {"start": start, "end": end}
-            if self._end[i] is not None:
-                row.update(self._end[i])
+            end_row = self._end[i]
+            if end_row is not None:
+                row.update(end_row)
                 for j, key in enumerate(("rms_h", "rms_v")):
                     n = self._count[i, j]
                     row[key] = math.sqrt(self._sq[i, j] / n) if n else math.nan

@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Recording, Stream, StreamKind, seconds
 from navreplay.geo.rotations import wrap_angle
 from navreplay.metrics.errors import position_error_ned
 from navreplay.sensors.gps import recorded_outages
-from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 
 @dataclasses.dataclass(frozen=True)

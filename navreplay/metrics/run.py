@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.filters.base import State
 from navreplay.filters.result import RunResult
 from navreplay.metrics.errors import (
@@ -21,7 +22,6 @@ from navreplay.metrics.errors import (
 from navreplay.metrics.reference import Reference
 from navreplay.metrics.stats import nees
 from navreplay.metrics.summary import RunSummary
-from navreplay.streams import Recording, StreamKind
 
 
 @dataclasses.dataclass
@@ -81,7 +81,7 @@ class RunMetrics:
     outages: tuple[tuple[float, float], ...] = ()
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
-        """Scalar scores (SI; see :data:`navreplay.tables.SUMMARY_UNITS`) for tables and JSON:
+        """Scalar scores (SI; see :data:`navreplay.metrics.tables.SUMMARY_UNITS`) for tables and JSON:
         those of :class:`~navreplay.metrics.summary.RunSummary` with the run as one block."""
         summary = RunSummary(probability)
         summary.add(self)
@@ -150,6 +150,7 @@ def run_metrics(
     truth = ref.at(result.t)
     nav = None
     if result.nav_pos is not None:
+        assert result.nav_v_n is not None and result.nav_q_nb is not None  # with the position
         nav = nav_errors(result.nav_pos, result.nav_v_n, result.nav_q_nb, truth,
                          result.navigation)
     nav_for_states = nav if nav is not None else NavErrors(*(np.full((M, 3), np.nan),) * 4)

@@ -13,12 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Stream, seconds
 from navreplay.filters.result import RunResult, concat
 from navreplay.metrics.coverage import CoverageCount
 from navreplay.metrics.reference import Reference
 from navreplay.metrics.run import RunMetrics, row_nis, run_metrics
 from navreplay.metrics.summary import RunSummary
-from navreplay.streams import Stream, seconds
 
 Scored = Callable[[RunResult, RunMetrics | None, Stream | None], None]
 """Called with each block of rows as it is scored, its metrics (None without truth) and the
@@ -120,7 +120,8 @@ class RunScorer:
         keep = max(int(np.searchsorted(ts, self.t0_ns + round(t[-1] * 1e9), side="right")) - 1,
                    0)
         if keep:
-            self._offset += float(ref.distance(np.array([(int(ts[keep]) - self.t0_ns) * 1e-9]))[0])
+            self._offset += float(np.asarray(
+                ref.distance(np.array([(int(ts[keep]) - self.t0_ns) * 1e-9])))[0])
             self._truth = self._truth.slice(keep, len(self._truth))
 
     def coverage(self) -> float:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from navreplay import chi2
+from navreplay.core import chi2
 
 CEP50_FACTOR = 0.5887
 """CEP50 = CEP50_FACTOR (LatRMS + LongRMS) (circular approximation for similar axes)."""

@@ -1,6 +1,6 @@
 """The scalar scores of one run, accumulated block by block in memory independent of its length:
 what the summary table and JSON of ``navreplay run`` show (SI; units in
-:data:`navreplay.tables.SUMMARY_UNITS`). A whole run is one block
+:data:`navreplay.metrics.tables.SUMMARY_UNITS`). A whole run is one block
 (:meth:`navreplay.metrics.RunMetrics.summary`).
 
 Examples

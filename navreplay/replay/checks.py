@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from navreplay.core.streams import Recording, Stream, StreamKind
 from navreplay.filters.base import Filter
 from navreplay.io.checks import first_problem
 from navreplay.io.source import recording_name
 from navreplay.replay.errors import InvalidRecordingError, MissingStreamError
-from navreplay.streams import Recording, Stream, StreamKind
 
 
 def check_streams(recording: Recording | Mapping[StreamKind, Stream], filter_cls: type[Filter],

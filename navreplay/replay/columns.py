@@ -69,6 +69,7 @@ class Columns:
         self.P[m] = est.P
         if self.has_nav:
             nav = est.nav
+            assert nav is not None  # checked against the filter's navigation before
             self.pos[m] = nav.pos
             self.v_n[m] = nav.v_n
             self.q_nb[m] = nav.q_nb

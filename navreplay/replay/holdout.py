@@ -21,8 +21,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from navreplay.core.streams import Recording, Stream, StreamKind, seconds
 from navreplay.filters.result import RunResult
-from navreplay.streams import Recording, Stream, StreamKind, seconds
 
 HELD_OUT = "held_out"
 """Key of ``metadata.extra`` holding the dropped fixes: ``t_ns`` and ``pos`` (lat, lon [rad],
@@ -115,6 +115,7 @@ def held_out_truth_errors(result: RunResult, recording: Recording) -> np.ndarray
 def _horizontal(result: RunResult, t: np.ndarray, pos: np.ndarray) -> np.ndarray:
     from navreplay.metrics import position_error_ned
 
+    assert result.nav_pos is not None  # held-out fixes score a position
     est = np.column_stack([np.interp(t, result.t, result.nav_pos[:, i]) for i in range(3)])
     d = position_error_ned(est, pos)
     return np.hypot(d[:, 0], d[:, 1])

@@ -30,6 +30,9 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
+import numpy as np
+
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.filters.base import Filter, FilterParams, TruthColumn
 from navreplay.filters.result import RunResult, concat, concat_innovations
 from navreplay.filters.settings import summary_entries
@@ -48,7 +51,6 @@ from navreplay.replay.smoothing import (
 )
 from navreplay.replay.spec import FilterSpec
 from navreplay.sensors.gps import recorded_outages
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 
 @dataclasses.dataclass(frozen=True)
@@ -293,31 +295,37 @@ def _replay_file(
             stage.start(start)
         estimates = [0] * len(specs)
         window: Window | None = first
+        del first  # each window goes once it is replayed
+        keep_empty = True
         while window is not None:
             known = {k: (COMPLETE if window.final else t) for k, t in window.known.items()}
-            truth = window.get(StreamKind.TRUTH)
-            if truth is not None and len(truth):
-                for stage in stages:
-                    stage.truth(truth)
-                if truth_store is not None:
-                    truth_store.add(truth)
-            for k, (session, scorer) in enumerate(zip(sessions, scorers, strict=True)):
-                if scorer is not None:
-                    scorer.add_truth(truth, final=window.final)
-                block = session.feed(window, final=window.final, known=known)
-                estimates[k] += block.t.shape[0] + session.live_rows
-                for stage in stages:
-                    stage.innovations(block)
-                if scorer is not None:
-                    scorer.add(block)
-                else:
-                    rows = block.rows(0, block.t.shape[0])
+            for piece, piece_known, final in _pieces(window, known, output_rate,
+                                                     keep_empty=keep_empty):
+                truth = piece.get(StreamKind.TRUTH)
+                if truth is not None and len(truth):
                     for stage in stages:
-                        stage.rows(rows, None, None)
-                if window.final and estimates[k] == 0:
-                    empty = block.rows(0, 0)  # no estimate at all: the outputs' headers
+                        stage.truth(truth)
+                    if truth_store is not None:
+                        truth_store.add(truth)
+                for k, (session, scorer) in enumerate(zip(sessions, scorers, strict=True)):
+                    if scorer is not None:
+                        scorer.add_truth(truth, final=final)
+                    block = session.feed(piece, final=final, known=piece_known)
+                    estimates[k] += block.t.shape[0] + session.live_rows
                     for stage in stages:
-                        stage.rows(empty, None, None)
+                        stage.innovations(block)
+                    if scorer is not None:
+                        scorer.add(block)
+                    else:
+                        rows = block.rows(0, block.t.shape[0])
+                        for stage in stages:
+                            stage.rows(rows, None, None)
+                    if final and estimates[k] == 0:
+                        empty = block.rows(0, 0)  # no estimate at all: the outputs' headers
+                        for stage in stages:
+                            stage.rows(empty, None, None)
+                del piece, truth  # the piece's estimates go before the next is replayed
+            keep_empty = False
             tracker.window(window)
             window = None if window.final else next(source)
         summaries = {spec.label: {**scorer.result(), **summary_entries(session.settings)}
@@ -349,6 +357,40 @@ def _replay_file(
         raise
     source.close()
     return FileRun(summaries, has_truth, source.salvaged, source.coverage(), covered)
+
+
+PIECE_OUTPUTS = 6_000
+"""Output ticks (at the output rate) of the longest piece of a window fed to the filters at
+once: a block of estimates carries a covariance per row, so at high output rates a reader's
+window (about 60 000 IMU samples) is replayed in pieces of bounded memory."""
+
+
+def _pieces(window: Window, known: dict[StreamKind, int], output_rate: float | None, *,
+            keep_empty: bool) -> Iterator[tuple[dict[StreamKind, Stream],
+                                                dict[StreamKind, int], bool]]:
+    """A window as consecutive pieces of at most :data:`PIECE_OUTPUTS` output ticks of the
+    IMU's time: (streams, the time each is known to, final). The pieces are what a reader of
+    shorter windows would hand over; the estimates do not depend on where the cuts fall.
+    ``keep_empty``: the first piece keeps every stream (the first window holds every stream
+    read), later ones only those with rows."""
+    imu = window.get(StreamKind.IMU)
+    span = int(PIECE_OUTPUTS / output_rate * 1e9) if output_rate else 0
+    if not span or imu is None or len(imu) < 2 or int(imu.t_ns[-1] - imu.t_ns[0]) <= span:
+        yield window, known, window.final
+        return
+    cuts = np.arange(int(imu.t_ns[0]) + span, int(imu.t_ns[-1]), span, dtype=np.int64)
+    lo = dict.fromkeys(window, 0)
+    for i, cut in enumerate([*cuts.tolist(), None]):
+        streams = {}
+        for kind, s in window.items():
+            hi = len(s) if cut is None else int(np.searchsorted(s.t_ns, cut, side="right"))
+            if hi > lo[kind] or (keep_empty and i == 0):
+                streams[kind] = s.slice(lo[kind], hi)
+            lo[kind] = hi
+        if cut is None:
+            yield streams, known, window.final
+        else:
+            yield streams, {k: min(t, cut) for k, t in known.items()}, False
 
 
 def _feed_smoothed(blocks: Iterator[RunResult], truth: TruthStore | None,
@@ -445,13 +487,14 @@ class _Progress:
         counts for the recording's length after the forward passes."""
         if self.progress is None or self.duration is None or epochs <= 0:
             return None
-        total = int((self.n + self.smoothed) * self.duration)
-        base = (self.n + i) * self.duration
+        progress, duration = self.progress, self.duration
+        total = int((self.n + self.smoothed) * duration)
+        base = (self.n + i) * duration
         seen = [0]
 
         def report(done: int) -> None:
             seen[0] += done
-            self.progress(min(int(base + self.duration * seen[0] / epochs), total), total)
+            progress(min(int(base + duration * seen[0] / epochs), total), total)
 
         return report
 

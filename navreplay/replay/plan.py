@@ -19,8 +19,8 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from navreplay.core.streams import Recording, Stream, StreamKind
 from navreplay.filters.base import TICK
-from navreplay.streams import Recording, Stream, StreamKind
 
 STREAM_PRIORITY: tuple[StreamKind, ...] = (
     StreamKind.MASTER_INS,

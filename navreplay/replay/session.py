@@ -31,9 +31,11 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Stream, StreamKind
 from navreplay.filters.base import (
     TICK,
     Estimate,
@@ -52,8 +54,8 @@ from navreplay.filters.result import RunResult
 from navreplay.filters.settings import FilterSettings, build_params
 from navreplay.filters.smoothable import Smoothable
 from navreplay.io.errors import RecordingError
+from navreplay.io.lifecycle import from_signal
 from navreplay.io.source import COMPLETE, Window
-from navreplay.lifecycle import from_signal
 from navreplay.replay.checks import check_streams
 from navreplay.replay.columns import Columns, innovation_series, undeclared
 from navreplay.replay.errors import (
@@ -72,7 +74,6 @@ from navreplay.replay.plan import EventPlan, aiding_kinds, merge_streams, window
 from navreplay.replay.smoothing import ForwardStore
 from navreplay.replay.spec import FilterSpec
 from navreplay.sensors.specs import SensorSpecs
-from navreplay.streams import Stream, StreamKind
 
 CHECK_EVERY = 1024
 """Estimates between divergence (non-finite) checks; events between live views and progress
@@ -121,7 +122,7 @@ class ReplaySession:
     ------
     MissingStreamError
         The recording lacks a required stream or column (before the filter is built).
-    navreplay.params.ParamError
+    navreplay.core.params.ParamError
         Parameters that do not fit the filter's.
     FilterInitError
         The filter raised while it was built.
@@ -195,7 +196,7 @@ class ReplaySession:
         self._imu_required = StreamKind.IMU in filter_cls.requires
         self._pacing, self._progress, self._live = pacing, progress, live
         self._observe_interval = observe_interval
-        self._meta = dict(
+        self._meta: dict[str, Any] = dict(
             filter_name=filter_cls.name,
             label=label,
             recording=source,

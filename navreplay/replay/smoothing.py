@@ -22,11 +22,11 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import Stream, StreamKind
 from navreplay.filters import rts
 from navreplay.filters.base import Estimate
 from navreplay.filters.result import RunResult
 from navreplay.filters.smoothable import Smoothable, SmoothingStep
-from navreplay.streams import Stream, StreamKind
 
 CHUNK = 1024
 """Epochs per stored chunk."""
@@ -95,7 +95,8 @@ class ForwardStore:
         if self._buf is None or self._m == 0:
             return
         path = self.directory / f"forward-{len(self.paths):06d}.npz"
-        np.savez(path, **{k: v[:self._m] for k, v in self._buf.items()})
+        arrays: dict[str, Any] = {k: v[:self._m] for k, v in self._buf.items()}
+        np.savez(path, **arrays)
         self.paths.append(path)
         self._m = 0
 
@@ -110,7 +111,8 @@ class TruthStore:
 
     def add(self, truth: Stream) -> None:
         path = self.directory / f"truth-{len(self.paths):06d}.npz"
-        np.savez(path, t_ns=truth.t_ns, **{f"c_{k}": v for k, v in truth.columns.items()})
+        arrays: dict[str, Any] = {f"c_{k}": v for k, v in truth.columns.items()}
+        np.savez(path, t_ns=truth.t_ns, **arrays)
         self.frame_id = truth.frame_id
         self.paths.append(path)
 

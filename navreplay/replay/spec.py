@@ -56,13 +56,14 @@ class FilterSpec:
     params: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     label: str = ""
     cls: type[Filter] | None = dataclasses.field(default=None, compare=False, repr=False)
+    _values: ParamValues | FilterParams | None = dataclasses.field(
+        default=None, init=False, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if not self.label:
             default = self.ref.rpartition(":")[2] if ":" in self.ref else self.ref
             object.__setattr__(self, "label", default)
         object.__setattr__(self, "params", ParamValues(self.params))  # keeps the sources
-        object.__setattr__(self, "_values", None)
 
     @classmethod
     def of(cls, filter_cls: type[Filter],
@@ -80,12 +81,13 @@ class FilterSpec:
     def resolve(self) -> FilterSpec:
         """Load the class and parse the values (each once; raises
         :class:`~navreplay.filters.registry.FilterLoadError` or
-        :class:`~navreplay.params.ParamError`); returns the spec."""
+        :class:`~navreplay.core.params.ParamError`); returns the spec."""
         if self.cls is None:
             object.__setattr__(self, "cls", load_filter(self.ref))
         if self._values is None:
             assert self.cls is not None
             checked = build_params(self.cls, self.params).params  # no sensors: the values only
+            assert isinstance(self.params, ParamValues)  # made one on creation
             object.__setattr__(self, "_values", ParamValues(
                 {k: getattr(checked, k) for k in self.params}, self.params.sources))
         return self
@@ -102,5 +104,5 @@ class FilterSpec:
         values = self.resolve()._values
         if isinstance(values, FilterParams):
             return values
-        return ParamValues(values)  # type: ignore[arg-type]
+        return ParamValues(values)
 

@@ -125,7 +125,7 @@ class Reproduction(abc.ABC):
 
     @abc.abstractmethod
     def campaign(
-        self, runs: int, *, seed: int, workers: int, progress: Progress | None, **options: Any
+        self, runs: int, *, seed: int, workers: int, progress: Progress | None
     ) -> Report:
         """Simulate, replay and evaluate ``runs`` runs; the report's figures feed
         :meth:`log_view`."""

@@ -41,17 +41,16 @@ from typing import Any
 
 import numpy as np
 
-from navreplay import consistency
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.tasks import RunOutput, RunTask, monte_carlo_tasks
+from navreplay.core.params import build
+from navreplay.core.streams import Recording
 from navreplay.filters.result import RunResult
 from navreplay.filters.rpm_aided_ins import Mode
-from navreplay.metrics import EnsembleResult, EnsembleStats, RunMetrics, run_metrics
-from navreplay.params import build
+from navreplay.metrics import EnsembleResult, EnsembleStats, RunMetrics, consistency, run_metrics
 from navreplay.replay.spec import FilterSpec
 from navreplay.reproduce import Check, Progress, Report, Reproduction, warm_up
 from navreplay.sim.scenarios.underwater import UnderwaterRpmParams
-from navreplay.streams import Recording
 
 SCENARIO = "underwater-rpm"
 FILTER = "rpm-aided-ins"
@@ -224,7 +223,7 @@ def nees_check(mean: float, runs: int, dof: int, what: str) -> Check:
     """The position-consistency check (docs/methods/consistency.md): the mean over ``runs``
     runs of each run's time-averaged ``dof``-dof NEES inside the band of ``runs``
     chi-square(dof) draws at the false-alarm probability
-    :data:`navreplay.consistency.CHECK_FALSE_ALARM`."""
+    :data:`navreplay.metrics.consistency.CHECK_FALSE_ALARM`."""
     lo, hi = consistency.mean_band(dof, runs)
     return Check(f"{what}: {dof}-dof position NEES, mean over runs and t >= {T_NEES:g} s "
                  f"({runs} runs as {runs} chi-square samples, false alarm "

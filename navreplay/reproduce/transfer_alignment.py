@@ -48,21 +48,21 @@ import numpy as np
 from navreplay.campaign.ensemble import run_ensemble
 from navreplay.campaign.executors import make_executor
 from navreplay.campaign.tasks import RunOutput, RunTask, monte_carlo_tasks
+from navreplay.core.streams import Recording
+from navreplay.core.units import DEG
 from navreplay.filters.result import RunResult
-from navreplay.filters.transfer_alignment import flexure_rate_sigma
+from navreplay.filters.transfer_alignment_model import flexure_rate_sigma
 from navreplay.geo.rotations import attitude_error, quat_to_dcm
 from navreplay.metrics import rms, truth_at
 from navreplay.replay.spec import FilterSpec
 from navreplay.reproduce import Check, Progress, Report, Reproduction, slashed, warm_up
 from navreplay.sim.scenarios.ship_transfer_alignment import ShipTransferAlignmentParams
-from navreplay.streams import Recording
-from navreplay.units import DEG
 
 SCENARIO = "ship-transfer-alignment"
 FILTER = "transfer-alignment"
 PARTIAL, FULL, VEL_ONLY = "vel_quat_partial", "vel_quat_full", "vel_only"
 PARTIAL_FLEX, FULL_FLEX = f"{PARTIAL}+flexure", f"{FULL}+flexure"
-VARIANTS = {
+VARIANTS: dict[str, dict[str, object]] = {
     PARTIAL: {"match": PARTIAL, "flexure_sigma": 0.0, "quat_model": "paper"},
     FULL: {"match": FULL, "flexure_sigma": 0.0, "quat_model": "paper"},
     VEL_ONLY: {"match": VEL_ONLY, "quat_model": "paper"},

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from navreplay.campaign.executors import make_executor
+from navreplay.core.units import DEG
 from navreplay.filters.vector_matching import (
     MatchModel,
     Variant,
@@ -63,7 +64,6 @@ from navreplay.sim.scenarios.gimpo import (
     GimpoAccelYawParams,
     simulate_runs,
 )
-from navreplay.units import DEG
 
 AXES: tuple[Axis, ...] = (Axis.N, Axis.E, Axis.D)
 ACCEL_G: tuple[float, ...] = tuple(round(k / 10.0, 1) for k in range(-15, 16))

@@ -2,7 +2,7 @@
 
 Every model has ``draw(rng)``, returning the run's random constants as a dataclass with
 ``as_dict()`` (JSON-friendly, for ``Metadata.true_errors``), and ``measure(errors, truth..., rng)``,
-a pure function of its inputs producing the stream columns of ``navreplay.streams.FIELDS``.
+a pure function of its inputs producing the stream columns of ``navreplay.core.streams.FIELDS``.
 
 ========================  ===========================================  ====================
 module                    model                                        stream

@@ -8,7 +8,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from navreplay.streams import jsonable
+from navreplay.core.streams import jsonable
 
 Vec3 = tuple[float, float, float]
 """Three per-axis values (N, E, D or x, y, z)."""
@@ -17,7 +17,7 @@ Vec3 = tuple[float, float, float]
 class FieldUnit(NamedTuple):
     """Units of a field of an error specification: the unit its value is held in (SI, or the
     unit the field's docstring names) and the datasheet unit it is written in
-    (:mod:`navreplay.sensors.specs`); both expressions of :mod:`navreplay.units`."""
+    (:mod:`navreplay.sensors.specs`); both expressions of :mod:`navreplay.core.units`."""
 
     si: str
     datasheet: str
@@ -29,6 +29,7 @@ def as_vec3(owner: object, name: str) -> None:
     A scalar applies to all three axes; anything else must have exactly three elements.
     """
     value = getattr(owner, name)
+    vec: tuple[float, ...]
     if isinstance(value, int | float):
         vec = (float(value),) * 3
     else:

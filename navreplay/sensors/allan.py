@@ -493,12 +493,13 @@ def fit_noise(tau: np.ndarray, avar: np.ndarray, rate: float, samples: int, axes
         terms=frozenset(terms), floor=math.nan, floor_tau=math.nan,
         walk_bound=walk_bound, notes=tuple(dict.fromkeys(notes)),
     )
-    fit = dataclasses.replace(fit, **_floor(fit, t))
+    floor, floor_tau = _floor(fit, t)
+    fit = dataclasses.replace(fit, floor=floor, floor_tau=floor_tau)
     edf_all = _edf_of_model(tau, m_all, samples, axes, np.maximum(fit.avar(tau), 1e-300))
     return fit, edf_all
 
 
-def _floor(fit: NoiseFit, t: np.ndarray) -> dict[str, float]:
+def _floor(fit: NoiseFit, t: np.ndarray) -> tuple[float, float]:
     """The flat part of the fitted curve: its first local minimum, or else its flattest point
     if the slope there is above ``FLOOR_SLOPE``; NaN when the curve has no flat part."""
     tau = np.logspace(math.log10(t[0]), math.log10(t[-1]), 400)
@@ -507,8 +508,8 @@ def _floor(fit: NoiseFit, t: np.ndarray) -> dict[str, float]:
     rising = np.flatnonzero((slope[:-1] < 0.0) & (slope[1:] >= 0.0))
     k = int(rising[0]) if rising.size else int(np.argmax(slope))
     if not rising.size and slope[k] < FLOOR_SLOPE:
-        return {"floor": math.nan, "floor_tau": math.nan}
-    return {"floor": float(adev[k]), "floor_tau": float(tau[k])}
+        return math.nan, math.nan
+    return float(adev[k]), float(tau[k])
 
 
 def _gm_supported(coef: dict[Term, float], T: float, t: np.ndarray, se: np.ndarray,
@@ -607,7 +608,8 @@ def analyse_triad(samples: np.ndarray, rate: float, *, bootstrap: int = 40,
     if bootstrap > 0:
         intervals = _bootstrap(fit, rate, n, bootstrap,
                                rng if rng is not None else np.random.default_rng(0))
-    return TriadAnalysis(rate=rate, samples=n, axes=tuple(axes), axis_fits=tuple(axis_fits),
+    return TriadAnalysis(rate=rate, samples=n, axes=(axes[0], axes[1], axes[2]),
+                         axis_fits=(axis_fits[0], axis_fits[1], axis_fits[2]),
                          curve=curve, fit=fit, intervals=intervals, bootstrap=bootstrap)
 
 

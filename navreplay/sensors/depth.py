@@ -17,7 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from navreplay.params import check_nonnegative, check_positive
+from navreplay.core.params import check_nonnegative, check_positive
 from navreplay.sensors._common import FieldUnit, RealisedErrors
 
 

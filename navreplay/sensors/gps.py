@@ -38,8 +38,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from navreplay.core.params import check_nonnegative, check_positive
 from navreplay.geo.earth import radii
-from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors._common import FieldUnit, RealisedErrors, Vec3, as_vec3
 from navreplay.sensors.noise import gauss_markov
 

@@ -17,13 +17,13 @@ with, per triad,
   [(rad/s)/(m/s^2)] acting on the true specific force;
 - n: white noise of density N (ARW, VRW); the per-sample sigma of a mean over dt is N / sqrt(dt).
 
-All 1-sigma values are SI; convert datasheet values with :mod:`navreplay.units` and the helpers
+All 1-sigma values are SI; convert datasheet values with :mod:`navreplay.core.units` and the helpers
 of :mod:`navreplay.sensors.noise` (e.g. white noise quoted as the 1-sigma of a 1-s average).
 
 Examples
 --------
 >>> import numpy as np
->>> from navreplay.units import DEG_PER_HOUR, MICRO_G, PPM, ARCMIN
+>>> from navreplay.core.units import DEG_PER_HOUR, MICRO_G, PPM, ARCMIN
 >>> model = ImuModel(gyro_bias=0.6 * DEG_PER_HOUR, gyro_scale_factor=300 * PPM,
 ...                  gyro_misalignment=ARCMIN, accel_bias=250 * MICRO_G)
 >>> rng = np.random.default_rng(0)
@@ -43,10 +43,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from navreplay import units
+from navreplay.core import units
+from navreplay.core.params import check_nonnegative, check_positive
 from navreplay.geo import earth
 from navreplay.geo.rotations import euler_to_quat, quat_to_dcm, quat_to_euler
-from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors._common import FieldUnit, RealisedErrors, draw_misalignment, triad_matrix
 from navreplay.sensors.noise import gauss_markov, random_walk, sample_sigma
 
@@ -410,7 +410,7 @@ def imu_grade(grade: ImuGrade | str) -> ImuModel:
 
     Examples
     --------
-    >>> from navreplay.units import DEG_PER_HOUR
+    >>> from navreplay.core.units import DEG_PER_HOUR
     >>> round(imu_grade("tactical").gyro_bias / DEG_PER_HOUR, 6)
     1.0
     """

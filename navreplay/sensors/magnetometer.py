@@ -33,10 +33,10 @@ from typing import ClassVar
 import numpy as np
 from pygeomag import GeoMag
 
+from navreplay.core.params import check_nonnegative, check_positive
+from navreplay.core.units import NANOTESLA
 from navreplay.geo.rotations import quat_conj, quat_rotate
-from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors._common import FieldUnit, RealisedErrors, draw_misalignment, triad_matrix
-from navreplay.units import NANOTESLA
 
 
 class WmmEpoch(enum.StrEnum):

@@ -34,8 +34,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from navreplay.core.params import check_nonnegative, check_positive
 from navreplay.geo.rotations import dcm_to_euler, quat_to_dcm, rotvec_to_dcm, wrap_angle
-from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors._common import FieldUnit, RealisedErrors, Vec3, as_vec3
 
 

@@ -16,7 +16,7 @@ Examples
 --------
 The 20 ug "white noise" of a 1-s average, at a 100 Hz IMU:
 
->>> from navreplay.units import MICRO_G
+>>> from navreplay.core.units import MICRO_G
 >>> N = density_from_average_sigma(20 * MICRO_G)          # (m/s^2)*sqrt(s)
 >>> round(sample_sigma(N, 0.01) / MICRO_G, 6)             # per-sample sigma [ug]
 200.0
@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 
 def sample_sigma(density: float, dt: float) -> float:
@@ -128,6 +127,8 @@ def gauss_markov(
     x = rng.standard_normal((n, dims))
     x[0] = x[0] * sigma if x0 is None else x0
     x[1:] *= sigma * math.sqrt(-math.expm1(-2.0 * dt / tau))
+    from scipy.signal import lfilter  # scipy.signal costs a second at start-up: only here
+
     return lfilter([1.0], [1.0, -a], x, axis=0)
 
 

@@ -33,8 +33,8 @@ datasheet units (:func:`specs_from_tables`), which :func:`specs_toml` writes bac
 TOML tables
 -----------
 The key is the field name and the value a number in SI or a string ``"NUMBER UNIT"``
-(:func:`navreplay.units.parse_quantity`); the unit may instead end the key
-(``gyro_arw_deg_per_sqrt_h = 0.15``, :func:`navreplay.units.key_unit`). Per-axis fields
+(:func:`navreplay.core.units.parse_quantity`); the unit may instead end the key
+(``gyro_arw_deg_per_sqrt_h = 0.15``, :func:`navreplay.core.units.key_unit`). Per-axis fields
 (GNSS sigmas N, E, D) take one value or an array of three. In ``[sensors.imu]`` the key
 ``grade`` starts from a built-in grade (:class:`~navreplay.sensors.imu.ImuGrade`) that the other
 keys override::
@@ -51,7 +51,7 @@ one line naming the table, the key and what was expected.
 
 Examples
 --------
->>> from navreplay.units import DEG_PER_SQRT_HOUR
+>>> from navreplay.core.units import DEG_PER_SQRT_HOUR
 >>> specs = specs_from_tables({"imu": {"grade": "tactical", "gyro_arw": "0.15 deg/sqrt(h)"}})
 >>> round(specs.imu.gyro_arw / DEG_PER_SQRT_HOUR, 6), specs.source("imu")
 (0.15, '[sensors.imu]: grade tactical, with gyro_arw')
@@ -67,10 +67,12 @@ import difflib
 import math
 import typing
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, TypeVar
 
-from navreplay import units
-from navreplay.params import ParamError, describe
+from navreplay.core import units
+from navreplay.core.params import ParamError, describe
+from navreplay.core.streams import StreamKind
+from navreplay.core.units import UnitError
 from navreplay.sensors._common import FieldUnit
 from navreplay.sensors.depth import DepthModel
 from navreplay.sensors.gps import GpsModel
@@ -78,8 +80,6 @@ from navreplay.sensors.imu import ImuGrade, ImuModel, imu_grade
 from navreplay.sensors.magnetometer import MagnetometerModel
 from navreplay.sensors.master_ins import MasterInsModel
 from navreplay.sensors.speed_log import SpeedLogModel
-from navreplay.streams import StreamKind
-from navreplay.units import UnitError
 
 SPEC_KINDS: dict[str, type] = {
     "imu": ImuModel,
@@ -91,6 +91,8 @@ SPEC_KINDS: dict[str, type] = {
 }
 """Sensor kinds (the ``[sensors.KIND]`` tables, the keys of ``Metadata.sensors``) and their
 records."""
+
+M = TypeVar("M")
 
 SPEC_STREAMS: dict[str, tuple[StreamKind, ...]] = {
     "imu": (StreamKind.IMU,),
@@ -162,6 +164,15 @@ class SensorSpecs:
     def get(self, kind: str) -> Any:
         """The record of ``kind``, or None."""
         return self.models.get(kind)
+
+    def require(self, model: type[M]) -> M:
+        """The record of the kind whose class is ``model`` (``specs.require(GpsModel)``), for
+        code that cannot run without it; a ValueError naming the kind when there is none."""
+        kind = next(k for k, cls in SPEC_KINDS.items() if cls is model)
+        found = self.models.get(kind)
+        if found is None:
+            raise ValueError(f"no {kind} specification (sensors: {', '.join(self.models) or 'none'})")
+        return found  # checked against SPEC_KINDS on creation
 
     @property
     def imu(self) -> ImuModel | None:
@@ -323,7 +334,7 @@ def _split_key(cls: type, key: str) -> tuple[str, str | None]:
     return name, units.key_unit(key[len(name) + 1:])
 
 
-def _value(cls: type, name: str, raw: Any, key_unit: str | None) -> Any:
+def _value(cls: Any, name: str, raw: Any, key_unit: str | None) -> Any:
     """The value of field ``name`` in its own unit from a TOML value."""
     si = cls.field_units[name].si
 
@@ -370,7 +381,7 @@ def spec_from_table(
 
     Raises
     ------
-    navreplay.params.ParamError
+    navreplay.core.params.ParamError
         One line naming the file, the table and the key: an unknown key, an unreadable value,
         a unit of the wrong dimension (with the expected one) or a value out of range.
     """
@@ -419,7 +430,7 @@ def spec_from_table(
     return model, known, source
 
 
-def _expected(cls: type, name: str) -> str:
+def _expected(cls: Any, name: str) -> str:
     """How field ``name`` is written, e.g. ``rad/s^(1/2), such as "0.1 deg/sqrt(h)"``."""
     unit = cls.field_units[name]
     dims = units.dimension_phrase(units.parse_unit(unit.si).dims)

@@ -31,10 +31,10 @@ from typing import ClassVar
 
 import numpy as np
 
+from navreplay.core.params import check_nonnegative, check_positive
+from navreplay.core.units import DEG
 from navreplay.geo.rotations import quat_conj, quat_rotate, rotvec_to_dcm
-from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors._common import FieldUnit, RealisedErrors
-from navreplay.units import DEG
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

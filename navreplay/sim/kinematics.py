@@ -3,7 +3,7 @@
 A trajectory generator describes the motion by attitude (q_nb or Euler angles) and NED
 velocity sampled at times t, integrates the position with :func:`integrate_position`, and
 derives the ideal IMU with :func:`imu_from_truth`. Both are the exact counterparts of
-:mod:`navreplay.strapdown`: integrating the ideal IMU reproduces the truth to rounding error,
+:mod:`navreplay.geo.strapdown`: integrating the ideal IMU reproduces the truth to rounding error,
 so any difference a filter sees comes from the sensor models.
 
 :func:`imu_from_truth` refines the increment formula of docs/methods/transfer-alignment.md
@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from navreplay import strapdown
+from navreplay.geo import strapdown
 
 __all__ = [
     "body_rates_to_euler_rates",

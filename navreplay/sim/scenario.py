@@ -1,6 +1,6 @@
 """Scenario interface and registry, and the pieces every scenario builds its recording from.
 
-A scenario turns (parameters, seed) into a :class:`~navreplay.streams.Recording`: truth
+A scenario turns (parameters, seed) into a :class:`~navreplay.core.streams.Recording`: truth
 trajectory, sensor streams and metadata. It is a pure function of its inputs: the same
 parameters and seed give byte-identical recordings.
 
@@ -32,11 +32,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 import navreplay
-from navreplay import params as _params
+from navreplay.core import params as _params
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
 from navreplay.sensors.imu import ImuErrors, ImuMeasurement, effective_biases
 from navreplay.sensors.specs import SensorSpecs, specs_from_tables
 from navreplay.sim.trajectory import Trajectory
-from navreplay.streams import Metadata, Recording, Stream, StreamKind, nanoseconds
 
 _REGISTRY: dict[str, type[Scenario]] = {}
 
@@ -46,7 +46,7 @@ class Scenario(abc.ABC):
     :meth:`sensor_specs` and :meth:`simulate`.
 
     ``Params`` is a frozen keyword-only dataclass in SI (datasheet units converted with
-    :mod:`navreplay.units`) with a ``duration`` field [s] where the length is free.
+    :mod:`navreplay.core.units`) with a ``duration`` field [s] where the length is free.
     """
 
     name: ClassVar[str]
@@ -138,7 +138,7 @@ def scenario_inputs(
     ``values`` are parameter values (strings or values) and, under :data:`SENSORS_KEY`,
     ``[sensors.KIND]`` tables written over the scenario's own sensors
     (:func:`navreplay.sensors.specs.specs_from_tables`). Raises
-    :class:`navreplay.params.ParamError` with one line.
+    :class:`navreplay.core.params.ParamError` with one line.
     """
     values = dict(values or {})
     tables = values.pop(SENSORS_KEY, None) or {}

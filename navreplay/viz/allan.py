@@ -26,11 +26,11 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from navreplay.outputs import atomic_path
+from navreplay.io.outputs import atomic_path
 from navreplay.viz.sink import APPLICATION_ID
 
 if TYPE_CHECKING:  # the figure's data classes; importing figures would load matplotlib
-    from navreplay.figures import AllanPanel
+    from navreplay.viz.figures import AllanPanel
 
 _AXIS_COLORS = ((214, 39, 40), (44, 160, 44), (31, 119, 180))
 """x, y, z (the figure's tab:red, tab:green, tab:blue)."""

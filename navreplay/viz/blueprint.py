@@ -10,13 +10,17 @@ ones (a row per filter, a column per component):
 =================  =====================================================================
 tab                views
 =================  =====================================================================
+Compare            horizontal and vertical position, velocity and heading error of every
+                   filter overlaid (one colour per filter, by name); their CDFs; the
+                   headline metrics of the summaries as a table
 Attitude           roll, pitch, yaw [deg] (yaw unwrapped); per filter phi_N, phi_E, phi_D
                    errors with +-3 sigma; attitude states
 Velocity           velocity N/E/D [m/s]; per filter their errors with +-3 sigma
 Position           position N/E/D [m] (local NED); per filter their errors [m] with +-3 sigma
-Sensor errors      per filter the other states' errors with +-3 sigma
-State estimates    states that move (all filters, with the truth column they estimate), sigmas
-                   of unscored states, extras
+Sensor errors      a column per filter: the other states' errors with +-3 sigma, a row per
+                   group of components (frozen states, of zero sigma, left out)
+State estimates    a column per filter: states that move, with the truth column they
+                   estimate, sigmas of unscored states, extras
 NEES / NIS         per filter the NEES and each measurement's NIS with the 95 % band
 Innovations        per filter, measurement and component: nu with +-3 sqrt(S_ii)
 Trajectory         top-down N/E (north up) and the 3D view, both framed on the trajectory
@@ -37,6 +41,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 TABS: tuple[tuple[str, str], ...] = (
+    ("compare", "Compare"),
     ("attitude", "Attitude"),
     ("velocity", "Velocity"),
     ("position", "Position"),
@@ -72,6 +77,13 @@ class Plot:
     paths: list[str]
     rank: int = 0
     legend: bool = True
+    kind: str = "series"
+    """``series`` (a time-series view), ``bars`` (a bar chart: the CDFs) or ``text``."""
+    column: str | None = None
+    """The filter whose column of the tab the plot is in (tabs laid out a column per filter);
+    None for plots the filters share."""
+    row: str | None = None
+    """Plots of one column with the same row (a group of components) share a row."""
 
 
 @dataclasses.dataclass
@@ -113,17 +125,21 @@ class Catalog:
         rank: int = 0,
         legend: bool = True,
         tab_title: str | None = None,
+        kind: str = "series",
+        column: str | None = None,
+        row: str | None = None,
         behind: bool = False,
     ) -> None:
-        """Put the series at ``path`` into plot ``plot`` (created with ``title``, ``rank`` and
-        ``legend``) of ``tab`` (created with ``tab_title`` if it is not one of :data:`TABS`);
-        ``behind``: before the series already there (drawn under them, as a shaded band)."""
+        """Put the series at ``path`` into plot ``plot`` (created with ``title``, ``rank``,
+        ``legend``, ``kind``, ``column`` and ``row``) of ``tab`` (created with ``tab_title`` if
+        it is not one of :data:`TABS`); ``behind``: before the series already there (drawn
+        under them, as a shaded band)."""
         if tab not in self.plots:
             self.plots[tab] = {}
             self.tab_titles[tab] = tab_title or tab
         plots = self.plots[tab]
         if plot not in plots:
-            plots[plot] = Plot(title, [], rank, legend)
+            plots[plot] = Plot(title, [], rank, legend, kind, column, row)
         paths = plots[plot].paths
         if path not in paths:
             paths.insert(0 if behind else len(paths), path)
@@ -156,7 +172,8 @@ class Catalog:
 
     def signature(self) -> tuple:
         """What the blueprint depends on (to resend it only when this changes)."""
-        world = None if self.world is None else tuple(np.round(np.r_[self.world], 1))
+        world = (None if self.world is None
+                 else tuple(float(v) for v in np.round(np.concatenate(self.world), 1)))
         return (
             tuple((t, k, len(p.paths)) for t, plots in self.plots.items() for k, p in plots.items()),
             world,
@@ -194,13 +211,20 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
         if not plots:
             continue
         ordered = sorted(plots.values(), key=lambda p: p.rank)  # stable: first use breaks ties
-        views = [_series_view(p) for p in ordered]
-        tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)), name=titles[key]))
+        if key == "compare":
+            tabs.append(_compare_tab(ordered, titles[key]))
+        elif any(p.column is not None for p in ordered):
+            tabs.append(_column_tab(ordered, titles[key], grid_columns))
+        else:
+            views = [_view(p) for p in ordered]
+            tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)),
+                                 name=titles[key]))
     # side panels collapsed: the plots get the whole window (each panel opens with one click)
     panels = (
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(timeline=catalog.timeline, state="collapsed"),
+        # the time cursor at the last time: the 3D view and the map show the whole run
+        rrb.TimePanel(timeline=catalog.timeline, state="collapsed", play_state="following"),
     )
     if not tabs:
         return rrb.Blueprint(rrb.TimeSeriesView(origin="/", name="all", axis_x=_WHOLE_RUN),
@@ -208,14 +232,61 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
     return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), *panels)
 
 
-def _series_view(plot: Plot) -> rrb.TimeSeriesView:
+def _view(plot: Plot) -> rrb.View:
+    contents = [f"+ {p}" for p in plot.paths]
+    if plot.kind == "text":
+        return rrb.TextDocumentView(origin="/", contents=contents, name=plot.title)
+    if plot.kind == "bars":
+        return rrb.BarChartView(
+            origin="/", contents=contents, name=plot.title,
+            plot_legend=rrb.PlotLegend(rrb.Corner2D.RightBottom, visible=plot.legend),
+        )
     return rrb.TimeSeriesView(
         origin="/",
-        contents=[f"+ {p}" for p in plot.paths],
+        contents=contents,
         name=plot.title,
-        plot_legend=rrb.PlotLegend(rrb.Corner2D.RightTop, visible=plot.legend),
+        plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop, visible=plot.legend),
         axis_x=_WHOLE_RUN,
     )
+
+
+def _compare_tab(plots: list[Plot], name: str) -> rrb.Container:
+    """The overlaid errors in a row, their CDFs in a row below, the table of headline metrics
+    at the bottom."""
+    rows = []
+    shares = []
+    for kind, share in (("series", 3.0), ("bars", 3.0), ("text", 2.6)):
+        views = [_view(p) for p in plots if p.kind == kind]
+        if views:
+            rows.append(rrb.Grid(*views, grid_columns=min(4, len(views))))
+            shares.append(share * max(1, -(-len(views) // 4)))
+    return rrb.Vertical(*rows, row_shares=shares, name=name)
+
+
+def _column_tab(plots: list[Plot], name: str, grid_columns: int) -> rrb.Container:
+    """A column per filter (its plots one row per group of components, so the same state of
+    two filters sits side by side), after a grid of the plots the filters share."""
+    shared = [_view(p) for p in plots if p.column is None]
+    columns: dict[str, dict[str, list[Plot]]] = {}
+    for p in plots:
+        if p.column is not None:
+            columns.setdefault(p.column, {}).setdefault(p.row or p.title, []).append(p)
+    rows = sorted({r for col in columns.values() for r in col},
+                  key=lambda r: min(p.rank for col in columns.values() for p in col.get(r, [])))
+    width = max((len(ps) for col in columns.values() for ps in col.values()), default=1)
+    cols = []
+    for label, col in columns.items():
+        cells: list[rrb.Container | rrb.View] = []
+        for r in rows:
+            views = [_view(p) for p in col.get(r, [])]
+            cells.append(rrb.Horizontal(*views) if len(views) > 1 else views[0] if views
+                         else rrb.Horizontal())
+        cols.append(rrb.Vertical(*cells, name=label))
+    if not shared:
+        return rrb.Horizontal(*cols, name=name)
+    body = rrb.Horizontal(*cols)
+    top = rrb.Grid(*shared, grid_columns=min(max(grid_columns, width), len(shared)))
+    return rrb.Vertical(top, body, row_shares=[1.0, float(len(rows))], name=name)
 
 
 def _trajectory_tab(

@@ -22,7 +22,7 @@ from typing import Any
 
 import rerun as rr
 
-from navreplay.outputs import temporary_path
+from navreplay.io.outputs import temporary_path
 from navreplay.viz import targets
 from navreplay.viz.sink import APPLICATION_ID, Sink
 from navreplay.viz.targets import (
@@ -157,12 +157,12 @@ def _open_serve(target: Serve, name: str | None, rid: str | None) -> Sink:
 def _start_server(target: Serve) -> None:
     """Start ``rerun --serve-web`` listening on ``target.bind`` only (rerun-sdk 0.41's
     ``serve_web_viewer`` takes no address and listens on every interface) and wait until both
-    its ports answer; it ends with this process (:mod:`navreplay.lifecycle`)."""
+    its ports answer; it ends with this process (:mod:`navreplay.io.lifecycle`)."""
     import subprocess
     import tempfile
     import time
 
-    from navreplay import lifecycle
+    from navreplay.io import lifecycle
 
     exe = targets.find_server()
     if exe is None:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy import stats
 
 from navreplay.geo import (
     dcm_to_quat,
@@ -190,6 +189,8 @@ def chi2_bounds(dof: int, runs: int = 1, p: float = 0.95) -> tuple[float, float]
         raise ValueError(
             f"chi2_bounds needs dof >= 1, runs >= 1, 0 < p < 1; got {dof}, {runs}, {p}"
         )
+    from scipy import stats  # not on the path of a run's view
+
     k = dof * runs
     a = 0.5 * (1.0 - p)
     return float(stats.chi2.ppf(a, k) / runs), float(stats.chi2.ppf(1.0 - a, k) / runs)

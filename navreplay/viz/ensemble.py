@@ -17,13 +17,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+import rerun as rr
 
 from navreplay.filters.base import NavError, State
 from navreplay.metrics import EnsembleResult, RunMetrics, chi2_bounds_per_count
-from navreplay.viz.naming import Tab, display_unit, quantity_of, resolve_unit
-from navreplay.viz.sink import SIGMA_SHADE, Sink, lighter
+from navreplay.metrics import outages as _outages
+from navreplay.viz.channel import TIMELINE, Channel
+from navreplay.viz.naming import Tab, display_unit, entity_path, quantity_of, resolve_unit
+from navreplay.viz.style import OUTAGE_COLOR, SIGMA_SHADE, TRUTH_COLOR, lighter
+
+if TYPE_CHECKING:
+    from navreplay.viz.sink import Sink
 
 _ENSEMBLE_NAV = (
     ("pos_ned", "position", ("N", "E", "D"), "m", 1.0),
@@ -159,3 +166,114 @@ def log_runs(sink: Sink, runs: Mapping[int, Mapping[str, RunMetrics]]) -> None:
                                   {f"{label} run {k}": values}, unit=unit,
                                   styles={f"{label} run {k}": (color, 1.0)},
                                   tab=tab, tab_title=tab_title, rank=order, legend=False)
+
+
+class EnsemblePlots(Channel):
+    """The Monte Carlo plots of a sink (``/ensemble/<plot>/<series>``)."""
+
+    def log_ensemble(
+        self,
+        name: str,
+        t: np.ndarray,
+        series: Mapping[str, np.ndarray],
+        *,
+        unit: str = "",
+        bounds: tuple[np.ndarray | float, np.ndarray | float] | None = None,
+        bounds_name: str = "95 % band",
+        styles: Mapping[str, tuple[tuple[int, int, int], float]] | None = None,
+        tab: str = "ensemble",
+        tab_title: str | None = None,
+        timeline: str | None = None,
+        rank: int = 0,
+        legend: bool = True,
+        shaded: Sequence[tuple[float, float]] = (),
+    ) -> None:
+        """Log one Monte Carlo plot under ``/ensemble/<name>/<series>``.
+
+        Parameters
+        ----------
+        name : str
+            Plot name, e.g. ``"roll error"`` or ``"NEES"``.
+        t : ndarray, shape (K,)
+            Time [s since the recording start], or the abscissa on ``timeline``.
+        series : mapping str -> ndarray (K,)
+            Overlaid series in display units, e.g. ``{"rpm RMS": ..., "rpm mean σ": ...,
+            "pure RMS": ...}``.
+        unit : str
+            Unit of every series, shown in the title (``"deg"``, ``"m"``, ``"-"``).
+        bounds : (lower, upper), optional
+            Scalars or arrays (K,), e.g. :func:`navreplay.viz.chi2_bounds` for the average
+            NEES; drawn as a shaded band (:meth:`band`).
+        styles : mapping, optional
+            Colour and width per series; a series without one takes the colour of its name
+            (:meth:`color_of`), so a variant keeps its colour in every plot.
+        tab, tab_title : str, optional
+            Tab key and title (default: one "Ensemble" tab).
+        timeline : str, optional
+            Put ``t`` on this sequence timeline instead of ``time`` (e.g. an acceleration
+            sweep in mg): ``t`` is rounded to integers.
+        rank : int
+            Order of the plot in its tab.
+        legend : bool
+            Whether the plot shows its legend.
+        shaded : sequence of (start, end)
+            Spans of ``t`` (GNSS outages) shaded under the series, each
+            ``/ensemble/<name>/gnss_outage/<k>``.
+        """
+        t = np.asarray(t, dtype=np.float64)
+
+        def index(tt: np.ndarray) -> list[rr.TimeColumn]:
+            if timeline is None:
+                return [rr.TimeColumn(TIMELINE,
+                                      duration=np.rint(tt * 1e9).astype("timedelta64[ns]"))]
+            return [rr.TimeColumn(timeline, sequence=np.rint(tt).astype(np.int64))]
+
+        idx = index(t)
+        if timeline is not None and self.catalog.timeline == TIMELINE and not any(
+            p for k, plots in self.catalog.plots.items() for p in plots
+        ):
+            self.catalog.timeline = timeline
+        root = entity_path("ensemble", name)
+        plot_title = f"{name} [{unit}]" if unit else name
+        styles = styles or {}
+        if bounds is not None:
+            path = f"{root}/bounds"
+            lo = np.broadcast_to(np.asarray(bounds[0], dtype=np.float64), t.shape)
+            hi = np.broadcast_to(np.asarray(bounds[1], dtype=np.float64), t.shape)
+            self.band(path, idx, lo, hi, TRUTH_COLOR, bounds_name)
+            self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
+                             legend=legend, tab_title=tab_title)
+        for key, values in series.items():
+            values = np.asarray(values, dtype=np.float64)
+            if values.shape != t.shape:
+                raise ValueError(
+                    f"ensemble {name!r}: series {key!r} has shape {values.shape}, t {t.shape}"
+                )
+            path = f"{root}/{entity_path(key)[1:]}"
+            color, width = styles[key] if key in styles else self._variant_style(key)
+            self._style(path, [key], [color], [width])
+            self._scalars(path, idx, values)
+            self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
+                             legend=legend, tab_title=tab_title)
+        if shaded and series:
+            top = np.fmax.reduce([np.asarray(v, dtype=np.float64) for v in series.values()])
+            for k, span in enumerate(shaded):
+                inside = _outages.inside(t, span) & np.isfinite(top)
+                if not inside.any():
+                    continue
+                path = f"{root}/gnss_outage/{k + 1}"
+                self.band(path, index(t[inside]), np.zeros(int(inside.sum())), top[inside],
+                          OUTAGE_COLOR, "GNSS outage")
+                self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
+                                 legend=legend, tab_title=tab_title, behind=True)
+
+    def _variant_style(self, key: str) -> tuple[tuple[int, int, int], float]:
+        """Colour and width of an ensemble series named ``"<variant>[ RMS| sigma| σ]"``: the
+        variant's colour; a sigma lighter and thinner than its RMS; ``"truth"`` grey."""
+        if key == "truth":
+            return TRUTH_COLOR, 2.0
+        for suffix, sigma in ((" RMS", False), (" mean σ", True), (" sigma", True), (" σ", True)):
+            if key.endswith(suffix) and len(key) > len(suffix):
+                color = self.color_of(key[: -len(suffix)])
+                return (lighter(color, SIGMA_SHADE), 1.0) if sigma else (color, 2.0)
+        return self.color_of(key), 1.5

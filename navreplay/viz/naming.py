@@ -27,9 +27,9 @@ import enum
 import re
 from collections.abc import Mapping
 
+from navreplay.core.units import DEG, DEG_PER_HOUR, MILLI_G
 from navreplay.filters.base import MeasurementKind
 from navreplay.filters.base import Quantity as StateQuantity
-from navreplay.units import DEG, DEG_PER_HOUR, MILLI_G
 
 
 class Tab(enum.StrEnum):

@@ -105,6 +105,7 @@ def open_viewer(rrd: Path, *, required: bool) -> str:
 
             raise VizUnavailableError(f"cannot open the Rerun viewer: {problem}")
         return f"(No viewer opened: {problem}. Open the view elsewhere with `rerun {rrd}`.)"
+    assert exe is not None  # else a problem above
     subprocess.Popen([exe, str(rrd)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                      start_new_session=True)
     return f"Opened the Rerun viewer on {rrd}."

@@ -12,6 +12,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.io import TOPICS, read_recording, write_recording
 from navreplay.io.cdr import encode, layout, records_to_fields, view_records
 from navreplay.io.convert import ENCODERS, aux_columns
@@ -23,7 +24,6 @@ from navreplay.io.schemas import (
     TRUTH_MSG,
 )
 from navreplay.io.synthetic import random_recording, random_stream
-from navreplay.streams import Recording, StreamKind
 
 
 def _nested(rec: np.ndarray, spec_message) -> dict:  # type: ignore[no-untyped-def]

@@ -11,12 +11,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
-from test_robustness import uncompressed_copy
+from mcap_edits import uncompressed_copy
 
+from navreplay.core.streams import Recording
 from navreplay.io import RecordingError, RecordingWarning, read_recording, write_recording
 from navreplay.io import writer as writer_module
 from navreplay.io.synthetic import random_recording
-from navreplay.streams import Recording
 
 SMALL_CHUNK = 8 << 10
 

@@ -13,6 +13,7 @@ import pytest
 from mcap.writer import Writer
 from mcap_ros2._cdr import CdrWriter, EncapsulationKind
 
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.io import (
     TOPICS,
     RecordingError,
@@ -28,7 +29,6 @@ from navreplay.io.cdr import encode, layout
 from navreplay.io.convert import ENCODERS
 from navreplay.io.schemas import SPECS
 from navreplay.io.synthetic import T0_NS, random_recording, random_stream
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 RNG_SEED = 20240611
 

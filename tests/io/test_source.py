@@ -14,11 +14,11 @@ import pytest
 from mcap_edits import write_small_chunks as _write
 from mcap_edits import zero_imu_stamps as _zero_imu_stamps
 
+from navreplay.core.streams import StreamKind
 from navreplay.io import files, mcapread, open_recording, read_recording, rosbag
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, MemorySource
 from navreplay.sim.scenario import simulate
-from navreplay.streams import StreamKind
 
 
 @pytest.fixture(scope="module")

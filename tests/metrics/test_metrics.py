@@ -3,11 +3,12 @@
 import numpy as np
 import pytest
 
-from navreplay import metrics, tables
+from navreplay import metrics
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.filters.base import Nav, NavError, Quantity, State, TrueConstant, TruthColumn
 from navreplay.filters.result import InnovationSeries, RunResult
 from navreplay.geo import earth, rotations
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
+from navreplay.metrics import tables
 
 LAT0, LON0, H0 = np.deg2rad(36.0), np.deg2rad(130.0), 10.0
 T0_NS = 1_500_000_000_000_000_000

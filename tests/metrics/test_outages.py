@@ -15,14 +15,15 @@ import numpy as np
 import pytest
 from mcap_edits import write_small_chunks
 
-from navreplay import metrics, tables
+from navreplay import metrics
+from navreplay.core.streams import Recording
 from navreplay.io import mcapread
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import MemorySource
+from navreplay.metrics import tables
 from navreplay.metrics.outages import OutageScores, ensemble_outages
 from navreplay.replay import FilterSpec, replay, replay_file
 from navreplay.sim.scenario import simulate
-from navreplay.streams import Recording
 from navreplay.viz.options import VizMode, VizOptions
 
 run_job = importlib.import_module("navreplay.jobs.run")
@@ -132,10 +133,10 @@ def test_the_outages_are_shaded_in_the_view(outage_drive, tmp_path) -> None:
     """``navreplay run --save``: each outage's ±3σ band under the position errors (rows
     inside the outage only), the true track inside the outages over the trajectory and the map;
     ``navreplay montecarlo``'s position RMS plots shade them too."""
-    from test_viz import read_rrd, scalars
+    from rrd import read_rrd, scalars
 
     from navreplay.jobs.montecarlo import MonteCarloJob, montecarlo
-    from navreplay.viz.sink import BAND_LINES
+    from navreplay.viz.style import BAND_LINES
 
     rec, path = outage_drive
     out = tmp_path / "run.rrd"

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from navreplay import metrics, tables
+from navreplay import metrics
 from navreplay.filters.base import MeasurementKind
 from navreplay.filters.result import InnovationSeries, RunResult
-from navreplay.metrics import RunScorer
+from navreplay.metrics import RunScorer, tables
 
 T0_NS = 1_700_000_000 * 10**9
 

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from same_bits import assert_same_results
 
+from navreplay.core.streams import Recording, StreamKind
 from navreplay.filters.base import Filter
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.filters.ins import InsFilter
 from navreplay.replay import replay, session
 from navreplay.sim.scenario import simulate
-from navreplay.streams import Recording, StreamKind
 
 
 @pytest.fixture(scope="module")

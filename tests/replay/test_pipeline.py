@@ -21,14 +21,14 @@ import pytest
 from mcap_edits import write_small_chunks as _write
 from mcap_edits import zero_imu_stamps as _zero_imu_stamps
 from rosbags.highlevel import AnyReader
-from test_viz import read_rrd
+from rrd import read_rrd
 
+from navreplay.core.streams import Recording, Stream, StreamKind
 from navreplay.io import mcapread, open_recording, read_recording
 from navreplay.io.errors import RecordingError, RecordingWarning
 from navreplay.logs.options import LogOptions
 from navreplay.replay import FilterSpec, ReplayError
 from navreplay.sim.scenario import simulate
-from navreplay.streams import Recording, Stream, StreamKind
 from navreplay.viz.options import VizMode, VizOptions
 
 run_job = importlib.import_module("navreplay.jobs.run")
@@ -77,7 +77,7 @@ def _same_summaries(a: dict, b: dict) -> None:
 def both(drive, tmp_path_factory):
     """The run in windows of 1500 messages and in one window: exports, .rrd, report."""
     d = tmp_path_factory.mktemp("runs")
-    from navreplay import figures
+    from navreplay.viz import figures
 
     shown: list = []
     real = figures.consistency
@@ -382,3 +382,29 @@ def test_frame_check_notes_name_the_span_they_averaged(drive) -> None:
     assert spans[0][0] == spans[1][0] < 0.2
     assert spans[0][1] < first_end + 0.2 < 10.0  # the first window's magnetometer samples
     assert spans[1][1] == pytest.approx(40.0, abs=0.2)  # all of them
+
+
+def test_pieces_of_a_window_give_the_estimates_of_the_whole(monkeypatch) -> None:
+    """At a high output rate a window is replayed in pieces: the estimates, covariances and
+    innovations are those of the window replayed at once, bit for bit."""
+    from navreplay.io.source import MemorySource
+    from navreplay.replay import pipeline
+
+    rec = simulate("vehicle-drive", {"duration": 40.0}, seed=3)
+
+    def run(pieces: int) -> dict:
+        monkeypatch.setattr(pipeline, "PIECE_OUTPUTS", pieces)
+        collect = pipeline.Collect()
+        pipeline.replay_file(MemorySource(rec, "drive"), [FilterSpec("gps-ins")],
+                             stages=[collect], output_rate=100.0, score=False)
+        return collect.results()
+
+    whole, cut = run(10**9), run(700)  # 7-second pieces, cuts between GPS fixes
+    a, b = whole["gps-ins"], cut["gps-ins"]
+    assert a.t.shape[0] > 3000
+    for name in ("t", "x", "P", "nav_pos", "nav_v_n", "nav_q_nb"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert sorted(a.innovations) == sorted(b.innovations)
+    for k, s in a.innovations.items():
+        assert np.array_equal(s.nu, b.innovations[k].nu) and np.array_equal(s.t,
+                                                                            b.innovations[k].t)

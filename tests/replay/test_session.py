@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from same_bits import assert_same_results
 
+from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.filters.base import (
     TICK,
     Estimate,
@@ -36,7 +37,6 @@ from navreplay.replay import (
     replay,
 )
 from navreplay.sim.scenario import simulate
-from navreplay.streams import Metadata, Recording, Stream, StreamKind
 
 T0 = 1_700_000_000_000_000_000
 S = 1_000_000_000
@@ -329,7 +329,7 @@ def test_observer_and_progress_called():
 
 
 def test_params_from_strings_are_typed():
-    from navreplay.params import ParamError
+    from navreplay.core.params import ParamError
 
     with pytest.raises(ParamError, match="unknown parameter"):
         replay(make_recording(), Recorder, {"gain": "2"})

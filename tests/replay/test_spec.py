@@ -11,11 +11,11 @@ import pytest
 from click.testing import CliRunner
 
 from navreplay.cli import cli
+from navreplay.core.params import ParamError
 from navreplay.filters import registry
 from navreplay.filters.gps_ins import GpsInsFilter
 from navreplay.filters.settings import Source, build_params
 from navreplay.io import write_recording
-from navreplay.params import ParamError
 from navreplay.replay import FilterSpec
 from navreplay.sim.scenario import simulate
 

@@ -73,13 +73,15 @@ import datetime
 import enum
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
+from navreplay.core.params import check_nonnegative, check_positive
+from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
+from navreplay.core.units import DEG, G0, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 from navreplay.geo.earth import gravity, gravity_n, ned_offset_to_lla, omega_en_n, omega_ie_n
 from navreplay.geo.rotations import euler_to_quat
-from navreplay.params import check_nonnegative, check_positive
 from navreplay.sensors.gps import (
     OUTAGES_KEY,
     GpsModel,
@@ -99,8 +101,6 @@ from navreplay.sensors.noise import nyquist_sample_sigma
 from navreplay.sensors.specs import SensorSpecs
 from navreplay.sim.scenario import Scenario, register_scenario
 from navreplay.sim.trajectory import parse_utc, utc_ns
-from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
-from navreplay.units import DEG, G0, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 
 SITE_NAME = "Gimpo airport (RKSS), near runway 32R"
 IGRF_FIELD_N = (29467e-9, -4330e-9, 41593e-9)
@@ -124,7 +124,8 @@ class Axis(enum.StrEnum):
         return cls.__members__.get(value.upper()) if isinstance(value, str) else None
 
     @property
-    def index(self) -> int:
+    def column(self) -> int:
+        """The column of the axis in a NED vector."""
         return "NED".index(self.value)
 
 
@@ -139,7 +140,8 @@ class BodyAxis(enum.StrEnum):
         return cls.__members__.get(value.upper()) if isinstance(value, str) else None
 
     @property
-    def index(self) -> int:
+    def column(self) -> int:
+        """The column of the body axis in a vector."""
         return "xy".index(self.value)
 
 
@@ -461,17 +463,17 @@ def truth_from_segments(
 def sweep_segments(p: GimpoAccelSweepParams) -> list[Segment]:
     """Rest, then ``accel_g`` along the navigation axis (= body axis: yaw stays 0)."""
     a_b = [0.0, 0.0, 0.0]
-    a_b[p.axis.index] = p.accel_g * G0
-    return [Segment(p.rest, p.duration, 0.0, tuple(a_b))]
+    a_b[p.axis.column] = p.accel_g * G0
+    return [Segment(p.rest, p.duration, 0.0, (a_b[0], a_b[1], a_b[2]))]
 
 
 def yaw_segments(p: GimpoAccelYawParams) -> list[Segment]:
     """+A along the body axis while turning +90 deg; coast; -A while turning back."""
     a_b = [0.0, 0.0, 0.0]
-    a_b[p.case.index] = p.accel_g * G0
-    minus = tuple(-a for a in a_b)
+    a_b[p.case.column] = p.accel_g * G0
+    minus = (-a_b[0], -a_b[1], -a_b[2])
     return [
-        Segment(10.0, 10.0 + YAW_WINDOW, YAW_RATE, tuple(a_b)),
+        Segment(10.0, 10.0 + YAW_WINDOW, YAW_RATE, (a_b[0], a_b[1], a_b[2])),
         Segment(20.0, 20.0 + YAW_WINDOW, -YAW_RATE, minus),
     ]
 
@@ -585,7 +587,7 @@ def simulate_runs(p: GimpoParams, truth: Truth, seeds: Sequence[int],
         v_n=np.stack([r.v_n for r in runs]),
         vel_sigma=np.stack([r.vel_sigma for r in runs]),
         accel_bias=np.stack([r.accel_bias for r in runs]),
-        errors=[r.errors for r in runs],
+        errors=[cast(tuple[ImuErrors, MagnetometerErrors], r.errors) for r in runs],
     )
 
 
@@ -618,7 +620,8 @@ class GimpoScenario(Scenario):
                 raise ValueError(f"the {kind} rate of gimpo recordings is the scenario's rate "
                                  f"({p.rate:g} Hz), got {sensors.get(kind).rate:g} Hz")
         truth = self.truth(p)
-        data = measure(SensorModels(sensors.imu, sensors.mag, sensors.gps), p.dt, truth, rng)
+        data = measure(SensorModels(sensors.require(ImuModel), sensors.require(MagnetometerModel),
+                                    sensors.require(GpsModel)), p.dt, truth, rng)
         t0_ns = utc_ns(p.start)
         t_ns = nanoseconds(truth.t, t0_ns)
         up = ~outage_mask(truth.t, p.gps_outages)  # epochs with a GNSS solution

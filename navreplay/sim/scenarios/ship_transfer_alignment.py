@@ -54,18 +54,10 @@ import math
 import numpy as np
 from scipy.signal import lfilter, lfiltic
 
-from navreplay.geo.earth import ned_offset_to_lla
-from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_to_dcm, quat_to_euler
-from navreplay.lti import second_order_markov
-from navreplay.params import check_nonnegative, check_positive
-from navreplay.sensors.imu import ImuModel
-from navreplay.sensors.master_ins import MasterInsModel
-from navreplay.sensors.noise import density_from_average_sigma
-from navreplay.sensors.specs import SensorSpecs
-from navreplay.sim.kinematics import imu_from_truth, integrate_position
-from navreplay.sim.scenario import Scenario, imu_stream, register_scenario
-from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
-from navreplay.units import (
+from navreplay.core.lti import second_order_markov
+from navreplay.core.params import check_nonnegative, check_positive
+from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
+from navreplay.core.units import (
     ARCMIN,
     DEG,
     DEG_PER_HOUR,
@@ -75,6 +67,14 @@ from navreplay.units import (
     MICRO_G,
     PPM,
 )
+from navreplay.geo.earth import ned_offset_to_lla
+from navreplay.geo.rotations import euler_to_quat, quat_mult, quat_to_dcm, quat_to_euler
+from navreplay.sensors.imu import ImuModel
+from navreplay.sensors.master_ins import MasterInsModel
+from navreplay.sensors.noise import density_from_average_sigma
+from navreplay.sensors.specs import SensorSpecs
+from navreplay.sim.kinematics import imu_from_truth, integrate_position
+from navreplay.sim.scenario import Scenario, imu_stream, register_scenario
 
 T0_NS = 1_704_067_200_000_000_000
 """Recording start, 2024-01-01T00:00:00Z [ns since the UNIX epoch]."""
@@ -353,7 +353,7 @@ class ShipTransferAlignment(Scenario):
         sensors: SensorSpecs,
     ) -> Recording:
         p = params
-        gins, imu = sensors.master_ins, sensors.imu
+        gins, imu = sensors.require(MasterInsModel), sensors.require(ImuModel)
         n = int(round(p.duration * p.imu_rate))
         dt = 1.0 / p.imu_rate
         t = np.arange(n + 1) * dt  # truth grid; IMU sample k covers (t[k-1], t[k]]

@@ -80,7 +80,23 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
+from navreplay.core.params import (
+    check_divides,
+    check_nonnegative,
+    check_positive,
+    check_whole_intervals,
+)
+from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
+from navreplay.core.units import (
+    ARCSEC,
+    DEG,
+    DEG_PER_HOUR,
+    DEG_PER_SQRT_HOUR,
+    MICRO_G,
+    MICRO_G_PER_SQRT_HZ,
+    MIL,
+    PPM,
+)
 from navreplay.sensors.depth import DepthModel
 from navreplay.sensors.imu import ImuModel
 from navreplay.sensors.specs import SensorSpecs
@@ -103,17 +119,6 @@ from navreplay.sim.trajectory import (
     sample_indices,
     time_grid,
     utc_ns,
-)
-from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
-from navreplay.units import (
-    ARCSEC,
-    DEG,
-    DEG_PER_HOUR,
-    DEG_PER_SQRT_HOUR,
-    MICRO_G,
-    MICRO_G_PER_SQRT_HZ,
-    MIL,
-    PPM,
 )
 
 ROUTE: tuple[tuple[float, float, Channel, float], ...] = (
@@ -386,7 +391,8 @@ class UnderwaterRpm(Scenario):
         else:
             direction = math.radians(p.current_direction_deg) % (2.0 * math.pi)
         v_c = current_velocity(p.current_speed, direction)
-        log_model, depth_model, imu_model = sensors.speed_log, sensors.depth, sensors.imu
+        log_model = sensors.require(SpeedLogModel)
+        depth_model, imu_model = sensors.require(DepthModel), sensors.require(ImuModel)
         log_errors = log_model.draw(rng_log)
         depth_errors = depth_model.draw(rng_depth)
         imu_errors = imu_model.draw(rng_imu)
@@ -400,6 +406,7 @@ class UnderwaterRpm(Scenario):
         n = time_grid(p.duration, p.imu_rate).size
         v_sway = sway_heave(n, p.imu_rate, p.sway_heave_sigma, p.sway_heave_tau, rng_sway)
         traj = generate(route, p.duration, p.imu_rate, body_velocity=v_sway)
+        assert traj.omega_ib_b is not None and traj.f_b is not None  # generate's ideal IMU
         imu_meas = imu_model.measure(imu_errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate,
                                      rng_imu)
 

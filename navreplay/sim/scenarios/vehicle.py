@@ -52,7 +52,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from navreplay.params import check_divides, check_nonnegative, check_positive, check_whole_intervals
+from navreplay.core.params import (
+    check_divides,
+    check_nonnegative,
+    check_positive,
+    check_whole_intervals,
+)
+from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
+from navreplay.core.units import DEG
 from navreplay.sensors.gps import (
     OUTAGES_KEY,
     GpsModel,
@@ -89,8 +96,6 @@ from navreplay.sim.trajectory import (
     sample_indices,
     utc_ns,
 )
-from navreplay.streams import Recording, Stream, StreamKind, nanoseconds
-from navreplay.units import DEG
 
 _TRUTH_COLUMNS = {
     "pos": "true latitude [rad], longitude [rad], ellipsoidal height [m]",
@@ -244,6 +249,7 @@ def _imu(
 ) -> tuple[Trajectory, ImuErrors, ImuMeasurement]:
     """Truth at the IMU rate and the IMU ``model`` on it."""
     traj = generate(route, p.duration, p.imu_rate)
+    assert traj.omega_ib_b is not None and traj.f_b is not None  # generate's ideal IMU
     errors = model.draw(rng)
     return traj, errors, model.measure(errors, traj.omega_ib_b, traj.f_b, 1.0 / p.imu_rate, rng)
 
@@ -301,7 +307,7 @@ class VehicleDrive(Scenario):
     def simulate(self, params: VehicleDriveParams, rng: np.random.Generator, seed: int,
                  sensors: SensorSpecs) -> Recording:
         p = params
-        gps_model, mag_model = sensors.gps, sensors.mag
+        gps_model, mag_model = sensors.require(GpsModel), sensors.require(MagnetometerModel)
         check_sensor_rate("gps", gps_model.rate, p.imu_rate)
         check_sensor_rate("mag", mag_model.rate, p.imu_rate)
         rng_imu, rng_gps, rng_mag, rng_init = rng.spawn(4)
@@ -313,7 +319,7 @@ class VehicleDrive(Scenario):
             speed=0.0, manoeuvres=drive_manoeuvres(p.duration, p.cruise_speed),
             turn_mode=p.turn_mode,
         ), p.max_bank_deg * DEG)
-        traj, imu_errors, imu_meas = _imu(p, sensors.imu, route, rng_imu)
+        traj, imu_errors, imu_meas = _imu(p, sensors.require(ImuModel), route, rng_imu)
         n = traj.t.shape[0]
 
         gi = sample_indices(n, p.imu_rate, gps_model.rate)
@@ -427,7 +433,7 @@ class Stationary(Scenario):
         start = parse_utc(p.date)
         t0_ns = utc_ns(start)
         route = Route(lat=p.lat_deg * DEG, lon=p.lon_deg * DEG, h=p.h, heading=p.heading_deg * DEG)
-        traj, imu_errors, imu_meas = _imu(p, sensors.imu, route, rng_imu)
+        traj, imu_errors, imu_meas = _imu(p, sensors.require(ImuModel), route, rng_imu)
         nav0, init_errors = _initial_nav(p, traj, t0_ns, rng_init, p.init_attitude_error)
         meta = self.metadata(
             p, seed,

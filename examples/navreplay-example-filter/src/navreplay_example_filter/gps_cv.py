@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.streams import StreamKind
 from navreplay.filters import kalman
 from navreplay.filters.base import (
     Estimate,
@@ -57,7 +58,6 @@ from navreplay.filters.base import (
     TruthColumn,
 )
 from navreplay.geo import euler_to_quat, radii
-from navreplay.streams import StreamKind
 
 POS = slice(0, 3)
 VEL = slice(3, 6)

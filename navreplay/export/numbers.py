@@ -1,0 +1,285 @@
+"""Text rows of numeric columns written by one compiled kernel: the same characters as
+Python's ``fmt % value`` for every value (CSV and TUM files), without a Python call per value.
+
+A column's format is ``%d``, ``%.Nf`` (N <= 15), ``%.Ng`` (1 <= N <= 17) or
+:data:`SECONDS_NS` (integer nanoseconds as seconds with nine decimals). Digits come from
+integer arithmetic: a value is scaled by an exact power of ten (one correctly rounded
+multiplication or division) and rounded to an integer. Where that rounding could differ from
+the correctly rounded decimal Python prints (the scaled value within 1e-6 of a half beyond its
+rounding error, or outside the exactly representable range) the value is formatted by Python
+instead (the kernel leaves a mark where it goes), as is every value of any other format.
+
+Examples
+--------
+>>> import numpy as np
+>>> format_rows([(np.array([1, -20]), "%d"), (np.array([0.5, 1e-7]), "%.9g")])
+'1,0.5\\n-20,1e-07\\n'
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+
+import numba
+import numpy as np
+
+from navreplay.core import jit  # noqa: F401  (the collector rests while numba compiles)
+
+SECONDS_NS = "seconds.nanoseconds"
+"""Format of an int64 column of nanoseconds printed as ``f"{s}.{ns:09d}"`` (``divmod`` by 1e9)."""
+
+BLOCK_ROWS = 8192
+"""Rows formatted at once."""
+
+_PYTHON, _INT, _FIXED, _GENERAL, _SECONDS = -1, 0, 1, 2, 3  # kinds of column
+_FIXED_RE = re.compile(r"%\.(\d+)f")
+_GENERAL_RE = re.compile(r"%\.(\d+)g")
+_CELL = 34  # the longest cell the kernel writes: "-" + 15 + "." + 15 digits, and a separator
+
+_POW10 = np.array([float(10**k) for k in range(23)])  # exact doubles
+_POW10_INT = np.array([10**k for k in range(19)], dtype=np.int64)
+_TIE = 1e-6
+_INT64_MIN = -(2**63)
+
+
+def format_rows(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
+                end: str = "\n") -> str:
+    """Rows of text: each column's values as ``fmt % value``, separated by ``sep``, each row
+    ended by ``end``.
+
+    Parameters
+    ----------
+    columns : sequence of (ndarray (M,), str)
+        Values and format of each column (all of M rows).
+    sep, end : str
+        One ASCII character each: between the values of a row; after each row.
+    """
+    if not columns:
+        return ""
+    k = len(columns)
+    arrays = [np.asarray(v) for v, _ in columns]
+    fmts = [f for _, f in columns]
+    kinds = np.array([_kind(a, f) for a, f in zip(arrays, fmts, strict=True)], dtype=np.int64)
+    kind, prec = kinds // 100 - 1, kinds % 100
+    ints = [a.dtype.kind in "iu" for a in arrays]
+    n = arrays[0].shape[0]
+    out = []
+    for a in range(0, n, BLOCK_ROWS):
+        b = min(n, a + BLOCK_ROWS)
+        F = np.zeros((b - a, k))
+        Ii = np.zeros((b - a, k), dtype=np.int64)
+        for j, v in enumerate(arrays):
+            if ints[j]:
+                Ii[:, j] = v[a:b]
+            else:
+                F[:, j] = v[a:b]
+        buf = np.empty((b - a) * (k * _CELL + 1), dtype=np.uint8)
+        marks = np.empty(2 * (b - a) * k, dtype=np.int64)
+        size, count = _write(F, Ii, kind, prec, ord(sep), ord(end), buf, marks)
+        text, done = [], 0  # the values left to Python go in at their marks
+        for pos, flat in marks[:2 * count].reshape(count, 2).tolist():
+            r, j = divmod(flat, k)
+            text += [buf[done:pos].tobytes().decode("ascii"), _python(arrays[j][a + r:a + r + 1].tolist()[0], fmts[j])]
+            done = pos
+        text.append(buf[done:size].tobytes().decode("ascii"))
+        out.append("".join(text))
+    return "".join(out)
+
+
+def _kind(values: np.ndarray, fmt: str) -> int:
+    """100 * (kind + 1) + precision of a column."""
+    integer = values.dtype.kind in "iu" and values.dtype.itemsize <= 8 and not (
+        values.dtype.kind == "u" and values.dtype.itemsize == 8)
+    if fmt == "%d" and integer:
+        return 100 * (_INT + 1)
+    if fmt == SECONDS_NS and integer:
+        return 100 * (_SECONDS + 1)
+    if values.dtype.kind == "f":
+        if (m := _FIXED_RE.fullmatch(fmt)) and int(m.group(1)) <= 15:
+            return 100 * (_FIXED + 1) + int(m.group(1))
+        if (m := _GENERAL_RE.fullmatch(fmt)) and 1 <= int(m.group(1)) <= 17:
+            return 100 * (_GENERAL + 1) + int(m.group(1))
+    return 0  # Python's
+
+
+def _python(value: object, fmt: str) -> str:
+    if fmt == SECONDS_NS:
+        s, ns = divmod(int(value), 1_000_000_000)  # type: ignore[call-overload]
+        return f"{s}.{ns:09d}"
+    return fmt % value
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _scaled(ax: float, k: int) -> float:
+    if k >= 0:
+        return ax * _POW10[k]
+    return ax / _POW10[-k]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _tie(m: float) -> bool:
+    """``m`` (within m * 2**-53 of the exact product) may round either way."""
+    return abs(m - math.floor(m) - 0.5) < _TIE + m * 4.5e-16
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
+    """(p significant digits as an integer, decimal exponent, in doubt) of finite ax > 0."""
+    e = int(math.floor(math.log10(ax)))
+    m = 0.0
+    for _ in range(4):
+        k = p - 1 - e
+        if k > 22 or k < -22:
+            return 0, e, True
+        m = _scaled(ax, k)
+        if m < _POW10[p - 1]:
+            e -= 1
+        elif m >= _POW10[p]:
+            e += 1
+        else:
+            break
+    else:
+        return 0, e, True
+    r = int(np.rint(m))
+    if r == _POW10_INT[p]:
+        r = _POW10_INT[p - 1]
+        e += 1
+    return r, e, _tie(m)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _put_uint(buf: np.ndarray, pos: int, v: int, width: int) -> int:
+    """Non-negative ``v`` in decimal, zero-padded to ``width`` digits (0: as many as it has)."""
+    count = 1
+    t = v
+    while t >= 10:
+        t //= 10
+        count += 1
+    count = max(count, width)
+    for i in range(count - 1, -1, -1):
+        buf[pos + i] = 48 + v % 10
+        v //= 10
+    return pos + count
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _put3(buf: np.ndarray, pos: int, a: int, b: int, c: int) -> int:
+    buf[pos], buf[pos + 1], buf[pos + 2] = a, b, c
+    return pos + 3
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int,
+               digits: np.ndarray) -> int:
+    """``%.{p}f`` (kd _FIXED) or ``%.{p}g`` (_GENERAL) of ``x``; -1 where the digits might
+    not be Python's."""
+    if x != x:
+        return _put3(buf, pos, 110, 97, 110)  # "nan"
+    if math.copysign(1.0, x) < 0.0:
+        buf[pos] = 45  # "-"
+        pos += 1
+    ax = abs(x)
+    if math.isinf(ax):
+        return _put3(buf, pos, 105, 110, 102)  # "inf"
+    if kd == _FIXED:
+        m = ax * _POW10[p]
+        if not m < 9e14 or _tie(m):
+            return -1
+        r = int(np.rint(m))
+        pos = _put_uint(buf, pos, r // _POW10_INT[p], 0)
+        if p:
+            buf[pos] = 46  # "."
+            pos = _put_uint(buf, pos + 1, r % _POW10_INT[p], p)
+        return pos
+    if ax == 0.0:
+        buf[pos] = 48
+        return pos + 1
+    r, e, doubt = _general_digits(ax, p)
+    if doubt:
+        return -1
+    for i in range(p - 1, -1, -1):
+        digits[i] = 48 + r % 10
+        r //= 10
+    sig = p  # significant digits without the trailing zeros
+    while sig > 1 and digits[sig - 1] == 48:
+        sig -= 1
+    if -4 <= e < p:
+        if e >= 0:  # integer digits, then the rest of the significant ones
+            for i in range(e + 1):
+                buf[pos + i] = digits[i]
+            pos += e + 1
+            if sig > e + 1:
+                buf[pos] = 46
+                pos += 1
+                for i in range(e + 1, sig):
+                    buf[pos] = digits[i]
+                    pos += 1
+        else:  # 0.000ddd
+            buf[pos] = 48
+            buf[pos + 1] = 46
+            pos += 2
+            for _ in range(-e - 1):
+                buf[pos] = 48
+                pos += 1
+            for i in range(sig):
+                buf[pos] = digits[i]
+                pos += 1
+        return pos
+    buf[pos] = digits[0]  # d.ddde+XX
+    pos += 1
+    if sig > 1:
+        buf[pos] = 46
+        pos += 1
+        for i in range(1, sig):
+            buf[pos] = digits[i]
+            pos += 1
+    buf[pos] = 101  # "e"
+    buf[pos + 1] = 45 if e < 0 else 43
+    return _put_uint(buf, pos + 2, abs(e), 2)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _write(F: np.ndarray, Ii: np.ndarray, kind: np.ndarray, prec: np.ndarray, sep: int,
+           end: int, buf: np.ndarray, marks: np.ndarray) -> tuple[int, int]:
+    """Write the rows into ``buf``; a value left to Python is skipped, its position and
+    ``r * k + j`` appended to ``marks``. Returns the bytes written and the marks."""
+    n, k = F.shape
+    digits = np.empty(20, dtype=np.uint8)
+    pos = 0
+    count = 0
+    for r in range(n):
+        for j in range(k):
+            if j:
+                buf[pos] = sep
+                pos += 1
+            kd = kind[j]
+            if kd == _INT or kd == _SECONDS:
+                v = Ii[r, j]
+                python = v == _INT64_MIN if kd == _INT else v < 0
+            else:
+                python = kd == _PYTHON
+                if not python:
+                    at = _put_float(buf, pos, F[r, j], kd, prec[j], digits)
+                    python = at < 0
+                    if not python:
+                        pos = at
+                        continue
+            if python:
+                marks[2 * count] = pos
+                marks[2 * count + 1] = r * k + j
+                count += 1
+            elif kd == _INT:
+                if v < 0:
+                    buf[pos] = 45
+                    pos += 1
+                    v = -v
+                pos = _put_uint(buf, pos, v, 0)
+            elif kd == _SECONDS:
+                pos = _put_uint(buf, pos, v // 1_000_000_000, 0)
+                buf[pos] = 46
+                pos = _put_uint(buf, pos + 1, v % 1_000_000_000, 9)
+        buf[pos] = end
+        pos += 1
+    return pos, count

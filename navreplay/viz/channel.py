@@ -1,0 +1,224 @@
+"""A Rerun recording stream and what navreplay's entity tree keeps about it: the time columns,
+the series and their static style, the colours of the labels, and the live layout (the
+blueprint sent ahead of the data it lays out)."""
+
+from __future__ import annotations
+
+import copy
+import weakref
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from navreplay.io.outputs import release
+from navreplay.viz import convert
+from navreplay.viz.blueprint import Catalog, build_blueprint
+from navreplay.viz.style import (
+    BAND_LINES,
+    BAND_WIDTH,
+    N_SIGMA,
+    PALETTE,
+    TRUTH_COLOR,
+    color_index,
+    dimmer,
+    lighter,
+)
+from navreplay.viz.targets import (
+    Save,
+    Target,
+)
+
+if TYPE_CHECKING:
+    from navreplay.viz.runs import RunState
+    from navreplay.viz.truth import TruthLog
+
+
+TIMELINE = "time"
+"""Duration since the recording start."""
+
+
+TIMESTAMP = "timestamp"
+"""Absolute time (UNIX epoch)."""
+
+
+def _remove(path: Path) -> None:
+    release(path)
+
+
+class Channel:
+    """The recording stream of a :class:`~navreplay.viz.sink.Sink` and the state of what it has
+    logged: the base of the views of the truth, the runs, the 3D world and the map, and the
+    ensembles."""
+
+    def __init__(
+        self,
+        rec: rr.RecordingStream,
+        target: Target,
+        *,
+        path: Path | None = None,
+        tmp: Path | None = None,
+        url: str | None = None,
+        web_url: str | None = None,
+        keep_alive: bool = False,
+    ) -> None:
+        self._rec = rec
+        self._keep_alive = keep_alive
+        self.target = target
+        self.path = path
+        self._tmp = tmp
+        self.url = url
+        self.web_url = web_url
+        self.recording_id = str(rec.get_recording_id())
+        self.catalog = Catalog()
+        self.live = not isinstance(target, Save)
+        self._sent: tuple | None = None
+        self._colors: dict[str, tuple[int, int, int]] = {}
+        self._runs: dict[str, RunState] = {}
+        self._styled: set[str] = set()
+        self._ref: np.ndarray | None = None
+        self._extent = 0.0
+        self._box: tuple[np.ndarray, np.ndarray] | None = None  # NED extremes of the truth
+        self._truth: convert.NavColumns | None = None
+        self._truth_yaw: tuple[np.ndarray, np.ndarray] | None = None  # t [s], unwrapped yaw
+        self._truth_log: TruthLog | None = None
+        # extent of the true track up to each time (ellipsoid caps): times [s], extents [m]
+        self._extent_curve: tuple[np.ndarray, np.ndarray] | None = None
+        self._t0_ns = 0
+        self._truth_wanted: dict[str, str] = {}
+        self._outages: tuple[tuple[float, float], ...] = ()
+        self._truth_columns: set[str] = set()
+        self._closed = False
+        self._world_coords = False
+        self._cleanup = weakref.finalize(self, _remove, tmp) if tmp is not None else None
+
+    def color_of(self, label: str) -> tuple[int, int, int]:
+        """The colour of a filter label (or an ensemble variant) in every plot of this sink:
+        picked from :data:`PALETTE` by its name (:func:`~navreplay.viz.style.color_index`), the
+        same in every run."""
+        if label not in self._colors:
+            taken = {PALETTE.index(c) for c in self._colors.values()}
+            self._colors[label] = PALETTE[color_index(label, taken)]
+        return self._colors[label]
+
+    def order_of(self, label: str) -> int:
+        """Position of a label in first-use order (the row of its panes)."""
+        self.color_of(label)
+        return list(self._colors).index(label)
+
+    def _layout_first(self, log: Callable[[], None], *, plan: bool = True) -> None:
+        """Run ``log``; on a live sink, first send the blueprint for what it will log: with
+        ``plan``, ``log`` runs once against a stream that drops everything (filling the
+        catalog), the blueprint goes out if the catalog changed, then ``log`` runs for real.
+        Without ``plan`` (later rows of a run already laid out) a plot that appears anyway is
+        announced right after its first rows."""
+        if not self.live:
+            log()
+            return
+        if plan:
+            saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
+                     self._extent, self._truth, self._truth_yaw, self._world_coords,
+                     set(self._truth_columns), self._box, copy.deepcopy(self._truth_log))
+            self._rec = _NullStream()  # type: ignore[assignment]
+            try:
+                log()
+            finally:
+                (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
+                 self._truth_yaw, self._world_coords, self._truth_columns, self._box,
+                 self._truth_log) = saved
+            if self.catalog.signature() != self._sent:
+                self.send_blueprint()
+        log()
+        if self.catalog.signature() != self._sent:
+            self.send_blueprint()
+
+    @staticmethod
+    def _indexes(t: np.ndarray, t0_ns: int) -> list[rr.TimeColumn]:
+        dt_ns = np.rint(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
+        return [
+            rr.TimeColumn(TIMELINE, duration=dt_ns.astype("timedelta64[ns]")),
+            rr.TimeColumn(TIMESTAMP, timestamp=(dt_ns + np.int64(t0_ns)).astype("datetime64[ns]")),
+        ]
+
+    def _scalars(self, path: str, idx: list[rr.TimeColumn], values: np.ndarray) -> None:
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        if values.shape[0]:
+            self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
+
+    def _style(
+        self,
+        path: str,
+        names: list[str],
+        colors: list[tuple[int, ...]],
+        widths: list[float] | None = None,
+    ) -> None:
+        if path in self._styled:
+            return
+        self._styled.add(path)
+        self._rec.log(path, rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
+
+    def _bounded(
+        self,
+        path: str,
+        idx: list[rr.TimeColumn],
+        value: np.ndarray,
+        sigma: np.ndarray | None,
+        name: str,
+        color: tuple[int, int, int],
+    ) -> None:
+        """A value with +-N_SIGMA bounds as three series (value, +3 sigma, -3 sigma): the
+        value in the filter's colour, the bounds thinner and lighter."""
+        if sigma is None:
+            self._style(path, [name], [color], [1.5])
+            self._scalars(path, idx, value)
+            return
+        faint = lighter(color, 0.45)
+        self._style(
+            path,
+            [name, "+3σ", "-3σ"],
+            [color, faint, faint],
+            [1.5, 1.0, 1.0],
+        )
+        self._scalars(path, idx, np.stack([value, N_SIGMA * sigma, -N_SIGMA * sigma], axis=1))
+
+    def band(
+        self,
+        path: str,
+        idx: list[rr.TimeColumn],
+        lo: np.ndarray,
+        hi: np.ndarray,
+        color: tuple[int, ...] = TRUTH_COLOR,
+        name: str = "95 % band",
+    ) -> None:
+        """A shaded band between ``lo`` and ``hi`` (arrays on ``idx``): Rerun 0.41 cannot fill
+        between series, so :data:`BAND_LINES` wide dim lines fill it."""
+        lo = np.asarray(lo, dtype=np.float64)
+        hi = np.asarray(hi, dtype=np.float64)
+        f = np.linspace(0.0, 1.0, BAND_LINES)
+        lines = lo[:, None] + (hi - lo)[:, None] * f[None, :]
+        shade = dimmer(color, 0.8)
+        self._style(path, [name] * BAND_LINES, [shade] * BAND_LINES, [BAND_WIDTH] * BAND_LINES)
+        self._scalars(path, idx, lines)
+
+    def blueprint(self) -> rrb.Blueprint:
+        """The default blueprint for what has been logged so far."""
+        return build_blueprint(self.catalog)
+
+    def send_blueprint(self) -> None:
+        """Send the default blueprint now (also done by :meth:`close`, and by a live sink
+        before the data of every new plot)."""
+        self._sent = self.catalog.signature()
+        self._rec.send_blueprint(self.blueprint(), make_active=True, make_default=True)
+
+
+class _NullStream:
+    """Stands in for the recording stream while a live sink lays out what it will log."""
+
+    def send_columns(self, *args: Any, **kwargs: Any) -> None:
+        pass
+
+    def log(self, *args: Any, **kwargs: Any) -> None:
+        pass

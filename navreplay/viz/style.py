@@ -1,0 +1,76 @@
+"""How the view looks: the filters' colours (one per label in every plot; grey for the truth),
+lighter and dimmer shades, the shaded bands, the +-3 sigma bounds and the order of the plots
+inside a tab."""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Collection
+
+N_SIGMA = 3.0
+
+
+BAND_LINES = 48
+"""A shaded band (NEES/NIS 95 % interval) is drawn as this many dim lines between its bounds:
+Rerun 0.41's time-series view has no fill between two series."""
+
+
+BAND_WIDTH = 8.0
+"""Width of each band line [px]."""
+
+
+TRUTH_COLOR = (150, 150, 150)
+
+
+OUTAGE_COLOR = (235, 160, 40)
+"""GNSS outages: the true track inside them, and (dimmed) the bands that shade them."""
+
+
+PALETTE = (
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+    (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207),
+)  # fmt: skip
+"""Filter colours (grey is reserved for the truth): a label's colour is picked by its name
+(:func:`color_index`), so a filter keeps its colour from run to run."""
+
+
+def color_index(label: str, taken: Collection[int] = ()) -> int:
+    """The :data:`PALETTE` index of a label: a CRC-32 of its name, or the next index not
+    ``taken`` by another label of the same view when two names fall on one colour (then the
+    label that came first keeps its own). The built-in filters have distinct colours."""
+    k = zlib.crc32(label.encode()) % len(PALETTE)
+    if len(taken) >= len(PALETTE):
+        return k
+    while k in taken:
+        k = (k + 1) % len(PALETTE)
+    return k
+
+
+AXIS_COLORS = ((230, 60, 60), (60, 200, 60), (70, 110, 240))
+
+
+SIGMA_SHADE = 0.5
+"""A predicted sigma beside its RMS is drawn in the same colour this much lighter, and thinner."""
+
+
+_BACKGROUND = (18, 18, 18)
+"""The viewer's dark plot background, that band colours are blended towards."""
+
+
+# plot ranks (order inside a tab): overlays first, then per-filter rows
+RANK_NAV, RANK_ERROR, RANK_STATE, RANK_SIGMA, RANK_EXTRA, RANK_TRUTH = (
+    0, 100, 300, 400, 500, 600
+)
+
+
+def lighter(color: tuple[int, ...], f: float) -> tuple[int, int, int]:
+    """``color`` moved a fraction ``f`` towards white."""
+    r, g, b = (int(round(c + (255 - c) * f)) for c in color[:3])
+    return r, g, b
+
+
+def dimmer(color: tuple[int, ...], f: float) -> tuple[int, int, int]:
+    """``color`` moved a fraction ``f`` towards the plot background (an opaque 'transparent'
+    colour: Rerun's plot lines ignore alpha)."""
+    r, g, b = (int(round(c + (bg - c) * f)) for c, bg in zip(color[:3], _BACKGROUND, strict=True))
+    return r, g, b
