@@ -74,7 +74,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             damage = "; ".join(check.problems)
             lines.append(f"DAMAGED: the data files disagree with metadata.yaml: {damage}")
     elif container.name != "mcap":  # a log read straight into streams (io.direct)
-        direct = container.source(path)
+        direct = container.source(path, None)
         assert isinstance(direct, DirectSource)  # the kinds read straight into streams
         listing = [(t.name, t.type_name, t.count, None, None) for t in direct.topics()]
         lines = [f"{path}  ({container.name}, {sum(r[2] for r in listing)} messages)"]
@@ -90,9 +90,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         warnings.simplefilter("always")
         try:
             with read_policy(options.policy):
-                recording, sources = read_streams(path, topics=options.topics,
-                                                  frames=options.stream_frames, validate=False,
-                                                  time=options.time)
+                recording, sources = read_streams(path, options.read_options(validate=False))
         except RecordingError as exc:
             recording, sources, problem = None, {}, str(exc)
     if recording is not None and options.span is not None:

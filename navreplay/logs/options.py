@@ -7,13 +7,14 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from navreplay.core.params import ParamError
 from navreplay.core.streams import StreamKind
 from navreplay.io.checks import STANDARD_GRAVITY, ImuRange, ReadPolicy
 from navreplay.io.convert import Convention
+from navreplay.io.source import ReadOptions
 from navreplay.io.span import TimeSpan, TimeSpanError
 
 REFERENCE = "reference"
@@ -125,6 +126,13 @@ class LogOptions:
     @property
     def stream_frames(self) -> dict[StreamKind, Convention]:
         return {StreamKind(k): v for k, v in self.frames.items() if k != REFERENCE}
+
+    def read_options(self, kinds: Iterable[StreamKind] | None = None, *,
+                     validate: bool = True) -> ReadOptions:
+        """The options of the log's reader (:class:`~navreplay.io.source.ReadOptions`):
+        ``kinds`` (all when None), the topics, the streams' frames and the time source."""
+        return ReadOptions(kinds=kinds, topics=self.topics, frames=self.stream_frames,
+                           time=self.time, validate=validate)
 
     @property
     def policy(self) -> ReadPolicy:

@@ -107,9 +107,9 @@ def open_log(path: str | Path, options: LogOptions | None = None, *,
     """
     options = options or LogOptions()
     path = Path(path)
-    inner = open_recording(path, kinds=kinds, topics=options.topics,
-                           frames=options.stream_frames, time=options.time,
-                           whole=whole or options.reference is not None)
+    read = options.read_options(kinds)
+    inner = open_recording(path, read.whole() if whole or options.reference is not None
+                           else read)
     return LogSource(inner, path, options)
 
 

@@ -15,7 +15,8 @@ from mcap_edits import write_small_chunks as _write
 from mcap_edits import zero_imu_stamps as _zero_imu_stamps
 
 from navreplay.core.streams import StreamKind
-from navreplay.io import files, mcapread, open_recording, read_recording, rosbag
+from navreplay.io import ReadOptions, files, mcapread, open_recording, read_recording, rosbag
+from navreplay.io import source as source_module
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, MemorySource
 from navreplay.sim.scenario import simulate
@@ -29,8 +30,8 @@ def drive(tmp_path_factory):
 
 def _windows(path, window: int, **kw) -> list:
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(mcapread, "WINDOW_MESSAGES", window)
-        with open_recording(path, **kw) as source:
+        mp.setattr(source_module, "WINDOW_MESSAGES", window)
+        with open_recording(path, ReadOptions(**kw)) as source:
             return list(source)
 
 
