@@ -25,13 +25,13 @@ from navreplay.io.topics import TopicSource, warn
 
 @dataclasses.dataclass(frozen=True)
 class Topic:
-    """A topic of a log: its name, type, message count and the stream it can feed (None: it
-    feeds none, e.g. a reference)."""
+    """A topic of a log: its name, type, message count and the streams it can feed (none: a
+    reference, say; a GNSS receiver's topic can feed both position and velocity)."""
 
     name: str
     type_name: str
     count: int
-    kind: StreamKind | None = None
+    kinds: tuple[StreamKind, ...] = ()
 
 
 @dataclasses.dataclass
@@ -79,14 +79,14 @@ class DirectSource(FileSource):
             if t is None:
                 raise RecordingError(f"{where}: topic {name} named for stream {kind.value} is "
                                      f"not in the {self.what}; it has {available}")
-            if t.kind is not kind:
-                readers = sorted({c.type_name for c in listing if c.kind is kind})
+            if kind not in t.kinds:
+                readers = sorted({c.type_name for c in listing if kind in c.kinds})
                 raise RecordingError(
                     f"{where}: topic {name} has type {t.type_name}; stream {kind.value} "
                     f"needs {' or '.join(readers) or 'a type this log does not have'}")
         chosen: dict[StreamKind, tuple[Topic, tuple[str, ...]]] = {}
         for kind in StreamKind:
-            cands = [t for t in listing if t.kind is kind and t.count]
+            cands = [t for t in listing if kind in t.kinds and t.count]
             if kind in opts.topics:
                 pick = by_name[opts.topics[kind]]
             elif cands:

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from navreplay.core.streams import Recording, StreamKind
-from navreplay.io import gins, mcapread, rosbag, rosbag1
+from navreplay.io import gins, mcapread, rosbag, rosbag1, ulog
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import ReadOptions, Source
 from navreplay.io.topics import TopicSource
@@ -37,6 +37,7 @@ class FileKind:
 FILE_KINDS: tuple[FileKind, ...] = (
     FileKind("rosbag1", rosbag1.accepts, rosbag1.Bag1Source),
     FileKind("gins", gins.accepts, gins.GinsSource),
+    FileKind("ulog", ulog.accepts, ulog.ULogSource),
     FileKind("rosbag2", rosbag.accepts, rosbag.BagSource),
     FileKind("mcap", mcapread.accepts, mcapread.McapSource),
 )

@@ -9,7 +9,7 @@ import dataclasses
 import warnings
 from pathlib import Path
 
-from navreplay.core.streams import seconds
+from navreplay.core.streams import StreamKind, seconds
 from navreplay.io.checks import gap_report, read_policy
 from navreplay.io.direct import DirectSource
 from navreplay.io.errors import RecordingError
@@ -104,16 +104,19 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             a = 0 if lo is None else int(s.t_ns.searchsorted(lo))
             b = len(s) if hi is None else int(s.t_ns.searchsorted(hi, side="right"))
             recording.streams[stream_kind] = s.slice(a, max(a, b))
-    by_topic = {src.topic: kind for kind, src in sources.items()}
+    by_topic: dict[str, list[StreamKind]] = {}  # a GNSS topic can feed gps and gps_vel
+    for stream_kind, src in sources.items():
+        by_topic.setdefault(src.topic, []).append(stream_kind)
     rows = [("topic", "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
              "end [s]", "gaps")]
     for topic, type_name, count, start, end in listing:
-        kind = by_topic.get(topic)
+        fed = by_topic.get(topic, [])
         stream = "(reference)" if type_name in (*REFERENCE_TYPES, NAV_TYPE) else "-"
         frame, axes, gaps = "", "", ""
-        if kind is not None and recording is not None:
+        if fed and recording is not None:
+            kind = fed[0]
             s, src = recording[kind], sources[kind]
-            stream, frame = kind.value, src.frame_id
+            stream, frame = ",".join(k.value for k in fed), src.frame_id
             axes = src.convention.value.upper() if src.convention else "-"
             gaps = "yes" if gap_report(s, recording.t0_ns) else "no"
             if len(s):  # the stream's sample times (header stamps or log times)
