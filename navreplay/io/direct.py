@@ -63,6 +63,10 @@ class DirectSource(FileSource):
         """One topic as the columns of stream ``kind``."""
         raise NotImplementedError
 
+    def readers(self, kind: StreamKind) -> tuple[str, ...]:
+        """The topic types of this kind of log that feed stream ``kind`` (for messages)."""
+        return ()
+
     def metadata(self) -> Metadata:
         return Metadata()
 
@@ -80,7 +84,8 @@ class DirectSource(FileSource):
                 raise RecordingError(f"{where}: topic {name} named for stream {kind.value} is "
                                      f"not in the {self.what}; it has {available}")
             if kind not in t.kinds:
-                readers = sorted({c.type_name for c in listing if kind in c.kinds})
+                readers = sorted({c.type_name for c in listing if kind in c.kinds}
+                                 | set(self.readers(kind)))
                 raise RecordingError(
                     f"{where}: topic {name} has type {t.type_name}; stream {kind.value} "
                     f"needs {' or '.join(readers) or 'a type this log does not have'}")

@@ -138,9 +138,10 @@ def _pyulog() -> Any:
     return pyulog
 
 
-def parse(path: Path, names: list[str] | None = None) -> Any:
-    """The file parsed by pyulog (only the topics ``names`` when given); a cut or a corrupt
-    file is a warning, a file that is not ULog a :class:`RecordingError`."""
+def parse(path: Path, names: list[str] | None = None) -> tuple[Any, bool]:
+    """The file parsed by pyulog (only the topics ``names`` when given), and whether messages
+    were lost; a cut or a corrupt file is a warning, a file that is not ULog a
+    :class:`RecordingError`."""
     pyulog = _pyulog()
     try:
         f = open(path, "rb")  # noqa: SIM115 (pyulog closes it)
@@ -170,7 +171,7 @@ def parse(path: Path, names: list[str] | None = None) -> Any:
         warnings.warn(RecordingWarning(
             f"{path}: pyulog finds the file corrupt inside and reads on past the damage (at "
             f"the next sync marker); messages in the damaged part are lost{at}"), stacklevel=3)
-    return log
+    return log, reads.cut_at is not None or bool(log.file_corruption)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -237,7 +238,7 @@ class ULogSource(DirectSource):
 
     def _parsed(self) -> Any:
         if self._log is None:
-            self._log = parse(self.path)
+            self._log, self._salvaged = parse(self.path)
             self._utc_ns = utc_offset_ns(self._log)
         return self._log
 
@@ -254,6 +255,9 @@ class ULogSource(DirectSource):
             if d.name == name and d.multi_id == multi_id:
                 return _Data(topic.name, d.data)
         raise RecordingError(f"{self.name}: no topic {topic.name}")  # listed: never
+
+    def readers(self, kind: StreamKind) -> tuple[str, ...]:
+        return tuple(name for name, kinds in FEEDS.items() if kind in kinds)
 
     def topics(self) -> list[Topic]:
         order = list(FEEDS)
@@ -395,7 +399,7 @@ def ekf2_solution(path: Path) -> Solution:
     ``epv`` (``evv``). Rows where the estimator flags the position or velocity invalid
     (``xy_valid``, ``v_xy_valid``...) are NaN in that part.
     """
-    log = parse(path, [*EKF2_TOPICS, *(n for n, k in FEEDS.items() if StreamKind.GPS in k)])
+    log, _ = parse(path, [*EKF2_TOPICS, *(n for n, k in FEEDS.items() if StreamKind.GPS in k)])
     utc_ns = utc_offset_ns(log)
     data = {d.name: _Data(d.name, d.data) for d in log.data_list if d.multi_id == 0}
     where = f"{path}: --onboard {ONBOARD}"
