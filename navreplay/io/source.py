@@ -29,6 +29,7 @@ from typing import Self
 
 from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.io.convert import Convention
+from navreplay.io.solution import RecordedSolution
 from navreplay.io.topics import TIME_SOURCES, FrameNames, TopicNames, TopicSource
 
 COMPLETE = 2**63 - 1
@@ -181,6 +182,9 @@ class Source:
         The topic, frame and convention of each stream, as it first appears.
     salvaged : bool
         Messages were lost to damage (known once the windows are read).
+    recorded : list of RecordedSolution
+        Navigation solutions the log recorded, replayed as rows beside the filters
+        (``run --onboard``; known once the first window is read).
     """
 
     kind = ""
@@ -188,6 +192,7 @@ class Source:
     def __init__(self, name: str) -> None:
         self.name = name
         self.sources: dict[StreamKind, TopicSource] = {}
+        self.recorded: list[RecordedSolution] = []
         self._salvaged = False
         self._metadata: Metadata | None = None
         self._t0_ns = 0

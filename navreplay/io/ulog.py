@@ -65,6 +65,7 @@ from navreplay.core.streams import Metadata, StreamKind
 from navreplay.io.convert import Convention
 from navreplay.io.direct import Columns, DirectSource, Topic, body_axes
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
+from navreplay.io.solution import RecordedSolution
 
 MAGIC = b"ULog\x01\x12\x35"
 """The first bytes of a ULog file (its version byte follows)."""
@@ -362,31 +363,7 @@ def _gnss(d: _Data, kind: StreamKind) -> Columns:
 # PX4's own estimate
 
 
-@dataclasses.dataclass
-class Solution:
-    """A recorded navigation solution at its sample times, its parts NaN where not logged.
-
-    Attributes
-    ----------
-    t_ns : (M,) int64
-    pos : (M, 3)  latitude, longitude [rad], ellipsoidal height [m]
-    v_n : (M, 3) [m/s] NED
-    q_nb : (M, 4) Hamilton, scalar first, FRD body to NED
-    pos_sigma, vel_sigma : (M, 3) [m], [m/s] 1-sigma N, E, D (NaN: not logged)
-    source : str
-        The topics read, for messages.
-    """
-
-    t_ns: np.ndarray
-    pos: np.ndarray
-    v_n: np.ndarray
-    q_nb: np.ndarray
-    pos_sigma: np.ndarray
-    vel_sigma: np.ndarray
-    source: str
-
-
-def ekf2_solution(path: Path) -> Solution:
+def ekf2_solution(path: Path, label: str = ONBOARD) -> RecordedSolution:
     """PX4's estimate in a ULog file, at the times of ``vehicle_local_position``.
 
     Velocity NED from ``vehicle_local_position`` (``vx, vy, vz``); position from
@@ -397,7 +374,8 @@ def ekf2_solution(path: Path) -> Solution:
     The 1-sigma: EKF2 logs ``eph`` and ``evh`` as the square root of the sum of the north and
     east variances, so each of north and east is ``eph / sqrt(2)`` (``evh / sqrt(2)``), down
     ``epv`` (``evv``). Rows where the estimator flags the position or velocity invalid
-    (``xy_valid``, ``v_xy_valid``...) are NaN in that part.
+    (``xy_valid``, ``v_xy_valid``...) are NaN in that part. The attitude's variance is not in
+    these topics: the attitude is shown and scored, without a NEES.
     """
     log, _ = parse(path, [*EKF2_TOPICS, *(n for n, k in FEEDS.items() if StreamKind.GPS in k)])
     utc_ns = utc_offset_ns(log)
@@ -447,7 +425,8 @@ def ekf2_solution(path: Path) -> Solution:
                              for i in range(4)])
         q /= np.linalg.norm(q, axis=1, keepdims=True)
         read.append("vehicle_attitude")
-    return Solution(t, pos, v, q, pos_sigma, vel_sigma, " + ".join(read))
+    return RecordedSolution(label, f"{path}: {' + '.join(read)}", t, pos, v, q, pos_sigma,
+                            vel_sigma, np.full((n, 3), np.nan))
 
 
 def _continuous(q: np.ndarray) -> np.ndarray:

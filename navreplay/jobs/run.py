@@ -146,6 +146,8 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
     if job.smooth:
         raise _params.ParamError("--smooth needs a single recording")
+    if job.log is not None and job.log.onboard:
+        raise _params.ParamError("--onboard needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")

@@ -108,6 +108,9 @@ class LogOptions:
         ``--force-frame``: ``--frame`` wins over frame ids that name other axes.
     span : TimeSpan or None
         ``--start`` / ``--end``: the part of the log read (:mod:`navreplay.io.span`).
+    onboard : tuple of str
+        ``--onboard``: recorded navigation solutions shown, scored and exported beside the
+        filters (:mod:`navreplay.logs.onboard`).
     """
 
     topics: Mapping[StreamKind, str] = dataclasses.field(default_factory=dict)
@@ -122,6 +125,7 @@ class LogOptions:
     imu_range: ImuRange = ImuRange()
     force_frames: bool = False
     span: TimeSpan | None = None
+    onboard: tuple[str, ...] = ()
 
     @property
     def stream_frames(self) -> dict[StreamKind, Convention]:
@@ -236,6 +240,7 @@ def log_options(
     force_frames: bool = False,
     start: str | None = None,
     end: str | None = None,
+    onboard: Sequence[str] = (),
 ) -> LogOptions:
     """Parse ``--topic``/``--frame``/``--imu-range`` items and the TOML tables into
     :class:`LogOptions`; every value is checked for its type and range here (``sensors``: the
@@ -283,4 +288,21 @@ def log_options(
     return LogOptions(topic_map, frame_map, method, dict(initial), reference, check_frames,
                       time, sensors=sensors or None,
                       imu_range=imu_range(imu_range_text, config.get("imu_range")),
-                      force_frames=force_frames, span=span)
+                      force_frames=force_frames, span=span, onboard=_onboard(onboard))
+
+
+def _onboard(sources: Sequence[str]) -> tuple[str, ...]:
+    """``--onboard`` sources, each once (a repeated one is read once), their labels
+    distinct."""
+    from navreplay.logs.onboard import onboard_label
+
+    out = tuple(dict.fromkeys(s.strip() for s in sources))
+    if "" in out:
+        raise ParamError("--onboard: an empty source")
+    labels = [onboard_label(s) for s in out]
+    for label in labels:
+        if labels.count(label) > 1:
+            twins = " and ".join(s for s in out if onboard_label(s) == label)
+            raise ParamError(f"--onboard {twins}: two recorded solutions would be named "
+                             f"{label}")
+    return out

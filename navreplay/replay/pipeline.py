@@ -41,6 +41,7 @@ from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, MemorySource, Source, Window
 from navreplay.metrics import RunMetrics, RunScorer
 from navreplay.replay.checks import validate_recording
+from navreplay.replay.recorded import RecordedSession
 from navreplay.replay.session import Progress, ReplaySession
 from navreplay.replay.smoothing import (
     ForwardStore,
@@ -289,11 +290,21 @@ def _replay_file(
         columns = {st.truth.column: st.unit for s in sessions for st in s.states
                    if isinstance(st.truth, TruthColumn)}
         late = {smoothed_label(sessions[k].label): sessions[k].label for k in stores}
-        start = RunStart(source.name, tuple(all_labels), t0_ns, has_truth, metadata, columns,
+        runs: list[ReplaySession | RecordedSession] = list(sessions)
+        for solution in source.recorded:  # the log's own solutions, rows beside the filters
+            if solution.label in all_labels:
+                raise ValueError(f"filter labels must be unique; {solution.label} is a filter's "
+                                 "and a recorded solution's")
+            runs.append(RecordedSession(solution, source=source.name, t0_ns=t0_ns))
+            scorers.append(RunScorer(solution.label, t0_ns, metadata.true_errors, has_truth,
+                                     outages=outages, scored=_fan_out(stages))
+                           if score else None)
+        labels = [*all_labels, *(r.label for r in runs[len(sessions):])]
+        start = RunStart(source.name, tuple(labels), t0_ns, has_truth, metadata, columns,
                          late, outages)
         for stage in stages:
             stage.start(start)
-        estimates = [0] * len(specs)
+        estimates = [0] * len(runs)
         window: Window | None = first
         del first  # each window goes once it is replayed
         keep_empty = True
@@ -307,7 +318,7 @@ def _replay_file(
                         stage.truth(truth)
                     if truth_store is not None:
                         truth_store.add(truth)
-                for k, (session, scorer) in enumerate(zip(sessions, scorers, strict=True)):
+                for k, (session, scorer) in enumerate(zip(runs, scorers, strict=True)):
                     if scorer is not None:
                         scorer.add_truth(truth, final=final)
                     block = session.feed(piece, final=final, known=piece_known)
@@ -328,11 +339,9 @@ def _replay_file(
             keep_empty = False
             tracker.window(window)
             window = None if window.final else next(source)
-        summaries = {spec.label: {**scorer.result(), **summary_entries(session.settings)}
-                     for spec, scorer, session in zip(specs, scorers, sessions, strict=True)
-                     if scorer is not None}
-        covered = {spec.label: scorer.coverage()
-                   for spec, scorer in zip(specs, scorers, strict=True)
+        summaries = {run.label: {**scorer.result(), **_row_entries(run)}
+                     for scorer, run in zip(scorers, runs, strict=True) if scorer is not None}
+        covered = {run.label: scorer.coverage() for scorer, run in zip(scorers, runs, strict=True)
                    if scorer is not None and has_truth}
         for i, (k, store) in enumerate(stores.items()):
             session = sessions[k]
@@ -349,7 +358,7 @@ def _replay_file(
                 summaries[label] = {**scorer.result(), **summary_entries(session.settings)}
                 if has_truth:
                     covered[label] = scorer.coverage()
-        summaries = {x: summaries[x] for x in all_labels if x in summaries}
+        summaries = {x: summaries[x] for x in labels if x in summaries}
     except BaseException:
         source.close()  # the reader's warnings so far, before the error
         for stage in stages:
@@ -357,6 +366,14 @@ def _replay_file(
         raise
     source.close()
     return FileRun(summaries, has_truth, source.salvaged, source.coverage(), covered)
+
+
+def _row_entries(row: ReplaySession | RecordedSession) -> dict[str, Any]:
+    """A row's entries of the summary beside its scores: a filter's settings, or what a
+    recorded solution is."""
+    if isinstance(row, RecordedSession):
+        return {"recorded": row.solution.source}
+    return summary_entries(row.settings)
 
 
 PIECE_OUTPUTS = 6_000
