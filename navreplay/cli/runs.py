@@ -101,14 +101,15 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
 
     args = list(args)
     names: str | None = None
-    if not (refs and looks_like_recording(args[0])):
+    if not ((refs or onboard) and looks_like_recording(args[0])):
         names = args.pop(0)
     if not args:
         raise click.UsageError("no RECORDING given")
     from navreplay.logs.options import log_options
 
     cfg = load_config(config, "filter", "topics", "frames", "initial", "sensors", "imu_range")
-    specs = jobs.filter_specs(names, refs, params, cfg)
+    # a recorded solution alone (--onboard without a filter) is a run of no filter
+    specs = jobs.filter_specs(names, refs, params, cfg) if names or refs or not onboard else ()
     log = log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
                       sensors=sensor_config(config, cfg), imu_range_text=imu_range,
                       force_frames=force_frame, start=start, end=end, onboard=onboard)

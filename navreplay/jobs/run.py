@@ -174,8 +174,11 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     from navreplay.metrics.coverage import add_coverage
 
     path = Path(job.recordings[0])
+    from navreplay.logs.onboard import onboard_label
+
     classes = [spec.filter_cls for spec in job.filters]
     labels = [spec.label for spec in job.filters]
+    labels += [onboard_label(s) for s in (job.log.onboard if job.log is not None else ())]
     source = open_log(path, job.log, kinds=streams_needed(classes, job.log))
     try:
         source.peek()  # read and made ready: the log's problems are raised before any output

@@ -16,6 +16,7 @@ from navreplay.io.errors import RecordingError
 from navreplay.io.files import BAGS, file_kind, read_streams
 from navreplay.io.gins import NAV_TYPE
 from navreplay.io.info import format_info, recording_info
+from navreplay.io.ulog import EKF2_TOPICS
 from navreplay.logs.options import LogOptions
 from navreplay.logs.reference import REFERENCE_TYPES
 
@@ -111,7 +112,9 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
              "end [s]", "gaps")]
     for topic, type_name, count, start, end in listing:
         fed = by_topic.get(topic, [])
-        stream = "(reference)" if type_name in (*REFERENCE_TYPES, NAV_TYPE) else "-"
+        stream = ("(reference)" if type_name in (*REFERENCE_TYPES, NAV_TYPE)
+                  else "(onboard ekf2)" if container.name == "ulog" and type_name in EKF2_TOPICS
+                  else "-")
         frame, axes, gaps = "", "", ""
         if fed and recording is not None:
             kind = fed[0]

@@ -123,6 +123,7 @@ def test_info_topic_and_span_on_a_log(flight: dict[str, Path]) -> None:
     assert rows["sensor_combined"][2:5] == ["imu", "imu_frd", "FRD"]
     assert rows["sensor_combined"][5:7] == ["6000", "100.000"]
     assert rows["vehicle_gps_position"][2] == "gps,gps_vel"
+    assert rows["vehicle_attitude"][2:4] == ["(onboard", "ekf2)"]
     code, out = invoke("info", flight["ulg"], "--start", "10", "--end", "20")
     assert code == 0 and rows["sensor_combined"][0] in out
     assert any(ln.startswith("sensor_combined") and " 1001 " in ln for ln in out.splitlines())

@@ -78,6 +78,12 @@ def test_ekf2_beside_the_filter_in_one_command(flight: dict[str, Path], tmp_path
     assert "ekf2" in (tmp_path / "r.html").read_text()
     view = read_rrd(tmp_path / "v.rrd")
     assert {"/ekf2/nav/yaw", "/ekf2/nees", "/ekf2/error/p_N", "/map/ekf2/position"} <= set(view)
+    # without a filter: the recorded solution alone, scored the same
+    code, out = invoke("run", flight["ulg"], "--onboard", "ekf2", "--reference", flight["ref"],
+                       "--no-viz", "--summary", tmp_path / "alone.json")
+    assert code == 0 and out.startswith("ekf2 over "), out
+    alone = json.loads((tmp_path / "alone.json").read_text())["filters"]
+    assert list(alone) == ["ekf2"] and alone["ekf2"] == ekf2
 
 
 def test_onboard_alone_and_its_errors(flight: dict[str, Path], tmp_path: Path) -> None:
