@@ -142,8 +142,9 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         return LogDescription("\n".join([*lines, "", f"streams: cannot be read: {problem}"]),
                               damage, problem)
     assert recording is not None  # read, or a problem above
-    lines += ["", f"streams (what `navreplay run` replays; times from {options.time} "
-                  f"{'stamps' if options.time == 'header' else 'times'}):"]
+    times = (f"{options.time} {'stamps' if options.time == 'header' else 'times'}"
+             if container.name in (*BAGS, "mcap") else "the log's sample times")
+    lines += ["", f"streams (what `navreplay run` replays; times from {times}):"]
     for kind, src in sources.items():
         picked = f"; picked over {', '.join(src.picked_from)}" if src.picked_from else ""
         axes = (f"{src.convention.value.upper()}: {src.reason}" if src.convention

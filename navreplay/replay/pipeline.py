@@ -8,8 +8,11 @@ each block of estimates as the truth around it arrives
 (:class:`~navreplay.metrics.RunScorer`) and hands truth, scored rows and innovations to the
 output stages (:class:`Stage`: the Rerun view, the exports, the report's series, or
 :class:`Collect`), which keep nothing that grows with the recording unless they mean to. A
-whole run is one block. :func:`replay` is the same over a recording in memory, collected into
-a :class:`~navreplay.filters.result.RunResult`.
+whole run is one block. The navigation solutions the log recorded (``source.recorded``,
+``run --onboard``) are rows beside the filters'
+(:class:`~navreplay.replay.recorded.RecordedSession`), scored and handed to the stages the same
+way. :func:`replay` is the same over a recording in memory, collected into a
+:class:`~navreplay.filters.result.RunResult`.
 
 Examples
 --------
