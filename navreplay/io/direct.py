@@ -63,6 +63,11 @@ class DirectSource(FileSource):
         """One topic as the columns of stream ``kind``."""
         raise NotImplementedError
 
+    def listing(self) -> list[Topic]:
+        """Every topic of the log (``navreplay info``; :meth:`topics` may list only those a
+        read parses)."""
+        return self.topics()
+
     def readers(self, kind: StreamKind) -> tuple[str, ...]:
         """The topic types of this kind of log that feed stream ``kind`` (for messages)."""
         return ()

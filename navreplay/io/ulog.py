@@ -42,7 +42,9 @@ mag         ``vehicle_magnetometer``, ``sensor_mag``    ``magnetometer_ga`` (cal
 
 A GNSS topic's ``timestamp_sample`` is its time where logged (else ``timestamp``). The topics
 of PX4's own estimate (``vehicle_local_position``, ``vehicle_global_position``,
-``vehicle_attitude``) are read by :func:`ekf2_solution` as a recorded navigation solution.
+``vehicle_attitude``) are read by :meth:`ULogSource.estimate` as a recorded navigation
+solution. A read parses only these topics and those of the streams (:data:`READ`); ``info``
+lists every topic (:meth:`ULogSource.listing`).
 
 A file cut short (a log whose writing stopped) yields the messages before the cut with a
 :class:`~navreplay.io.errors.SalvagedWarning`; a file pyulog finds corrupt inside is read past
@@ -92,6 +94,9 @@ EKF2_TOPICS = ("vehicle_local_position", "vehicle_global_position", "vehicle_att
 
 ONBOARD = "ekf2"
 """The name of PX4's own solution as a recorded estimator (``--onboard ekf2``)."""
+
+READ = (*FEEDS, *EKF2_TOPICS)
+"""The topics a read parses (a flight log holds a hundred more, skipped)."""
 
 
 def accepts(path: Path) -> bool:
@@ -238,10 +243,21 @@ class ULogSource(DirectSource):
         self._utc_ns = 0
 
     def _parsed(self) -> Any:
+        """The topics navreplay reads (a log's other topics are skipped by the parser)."""
         if self._log is None:
-            self._log, self._salvaged = parse(self.path)
+            named = (t.partition("/")[0] for t in self.options.topics.values())
+            self._log, self._salvaged = parse(self.path, list(dict.fromkeys([*READ, *named])))
             self._utc_ns = utc_offset_ns(self._log)
         return self._log
+
+    def listing(self) -> list[Topic]:
+        """Every topic of the log (the whole file parsed)."""
+        log, _ = parse(self.path)
+        return self._topics(log)
+
+    def estimate(self, label: str = ONBOARD) -> RecordedSolution:
+        """PX4's own estimate in the log (:func:`ekf2_solution`), on the streams' time base."""
+        return ekf2_solution(self._parsed(), self._utc_ns, self.name, label)
 
     def metadata(self) -> Metadata:
         self._parsed()
@@ -261,8 +277,12 @@ class ULogSource(DirectSource):
         return tuple(name for name, kinds in FEEDS.items() if kind in kinds)
 
     def topics(self) -> list[Topic]:
+        return self._topics(self._parsed())
+
+    @staticmethod
+    def _topics(log: Any) -> list[Topic]:
         order = list(FEEDS)
-        found = sorted(self._parsed().data_list,
+        found = sorted(log.data_list,
                        key=lambda d: (order.index(d.name) if d.name in order else len(order),
                                       d.name, d.multi_id))
         return [Topic(topic_name(d.name, d.multi_id), d.name, len(d.data["timestamp"]),
@@ -363,8 +383,10 @@ def _gnss(d: _Data, kind: StreamKind) -> Columns:
 # PX4's own estimate
 
 
-def ekf2_solution(path: Path, label: str = ONBOARD) -> RecordedSolution:
-    """PX4's estimate in a ULog file, at the times of ``vehicle_local_position``.
+def ekf2_solution(log: Any, utc_ns: int, where: str, label: str = ONBOARD
+                  ) -> RecordedSolution:
+    """PX4's estimate in a parsed ULog file (:func:`parse`), at the times of
+    ``vehicle_local_position`` plus ``utc_ns`` [ns].
 
     Velocity NED from ``vehicle_local_position`` (``vx, vy, vz``); position from
     ``vehicle_global_position`` (``lat, lon``, ``alt_ellipsoid``) interpolated to those times
@@ -377,13 +399,10 @@ def ekf2_solution(path: Path, label: str = ONBOARD) -> RecordedSolution:
     (``xy_valid``, ``v_xy_valid``...) are NaN in that part. The attitude's variance is not in
     these topics: the attitude is shown and scored, without a NEES.
     """
-    log, _ = parse(path, [*EKF2_TOPICS, *(n for n, k in FEEDS.items() if StreamKind.GPS in k)])
-    utc_ns = utc_offset_ns(log)
     data = {d.name: _Data(d.name, d.data) for d in log.data_list if d.multi_id == 0}
-    where = f"{path}: --onboard {ONBOARD}"
     if "vehicle_local_position" not in data:
-        raise RecordingError(f"{where}: no topic vehicle_local_position (PX4's estimate); the "
-                             f"log has {', '.join(sorted(data)) or 'none of its topics'}")
+        raise RecordingError(f"{where}: --onboard {ONBOARD}: no topic vehicle_local_position "
+                             "(PX4's estimate) in the log")
     lp = data["vehicle_local_position"]
     t = lp.times() + utc_ns
     n = t.size
@@ -425,7 +444,7 @@ def ekf2_solution(path: Path, label: str = ONBOARD) -> RecordedSolution:
                              for i in range(4)])
         q /= np.linalg.norm(q, axis=1, keepdims=True)
         read.append("vehicle_attitude")
-    return RecordedSolution(label, f"{path}: {' + '.join(read)}", t, pos, v, q, pos_sigma,
+    return RecordedSolution(label, f"{where}: {' + '.join(read)}", t, pos, v, q, pos_sigma,
                             vel_sigma, np.full((n, 3), np.nan))
 
 

@@ -77,7 +77,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     elif container.name != "mcap":  # a log read straight into streams (io.direct)
         direct = container.source(path, None)
         assert isinstance(direct, DirectSource)  # the kinds read straight into streams
-        listing = [(t.name, t.type_name, t.count, None, None) for t in direct.topics()]
+        listing = [(t.name, t.type_name, t.count, None, None) for t in direct.listing()]
         lines = [f"{path}  ({container.name}, {sum(r[2] for r in listing)} messages)"]
     else:
         info = recording_info(path)

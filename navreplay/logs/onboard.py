@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import warnings
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -35,8 +34,8 @@ from navreplay.core.streams import Recording, StreamKind
 from navreplay.geo.rotations import euler_to_quat
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.files import file_kind
 from navreplay.io.solution import RecordedSolution
+from navreplay.io.source import Source
 from navreplay.logs.reference import ReferenceError, read_reference, reference_stream
 
 EKF2 = "ekf2"
@@ -63,11 +62,11 @@ def _as_onboard(spec: str) -> Iterator[None]:
         raise RecordingError(f"--onboard {spec}: {text}") from None
 
 
-def read_onboard(spec: str, log: Path, recording: Recording, *,
+def read_onboard(spec: str, log: Path, recording: Recording, source: Source, *,
                  frames: Mapping[str, Convention], time: str,
                  initial: Mapping[str, Any]) -> tuple[RecordedSolution, str]:
-    """The recorded solution ``spec`` names (module docstring) and one line saying what it
-    holds.
+    """The recorded solution ``spec`` names (module docstring) in the log ``log`` (read as
+    ``recording`` by ``source``), and one line saying what it holds.
 
     Raises
     ------
@@ -77,15 +76,13 @@ def read_onboard(spec: str, log: Path, recording: Recording, *,
     """
     label = onboard_label(spec)
     if spec == EKF2:
-        kind = file_kind(log).name
-        if kind != "ulog":
-            raise RecordingError(f"{log}: --onboard {EKF2} reads PX4's estimate from a ULog "
-                                 f"file; this log is {kind} (name a topic or file instead)")
-        from navreplay.io.ulog import ekf2_solution
+        from navreplay.io.ulog import ULogSource
 
-        with warnings.catch_warnings():  # the log's damage was said when its streams were read
-            warnings.simplefilter("ignore")
-            solution = ekf2_solution(log, label)
+        if not isinstance(source, ULogSource):
+            raise RecordingError(f"{log}: --onboard {EKF2} reads PX4's estimate from a ULog "
+                                 f"file; this log is {source.kind} (name a topic or file "
+                                 "instead)")
+        solution = source.estimate(label)
     elif spec == MASTER_INS:
         if StreamKind.MASTER_INS not in recording:
             raise RecordingError(f"{log}: --onboard {MASTER_INS}: the log has no master-INS "

@@ -87,7 +87,7 @@ class LogSource(Source):
             self.notes.append(note)
         self.notes += make_ready(first.recording(), self.sources, self.options)
         for spec in self.options.onboard:
-            solution, note = read_onboard(spec, self.path, first.recording(),
+            solution, note = read_onboard(spec, self.path, first.recording(), self.inner,
                                           frames=self.options.frames, time=self.options.time,
                                           initial=self.options.initial)
             if self.options.span is not None:

@@ -106,6 +106,11 @@ def test_onboard_alone_and_its_errors(flight: dict[str, Path], tmp_path: Path) -
     code, out = invoke("run", "gps-ins", flight["mcap"], "--onboard", "ekf2", "--no-viz")
     assert code == 1 and f"{flight['mcap']}: --onboard ekf2 reads PX4's estimate from a ULog " \
         "file; this log is mcap" in out
+    bare = write_px4_log(tmp_path / "bare.ulg", simulate("vehicle-drive", {"duration": 20.0},
+                                                         seed=2), ekf2=False)
+    code, out = invoke("run", "gps-ins", bare, "--onboard", "ekf2", "--init", "align",
+                       "--no-viz")
+    assert code == 1 and f"{bare}: --onboard ekf2: no topic vehicle_local_position" in out
     code, out = invoke("run", "gps-ins", flight["mcap"], "--onboard", "/ins/odom", "--no-viz")
     assert code == 1 and "--onboard /ins/odom: no such topic in" in out
     (tmp_path / "other").mkdir()
