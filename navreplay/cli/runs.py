@@ -82,8 +82,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
         start: str | None, end: str | None,
         imu_range: str | None, init: str | None, reference: str | None,
-        onboard: Sequence[str], no_frame_check: bool, export: str | None, report: str | None, max_imu_gap: float | None,
-        smooth: bool, force: bool) -> None:
+        onboard: Sequence[str], no_frame_check: bool, export: str | None, report: str | None,
+        max_imu_gap: float | None, smooth: bool, force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b

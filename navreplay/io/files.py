@@ -1,11 +1,13 @@
 """Recording files: which kind a path is, decided once, and the file opened once.
 
 :func:`open_recording` asks each kind of :data:`FILE_KINDS` in turn whether it takes the path
-and opens it as that kind's :class:`~navreplay.io.source.Source`: a ROS 1 bag
-(:mod:`navreplay.io.rosbag1`), a rosbag2 folder, its ``metadata.yaml`` or a ``.db3`` file
+and opens it as that kind's :class:`~navreplay.io.source.FileSource`, with the
+:class:`~navreplay.io.source.ReadOptions` every reader takes: a ROS 1 bag
+(:mod:`navreplay.io.rosbag1`), a GINS text log (:mod:`navreplay.io.gins`), a PX4 ULog file
+(:mod:`navreplay.io.ulog`), a rosbag2 folder, its ``metadata.yaml`` or a ``.db3`` file
 (:mod:`navreplay.io.rosbag`), else an MCAP file
 (:mod:`navreplay.io.mcapread`, the last, which takes any file). Another kind of log is one
-module with an ``accepts(path)`` function and a ``Source`` class, and one line in
+module with an ``accepts(path)`` function and a ``FileSource`` class, and one line in
 :data:`FILE_KINDS`.
 
 :func:`read_recording` and :func:`read_streams` read a file whole, in one window.
@@ -63,7 +65,8 @@ def open_recording(path: str | os.PathLike[str], options: ReadOptions | None = N
         A file or folder of one of the :data:`FILE_KINDS`: an MCAP file (ROS 2 profile, CDR
         messages), read in bulk, in time windows when it is intact; a rosbag2 folder (its
         ``metadata.yaml``; MCAP or sqlite3 storage, split files), a ``.db3`` file or a ROS 1
-        bag, read with ``rosbags``; a GINS text log; each of the last in one window.
+        bag, read with ``rosbags``; a GINS text log; a PX4 ULog file, read with pyulog; each of
+        the last in one window.
     options : ReadOptions, optional
         Streams, topics, frames, time source, checks and window size
         (:class:`~navreplay.io.source.ReadOptions`; its defaults when None).

@@ -170,12 +170,11 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     """Replay the filters over one recording, window by window (memory flat in its length):
     the .rrd or the live view, the exports and the report's series fed block by block
     (:func:`navreplay.replay.replay_file`)."""
+    from navreplay.logs.onboard import onboard_label
     from navreplay.logs.prepare import open_log, streams_needed
     from navreplay.metrics.coverage import add_coverage
 
     path = Path(job.recordings[0])
-    from navreplay.logs.onboard import onboard_label
-
     classes = [spec.filter_cls for spec in job.filters]
     labels = [spec.label for spec in job.filters]
     labels += [onboard_label(s) for s in (job.log.onboard if job.log is not None else ())]
