@@ -57,6 +57,7 @@ import contextlib
 import dataclasses
 import io
 import math
+import os
 import warnings
 from pathlib import Path
 from typing import Any
@@ -68,6 +69,7 @@ from navreplay.io.convert import Convention
 from navreplay.io.direct import Columns, DirectSource, Topic, body_axes
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.solution import RecordedSolution
+from navreplay.io.source import ReadOptions
 
 MAGIC = b"ULog\x01\x12\x35"
 """The first bytes of a ULog file (its version byte follows)."""
@@ -237,8 +239,11 @@ class ULogSource(DirectSource):
     kind = "ulog"
     what = "log"
 
-    def __init__(self, path: Any, options: Any = None) -> None:
+    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None
+                 ) -> None:
         super().__init__(path, options)
+        named = {k: v.removesuffix("/0") for k, v in self.options.topics.items()}
+        self.options = dataclasses.replace(self.options, topics=named)  # name/0 is name
         self._log: Any = None
         self._utc_ns = 0
 
@@ -354,6 +359,7 @@ def _gnss(d: _Data, kind: StreamKind) -> Columns:
             keep &= np.asarray(d.data["vel_ned_valid"]).astype(bool)
         v = np.column_stack([d.get(f"vel_{a}_m_s") for a in "ned"])
         sigma = np.repeat(d.get("s_variance_m_s")[:, None], 3, axis=1)
+        keep &= _accuracy(sigma)
         cols = {"v_n": v[keep], "vel_sigma": sigma[keep]}
         frame = "ned"
     else:
@@ -369,14 +375,21 @@ def _gnss(d: _Data, kind: StreamKind) -> Columns:
             raise ValueError("no ellipsoidal height (alt_ellipsoid)")
         pos = np.column_stack([np.radians(lat), np.radians(lon), h])
         sigma = np.column_stack([d.get("eph"), d.get("eph"), d.get("epv")])
+        keep &= _accuracy(sigma)
         cols = {"pos": pos[keep], "pos_sigma": sigma[keep]}
         frame = "gnss"
     if not keep.all():
         notes.append(f"{int((~keep).sum())} of {keep.size} messages without a 3D fix"
-                     f"{' or a valid velocity' if kind is StreamKind.GPS_VEL else ''} left out")
+                     f"{' or a valid velocity' if kind is StreamKind.GPS_VEL else ''} or "
+                     "without a positive accuracy left out")
     conv = Convention.NED if kind is StreamKind.GPS_VEL else None
     return Columns(t[keep], cols, frame, conv, "PX4's local frame is NED" if conv else "",
                    notes)
+
+
+def _accuracy(sigma: np.ndarray) -> np.ndarray:
+    """Rows whose accuracies are positive numbers (a receiver that reports none says 0)."""
+    return np.all(np.isfinite(sigma) & (sigma > 0), axis=1)
 
 
 # --------------------------------------------------------------------------------------------

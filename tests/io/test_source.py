@@ -70,7 +70,7 @@ def test_the_file_is_opened_once_and_its_kind_decided_once(drive, monkeypatch) -
         for k in files.FILE_KINDS))
     windows = _windows(path, 150)
     assert len(windows) >= 10 and len(opened) == 1
-    assert asked == ["rosbag1", "gins", "rosbag2", "mcap"]  # each kind asked once, in order
+    assert asked == ["rosbag1", "gins", "ulog", "rosbag2", "mcap"]  # each asked once, in order
 
 
 def _counting(fn, seen: list, name: str):

@@ -88,8 +88,8 @@ def test_streams_read_back_as_the_recording(flight: dict[str, Path]) -> None:
                                rtol=1e-5, atol=1e-8)
     np.testing.assert_allclose(other[StreamKind.IMU]["f_b"], b["f_b"], rtol=1e-5, atol=1e-5)
     v15, src = read_streams(flight["ulg"], ReadOptions(kinds=["gps"],
-                                                       topics={"gps": "sensor_gps"}))
-    assert src[StreamKind.GPS].topic == "sensor_gps"
+                                                       topics={"gps": "sensor_gps/0"}))
+    assert src[StreamKind.GPS].topic == "sensor_gps"  # instance 0 is the topic's name
     np.testing.assert_allclose(v15[StreamKind.GPS]["pos"], g0["pos"], rtol=0, atol=1e-9)
 
 
