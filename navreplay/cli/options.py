@@ -201,6 +201,12 @@ max_imu_gap_option = click.option(
     help="Longest IMU gap [s] a filter bridges; a longer one, or any gap for a filter that "
          "cannot bridge, stops the run (default: 6 s).")
 
+smooth_option = click.option(
+    "--smooth", is_flag=True,
+    help="Also smooth every filter that can be (fixed-interval RTS smoother, "
+         "docs/smoothing.md): its result LABEL/rts is scored, shown, exported and reported "
+         "as a filter's (per run, and its ensemble statistics).")
+
 
 def check_executor(ctx: click.Context, param: click.Parameter, value: str) -> str:
     from navreplay.campaign.dask_executor import is_address
