@@ -101,3 +101,48 @@ def test_non_smoothable_filter_gets_no_smoothed_run():
     collect = Collect()
     replay_file(MemorySource(rec, "rec"), [FilterSpec("gps-ins")], stages=[collect])
     assert set(collect.results()) == {"gps-ins"}
+
+
+def test_progress_covers_the_forward_and_backward_passes_and_the_scoring(monkeypatch):
+    """The bar's total is fixed from the first call; it moves through each backward pass and
+    each smoothed run's scoring and reaches its end only when the last one is scored."""
+    from navreplay.replay import pipeline
+
+    events: list = []
+    backward, feed = pipeline.backward, pipeline._feed_smoothed
+
+    def spy_backward(*a, **kw):
+        events.append("backward")
+        out = backward(*a, **kw)
+        events.append("scoring")
+        return out
+
+    def spy_feed(*a, **kw):
+        feed(*a, **kw)
+        events.append("scored")
+
+    monkeypatch.setattr(pipeline, "backward", spy_backward)
+    monkeypatch.setattr(pipeline, "_feed_smoothed", spy_feed)
+    rec = simulate("vehicle-drive", {"duration": 60.0}, seed=9)
+    replay_file(MemorySource(rec, "rec"), [FilterSpec("ins"), FilterSpec("gps-ins")],
+                progress=lambda done, total: events.append((done, total)), smooth=True,
+                output_rate=2.0)
+    marks = [i for i, e in enumerate(events) if isinstance(e, str)]
+    assert [events[i] for i in marks] == ["backward", "scoring", "scored"] * 2
+    calls = [e for e in events if isinstance(e, tuple)]
+    total = calls[0][1]
+    assert all(t == total for _, t in calls)
+    done = [d for d, _ in calls]
+    assert done == sorted(done) and done[-1] == total and all(d < total for d in done[:-1])
+    last = max(i for i, e in enumerate(events) if isinstance(e, tuple))
+    assert marks[-2] < last < marks[-1]  # in the scoring of the last smoothed run
+    # the forward passes of both filters end at 2 / (2 + 2 x (backward + scoring)) of the bar
+    segments = [[e[0] for e in events[a:b] if isinstance(e, tuple)]
+                for a, b in zip([0, *marks[:-1]], marks, strict=True)]
+    assert segments[0][-1] == pytest.approx(
+        total / (1.0 + pipeline.BACKWARD_COST + pipeline.SCORING_COST), abs=1)
+    # each backward pass and each scoring moves the bar on
+    moved = [seg for seg, b in zip(segments, marks, strict=True) if events[b] != "backward"]
+    assert len(moved) == 4
+    ends = [segments[0][-1]] + [seg[-1] for seg in moved if seg]
+    assert all(seg for seg in moved) and ends == sorted(set(ends)), segments
