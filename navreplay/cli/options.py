@@ -13,7 +13,8 @@ import click
 
 
 class Progress:
-    """A ``progress(done, total)`` callback drawing a click progress bar on stderr."""
+    """A ``progress(done, total)`` callback drawing a click progress bar on stderr (a total
+    that changes, as the events of each filter become known, resizes it)."""
 
     def __init__(self, label: str) -> None:
         self.label = label
@@ -26,6 +27,7 @@ class Progress:
         if self.bar is None:
             self.bar = click.progressbar(length=max(total, 1), label=self.label, file=sys.stderr)
             self.bar.__enter__()
+        self.bar.length = max(total, 1)
         if done > self.done:
             self.bar.update(done - self.done)
             self.done = done

@@ -192,3 +192,17 @@ def test_exports_do_not_wait_for_the_smoothed_run(drive):
                 counts[channel.topic] = counts.get(channel.topic, 0) + 1
     assert counts == {"/estimates/gps_ins/odom": fwd.t.shape[0],
                       "/estimates/gps_ins_rts/odom": rts.t.shape[0]}
+
+
+def test_the_progress_bar_takes_a_total_that_grows(monkeypatch):
+    """Without the recording's length the bar counts events, whose total grows as each
+    filter's become known: the bar follows it instead of ending early."""
+    from navreplay.cli import options
+
+    monkeypatch.setattr(options, "stderr_is_tty", lambda: True)
+    with options.Progress("replay") as bar:
+        bar(120, 174)
+        bar(302, 437)
+        assert bar.bar.length == 437 and bar.bar.pct == pytest.approx(302 / 437)
+        bar(437, 437)
+        assert bar.bar.pct == 1.0
