@@ -248,8 +248,11 @@ def campaign(
         check_max_gap(max_imu_gap)
     except ValueError as e:
         raise _params.ParamError(str(e)) from None
-    if max_imu_gap is not None or smooth:
-        tasks = [dataclasses.replace(t, max_imu_gap=max_imu_gap, smooth=smooth) for t in tasks]
+    given: dict[str, Any] = {"max_imu_gap": max_imu_gap} if max_imu_gap is not None else {}
+    if smooth:
+        given["smooth"] = True
+    if given:
+        tasks = [dataclasses.replace(t, **given) for t in tasks]
 
     stats: dict[str, Any] = {label: metrics.EnsembleStats(label) for label in labels}
     rows: list[dict[str, Any]] = []
