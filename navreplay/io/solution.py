@@ -91,10 +91,15 @@ class RecordedSolution:
         return self.rows(np.arange(a, max(a, b)))
 
     def complete(self) -> tuple[RecordedSolution, int]:
-        """The rows where every part the solution gives is finite, and how many were left
-        out (a position before the estimator had one, a gap the estimator flagged)."""
-        parts = self.parts()
+        """The rows where every part the solution gives is finite, with its 1-sigma where the
+        solution gives one for the part, and how many were left out (a position before the
+        estimator had one, a gap the estimator flagged, an infinite variance: PX4 says so
+        before it has a global origin)."""
         keep = np.ones(len(self.t_ns), dtype=bool)
-        for p in parts:
+        for p in self.parts():
             keep &= np.isfinite(getattr(self, p)).all(axis=1)
+            sigma = getattr(self, SIGMAS[p])
+            valid = (np.isfinite(sigma) & (sigma > 0)).all(axis=1)
+            if valid.any():
+                keep &= valid
         return self.rows(keep), int((~keep).sum())
