@@ -279,7 +279,7 @@ def _replay_file(
             outages = recorded_outages(metadata.extra)
         except ValueError as e:
             raise RecordingError(f"{source.name}: {e}") from None
-        tracker = _Progress(progress, len(specs), first, len(stores))
+        tracker = _Progress(progress, len(specs) + len(source.recorded), first, len(stores))
         scorers: list[RunScorer | None] = []
         sessions = []
         for k, spec in enumerate(specs):
@@ -471,7 +471,8 @@ def _live(scorer: RunScorer | None, stages: Sequence[Stage]) -> Callable[[RunRes
 
 
 class _Progress:
-    """Progress over the filters: seconds of the recording replayed, over the filters' total
+    """Progress over the rows (the filters, and the recorded solutions, which follow the
+    windows): seconds of the recording replayed, over the rows' total
     (events, when the recording's length is not known), then the smoothed runs: each one's
     backward pass and scoring count for :data:`~navreplay.replay.smoothing.BACKWARD_COST` and
     :data:`~navreplay.replay.smoothing.SCORING_COST` of a forward pass, by epochs done, so the
@@ -495,8 +496,8 @@ class _Progress:
         return float(sum(e[1] for e in self.events))
 
     def _total(self, forward: float) -> int:
-        return int(forward * (1.0 + self.runs_smoothed * (BACKWARD_COST + SCORING_COST) / self.n)
-                   + 1e-6)
+        smoothing = self.runs_smoothed * (BACKWARD_COST + SCORING_COST) / max(self.n, 1)
+        return int(forward * (1.0 + smoothing) + 1e-6)
 
     def of(self, k: int) -> Progress:
         def report(done: int, total: int) -> None:
