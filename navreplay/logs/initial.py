@@ -23,9 +23,12 @@ method's, one by one (with their sigmas).
 * else magnetometer heading (levelled field + WMM declination), 1-sigma
   :data:`MAG_HEADING_SIGMA` (local disturbances) combined with the levelling sigma times
   tan(dip);
-* else GNSS course over ground at the first fix faster than :data:`COG_MIN_SPEED`, carried back
-  to the start by the integrated yaw rate; 1-sigma from the velocity noise and
-  :data:`COG_SIDESLIP` (the vehicle moving along its x axis).
+* else GNSS course over ground at the first velocity faster than :data:`COG_MIN_SPEED`, carried
+  back to the start by the integrated yaw rate; 1-sigma from the velocity noise and
+  :data:`COG_SIDESLIP` (the vehicle moving along its x axis);
+* else (no velocity topic, or never that fast: a walk) the GNSS track: the chord from the still
+  position to the first fix :data:`CHORD_LENGTH` away, carried back by half the yaw turned
+  meanwhile; 1-sigma from the fixes' noise over the chord, the sideslip and that half turn.
 
 Position: the GNSS fix nearest the start (its covariance, else :data:`GNSS_POS_SIGMA`), else
 ``[initial]``. Velocity zero (still), 1-sigma :data:`STILL_VEL_SIGMA`. The solution is stamped
@@ -257,9 +260,13 @@ def _heading(recording: Recording, stop: int, C_lb: np.ndarray, lat: float, pos:
                 float(wrap_angle(math.atan2(-m_l[1], m_l[0]) + decl)), sigma)
     reasons.append("no magnetometer")
     cog = _course_over_ground(recording, stop, C_lb)
+    if cog is None:  # too slow or no velocity: the track over a distance
+        reasons.append(f"no GNSS velocity over {COG_MIN_SPEED:g} m/s"
+                       if StreamKind.GPS_VEL in recording else "no GNSS velocity topic")
+        cog = _chord(recording, stop, C_lb)
     if cog is not None:
         return _because(cog[0], reasons), cog[1], cog[2]
-    reasons.append(f"no GNSS course over {COG_MIN_SPEED:g} m/s")
+    reasons.append(f"no GNSS track of {CHORD_LENGTH:g} m")
     raise InitialisationError(
         "--init align cannot find the heading (" + "; ".join(reasons) + "): give yaw_deg in "
         "[initial], a magnetometer topic, or use --init reference")
@@ -271,16 +278,15 @@ def _because(how: str, reasons: list[str]) -> str:
 
 def _course_over_ground(recording: Recording, stop: int, C_lb: np.ndarray
                         ) -> tuple[str, float, float] | None:
+    """Heading from the first GNSS velocity faster than :data:`COG_MIN_SPEED` after the still
+    window, carried back by the yaw turned meanwhile; None without such a velocity."""
     imu = recording[StreamKind.IMU]
-    if StreamKind.GPS_VEL in recording:
-        s = recording[StreamKind.GPS_VEL]
-        t_v, v = s.t_ns, s["v_n"][:, :2]
-        s_v = s["vel_sigma"][:, :2].max(axis=1) if "vel_sigma" in s.columns else np.full(
-            len(s), 0.1)
-    elif StreamKind.GPS in recording and len(recording[StreamKind.GPS]) > 2:
-        return _chord(recording, stop, C_lb)
-    else:
+    if StreamKind.GPS_VEL not in recording:
         return None
+    s = recording[StreamKind.GPS_VEL]
+    t_v, v = s.t_ns, s["v_n"][:, :2]
+    s_v = s["vel_sigma"][:, :2].max(axis=1) if "vel_sigma" in s.columns else np.full(
+        len(s), 0.1)
     speed = np.hypot(v[:, 0], v[:, 1])
     after = (t_v > imu.t_ns[stop - 1]) & (speed > COG_MIN_SPEED)
     if not after.any():
@@ -306,6 +312,8 @@ def _chord(recording: Recording, stop: int, C_lb: np.ndarray
     """Heading from the chord between the mean still position and the first fix
     :data:`CHORD_LENGTH` away, carried back by the yaw turned meanwhile (half of it: the chord
     of a steady turn points along the mean heading)."""
+    if StreamKind.GPS not in recording or len(recording[StreamKind.GPS]) < 2:
+        return None
     imu, gps = recording[StreamKind.IMU], recording[StreamKind.GPS]
     still = gps.t_ns <= imu.t_ns[stop - 1]
     if not still.any():
