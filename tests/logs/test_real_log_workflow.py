@@ -297,3 +297,29 @@ def test_align_on_a_slow_walk_uses_the_gnss_track(walks: dict[str, Path]) -> Non
         r"magnetometer; no GNSS velocity over 2 m/s; no GNSS track of 30 m\): give yaw_deg in "
         r"\[initial\], a magnetometer topic, or use --init reference",
         out.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize(("args", "error"), [
+    (["--init", "align"], "Error: --init align cannot find the heading ("),
+    (["--init", "table"], "Error: --init table: missing a position (lat_deg, lon_deg, h)"),
+])
+def test_failed_initialisation_is_one_line_on_stderr(tmp_path: Path, args: list[str],
+                                                     error: str) -> None:
+    """The console script on the MCAP file of a bag whose IMU stamps are zero (the reader
+    warns) and whose start cannot be made: its warnings as `warning:` lines, then one error
+    line; no raw `sys:1: RecordingWarning`, no traceback, nothing on stdout."""
+    import subprocess
+    import sys
+
+    bag = write_bag(tmp_path / "bag", duration=30.0, imu_zero_stamps=True,
+                    imu_grade=WALK_GRADE, noisy=True)
+    data = next(bag.glob("*.mcap"))
+    res = subprocess.run([sys.executable, "-m", "navreplay", "run", "gps-ins", str(data),
+                          *args, "--no-viz"], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 1 and res.stdout == ""
+    lines = res.stderr.strip().splitlines()
+    assert lines[-1].startswith(error) and "\n" not in lines[-1], res.stderr
+    assert all(ln.startswith("warning: ") for ln in lines[:-1]), res.stderr
+    assert any("header stamps are zero" in ln for ln in lines[:-1])
+    assert "sys:1" not in res.stderr and "RecordingWarning" not in res.stderr
