@@ -91,6 +91,13 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
       navreplay run gps-ins runs/*.mcap --workers 2      # ensemble statistics
       navreplay run ins,gps-ins drive.mcap --export out/drive --report out/drive.html
       navreplay run gps-ins drive.mcap --smooth --export out/drive   # + gps-ins/rts
+
+    Variants: FILTER[KEY=VALUE,KEY=VALUE,...] runs a filter with its own parameters, labelled
+    by that text (one filter several times side by side). Pairs are separated by ',' (not
+    ';'); a vector goes on with commas; quote the list for the shell:
+
+    \b
+      navreplay run 'gps-ins,gps-ins[use_gps_vel=false,lever_arm_b=0.5,0,-1.2]' drive.mcap
     """
     from navreplay import jobs
 
@@ -171,6 +178,14 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     Example:
       navreplay montecarlo vehicle-drive ins,gps-ins --runs 50 --workers 2 -p scenario.duration=300
       navreplay montecarlo vehicle-drive gps-ins --runs 1000 --executor dask://scheduler:8786
+
+    Variants: FILTER[KEY=VALUE,KEY=VALUE,...] runs a filter with its own parameters, labelled
+    by that text (one filter several times side by side). Pairs are separated by ',' (not
+    ';'); a vector goes on with commas; quote the list for the shell:
+
+    \b
+      navreplay montecarlo vehicle-drive 'gps-ins,gps-ins[use_gps_vel=false,lever_arm_b=1,0,-1]' \\
+          --runs 20
     """
     from navreplay import jobs
 
