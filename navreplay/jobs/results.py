@@ -83,7 +83,8 @@ class Outputs:
 
             self._series = {label: RunSeries(label) for label in run.labels}
             self._context = {"command": self.command,
-                             **run_context(getattr(run, "metadata", None), run.source)}
+                             **run_context(getattr(run, "metadata", None), run.source,
+                                           getattr(run, "t0_ns", 0))}
 
     def truth(self, truth: Any) -> None:
         """A window of the truth stream (later than before)."""

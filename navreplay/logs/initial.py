@@ -51,6 +51,7 @@ from navreplay.geo.rotations import euler_to_dcm, euler_to_quat, quat_to_euler, 
 from navreplay.io.errors import RecordingError
 from navreplay.logs.framecheck import still_window, wmm_field_ned
 from navreplay.logs.options import InitMethod
+from navreplay.metrics.initial import RECORDING
 
 GYROCOMPASS_MAX_SIGMA = math.radians(5.0)
 MAG_HEADING_SIGMA = math.radians(3.0)
@@ -79,6 +80,12 @@ class InitialisationError(RecordingError):
 def _vec3(value: Any) -> np.ndarray:
     v = np.atleast_1d(np.asarray(value, dtype=float))
     return np.full(3, v[0]) if v.size == 1 else v.reshape(3)
+
+
+STATE_KEYS = ("lat_deg", "lon_deg", "h", "v_n", "roll_deg", "pitch_deg", "yaw_deg",
+              "pos_sigma", "vel_sigma", "att_sigma_deg", "accel_bias", "gyro_bias_dph")
+"""The ``[initial]`` keys that are part of the initial state (the others are assumptions of
+``--init align``)."""
 
 
 def _from_table(nav: dict[str, Any], table: Mapping[str, Any]) -> dict[str, Any]:
@@ -362,19 +369,23 @@ def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[
             raise InitialisationError("--init metadata: the recording has no initial solution; "
                                       "use --init align, --init reference or [initial]")
         nav, note = dict(meta), "initial solution from the recording's metadata"
+        nav.setdefault("method", RECORDING)
     elif method is InitMethod.REFERENCE:
         nav, note = from_reference(recording), "initial solution from the reference"
     elif method is InitMethod.ALIGN:
         nav, note = align(recording, table)
     else:
         imu = recording[StreamKind.IMU]
-        nav = {"t_ns": int(imu.t_ns[0]), "method": "table",
+        nav = {"t_ns": int(imu.t_ns[0]), "method": "[initial]",
                "sigma": {"pos_ned": [GNSS_POS_SIGMA] * 3, "v_n": [0.1] * 3,
                          "phi": [math.radians(1.0)] * 3}}
         note = "initial solution from [initial]"
     if table:
         nav = _from_table(nav, table)
         note += " with [initial] values"
+        used = [k for k in table if k in STATE_KEYS]
+        if method is not InitMethod.TABLE and used:
+            nav["method"] = f"{nav['method']} + [initial] {', '.join(used)}"
     if method is InitMethod.TABLE:
         nav.setdefault("v_n", [0.0, 0.0, 0.0])
     missing = _complete(nav, needs)

@@ -323,3 +323,53 @@ def test_failed_initialisation_is_one_line_on_stderr(tmp_path: Path, args: list[
     assert all(ln.startswith("warning: ") for ln in lines[:-1]), res.stderr
     assert any("header stamps are zero" in ln for ln in lines[:-1])
     assert "sys:1" not in res.stderr and "RecordingWarning" not in res.stderr
+
+
+def test_initial_state_and_its_source_in_summary_text_and_report(drive: Path,
+                                                                 tmp_path: Path) -> None:
+    """The state the filters started from, with its source and time, is the summary's
+    `initial`, one line of the text summary and a row of the report's context: [initial] at
+    --start 70 (the values given, at the first IMU sample from 70 s), align over the still
+    start (stamped at its end, 62 s, level within its sigma of the truth), and a method with
+    [initial] values over it."""
+    config = tmp_path / "init.toml"
+    config.write_text("[initial]\nlat_deg = 45.001\nlon_deg = 7.002\nh = 310.0\n"
+                      "v_n = [10.0, 0.5, 0.0]\nroll_deg = 1.0\npitch_deg = -2.0\nyaw_deg = 30.0\n"
+                      "pos_sigma = [0.5, 0.5, 1.0]\natt_sigma_deg = [0.1, 0.1, 0.5]\n")
+    code, out = invoke("run", "ins", str(drive), "--start", "70", "--end", "75", "--init",
+                       "table", "--config", str(config), "--no-viz", "--summary",
+                       str(tmp_path / "s.json"), "--report", str(tmp_path / "r.html"))
+    assert code == 0, out
+    init = json.loads((tmp_path / "s.json").read_text())["initial"]
+    assert init["source"] == "[initial]" and init["t"] == pytest.approx(70.0, abs=0.021)
+    assert init["t_ns"] - 1_750_000_070 * 10**9 == pytest.approx(0, abs=21_000_000)
+    assert (init["lat_deg"], init["lon_deg"], init["h"]) == pytest.approx((45.001, 7.002, 310.0))
+    assert init["v_n"] == pytest.approx([10.0, 0.5, 0.0])
+    assert (init["roll_deg"], init["pitch_deg"], init["yaw_deg"]) == pytest.approx(
+        (1.0, -2.0, 30.0), abs=1e-9)
+    assert init["sigma"]["pos_ned"] == [0.5, 0.5, 1.0] and init["sigma"]["att_deg"] == [
+        0.1, 0.1, 0.5]
+    line = next(ln for ln in out.splitlines() if ln.startswith("initial state "))
+    assert line.startswith(f"initial state from [initial] at t = {init['t']:.3f} s: "
+                           "45.0010000 deg N, 7.0020000 deg E, 310.00 m; v_NED 10.00, 0.50, "
+                           "0.00 m/s; roll 1.00, pitch -2.00, yaw 30.00 deg; 1-sigma 0.5, 0.5, "
+                           "1 m"), line
+    page = (tmp_path / "r.html").read_text()
+    assert ("<td>initial state</td><td style='text-align:left'>"
+            + line.removeprefix("initial state ")) in page
+    tab = truth_table(DRIVE)
+    code, out = invoke("run", "ins", str(drive), "--init", "align", "--no-viz", "--force",
+                       "--summary", str(tmp_path / "s.json"))
+    assert code == 0, out
+    init = json.loads((tmp_path / "s.json").read_text())["initial"]
+    assert init["source"].startswith("align (") and init["t"] == pytest.approx(62.0)
+    for k, name in enumerate(("roll_deg", "pitch_deg")):
+        assert abs(init[name] - math.degrees(tab["euler"][0, k])) < init["sigma"]["att_deg"][k]
+    config.write_text("[initial]\nyaw_deg = 23.0\natt_sigma_deg = [0.2, 0.2, 1.0]\n"
+                      "accel_bias_sigma = 0.003\n")
+    code, out = invoke("run", "ins", str(drive), "--init", "align", "--config", str(config),
+                       "--no-viz", "--force", "--summary", str(tmp_path / "s.json"))
+    assert code == 0, out
+    init = json.loads((tmp_path / "s.json").read_text())["initial"]
+    assert init["source"] == "align ([initial] yaw_deg) + [initial] yaw_deg, att_sigma_deg"
+    assert init["yaw_deg"] == pytest.approx(23.0) and init["sigma"]["att_deg"] == [0.2, 0.2, 1.0]
