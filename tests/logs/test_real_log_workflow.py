@@ -373,3 +373,45 @@ def test_initial_state_and_its_source_in_summary_text_and_report(drive: Path,
     init = json.loads((tmp_path / "s.json").read_text())["initial"]
     assert init["source"] == "align ([initial] yaw_deg) + [initial] yaw_deg, att_sigma_deg"
     assert init["yaw_deg"] == pytest.approx(23.0) and init["sigma"]["att_deg"] == [0.2, 0.2, 1.0]
+
+
+def test_initial_position_is_the_origin_at_the_start(drive: Path, tmp_path: Path) -> None:
+    """--start 85 with the state at 85 s in [initial] and a local TUM reference of the whole
+    drive (origin where the drive starts, 150 m back): the reference is placed so that it is
+    at [initial] at the start (scored to centimetres), and the exports' frame and the view
+    have their origin there (the exported trajectory starts at 0, 0, 0)."""
+    tab = truth_table(DRIVE)
+    k = int(np.searchsorted(tab["t_ns"], tab["t_ns"][0] + 85 * 10**9))
+    assert np.hypot(*tab["enu"][k, :2]) > 100.0  # the start is far from the TUM's origin
+    lat, lon, h = (float(x) for x in tab["lla"][k])
+    roll, pitch, yaw = (float(x) for x in np.degrees(tab["euler"][k]))
+    config = tmp_path / "init.toml"
+    config.write_text(
+        f"[initial]\nlat_deg = {math.degrees(lat)!r}\nlon_deg = {math.degrees(lon)!r}\n"
+        f"h = {h!r}\nv_n = {[float(v) for v in tab['v_n'][k]]!r}\nroll_deg = {roll!r}\n"
+        f"pitch_deg = {pitch!r}\nyaw_deg = {yaw!r}\npos_sigma = 0.5\nvel_sigma = 0.05\n"
+        "att_sigma_deg = [0.1, 0.1, 0.5]\n")
+    tum = tmp_path / "ref.tum"
+    tum.write_text("".join(
+        f"{t * 1e-9:.9f} {p[0]:.6f} {p[1]:.6f} {p[2]:.6f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f} "
+        f"{q[0]:.9f}\n" for t, p, q in zip(tab["t_ns"], tab["enu"], tab["q_enu_flu"],
+                                           strict=True)))
+    code, out = invoke("run", "ins", str(drive), "--start", "85", "--end", "90", "--init",
+                       "table", "--config", str(config), "--reference", str(tum),
+                       "--export", str(tmp_path / "exp"), "--save", str(tmp_path / "v.rrd"),
+                       "--summary", str(tmp_path / "s.json"))
+    assert code == 0, out
+    assert ("from [initial] lat_deg, lon_deg, h, the reference's position at the start, "
+            "t = 85.000 s)") in out
+    s = json.loads((tmp_path / "s.json").read_text())["filters"]["ins"]
+    assert s["pos_rms_h"] < 0.05 and s["att_rms_heading"] < 0.01
+    origin = json.loads((tmp_path / "exp" / "manifest.json").read_text())["origin"]
+    assert origin["source"] == "[initial] lat_deg, lon_deg, h (the position at the start)"
+    assert (origin["lat_deg"], origin["lon_deg"], origin["h_m"]) == pytest.approx(
+        (math.degrees(lat), math.degrees(lon), h), abs=1e-12)
+    first = np.loadtxt(tmp_path / "exp" / "ins.tum")[0]
+    assert np.abs(first[1:4]).max() < 0.01  # the run starts at the origin
+    from rrd import read_rrd
+
+    body = read_rrd(tmp_path / "v.rrd")["/world/ins/body"]["Transform3D:translation"]
+    assert np.abs(body.reshape(-1, 3)[0]).max() < 0.01  # the view's local NED frame alike
