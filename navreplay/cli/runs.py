@@ -53,7 +53,8 @@ from navreplay.cli.options import (
 @click.option("--rate", type=float, metavar="X",
               help="Replay at X times real time (1.0 = real time), for live viewing.")
 @click.option("--output-rate", type=float, default=10.0, show_default=True, metavar="HZ",
-              help="Estimate output rate between aiding samples [Hz] (at most 1000).")
+              help="Estimate output grid [Hz] (at most 1000); every aiding sample adds its "
+                   "row, one row per time (docs/exports.md).")
 @log_flags
 @click.option("--init", "init", type=click.Choice(["metadata", "reference", "align", "table"]),
               help="Initial solution: the recording's metadata (default when present), the "

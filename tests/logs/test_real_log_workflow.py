@@ -415,3 +415,38 @@ def test_initial_position_is_the_origin_at_the_start(drive: Path, tmp_path: Path
 
     body = read_rrd(tmp_path / "v.rrd")["/world/ins/body"]["Transform3D:translation"]
     assert np.abs(body.reshape(-1, 3)[0]).max() < 0.01  # the view's local NED frame alike
+
+
+def test_export_rows_on_the_whole_grid_after_each_update(tmp_path: Path) -> None:
+    """A 100 Hz GINS log whose 1 Hz fixes fall 5 ms after an IMU sample, replayed at
+    --output-rate 100 from the end of the alignment: one row per time, none repeated (not the
+    start's), a row at every IMU sample from the start (the grid keeps the sample after each
+    update), and the row at the sample before a fix is the state after the fix (the filter's
+    state is at that sample when it applies the fix: its position sigma drops there)."""
+    from gins_maker import SOW0, write_gins
+
+    log = write_gins(tmp_path / "log", duration=75.0, gnss_offset=0.005)
+    gnss = log / "GNSS-RTK.txt"  # the log starts at the first IMU sample: the grid is on it
+    gnss.write_text("".join(gnss.read_text().splitlines(keepends=True)[1:]))
+    code, out = invoke("run", "gps-ins", str(log), "--init", "align", "--no-viz",
+                       "--output-rate", "100", "--export", str(tmp_path / "exp"))
+    assert code == 0, out
+    rows = (tmp_path / "exp" / "gps-ins.csv").read_text().splitlines()
+    head, rows = rows[0].split(","), rows[1:]
+    assert len(set(rows)) == len(rows)
+    stamps = np.array([int(r.split(",", 1)[0]) for r in rows])
+    assert np.all(np.diff(stamps) > 0)
+    t = np.round(stamps * 1e-6).astype(np.int64)  # ms of the GPS week
+    imu = np.round(np.loadtxt(log / "IMU.txt", usecols=0) * 1e3).astype(np.int64)
+    fixes = np.round(np.loadtxt(gnss, usecols=0) * 1e3).astype(np.int64)
+    assert t[0] - round(SOW0 * 1e3) == 62_000  # the end of the still start
+    assert np.array_equal(t, imu[imu >= t[0]])  # every IMU sample from the start, once
+    fixes = fixes[(fixes > t[0] + 10) & (fixes < t[-1])]
+    assert len(fixes) == 12 and np.all(fixes % 1000 == 5)
+    sigma = np.array([float(r.split(",")[head.index("sigma_north [m]")]) for r in rows])
+    at = np.searchsorted(t, fixes) - 1  # the sample before each fix
+    assert np.all(t[at] == fixes - 5)
+    # between samples the sigma grows; at the sample before a fix it drops (the update)
+    assert np.all(sigma[at] < sigma[at - 1]) and np.all(sigma[at + 1] >= sigma[at])
+    between = np.setdiff1d(np.arange(1, len(t) - 1), at)  # the last: after the last fix
+    assert np.all(sigma[between] >= sigma[between - 1] - 1e-4)
