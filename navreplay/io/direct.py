@@ -28,12 +28,15 @@ from navreplay.io.topics import TopicSource, warn
 @dataclasses.dataclass(frozen=True)
 class Topic:
     """A topic of a log: its name, type, message count and the stream it can feed (None: it
-    feeds none, e.g. a reference)."""
+    feeds none, e.g. a reference); the times of its first and last message [ns] when listing
+    them is cheap (None: not listed)."""
 
     name: str
     type_name: str
     count: int
     kind: StreamKind | None = None
+    start_ns: int | None = None
+    end_ns: int | None = None
 
 
 @dataclasses.dataclass
@@ -54,6 +57,10 @@ class DirectSource(Source):
     per sample)."""
 
     what = "log"
+    item = "topic"
+    """What the log's topics are (``navreplay info`` names its first column so)."""
+    time_base = "each message's own time"
+    """Where the sample times come from (``navreplay info``)."""
 
     def __init__(
         self,
@@ -88,6 +95,10 @@ class DirectSource(Source):
 
     def metadata(self) -> Metadata:
         return Metadata()
+
+    def info_lines(self, listing: list[Topic]) -> list[str]:
+        """What ``navreplay info`` says of the log above its table of topics."""
+        return [f"{self.name}  ({self.kind}, {sum(t.count for t in listing)} messages)"]
 
     # -- the window --------------------------------------------------------------------------
 

@@ -62,6 +62,8 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     path = Path(path)
     damage = None
     listing: list[tuple[str, str, int, int | None, int | None]]
+    item = "topic"
+    time_base = f"{options.time} {'stamps' if options.time == 'header' else 'times'}"
     container = file_kind(path)
     if container.name in BAGS:
         from navreplay.io.rosbag import bag_topics, check_bag
@@ -76,8 +78,10 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     elif container.name != "mcap":  # a log read straight into streams (io.direct)
         direct = container.source(path)
         assert isinstance(direct, DirectSource)  # the kinds read straight into streams
-        listing = [(t.name, t.type_name, t.count, None, None) for t in direct.topics()]
-        lines = [f"{path}  ({container.name}, {sum(r[2] for r in listing)} messages)"]
+        topics = direct.topics()
+        listing = [(t.name, t.type_name, t.count, t.start_ns, t.end_ns) for t in topics]
+        lines = direct.info_lines(topics)
+        item, time_base = direct.item, direct.time_base
     else:
         info = recording_info(path)
         listing = [(t.topic, t.schema or "-", t.count, t.start_ns, t.end_ns)
@@ -107,7 +111,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             b = len(s) if hi is None else int(s.t_ns.searchsorted(hi, side="right"))
             recording.streams[stream_kind] = s.slice(a, max(a, b))
     by_topic = {src.topic: kind for kind, src in sources.items()}
-    rows = [("topic", "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
+    rows = [(item, "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
              "end [s]", "gaps")]
     for topic, type_name, count, start, end in listing:
         kind = by_topic.get(topic)
@@ -138,8 +142,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         return LogDescription("\n".join([*lines, "", f"streams: cannot be read: {problem}"]),
                               damage, problem)
     assert recording is not None  # read, or a problem above
-    lines += ["", f"streams (what `navreplay run` replays; times from {options.time} "
-                  f"{'stamps' if options.time == 'header' else 'times'}):"]
+    lines += ["", f"streams (what `navreplay run` replays; times from {time_base}):"]
     for kind, src in sources.items():
         picked = f"; picked over {', '.join(src.picked_from)}" if src.picked_from else ""
         axes = (f"{src.convention.value.upper()}: {src.reason}" if src.convention

@@ -450,3 +450,24 @@ def test_export_rows_on_the_whole_grid_after_each_update(tmp_path: Path) -> None
     assert np.all(sigma[at] < sigma[at - 1]) and np.all(sigma[at + 1] >= sigma[at])
     between = np.setdiff1d(np.arange(1, len(t) - 1), at)  # the last: after the last fix
     assert np.all(sigma[between] >= sigma[between - 1] - 1e-4)
+
+
+def test_info_on_a_gins_log_names_its_files_rates_and_spans(gins_log: Path) -> None:
+    """info on a GINS folder (or its IMU file) says what it read in a bag's terms: the files
+    with their rows, rates and spans (the reference file's too), the time base (GPS seconds
+    of the week, the files' own), and no header stamps it does not have."""
+    for path in (gins_log, gins_log / "IMU.txt"):
+        code, out = invoke("info", str(path))
+        assert code == 0, out
+        lines = out.splitlines()
+        assert lines[0] == f"{path}  (GINS text log, 3 file(s) in the folder, 9992 rows)"
+        assert lines[1] == "times: GPS seconds of the week, 456000.000 to 456090.000 (90.000 s)"
+        assert lines[3].split()[:2] == ["file", "type"]
+        rows = {ln.split()[0]: ln.split() for ln in lines if ln.split()[:1] and (
+            ln.split()[0].endswith((".txt", ".nav")))}
+        assert rows["GNSS-RTK.txt"][2:] == ["gps", "gnss", "-", "91", "1.000", "0.000",
+                                            "90.000", "no"]
+        assert rows["truth.nav"][2:] == ["(reference)", "901", "10.000", "0.000", "90.000"]
+        assert ("streams (what `navreplay run` replays; times from the files' time column, "
+                "GPS seconds of the week):") in lines
+        assert "header" not in out and "messages" not in out
