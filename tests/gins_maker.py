@@ -18,10 +18,13 @@ WEEK = 2370
 
 
 def write_gins(folder: Path, *, duration: float = 90.0, rate: float = 100.0, seed: int = 3,
-               gnss_sigma: tuple[float, float, float] = (1.5, 1.5, 3.0)) -> Path:
+               gnss_sigma: tuple[float, float, float] = (1.5, 1.5, 3.0),
+               gnss_offset: float = 0.0) -> Path:
     """Write ``IMU.txt`` (time, gyro and velocity increments FRD), ``GNSS-RTK.txt`` (time, lat,
     lon, h, std N/E/U; 1 Hz, noise of the stated std) and ``truth.nav`` (10 Hz) into
-    ``folder``; the IMU is of the tactical grade of rosbag_maker (seeded)."""
+    ``folder``; the IMU is of the tactical grade of rosbag_maker (seeded). ``gnss_offset`` [s]:
+    the fixes are that much after the IMU samples (a receiver not synchronised to the IMU; the
+    position is the truth's at the fix time, linearly between the samples)."""
     rng = np.random.default_rng(seed)
     tr = trajectory(duration, rate)
     dt = 1.0 / rate
@@ -40,9 +43,12 @@ def write_gins(folder: Path, *, duration: float = 90.0, rate: float = 100.0, see
     with open(folder / "GNSS-RTK.txt", "w") as out:
         for k in range(0, len(sow), int(rate)):
             noise = sigma[[0, 1, 2]] * rng.standard_normal(3) * np.array([1.0, 1.0, -1.0])
+            w = gnss_offset * rate  # between samples k and k + 1
+            pos = (1.0 - w) * tr.pos[k] + w * tr.pos[min(k + 1, len(sow) - 1)]
             lat, lon, h = (float(np.ravel(v)[0]) for v in
-                           earth.ned_offset_to_lla(*tr.pos[k], noise))
-            out.write(f"{sow[k]:.3f} {math.degrees(lat):.10f} {math.degrees(lon):.10f} "
+                           earth.ned_offset_to_lla(*pos, noise))
+            out.write(f"{sow[k] + gnss_offset:.3f} {math.degrees(lat):.10f} "
+                      f"{math.degrees(lon):.10f} "
                       f"{h:.4f} {sigma[0]:.4f} {sigma[1]:.4f} {sigma[2]:.4f}\n")
     euler = np.degrees(quat_to_euler(tr.q_nb))
     with open(folder / "truth.nav", "w") as out:

@@ -32,9 +32,10 @@ Q_FRD_FLU = np.array([0.0, 1.0, 0.0, 0.0])
 FLIP = np.array([1.0, -1.0, -1.0])
 
 
-def trajectory(duration: float, rate: float):
+def trajectory(duration: float, rate: float, speed: float = 10.0):
+    """Still for 60 s, then up to ``speed`` [m/s] at 0.5 m/s^2, turns and a climb."""
     route = Route(lat=LAT, lon=LON, h=H, heading=0.4, speed=0.0, manoeuvres=(
-        Manoeuvre(channel=Channel.SPEED, start=60.0, duration=20.0, change=10.0),
+        Manoeuvre(channel=Channel.SPEED, start=60.0, duration=2.0 * speed, change=speed),
         Manoeuvre(channel=Channel.HEADING, start=100.0, duration=20.0, change=math.radians(90.0)),
         Manoeuvre(channel=Channel.HEADING, start=160.0, duration=30.0, change=math.radians(-120.0)),
         Manoeuvre(channel=Channel.PITCH, start=200.0, duration=10.0, change=math.radians(3.0)),
@@ -106,7 +107,8 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
               imu_frame_after: tuple[float, str] | None = None,
               gyro_spike: tuple[float, float] | None = None,
               world_frame: str | None = None, imu: bool = True,
-              text_topic: str | None = None, ros1: bool = False) -> Path:
+              text_topic: str | None = None, ros1: bool = False, speed: float = 10.0,
+              gps_vel: bool = False) -> Path:
     """Write a rosbag2 folder at ``path``.
 
     ``imu_frame`` overrides the IMU frame id (a mislabelled FRD IMU: ``ned=True,
@@ -119,7 +121,10 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
     (t [s], rate [rad/s]): the gyro x sample at that time replaced; ``world_frame``: the
     Odometry's frame id; ``imu=False``: no IMU topic; ``text_topic``: a std_msgs/String topic
     of that name beside the others; ``ros1``: a ROS 1 bag file at ``path`` (rosbags' rosbag1
-    writer, ROS 1 serialisation) instead of a rosbag2 folder.
+    writer, ROS 1 serialisation) instead of a rosbag2 folder. ``speed`` [m/s]: the speed
+    driven after the still start (1 for a walk); ``gps_vel``: a
+    TwistWithCovarianceStamped ``/gnss/vel`` beside the fixes (world frame, 1 Hz, the noise of
+    the fixes' grade: 0.1 m/s with ``noisy``).
     """
     global T
     T = (STORE1 if ros1 else STORE).types
@@ -130,16 +135,17 @@ def write_bag(path: Path, *, ned: bool = False, noisy: bool = False, storage: st
                           mag_bias_nT=mag_bias_nT, poses=poses, imu_lag=imu_lag,
                           imu_zero_stamps=imu_zero_stamps, imu_frame_after=imu_frame_after,
                           gyro_spike=gyro_spike, world_frame=world_frame, imu=imu,
-                          text_topic=text_topic, ros1=ros1)
+                          text_topic=text_topic, ros1=ros1, speed=speed, gps_vel=gps_vel)
     finally:
         T = STORE.types
 
 
 def _write_bag(path: Path, *, ned, noisy, storage, imu_frame, duration, rate, seed, imu_grade,
                gyro_bias_dph, mag, mag_frame, mag_bias_nT, poses, imu_lag, imu_zero_stamps,
-               imu_frame_after, gyro_spike, world_frame, imu, text_topic, ros1) -> Path:
+               imu_frame_after, gyro_spike, world_frame, imu, text_topic, ros1, speed,
+               gps_vel) -> Path:
     rng = np.random.default_rng(seed)
-    tr = trajectory(duration, rate)
+    tr = trajectory(duration, rate, speed)
     t_ns = T0_NS + np.rint(tr.t * 1e9).astype(np.int64)
     w, f = tr.omega_ib_b.copy(), tr.f_b.copy()
     grade = imu_grade or (TACTICAL if noisy else None)
@@ -222,6 +228,22 @@ def _write_bag(path: Path, *, ned, noisy, storage, imu_frame, duration, rate, se
                 latitude=math.degrees(pos[0]), longitude=math.degrees(pos[1]), altitude=pos[2],
                 position_covariance=cov, position_covariance_type=2)
             bag.write(c_fix, int(t_ns[k]), serialize(msg, msg.__msgtype__))
+        if gps_vel:
+            c_vel = bag.add_connection("/gnss/vel", "geometry_msgs/msg/TwistWithCovarianceStamped",
+                                       typestore=STORE)
+            vel_sigma = 0.1 if noisy else 0.01
+            cov = np.zeros(36)
+            cov[[0, 7, 14]] = vel_sigma**2
+            for k in range(0, len(t_ns), step):
+                v = tr.v_n[k] + vel_sigma * rng.standard_normal(3) * noisy
+                v_w = v if ned else np.array([v[1], v[0], -v[2]])
+                msg = T["geometry_msgs/msg/TwistWithCovarianceStamped"](
+                    header=_header(t_ns[k], world),
+                    twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                        twist=T["geometry_msgs/msg/Twist"](linear=_v3(v_w),
+                                                           angular=_v3([0, 0, 0])),
+                        covariance=cov))
+                bag.write(c_vel, int(t_ns[k]), serialize(msg, msg.__msgtype__))
         for k in range(0, len(t_ns), step // 10):
             pose = T["geometry_msgs/msg/PoseWithCovariance"](
                 pose=T["geometry_msgs/msg/Pose"](

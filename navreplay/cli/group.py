@@ -145,7 +145,10 @@ _STOPPED = False
 def main(argv: Sequence[str] | None = None) -> None:
     """Console-script entry point. A command stopped by a signal ends at once: the
     interpreter's teardown (freeing a loaded process, joining pools) could take longer than
-    the second a stop may take, and nothing is left to save."""
+    the second a stop may take, and nothing is left to save. Warnings are ``warning:`` lines
+    for the whole process: one given after the command (a reader collected at exit reporting
+    its warnings) is not a raw ``sys:1: RecordingWarning`` line."""
+    warnings.showwarning = _show_warning
     try:
         cli.main(args=list(argv) if argv is not None else None, prog_name="navreplay")
     except SystemExit as e:

@@ -54,7 +54,8 @@ from navreplay.cli.options import (
 @click.option("--rate", type=float, metavar="X",
               help="Replay at X times real time (1.0 = real time), for live viewing.")
 @click.option("--output-rate", type=float, default=10.0, show_default=True, metavar="HZ",
-              help="Estimate output rate between aiding samples [Hz] (at most 1000).")
+              help="Estimate output grid [Hz] (at most 1000); every aiding sample adds its "
+                   "row, one row per time (docs/exports.md).")
 @log_flags
 @click.option("--init", "init", type=click.Choice(["metadata", "reference", "align", "table"]),
               help="Initial solution: the recording's metadata (default when present), the "
@@ -94,6 +95,13 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
       navreplay run ins,gps-ins drive.mcap --export out/drive --report out/drive.html
       navreplay run gps-ins drive.mcap --smooth --export out/drive   # + gps-ins/rts
       navreplay run gps-ins flight.ulg --onboard ekf2    # beside PX4's own estimate
+
+    Variants: FILTER[KEY=VALUE,KEY=VALUE,...] runs a filter with its own parameters, labelled
+    by that text (one filter several times side by side). Pairs are separated by ',' (not
+    ';'); a vector goes on with commas; quote the list for the shell:
+
+    \b
+      navreplay run 'gps-ins,gps-ins[use_gps_vel=false,lever_arm_b=0.5,0,-1.2]' drive.mcap
     """
     from navreplay import jobs
 
@@ -180,6 +188,14 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
       navreplay montecarlo vehicle-drive ins,gps-ins --runs 50 --workers 2 -p scenario.duration=300
       navreplay montecarlo vehicle-drive gps-ins --runs 1000 --executor dask://scheduler:8786
       navreplay montecarlo vehicle-drive gps-ins --runs 50 --smooth   # + gps-ins/rts
+
+    Variants: FILTER[KEY=VALUE,KEY=VALUE,...] runs a filter with its own parameters, labelled
+    by that text (one filter several times side by side). Pairs are separated by ',' (not
+    ';'); a vector goes on with commas; quote the list for the shell:
+
+    \b
+      navreplay montecarlo vehicle-drive 'gps-ins,gps-ins[use_gps_vel=false,lever_arm_b=1,0,-1]' \\
+          --runs 20
     """
     from navreplay import jobs
 

@@ -138,6 +138,12 @@ class Stream:
         return [f for f in FIELDS.get(self.kind, {}) if f not in self.columns]
 
 
+LOCAL_ORIGIN = "local_origin"
+"""``Metadata.extra`` key of the origin the view's local NED frame and the exports' ENU frame take
+when the user gave one (``[initial]``'s position of a log): ``{"pos": [lat, lon, h] (rad, rad,
+m), "source": str}``; without it, the first reference sample or the first estimate."""
+
+
 @dataclasses.dataclass
 class Metadata:
     """What a recording says about itself (stored as an MCAP metadata record).
@@ -167,7 +173,7 @@ class Metadata:
         the scenario's initial errors, never the truth.
     navreplay_version : str
     extra : dict
-        Anything else (site, date, truth column descriptions).
+        Anything else (site, date, truth column descriptions; :data:`LOCAL_ORIGIN`).
     """
 
     scenario: str = ""

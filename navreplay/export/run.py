@@ -52,9 +52,9 @@ class RunExport:
     an interrupted run leaves the directory as it was. The files are those of one call with the
     whole run: what is written depends on the rows, not on how they were split into blocks.
 
-    The first rows are held until the export frame's origin (the reference's first sample, else
-    the first filter's first navigation estimate) and which filters have a navigation solution
-    are known (usually the first window).
+    The first rows are held until the export frame's origin (``origin`` when given, else the
+    reference's first sample, else the first filter's first navigation estimate) and which
+    filters have a navigation solution are known (usually the first window).
 
     Parameters
     ----------
@@ -67,11 +67,17 @@ class RunExport:
         The recording, for the manifest.
     force : bool
         Overwrite existing files (checked here, before anything is written).
+    late : mapping, optional
+        Labels whose rows come after every other's, with the label they follow.
+    origin : mapping, optional
+        The frame's origin the user gave (``metadata.extra[LOCAL_ORIGIN]``: ``pos`` [rad, rad,
+        m] and ``source``).
     """
 
     def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
                  source: str = "", force: bool = False,
-                 late: Mapping[str, str] | None = None) -> None:
+                 late: Mapping[str, str] | None = None,
+                 origin: Mapping[str, Any] | None = None) -> None:
         self.out_dir = Path(out_dir)
         self.labels = tuple(labels)
         self.late = dict(late or {})
@@ -83,6 +89,9 @@ class RunExport:
         check_targets(run_targets(self.out_dir, self.labels, has_reference), force)
         self.file_stems = file_stems(self.labels)
         self._frame: LocalFrame | None = None
+        if origin is not None:  # given (Metadata.extra[LOCAL_ORIGIN]): before any sample
+            lat, lon, h = (float(x) for x in origin["pos"])
+            self._frame = LocalFrame(lat, lon, h, str(origin["source"]))
         self._started = False
         self._held: list[tuple[str, Any]] = []  # ("ref", Stream) / ("out", FilterOutput)
         self._nav: dict[str, bool] = {}  # label -> has a navigation solution (from its rows)

@@ -26,12 +26,15 @@ from navreplay.io.topics import TopicSource, warn
 @dataclasses.dataclass(frozen=True)
 class Topic:
     """A topic of a log: its name, type, message count and the streams it can feed (none: a
-    reference, say; a GNSS receiver's topic can feed both position and velocity)."""
+    reference, say; a GNSS receiver's topic can feed both position and velocity); the times of
+    its first and last message [ns] when listing them is cheap (None: not listed)."""
 
     name: str
     type_name: str
     count: int
     kinds: tuple[StreamKind, ...] = ()
+    start_ns: int | None = None
+    end_ns: int | None = None
 
 
 @dataclasses.dataclass
@@ -52,6 +55,10 @@ class DirectSource(FileSource):
     have one time per sample, and are read whole)."""
 
     what = "log"
+    item = "topic"
+    """What the log's topics are (``navreplay info`` names its first column so)."""
+    time_base = "each message's own time"
+    """Where the sample times come from (``navreplay info``)."""
 
     # -- what a kind of log provides ---------------------------------------------------------
 
@@ -74,6 +81,10 @@ class DirectSource(FileSource):
 
     def metadata(self) -> Metadata:
         return Metadata()
+
+    def info_lines(self, listing: list[Topic]) -> list[str]:
+        """What ``navreplay info`` says of the log above its table of topics."""
+        return [f"{self.name}  ({self.kind}, {sum(t.count for t in listing)} messages)"]
 
     # -- the window --------------------------------------------------------------------------
 

@@ -139,6 +139,18 @@ class GinsSource(DirectSource):
 
     kind = "gins"
     what = "folder"
+    item = "file"
+    time_base = "the files' time column, GPS seconds of the week"
+
+    def info_lines(self, listing: list[Topic]) -> list[str]:
+        lines = [f"{self.name}  (GINS text log, {len(listing)} file(s) in the {self.what}, "
+                 f"{sum(t.count for t in listing)} rows)"]
+        starts = [t.start_ns for t in listing if t.start_ns is not None]
+        ends = [t.end_ns for t in listing if t.end_ns is not None]
+        if starts and ends:
+            lines.append(f"times: GPS seconds of the week, {min(starts) * 1e-9:.3f} to "
+                         f"{max(ends) * 1e-9:.3f} ({(max(ends) - min(starts)) * 1e-9:.3f} s)")
+        return lines
 
     def _folder(self) -> Path:
         return self.path if self.path.is_dir() else self.path.parent
@@ -157,7 +169,8 @@ class GinsSource(DirectSource):
             assert ty is not None
             if not _numeric(_first_row(p), WIDTH[ty]):
                 continue
-            out.append(Topic(p.name, ty, _count_rows(p), kinds[ty]))
+            count, first, last = _count_rows(p, 1 if ty == NAV_TYPE else 0)
+            out.append(Topic(p.name, ty, count, kinds[ty], first, last))
         return out
 
     def read(self, topic: Topic, kind: StreamKind, declared: Convention | None) -> Columns:
@@ -179,11 +192,23 @@ class GinsSource(DirectSource):
         return Columns(t_ns, {"pos": pos, "pos_sigma": data[:, 4:7].copy()}, "gnss")
 
 
-def _count_rows(path: Path) -> int:
-    n = 0
+def _count_rows(path: Path, ti: int) -> tuple[int, int | None, int | None]:
+    """The rows of a file and the times [ns] of its first and last (time column ``ti``;
+    None where it is not a number: the read names the line)."""
+    n, first, last = 0, b"", b""
     with open(path, "rb") as f:
         for line in f:
             s = line.strip()
             if s and not s.startswith((b"#", b"%")):
                 n += 1
-    return n
+                last = s
+                first = first or s
+
+    def time(row: bytes) -> int | None:
+        fields = row.replace(b",", b" ").split()
+        try:
+            return int(seconds_to_ns(np.array(float(fields[ti]))))
+        except (IndexError, ValueError):
+            return None
+
+    return n, time(first), time(last)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -45,12 +46,17 @@ def split_filter_list(text: str) -> list[str]:
 
 def _inline_params(item: str) -> tuple[str, dict[str, str]]:
     """``name[k=v,k2=1,2,3]`` -> (name, {k: v, k2: "1,2,3"}): a comma-separated piece without
-    ``=`` continues the previous value (a vector)."""
+    ``=`` continues the previous value (a vector); ``;`` before a ``key=`` is an error naming
+    the comma form (``;`` between a vector's items is fine)."""
     if "[" not in item:
         return item, {}
     if not item.endswith("]"):
         raise _params.ParamError(f"filter {item!r}: text after ']'")
     ref, _, inner = item[:-1].partition("[")
+    if re.search(r";\s*[A-Za-z_]\w*\s*=", inner):  # pairs split as in other tools
+        fixed = re.sub(r";(\s*[A-Za-z_]\w*\s*=)", r",\1", inner)
+        raise _params.ParamError(f"filter {item!r}: separate KEY=VALUE pairs with ',' (not "
+                                 f"';'): '{ref.strip()}[{fixed}]'")
     values: dict[str, str] = {}
     last: str | None = None
     for piece in inner.split(","):

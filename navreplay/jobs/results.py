@@ -77,13 +77,15 @@ class Outputs:
         if self.export_dir is not None:
             self._export = export.RunExport(self.export_dir, run.labels,
                                             has_reference=run.has_truth, source=run.source,
-                                            force=self.force, late=getattr(run, "late", {}))
+                                            force=self.force, late=getattr(run, "late", {}),
+                                            origin=_origin(run))
         if self.report_path is not None:
             from navreplay.report import RunSeries, run_context
 
             self._series = {label: RunSeries(label) for label in run.labels}
             self._context = {"command": self.command,
-                             **run_context(getattr(run, "metadata", None), run.source)}
+                             **run_context(getattr(run, "metadata", None), run.source,
+                                           getattr(run, "t0_ns", 0))}
 
     def truth(self, truth: Any) -> None:
         """A window of the truth stream (later than before)."""
@@ -162,3 +164,11 @@ class Outputs:
                                          force=self.force)
             notes.append(f"Report written to {self.report_path}")
         return notes
+
+
+def _origin(run: Any) -> Any:
+    """The frame origin the user gave for a run (``Metadata.extra[LOCAL_ORIGIN]``), or None."""
+    from navreplay.core.streams import LOCAL_ORIGIN
+
+    metadata = getattr(run, "metadata", None)
+    return metadata.extra.get(LOCAL_ORIGIN) if metadata is not None else None

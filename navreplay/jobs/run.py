@@ -20,6 +20,7 @@ from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
 from navreplay.jobs.smooth import output_labels, partners, scratch_dir, unsmoothed_notes
 from navreplay.metrics import tables
+from navreplay.metrics.initial import format_initial_state, initial_state
 from navreplay.replay.pipeline import replay_file
 from navreplay.replay.session import Progress
 from navreplay.replay.spec import FilterSpec
@@ -32,6 +33,8 @@ class PerRun:
 
     metrics: dict[str, Any]
     summaries: dict[str, dict[str, Any]]
+    initial: dict[str, Any] | None = None
+    """The initial state the run started from (:func:`navreplay.metrics.initial.initial_state`)."""
 
 
 def campaign_extract(
@@ -49,7 +52,8 @@ def campaign_extract(
             if label in summaries:
                 add_coverage(summaries[label], label, reference_coverage(result.t, t_ref),
                              f"the reference of {task.source}")
-    return PerRun(scored, summaries)
+    return PerRun(scored, summaries,
+                  initial_state(recording.metadata.initial_nav, recording.t0_ns))
 
 
 def salvaged_note(source: str, covered: float | None) -> str:
@@ -178,10 +182,11 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     labels += [onboard_label(s) for s in (job.log.onboard if job.log is not None else ())]
     source = open_log(path, job.log, kinds=streams_needed(classes, job.log))
     try:
-        source.peek()  # read and made ready: the log's problems are raised before any output
+        first = source.peek()  # read and made ready: the log's problems raised before output
     except BaseException:
         source.close()
         raise
+    initial = initial_state(first.metadata.initial_nav, first.t0_ns)
     outputs = outputs_of(job)
     sink = open_output(job.viz, DEFAULT_OUT / f"{path.stem}.rrd", path.name)
     stages = [st for st in (sink, outputs) if st is not None]
@@ -196,7 +201,8 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             for label, fraction in done.reference_coverage.items():
                 add_coverage(done.summaries[label], label, fraction,
                              f"reference {ref}" if ref else "the truth")
-        notes = (list(source.notes) + setting_notes(done.summaries.values())
+        started = [f"initial state {format_initial_state(initial)}"] if initial else []
+        notes = (list(source.notes) + started + setting_notes(done.summaries.values())
                  + (unsmoothed_notes(job.filters) if job.smooth else []))
         if done.salvaged:
             notes.append(salvaged_note(str(path), done.coverage))
@@ -210,7 +216,7 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
             sink.abort()
         raise
     summary = {"recording": str(path), "coverage": done.coverage, "salvaged": done.salvaged,
-               "filters": done.summaries}
+               "initial": initial, "filters": done.summaries}
     has_truth = done.has_truth
     if job.summary_path is not None:
         write_json(job.summary_path, summary)
@@ -271,7 +277,8 @@ def campaign(
             drill[out.index + 1] = per.metrics
         rows.append({"run": out.index + 1, "recording": out.source, "seed": out.seed,
                      "seconds": out.seconds, "coverage": out.coverage,
-                     "salvaged": out.salvaged, "filters": per.summaries})
+                     "salvaged": out.salvaged, "initial": per.initial,
+                     "filters": per.summaries})
         if out.salvaged:
             notes.append(salvaged_note(out.source, out.coverage))
         notes.extend(n for n in setting_notes(per.summaries.values()) if n not in notes)

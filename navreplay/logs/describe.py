@@ -63,6 +63,8 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     path = Path(path)
     damage = None
     listing: list[tuple[str, str, int, int | None, int | None]]
+    item = "topic"
+    time_base = f"{options.time} {'stamps' if options.time == 'header' else 'times'}"
     container = file_kind(path)
     if container.name in BAGS:
         from navreplay.io.rosbag import bag_topics, check_bag
@@ -77,8 +79,10 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     elif container.name != "mcap":  # a log read straight into streams (io.direct)
         direct = container.source(path, None)
         assert isinstance(direct, DirectSource)  # the kinds read straight into streams
-        listing = [(t.name, t.type_name, t.count, None, None) for t in direct.listing()]
-        lines = [f"{path}  ({container.name}, {sum(r[2] for r in listing)} messages)"]
+        topics = direct.listing()
+        listing = [(t.name, t.type_name, t.count, t.start_ns, t.end_ns) for t in topics]
+        lines = direct.info_lines(topics)
+        item, time_base = direct.item, direct.time_base
     else:
         info = recording_info(path)
         listing = [(t.topic, t.schema or "-", t.count, t.start_ns, t.end_ns)
@@ -108,7 +112,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
     by_topic: dict[str, list[StreamKind]] = {}  # a GNSS topic can feed gps and gps_vel
     for stream_kind, src in sources.items():
         by_topic.setdefault(src.topic, []).append(stream_kind)
-    rows = [("topic", "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
+    rows = [(item, "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
              "end [s]", "gaps")]
     for topic, type_name, count, start, end in listing:
         fed = by_topic.get(topic, [])
@@ -142,9 +146,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         return LogDescription("\n".join([*lines, "", f"streams: cannot be read: {problem}"]),
                               damage, problem)
     assert recording is not None  # read, or a problem above
-    times = (f"{options.time} {'stamps' if options.time == 'header' else 'times'}"
-             if container.name in (*BAGS, "mcap") else "the log's sample times")
-    lines += ["", f"streams (what `navreplay run` replays; times from {times}):"]
+    lines += ["", f"streams (what `navreplay run` replays; times from {time_base}):"]
     for kind, src in sources.items():
         picked = f"; picked over {', '.join(src.picked_from)}" if src.picked_from else ""
         axes = (f"{src.convention.value.upper()}: {src.reason}" if src.convention

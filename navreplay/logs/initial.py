@@ -23,9 +23,12 @@ method's, one by one (with their sigmas).
 * else magnetometer heading (levelled field + WMM declination), 1-sigma
   :data:`MAG_HEADING_SIGMA` (local disturbances) combined with the levelling sigma times
   tan(dip);
-* else GNSS course over ground at the first fix faster than :data:`COG_MIN_SPEED`, carried back
-  to the start by the integrated yaw rate; 1-sigma from the velocity noise and
-  :data:`COG_SIDESLIP` (the vehicle moving along its x axis).
+* else GNSS course over ground at the first velocity faster than :data:`COG_MIN_SPEED`, carried
+  back to the start by the integrated yaw rate; 1-sigma from the velocity noise and
+  :data:`COG_SIDESLIP` (the vehicle moving along its x axis);
+* else (no velocity topic, or never that fast: a walk) the GNSS track: the chord from the still
+  position to the first fix :data:`CHORD_LENGTH` away, carried back by half the yaw turned
+  meanwhile; 1-sigma from the fixes' noise over the chord, the sideslip and that half turn.
 
 Position: the GNSS fix nearest the start (its covariance, else :data:`GNSS_POS_SIGMA`), else
 ``[initial]``. Velocity zero (still), 1-sigma :data:`STILL_VEL_SIGMA`. The solution is stamped
@@ -48,6 +51,7 @@ from navreplay.geo.rotations import euler_to_dcm, euler_to_quat, quat_to_euler, 
 from navreplay.io.errors import RecordingError
 from navreplay.logs.framecheck import still_window, wmm_field_ned
 from navreplay.logs.options import InitMethod
+from navreplay.metrics.initial import RECORDING
 
 GYROCOMPASS_MAX_SIGMA = math.radians(5.0)
 MAG_HEADING_SIGMA = math.radians(3.0)
@@ -76,6 +80,12 @@ class InitialisationError(RecordingError):
 def _vec3(value: Any) -> np.ndarray:
     v = np.atleast_1d(np.asarray(value, dtype=float))
     return np.full(3, v[0]) if v.size == 1 else v.reshape(3)
+
+
+STATE_KEYS = ("lat_deg", "lon_deg", "h", "v_n", "roll_deg", "pitch_deg", "yaw_deg",
+              "pos_sigma", "vel_sigma", "att_sigma_deg", "accel_bias", "gyro_bias_dph")
+"""The ``[initial]`` keys that are part of the initial state (the others are assumptions of
+``--init align``)."""
 
 
 def _from_table(nav: dict[str, Any], table: Mapping[str, Any]) -> dict[str, Any]:
@@ -257,9 +267,13 @@ def _heading(recording: Recording, stop: int, C_lb: np.ndarray, lat: float, pos:
                 float(wrap_angle(math.atan2(-m_l[1], m_l[0]) + decl)), sigma)
     reasons.append("no magnetometer")
     cog = _course_over_ground(recording, stop, C_lb)
+    if cog is None:  # too slow or no velocity: the track over a distance
+        reasons.append(f"no GNSS velocity over {COG_MIN_SPEED:g} m/s"
+                       if StreamKind.GPS_VEL in recording else "no GNSS velocity topic")
+        cog = _chord(recording, stop, C_lb)
     if cog is not None:
         return _because(cog[0], reasons), cog[1], cog[2]
-    reasons.append(f"no GNSS course over {COG_MIN_SPEED:g} m/s")
+    reasons.append(f"no GNSS track of {CHORD_LENGTH:g} m")
     raise InitialisationError(
         "--init align cannot find the heading (" + "; ".join(reasons) + "): give yaw_deg in "
         "[initial], a magnetometer topic, or use --init reference")
@@ -271,16 +285,15 @@ def _because(how: str, reasons: list[str]) -> str:
 
 def _course_over_ground(recording: Recording, stop: int, C_lb: np.ndarray
                         ) -> tuple[str, float, float] | None:
+    """Heading from the first GNSS velocity faster than :data:`COG_MIN_SPEED` after the still
+    window, carried back by the yaw turned meanwhile; None without such a velocity."""
     imu = recording[StreamKind.IMU]
-    if StreamKind.GPS_VEL in recording:
-        s = recording[StreamKind.GPS_VEL]
-        t_v, v = s.t_ns, s["v_n"][:, :2]
-        s_v = s["vel_sigma"][:, :2].max(axis=1) if "vel_sigma" in s.columns else np.full(
-            len(s), 0.1)
-    elif StreamKind.GPS in recording and len(recording[StreamKind.GPS]) > 2:
-        return _chord(recording, stop, C_lb)
-    else:
+    if StreamKind.GPS_VEL not in recording:
         return None
+    s = recording[StreamKind.GPS_VEL]
+    t_v, v = s.t_ns, s["v_n"][:, :2]
+    s_v = s["vel_sigma"][:, :2].max(axis=1) if "vel_sigma" in s.columns else np.full(
+        len(s), 0.1)
     speed = np.hypot(v[:, 0], v[:, 1])
     after = (t_v > imu.t_ns[stop - 1]) & (speed > COG_MIN_SPEED)
     if not after.any():
@@ -306,6 +319,8 @@ def _chord(recording: Recording, stop: int, C_lb: np.ndarray
     """Heading from the chord between the mean still position and the first fix
     :data:`CHORD_LENGTH` away, carried back by the yaw turned meanwhile (half of it: the chord
     of a steady turn points along the mean heading)."""
+    if StreamKind.GPS not in recording or len(recording[StreamKind.GPS]) < 2:
+        return None
     imu, gps = recording[StreamKind.IMU], recording[StreamKind.GPS]
     still = gps.t_ns <= imu.t_ns[stop - 1]
     if not still.any():
@@ -354,19 +369,23 @@ def initial_nav(method: InitMethod | None, recording: Recording, table: Mapping[
             raise InitialisationError("--init metadata: the recording has no initial solution; "
                                       "use --init align, --init reference or [initial]")
         nav, note = dict(meta), "initial solution from the recording's metadata"
+        nav.setdefault("method", RECORDING)
     elif method is InitMethod.REFERENCE:
         nav, note = from_reference(recording), "initial solution from the reference"
     elif method is InitMethod.ALIGN:
         nav, note = align(recording, table)
     else:
         imu = recording[StreamKind.IMU]
-        nav = {"t_ns": int(imu.t_ns[0]), "method": "table",
+        nav = {"t_ns": int(imu.t_ns[0]), "method": "[initial]",
                "sigma": {"pos_ned": [GNSS_POS_SIGMA] * 3, "v_n": [0.1] * 3,
                          "phi": [math.radians(1.0)] * 3}}
         note = "initial solution from [initial]"
     if table:
         nav = _from_table(nav, table)
         note += " with [initial] values"
+        used = [k for k in table if k in STATE_KEYS]
+        if method is not InitMethod.TABLE and used:
+            nav["method"] = f"{nav['method']} + [initial] {', '.join(used)}"
     if method is InitMethod.TABLE:
         nav.setdefault("v_n", [0.0, 0.0, 0.0])
     missing = _complete(nav, needs)

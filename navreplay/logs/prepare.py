@@ -2,7 +2,8 @@
 
 :func:`open_log` opens a recording file (:func:`navreplay.io.files.open_recording`) as a
 :class:`LogSource`: the same windows, the first made ready before it is handed out (frames
-checked, the initial solution set in ``metadata.initial_nav``, the ``[sensors.*]`` tables of
+checked, the initial solution set in ``metadata.initial_nav`` (and the ``[initial]`` position, when
+given, as ``metadata.extra["local_origin"]``), the ``[sensors.*]`` tables of
 the configuration written over the sensor specifications, and with ``--reference`` the
 reference as its truth stream: a log with a reference is read in one window). Every window is
 read under the options' :class:`~navreplay.io.checks.ReadPolicy`.
@@ -10,12 +11,13 @@ read under the options' :class:`~navreplay.io.checks.ReadPolicy`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
 
-from navreplay.core.streams import Recording, StreamKind
+from navreplay.core.streams import LOCAL_ORIGIN, Recording, StreamKind
 from navreplay.filters.base import Filter, consumed_streams
 from navreplay.io.checks import read_policy
 from navreplay.io.files import open_recording
@@ -162,6 +164,12 @@ def make_ready(recording: Recording, sources: dict[StreamKind, TopicSource],
     nav, note = initial_nav(options.init, recording, options.initial, options.needs)
     if nav:
         recording.metadata.initial_nav = nav
+    if "lat_deg" in options.initial and "lon_deg" in options.initial:
+        # the user's position at the start: the origin of the view's and the exports' frame
+        recording.metadata.extra[LOCAL_ORIGIN] = {
+            "pos": [math.radians(options.initial["lat_deg"]),
+                    math.radians(options.initial["lon_deg"]), float(options.initial.get("h", 0.0))],
+            "source": "[initial] lat_deg, lon_deg, h (the position at the start)"}
     if note:
         notes.append(note)
     return notes

@@ -28,10 +28,13 @@ CSV file (``.csv``)
     ``navreplay run --export`` writes them (``stamp [ns]``, ``lat [deg]``, ``v_N [m/s]``), are
     read as ``t_ns``, ``lat_deg``, ``v_N``: an exported run (a smoothed one) is a reference.
 
-Local positions need the geodetic position of the world origin: ``lat_deg``/``lon_deg``/``h``
-of the ``[initial]`` table when given, else a fit to the log's NavSatFix stream: the origin is the
-mean over all fixes inside the reference's time span of (fix - reference position at the fix
-time), which averages the GNSS noise (the antenna lever arm is neglected).
+Local positions need a geodetic anchor. The ``[initial]`` table's ``lat_deg``/``lon_deg``/``h``
+when given: the position at the start of the run (the first IMU sample, ``--start`` included),
+so the reference's position at that time (interpolated) is placed there; a reference whose
+local origin is where the run starts (another tool's run started alike) has its origin there.
+Else a fit to the log's NavSatFix stream: the origin is the mean over all fixes inside the
+reference's time span of (fix - reference position at the fix time), which averages the GNSS
+noise (the antenna lever arm is neglected).
 """
 
 from __future__ import annotations
@@ -554,20 +557,33 @@ def reference_stream(ref: Reference, recording: Recording, initial: Mapping[str,
     note = ""
     pos = ref.pos
     if ref.local_ned is not None:
+        local = ref.local_ned
         if "lat_deg" in initial and "lon_deg" in initial:
-            origin = np.array([math.radians(initial["lat_deg"]), math.radians(initial["lon_deg"]),
-                               float(initial.get("h", 0.0))])
-            how = "[initial] lat_deg, lon_deg, h"
+            # [initial] is the position at the start: the reference is there at that time
+            start = np.array([math.radians(initial["lat_deg"]), math.radians(initial["lon_deg"]),
+                              float(initial.get("h", 0.0))])
+            t_start = (int(recording[StreamKind.IMU].t_ns[0]) if StreamKind.IMU in recording
+                       and len(recording[StreamKind.IMU]) else int(ref.t_ns.min()))
+            o = np.argsort(ref.t_ns, kind="stable")
+            t = (ref.t_ns[o] - ref.t_ns[o[0]]).astype(float)
+            at = np.array([np.interp(float(t_start - ref.t_ns[o[0]]), t, local[o, i])
+                           for i in range(3)])
+            origin = np.array([float(np.ravel(v)[0])
+                               for v in earth.ned_offset_to_lla(start[0], start[1], start[2], -at)])
+            base, local = start, local - at  # placed about the start
+            how = ("[initial] lat_deg, lon_deg, h, the reference's position at the start, t = "
+                   f"{float(seconds(t_start, recording.t0_ns)):.3f} s")
         elif StreamKind.GPS in recording:
             origin, rms = _gnss_fit(ref, ref.local_ned, recording)
             _check_world(ref, recording, rms)
             how = (f"a fit to {len(recording[StreamKind.GPS])} GNSS fixes, {rms:.1f} m RMS "
                    "apart")
+            base = origin
         else:
             raise ReferenceError(
                 f"reference {ref.source}: local positions need an origin: a NavSatFix topic "
                 "in the log, or lat_deg, lon_deg, h in [initial]")
-        lat, lon, h = earth.ned_offset_to_lla(origin[0], origin[1], origin[2], ref.local_ned)
+        lat, lon, h = earth.ned_offset_to_lla(base[0], base[1], base[2], local)
         pos = np.stack([lat, lon, h], axis=1)
         note = (f" (local origin {math.degrees(origin[0]):.7f} deg, "
                 f"{math.degrees(origin[1]):.7f} deg, {origin[2]:.2f} m from {how})")

@@ -7,9 +7,10 @@ recording has an IMU, whether declared or not, and the truth never does. Events 
 timestamp; samples with equal timestamps are ordered by stream priority,
 :data:`STREAM_PRIORITY` (master INS, GNSS position, GNSS velocity, magnetometer, speed log,
 depth, then any other kind by name), then by row. When the recording has an IMU stream, an
-output tick at ``output_rate`` [Hz] (on the grid ``t = k / output_rate`` since the recording
-start) is added in every tick interval ``(t_k-1, t_k]`` that holds no aiding sample, so that a
-free-inertial run still has outputs; ticks at a time equal to an event's come after it.
+output tick at ``output_rate`` [Hz] is added at every time of the grid ``t = k / output_rate``
+since the recording start (from the first IMU sample, or from the filter's start) that is not
+the time of an aiding sample: the estimates are on the whole grid, and at every aiding sample
+besides (one estimate per time, after every sample of that time is applied).
 """
 
 from __future__ import annotations
@@ -147,13 +148,10 @@ def window_plan(
         ticks = _ticks(first, last, t0_ns, float(output_rate))
         if lo is not None:
             ticks = ticks[ticks > lo]
-        grid = ticks if lo is None else _ticks(first_imu_ns, first_imu_ns + 3 * period_ns,
-                                               t0_ns, float(output_rate))
-        period = grid[1] - grid[0] if len(grid) > 1 else np.int64(period_ns)
-        # ticks only in intervals without an aiding sample (of the whole recording)
-        before = np.searchsorted(t_all, ticks - period, side="right")
-        upto = np.searchsorted(t_all, ticks, side="right")
-        ticks = ticks[upto == before]
+        # every grid time but those of an aiding sample (its estimate is the one there)
+        if len(t_all):
+            at = np.minimum(np.searchsorted(t_all, ticks), len(t_all) - 1)
+            ticks = ticks[t_all[at] != ticks]
         t_ev = np.concatenate([t_ev, ticks])
         code = np.concatenate([code, np.full(len(ticks), TICK, np.int64)])
         row = np.concatenate([row, np.zeros(len(ticks), np.int64)])

@@ -16,7 +16,10 @@ For each event at time ``t_e`` (the event plan of :mod:`navreplay.replay.plan`) 
 2. is handed the aiding sample (:meth:`~navreplay.filters.base.Filter.update`; not for ticks),
    whose innovations are collected,
 3. gives :meth:`~navreplay.filters.base.Filter.estimate`, stored in preallocated columns
-   (skipped while the filter returns None), once per distinct event time.
+   (skipped while the filter returns None), once per distinct event time, and not for an
+   output tick followed by an aiding sample before the next IMU sample: an IMU-propagated
+   filter's state is at its last IMU sample for both, and the row there is the one after the
+   update (the tick at the next IMU sample stays).
 
 IMU samples after the last event are handed over at the end, followed by a last estimate.
 Every IMU sample is thus delivered exactly once and in order. The events go to the filter in
@@ -216,6 +219,7 @@ class ReplaySession:
         # the filter starts at its initial solution's time: the samples before it are not its
         start_ns = first.metadata.initial_nav.get("t_ns")
         self._start_ns: int | None = int(start_ns) if start_ns is not None else None
+        self._filter_start_ns = self._start_ns  # kept: the output ticks begin there
         self._events = 0
         self._wall0 = time.perf_counter()
         self._t_first: float | None = None
@@ -256,11 +260,18 @@ class ReplaySession:
         imu_t_ns, imu_columns, start = self._window_imu(window.get(StreamKind.IMU))
         if self._start_ns is not None and len(imu_t_ns):
             imu_t_ns, imu_columns, start = self._skip_to_start(imu_t_ns, imu_columns, start)
-        if self._first_imu_ns is None and len(imu_t_ns):
-            self._first_imu_ns = int(imu_t_ns[0])
+        if self._first_imu_ns is None and len(imu_t_ns) and self._start_ns is None:
+            # the output ticks from the first sample, or from the filter's start when the
+            # samples began before it (no tick before the start: its estimate would repeat
+            # the start's, once per tick)
+            self._first_imu_ns = max(int(imu_t_ns[0]), self._filter_start_ns or 0)
         hi = None if final else (int(imu_t_ns[-1]) if len(imu_t_ns) > start else None)
         if hi is not None and self._known:
             hi = min(hi, *self._known.values())
+        if hi is not None:
+            # the events after the last IMU sample up to hi share its estimate time with those
+            # after hi (the filter's state is at that sample): they wait for the next window
+            hi = int(imu_t_ns[max(int(np.searchsorted(imu_t_ns, hi, side="right")) - 1, 0)]) - 1
             if self._done_to_ns is not None and hi <= self._done_to_ns:
                 hi = None
         if not final and hi is None:  # nothing to apply yet: the IMU samples wait
@@ -392,9 +403,13 @@ class ReplaySession:
         n_events = len(plan)
         t_ev = (plan.t_ns - np.int64(self._t0_ns)).astype(np.float64) * 1e-9
         codes, rows, ends = plan.code, plan.row, plan.imu_end
-        # one estimate per distinct time: samples sharing a timestamp are all applied first
-        record = np.append(plan.t_ns[1:] != plan.t_ns[:-1], True)
+        # one estimate per distinct time, after every sample of that time; none for a tick
+        # followed by an aiding sample before the next IMU sample (the state is at the IMU
+        # sample for both: the row there is the one after the update)
         n_imu = len(imu_t)
+        record = np.append(plan.t_ns[1:] != plan.t_ns[:-1], True)
+        if n_imu:
+            record[:-1] &= ~((codes[:-1] == TICK) & (ends[1:] == ends[:-1]))
         done_imu = max(feeder.start, int(ends[-1]) if n_events else 0)
         if final and n_imu > done_imu:  # the IMU samples after the last event, an estimate
             t_ev = np.append(t_ev, imu_t[-1])

@@ -35,6 +35,7 @@ from navreplay import __version__
 from navreplay.export import FilterOutput, check_targets, write_text
 from navreplay.metrics import chi2_bounds, chi2_bounds_per_count
 from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors, headline_rows
+from navreplay.metrics.initial import format_initial_state, initial_state
 from navreplay.metrics.tables import format_summaries, outage_cells, summary_unit
 from navreplay.report.envelope import Envelope
 
@@ -119,28 +120,19 @@ def context_section(context: Mapping[str, Any]) -> str:
     return f"<table>{''.join(rows)}</table>" if rows else ""
 
 
-def run_context(metadata: Any, source: str) -> dict[str, Any]:
+def run_context(metadata: Any, source: str, t0_ns: int = 0) -> dict[str, Any]:
     """The recording's part of a report's context: file, scenario, seed, scenario parameters,
-    initial state (latitude, longitude [deg], height [m], NED velocity [m/s], roll, pitch, yaw
-    [deg]) and the version that wrote it, with this one's versions."""
+    initial state (where it came from, its time from ``t0_ns``, the recording's start, and its
+    values: :func:`navreplay.metrics.initial.format_initial_state`) and the version that wrote
+    it, with this one's versions."""
     out: dict[str, Any] = {"recording": source}
     if metadata is not None:
         out["scenario"] = metadata.scenario or None
         out["seed"] = metadata.seed
         out["scenario parameters"] = ", ".join(
             f"{k}={_short(v)}" for k, v in (metadata.params or {}).items()) or None
-        init = metadata.initial_nav or {}
-        if init.get("pos") is not None:
-            from navreplay.geo.rotations import quat_to_euler
-
-            lat, lon, h = (float(x) for x in init["pos"])
-            text = f"{lat * _DEG:.6f}° N, {lon * _DEG:.6f}° E, {h:.1f} m"
-            if init.get("v_n") is not None:
-                text += "; v_NED " + ", ".join(f"{float(x):.2f}" for x in init["v_n"]) + " m/s"
-            if init.get("q_nb") is not None:
-                e = np.asarray(quat_to_euler(np.asarray(init["q_nb"], dtype=float))) * _DEG
-                text += f"; roll {e[0]:.2f}°, pitch {e[1]:.2f}°, yaw {e[2]:.2f}°"
-            out["initial state"] = text
+        state = initial_state(metadata.initial_nav or {}, t0_ns)
+        out["initial state"] = format_initial_state(state) or None
         out["recorded by"] = (f"navreplay {metadata.navreplay_version}"
                               if metadata.navreplay_version else None)
     out["versions"] = versions()

@@ -64,7 +64,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from navreplay.core.streams import Stream
+from navreplay.core.streams import LOCAL_ORIGIN, Stream
 from navreplay.filters.result import RunResult
 from navreplay.io.outputs import OutputError
 from navreplay.metrics import RunMetrics
@@ -117,10 +117,15 @@ class Sink(RunView, EnsemblePlots):
 
     def start(self, run: Any) -> None:
         """A replay over one recording starts (a :class:`navreplay.replay.RunStart`: its start
-        time and the truth columns the declared states are scored against)."""
+        time, the truth columns the declared states are scored against, and the local frame's
+        origin when the user gave one: :data:`navreplay.core.streams.LOCAL_ORIGIN`)."""
         self._t0_ns = int(run.t0_ns)
         self._truth_wanted = dict(run.truth_columns)
         self._outages = tuple(run.gnss_outages)
+        metadata = getattr(run, "metadata", None)
+        origin = metadata.extra.get(LOCAL_ORIGIN) if metadata is not None else None
+        if origin is not None and self._ref is None:  # the local NED frame's, given by the user
+            self._ref = np.asarray(origin["pos"], dtype=float)
 
     def truth(self, truth: Stream) -> None:
         """Log a window of the truth stream (rows later than those logged before; columns

@@ -194,6 +194,33 @@ def test_run_variants_of_one_filter(recs, in_tmp):
     assert a["nis_mean_gps_pos"] > b["nis_mean_gps_pos"]
 
 
+@pytest.mark.parametrize("command", ["run", "montecarlo"])
+def test_help_shows_the_variant_syntax_with_an_example_that_parses(command):
+    """--help states the variant grammar (',' between pairs, not ';') and its example is a
+    filter list the commands accept: two labelled variants, the vector read whole; ';'
+    between pairs is one line showing the comma form."""
+    import re
+
+    from navreplay.jobs import filter_specs
+
+    res = invoke(command, "--help")
+    ok(res)
+    text = " ".join(res.output.split())
+    assert "Pairs are separated by ',' (not ';')" in text
+    after = res.output.split("(not ';')")[1]
+    example = re.search(rf"navreplay {command} .*'([^']+\[[^']+\])'", after).group(1)
+    plain, variant = (spec.resolve() for spec in filter_specs(example))
+    assert plain.label == "gps-ins" and variant.label == example.split(",", 1)[1]
+    assert variant.values["use_gps_vel"] is False and len(variant.values["lever_arm_b"]) == 3
+    assert "use_gps_vel" not in plain.values
+    err = fails(invoke(command, *(["vehicle-drive"] if command == "montecarlo" else []),
+                       "gps-ins[use_gps_vel=false;gps_pos_sigma_scale=2]",
+                       *(["--runs", "1"] if command == "montecarlo" else ["r.mcap"])))
+    assert err == ("Error: filter 'gps-ins[use_gps_vel=false;gps_pos_sigma_scale=2]': separate "
+                   "KEY=VALUE pairs with ',' (not ';'): "
+                   "'gps-ins[use_gps_vel=false,gps_pos_sigma_scale=2]'")
+
+
 @pytest.mark.parametrize("scenario, duration, name", [
     ("gimpo-accel-sweep", 10.0, "vector-matching"),
     ("ship-transfer-alignment", 5.0, "transfer-alignment"),
