@@ -41,6 +41,7 @@ _CELL = 34  # the longest cell the kernel writes: "-" + 15 + "." + 15 digits, an
 _POW10 = np.array([float(10**k) for k in range(23)])  # exact doubles
 _POW10_INT = np.array([10**k for k in range(19)], dtype=np.int64)
 _TIE = 1e-6
+_LOG10_2 = math.log10(2.0)
 _INT64_MIN = -(2**63)
 
 
@@ -127,7 +128,8 @@ def _tie(m: float) -> bool:
 @numba.njit(cache=True, error_model="numpy")
 def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
     """(p significant digits as an integer, decimal exponent, in doubt) of finite ax > 0."""
-    e = int(math.floor(math.log10(ax)))
+    # from the binary exponent (ax in [2**(b-1), 2**b)): the decimal one or one below it
+    e = int(math.floor((math.frexp(ax)[1] - 1) * _LOG10_2))
     m = 0.0
     for _ in range(4):
         k = p - 1 - e
@@ -199,9 +201,15 @@ def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int,
     r, e, doubt = _general_digits(ax, p)
     if doubt:
         return -1
-    for i in range(p - 1, -1, -1):
-        digits[i] = 48 + r % 10
-        r //= 10
+    i = p - 1
+    while i > 0:  # two digits at a time
+        d = r % 100
+        r //= 100
+        digits[i] = 48 + d % 10
+        digits[i - 1] = 48 + d // 10
+        i -= 2
+    if i == 0:
+        digits[0] = 48 + r
     sig = p  # significant digits without the trailing zeros
     while sig > 1 and digits[sig - 1] == 48:
         sig -= 1
