@@ -38,6 +38,11 @@ _FIXED_RE = re.compile(r"%\.(\d+)f")
 _GENERAL_RE = re.compile(r"%\.(\d+)g")
 _CELL = 34  # the longest cell the kernel writes: "-" + 15 + "." + 15 digits, and a separator
 
+_kernel = numba.njit(cache=True, error_model="numpy", _nrt=False)
+"""The kernels allocate nothing (scratch arrays come from the caller), so they run without
+numba's reference counting of arrays: its atomic counts on every call between them cost about
+as much as formatting a value."""
+
 _POW10 = np.array([float(10**k) for k in range(23)])  # exact doubles
 _POW10_INT = np.array([10**k for k in range(19)], dtype=np.int64)
 _TIE = 1e-6
@@ -67,6 +72,7 @@ def format_rows(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
     ints = [a.dtype.kind in "iu" for a in arrays]
     n = arrays[0].shape[0]
     out = []
+    digits = np.empty(20, dtype=np.uint8)
     for a in range(0, n, BLOCK_ROWS):
         b = min(n, a + BLOCK_ROWS)
         F = np.zeros((b - a, k))
@@ -78,7 +84,7 @@ def format_rows(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
                 F[:, j] = v[a:b]
         buf = np.empty((b - a) * (k * _CELL + 1), dtype=np.uint8)
         marks = np.empty(2 * (b - a) * k, dtype=np.int64)
-        size, count = _write(F, Ii, kind, prec, ord(sep), ord(end), buf, marks)
+        size, count = _write(F, Ii, kind, prec, ord(sep), ord(end), buf, marks, digits)
         text, done = [], 0  # the values left to Python go in at their marks
         for pos, flat in marks[:2 * count].reshape(count, 2).tolist():
             r, j = divmod(flat, k)
@@ -112,20 +118,20 @@ def _python(value: object, fmt: str) -> str:
     return fmt % value
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _scaled(ax: float, k: int) -> float:
     if k >= 0:
         return ax * _POW10[k]
     return ax / _POW10[-k]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _tie(m: float) -> bool:
     """``m`` (within m * 2**-53 of the exact product) may round either way."""
     return abs(m - math.floor(m) - 0.5) < _TIE + m * 4.5e-16
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
     """(p significant digits as an integer, decimal exponent, in doubt) of finite ax > 0."""
     # from the binary exponent (ax in [2**(b-1), 2**b)): the decimal one or one below it
@@ -151,7 +157,7 @@ def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
     return r, e, _tie(m)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _put_uint(buf: np.ndarray, pos: int, v: int, width: int) -> int:
     """Non-negative ``v`` in decimal, zero-padded to ``width`` digits (0: as many as it has)."""
     count = 1
@@ -166,13 +172,13 @@ def _put_uint(buf: np.ndarray, pos: int, v: int, width: int) -> int:
     return pos + count
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _put3(buf: np.ndarray, pos: int, a: int, b: int, c: int) -> int:
     buf[pos], buf[pos + 1], buf[pos + 2] = a, b, c
     return pos + 3
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int,
                digits: np.ndarray) -> int:
     """``%.{p}f`` (kd _FIXED) or ``%.{p}g`` (_GENERAL) of ``x``; -1 where the digits might
@@ -248,13 +254,12 @@ def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int,
     return _put_uint(buf, pos + 2, abs(e), 2)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _write(F: np.ndarray, Ii: np.ndarray, kind: np.ndarray, prec: np.ndarray, sep: int,
-           end: int, buf: np.ndarray, marks: np.ndarray) -> tuple[int, int]:
+           end: int, buf: np.ndarray, marks: np.ndarray, digits: np.ndarray) -> tuple[int, int]:
     """Write the rows into ``buf``; a value left to Python is skipped, its position and
     ``r * k + j`` appended to ``marks``. Returns the bytes written and the marks."""
     n, k = F.shape
-    digits = np.empty(20, dtype=np.uint8)
     pos = 0
     count = 0
     for r in range(n):
