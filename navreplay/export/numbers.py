@@ -38,7 +38,7 @@ _FIXED_RE = re.compile(r"%\.(\d+)f")
 _GENERAL_RE = re.compile(r"%\.(\d+)g")
 _CELL = 34  # the longest cell the kernel writes: "-" + 15 + "." + 15 digits, and a separator
 
-_kernel = numba.njit(cache=True, error_model="numpy", _nrt=False)
+_kernel = numba.njit(cache=True, error_model="numpy", _nrt=False)  # type: ignore[call-overload]
 """The kernels allocate nothing (scratch arrays come from the caller), so they run without
 numba's reference counting of arrays: its atomic counts on every call between them cost about
 as much as formatting a value."""
