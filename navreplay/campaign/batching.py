@@ -1,0 +1,172 @@
+"""Several runs per task: :class:`Batching`, an executor over another that groups the calls
+submitted to it.
+
+Each task an executor runs has a fixed cost beside the run itself (pickling the call and its
+result, the trip to the worker and back; for Dask the scheduler as well: about 10-20 ms), so
+runs of a few milliseconds are slower on two workers than in one process. :class:`Batching`
+sends consecutive calls as one task of its executor (:func:`call_batch`), as many as carry
+about :attr:`Batching.task_seconds` of work, and hands back one future per call, so the
+campaign above it is unchanged.
+
+How many: the first call of each worker goes alone, to time a run; the calls submitted
+meanwhile wait. Once a run's time is known (the first result, or any result asked for), the
+waiting calls go in groups of ``task_seconds / (time of a run)`` (at least 1, at most
+``max_batch``); later calls are sent as soon as a group is full, and a call whose result is
+asked for sends the group it waits in at once. Results come back in submission order; a call
+that raises does so from its own future's ``result()``, the others of its group unaffected.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from navreplay.campaign.executors import Executor, Future
+from navreplay.io import lifecycle
+
+
+def call_batch(calls: list[tuple[Callable[..., Any], tuple, dict]]) -> list[tuple[bool, Any, float]]:
+    """Run the calls one after the other: per call (returned, its value or the exception it
+    raised, seconds). Runs in the worker."""
+    out = []
+    for fn, args, kwargs in calls:
+        start = time.perf_counter()
+        try:
+            value = fn(*args, **kwargs)
+        except Exception as e:  # handed to that call's future
+            out.append((False, e, time.perf_counter() - start))
+        else:
+            out.append((True, value, time.perf_counter() - start))
+    return out
+
+
+class _Call:
+    """The future of one call in a group."""
+
+    def __init__(self, owner: Batching, call: tuple[Callable[..., Any], tuple, dict]) -> None:
+        self._owner = owner
+        self.call: tuple[Callable[..., Any], tuple, dict] | None = call
+        self.group: Future | None = None  # set when sent
+        self.index = 0
+
+    def result(self, timeout: float | None = None) -> Any:
+        if self.group is None:
+            self._owner._ask(self)
+        assert self.group is not None
+        outcomes = self.group.result(timeout)
+        if self.index == 0:  # each group's times counted once
+            self._owner._timed(outcomes)
+        ok, value, _ = outcomes[self.index]
+        if not ok:
+            raise value
+        return value
+
+
+class Batching:
+    """An executor whose tasks are groups of the calls submitted to it (see the module
+    docstring).
+
+    Parameters
+    ----------
+    executor : Executor
+        Runs the groups (a process pool, a Dask client); shut down with this one.
+    workers : int
+        How many groups ``executor`` runs at once.
+    task_seconds : float
+        Work per task [s] the groups are sized to.
+    max_batch : int
+        Most calls per task.
+
+    Attributes
+    ----------
+    parallelism : int
+        ``workers * max_batch``: a campaign keeps twice as many calls in flight, so that every
+        worker has full groups queued.
+    """
+
+    def __init__(self, executor: Executor, workers: int, *, task_seconds: float = 0.25,
+                 max_batch: int = 8) -> None:
+        self.executor = executor
+        self.workers = max(1, workers)
+        self.task_seconds = task_seconds
+        self.max_batch = max(1, max_batch)
+        self.parallelism = self.workers * self.max_batch
+        self._lock = threading.Lock()
+        self._waiting: list[_Call] = []
+        self._probes: list[_Call] = []
+        self._run_seconds: float | None = None  # mean time of a run, once one is known
+        self._timed_runs = 0
+
+    @property
+    def batch(self) -> int:
+        """Calls per task (1 until a run has been timed)."""
+        if not self._run_seconds:
+            return 1 if self._run_seconds is None else self.max_batch
+        return max(1, min(self.max_batch, math.floor(self.task_seconds / self._run_seconds)))
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
+        call = _Call(self, (fn, args, kwargs))
+        with self._lock:
+            if self._run_seconds is None and len(self._probes) < self.workers:
+                self._probes.append(call)
+                self._send([call])
+            else:
+                self._waiting.append(call)
+                if self._run_seconds is not None and len(self._waiting) >= self.batch:
+                    self._flush(whole=True)
+        return call
+
+    def _ask(self, call: _Call) -> None:
+        """The result of a call not yet sent is wanted: learn a run's time if need be, then send
+        the waiting calls (the last group as it is)."""
+        if self._run_seconds is None:
+            probe = self._probes[0]
+            assert probe.group is not None
+            self._timed(probe.group.result())
+        with self._lock:
+            if call.group is None:
+                self._flush(whole=False)
+
+    def _timed(self, outcomes: list[tuple[bool, Any, float]]) -> None:
+        """Fold a group's run times into the mean (its first result asked for)."""
+        with self._lock:
+            n = self._timed_runs
+            total = (self._run_seconds or 0.0) * n + sum(s for _, _, s in outcomes)
+            self._timed_runs = n + len(outcomes)
+            self._run_seconds = total / self._timed_runs
+
+    def _flush(self, whole: bool) -> None:
+        """Send the waiting calls in groups of :attr:`batch` (``whole``: only full groups)."""
+        size = self.batch
+        while self._waiting and (len(self._waiting) >= size or not whole):
+            group, self._waiting = self._waiting[:size], self._waiting[size:]
+            self._send(group)
+
+    def _send(self, group: list[_Call]) -> None:
+        calls = []
+        for i, c in enumerate(group):
+            assert c.call is not None
+            calls.append(c.call)
+            c.index, c.call = i, None
+        future = self.executor.submit(call_batch, calls)
+        for c in group:
+            c.group = future
+
+    def shutdown(self, wait: bool = True) -> None:
+        """With ``wait``, finish every call; without, drop the waiting ones, stop the running
+        ones (a process pool's workers are terminated) and return."""
+        if wait:
+            with self._lock:
+                self._flush(whole=False)
+            self.executor.shutdown(wait=True)
+            return
+        self._waiting.clear()
+        if isinstance(self.executor, cf.Executor):
+            lifecycle.stop_workers(self.executor)  # before shutdown forgets the processes
+            self.executor.shutdown(wait=False, cancel_futures=True)
+        else:
+            self.executor.shutdown(wait=False)
