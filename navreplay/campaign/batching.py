@@ -11,8 +11,8 @@ campaign above it is unchanged.
 How many: the first call of each worker goes alone, to time a run; the calls submitted
 meanwhile wait. Once a run's time is known (the first result, or any result asked for), the
 waiting calls go in groups of ``task_seconds / (time of a run)`` (at least 1, at most
-``max_batch``); later calls are sent as soon as a group is full, and a call whose result is
-asked for sends the group it waits in at once. Results come back in submission order; a call
+``max_batch``); later calls are sent as soon as a group is full (while fewer than two groups per worker are
+in flight), and a call whose result is asked for sends the group it waits in at once. Results come back in submission order; a call
 that raises does so from its own future's ``result()``, the others of its group unaffected.
 """
 
@@ -27,6 +27,10 @@ from typing import Any
 
 from navreplay.campaign.executors import Executor, Future
 from navreplay.io import lifecycle
+
+
+def _true() -> bool:
+    return True
 
 
 def call_batch(calls: list[tuple[Callable[..., Any], tuple, dict]]) -> list[tuple[bool, Any, float]]:
@@ -98,6 +102,7 @@ class Batching:
         self._lock = threading.Lock()
         self._waiting: list[_Call] = []
         self._probes: list[_Call] = []
+        self._in_flight: list[Future] = []  # groups sent and maybe not done
         self._run_seconds: float | None = None  # mean time of a run, once one is known
         self._timed_runs = 0
 
@@ -116,20 +121,22 @@ class Batching:
                 self._send([call])
             else:
                 self._waiting.append(call)
-                if self._run_seconds is not None and len(self._waiting) >= self.batch:
+                if self._run_seconds is not None:
                     self._flush(whole=True)
         return call
 
     def _ask(self, call: _Call) -> None:
         """The result of a call not yet sent is wanted: learn a run's time if need be, then send
-        the waiting calls (the last group as it is)."""
+        the waiting calls up to its group."""
         if self._run_seconds is None:
             probe = self._probes[0]
             assert probe.group is not None
             self._timed(probe.group.result())
         with self._lock:
-            if call.group is None:
-                self._flush(whole=False)
+            size = self.batch
+            while call.group is None:  # the groups up to the one it is in
+                group, self._waiting = self._waiting[:size], self._waiting[size:]
+                self._send(group)
 
     def _timed(self, outcomes: list[tuple[bool, Any, float]]) -> None:
         """Fold a group's run times into the mean (its first result asked for)."""
@@ -140,9 +147,13 @@ class Batching:
             self._run_seconds = total / self._timed_runs
 
     def _flush(self, whole: bool) -> None:
-        """Send the waiting calls in groups of :attr:`batch` (``whole``: only full groups)."""
+        """Send the waiting calls in groups of :attr:`batch`; ``whole``: only full groups, and
+        only while fewer than two groups per worker are in flight (the executor's queue stays
+        short whatever the campaign's window); else all of them (the last group as it is)."""
         size = self.batch
-        while self._waiting and (len(self._waiting) >= size or not whole):
+        self._in_flight = [f for f in self._in_flight if not getattr(f, "done", _true)()]
+        while self._waiting and (not whole or (
+                len(self._waiting) >= size and len(self._in_flight) < 2 * self.workers)):
             group, self._waiting = self._waiting[:size], self._waiting[size:]
             self._send(group)
 
@@ -153,6 +164,7 @@ class Batching:
             calls.append(c.call)
             c.index, c.call = i, None
         future = self.executor.submit(call_batch, calls)
+        self._in_flight.append(future)
         for c in group:
             c.group = future
 

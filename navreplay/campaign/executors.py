@@ -62,7 +62,7 @@ POOL_TASK_SECONDS = 0.1
 """Work per task of a process pool [s] (a task costs it about a millisecond)."""
 DASK_TASK_SECONDS = 0.5
 """Work per task of a Dask cluster [s] (a task costs it about 10-20 ms)."""
-MAX_BATCH = 8
+MAX_BATCH = 32
 """Most runs per task."""
 
 
