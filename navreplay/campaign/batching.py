@@ -9,9 +9,9 @@ about :attr:`Batching.task_seconds` of work, and hands back one future per call,
 campaign above it is unchanged.
 
 How many: the first call of each worker goes alone, to time a run; the calls submitted
-meanwhile wait. Once a run's time is known (the first result, or any result asked for), the
-waiting calls go in groups of ``task_seconds / (time of a run)`` (at least 1, at most
-``max_batch``); later calls are sent as soon as a group is full (while fewer than two groups per worker are
+meanwhile wait. Once a run's time is known (the first result asked for; then the mean of the
+latest group's), the waiting calls go in groups of ``task_seconds / (time of a run)`` (at least
+1, at most ``max_batch``); later calls are sent as soon as a group is full (while fewer than two groups per worker are
 in flight), and a call whose result is asked for sends the group it waits in at once. Results come back in submission order; a call
 that raises does so from its own future's ``result()``, the others of its group unaffected.
 """
@@ -103,8 +103,7 @@ class Batching:
         self._waiting: list[_Call] = []
         self._probes: list[_Call] = []
         self._in_flight: list[Future] = []  # groups sent and maybe not done
-        self._run_seconds: float | None = None  # mean time of a run, once one is known
-        self._timed_runs = 0
+        self._run_seconds: float | None = None  # time of a run, once one is known
 
     @property
     def batch(self) -> int:
@@ -139,12 +138,11 @@ class Batching:
                 self._send(group)
 
     def _timed(self, outcomes: list[tuple[bool, Any, float]]) -> None:
-        """Fold a group's run times into the mean (its first result asked for)."""
+        """A group's mean run time, the latest estimate (when its first result is asked
+        for): the sizes follow the runs of the campaign at hand, not a worker's first run with
+        its imports."""
         with self._lock:
-            n = self._timed_runs
-            total = (self._run_seconds or 0.0) * n + sum(s for _, _, s in outcomes)
-            self._timed_runs = n + len(outcomes)
-            self._run_seconds = total / self._timed_runs
+            self._run_seconds = sum(s for _, _, s in outcomes) / len(outcomes)
 
     def _flush(self, whole: bool) -> None:
         """Send the waiting calls in groups of :attr:`batch`; ``whole``: only full groups, and
