@@ -63,15 +63,24 @@ def main(short_runs: int = 60, runs: int = 40, repeats: int = 3, duration: float
         print(f"{name}: started and warm in {time.perf_counter() - start:.1f} s wall")
     _campaign("stationary", "ins", 2, 1.0, executors["one process"])
     print(f"cost per run ({short_runs} runs of 1 s 'stationary' with 'ins'; workers started), "
-          "wall:")
-    per_run = {}
-    for name, ex in executors.items():
-        per_run[name] = _campaign("stationary", "ins", short_runs, 1.0, ex) / short_runs
-        print(f"  {name:24s} {per_run[name] * 1e3:7.1f} ms per run")
-    for name in list(executors)[1:]:
-        r = per_run["one process"] / per_run[name]
-        print(f"  {name:24s} {r:.2f}x one process on 1-s runs (target >= 1x, never slower: "
-              f"{'met' if r >= 1.0 else 'NOT met'})")
+          f"wall, {repeats} paired repeats (medians):")
+    per_run: dict[str, list[float]] = {name: [] for name in executors}
+    short: dict[str, list[float]] = {name: [] for name in list(executors)[1:]}
+    for r in range(repeats):
+        for name in short:
+            order = ("one process", name) if r % 2 == 0 else (name, "one process")
+            pair = {who: _campaign("stationary", "ins", short_runs, 1.0, executors[who])
+                    / short_runs for who in order}
+            per_run["one process"].append(pair["one process"])
+            per_run[name].append(pair[name])
+            short[name].append(pair["one process"] / pair[name])
+    for name, values in per_run.items():
+        print(f"  {name:24s} {statistics.median(values) * 1e3:7.1f} ms per run")
+    for name, values in short.items():
+        med = statistics.median(values)
+        print(f"  {name:24s} {med:.2f}x one process on 1-s runs (range {min(values):.2f}-"
+              f"{max(values):.2f}; target >= 1x, never slower: "
+              f"{'met' if med >= 1.0 else 'NOT met'})")
     print(f"Monte Carlo ({runs} runs of {duration:g} s 'vehicle-drive' with 'gps-ins'; "
           f"workers started), wall, {repeats} paired repeats:")
     one_times: list[float] = []
