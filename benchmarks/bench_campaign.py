@@ -28,6 +28,7 @@ small part of the wall time; the load average before and after is printed: a spe
 from __future__ import annotations
 
 import os
+import pickle
 import statistics
 import time
 from typing import Any
@@ -43,6 +44,15 @@ def _campaign(scenario: str, filt: str, runs: int, duration: float, executor: An
     start = time.perf_counter()
     run_ensemble(tasks, (FilterSpec(filt),), lambda out: None, executor=executor)
     return time.perf_counter() - start
+
+
+def _one_run(duration: float) -> tuple[float, int]:
+    """(wall time in the worker [s], size of its pickled output [bytes]) of one run of the
+    Monte Carlo, in this process."""
+    outs: list[Any] = []
+    tasks = monte_carlo_tasks("vehicle-drive", 1, values={"duration": duration}, seed=0)
+    run_ensemble(tasks, (FilterSpec("gps-ins"),), outs.append, workers=1)
+    return outs[0].seconds, len(pickle.dumps(outs[0]))
 
 
 def _load() -> str:
@@ -81,6 +91,9 @@ def main(short_runs: int = 60, runs: int = 40, repeats: int = 3, duration: float
         print(f"  {name:24s} {med:.2f}x one process on 1-s runs (range {min(values):.2f}-"
               f"{max(values):.2f}; target >= 1x, never slower: "
               f"{'met' if med >= 1.0 else 'NOT met'})")
+    seconds, size = _one_run(duration)
+    print(f"one run of the Monte Carlo below: {seconds * 1e3:.0f} ms in its worker (simulate, "
+          f"replay, metrics), its output pickled {size / 1e6:.2f} MB")
     print(f"Monte Carlo ({runs} runs of {duration:g} s 'vehicle-drive' with 'gps-ins'; "
           f"workers started), wall, {repeats} paired repeats:")
     one_times: list[float] = []

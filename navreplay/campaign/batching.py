@@ -11,8 +11,9 @@ campaign above it is unchanged.
 How many: the first call of each worker goes alone, to time a run; the calls submitted
 meanwhile wait. Once a run's time is known (the first result asked for; then the mean of the
 latest group's), the waiting calls go in groups of ``task_seconds / (time of a run)`` (at least
-1, at most ``max_batch``); later calls are sent as soon as a group is full (while fewer than two groups per worker are
-in flight), and a call whose result is asked for sends the group it waits in at once. Results come back in submission order; a call
+1, at most ``max_batch``); later calls are sent as soon as a group is full, while fewer than two groups per worker are
+in flight. When a result is asked for (the caller will wait), the waiting calls are spread in
+even groups over the free places in flight, so no worker idles while calls wait. Results come back in submission order; a call
 that raises does so from its own future's ``result()``, the others of its group unaffected.
 """
 
@@ -58,8 +59,7 @@ class _Call:
         self.index = 0
 
     def result(self, timeout: float | None = None) -> Any:
-        if self.group is None:
-            self._owner._ask(self)
+        self._owner._before_wait(self)
         assert self.group is not None
         outcomes = self.group.result(timeout)
         if self.index == 0:  # each group's times counted once
@@ -124,18 +124,25 @@ class Batching:
                     self._flush(whole=True)
         return call
 
-    def _ask(self, call: _Call) -> None:
-        """The result of a call not yet sent is wanted: learn a run's time if need be, then send
-        the waiting calls up to its group."""
+    def _before_wait(self, call: _Call) -> None:
+        """A result is wanted (the caller is about to wait): learn a run's time if need be,
+        then spread the waiting calls over the free places in flight in even groups (at most
+        :attr:`batch` each), so that no worker idles while calls wait; the call itself is
+        sent in any case."""
         if self._run_seconds is None:
             probe = self._probes[0]
             assert probe.group is not None
             self._timed(probe.group.result())
         with self._lock:
-            size = self.batch
-            while call.group is None:  # the groups up to the one it is in
+            self._in_flight = [f for f in self._in_flight if not getattr(f, "done", _true)()]
+            free = 2 * self.workers - len(self._in_flight)
+            if not self._waiting or (free <= 0 and call.group is not None):
+                return
+            size = max(1, min(self.batch, math.ceil(len(self._waiting) / max(free, 1))))
+            while self._waiting and (free > 0 or call.group is None):
                 group, self._waiting = self._waiting[:size], self._waiting[size:]
                 self._send(group)
+                free -= 1
 
     def _timed(self, outcomes: list[tuple[bool, Any, float]]) -> None:
         """A group's mean run time, the latest estimate (when its first result is asked

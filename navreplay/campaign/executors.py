@@ -4,8 +4,9 @@ A campaign needs of its executor only ``submit(fn, *args)`` and ``shutdown()``, 
 only ``result()`` (a subset of :class:`concurrent.futures.Executor`). :func:`make_executor`
 makes the one ``--executor`` names: a :class:`concurrent.futures.ProcessPoolExecutor` of
 ``--workers`` (or :class:`InlineExecutor` for one), or a Dask cluster, local or remote
-(:class:`navreplay.campaign.dask_executor.DaskExecutor`); other engines plug in through a thin
-adapter of the same two methods.
+(:class:`navreplay.campaign.dask_executor.DaskExecutor`), the pool and the cluster wrapped in
+:class:`navreplay.campaign.batching.Batching` (several runs per task); other engines plug in
+through a thin adapter of the same two methods.
 """
 
 from __future__ import annotations
