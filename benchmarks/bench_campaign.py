@@ -55,6 +55,26 @@ def _one_run(duration: float) -> tuple[float, int]:
     return outs[0].seconds, len(pickle.dumps(outs[0]))
 
 
+def _tree_cpu() -> float:
+    """CPU seconds (user + system) of this process and all its descendants alive (the
+    workers, Dask's scheduler and nannies), from /proc (Linux)."""
+    stats = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            stats[int(entry)] = (int(fields[1]), int(fields[11]) + int(fields[12]))
+    tree, total = {os.getpid()}, 0
+    for _ in range(4):  # children, grandchildren, ...
+        tree |= {pid for pid, (ppid, _) in stats.items() if ppid in tree}
+    for pid in tree:
+        total += stats.get(pid, (0, 0))[1]
+    return total / os.sysconf("SC_CLK_TCK")
+
+
 def _load() -> str:
     one, five, _ = os.getloadavg()
     return f"load average {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} cores"
@@ -76,14 +96,20 @@ def main(short_runs: int = 60, runs: int = 40, repeats: int = 3, duration: float
           f"wall, {repeats} paired repeats (medians):")
     per_run: dict[str, list[float]] = {name: [] for name in executors}
     short: dict[str, list[float]] = {name: [] for name in list(executors)[1:]}
+    cpu_ratio: dict[str, list[float]] = {name: [] for name in short}
     for r in range(repeats):
         for name in short:
             order = ("one process", name) if r % 2 == 0 else (name, "one process")
-            pair = {who: _campaign("stationary", "ins", short_runs, 1.0, executors[who])
-                    / short_runs for who in order}
+            pair, cpu = {}, {}
+            for who in order:
+                c0 = _tree_cpu()
+                pair[who] = _campaign("stationary", "ins", short_runs, 1.0,
+                                      executors[who]) / short_runs
+                cpu[who] = (_tree_cpu() - c0) / short_runs
             per_run["one process"].append(pair["one process"])
             per_run[name].append(pair[name])
             short[name].append(pair["one process"] / pair[name])
+            cpu_ratio[name].append(cpu["one process"] / cpu[name])
     for name, values in per_run.items():
         print(f"  {name:24s} {statistics.median(values) * 1e3:7.1f} ms per run")
     for name, values in short.items():
@@ -91,6 +117,12 @@ def main(short_runs: int = 60, runs: int = 40, repeats: int = 3, duration: float
         print(f"  {name:24s} {med:.2f}x one process on 1-s runs (range {min(values):.2f}-"
               f"{max(values):.2f}; target >= 1x, never slower: "
               f"{'met' if med >= 1.0 else 'NOT met'})")
+    print("  CPU per run, all processes (this one, the workers, Dask's scheduler and nannies), "
+          "one process over each executor (1: no cost of its own; x2 bounds the speed-up of "
+          "2 workers on idle cores):")
+    for name, values in cpu_ratio.items():
+        print(f"  {name:24s} {statistics.median(values):.2f} (range {min(values):.2f}-"
+              f"{max(values):.2f})")
     seconds, size = _one_run(duration)
     print(f"one run of the Monte Carlo below: {seconds * 1e3:.0f} ms in its worker (simulate, "
           f"replay, metrics), its output pickled {size / 1e6:.2f} MB")
@@ -98,14 +130,19 @@ def main(short_runs: int = 60, runs: int = 40, repeats: int = 3, duration: float
           f"workers started), wall, {repeats} paired repeats:")
     one_times: list[float] = []
     ratios: dict[str, list[float]] = {name: [] for name in list(executors)[1:]}
+    mc_ratio: dict[str, list[float]] = {name: [] for name in ratios}
     for r in range(repeats):
         for name in ratios:
             pair = {}
             order = ("one process", name) if r % 2 == 0 else (name, "one process")
+            mc_cpu = {}
             for who in order:
+                c0 = _tree_cpu()
                 pair[who] = _campaign("vehicle-drive", "gps-ins", runs, duration, executors[who])
+                mc_cpu[who] = _tree_cpu() - c0
             one_times.append(pair["one process"])
             ratios[name].append(pair["one process"] / pair[name])
+            mc_ratio[name].append(mc_cpu["one process"] / mc_cpu[name])
             print(f"  repeat {r + 1}: one process {pair['one process']:6.1f} s, {name} "
                   f"{pair[name]:6.1f} s = {ratios[name][-1]:.2f}x")
     print(f"  one process: median {statistics.median(one_times):.1f} s "
@@ -116,6 +153,9 @@ def main(short_runs: int = 60, runs: int = 40, repeats: int = 3, duration: float
         print(f"  {name:24s} speed-up median {med:.2f}x (range {min(values):.2f}-"
               f"{max(values):.2f}; target >= {target:g}x on an idle machine: "
               f"{'met' if med >= target else 'NOT met'})")
+    for name, values in mc_ratio.items():
+        print(f"  {name:24s} CPU of one process over all of its processes: "
+              f"{statistics.median(values):.2f} (range {min(values):.2f}-{max(values):.2f})")
     print(_load())
     for ex in executors.values():
         ex.shutdown()
