@@ -49,13 +49,31 @@ def call_batch(calls: list[tuple[Callable[..., Any], tuple, dict]]) -> list[tupl
     return out
 
 
+class _Group:
+    """A group sent: its executor's future, whose result is fetched once (a Dask future
+    fetches it from the worker at each ``result()``)."""
+
+    def __init__(self, future: Future) -> None:
+        self.future: Future | None = future
+        self.outcomes: list[tuple[bool, Any, float]] | None = None
+
+    def done(self) -> bool:
+        return self.future is None or getattr(self.future, "done", _true)()
+
+    def result(self, timeout: float | None = None) -> list[tuple[bool, Any, float]]:
+        if self.outcomes is None:
+            assert self.future is not None
+            self.outcomes, self.future = self.future.result(timeout), None
+        return self.outcomes
+
+
 class _Call:
     """The future of one call in a group."""
 
     def __init__(self, owner: Batching, call: tuple[Callable[..., Any], tuple, dict]) -> None:
         self._owner = owner
         self.call: tuple[Callable[..., Any], tuple, dict] | None = call
-        self.group: Future | None = None  # set when sent
+        self.group: _Group | None = None  # set when sent
         self.index = 0
 
     def result(self, timeout: float | None = None) -> Any:
@@ -102,7 +120,7 @@ class Batching:
         self._lock = threading.Lock()
         self._waiting: list[_Call] = []
         self._probes: list[_Call] = []
-        self._in_flight: list[Future] = []  # groups sent and maybe not done
+        self._in_flight: list[_Group] = []  # groups sent and maybe not done
         self._run_seconds: float | None = None  # time of a run, once one is known
 
     @property
@@ -134,7 +152,7 @@ class Batching:
             assert probe.group is not None
             self._timed(probe.group.result())
         with self._lock:
-            self._in_flight = [f for f in self._in_flight if not getattr(f, "done", _true)()]
+            self._in_flight = [g for g in self._in_flight if not g.done()]
             free = 2 * self.workers - len(self._in_flight)
             if not self._waiting or (free <= 0 and call.group is not None):
                 return
@@ -156,7 +174,7 @@ class Batching:
         only while fewer than two groups per worker are in flight (the executor's queue stays
         short whatever the campaign's window); else all of them (the last group as it is)."""
         size = self.batch
-        self._in_flight = [f for f in self._in_flight if not getattr(f, "done", _true)()]
+        self._in_flight = [g for g in self._in_flight if not g.done()]
         while self._waiting and (not whole or (
                 len(self._waiting) >= size and len(self._in_flight) < 2 * self.workers)):
             group, self._waiting = self._waiting[:size], self._waiting[size:]
@@ -168,10 +186,10 @@ class Batching:
             assert c.call is not None
             calls.append(c.call)
             c.index, c.call = i, None
-        future = self.executor.submit(call_batch, calls)
-        self._in_flight.append(future)
+        sent = _Group(self.executor.submit(call_batch, calls))
+        self._in_flight.append(sent)
         for c in group:
-            c.group = future
+            c.group = sent
 
     def shutdown(self, wait: bool = True) -> None:
         """With ``wait``, finish every call; without, drop the waiting ones, stop the running
