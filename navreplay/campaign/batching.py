@@ -11,10 +11,11 @@ campaign above it is unchanged.
 How many: the first call of each worker goes alone, to time a run; the calls submitted
 meanwhile wait. Once a run's time is known (the first result asked for; then the mean of the
 latest group's), the waiting calls go in groups of ``task_seconds / (time of a run)`` (at least
-1, at most ``max_batch``); later calls are sent as soon as a group is full, while fewer than two groups per worker are
-in flight. When a result is asked for (the caller will wait), the waiting calls are spread in
-even groups over the free places in flight, so no worker idles while calls wait. Results come back in submission order; a call
-that raises does so from its own future's ``result()``, the others of its group unaffected.
+1, at most ``max_batch``); later calls are sent as soon as a group is full, while fewer than
+two groups per worker are in flight. When a result is asked for (the caller will wait), the
+waiting calls are spread in even groups over the free places in flight, so no worker idles
+while calls wait. Results come back in submission order; a call that raises does so from its
+own future's ``result()``, the others of its group unaffected.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ def _true() -> bool:
     return True
 
 
-def call_batch(calls: list[tuple[Callable[..., Any], tuple, dict]]) -> list[tuple[bool, Any, float]]:
+def call_batch(
+        calls: list[tuple[Callable[..., Any], tuple, dict]]) -> list[tuple[bool, Any, float]]:
     """Run the calls one after the other: per call (returned, its value or the exception it
     raised, seconds). Runs in the worker."""
     out = []
