@@ -98,10 +98,13 @@ def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np
     B = np.zeros((M, 6, 6))
     B[:, :3, :3] = R
     B[:, 3:, 3:] = R
-    pose_cov = B @ cov[:, [0, 1, 2, 6, 7, 8]][:, :, [0, 1, 2, 6, 7, 8]] @ B.transpose(0, 2, 1)
     J = np.concatenate([np.broadcast_to(np.eye(3), (M, 3, 3)), -skew(v_n)], axis=2)
     J = F_FRD_FLU @ C_nb.transpose(0, 2, 1) @ J
-    lin = J @ cov[:, 3:9, 3:9] @ J.transpose(0, 2, 1)
+    if cov.any() or np.isnan(cov).any():
+        pose_cov = B @ cov[:, [0, 1, 2, 6, 7, 8]][:, :, [0, 1, 2, 6, 7, 8]] @ B.transpose(0, 2, 1)
+        lin = J @ cov[:, 3:9, 3:9] @ J.transpose(0, 2, 1)
+    else:  # a zero covariance (the reference's): the products' zeros and NaN, without them
+        pose_cov, lin = _zero_product(B), _zero_product(J)
     twist_cov = np.zeros((M, 6, 6))
     twist_cov[:, :3, :3] = lin
     twist_cov[:, 3:, 3:] = np.full((M, 3, 3), np.nan)  # angular rate: not estimated
@@ -110,12 +113,17 @@ def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np
                  v_b * np.diagonal(F_FRD_FLU), _mark_unknown(twist_cov))
 
 
+def _zero_product(A: np.ndarray) -> np.ndarray:
+    """``A @ 0 @ A^T`` (M, n, n) for A (M, n, k): NaN in the rows and columns of the rows of A
+    with a value that is not finite (times zero), else 0."""
+    bad = ~np.isfinite(A).all(axis=2)
+    return np.where(bad[:, :, None] | bad[:, None, :], np.nan, 0.0)
+
+
 def _mark_unknown(cov: np.ndarray) -> np.ndarray:
     """Rows/columns whose variance is not finite: 0, and UNKNOWN_VARIANCE on the diagonal."""
-    cov = cov.copy()
     bad = ~np.isfinite(np.diagonal(cov, axis1=1, axis2=2))
-    cov[np.broadcast_to(bad[:, :, None], cov.shape) | np.broadcast_to(bad[:, None, :], cov.shape)] = 0.0
-    cov[~np.isfinite(cov)] = 0.0
+    cov = np.where(bad[:, :, None] | bad[:, None, :] | ~np.isfinite(cov), 0.0, cov)
     d = np.arange(cov.shape[1])
     cov[:, d, d] = np.where(bad, UNKNOWN_VARIANCE, cov[:, d, d])
     return cov

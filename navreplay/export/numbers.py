@@ -30,7 +30,7 @@ from navreplay.core import jit  # noqa: F401  (the collector rests while numba c
 SECONDS_NS = "seconds.nanoseconds"
 """Format of an int64 column of nanoseconds printed as ``f"{s}.{ns:09d}"`` (``divmod`` by 1e9)."""
 
-BLOCK_ROWS = 8192
+BLOCK_ROWS = 1024
 """Rows formatted at once."""
 
 _PYTHON, _INT, _FIXED, _GENERAL, _SECONDS = -1, 0, 1, 2, 3  # kinds of column
@@ -38,9 +38,16 @@ _FIXED_RE = re.compile(r"%\.(\d+)f")
 _GENERAL_RE = re.compile(r"%\.(\d+)g")
 _CELL = 34  # the longest cell the kernel writes: "-" + 15 + "." + 15 digits, and a separator
 
+_kernel = numba.njit(cache=True, error_model="numpy", _nrt=False)  # type: ignore[call-overload]
+"""The kernels allocate nothing, so they run without numba's reference counting of arrays: its
+atomic counts on every call between them cost about as much as formatting a value."""
+
 _POW10 = np.array([float(10**k) for k in range(23)])  # exact doubles
 _POW10_INT = np.array([10**k for k in range(19)], dtype=np.int64)
+_POW10_UINT = _POW10_INT.astype(np.uint64)
+_TEN, _ZERO = np.uint64(10), np.uint64(48)  # unsigned digit arithmetic (and the digit 0)
 _TIE = 1e-6
+_LOG10_2 = math.log10(2.0)
 _INT64_MIN = -(2**63)
 
 
@@ -68,13 +75,14 @@ def format_rows(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
     out = []
     for a in range(0, n, BLOCK_ROWS):
         b = min(n, a + BLOCK_ROWS)
-        F = np.zeros((b - a, k))
-        Ii = np.zeros((b - a, k), dtype=np.int64)
+        # one row per column (contiguous copies); the kernel reads each column's own row
+        F = np.empty((k, b - a))
+        Ii = np.empty((k, b - a), dtype=np.int64)
         for j, v in enumerate(arrays):
             if ints[j]:
-                Ii[:, j] = v[a:b]
+                Ii[j] = v[a:b]
             else:
-                F[:, j] = v[a:b]
+                F[j] = v[a:b]
         buf = np.empty((b - a) * (k * _CELL + 1), dtype=np.uint8)
         marks = np.empty(2 * (b - a) * k, dtype=np.int64)
         size, count = _write(F, Ii, kind, prec, ord(sep), ord(end), buf, marks)
@@ -111,23 +119,24 @@ def _python(value: object, fmt: str) -> str:
     return fmt % value
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _scaled(ax: float, k: int) -> float:
     if k >= 0:
         return ax * _POW10[k]
     return ax / _POW10[-k]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _tie(m: float) -> bool:
     """``m`` (within m * 2**-53 of the exact product) may round either way."""
     return abs(m - math.floor(m) - 0.5) < _TIE + m * 4.5e-16
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
     """(p significant digits as an integer, decimal exponent, in doubt) of finite ax > 0."""
-    e = int(math.floor(math.log10(ax)))
+    # from the binary exponent (ax in [2**(b-1), 2**b)): the decimal one or one below it
+    e = int(math.floor((math.frexp(ax)[1] - 1) * _LOG10_2))
     m = 0.0
     for _ in range(4):
         k = p - 1 - e
@@ -149,30 +158,26 @@ def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
     return r, e, _tie(m)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _put_uint(buf: np.ndarray, pos: int, v: int, width: int) -> int:
     """Non-negative ``v`` in decimal, zero-padded to ``width`` digits (0: as many as it has)."""
+    u = np.uint64(v)
     count = 1
-    t = v
-    while t >= 10:
-        t //= 10
+    t = u
+    while t >= _TEN:
+        t //= _TEN
         count += 1
-    count = max(count, width)
-    for i in range(count - 1, -1, -1):
-        buf[pos + i] = 48 + v % 10
-        v //= 10
-    return pos + count
+    return _put_digits(buf, pos, u, max(count, width))
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
 def _put3(buf: np.ndarray, pos: int, a: int, b: int, c: int) -> int:
     buf[pos], buf[pos + 1], buf[pos + 2] = a, b, c
     return pos + 3
 
 
-@numba.njit(cache=True, error_model="numpy")
-def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int,
-               digits: np.ndarray) -> int:
+@_kernel
+def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int) -> int:
     """``%.{p}f`` (kd _FIXED) or ``%.{p}g`` (_GENERAL) of ``x``; -1 where the digits might
     not be Python's."""
     if x != x:
@@ -187,11 +192,11 @@ def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int,
         m = ax * _POW10[p]
         if not m < 9e14 or _tie(m):
             return -1
-        r = int(np.rint(m))
-        pos = _put_uint(buf, pos, r // _POW10_INT[p], 0)
+        u = np.uint64(np.rint(m))
+        pos = _put_uint(buf, pos, u // _POW10_UINT[p], 0)
         if p:
             buf[pos] = 46  # "."
-            pos = _put_uint(buf, pos + 1, r % _POW10_INT[p], p)
+            pos = _put_digits(buf, pos + 1, u % _POW10_UINT[p], p)
         return pos
     if ax == 0.0:
         buf[pos] = 48
@@ -199,54 +204,56 @@ def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int,
     r, e, doubt = _general_digits(ax, p)
     if doubt:
         return -1
-    for i in range(p - 1, -1, -1):
-        digits[i] = 48 + r % 10
-        r //= 10
+    u = np.uint64(r)
     sig = p  # significant digits without the trailing zeros
-    while sig > 1 and digits[sig - 1] == 48:
+    while sig > 1 and u % _TEN == 0:
+        u //= _TEN
         sig -= 1
     if -4 <= e < p:
-        if e >= 0:  # integer digits, then the rest of the significant ones
-            for i in range(e + 1):
-                buf[pos + i] = digits[i]
-            pos += e + 1
-            if sig > e + 1:
-                buf[pos] = 46
-                pos += 1
-                for i in range(e + 1, sig):
-                    buf[pos] = digits[i]
-                    pos += 1
-        else:  # 0.000ddd
+        if e < 0:  # 0.000ddd
             buf[pos] = 48
             buf[pos + 1] = 46
             pos += 2
             for _ in range(-e - 1):
                 buf[pos] = 48
                 pos += 1
-            for i in range(sig):
-                buf[pos] = digits[i]
+            return _put_digits(buf, pos, u, sig)
+        if sig <= e + 1:  # an integer: its significant digits, then zeros
+            pos = _put_digits(buf, pos, u, sig)
+            for _ in range(e + 1 - sig):
+                buf[pos] = 48
                 pos += 1
-        return pos
-    buf[pos] = digits[0]  # d.ddde+XX
-    pos += 1
+            return pos
+        scale = _POW10_UINT[sig - e - 1]  # integer digits, ".", the rest
+        pos = _put_digits(buf, pos, u // scale, e + 1)
+        buf[pos] = 46
+        return _put_digits(buf, pos + 1, u % scale, sig - e - 1)
+    scale = _POW10_UINT[sig - 1]  # d.ddde+XX
+    pos = _put_digits(buf, pos, u // scale, 1)
     if sig > 1:
         buf[pos] = 46
-        pos += 1
-        for i in range(1, sig):
-            buf[pos] = digits[i]
-            pos += 1
+        pos = _put_digits(buf, pos + 1, u % scale, sig - 1)
     buf[pos] = 101  # "e"
     buf[pos + 1] = 45 if e < 0 else 43
     return _put_uint(buf, pos + 2, abs(e), 2)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@_kernel
+def _put_digits(buf: np.ndarray, pos: int, u: np.uint64, count: int) -> int:
+    """The last ``count`` decimal digits of ``u`` (leading zeros included). Unsigned: a
+    signed division by ten costs twice as much (Python's rounding towards minus infinity)."""
+    for i in range(pos + count - 1, pos - 1, -1):
+        buf[i] = _ZERO + u % _TEN
+        u //= _TEN
+    return pos + count
+
+
+@_kernel
 def _write(F: np.ndarray, Ii: np.ndarray, kind: np.ndarray, prec: np.ndarray, sep: int,
            end: int, buf: np.ndarray, marks: np.ndarray) -> tuple[int, int]:
     """Write the rows into ``buf``; a value left to Python is skipped, its position and
     ``r * k + j`` appended to ``marks``. Returns the bytes written and the marks."""
-    n, k = F.shape
-    digits = np.empty(20, dtype=np.uint8)
+    k, n = F.shape
     pos = 0
     count = 0
     for r in range(n):
@@ -256,12 +263,12 @@ def _write(F: np.ndarray, Ii: np.ndarray, kind: np.ndarray, prec: np.ndarray, se
                 pos += 1
             kd = kind[j]
             if kd == _INT or kd == _SECONDS:
-                v = Ii[r, j]
+                v = Ii[j, r]
                 python = v == _INT64_MIN if kd == _INT else v < 0
             else:
                 python = kd == _PYTHON
                 if not python:
-                    at = _put_float(buf, pos, F[r, j], kd, prec[j], digits)
+                    at = _put_float(buf, pos, F[j, r], kd, prec[j])
                     python = at < 0
                     if not python:
                         pos = at

@@ -105,13 +105,12 @@ class OdometryWriter:
     """
 
     def __init__(self, path: Path, topics: Sequence[str], late: Sequence[str] = ()) -> None:
-        from mcap.writer import CompressionType, Writer
-
+        from navreplay.io.mcapwrite import BulkWriter
         from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
         from navreplay.io.writer import LIBRARY
 
         self._file = open(path, "wb")  # noqa: SIM115 (closed by finish or close)
-        self._w = Writer(self._file, compression=CompressionType.ZSTD, enable_crcs=True)
+        self._w = BulkWriter(self._file)
         self._w.start(profile=PROFILE, library=LIBRARY)
         sid = self._w.register_schema(ODOMETRY_TYPE, SCHEMA_ENCODING, _ODOMETRY_SCHEMA.encode())
         self._ids = {topic: self._w.register_channel(topic, MESSAGE_ENCODING, sid)
@@ -125,14 +124,11 @@ class OdometryWriter:
         if not len(poses.stamps_ns):
             return
         rec = encode_odometry(poses)  # as rows of bytes (concatenating records repacks them)
+        rows = rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)
         if topic in self._late:
-            add, cid = self._w.add_message, self._ids[topic]
-            rows = rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)
-            for ti, row in zip(poses.stamps_ns.tolist(), rows, strict=True):
-                add(cid, ti, row.tobytes(), ti)
+            self._w.add_messages([(self._ids[topic], poses.stamps_ns, rows)])
             return
-        self._queue[topic].append((poses.stamps_ns,
-                                   rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)))
+        self._queue[topic].append((poses.stamps_ns, rows))
         self._last[topic] = int(poses.stamps_ns[-1])
         stamps = [v for v in self._last.values() if v is not None]
         if len(stamps) == len(self._last):
@@ -140,28 +136,18 @@ class OdometryWriter:
 
     def _write(self, limit: int | None) -> None:
         """Write the queued messages earlier than ``limit`` (all with None)."""
-        times, channels, messages = [], [], []  # per message, in the order of the topics
+        batches = []  # in the order of the topics
         for topic, queue in self._queue.items():
             cid = self._ids[topic]
             kept = []
-            for t, rec in queue:
+            for t, rows in queue:
                 n = t.shape[0] if limit is None else int(np.searchsorted(t, limit, side="left"))
                 if n:
-                    times.append(t[:n])
-                    channels.append(np.full(n, cid))
-                    data, size = rec[:n].tobytes(), rec.shape[1]
-                    messages += [data[i:i + size] for i in range(0, n * size, size)]
+                    batches.append((cid, t[:n], rows[:n]))
                 if n < t.shape[0]:
-                    kept.append((t[n:], rec[n:]))
+                    kept.append((t[n:], rows[n:]))
             self._queue[topic] = kept
-        if not times:
-            return
-        t = np.concatenate(times)
-        order = np.argsort(t, kind="stable")
-        add = self._w.add_message
-        cids = np.concatenate(channels)[order]
-        for i, ti, cid in zip(order.tolist(), t[order].tolist(), cids.tolist(), strict=True):
-            add(cid, ti, messages[i], ti)
+        self._w.add_messages(batches)
 
     def finish(self) -> None:
         self._write(None)

@@ -153,8 +153,16 @@ def _nav_covariance(result: RunResult) -> np.ndarray:
             scales.append(scale_of.get(q, np.ones(M)))
     out = np.full((M, 9, 9), np.nan)
     if idx:
-        ix, r = np.array(idx), np.array(rows)
         s = np.stack(scales, axis=1)
-        sub = result.P[:, ix[:, None], ix[None, :]] * s[:, :, None] * s[:, None, :]
-        out[:, r[:, None], r[None, :]] = sub
+        sub = result.P[:, _block(idx), _block(idx, True)] * s[:, :, None] * s[:, None, :]
+        out[:, _block(rows), _block(rows, True)] = sub
     return out
+
+
+def _block(index: list[int], column: bool = False) -> slice | np.ndarray:
+    """Rows (or, ``column``, columns) ``index`` of a matrix: a slice when they are
+    consecutive (a view, no gather), else an index array shaped to broadcast."""
+    if index == list(range(index[0], index[0] + len(index))):
+        return slice(index[0], index[0] + len(index))
+    ix = np.array(index)
+    return ix[None, :] if column else ix[:, None]

@@ -2,7 +2,8 @@
 
 Messages of all streams are merged by time (ties in :class:`StreamKind` order) and written in
 windows of about :data:`WINDOW` messages: each window's messages are CDR-encoded per stream as one
-numpy structured array and handed to mcap's raw ``Writer``. Memory stays bounded by the window, not
+numpy structured array and handed to :class:`~navreplay.io.mcapwrite.BulkWriter` (mcap's file
+layout, the records assembled in bulk). Memory stays bounded by the window, not
 the recording. The file is written under a temporary name beside the target, fsynced, and renamed
 only once complete, so the target name never shows a partial file.
 """
@@ -15,7 +16,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
-from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType
 
 from navreplay import __version__
 from navreplay.core.streams import Recording, Stream, StreamKind
@@ -23,6 +24,7 @@ from navreplay.io import cdr
 from navreplay.io.checks import first_problem
 from navreplay.io.convert import ENCODERS, AuxColumn, aux_columns, check_columns
 from navreplay.io.errors import RecordingError, RecordingExistsError
+from navreplay.io.mcapwrite import BulkWriter
 from navreplay.io.metadata import encode_metadata
 from navreplay.io.outputs import fsync_path, release, temporary_path
 from navreplay.io.schemas import (
@@ -88,11 +90,12 @@ def _plan(recording: Recording, where: str, validate: bool) -> list[_Topic]:
     return plan
 
 
-def _encode(topic: _Topic, start: int, stop: int) -> bytes:
-    """CDR payloads of rows [start, stop) of a topic's stream, concatenated."""
+def _encode(topic: _Topic, start: int, stop: int) -> np.ndarray:
+    """CDR payloads of rows [start, stop) of a topic's stream, one row of bytes each."""
     part = topic.stream.slice(start, stop)
     fields = ENCODERS[topic.spec.kind](part, topic.aux)
-    return cdr.encode(topic.layout, part.t_ns, topic.frame_id, fields).tobytes()
+    rec = cdr.encode(topic.layout, part.t_ns, topic.frame_id, fields)
+    return rec.view(np.uint8).reshape(len(rec), topic.layout.itemsize)
 
 
 def _windows(plan: list[_Topic]) -> list[tuple[int, ...]]:
@@ -112,7 +115,7 @@ def _windows(plan: list[_Topic]) -> list[tuple[int, ...]]:
 
 
 def _write_mcap(out: BinaryIO, recording: Recording, plan: list[_Topic]) -> None:
-    writer = Writer(
+    writer = BulkWriter(
         out,
         chunk_size=CHUNK_SIZE,
         compression=CompressionType.ZSTD,
@@ -129,28 +132,11 @@ def _write_mcap(out: BinaryIO, recording: Recording, plan: list[_Topic]) -> None
             message.name, SCHEMA_ENCODING, message.schema_text.encode("utf-8")
         )
         channel_ids.append(writer.register_channel(topic.spec.topic, MESSAGE_ENCODING, schema_id))
-    add = writer.add_message
     bounds = _windows(plan)
     for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
-        times: list[np.ndarray] = []
-        channels: list[np.ndarray] = []
-        payloads: list[bytes] = []
-        for topic, cid, a, b in zip(plan, channel_ids, lo, hi, strict=True):
-            if b <= a:
-                continue
-            buf = _encode(topic, a, b)
-            size = topic.layout.itemsize
-            payloads.extend(buf[i : i + size] for i in range(0, len(buf), size))
-            times.append(topic.stream.t_ns[a:b])
-            channels.append(np.full(b - a, cid, dtype=np.int64))
-        if not times:
-            continue
-        t = np.concatenate(times)
-        order = np.argsort(t, kind="stable")
-        for i, ti, ci in zip(
-            order.tolist(), t[order].tolist(), np.concatenate(channels)[order].tolist(), strict=True
-        ):
-            add(ci, ti, payloads[i], ti)
+        writer.add_messages([(cid, topic.stream.t_ns[a:b], _encode(topic, a, b))
+                             for topic, cid, a, b in zip(plan, channel_ids, lo, hi, strict=True)
+                             if b > a])
     writer.finish()
 
 

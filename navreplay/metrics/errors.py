@@ -180,7 +180,7 @@ def state_errors(
     e : ndarray, shape (M, k)
         Estimation errors.
     P : ndarray, shape (M, k, k)
-        Their covariance (the block of ``result.P``).
+        Their covariance (the block of ``result.P``; a read-only use: it may be a view).
     """
     names, cols, idx = [], [], []
     for i, st in enumerate(states):
@@ -202,8 +202,12 @@ def state_errors(
     M = result.t.shape[0]
     if not names:
         return (), np.zeros((M, 0)), np.zeros((M, 0, 0))
-    ix = np.array(idx)
-    P = np.take(np.take(result.P, ix, axis=1), ix, axis=2)  # twice as fast as P[:, ix, ix.T]
+    a, b = idx[0], idx[-1] + 1
+    if b - a == len(idx):  # consecutive states: a view of their block, no copy
+        P = result.P[:, a:b, a:b]
+    else:
+        ix = np.array(idx)
+        P = np.take(np.take(result.P, ix, axis=1), ix, axis=2)  # twice as fast as P[:, ix, ix.T]
     return tuple(names), np.stack(cols, axis=1), P
 
 

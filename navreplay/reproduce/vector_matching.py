@@ -379,7 +379,7 @@ class VectorMatchingReproduction(Reproduction):
         )
         total = len(AXES) * len(ACCEL_G) * runs + len(CASES) * yaw_runs
         wall0 = time.perf_counter()
-        executor = make_executor(workers)
+        executor = make_executor(workers, batch=False)  # a few long tasks
         try:
             futures = [executor.submit(fn, key, n, seed) for fn, key, n in tasks]
             results, done = [], 0

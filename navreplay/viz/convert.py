@@ -1,7 +1,7 @@
 """Array conversions behind the Rerun output: truth at output times, navigation errors, local
 NED positions, position covariance in metres, 3-sigma ellipsoids, chi-square bounds.
 
-Pure numpy (and scipy for chi-square); no rerun import, so everything here is testable alone.
+Pure numpy; no rerun import, so everything here is testable alone.
 All angles in radians, positions as ``[lat, lon, h]`` (rad, rad, m), quaternions ``q_nb``
 scalar first; the xyzw order appears only in :func:`ellipsoids`, whose output goes to Rerun.
 """
@@ -189,8 +189,8 @@ def chi2_bounds(dof: int, runs: int = 1, p: float = 0.95) -> tuple[float, float]
         raise ValueError(
             f"chi2_bounds needs dof >= 1, runs >= 1, 0 < p < 1; got {dof}, {runs}, {p}"
         )
-    from scipy import stats  # not on the path of a run's view
+    from navreplay.core import chi2  # not scipy.stats: its import costs more than a view
 
     k = dof * runs
     a = 0.5 * (1.0 - p)
-    return float(stats.chi2.ppf(a, k) / runs), float(stats.chi2.ppf(1.0 - a, k) / runs)
+    return chi2.ppf(a, k) / runs, chi2.ppf(1.0 - a, k) / runs

@@ -102,7 +102,7 @@ def test_unfinished_file(
     rec, _ = original
     path = tmp_path / "unfinished.mcap"
     monkeypatch.setattr(writer_module, "CHUNK_SIZE", SMALL_CHUNK)
-    monkeypatch.setattr(writer_module.Writer, "finish", lambda self: None)
+    monkeypatch.setattr(writer_module.BulkWriter, "finish", lambda self: None)
     write_recording(path, rec)
     with pytest.warns(RecordingWarning, match="unfinished.mcap: file is truncated or damaged"):
         back = read_recording(path)
