@@ -72,7 +72,7 @@ from navreplay.cli.options import (
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, bind: str | None,
-        web_port: int | None, grpc_port: int | None, no_viz: bool,
+        web_port: int | None, grpc_port: int | None, no_viz: bool, full_rate: bool,
         summary: str | None, workers: int, executor: str, rate: float | None,
         output_rate: float,
         topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
@@ -111,7 +111,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
     job = jobs.RunJob(
         filters=specs,
         recordings=tuple(Path(a) for a in args),
-        viz=viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port),
+        viz=viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port,
+                        full_rate),
         summary_path=Path(summary) if summary else None,
         workers=workers, executor=executor, pacing=rate, output_rate=output_rate,
         max_imu_gap=max_imu_gap,
@@ -159,7 +160,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
                executor: str, refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
                spawn: bool, connect: str | None, serve: bool, bind: str | None,
-               web_port: int | None, grpc_port: int | None, no_viz: bool,
+               web_port: int | None, grpc_port: int | None, no_viz: bool, full_rate: bool,
                summary: str | None, export: str | None, report: str | None,
                max_imu_gap: float | None) -> None:
     """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
@@ -190,7 +191,8 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         values=jobs.scenario_values(scenario_items, cfg, duration),
         seed=seed, workers=workers, executor=executor,
         keep_dir=Path(keep) if keep else None, force=force,
-        viz=viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port),
+        viz=viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port,
+                        full_rate),
         summary_path=Path(summary) if summary else None,
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None,
@@ -210,7 +212,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 def compare(summaries: Sequence[str], save: str | None, spawn: bool, connect: str | None,
             serve: bool, bind: str | None, web_port: int | None, grpc_port: int | None,
-            no_viz: bool, report: str | None, force: bool) -> None:
+            no_viz: bool, full_rate: bool, report: str | None, force: bool) -> None:
     """Compare the headline metrics of saved summaries (``run``/``montecarlo --summary``):
     a row per metric, a column per filter (``FILE/label`` when labels repeat), the best marked.
 
@@ -228,6 +230,6 @@ def compare(summaries: Sequence[str], save: str | None, spawn: bool, connect: st
     job = jobs.CompareJob(
         summaries=tuple(Path(s) for s in summaries),
         viz=viz_options(save, spawn, connect, serve, no_viz or not view, bind, web_port,
-                        grpc_port),
+                        grpc_port, full_rate and view),
         report_path=Path(report) if report else None, force=force)
     finish(jobs.compare(job))

@@ -40,6 +40,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from navreplay.viz.ranges import Envelope, YRange, time_range, y_range
+
 TABS: tuple[tuple[str, str], ...] = (
     ("compare", "Compare"),
     ("attitude", "Attitude"),
@@ -113,6 +115,13 @@ class Catalog:
     timeline: str = "time"
     covariances: list[str] = dataclasses.field(default_factory=list)
     """Ellipsoid entities under ``/world`` (left out of the top-down view)."""
+    envelopes: dict[str, Envelope] = dataclasses.field(default_factory=dict)
+    """Per series on the ``time`` timeline, the extent of its values over time (the y range
+    its pane opens on)."""
+    legend: list[tuple[str, tuple[int, int, int]]] = dataclasses.field(default_factory=list)
+    """The filters drawn in the trajectory views and on the map, with their colours."""
+    scale_bar: float | None = None
+    """Length [m] of the scale bar drawn in the trajectory views and on the map."""
     _paths: set[str] = dataclasses.field(default_factory=set, repr=False)
 
     def add(
@@ -183,7 +192,8 @@ class Catalog:
         )
 
 
-def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint:
+def build_blueprint(catalog: Catalog, *, grid_columns: int = 3,
+                    ranges: bool = True) -> rrb.Blueprint:
     """Tabs of grids of time-series views for the catalogued plots, the trajectory views and
     the map.
 
@@ -192,7 +202,13 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
     catalog : Catalog
     grid_columns : int
         Views per grid row (a row per filter for the per-filter panes of N, E, D components).
+    ranges : bool
+        Open each time-series pane on the y range of its data (:func:`ranges.y_range`: a
+        minimum span, the start-up left out where it would flatten the result, room for the
+        legend) and every pane on the run's time span with a margin; else the viewer's
+        automatic ranges.
     """
+    rg = _Ranges(catalog.envelopes) if ranges else None
     tabs: list[rrb.Container] = []
     order = [k for k, _ in TABS] + [k for k in catalog.plots if k not in dict(TABS)]
     titles = {**dict(TABS), **catalog.tab_titles}
@@ -212,11 +228,11 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
             continue
         ordered = sorted(plots.values(), key=lambda p: p.rank)  # stable: first use breaks ties
         if key == "compare":
-            tabs.append(_compare_tab(ordered, titles[key]))
+            tabs.append(_compare_tab(ordered, titles[key], rg))
         elif any(p.column is not None for p in ordered):
-            tabs.append(_column_tab(ordered, titles[key], grid_columns))
+            tabs.append(_column_tab(ordered, titles[key], grid_columns, rg))
         else:
-            views = [_view(p) for p in ordered]
+            views = [_view(p, rg) for p in ordered]
             tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)),
                                  name=titles[key]))
     # side panels collapsed: the plots get the whole window (each panel opens with one click)
@@ -232,7 +248,33 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
     return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), *panels)
 
 
-def _view(plot: Plot) -> rrb.View:
+class _Ranges:
+    """The ranges the panes open on, from the series' envelopes."""
+
+    def __init__(self, envelopes: dict[str, Envelope]) -> None:
+        self.envelopes = envelopes
+        spans = [(e.t_first, e.t_last) for e in envelopes.values() if np.isfinite(e.t_first)]
+        self.time = (time_range(min(a for a, _ in spans), max(b for _, b in spans))
+                     if spans else None)
+
+    def y(self, plot: Plot) -> YRange | None:
+        envs = [self.envelopes[p] for p in plot.paths if p in self.envelopes]
+        return y_range(envs, legend=plot.legend) if envs else None
+
+    def time_axis(self) -> rrb.TimeAxis:
+        if self.time is None:
+            return _WHOLE_RUN
+        lo, hi = self.time
+        return rrb.TimeAxis(view_range=rr.TimeRange(
+            start=rrb.TimeRangeBoundary.absolute(seconds=lo),
+            end=rrb.TimeRangeBoundary.absolute(seconds=hi)))
+
+
+SETTLED_NOTE = " (y: after start-up)"
+"""Appended to the title of a pane whose y range leaves out the start-up transient."""
+
+
+def _view(plot: Plot, rg: _Ranges | None = None) -> rrb.View:
     contents = [f"+ {p}" for p in plot.paths]
     if plot.kind == "text":
         return rrb.TextDocumentView(origin="/", contents=contents, name=plot.title)
@@ -241,32 +283,36 @@ def _view(plot: Plot) -> rrb.View:
             origin="/", contents=contents, name=plot.title,
             plot_legend=rrb.PlotLegend(rrb.Corner2D.RightBottom, visible=plot.legend),
         )
+    y = rg.y(plot) if rg is not None else None
+    on_time = y is not None  # a series of the time timeline (not a sweep's sequence)
     return rrb.TimeSeriesView(
         origin="/",
         contents=contents,
-        name=plot.title,
+        name=plot.title + (SETTLED_NOTE if y is not None and y.settled else ""),
         plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop, visible=plot.legend),
-        axis_x=_WHOLE_RUN,
+        axis_x=rg.time_axis() if on_time and rg is not None else _WHOLE_RUN,
+        axis_y=rrb.ScalarAxis(range=(y.lo, y.hi)) if y is not None else None,
     )
 
 
-def _compare_tab(plots: list[Plot], name: str) -> rrb.Container:
+def _compare_tab(plots: list[Plot], name: str, rg: _Ranges | None) -> rrb.Container:
     """The overlaid errors in a row, their CDFs in a row below, the table of headline metrics
     at the bottom."""
     rows = []
     shares = []
     for kind, share in (("series", 3.0), ("bars", 3.0), ("text", 2.6)):
-        views = [_view(p) for p in plots if p.kind == kind]
+        views = [_view(p, rg) for p in plots if p.kind == kind]
         if views:
             rows.append(rrb.Grid(*views, grid_columns=min(4, len(views))))
             shares.append(share * max(1, -(-len(views) // 4)))
     return rrb.Vertical(*rows, row_shares=shares, name=name)
 
 
-def _column_tab(plots: list[Plot], name: str, grid_columns: int) -> rrb.Container:
+def _column_tab(plots: list[Plot], name: str, grid_columns: int,
+                rg: _Ranges | None) -> rrb.Container:
     """A column per filter (its plots one row per group of components, so the same state of
     two filters sits side by side), after a grid of the plots the filters share."""
-    shared = [_view(p) for p in plots if p.column is None]
+    shared = [_view(p, rg) for p in plots if p.column is None]
     columns: dict[str, dict[str, list[Plot]]] = {}
     for p in plots:
         if p.column is not None:
@@ -278,7 +324,7 @@ def _column_tab(plots: list[Plot], name: str, grid_columns: int) -> rrb.Containe
     for label, col in columns.items():
         cells: list[rrb.Container | rrb.View] = []
         for r in rows:
-            views = [_view(p) for p in col.get(r, [])]
+            views = [_view(p, rg) for p in col.get(r, [])]
             cells.append(rrb.Horizontal(*views) if len(views) > 1 else views[0] if views
                          else rrb.Horizontal())
         cols.append(rrb.Vertical(*cells, name=label))

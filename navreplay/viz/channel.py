@@ -17,6 +17,7 @@ import rerun.blueprint as rrb
 from navreplay.io.outputs import release
 from navreplay.viz import convert
 from navreplay.viz.blueprint import Catalog, build_blueprint
+from navreplay.viz.ranges import DRAWN_RATE_HZ, Envelope, envelope_rows
 from navreplay.viz.style import (
     BAND_LINES,
     BAND_WIDTH,
@@ -49,6 +50,24 @@ def _remove(path: Path) -> None:
     release(path)
 
 
+class TimeIndex(list):
+    """The time columns of a send (``time`` and, with ``t0_ns``, ``timestamp``) and the times
+    [s] they were made of, so a series can be thinned to what is drawn."""
+
+    def __init__(self, t: np.ndarray, t0_ns: int | None) -> None:
+        self.t = np.asarray(t, dtype=np.float64)
+        self.t0_ns = t0_ns
+        dt_ns = np.rint(self.t * 1e9).astype(np.int64)
+        cols = [rr.TimeColumn(TIMELINE, duration=dt_ns.astype("timedelta64[ns]"))]
+        if t0_ns is not None:
+            cols.append(rr.TimeColumn(
+                TIMESTAMP, timestamp=(dt_ns + np.int64(t0_ns)).astype("datetime64[ns]")))
+        super().__init__(cols)
+
+    def take(self, k: np.ndarray) -> TimeIndex:
+        return TimeIndex(self.t[k], self.t0_ns)
+
+
 class Channel:
     """The recording stream of a :class:`~navreplay.viz.sink.Sink` and the state of what it has
     logged: the base of the views of the truth, the runs, the 3D world and the map, and the
@@ -64,6 +83,7 @@ class Channel:
         url: str | None = None,
         web_url: str | None = None,
         keep_alive: bool = False,
+        drawn_rate: float | None = DRAWN_RATE_HZ,
     ) -> None:
         self._rec = rec
         self._keep_alive = keep_alive
@@ -74,6 +94,8 @@ class Channel:
         self.web_url = web_url
         self.recording_id = str(rec.get_recording_id())
         self.catalog = Catalog()
+        self.drawn_rate = drawn_rate
+        """Bins per second of a drawn series' min/max envelope (None: every row drawn)."""
         self.live = not isinstance(target, Save)
         self._sent: tuple | None = None
         self._colors: dict[str, tuple[int, int, int]] = {}
@@ -130,23 +152,31 @@ class Channel:
                  self._truth_yaw, self._world_coords, self._truth_columns, self._box,
                  self._truth_log) = saved
             if self.catalog.signature() != self._sent:
-                self.send_blueprint()
+                self.send_blueprint(final=False)
         log()
         if self.catalog.signature() != self._sent:
-            self.send_blueprint()
+            self.send_blueprint(final=False)
 
     @staticmethod
-    def _indexes(t: np.ndarray, t0_ns: int) -> list[rr.TimeColumn]:
-        dt_ns = np.rint(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
-        return [
-            rr.TimeColumn(TIMELINE, duration=dt_ns.astype("timedelta64[ns]")),
-            rr.TimeColumn(TIMESTAMP, timestamp=(dt_ns + np.int64(t0_ns)).astype("datetime64[ns]")),
-        ]
+    def _indexes(t: np.ndarray, t0_ns: int) -> TimeIndex:
+        return TimeIndex(t, t0_ns)
 
-    def _scalars(self, path: str, idx: list[rr.TimeColumn], values: np.ndarray) -> None:
+    def _scalars(self, path: str, idx: list[rr.TimeColumn], values: np.ndarray,
+                 columns: tuple[int, ...] | None = None) -> None:
+        """Send a series; of a :class:`TimeIndex` only the rows of its min/max envelope
+        (:func:`~navreplay.viz.ranges.envelope_rows` of ``columns``, at
+        :attr:`drawn_rate`), whose extent the pane's y range is made from."""
         values = np.ascontiguousarray(values, dtype=np.float64)
-        if values.shape[0]:
-            self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
+        if not values.shape[0]:
+            return
+        if isinstance(idx, TimeIndex):
+            flat = values.reshape(values.shape[0], -1)
+            if self.drawn_rate is not None:
+                k = envelope_rows(idx.t, flat, self.drawn_rate, columns)
+                if k.shape[0] < values.shape[0]:
+                    idx, values, flat = idx.take(k), values[k], flat[k]
+            self.catalog.envelopes.setdefault(path, Envelope()).add(idx.t, flat)
+        self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
 
     def _style(
         self,
@@ -182,7 +212,9 @@ class Channel:
             [color, faint, faint],
             [1.5, 1.0, 1.0],
         )
-        self._scalars(path, idx, np.stack([value, N_SIGMA * sigma, -N_SIGMA * sigma], axis=1))
+        # the -3σ bound mirrors the +3σ: the envelope of the value and of +3σ keeps both
+        self._scalars(path, idx, np.stack([value, N_SIGMA * sigma, -N_SIGMA * sigma], axis=1),
+                      columns=(0, 1))
 
     def band(
         self,
@@ -201,17 +233,26 @@ class Channel:
         lines = lo[:, None] + (hi - lo)[:, None] * f[None, :]
         shade = dimmer(color, 0.8)
         self._style(path, [name] * BAND_LINES, [shade] * BAND_LINES, [BAND_WIDTH] * BAND_LINES)
-        self._scalars(path, idx, lines)
+        if isinstance(idx, TimeIndex) and self.drawn_rate is not None and lo.shape[0] > 2:
+            # a band of constant bounds is drawn by the rows where they change (and its ends)
+            moved = np.r_[True, (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])]
+            moved[-1] = True
+            k = np.flatnonzero(moved | np.r_[moved[1:], True])
+            idx, lines = idx.take(k), lines[k]
+        self._scalars(path, idx, lines, columns=(0, BAND_LINES - 1))
 
-    def blueprint(self) -> rrb.Blueprint:
-        """The default blueprint for what has been logged so far."""
-        return build_blueprint(self.catalog)
+    def blueprint(self, *, final: bool = True) -> rrb.Blueprint:
+        """The default blueprint for what has been logged so far; ``final``: the panes open on
+        the y and time ranges of their data (a live view's blueprint before the end leaves
+        them to the viewer, which follows the data as it comes)."""
+        return build_blueprint(self.catalog, ranges=final)
 
-    def send_blueprint(self) -> None:
+    def send_blueprint(self, *, final: bool = True) -> None:
         """Send the default blueprint now (also done by :meth:`close`, and by a live sink
-        before the data of every new plot)."""
+        before the data of every new plot, not ``final``)."""
         self._sent = self.catalog.signature()
-        self._rec.send_blueprint(self.blueprint(), make_active=True, make_default=True)
+        self._rec.send_blueprint(self.blueprint(final=final), make_active=True,
+                                 make_default=True)
 
 
 class _NullStream:

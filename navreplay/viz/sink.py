@@ -174,7 +174,7 @@ class Sink(RunView, EnsemblePlots):
                 k = int(np.searchsorted(t, rows.t[-1], side="right")) - 1
                 if k >= 0:
                     box = (lo[k], hi[k])
-            self._log_rows(r, rows, 0, rows.t.shape[0])
+            self._log_rows(r, rows, 0, rows.t.shape[0], frozenset(errors))
             r.extent_box = box
             self._log_errors(r, rows, errors)
             if nees is not None:

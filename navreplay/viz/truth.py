@@ -19,7 +19,7 @@ from navreplay.viz.naming import (
     title,
 )
 from navreplay.viz.style import RANK_NAV, TRUTH_COLOR, lighter
-from navreplay.viz.world import WORLD_RATE_HZ, Track, WorldView, axis_size, xyzw
+from navreplay.viz.world import BODY_RATE_HZ, Track, WorldView, axis_size, xyzw
 
 TRUTH_RATE_HZ = 20.0
 """Default rate of the truth time series [Hz]; None in :meth:`Sink.log_truth` keeps all rows."""
@@ -81,7 +81,7 @@ class TruthView(WorldView):
                              rank=RANK_NAV)
         # 3D and map
         world = f"/world{root}"
-        w = convert.decimate(nav.t, WORLD_RATE_HZ, after=log.last)
+        w = convert.decimate(nav.t, BODY_RATE_HZ, after=log.last)
         if w.shape[0]:
             self._rec.send_columns(
                 f"{world}/body",

@@ -26,7 +26,11 @@ if TYPE_CHECKING:
 
 
 WORLD_RATE_HZ = 10.0
-"""Rate of attitude transforms in /world [Hz]."""
+"""Starting rate of the points of the trajectory strips and map tracks [Hz]."""
+
+
+BODY_RATE_HZ = 2.0
+"""Rate of the body transforms (position and attitude) in /world [Hz]."""
 
 
 COVARIANCE_RATE_HZ = 1.0
@@ -186,7 +190,7 @@ class WorldView(Channel):
     ) -> None:
         L = run.label
         ned = np.stack([values["p_N"], values["p_E"], values["p_D"]], axis=1)
-        w = convert.decimate(nav.t, WORLD_RATE_HZ, after=run.world_t)
+        w = convert.decimate(nav.t, BODY_RATE_HZ, after=run.world_t)
         w = w[np.isfinite(ned[w]).all(axis=1) & np.isfinite(nav.q_nb[w]).all(axis=1)]
         if w.shape[0]:
             self._set_world()
