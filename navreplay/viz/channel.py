@@ -17,6 +17,7 @@ import rerun.blueprint as rrb
 from navreplay.io.outputs import release
 from navreplay.viz import convert
 from navreplay.viz.blueprint import Catalog, build_blueprint
+from navreplay.viz.naming import legend_name
 from navreplay.viz.ranges import DRAWN_RATE_HZ, Envelope, envelope_rows
 from navreplay.viz.style import (
     BAND_LINES,
@@ -113,6 +114,8 @@ class Channel:
         self._truth_wanted: dict[str, str] = {}
         self._outages: tuple[tuple[float, float], ...] = ()
         self._truth_columns: set[str] = set()
+        self._truth_widths: dict[str, int] = {}  # components of each truth column logged
+        self._truth_names: dict[str, dict[int, str]] = {}  # their names, from the states
         self._closed = False
         self._world_coords = False
         self._cleanup = weakref.finalize(self, _remove, tmp) if tmp is not None else None
@@ -143,14 +146,15 @@ class Channel:
         if plan:
             saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
                      self._extent, self._truth, self._truth_yaw, self._world_coords,
-                     set(self._truth_columns), self._box, copy.deepcopy(self._truth_log))
+                     set(self._truth_columns), self._box, copy.deepcopy(self._truth_log),
+                     copy.deepcopy(self._truth_names))
             self._rec = _NullStream()  # type: ignore[assignment]
             try:
                 log()
             finally:
                 (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
                  self._truth_yaw, self._world_coords, self._truth_columns, self._box,
-                 self._truth_log) = saved
+                 self._truth_log, self._truth_names) = saved
             if self.catalog.signature() != self._sent:
                 self.send_blueprint(final=False)
         log()
@@ -188,7 +192,8 @@ class Channel:
         if path in self._styled:
             return
         self._styled.add(path)
-        self._rec.log(path, rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
+        self._rec.log(path, rr.SeriesLines(names=[legend_name(n) for n in names], colors=colors,
+                                           widths=widths), static=True)
 
     def _bounded(
         self,

@@ -266,6 +266,39 @@ class EnsemblePlots(Channel):
                 self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
                                  legend=legend, tab_title=tab_title, behind=True)
 
+    def log_sweep(
+        self,
+        name: str,
+        x: np.ndarray,
+        series: Mapping[str, np.ndarray],
+        *,
+        unit: str,
+        x_name: str,
+        x_unit: str,
+        tab: str = "ensemble",
+        tab_title: str | None = None,
+        rank: int = 0,
+    ) -> None:
+        """A sweep (a result against a parameter, not time) as a bar chart on the parameter's
+        own axis: at each ``x`` a bar per series, side by side in the series' colours
+        (``/ensemble/<name>/<series>``), titled ``<name> [unit] vs <x_name> [x_unit]``."""
+        x = np.asarray(x, dtype=np.float64)
+        step = float(np.min(np.diff(np.unique(x)))) if np.unique(x).shape[0] > 1 else 1.0
+        width = 0.8 * step / max(len(series), 1)
+        title = f"{name} [{unit}] vs {x_name} [{x_unit}]"
+        for j, (key, values) in enumerate(series.items()):
+            values = np.asarray(values, dtype=np.float64)
+            if values.shape != x.shape:
+                raise ValueError(
+                    f"sweep {name!r}: series {key!r} has shape {values.shape}, x {x.shape}")
+            path = f"{entity_path('ensemble', name)}/{entity_path(key)[1:]}"
+            color, _ = self._variant_style(key)
+            offset = (j - 0.5 * (len(series) - 1)) * width
+            self._rec.log(path, rr.BarChart(values, abscissa=x + offset, color=color,
+                                            widths=np.full(x.shape, width)), static=True)
+            self.catalog.add(tab, f"ensemble:{name}", title, path, rank=rank, kind="bars",
+                             tab_title=tab_title)
+
     def _variant_style(self, key: str) -> tuple[tuple[int, int, int], float]:
         """Colour and width of an ensemble series named ``"<variant>[ RMS| sigma| σ]"``: the
         variant's colour; a sigma lighter and thinner than its RMS; ``"truth"`` grey."""

@@ -163,7 +163,7 @@ def _union(parts: list[tuple[float, float] | None]) -> tuple[float, float] | Non
 
 
 def time_range(t_first: float, t_last: float) -> tuple[float, float]:
-    """The time span [s] a pane shows: the run with 2 % of margin on each side, so the first
-    and the last tick labels are not clipped by the pane's edges."""
-    pad = 0.02 * max(t_last - t_first, 1e-3)
-    return t_first - pad, t_last + pad
+    """The time span [s] a pane shows: the run with margins (2 % before, 7 % after), so the
+    first and the last tick labels (``+0s``, ``+10m``) are not clipped by the pane's edges."""
+    span = max(t_last - t_first, 1e-3)
+    return t_first - 0.02 * span, t_last + 0.07 * span

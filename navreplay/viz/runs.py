@@ -211,6 +211,7 @@ class RunView(TruthView):
                 if st is not None and isinstance(st.truth, TruthColumn):
                     p_true = self._truth_column(st.truth.column, st.unit)
                     if p_true is not None:
+                        self._name_truth(st.truth.column, st.truth.index, n)
                         self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]",
                                          p_true, rank=RANK_STATE, column=L, row=g)
             nav_state = st is not None and isinstance(st.truth, NavError)

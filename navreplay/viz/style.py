@@ -22,6 +22,11 @@ BAND_WIDTH = 8.0
 TRUTH_COLOR = (150, 150, 150)
 
 
+TRUTH_COMPONENT_COLORS = ((235, 150, 150), (150, 225, 150), (160, 180, 245))
+"""The components x, y, z of a truth column drawn beside an estimate's: the axis colours
+(x red, y green, z blue) greyed, so the three are told apart and still read as the truth."""
+
+
 OUTAGE_COLOR = (235, 160, 40)
 """GNSS outages: the true track inside them, and (dimmed) the bands that shade them."""
 

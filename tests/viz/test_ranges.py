@@ -1,0 +1,159 @@
+"""What the view draws and the ranges its panes open on: min/max envelopes that keep every
+peak, a bounded number of rows per second, readable y ranges (a minimum span, the start-up
+left out where it flattens the result, room for the legend), the run's time span, units and
+names read back from the blueprint."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rerun as rr
+from rrd import read_rrd, scalars
+from test_viz import log_runs, make_result, make_truth, read_blueprint
+
+from navreplay.viz import naming, open_sink
+from navreplay.viz.ranges import (
+    DRAWN_RATE_HZ,
+    LEGEND_HEADROOM,
+    Envelope,
+    envelope_rows,
+    time_range,
+    y_range,
+)
+from navreplay.viz.style import TRUTH_COLOR, TRUTH_COMPONENT_COLORS
+
+
+def blueprint_fields(path) -> dict[str, dict[str, list]]:
+    """Per view name, every field of its blueprint entities (ScalarAxis:range, TimeAxis:...)."""
+    reader = rr.chunk.RrdReader(path)
+    store = reader.stream(store=reader.blueprints()[0]).collect()
+    fields: dict[str, dict[str, list]] = {}
+    for chunk in store.stream().to_chunks():
+        rb = chunk.to_record_batch()
+        key = "/".join(chunk.entity_path.strip("/").split("/")[:2])
+        for name in rb.schema.names:
+            if ":" in name:
+                fields.setdefault(key, {})[name] = rb.column(name).to_pylist()[-1]
+    return {f["ViewBlueprint:display_name"][0]: f for f in fields.values()
+            if "ViewBlueprint:display_name" in f}
+
+
+def test_envelope_keeps_every_peak_in_a_bounded_number_of_rows():
+    rng = np.random.default_rng(7)
+    t = np.arange(360_000) * 0.01  # 1 h at 100 Hz
+    v = np.cumsum(rng.normal(size=(t.shape[0], 3)), axis=0)
+    spikes = rng.choice(t.shape[0], 25, replace=False)
+    v[spikes, 0] += 1e4  # one-sample peaks
+    v[1000:1500, 0] = np.nan  # a gap
+    k = envelope_rows(t, v, 1.0, columns=(0, 1))
+    assert k.shape[0] <= 4 * 3600 + 3 * 10  # two columns x (min, max) per 1 s bin, a gap's ends
+    assert set(spikes) <= set(k.tolist())
+    bins = np.floor(t).astype(int)
+    for j in (0, 1):  # every bin's extremes of the enveloped columns are drawn
+        full_max = np.full(3600, -np.inf)
+        np.fmax.at(full_max, bins, v[:, j])
+        drawn_max = np.full(3600, -np.inf)
+        np.fmax.at(drawn_max, bins[k], v[k, j])
+        np.testing.assert_array_equal(drawn_max, full_max)
+        full_min = np.full(3600, np.inf)
+        np.fmin.at(full_min, bins, v[:, j])
+        drawn_min = np.full(3600, np.inf)
+        np.fmin.at(drawn_min, bins[k], v[k, j])
+        np.testing.assert_array_equal(drawn_min, full_min)
+    assert np.isnan(v[k, 0]).any(), "the gap stays a gap"
+
+
+def test_sink_draws_envelopes_with_the_peaks_and_scores_are_untouched(tmp_path):
+    truth = make_truth(duration=300.0)
+    r = make_result("f", 3, truth, m=3000)
+    spike = 1234
+    r.x[spike, 12] = 0.5  # a peak of db_g_x
+    drawn, full = tmp_path / "drawn.rrd", tmp_path / "full.rrd"
+    with open_sink(drawn) as sink:
+        assert sink.drawn_rate == DRAWN_RATE_HZ
+        log_runs(sink, [r], truth)
+    with open_sink(full, drawn_rate=None) as sink:
+        log_runs(sink, [r], truth)
+    d, f = read_rrd(drawn), read_rrd(full)
+    assert drawn.stat().st_size < 0.6 * full.stat().st_size
+    for path in ("/f/state/db_g_x", "/f/error/db_g_x", "/f/error/p_N", "/compare/pos_h/f"):
+        a, b = scalars(d, path), scalars(f, path)
+        assert a.shape[0] < 0.7 * b.shape[0], path
+        np.testing.assert_array_equal(np.nanmax(a, axis=0), np.nanmax(b, axis=0))
+        np.testing.assert_array_equal(np.nanmin(a, axis=0), np.nanmin(b, axis=0))
+    t = d["/f/state/db_g_x"]["time"]
+    assert int(np.rint(r.t[spike] * 1e9)) in t.tolist()
+    # a band of constant bounds: its ends only
+    assert d["/f/nees/band"]["time"].shape[0] <= 4
+
+
+def test_y_range_minimum_span_transient_and_legend():
+    t = np.arange(0.0, 600.0, 0.1)
+    zero = Envelope()
+    zero.add(t, np.zeros((t.shape[0], 1)))
+    r = y_range([zero])
+    assert (r.lo, r.hi) == (-1.0, 1.0) and not r.settled
+    const = Envelope()
+    const.add(t, np.full((t.shape[0], 1), 50.0))
+    r = y_range([const])
+    assert r.lo < 50.0 < r.hi and r.hi - r.lo == pytest.approx(10.0)
+    # transfer alignment: a 380 mrad start-up, then 1-3 mrad
+    ta = Envelope()
+    ta.add(t, (2.0 + np.sin(t) + 378.0 * np.exp(-t / 10.0))[:, None])
+    r = y_range([ta])
+    assert r.settled and r.hi < 5.0 and r.lo > 0.5
+    high = Envelope()
+    high.add(t, np.full((t.shape[0], 1), 300.0))
+    plain = y_range([high, ta])
+    assert plain.hi > 370.0 and not plain.settled  # the start-up is not what sets the span
+    with_legend = y_range([ta], legend=True)  # room above the data for the legend
+    assert with_legend.lo == r.lo
+    assert with_legend.hi - r.hi == pytest.approx(LEGEND_HEADROOM * (r.hi - r.lo) / 1.1)
+    lo, hi = time_range(0.0, 600.0)
+    assert lo < 0.0 and hi > 620.0
+
+
+def test_blueprint_ranges_units_and_truth_names(tmp_path):
+    truth = make_truth(duration=200.0)
+    a = make_result("gps-ins", 1, truth, m=2000)
+    b = make_result("gps-ins[gps_pos_sigma_scale=2]", 2, truth, m=2000)
+    a.x[:, 3] = 0.0  # a state feedback keeps at zero: no pane
+    path = tmp_path / "run.rrd"
+    with open_sink(path) as sink:
+        log_runs(sink, [a, b], truth)
+        t = np.arange(0.0, 200.0, 0.5)
+        sink.log_ensemble("TA heading error RMS", t,
+                          {"ta RMS": 2.0 + 300.0 * np.exp(-t / 5.0)}, unit="mrad")
+        sink.log_ensemble("always zero", t, {"ta RMS": np.zeros_like(t)}, unit="m")
+    tabs, views = read_blueprint(path)
+    fields = blueprint_fields(path)
+    for name, (kind, _) in views.items():
+        if kind != "TimeSeries":
+            continue
+        lo, hi = fields[name]["ScalarAxis:range"][0]
+        assert hi > lo, name  # never a lone tick
+        start_end = fields[name]["TimeAxis:view_range"][0]
+        assert start_end["start"] < 0 and start_end["end"] > 200e9, name
+    assert fields["always zero [m]"]["ScalarAxis:range"][0] == [-1.0, 1.0]
+    ta = [n for n in views if n.startswith("TA heading error RMS [mrad]")]
+    assert ta == ["TA heading error RMS [mrad] (y: after start-up)"]
+    assert fields[ta[0]]["ScalarAxis:range"][0][1] < 10.0
+    # truth components named like the estimates, in colours told apart
+    data = read_rrd(path)
+    style = data["static"]["/truth/extra/gyro_bias_eff"].to_pydict()
+    # (static: the last style logged is the one shown)
+    assert style["SeriesLines:names"][-1] == [f"db_g_{c} (truth)" for c in "xyz"]
+    colors = [((c >> 24) & 255, (c >> 16) & 255, (c >> 8) & 255)
+              for c in style["SeriesLines:colors"][-1]]
+    assert colors == list(TRUTH_COMPONENT_COLORS) and TRUTH_COLOR not in colors
+    # a variant's legend entry is short, its pane titles keep the whole label
+    legend = data["static"][naming.entity_path("compare", "pos_h", b.label)].to_pydict()
+    assert legend["SeriesLines:names"][0] == ["gps-ins[scale=2]"]
+    assert f"{b.label}: position N error [m], ±3σ" in tabs["Position"]
+
+
+def test_ensemble_misalignments_in_degrees():
+    assert naming.resolve_unit("m_a_xy").label == "deg"
+    assert naming.resolve_unit("m_g_zx").label == "deg"
+    assert naming.quantity_of("m_a_yz") is naming.Tab.SENSOR
+    assert naming.resolve_unit("s_a_x").label == "-"
