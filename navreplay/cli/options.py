@@ -83,7 +83,6 @@ def viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool,
                  grpc_port: int | None = None, full_rate: bool = False) -> Any:
     import dataclasses
 
-    from navreplay.jobs import VizMode, VizOptions
 
     if full_rate and no_viz:
         raise click.UsageError("--full-rate and --no-viz exclude each other")
