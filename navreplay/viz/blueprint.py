@@ -215,13 +215,16 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3,
     for key in order:
         if key == "world":
             if catalog.world is not None:
-                tabs.append(_trajectory_tab(catalog.world, catalog.covariances, titles[key]))
+                tabs.append(_trajectory_tab(catalog.world, catalog.covariances, titles[key],
+                                            catalog))
             continue
         if key == "map":
             if catalog.geo:
-                tabs.append(rrb.Horizontal(
-                    rrb.MapView(origin="/map", name="latitude / longitude"), name=titles[key]
-                ))
+                views: list[rrb.View] = [rrb.MapView(origin="/map", name="latitude / longitude")]
+                if catalog.legend:
+                    views.append(_legend_view(catalog))
+                tabs.append(rrb.Vertical(*views, row_shares=[12.0, 1.0][:len(views)],
+                                         name=titles[key]))
             continue
         plots = catalog.plots.get(key, {})
         if not plots:
@@ -335,35 +338,54 @@ def _column_tab(plots: list[Plot], name: str, grid_columns: int,
     return rrb.Vertical(top, body, row_shares=[1.0, float(len(rows))], name=name)
 
 
+def _legend_view(catalog: Catalog) -> rrb.View:
+    """The key of the trajectory views and the map: a dot per track in its colour (and the
+    scale bar's length)."""
+    n = len(catalog.legend) + (catalog.scale_bar is not None)
+    return rrb.Spatial2DView(origin="/legend", name="legend",
+                             visual_bounds=rrb.VisualBounds2D(x_range=[-3.0, 7.0 * n],
+                                                              y_range=[-1.0, 1.6]))
+
+
 def _trajectory_tab(
-    box: tuple[np.ndarray, np.ndarray], covariances: list[str], name: str
+    box: tuple[np.ndarray, np.ndarray], covariances: list[str], name: str,
+    catalog: Catalog | None = None,
 ) -> rrb.Container:
     """Top-down N/E view (camera above the trajectory, north up) beside the 3D view, both
-    framed on the NED box [m] of the trajectories."""
+    framed on the NED box [m] of the trajectories, with a grid of the scale bar's length and
+    the legend."""
     lo, hi = box
     centre = 0.5 * (lo + hi)
     span = float(max(np.max(hi[:2] - lo[:2]), 10.0))
+    bar = catalog.scale_bar if catalog is not None else None
+    grid = f", grid {bar:g} m" if bar else ""
     top = rrb.Spatial3DView(
         origin="/world",
-        name="top-down N/E [m] (north up)",
+        name=f"top-down N/E [m] (north up){grid}",
         contents=["+ /world/**", *(f"- {p}" for p in covariances)],
         eye_controls=rrb.EyeControls3D(
             position=(centre[0], centre[1], centre[2] - 1.25 * span),
             look_target=tuple(centre),
             eye_up=(1.0, 0.0, 0.0),  # north at the top of the screen
         ),
-        line_grid=rrb.LineGrid3D(visible=False),
+        line_grid=(rrb.LineGrid3D(visible=True, spacing=bar, plane=rr.components.Plane3D.XY)
+                   if bar else rrb.LineGrid3D(visible=False)),
     )
     persp = rrb.Spatial3DView(
         origin="/world",
-        name="3D NED [m], 3-sigma position ellipsoids",
+        name=f"3D NED [m], 3-sigma position ellipsoids{grid}",
         eye_controls=rrb.EyeControls3D(
             position=(centre[0] - 0.8 * span, centre[1] - 0.8 * span, centre[2] - 0.6 * span),
             look_target=tuple(centre),
             eye_up=(0.0, 0.0, -1.0),
         ),
+        line_grid=(rrb.LineGrid3D(visible=True, spacing=bar, plane=rr.components.Plane3D.XY)
+                   if bar else None),
     )
-    return rrb.Horizontal(top, persp, name=name)
+    if catalog is None or not catalog.legend:
+        return rrb.Horizontal(top, persp, name=name)
+    return rrb.Vertical(rrb.Horizontal(top, persp), _legend_view(catalog),
+                        row_shares=[12.0, 1.0], name=name)
 
 
 # Plots show the whole run (the viewer's default is a window around the time cursor).

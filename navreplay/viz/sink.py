@@ -228,6 +228,7 @@ class Sink(RunView, EnsemblePlots):
             self._finish_truth()
             for run in self._runs.values():
                 self._finish_run(run)
+            self._log_legend()
             self.send_blueprint()
             self.flush(timeout)
             if not self._keep_alive:  # a served stream keeps its server up for late browsers

@@ -157,3 +157,37 @@ def test_ensemble_misalignments_in_degrees():
     assert naming.resolve_unit("m_g_zx").label == "deg"
     assert naming.quantity_of("m_a_yz") is naming.Tab.SENSOR
     assert naming.resolve_unit("s_a_x").label == "-"
+
+
+def test_trajectory_and_map_have_a_legend_and_a_scale(tmp_path):
+    from navreplay.viz.world import scale_length
+
+    truth = make_truth(duration=200.0)
+    a = make_result("gps-ins", 1, truth, m=2000)
+    path = tmp_path / "run.rrd"
+    with open_sink(path) as sink:
+        log_runs(sink, [a], truth)
+    tabs, views = read_blueprint(path)
+    fields = blueprint_fields(path)
+    assert "legend" in tabs["Trajectory"] and "legend" in tabs["Map"]
+    assert views["legend"][0] == "2D"
+    data = read_rrd(path)
+    legend = data["static"]["/legend"].to_pydict()
+    # the truth moves 4 m/s north for 200 s: 800 m, a 100 m bar and grid
+    assert scale_length(800.0) == 100.0
+    assert legend["Points2D:labels"][-1] == ["truth", "gps-ins", "white bar: 100 m"]
+    top = [n for n in tabs["Trajectory"] if n.startswith("top-down")]
+    assert top == ["top-down N/E [m] (north up), grid 100 m"]
+    assert fields[top[0]]["LineGrid3D:spacing"] == [100.0]
+    bar = data["static"]["/world/scale"].to_pydict()["LineStrips3D:strips"][-1][0]
+    assert np.hypot(*np.subtract(bar[1], bar[0])[:2]) == pytest.approx(100.0)
+    assert "/map/scale" in data["static"]
+    # the body axes carry no x/y/z badges (they piled up where the tracks meet)
+    assert "Arrows3D:labels" not in data["static"]["/world/gps-ins/body/axes"].to_pydict()
+    # the viewer opens at the end of the run: the time panel follows the last time
+    reader = rr.chunk.RrdReader(path)
+    store = reader.stream(store=reader.blueprints()[0]).collect()
+    for chunk in store.stream().to_chunks():
+        rb = chunk.to_record_batch()
+        if chunk.entity_path == "/time_panel" and "TimePanelBlueprint:play_state" in rb.schema.names:
+            assert rb.column("TimePanelBlueprint:play_state").to_pylist()[-1] == [3]  # following
