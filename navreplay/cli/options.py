@@ -147,7 +147,8 @@ def viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--no-viz", is_flag=True, help="No Rerun output."),
         click.option("--full-rate", "full_rate", is_flag=True,
                      help="Draw every estimate in the Rerun view (default: each series as "
-                          "its min/max envelope per second, every peak kept; a smaller .rrd)."),
+                          "its smallest and largest value every 2 s, every peak kept, about "
+                          "5x smaller .rrd; scores always use every estimate)."),
     ]
     for opt in reversed(opts):
         fn = opt(fn)

@@ -166,9 +166,9 @@ class Channel:
         return TimeIndex(t, t0_ns)
 
     def _scalars(self, path: str, idx: list[rr.TimeColumn], values: np.ndarray,
-                 columns: tuple[int, ...] | None = None) -> None:
+                 columns: tuple[int, ...] | None = None, maxima: tuple[int, ...] = ()) -> None:
         """Send a series; of a :class:`TimeIndex` only the rows of its min/max envelope
-        (:func:`~navreplay.viz.ranges.envelope_rows` of ``columns``, at
+        (:func:`~navreplay.viz.ranges.envelope_rows` of ``columns`` and ``maxima``, at
         :attr:`drawn_rate`), whose extent the pane's y range is made from."""
         values = np.ascontiguousarray(values, dtype=np.float64)
         if not values.shape[0]:
@@ -176,7 +176,7 @@ class Channel:
         if isinstance(idx, TimeIndex):
             flat = values.reshape(values.shape[0], -1)
             if self.drawn_rate is not None:
-                k = envelope_rows(idx.t, flat, self.drawn_rate, columns)
+                k = envelope_rows(idx.t, flat, self.drawn_rate, columns, maxima)
                 if k.shape[0] < values.shape[0]:
                     idx, values, flat = idx.take(k), values[k], flat[k]
             self.catalog.envelopes.setdefault(path, Envelope()).add(idx.t, flat)
@@ -217,9 +217,9 @@ class Channel:
             [color, faint, faint],
             [1.5, 1.0, 1.0],
         )
-        # the -3σ bound mirrors the +3σ: the envelope of the value and of +3σ keeps both
+        # drawn: the value's smallest and largest per bin, the bounds' widest (-3σ mirrors +3σ)
         self._scalars(path, idx, np.stack([value, N_SIGMA * sigma, -N_SIGMA * sigma], axis=1),
-                      columns=(0, 1))
+                      columns=(0,), maxima=(1,))
 
     def band(
         self,

@@ -21,19 +21,22 @@ import dataclasses
 
 import numpy as np
 
-DRAWN_RATE_HZ = 1.0
-"""Default bins per second of a drawn series: each bin keeps the rows of its smallest and its
-largest value per column (at most 2 rows per column and bin), so a 10 Hz or 100 Hz output draws
-at about 4-10 rows per second and every peak stays; scores use every row."""
+DRAWN_RATE_HZ = 0.5
+"""Default bins per second of a drawn series: each 2 s bin keeps the rows of the smallest and
+the largest value (and of a ±3σ bound's largest), so a 10 Hz or a 100 Hz output draws at
+about one row per second, a pane holds about a bin per pixel of its width even for an hour,
+and every peak stays. Scores, summaries and exports use every row."""
 
 
 def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
-                  columns: tuple[int, ...] | None = None) -> np.ndarray:
+                  columns: tuple[int, ...] | None = None,
+                  maxima: tuple[int, ...] = ()) -> np.ndarray:
     """Indices of the rows of ``values`` (M, k) at times ``t`` [s] to draw: per bin of
     ``1 / rate_hz`` seconds, the row of the smallest and of the largest value of each of
-    ``columns`` (all by default), and the first and the last row (a block's ends join the
-    next). NaN values are never a minimum or maximum; rows where column 0 is NaN between
-    finite ones are kept once per bin (a gap stays a gap)."""
+    ``columns`` (all by default), the row of the largest value of each of ``maxima`` (a +3σ
+    bound: its peaks), and the first and the last row (a block's ends join the next). NaN
+    values are never a minimum or maximum; rows where column 0 is NaN between finite ones
+    are kept once per bin (a gap stays a gap)."""
     M = t.shape[0]
     if M <= 2:
         return np.arange(M)
@@ -45,10 +48,10 @@ def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
     keep = np.zeros(M, dtype=bool)
     keep[[0, M - 1]] = True
     cols = range(values.shape[1]) if columns is None else columns
-    for j in cols:
+    for j, signs in [*((j, (1.0, -1.0)) for j in cols), *((j, (-1.0,)) for j in maxima)]:
         v = values[:, j]
-        for s in (v, -v):  # NaN sorts last: a bin's first row is its minimum (maximum)
-            order = np.lexsort((s, seg))
+        for sign in signs:  # NaN sorts last: a bin's first row is its minimum (maximum)
+            order = np.lexsort((sign * v, seg))
             first = order[starts]
             keep[first[np.isfinite(v[first])]] = True
     gap = np.isnan(values[:, 0])
