@@ -65,6 +65,10 @@ from navreplay.cli.options import (
               help="Skip the gravity and magnetic-dip checks of the frames.")
 @result_flags
 @max_imu_gap_option
+@click.option("--export-compression", "export_compression", default="zstd", show_default=True,
+              type=click.Choice(["zstd", "lz4", "none"]),
+              help="Chunk compression of the estimates MCAP of --export (none: readable "
+                   "without a decompressor, e.g. by Foxglove's npm MCAP reader).")
 @click.option("--smooth", is_flag=True,
               help="Also smooth every filter that can be (fixed-interval RTS smoother, "
                    "docs/smoothing.md): its result LABEL/rts is scored, shown and exported "
@@ -79,6 +83,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         start: str | None, end: str | None,
         imu_range: str | None, init: str | None, reference: str | None, no_frame_check: bool,
         export: str | None, report: str | None, max_imu_gap: float | None,
+        export_compression: str,
         smooth: bool, force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
@@ -119,7 +124,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
                         sensors=sensor_config(config, cfg), imu_range_text=imu_range,
                         force_frames=force_frame, start=start, end=end),
-        export_dir=Path(export) if export else None,
+        export_dir=Path(export) if export else None, export_compression=export_compression,
         report_path=Path(report) if report else None, force=force, smooth=smooth,
         command=command_line(),
     )
