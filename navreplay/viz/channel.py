@@ -47,6 +47,12 @@ TIMESTAMP = "timestamp"
 """Absolute time (UNIX epoch)."""
 
 
+PENDING_ROWS = 4096
+"""Rows of a series a file's sink holds before sending them as one chunk: the blocks of a
+long run (a window each) would otherwise each be a chunk per series, and a chunk's overhead
+(about a kilobyte) would outweigh its rows at 100 Hz outputs."""
+
+
 def _remove(path: Path) -> None:
     release(path)
 
@@ -97,6 +103,8 @@ class Channel:
         self.catalog = Catalog()
         self.drawn_rate = drawn_rate
         """Bins per second of a drawn series' min/max envelope (None: every row drawn)."""
+        self._pending: dict[str, list[tuple[TimeIndex, np.ndarray]]] = {}
+        """Rows of each series held until a chunk's worth (a file's, not a live view's)."""
         self.live = not isinstance(target, Save)
         self._sent: tuple | None = None
         self._colors: dict[str, tuple[int, int, int]] = {}
@@ -180,7 +188,23 @@ class Channel:
                 if k.shape[0] < values.shape[0]:
                     idx, values, flat = idx.take(k), values[k], flat[k]
             self.catalog.envelopes.setdefault(path, Envelope()).add(idx.t, flat)
+            if not self.live:  # a file: sent in chunks of PENDING_ROWS, not one per block
+                pending = self._pending.setdefault(path, [])
+                pending.append((idx, values))
+                if sum(v.shape[0] for _, v in pending) >= PENDING_ROWS:
+                    self._send_pending(path)
+                return
         self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
+
+    def _send_pending(self, path: str | None = None) -> None:
+        """Send the rows held for ``path`` (every path with None) as one chunk each."""
+        for p in [path] if path is not None else list(self._pending):
+            parts = self._pending.pop(p, [])
+            if not parts:
+                continue
+            idx = TimeIndex(np.concatenate([i.t for i, _ in parts]), parts[0][0].t0_ns)
+            values = np.concatenate([v for _, v in parts])
+            self._rec.send_columns(p, indexes=idx, columns=rr.Scalars.columns(scalars=values))
 
     def _style(
         self,

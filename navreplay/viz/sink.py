@@ -214,6 +214,7 @@ class Sink(RunView, EnsemblePlots):
 
     def flush(self, timeout: float = 30.0) -> None:
         """Wait until the logged data has left the process (raises VizUnavailableError)."""
+        self._send_pending()
         try:
             self._rec.flush(timeout_sec=timeout)
         except RuntimeError as e:
