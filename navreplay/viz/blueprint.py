@@ -233,7 +233,7 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3,
         if key == "compare":
             tabs.append(_compare_tab(ordered, titles[key], rg))
         elif any(p.column is not None for p in ordered):
-            tabs.append(_column_tab(ordered, titles[key], grid_columns, rg))
+            tabs.extend(_column_tabs(ordered, titles[key], grid_columns, rg))
         else:
             views = [_view(p, rg) for p in ordered]
             tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)),
@@ -311,31 +311,44 @@ def _compare_tab(plots: list[Plot], name: str, rg: _Ranges | None) -> rrb.Contai
     return rrb.Vertical(*rows, row_shares=shares, name=name)
 
 
-def _column_tab(plots: list[Plot], name: str, grid_columns: int,
-                rg: _Ranges | None) -> rrb.Container:
+ROWS_PER_PAGE = 3
+"""Rows of panes per tab in the tabs laid out a column per filter: more rows go to further
+tabs (``Sensor errors: m_a, b_a, b_g``), so a pane keeps the height its tick labels need."""
+
+
+def _column_tabs(plots: list[Plot], name: str, grid_columns: int,
+                 rg: _Ranges | None) -> list[rrb.Container]:
     """A column per filter (its plots one row per group of components, so the same state of
-    two filters sits side by side), after a grid of the plots the filters share."""
+    two filters sits side by side), after a grid of the plots the filters share; at most
+    :data:`ROWS_PER_PAGE` rows per tab, each further tab titled by its rows."""
     shared = [_view(p, rg) for p in plots if p.column is None]
     columns: dict[str, dict[str, list[Plot]]] = {}
     for p in plots:
         if p.column is not None:
             columns.setdefault(p.column, {}).setdefault(p.row or p.title, []).append(p)
-    rows = sorted({r for col in columns.values() for r in col},
-                  key=lambda r: min(p.rank for col in columns.values() for p in col.get(r, [])))
+    rows = sorted({r for col in columns.values() for r in col},  # by rank, then by name
+                  key=lambda r: (min(p.rank for col in columns.values() for p in col.get(r, [])),
+                                 r))
     width = max((len(ps) for col in columns.values() for ps in col.values()), default=1)
-    cols = []
-    for label, col in columns.items():
-        cells: list[rrb.Container | rrb.View] = []
-        for r in rows:
-            views = [_view(p, rg) for p in col.get(r, [])]
-            cells.append(rrb.Horizontal(*views) if len(views) > 1 else views[0] if views
-                         else rrb.Horizontal())
-        cols.append(rrb.Vertical(*cells, name=label))
-    if not shared:
-        return rrb.Horizontal(*cols, name=name)
-    body = rrb.Horizontal(*cols)
-    top = rrb.Grid(*shared, grid_columns=min(max(grid_columns, width), len(shared)))
-    return rrb.Vertical(top, body, row_shares=[1.0, float(len(rows))], name=name)
+    pages = [rows[i:i + ROWS_PER_PAGE] for i in range(0, len(rows), ROWS_PER_PAGE)] or [[]]
+    tabs: list[rrb.Container] = []
+    for k, page in enumerate(pages):
+        title = name if len(pages) == 1 else f"{name}: {', '.join(page)}"
+        cols = []
+        for label, col in columns.items():
+            cells: list[rrb.Container | rrb.View] = []
+            for r in page:
+                views = [_view(p, rg) for p in col.get(r, [])]
+                cells.append(rrb.Horizontal(*views) if len(views) > 1 else views[0] if views
+                             else rrb.Horizontal())
+            cols.append(rrb.Vertical(*cells, name=label))
+        if not shared or k:
+            tabs.append(rrb.Horizontal(*cols, name=title))
+            continue
+        top = rrb.Grid(*shared, grid_columns=min(max(grid_columns, width), len(shared)))
+        tabs.append(rrb.Vertical(top, rrb.Horizontal(*cols), row_shares=[1.0, float(len(page))],
+                                 name=title))
+    return tabs
 
 
 def _legend_view(catalog: Catalog) -> rrb.View:

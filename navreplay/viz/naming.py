@@ -127,7 +127,7 @@ NAV_TITLES: dict[str, str] = {
 }
 """Plot titles of the navigation quantities (the unit is appended)."""
 
-_COMPONENT = re.compile(r"(_[NEDxyz]|_?[0-9]+)$")
+_COMPONENT = re.compile(r"(_[NEDxyz]|_[xyz]{2}|_?[0-9]+)$")
 
 
 def guess_si_unit(name: str) -> str | None:
@@ -176,7 +176,8 @@ def tab_of(quantity: StateQuantity) -> Tab:
 
 
 def group_of(name: str) -> str:
-    """Name without its component suffix (``_x``, ``_N``, ``2``), to plot components together."""
+    """Name without its component suffix (``_x``, ``_N``, ``2``, a misalignment's ``_xy``), to
+    plot components together."""
     stem = _COMPONENT.sub("", name)
     return stem or name
 

@@ -155,7 +155,40 @@ def y_range(envelopes: list[Envelope], *, legend: bool = False) -> YRange | None
         half = 0.1 * mag if mag > 0.0 else 1.0
         return YRange(lo - half, hi + half, settled)
     pad = 0.05 * span
-    return YRange(lo - pad, hi + pad + (LEGEND_HEADROOM * span if legend else 0.0), settled)
+    lo, hi = labelled(lo - pad, hi + pad)
+    return YRange(lo, hi + (LEGEND_HEADROOM * span if legend else 0.0), settled)
+
+
+LABELLED_INTERVALS = 7
+"""The most tick intervals a pane of the default layout labels (its axis labels only powers of
+ten, each at least about 28 px apart)."""
+
+
+def labelled(lo: float, hi: float) -> tuple[float, float]:
+    """``[lo, hi]`` grown, on the side that costs less, until it holds two labelled ticks: the
+    viewer labels multiples of one power of ten ``S``, the finest with at most
+    :data:`LABELLED_INTERVALS` intervals in the range; a range holding one multiple of ``S``
+    (often just "0") shows a lone tick.
+
+    >>> labelled(-0.06, 0.06)          # ticks at -0.1 and 0 (or 0 and 0.1) instead of 0 alone
+    (-0.1, 0.06)
+    >>> labelled(-1.5, 1.5)            # -1, 0, 1: unchanged
+    (-1.5, 1.5)
+    """
+    for _ in range(4):  # a grown range may call for a coarser step: again
+        span = hi - lo
+        if not (np.isfinite(span) and span > 0.0):
+            return lo, hi
+        step = 10.0 ** np.ceil(np.log10(span / LABELLED_INTERVALS))
+        first, last = np.ceil(lo / step - 1e-6), np.floor(hi / step + 1e-6)
+        if last - first >= 1:
+            break
+        if last == first:  # one multiple inside: add the nearer of its neighbours
+            down, up = (first - 1) * step, (first + 1) * step
+            lo, hi = (float(down), hi) if lo - down <= up - hi else (lo, float(up))
+        else:
+            lo, hi = float(np.floor(lo / step) * step), float(np.ceil(hi / step) * step)
+    return lo, hi
 
 
 def _union(parts: list[tuple[float, float] | None]) -> tuple[float, float] | None:

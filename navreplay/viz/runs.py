@@ -196,7 +196,8 @@ class RunView(TruthView):
         for i, n in enumerate(names):
             label, scale = self._unit(run, n, result, a, b)
             g = group_of(n)
-            shade = lighter(run.color, min(0.3 * groups[g].index(n), 0.75))
+            step = min(0.3, 0.75 / max(len(groups[g]) - 1, 1))  # up to six components apart
+            shade = lighter(run.color, step * groups[g].index(n))
             legend = L if len(groups[g]) == 1 else f"{L} {n}"
             p_state = entity_path(L, "state", n)
             st = run.states.get(n)

@@ -201,3 +201,18 @@ def test_trajectory_and_map_have_a_legend_and_a_scale(tmp_path):
         rb = chunk.to_record_batch()
         if chunk.entity_path == "/time_panel" and "TimePanelBlueprint:play_state" in rb.schema.names:
             assert rb.column("TimePanelBlueprint:play_state").to_pylist()[-1] == [3]  # following
+
+
+def test_every_range_holds_two_labelled_ticks():
+    from navreplay.viz.ranges import LABELLED_INTERVALS, labelled
+
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        centre = rng.normal() * 10.0 ** rng.uniform(-6, 4)
+        half = 10.0 ** rng.uniform(-6, 4)
+        lo, hi = labelled(centre - half, centre + half)
+        assert lo <= centre - half and hi >= centre + half  # only ever grown
+        step = 10.0 ** np.ceil(np.log10((hi - lo) / LABELLED_INTERVALS))
+        ticks = np.floor(hi / step + 1e-6) - np.ceil(lo / step - 1e-6) + 1
+        assert ticks >= 2, (lo, hi)
+        assert (hi - lo) <= 3.0 * 2 * half  # never flattened below a third of the pane
