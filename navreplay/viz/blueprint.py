@@ -118,6 +118,8 @@ class Catalog:
     envelopes: dict[str, Envelope] = dataclasses.field(default_factory=dict)
     """Per series on the ``time`` timeline, the extent of its values over time (the y range
     its pane opens on)."""
+    names: dict[str, list[str]] = dataclasses.field(default_factory=dict)
+    """Per series, the names its legend shows."""
     legend: list[tuple[str, tuple[int, int, int]]] = dataclasses.field(default_factory=list)
     """The filters drawn in the trajectory views and on the map, with their colours."""
     scale_bar: float | None = None
@@ -208,7 +210,7 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3,
         legend) and every pane on the run's time span with a margin; else the viewer's
         automatic ranges.
     """
-    rg = _Ranges(catalog.envelopes) if ranges else None
+    rg = _Ranges(catalog.envelopes, catalog.names) if ranges else None
     tabs: list[rrb.Container] = []
     order = [k for k, _ in TABS] + [k for k in catalog.plots if k not in dict(TABS)]
     titles = {**dict(TABS), **catalog.tab_titles}
@@ -254,15 +256,17 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3,
 class _Ranges:
     """The ranges the panes open on, from the series' envelopes."""
 
-    def __init__(self, envelopes: dict[str, Envelope]) -> None:
+    def __init__(self, envelopes: dict[str, Envelope], names: dict[str, list[str]]) -> None:
         self.envelopes = envelopes
+        self.names = names
         spans = [(e.t_first, e.t_last) for e in envelopes.values() if np.isfinite(e.t_first)]
         self.time = (time_range(min(a for a, _ in spans), max(b for _, b in spans))
                      if spans else None)
 
     def y(self, plot: Plot) -> YRange | None:
         envs = [self.envelopes[p] for p in plot.paths if p in self.envelopes]
-        return y_range(envs, legend=plot.legend) if envs else None
+        entries = len({n for p in plot.paths for n in self.names.get(p, ())})
+        return y_range(envs, legend=entries if plot.legend else 0) if envs else None
 
     def time_axis(self) -> rrb.TimeAxis:
         if self.time is None:

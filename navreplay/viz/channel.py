@@ -216,8 +216,10 @@ class Channel:
         if path in self._styled:
             return
         self._styled.add(path)
-        self._rec.log(path, rr.SeriesLines(names=[legend_name(n) for n in names], colors=colors,
-                                           widths=widths), static=True)
+        shown = [legend_name(n) for n in names]
+        self.catalog.names[path] = shown
+        self._rec.log(path, rr.SeriesLines(names=shown, colors=colors, widths=widths),
+                      static=True)
 
     def _bounded(
         self,

@@ -124,16 +124,23 @@ TRANSIENT = 5.0
 this factor."""
 
 
-LEGEND_HEADROOM = 0.35
-"""Space above the data of a pane with a legend, as a fraction of the data's span: the legend
-(top corner) sits over it, off the data."""
+LEGEND_ENTRY = 0.09
+"""The height of a legend entry as a fraction of a pane's (about 20 px of about 220)."""
 
 
-def y_range(envelopes: list[Envelope], *, legend: bool = False) -> YRange | None:
+def legend_headroom(entries: int) -> float:
+    """Space above the data of a pane whose legend has ``entries`` entries, as a fraction of
+    the data's span: the legend (top corner) sits over it, off the data (0.3 for two
+    entries, 1.4 for six)."""
+    share = min(0.7, 0.05 + LEGEND_ENTRY * max(entries, 1))
+    return share / (1.0 - share)
+
+
+def y_range(envelopes: list[Envelope], *, legend: int = 0) -> YRange | None:
     """The y range of a pane drawing these series: the data's extent padded by 5 %; values
     that never vary (all zero) get a span of 2 (or 20 % of their magnitude) instead of a lone
     tick; a start-up transient that makes the span :data:`TRANSIENT` times that of the rest is
-    left out; with a legend, :data:`LEGEND_HEADROOM` above."""
+    left out; with a legend of ``legend`` entries, :func:`legend_headroom` above."""
     envs = [e for e in envelopes if np.isfinite(e.t_first)]
     if not envs:
         return None
@@ -156,7 +163,7 @@ def y_range(envelopes: list[Envelope], *, legend: bool = False) -> YRange | None
         return YRange(lo - half, hi + half, settled)
     pad = 0.05 * span
     lo, hi = labelled(lo - pad, hi + pad)
-    return YRange(lo, hi + (LEGEND_HEADROOM * span if legend else 0.0), settled)
+    return YRange(lo, hi + (legend_headroom(legend) * span if legend else 0.0), settled)
 
 
 LABELLED_INTERVALS = 7

@@ -136,8 +136,9 @@ class RunView(TruthView):
                                             color=run.color,
                                             widths=np.full(frac.shape, 0.004 * span * u.scale)),
                           static=True)
+            # no legend (a bar chart's names its entity paths): the colours are those above
             self.catalog.add("compare", f"cdf:{key}", f"CDF of the {name} [%] vs [{u.label}]",
-                             path, rank=len(COMPARED) + rank, kind="bars")
+                             path, rank=len(COMPARED) + rank, kind="bars", legend=False)
 
     def _declare(self, run: RunState, result: RunResult) -> None:
         run.states = {s.name: s for s in (*result.states, *result.scored_extras)}

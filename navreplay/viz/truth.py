@@ -128,9 +128,8 @@ class TruthView(WorldView):
         path = self._truth_column(column, "")
         if path is not None:
             names, colors, widths = self._truth_style(column)
-            self._styled.add(path)
-            self._rec.log(path, rr.SeriesLines(names=names, colors=colors, widths=widths),
-                          static=True)
+            self._styled.discard(path)
+            self._style(path, names, colors, widths)
 
     def _truth_column(self, column: str, unit: str) -> str | None:
         """Entity of a truth column logged with the truth (:meth:`start` named it), or None

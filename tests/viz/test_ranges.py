@@ -14,7 +14,7 @@ from test_viz import log_runs, make_result, make_truth, read_blueprint
 from navreplay.viz import naming, open_sink
 from navreplay.viz.ranges import (
     DRAWN_RATE_HZ,
-    LEGEND_HEADROOM,
+    LEGEND_ENTRY,
     Envelope,
     envelope_rows,
     time_range,
@@ -116,9 +116,11 @@ def test_y_range_minimum_span_transient_and_legend():
     high.add(t, np.full((t.shape[0], 1), 300.0))
     plain = y_range([high, ta])
     assert plain.hi > 370.0 and not plain.settled  # the start-up is not what sets the span
-    with_legend = y_range([ta], legend=True)  # room above the data for the legend
-    assert with_legend.lo == r.lo
-    assert with_legend.hi - r.hi == pytest.approx(LEGEND_HEADROOM * (r.hi - r.lo) / 1.1)
+    for entries in (1, 2, 6):  # room above the data for the legend, by its entries
+        with_legend = y_range([ta], legend=entries)
+        assert with_legend.lo == r.lo
+        room = (with_legend.hi - r.hi) / (with_legend.hi - with_legend.lo)
+        assert room >= LEGEND_ENTRY * entries
     lo, hi = time_range(0.0, 600.0)
     assert lo < 0.0 and hi > 620.0
 
