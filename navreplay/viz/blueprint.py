@@ -238,8 +238,12 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3,
             tabs.extend(_column_tabs(ordered, titles[key], grid_columns, rg))
         else:
             views = [_view(p, rg) for p in ordered]
-            tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)),
-                                 name=titles[key]))
+            cols = min(grid_columns, len(views))
+            per_page = cols * GRID_ROWS_PER_PAGE if key.startswith("ensemble") else len(views)
+            pages = [views[i:i + per_page] for i in range(0, len(views), per_page)]
+            for k, page in enumerate(pages):
+                title = titles[key] if len(pages) == 1 else f"{titles[key]} ({k + 1}/{len(pages)})"
+                tabs.append(rrb.Grid(*page, grid_columns=cols, name=title))
     # side panels collapsed: the plots get the whole window (each panel opens with one click)
     panels = (
         rrb.BlueprintPanel(state="collapsed"),
@@ -313,6 +317,11 @@ def _compare_tab(plots: list[Plot], name: str, rg: _Ranges | None) -> rrb.Contai
             rows.append(rrb.Grid(*views, grid_columns=min(4, len(views))))
             shares.append(share * max(1, -(-len(views) // 4)))
     return rrb.Vertical(*rows, row_shares=shares, name=name)
+
+
+GRID_ROWS_PER_PAGE = 4
+"""Rows of panes per tab in the tabs laid out as a grid (the Monte Carlo tabs): more go to
+further tabs, ``Ensemble states (2/4)``."""
 
 
 ROWS_PER_PAGE = 3
