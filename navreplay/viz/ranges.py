@@ -205,8 +205,27 @@ def _union(parts: list[tuple[float, float] | None]) -> tuple[float, float] | Non
     return min(p[0] for p in found), max(p[1] for p in found)
 
 
+TIME_STEPS = (1.0, 10.0, 60.0, 600.0, 3600.0, 36000.0, 86400.0)
+"""The steps [s] of the viewer's duration ticks (``+10s``, ``+1m``, ``+10m``, ``+1h``)."""
+
+
+TIME_INTERVALS = 4
+"""The most tick intervals a pane of the default layout labels on its time axis (four panes
+side by side, ``+1m``-wide labels)."""
+
+
 def time_range(t_first: float, t_last: float) -> tuple[float, float]:
-    """The time span [s] a pane shows: the run with margins (2 % before, 7 % after), so the
-    first and the last tick labels (``+0s``, ``+10m``) are not clipped by the pane's edges."""
+    """The time span [s] a pane shows: the run, up to the next labelled tick if only one
+    would be labelled (a 480 s run up to +10m: ``+0s`` and ``+10m``, never ``+0s`` alone), with
+    margins (2 % before, 7 % after) so the first and the last tick labels are not clipped by
+    the pane's edges.
+
+    >>> [round(v) for v in time_range(0.0, 480.0)], [round(v) for v in time_range(0.0, 240.0)]
+    ([-12, 642], [-5, 257])
+    """
     span = max(t_last - t_first, 1e-3)
+    step = next((s for s in TIME_STEPS if span / s <= TIME_INTERVALS), TIME_STEPS[-1])
+    if np.floor(t_last / step + 1e-6) - np.ceil(t_first / step - 1e-6) < 1:
+        t_last = float(np.ceil(t_last / step - 1e-6) * step)
+        span = t_last - t_first
     return t_first - 0.02 * span, t_last + 0.07 * span

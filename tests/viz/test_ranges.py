@@ -123,6 +123,9 @@ def test_y_range_minimum_span_transient_and_legend():
         assert room >= LEGEND_ENTRY * entries
     lo, hi = time_range(0.0, 600.0)
     assert lo < 0.0 and hi > 620.0
+    lo, hi = time_range(0.0, 480.0)  # +1m ticks too dense in a narrow pane: up to +10m
+    assert lo < 0.0 and hi > 600.0
+    assert time_range(0.0, 240.0)[1] < 260.0  # +0s .. +4m labelled: the run's own span
 
 
 def test_blueprint_ranges_units_and_truth_names(tmp_path):
