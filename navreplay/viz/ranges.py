@@ -209,7 +209,7 @@ TIME_STEPS = (1.0, 10.0, 60.0, 600.0, 3600.0, 36000.0, 86400.0)
 """The steps [s] of the viewer's duration ticks (``+10s``, ``+1m``, ``+10m``, ``+1h``)."""
 
 
-TIME_INTERVALS = 4
+TIME_INTERVALS = 5
 """The most tick intervals a pane of the default layout labels on its time axis (four panes
 side by side, ``+1m``-wide labels)."""
 
