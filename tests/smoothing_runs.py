@@ -1,13 +1,16 @@
-"""Smoothed runs for the smoother's tests: vehicle-drive with GNSS outages made by dropping
-the GNSS samples of the outage windows, replayed forward and smoothed, scored."""
+"""Smoothed runs for the smoother's tests: vehicle-drive with the GNSS outages of its schedule
+(``gps_outages``), replayed forward and smoothed and scored, one by one or as the ensembles
+of ``navreplay montecarlo --smooth``."""
 
 import dataclasses
 
 import numpy as np
 
 from navreplay import metrics
-from navreplay.core.streams import Recording, Stream, StreamKind
+from navreplay.campaign import monte_carlo_tasks, run_ensemble
+from navreplay.core.streams import Recording
 from navreplay.io.source import MemorySource
+from navreplay.jobs.run import campaign_extract
 from navreplay.replay.pipeline import Collect, replay_file
 from navreplay.replay.spec import FilterSpec
 from navreplay.sim.scenario import simulate
@@ -21,28 +24,17 @@ GNSS = {"gps_pos_sigma_h": 0.5, "gps_pos_sigma_v": 1.0}
 """Differential GNSS, as a survey is post-processed."""
 DEV_SEEDS = (100, 101, 102, 103)
 """Seeds the smoother was developed on (and nothing else)."""
+OUTPUT_RATE = 1.0
+"""[Hz]"""
 
 
-def drop_gnss(rec: Recording, outages=OUTAGES) -> Recording:
-    """The recording without its GNSS samples in the outage windows."""
-    streams = dict(rec.streams)
-    for kind in (StreamKind.GPS, StreamKind.GPS_VEL):
-        if kind not in rec:
-            continue
-        s = rec[kind]
-        t = (s.t_ns - rec.t0_ns) * 1e-9
-        keep = np.ones(len(t), bool)
-        for a, length in outages:
-            keep &= ~((t >= a) & (t < a + length))
-        streams[kind] = Stream(s.kind, s.t_ns[keep], {k: v[keep] for k, v in s.columns.items()},
-                               s.frame_id)
-    return dataclasses.replace(rec, streams=streams)
+def values(duration: float = DURATION, outages=OUTAGES) -> dict:
+    """The scenario's parameters."""
+    return {"duration": duration, "imu_grade": GRADE, "gps_outages": outages, **GNSS}
 
 
-def drive(seed: int, duration: float = DURATION) -> Recording:
-    return drop_gnss(simulate("vehicle-drive", {"duration": duration, "imu_grade": GRADE,
-                                                 **GNSS},
-                              seed=seed))
+def drive(seed: int, duration: float = DURATION, outages=OUTAGES) -> Recording:
+    return simulate("vehicle-drive", values(duration, outages), seed=seed)
 
 
 @dataclasses.dataclass
@@ -55,8 +47,8 @@ class Pair:
     m_smoothed: metrics.RunMetrics
 
 
-def smoothed_pair(rec: Recording, filter_name: str = "gps-ins", output_rate: float = 1.0
-                  ) -> Pair:
+def smoothed_pair(rec: Recording, filter_name: str = "gps-ins",
+                  output_rate: float = OUTPUT_RATE) -> Pair:
     collect = Collect()
     replay_file(MemorySource(rec, "drive"), [FilterSpec(filter_name)], stages=[collect],
                 output_rate=output_rate, smooth=True, score=False)
@@ -65,11 +57,32 @@ def smoothed_pair(rec: Recording, filter_name: str = "gps-ins", output_rate: flo
     return Pair(fwd, rts, metrics.run_metrics(fwd, rec), metrics.run_metrics(rts, rec))
 
 
-def horizontal(m: metrics.RunMetrics) -> np.ndarray:
-    """Horizontal position error [m] of each epoch."""
-    return np.hypot(m.nav.pos_ned[:, 0], m.nav.pos_ned[:, 1])
+@dataclasses.dataclass
+class Ensembles:
+    """The ensemble statistics of a filter and of its smoothed run, and the largest ratio of
+    a smoothed sigma to the forward one over every run, scored state and epoch."""
+
+    forward: metrics.EnsembleResult
+    smoothed: metrics.EnsembleResult
+    sigma_ratio_max: float
 
 
-def in_outage(t: np.ndarray, outage) -> np.ndarray:
-    a, length = outage
-    return (t >= a) & (t < a + length)
+def smoothed_ensembles(seed: int, runs: int, workers: int = 1,
+                       filter_name: str = "gps-ins") -> Ensembles:
+    """The ensembles of ``navreplay montecarlo vehicle-drive FILTER --smooth`` over seeds
+    ``seed`` .. ``seed + runs - 1`` (the campaign's tasks, extractor and statistics)."""
+    tasks = [dataclasses.replace(t, smooth=True)
+             for t in monte_carlo_tasks("vehicle-drive", runs, values=values(), seed=seed)]
+    labels = (filter_name, filter_name + "/rts")
+    stats = {label: metrics.EnsembleStats(label) for label in labels}
+    ratio = [0.0]
+
+    def add(out) -> None:
+        fwd, rts = (out.metrics.metrics[label] for label in labels)
+        for label, m in zip(labels, (fwd, rts), strict=True):
+            stats[label].add(m)
+        ratio[0] = max(ratio[0], float(np.max(np.sqrt(rts.state_var / fwd.state_var))))
+
+    run_ensemble(tasks, [FilterSpec(filter_name)], add, extract=campaign_extract,
+                 workers=workers, output_rate=OUTPUT_RATE)
+    return Ensembles(*(stats[label].result() for label in labels), ratio[0])

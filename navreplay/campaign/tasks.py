@@ -57,6 +57,10 @@ class RunTask:
         Topics, frames, time source, initialisation and reference applied to ``path``.
     max_imu_gap : float, optional
         Longest IMU gap a filter bridges [s] (``--max-imu-gap``, :mod:`navreplay.replay.gaps`).
+    smooth : bool
+        Also smooth the filters that can be (``--smooth``): their smoothed runs come back as
+        ``LABEL/rts`` (:mod:`navreplay.replay.smoothing`; the forward pass is stored in the
+        worker's temporary directory meanwhile and removed after the run).
     """
 
     index: int
@@ -69,6 +73,7 @@ class RunTask:
     log: Any = None
     """How to read a log from elsewhere (:class:`navreplay.logs.options.LogOptions`)."""
     max_imu_gap: float | None = None
+    smooth: bool = False
 
     @property
     def source(self) -> str:
@@ -183,9 +188,11 @@ def replay_filters(
     output_rate: float | None = 10.0,
     validate: bool = True,
     max_imu_gap: float | None = None,
+    smooth: bool = False,
 ) -> dict[str, RunResult]:
     """Replay each filter over one recording in memory (:func:`navreplay.replay.replay_file`
-    over it as one window); results by label.
+    over it as one window); results by label (with ``smooth``, each smoothable filter's
+    smoothed run too, labelled ``LABEL/rts``).
 
     Every filter's streams are checked, and every filter built, before the first one runs, so a
     missing stream fails the whole command before any work.
@@ -195,7 +202,7 @@ def replay_filters(
         validate_recording(recording, src.name)
     collect = Collect()
     replay_file(src, filters, stages=[collect], output_rate=output_rate,
-                max_imu_gap=max_imu_gap, score=False)
+                max_imu_gap=max_imu_gap, score=False, smooth=smooth)
     return collect.results()
 
 
@@ -211,7 +218,7 @@ def run_task(
     results = replay_filters(
         recording, filters, source=task.source, output_rate=output_rate,
         validate=task.path is None,  # files are validated by the reader
-        max_imu_gap=task.max_imu_gap,
+        max_imu_gap=task.max_imu_gap, smooth=task.smooth,
     )
     metrics = extract(recording, results, task)
     return RunOutput(task.index, task.source, task.seed, metrics, time.perf_counter() - t0,

@@ -13,7 +13,8 @@ import click
 
 
 class Progress:
-    """A ``progress(done, total)`` callback drawing a click progress bar on stderr."""
+    """A ``progress(done, total)`` callback drawing a click progress bar on stderr (a total
+    that changes, as the events of each filter become known, resizes it)."""
 
     def __init__(self, label: str) -> None:
         self.label = label
@@ -26,6 +27,7 @@ class Progress:
         if self.bar is None:
             self.bar = click.progressbar(length=max(total, 1), label=self.label, file=sys.stderr)
             self.bar.__enter__()
+        self.bar.length = max(total, 1)
         if done > self.done:
             self.bar.update(done - self.done)
             self.done = done
@@ -216,6 +218,12 @@ max_imu_gap_option = click.option(
     "--max-imu-gap", type=float, metavar="S",
     help="Longest IMU gap [s] a filter bridges; a longer one, or any gap for a filter that "
          "cannot bridge, stops the run (default: 6 s).")
+
+smooth_option = click.option(
+    "--smooth", is_flag=True,
+    help="Also smooth every filter that can be (fixed-interval RTS smoother, "
+         "docs/smoothing.md): its result LABEL/rts is scored, shown, exported and reported "
+         "as a filter's (per run, and its ensemble statistics).")
 
 
 def check_executor(ctx: click.Context, param: click.Parameter, value: str) -> str:

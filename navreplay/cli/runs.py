@@ -25,6 +25,7 @@ from navreplay.cli.options import (
     output_of,
     result_flags,
     sensor_config,
+    smooth_option,
     viz_flags,
     viz_options,
     viz_output,
@@ -69,10 +70,7 @@ from navreplay.cli.options import (
               type=click.Choice(["zstd", "lz4", "none"]),
               help="Chunk compression of the estimates MCAP of --export (none: readable "
                    "without a decompressor, e.g. by Foxglove's npm MCAP reader).")
-@click.option("--smooth", is_flag=True,
-              help="Also smooth every filter that can be (fixed-interval RTS smoother, "
-                   "docs/smoothing.md): its result LABEL/rts is scored, shown and exported "
-                   "as a filter's.")
+@smooth_option
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, bind: str | None,
@@ -161,13 +159,14 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
               help="Write per-run and ensemble figures as JSON.")
 @result_flags
 @max_imu_gap_option
+@smooth_option
 def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, workers: int,
                executor: str, refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
                spawn: bool, connect: str | None, serve: bool, bind: str | None,
                web_port: int | None, grpc_port: int | None, no_viz: bool, full_rate: bool,
                summary: str | None, export: str | None, report: str | None,
-               max_imu_gap: float | None) -> None:
+               max_imu_gap: float | None, smooth: bool) -> None:
     """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
 
     Prints per-filter ensemble statistics (RMS error vs mean filter sigma, NEES with its
@@ -177,6 +176,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     Example:
       navreplay montecarlo vehicle-drive ins,gps-ins --runs 50 --workers 2 -p scenario.duration=300
       navreplay montecarlo vehicle-drive gps-ins --runs 1000 --executor dask://scheduler:8786
+      navreplay montecarlo vehicle-drive gps-ins --runs 50 --smooth   # + gps-ins/rts
     """
     from navreplay import jobs
 
@@ -187,7 +187,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
     check_command_outputs(force, [config],
                           output_of(keep, "--keep", directory=True, writes=("*.mcap",)),
                           viz_output(save, no_viz, spawn or serve or bool(connect)),
-                          output_of(summary, "--summary"), export_output(export, specs),
+                          output_of(summary, "--summary"), export_output(export, specs, smooth),
                           output_of(report, "--report"))
     job = jobs.MonteCarloJob(
         scenario=scenario,
@@ -201,7 +201,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         summary_path=Path(summary) if summary else None,
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None,
-        max_imu_gap=max_imu_gap,
+        max_imu_gap=max_imu_gap, smooth=smooth,
     )
     with Progress(f"montecarlo {scenario}") as progress:
         done = jobs.montecarlo(job, progress)

@@ -47,6 +47,9 @@ class MonteCarloJob:
         (:func:`navreplay.campaign.executors.make_executor`).
     max_imu_gap : float, optional
         Longest IMU gap a filter bridges [s] (:mod:`navreplay.replay.gaps`).
+    smooth : bool
+        Also smooth every run of the filters that can be: their ensemble statistics come
+        beside the forward ones, labelled ``LABEL/rts`` (:mod:`navreplay.jobs.smooth`).
     """
 
     scenario: str
@@ -64,6 +67,7 @@ class MonteCarloJob:
     report_path: Path | None = None
     executor: str = "process"
     max_imu_gap: float | None = None
+    smooth: bool = False
 
 
 def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunReport:
@@ -96,4 +100,4 @@ def montecarlo(job: MonteCarloJob, progress: Progress | None = None) -> RunRepor
     return campaign(tasks, job.filters, job.viz, DEFAULT_OUT / f"montecarlo-{job.scenario}.rrd",
                      job.summary_path, job.workers, progress, title, job.output_rate,
                      per_run_table=False, outputs=outputs_of(job), executor=job.executor,
-                     max_imu_gap=job.max_imu_gap)
+                     max_imu_gap=job.max_imu_gap, smooth=job.smooth)

@@ -18,7 +18,7 @@ from navreplay.filters.settings import setting_notes, summary_entries
 from navreplay.io.checks import read_policy
 from navreplay.jobs.report import DEFAULT_OUT, RunReport, write_json
 from navreplay.jobs.results import Outputs
-from navreplay.jobs.smooth import scratch_dir, unsmoothed_notes
+from navreplay.jobs.smooth import output_labels, partners, scratch_dir, unsmoothed_notes
 from navreplay.metrics import tables
 from navreplay.replay.pipeline import replay_file
 from navreplay.replay.session import Progress
@@ -147,15 +147,13 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
             return _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
-    if job.smooth:
-        raise _params.ParamError("--smooth needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
     return campaign(tasks, job.filters, job.viz, default, job.summary_path, job.workers,
                      progress, title, job.output_rate, per_run_table=True,
                      outputs=outputs_of(job), executor=job.executor,
-                     max_imu_gap=job.max_imu_gap)
+                     max_imu_gap=job.max_imu_gap, smooth=job.smooth)
 
 
 def _with_needs(job: RunJob) -> RunJob:
@@ -237,22 +235,31 @@ def campaign(
     outputs: Outputs | None = None,
     executor: str = "process",
     max_imu_gap: float | None = None,
+    smooth: bool = False,
 ) -> RunReport:
+    """Run the tasks over the filters (:func:`navreplay.campaign.run_ensemble`) and report
+    each filter's ensemble statistics (with ``smooth``, each smoothed run's beside its filter's,
+    labelled ``LABEL/rts``): the text tables, the summary, the view, the exports and the
+    report."""
     from navreplay import metrics
     from navreplay.replay.gaps import check_max_gap
 
+    labels = output_labels(filters, smooth)
     outputs = outputs or Outputs()
-    outputs.check([spec.label for spec in filters], ensemble=True)
+    outputs.check(labels, ensemble=True)
     try:
         check_max_gap(max_imu_gap)
     except ValueError as e:
         raise _params.ParamError(str(e)) from None
-    if max_imu_gap is not None:
-        tasks = [dataclasses.replace(t, max_imu_gap=max_imu_gap) for t in tasks]
+    given: dict[str, Any] = {"max_imu_gap": max_imu_gap} if max_imu_gap is not None else {}
+    if smooth:
+        given["smooth"] = True
+    if given:
+        tasks = [dataclasses.replace(t, **given) for t in tasks]
 
-    stats: dict[str, Any] = {spec.label: metrics.EnsembleStats(spec.label) for spec in filters}
+    stats: dict[str, Any] = {label: metrics.EnsembleStats(label) for label in labels}
     rows: list[dict[str, Any]] = []
-    notes: list[str] = []
+    notes: list[str] = unsmoothed_notes(filters) if smooth else []
     settings: dict[str, dict[str, Any]] = {}  # each filter's, from its first run
 
     drill: dict[int, Any] = {}  # per-run metrics for the view when the runs are kept
@@ -287,8 +294,9 @@ def campaign(
             from navreplay.viz.ensemble import log_ensemble, log_runs
 
             declared = {spec.label: getattr(spec.filter_cls, "states", None) for spec in filters}
+            of = partners(filters, smooth)
             for label, result in ens.items():
-                states = declared.get(label)
+                states = declared.get(of.get(label, label))
                 log_ensemble(sink, label, result, states if isinstance(states, tuple) else None)
             log_runs(sink, drill)
         hint = close_output(sink, viz_options)

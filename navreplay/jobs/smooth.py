@@ -1,5 +1,6 @@
-"""``--smooth`` of ``navreplay run``: which filters get a smoothed run, the notes for those
-that cannot, and where the forward pass is stored meanwhile (docs/smoothing.md)."""
+"""``--smooth`` of ``navreplay run`` and ``navreplay montecarlo``: which filters get a smoothed
+run, the notes for those that cannot, and where the forward pass is stored meanwhile
+(docs/smoothing.md)."""
 
 from __future__ import annotations
 
@@ -20,6 +21,12 @@ def output_labels(specs: Sequence[Any], smooth: bool) -> list[str]:
         if smooth and is_smoothable(spec.filter_cls):
             out.append(smoothed_label(spec.label))
     return out
+
+
+def partners(specs: Sequence[Any], smooth: bool) -> dict[str, str]:
+    """The label of each smoothed run's filter, by the smoothed run's label."""
+    return {smoothed_label(spec.label): spec.label for spec in specs
+            if smooth and is_smoothable(spec.filter_cls)}
 
 
 def unsmoothed_notes(specs: Sequence[Any]) -> list[str]:

@@ -142,24 +142,33 @@ def outage_cells(summaries: Mapping[str, Mapping[str, Any]]) -> list[tuple[str, 
     """Each GNSS outage of each filter (``gnss_outages``,
     :mod:`navreplay.metrics.outages`): the horizontal and vertical position error at its end
     with the predicted sigmas, the RMS over it, and for an ensemble the end error over its sigma
-    against the band; a header row first (no rows without outages)."""
+    against the band; a header row first (no rows without outages). The rows of a run derived
+    from a filter's, labelled ``LABEL/...`` (its smoothed run ``LABEL/rts``), follow the
+    filter's row of each outage, so that the two read side by side."""
     rows: list[tuple[str, ...]] = [("GNSS outage [s]", "end error H [m]", "σ H [m]",
                                     "end error V [m]", "σ V [m]", "RMS H [m]", "RMS V [m]",
                                     "check")]
-    for label, s in summaries.items():
-        for o in s.get("gnss_outages") or ():
-            name = f"{label} {o['start']:g}-{o['end']:g}"
-            if "t_end" not in o:
-                rows.append((name, *("-",) * 6, "no estimate inside"))
-                continue
-            check = ""
-            if "ratio_end_h" in o:
-                lo, hi = o["band"]
-                check = (f"H/σ {o['ratio_end_h']:.3g} in {lo:.3g}-{hi:.3g}: "
-                         + ("ok" if o["passed"] else "INCONSISTENT"))
-            rows.append((name, *(f"{o[k]:.3g}" for k in (
-                "err_end_h", "sigma_end_h", "err_end_v", "sigma_end_v", "rms_h", "rms_v")),
-                check))
+    order: list[tuple[str, dict[str, Any]]] = []
+    for label in summaries:
+        if label.rpartition("/")[0] in summaries:
+            continue  # with its filter's rows
+        group = [label, *(x for x in summaries if x.rpartition("/")[0] == label)]
+        outages = [list(summaries[x].get("gnss_outages") or ()) for x in group]
+        for i in range(max(map(len, outages))):
+            order += [(x, o[i]) for x, o in zip(group, outages, strict=True) if i < len(o)]
+    for label, o in order:
+        name = f"{label} {o['start']:g}-{o['end']:g}"
+        if "t_end" not in o:
+            rows.append((name, *("-",) * 6, "no estimate inside"))
+            continue
+        check = ""
+        if "ratio_end_h" in o:
+            lo, hi = o["band"]
+            check = (f"H/σ {o['ratio_end_h']:.3g} in {lo:.3g}-{hi:.3g}: "
+                     + ("ok" if o["passed"] else "INCONSISTENT"))
+        rows.append((name, *(f"{o[k]:.3g}" for k in (
+            "err_end_h", "sigma_end_h", "err_end_v", "sigma_end_v", "rms_h", "rms_v")),
+            check))
     if len(rows) == 1:
         return []
     if not any(r[-1] for r in rows[1:]):  # single runs: no check

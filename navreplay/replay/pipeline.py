@@ -43,6 +43,8 @@ from navreplay.metrics import RunMetrics, RunScorer
 from navreplay.replay.checks import validate_recording
 from navreplay.replay.session import Progress, ReplaySession
 from navreplay.replay.smoothing import (
+    BACKWARD_COST,
+    SCORING_COST,
     ForwardStore,
     TruthStore,
     backward,
@@ -338,13 +340,13 @@ def _replay_file(
             session = sessions[k]
             label = smoothed_label(session.label)
             scorer = (RunScorer(label, t0_ns, metadata.true_errors, has_truth,
-                                scored=_fan_out(stages)) if score else None)
+                                outages=outages, scored=_fan_out(stages)) if score else None)
             paths = backward(store, session.filter,  # type: ignore[arg-type]
-                             tracker.backward(i, store.epochs))
+                             tracker.smoothed(i, store.epochs, scoring=False))
             meta = {**session._meta, "label": label, "scored_extras": (), "measurements": (),
                     "navigation": session.navigation}
             _feed_smoothed(smoothed_blocks(paths, meta), truth_store, scorer, stages,
-                           has_truth)
+                           has_truth, tracker.smoothed(i, store.epochs, scoring=True))
             if scorer is not None:
                 summaries[label] = {**scorer.result(), **summary_entries(session.settings)}
                 if has_truth:
@@ -394,9 +396,11 @@ def _pieces(window: Window, known: dict[StreamKind, int], output_rate: float | N
 
 
 def _feed_smoothed(blocks: Iterator[RunResult], truth: TruthStore | None,
-                   scorer: RunScorer | None, stages: Sequence[Stage], has_truth: bool) -> None:
+                   scorer: RunScorer | None, stages: Sequence[Stage], has_truth: bool,
+                   progress: Callable[[int], None] | None = None) -> None:
     """A smoothed run through its scorer and the stages, its blocks interleaved with the truth
-    windows stored by the forward pass (so that the scorer keeps only the truth around them)."""
+    windows stored by the forward pass (so that the scorer keeps only the truth around them);
+    ``progress(rows)`` after each block."""
     def add(block: RunResult) -> None:
         for stage in stages:
             stage.innovations(block)
@@ -405,6 +409,8 @@ def _feed_smoothed(blocks: Iterator[RunResult], truth: TruthStore | None,
         else:
             for stage in stages:
                 stage.rows(block, None, None)
+        if progress is not None:
+            progress(block.t.shape[0])
 
     pending = next(blocks, None)
     if pending is None:
@@ -446,26 +452,39 @@ def _live(scorer: RunScorer | None, stages: Sequence[Stage]) -> Callable[[RunRes
 
 class _Progress:
     """Progress over the filters: seconds of the recording replayed, over the filters' total
-    (events, when the recording's length is unknown)."""
+    (events, when the recording's length is not known), then the smoothed runs: each one's
+    backward pass and scoring count for :data:`~navreplay.replay.smoothing.BACKWARD_COST` and
+    :data:`~navreplay.replay.smoothing.SCORING_COST` of a forward pass, by epochs done, so the
+    bar reaches its end when the last smoothed run is scored."""
 
     def __init__(self, progress: Progress | None, n: int, first: Window,
                  smoothed: int = 0) -> None:
-        self.progress, self.n, self.smoothed = progress, n, smoothed
+        self.progress, self.n, self.runs_smoothed = progress, n, smoothed
         duration = first.metadata.params.get("duration")
         if not isinstance(duration, int | float) or not duration > 0:
             duration = ((first.end_ns - first.t0_ns) * 1e-9 if first.end_ns is not None
                         else None)
         self.duration = duration
         self.t0_ns = first.t0_ns
-        self.done = [0.0] * n
         self.events = [(0, 0)] * n
+
+    def _forward(self) -> float:
+        """The forward passes' length in the bar's units."""
+        if self.duration is not None:
+            return self.n * self.duration
+        return float(sum(e[1] for e in self.events))
+
+    def _total(self, forward: float) -> int:
+        return int(forward * (1.0 + self.runs_smoothed * (BACKWARD_COST + SCORING_COST) / self.n)
+                   + 1e-6)
 
     def of(self, k: int) -> Progress:
         def report(done: int, total: int) -> None:
             self.events[k] = (done, total)
             if self.duration is None and self.progress is not None:
                 d = sum(e[0] for e in self.events)
-                self.progress(d, max(d, sum(e[1] for e in self.events) or 1))
+                forward = max(d, self._forward())
+                self.progress(d, max(self._total(forward), 1))
 
         return report
 
@@ -479,22 +498,26 @@ class _Progress:
             done = min((int(imu.t_ns[-1]) - self.t0_ns) * 1e-9, self.duration)
         else:
             return
-        total = int((self.n + self.smoothed) * self.duration)
+        total = self._total(self._forward())
         self.progress(min(int(self.n * done), total), total)
 
-    def backward(self, i: int, epochs: int) -> Callable[[int], None] | None:
-        """The progress of the backward pass of the i-th smoothed filter over ``epochs``: each
-        counts for the recording's length after the forward passes."""
-        if self.progress is None or self.duration is None or epochs <= 0:
+    def smoothed(self, i: int, epochs: int, *, scoring: bool) -> Callable[[int], None] | None:
+        """The progress of the i-th smoothed run's backward pass (or, with ``scoring``, of its
+        scoring and staging) over its ``epochs``: ``report(epochs done since the last call)``."""
+        if self.progress is None or epochs <= 0:
             return None
-        progress, duration = self.progress, self.duration
-        total = int((self.n + self.smoothed) * duration)
-        base = (self.n + i) * duration
+        progress, forward = self.progress, self._forward()
+        total = self._total(forward)
+        one = forward / self.n  # one filter's forward pass
+        start = forward + one * (i * (BACKWARD_COST + SCORING_COST)
+                                 + (BACKWARD_COST if scoring else 0.0))
+        width = one * (SCORING_COST if scoring else BACKWARD_COST)
         seen = [0]
 
         def report(done: int) -> None:
             seen[0] += done
-            progress(min(int(base + duration * seen[0] / epochs), total), total)
+            progress(min(int(start + width * min(seen[0] / epochs, 1.0) + 1e-6), total),
+                     total)
 
         return report
 

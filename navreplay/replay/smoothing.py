@@ -30,6 +30,12 @@ from navreplay.filters.smoothable import Smoothable, SmoothingStep
 
 CHUNK = 1024
 """Epochs per stored chunk."""
+BACKWARD_COST = 0.2
+"""The backward pass of a filter's run, in forward passes of it (in the progress bar;
+``benchmarks/bench_smoothing.py`` measures 0.17-0.18 for gps-ins)."""
+SCORING_COST = 0.25
+"""The scoring and output of a smoothed run, in forward passes of its filter (in the progress
+bar; ``bench_smoothing`` measures 0.25-0.26 for gps-ins with its exports)."""
 SUFFIX = "/rts"
 """The label of a smoothed run: its filter's label and this."""
 
