@@ -180,14 +180,14 @@ def layout(mcap_name: str, sources: Sequence[tuple[str, str, tuple[int, int, int
     topics3d = {f"{root}/odom": {"visible": True, "color": hex_color(color) + "ff",
                                  "type": "arrow"} for _, root, color in sources}
     plots = {
-        f"Plot!{axis}": {
-            "title": f"position {axis} in map [m]",
-            "paths": [{"value": f"{root}/odom.pose.pose.position.{axis[0]}", "enabled": True,
+        f"Plot!{name}": {
+            "title": f"position {axis} ({name}) in map [m]",
+            "paths": [{"value": f"{root}/odom.pose.pose.position.{axis}", "enabled": True,
                        "timestampMethod": "headerStamp", "color": hex_color(color),
                        "label": label} for label, root, color in sources],
             "showLegend": True, "legendDisplay": "top", "isSynced": True,
         }
-        for axis in ("x (east)", "y (north)")
+        for axis, name in (("x", "east"), ("y", "north"))
     }
     configs: dict[str, Any] = {
         "3D!estimates": {
@@ -213,8 +213,7 @@ def layout(mcap_name: str, sources: Sequence[tuple[str, str, tuple[int, int, int
             "direction": "row",
             "first": {"direction": "column", "first": "3D!estimates",
                       "second": "map!estimates", "splitPercentage": 60},
-            "second": {"direction": "column", "first": "Plot!x (east)",
-                       "second": "Plot!y (north)"},
+            "second": {"direction": "column", "first": "Plot!east", "second": "Plot!north"},
             "splitPercentage": 60,
         },
         "navreplay": {"mcap": mcap_name,

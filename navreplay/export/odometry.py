@@ -119,8 +119,6 @@ class OdometryWriter:
         from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
         from navreplay.io.writer import LIBRARY
 
-        if compression not in COMPRESSIONS:
-            raise ValueError(f"MCAP compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
         self._file = open(path, "wb")  # noqa: SIM115 (closed by finish or close)
         self._w = Writer(self._file, compression=CompressionType[compression.upper()],
                          enable_crcs=True)

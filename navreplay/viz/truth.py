@@ -105,7 +105,7 @@ class TruthView(WorldView):
         self._log_track(log.root.strip("/"), log.track, TRUTH_COLOR, 1.5, 1.5)
         self._log_outage_track(log.root, log.track)
 
-    def _truth_style(self, column: str) -> tuple[list[str], list[tuple[int, int, int]],
+    def _truth_style(self, column: str) -> tuple[list[str], list[tuple[int, ...]],
                                                  list[float]]:
         """Names, colours and widths of a truth column's components: named after the states
         that estimate them (``b_a_x (truth)``) once a filter has declared them, else
@@ -113,8 +113,9 @@ class TruthView(WorldView):
         k = self._truth_widths.get(column, 1)
         named = self._truth_names.get(column, {})
         names = [named.get(j, "truth" if k == 1 else f"truth {column}[{j}]") for j in range(k)]
-        colors = ([TRUTH_COLOR] if k == 1 else
-                  [TRUTH_COMPONENT_COLORS[j % len(TRUTH_COMPONENT_COLORS)] for j in range(k)])
+        colors: list[tuple[int, ...]] = (
+            [TRUTH_COLOR] if k == 1
+            else [TRUTH_COMPONENT_COLORS[j % len(TRUTH_COMPONENT_COLORS)] for j in range(k)])
         return names, colors, [2.0] * k
 
     def _name_truth(self, column: str, index: tuple[int, ...], state: str) -> None:

@@ -112,7 +112,8 @@ class WorldView(Channel):
                                                           labels=[f"{length:g} m"]),
                           static=True)
             if self._ref is not None:
-                lat, lon, _ = ned_offset_to_lla(*self._ref, bar)
+                ref = self._ref
+                lat, lon, _ = ned_offset_to_lla(ref[0], ref[1], ref[2], bar)
                 self._rec.log("/map/scale",
                               rr.GeoLineStrings(lat_lon=[np.degrees(np.stack([lat, lon], 1))],
                                                 colors=[SCALE_COLOR],

@@ -182,7 +182,7 @@ def test_foxglove_layout_names_the_files_topics(exported) -> None:
     color = PALETTE[color_index("gps-ins")]
     assert panels["map!estimates"]["topicColors"]["/estimates/gps_ins/fix"] == \
         "#{:02x}{:02x}{:02x}".format(*color)
-    for key in ("Plot!x (east)", "Plot!y (north)"):
+    for key in ("Plot!east", "Plot!north"):
         for path in panels[key]["paths"]:
             assert path["value"].split(".")[0] in topics
     assert set(_leaves(layout["layout"])) == set(panels)
