@@ -103,7 +103,7 @@ class Channel:
         self.catalog = Catalog()
         self.drawn_rate = drawn_rate
         """Bins per second of a drawn series' min/max envelope (None: every row drawn)."""
-        self._pending: dict[str, list[tuple[TimeIndex, np.ndarray]]] = {}
+        self._pending: dict[str, list[tuple[TimeIndex, np.ndarray, Any, Any]]] = {}
         """Rows of each series held until a chunk's worth (a file's, not a live view's)."""
         self.live = not isinstance(target, Save)
         self._sent: tuple | None = None
@@ -183,28 +183,48 @@ class Channel:
             return
         if isinstance(idx, TimeIndex):
             flat = values.reshape(values.shape[0], -1)
-            if self.drawn_rate is not None:
-                k = envelope_rows(idx.t, flat, self.drawn_rate, columns, maxima)
-                if k.shape[0] < values.shape[0]:
-                    idx, values, flat = idx.take(k), values[k], flat[k]
             self.catalog.envelopes.setdefault(path, Envelope()).add(idx.t, flat)
-            if not self.live:  # a file: sent in chunks of PENDING_ROWS, not one per block
+            if not self.live:  # a file: whole bins, sent in chunks of PENDING_ROWS
                 pending = self._pending.setdefault(path, [])
-                pending.append((idx, values))
-                if sum(v.shape[0] for _, v in pending) >= PENDING_ROWS:
-                    self._send_pending(path)
+                pending.append((idx, values, columns, maxima))
+                if sum(v.shape[0] for _, v, _, _ in pending) >= PENDING_ROWS:
+                    self._send_pending(path, whole_bins=True)
                 return
+            idx, values = self._drawn(idx, values, columns, maxima)
         self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
 
-    def _send_pending(self, path: str | None = None) -> None:
-        """Send the rows held for ``path`` (every path with None) as one chunk each."""
+    def _drawn(self, idx: TimeIndex, values: np.ndarray, columns: tuple[int, ...] | None,
+               maxima: tuple[int, ...]) -> tuple[TimeIndex, np.ndarray]:
+        """The rows of a series drawn: its min/max envelope at :attr:`drawn_rate`."""
+        if self.drawn_rate is None:
+            return idx, values
+        k = envelope_rows(idx.t, values.reshape(values.shape[0], -1), self.drawn_rate, columns,
+                          maxima)
+        return (idx.take(k), values[k]) if k.shape[0] < values.shape[0] else (idx, values)
+
+    def _send_pending(self, path: str | None = None, *, whole_bins: bool = False) -> None:
+        """Send the rows held for ``path`` (every path with None) as one chunk each; with
+        ``whole_bins``, the rows of the last, unfinished bin stay held (the rows drawn do not
+        depend on how the rows came)."""
         for p in [path] if path is not None else list(self._pending):
             parts = self._pending.pop(p, [])
             if not parts:
                 continue
-            idx = TimeIndex(np.concatenate([i.t for i, _ in parts]), parts[0][0].t0_ns)
-            values = np.concatenate([v for _, v in parts])
-            self._rec.send_columns(p, indexes=idx, columns=rr.Scalars.columns(scalars=values))
+            _, _, columns, maxima = parts[0]
+            t = np.concatenate([i.t for i, _, _, _ in parts])
+            values = np.concatenate([v for _, v, _, _ in parts])
+            cut = t.shape[0]
+            if whole_bins and self.drawn_rate is not None:
+                bins = np.floor(t * self.drawn_rate)
+                cut = int(np.searchsorted(bins, bins[-1], side="left"))
+                if cut < t.shape[0]:
+                    rest = TimeIndex(t[cut:], parts[0][0].t0_ns)
+                    self._pending[p] = [(rest, values[cut:], columns, maxima)]
+            if not cut:
+                continue
+            idx, sent = self._drawn(TimeIndex(t[:cut], parts[0][0].t0_ns), values[:cut],
+                                    columns, maxima)
+            self._rec.send_columns(p, indexes=idx, columns=rr.Scalars.columns(scalars=sent))
 
     def _style(
         self,
@@ -264,12 +284,6 @@ class Channel:
         lines = lo[:, None] + (hi - lo)[:, None] * f[None, :]
         shade = dimmer(color, 0.8)
         self._style(path, [name] * BAND_LINES, [shade] * BAND_LINES, [BAND_WIDTH] * BAND_LINES)
-        if isinstance(idx, TimeIndex) and self.drawn_rate is not None and lo.shape[0] > 2:
-            # a band of constant bounds is drawn by the rows where they change (and its ends)
-            moved = np.r_[True, (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])]
-            moved[-1] = True
-            k = np.flatnonzero(moved | np.r_[moved[1:], True])
-            idx, lines = idx.take(k), lines[k]
         self._scalars(path, idx, lines, columns=(0, BAND_LINES - 1))
 
     def blueprint(self, *, final: bool = True) -> rrb.Blueprint:

@@ -34,7 +34,7 @@ def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
     """Indices of the rows of ``values`` (M, k) at times ``t`` [s] to draw: per bin of
     ``1 / rate_hz`` seconds, the row of the smallest and of the largest value of each of
     ``columns`` (all by default), the row of the largest value of each of ``maxima`` (a +3σ
-    bound: its peaks), and the first and the last row (a block's ends join the next). NaN
+    bound: its peaks): rows of whole bins give the same rows however they were split. NaN
     values are never a minimum or maximum; rows where column 0 is NaN between finite ones
     are kept once per bin (a gap stays a gap)."""
     M = t.shape[0]
@@ -46,7 +46,6 @@ def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
         return np.arange(M)
     seg = np.repeat(np.arange(starts.shape[0]), np.diff(np.r_[starts, M]))
     keep = np.zeros(M, dtype=bool)
-    keep[[0, M - 1]] = True
     cols = range(values.shape[1]) if columns is None else columns
     for j, signs in [*((j, (1.0, -1.0)) for j in cols), *((j, (-1.0,)) for j in maxima)]:
         v = values[:, j]

@@ -308,7 +308,7 @@ def scale_length(span: float) -> float:
     scale bar and the grid spacing of the trajectory views.
 
     >>> scale_length(2300.0), scale_length(40.0), scale_length(0.0)
-    (500.0, 10.0, 1.0)
+    (200.0, 5.0, 1.0)
     """
     target = max(span / 5.0, 1.0)
     k = 10.0 ** np.floor(np.log10(target))

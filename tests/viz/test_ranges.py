@@ -93,8 +93,8 @@ def test_sink_draws_envelopes_with_the_peaks_and_scores_are_untouched(tmp_path):
             assert np.nanmin(a[:, 2]) == np.nanmin(b[:, 2])
     t = d["/f/state/db_g_x"]["time"]
     assert int(np.rint(r.t[spike] * 1e9)) in t.tolist()
-    # a band of constant bounds: its ends only
-    assert d["/f/nees/band"]["time"].shape[0] <= 4
+    # a band of constant bounds: a row per bin
+    assert d["/f/nees/band"]["time"].shape[0] <= 300.0 * DRAWN_RATE_HZ + 2
 
 
 def test_y_range_minimum_span_transient_and_legend():
@@ -221,3 +221,28 @@ def test_every_range_holds_two_labelled_ticks():
         ticks = np.floor(hi / step + 1e-6) - np.ceil(lo / step - 1e-6) + 1
         assert ticks >= 2, (lo, hi)
         assert (hi - lo) <= 3.0 * 2 * half  # never flattened below a third of the pane
+
+
+def test_a_sweep_is_a_bar_chart_on_its_own_axis(tmp_path):
+    a_mg = np.array([0.0, 100.0, 200.0, 400.0])
+    path = tmp_path / "sweep.rrd"
+    with open_sink(path) as sink:
+        sink.log_sweep("fig1 N sweep: RMS roll at 10 s", a_mg,
+                       {"gravity": np.array([0.1, 0.2, 0.4, 0.8]),
+                        "specific_force": np.array([0.1, 0.1, 0.1, 0.1])},
+                       unit="deg", x_name="acceleration", x_unit="mg", tab="sweeps",
+                       tab_title="Sweeps")
+    tabs, views = read_blueprint(path)
+    title = "fig1 N sweep: RMS roll at 10 s [deg] vs acceleration [mg]"
+    assert tabs["Sweeps"] == [title] and views[title][0] == "BarChart"
+    data = read_rrd(path)
+    root = naming.entity_path("ensemble", "fig1 N sweep: RMS roll at 10 s")
+    bars = {k: data["static"][f"{root}/{k}"].to_pydict() for k in ("gravity", "specific_force")}
+    x = {k: np.array(b["BarChart:abscissa"][-1][0]["buffer"]) for k, b in bars.items()}
+    width = {k: np.array(b["BarChart:widths"][-1]) for k, b in bars.items()}
+    # a bar per model side by side about each acceleration [mg], together 80 % of the spacing
+    np.testing.assert_allclose(x["gravity"], a_mg - 20.0)
+    np.testing.assert_allclose(x["specific_force"], a_mg + 20.0)
+    np.testing.assert_allclose(width["gravity"], 40.0)
+    np.testing.assert_allclose(bars["gravity"]["BarChart:values"][-1][0]["buffer"],
+                               [0.1, 0.2, 0.4, 0.8])
