@@ -103,8 +103,9 @@ class Channel:
         self.catalog = Catalog()
         self.drawn_rate = drawn_rate
         """Bins per second of a drawn series' min/max envelope (None: every row drawn)."""
-        self._pending: dict[str, list[tuple[TimeIndex, np.ndarray, Any, Any]]] = {}
-        """Rows of each series held until a chunk's worth (a file's, not a live view's)."""
+        self._pending: dict[str, tuple[Any, list[tuple[TimeIndex, np.ndarray]]]] = {}
+        """Per series of a file (not a live view): the rows of its unfinished bin, and the rows
+        drawn not yet sent (a chunk's worth is sent at once)."""
         self.live = not isinstance(target, Save)
         self._sent: tuple | None = None
         self._colors: dict[str, tuple[int, int, int]] = {}
@@ -155,14 +156,14 @@ class Channel:
             saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
                      self._extent, self._truth, self._truth_yaw, self._world_coords,
                      set(self._truth_columns), self._box, copy.deepcopy(self._truth_log),
-                     copy.deepcopy(self._truth_names))
+                     copy.deepcopy(self._truth_names), copy.deepcopy(self._pending))
             self._rec = _NullStream()  # type: ignore[assignment]
             try:
                 log()
             finally:
                 (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
                  self._truth_yaw, self._world_coords, self._truth_columns, self._box,
-                 self._truth_log, self._truth_names) = saved
+                 self._truth_log, self._truth_names, self._pending) = saved
             if self.catalog.signature() != self._sent:
                 self.send_blueprint(final=False)
         log()
@@ -184,13 +185,9 @@ class Channel:
         if isinstance(idx, TimeIndex):
             flat = values.reshape(values.shape[0], -1)
             self.catalog.envelopes.setdefault(path, Envelope()).add(idx.t, flat)
-            if not self.live:  # a file: whole bins, sent in chunks of PENDING_ROWS
-                pending = self._pending.setdefault(path, [])
-                pending.append((idx, values, columns, maxima))
-                if sum(v.shape[0] for _, v, _, _ in pending) >= PENDING_ROWS:
-                    self._send_pending(path, whole_bins=True)
-                return
-            idx, values = self._drawn(idx, values, columns, maxima)
+            # whole bins drawn (a live view's as they complete, a file's in chunks)
+            self._hold(path, idx, values, columns, maxima)
+            return
         self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
 
     def _drawn(self, idx: TimeIndex, values: np.ndarray, columns: tuple[int, ...] | None,
@@ -202,29 +199,41 @@ class Channel:
                           maxima)
         return (idx.take(k), values[k]) if k.shape[0] < values.shape[0] else (idx, values)
 
-    def _send_pending(self, path: str | None = None, *, whole_bins: bool = False) -> None:
-        """Send the rows held for ``path`` (every path with None) as one chunk each; with
-        ``whole_bins``, the rows of the last, unfinished bin stay held (the rows drawn do not
-        depend on how the rows came)."""
-        for p in [path] if path is not None else list(self._pending):
-            parts = self._pending.pop(p, [])
-            if not parts:
-                continue
-            _, _, columns, maxima = parts[0]
-            t = np.concatenate([i.t for i, _, _, _ in parts])
-            values = np.concatenate([v for _, v, _, _ in parts])
-            cut = t.shape[0]
-            if whole_bins and self.drawn_rate is not None:
-                bins = np.floor(t * self.drawn_rate)
-                cut = int(np.searchsorted(bins, bins[-1], side="left"))
-                if cut < t.shape[0]:
-                    rest = TimeIndex(t[cut:], parts[0][0].t0_ns)
-                    self._pending[p] = [(rest, values[cut:], columns, maxima)]
-            if not cut:
-                continue
-            idx, sent = self._drawn(TimeIndex(t[:cut], parts[0][0].t0_ns), values[:cut],
-                                    columns, maxima)
-            self._rec.send_columns(p, indexes=idx, columns=rr.Scalars.columns(scalars=sent))
+    def _hold(self, path: str, idx: TimeIndex, values: np.ndarray,
+              columns: tuple[int, ...] | None, maxima: tuple[int, ...]) -> None:
+        """Draw the whole bins of a file's series as they complete (the rows of the last,
+        unfinished bin held, so the rows drawn do not depend on how the rows came) and send
+        them once :data:`PENDING_ROWS` are drawn."""
+        tail, ready = self._pending.get(path, (None, []))
+        if tail is not None:
+            idx = TimeIndex(np.concatenate([tail[0].t, idx.t]), idx.t0_ns)
+            values = np.concatenate([tail[1], values])
+        cut = values.shape[0]
+        if self.drawn_rate is not None:
+            bins = np.floor(idx.t * self.drawn_rate)
+            cut = int(np.searchsorted(bins, bins[-1], side="left"))
+        if cut:
+            ready.append(self._drawn(idx.take(np.arange(cut)), values[:cut], columns, maxima))
+        tail = ((idx.take(np.arange(cut, values.shape[0])), values[cut:], columns, maxima)
+                if cut < values.shape[0] else None)
+        self._pending[path] = (tail, ready)
+        if self.live or sum(v.shape[0] for _, v in ready) >= PENDING_ROWS:
+            self._send_ready(path, ready)
+            self._pending[path] = (tail, [])
+
+    def _send_ready(self, path: str, ready: list[tuple[TimeIndex, np.ndarray]]) -> None:
+        if ready:
+            idx = TimeIndex(np.concatenate([i.t for i, _ in ready]), ready[0][0].t0_ns)
+            values = np.concatenate([v for _, v in ready])
+            self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
+
+    def _send_pending(self) -> None:
+        """Draw and send every series' rows held (their last bins too)."""
+        for path, (tail, ready) in list(self._pending.items()):
+            if tail is not None:
+                ready.append(self._drawn(*tail))
+            self._send_ready(path, ready)
+        self._pending.clear()
 
     def _style(
         self,
