@@ -33,6 +33,12 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
         (rf"^(strapdown\.propagate|ins|gps-ins), .+ +{_N} +{_N} +{_N}$", 4),
         (rf"^(kalman|ins_error|ins_time_update)\..+ +{_N}$", 6),
     ],
+    "bench_rrd_size": [
+        (rf"^  (full rate \(--full-rate\)|drawn envelopes \(default\)|drawn, outputs at 100 Hz):"
+         rf" +{_N} MB +{_N} MB/h  \({_N} s\)$", 3),
+        (rf"^size per hour: {_N} MB/h, {_N}x smaller than full rate \(target <= 30 MB/h: "
+         r"(met|NOT met)\)$", 1),
+    ],
     "bench_smoothing": [
         (rf"^ +{_N}s ratios: backward / forward = {_N}, forward with --smooth / without = "
          rf"{_N}, peak with / without = {_N}; ", 1),

@@ -15,11 +15,12 @@ from navreplay.viz.naming import innovation_rows
 
 
 def export_runs(out_dir: Path, results: list[RunResult], rec: Recording | None, *,
-                source: str = "", force: bool = False) -> list[Path]:
+                source: str = "", force: bool = False,
+                compression: str = "zstd") -> list[Path]:
     """Export whole runs (scored against the recording's truth, if any); the files written."""
     has_ref = rec is not None and StreamKind.TRUTH in rec
     writer = export.RunExport(out_dir, [r.label for r in results], has_reference=has_ref,
-                              source=source, force=force)
+                              source=source, force=force, compression=compression)
     try:
         if has_ref:
             writer.add_reference(rec[StreamKind.TRUTH])

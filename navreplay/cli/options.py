@@ -82,7 +82,19 @@ def sensor_config(path: str | None, config: dict[str, Any] | None) -> Any:
 
 def viz_options(save: str | None, spawn: bool, connect: str | None, serve: bool,
                  no_viz: bool, bind: str | None = None, web_port: int | None = None,
-                 grpc_port: int | None = None) -> Any:
+                 grpc_port: int | None = None, full_rate: bool = False) -> Any:
+    import dataclasses
+
+
+    if full_rate and no_viz:
+        raise click.UsageError("--full-rate and --no-viz exclude each other")
+    options = _viz_target(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port)
+    return dataclasses.replace(options, full_rate=full_rate) if full_rate else options
+
+
+def _viz_target(save: str | None, spawn: bool, connect: str | None, serve: bool,
+                no_viz: bool, bind: str | None, web_port: int | None,
+                grpc_port: int | None) -> Any:
     from navreplay.jobs import VizMode, VizOptions
 
     chosen = [name for name, on in (("--save", save is not None), ("--spawn", spawn),
@@ -135,6 +147,10 @@ def viz_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--grpc-port", "grpc_port", type=click.IntRange(1, 65535), metavar="PORT",
                      help="With --serve: the data's (gRPC) port [default: 9876]."),
         click.option("--no-viz", is_flag=True, help="No Rerun output."),
+        click.option("--full-rate", "full_rate", is_flag=True,
+                     help="Draw every estimate in the Rerun view (default: each series as "
+                          "its smallest and largest value every 2 s, every peak kept, about "
+                          "5x smaller .rrd; scores always use every estimate)."),
     ]
     for opt in reversed(opts):
         fn = opt(fn)

@@ -71,18 +71,22 @@ from navreplay.cli.options import (
               help="Skip the gravity and magnetic-dip checks of the frames.")
 @result_flags
 @max_imu_gap_option
+@click.option("--export-compression", "export_compression", default="zstd", show_default=True,
+              type=click.Choice(["zstd", "lz4", "none"]),
+              help="Chunk compression of the estimates MCAP of --export (none: readable "
+                   "without a decompressor, e.g. by Foxglove's npm MCAP reader).")
 @smooth_option
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
         save: str | None, spawn: bool, connect: str | None, serve: bool, bind: str | None,
-        web_port: int | None, grpc_port: int | None, no_viz: bool,
+        web_port: int | None, grpc_port: int | None, no_viz: bool, full_rate: bool,
         summary: str | None, workers: int, executor: str, rate: float | None,
         output_rate: float,
         topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
         start: str | None, end: str | None,
         imu_range: str | None, init: str | None, reference: str | None,
         onboard: Sequence[str], no_frame_check: bool, export: str | None, report: str | None,
-        max_imu_gap: float | None, smooth: bool, force: bool) -> None:
+        max_imu_gap: float | None, export_compression: str, smooth: bool, force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b
@@ -128,12 +132,13 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
     job = jobs.RunJob(
         filters=specs,
         recordings=tuple(Path(a) for a in args),
-        viz=viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port),
+        viz=viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port,
+                        full_rate),
         summary_path=Path(summary) if summary else None,
         workers=workers, executor=executor, pacing=rate, output_rate=output_rate,
         max_imu_gap=max_imu_gap,
         log=log,
-        export_dir=Path(export) if export else None,
+        export_dir=Path(export) if export else None, export_compression=export_compression,
         report_path=Path(report) if report else None, force=force, smooth=smooth,
         command=command_line(),
     )
@@ -175,7 +180,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
                executor: str, refs: Sequence[str], params: Sequence[str], duration: float | None,
                config: str | None, keep: str | None, force: bool, save: str | None,
                spawn: bool, connect: str | None, serve: bool, bind: str | None,
-               web_port: int | None, grpc_port: int | None, no_viz: bool,
+               web_port: int | None, grpc_port: int | None, no_viz: bool, full_rate: bool,
                summary: str | None, export: str | None, report: str | None,
                max_imu_gap: float | None, smooth: bool) -> None:
     """Monte Carlo: simulate SCENARIO with --runs seeds and replay FILTER(s) on each, in memory.
@@ -215,7 +220,8 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
         values=jobs.scenario_values(scenario_items, cfg, duration),
         seed=seed, workers=workers, executor=executor,
         keep_dir=Path(keep) if keep else None, force=force,
-        viz=viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port),
+        viz=viz_options(save, spawn, connect, serve, no_viz, bind, web_port, grpc_port,
+                        full_rate),
         summary_path=Path(summary) if summary else None,
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None,
@@ -235,7 +241,7 @@ def montecarlo(scenario: str, filter_names: str | None, runs: int, seed: int, wo
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 def compare(summaries: Sequence[str], save: str | None, spawn: bool, connect: str | None,
             serve: bool, bind: str | None, web_port: int | None, grpc_port: int | None,
-            no_viz: bool, report: str | None, force: bool) -> None:
+            no_viz: bool, full_rate: bool, report: str | None, force: bool) -> None:
     """Compare the headline metrics of saved summaries (``run``/``montecarlo --summary``):
     a row per metric, a column per filter (``FILE/label`` when labels repeat), the best marked.
 
@@ -253,6 +259,6 @@ def compare(summaries: Sequence[str], save: str | None, spawn: bool, connect: st
     job = jobs.CompareJob(
         summaries=tuple(Path(s) for s in summaries),
         viz=viz_options(save, spawn, connect, serve, no_viz or not view, bind, web_port,
-                        grpc_port),
+                        grpc_port, full_rate and view),
         report_path=Path(report) if report else None, force=force)
     finish(jobs.compare(job))

@@ -69,6 +69,7 @@ from navreplay.export.ensemble import (
     export_ensemble,
 )
 from navreplay.export.files import (
+    FOXGLOVE_LAYOUT,
     INNOVATIONS,
     MANIFEST,
     ODOMETRY_FILE,
@@ -117,6 +118,7 @@ from navreplay.export.tum import (
 __all__ = [
     "BODY_FRAME",
     "Column",
+    "FOXGLOVE_LAYOUT",
     "F_FRD_FLU",
     "FilterOutput",
     "INNOVATIONS",

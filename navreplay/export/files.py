@@ -15,6 +15,10 @@ MANIFEST = "manifest.json"
 ODOMETRY_FILE = "estimates.mcap"
 
 
+FOXGLOVE_LAYOUT = "estimates.foxglove-layout.json"
+"""The Foxglove layout of the estimates MCAP, beside it."""
+
+
 REFERENCE_LABEL = "reference"
 
 
@@ -58,7 +62,7 @@ def run_targets(out_dir: Path, labels: Sequence[str], has_reference: bool) -> li
     """Every file ``--export DIR`` of a single run writes (for the overwrite check)."""
     out_dir = Path(out_dir)
     stems = file_stems(labels)
-    paths = [out_dir / MANIFEST, out_dir / ODOMETRY_FILE]
+    paths = [out_dir / MANIFEST, out_dir / ODOMETRY_FILE, out_dir / FOXGLOVE_LAYOUT]
     for stem in stems.values():
         paths += [out_dir / f"{stem}.csv", out_dir / f"{stem}.tum"]
         # the measurements are known once the filters run: refuse those there are already

@@ -82,6 +82,11 @@ class Poses:
     pose_cov: np.ndarray
     v_flu: np.ndarray
     twist_cov: np.ndarray
+    lla: np.ndarray | None = None
+    """Latitude, longitude [rad] and height [m] (M, 3): the NavSatFix messages."""
+    fix_cov: np.ndarray | None = None
+    """Position covariance in the ENU frame at the vehicle [m^2] (M, 3, 3), NaN where the
+    filter holds no variance."""
 
 
 def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np.ndarray,
@@ -108,9 +113,11 @@ def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np
     twist_cov = np.zeros((M, 6, 6))
     twist_cov[:, :3, :3] = lin
     twist_cov[:, 3:, 3:] = np.full((M, 3, 3), np.nan)  # angular rate: not estimated
+    fix_cov = T_NED_ENU @ cov[:, :3, :3] @ T_NED_ENU
     return Poses(np.asarray(stamps_ns, dtype=np.int64), frame.position(pos),
                  np.concatenate([q[:, 1:], q[:, :1]], axis=1), _mark_unknown(pose_cov),
-                 v_b * np.diagonal(F_FRD_FLU), _mark_unknown(twist_cov))
+                 v_b * np.diagonal(F_FRD_FLU), _mark_unknown(twist_cov),
+                 np.asarray(pos, dtype=np.float64), fix_cov)
 
 
 def _zero_product(A: np.ndarray) -> np.ndarray:

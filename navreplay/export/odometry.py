@@ -94,27 +94,50 @@ def encode_odometry(poses: Poses, frame_id: str = WORLD_FRAME,
     return rec
 
 
-class OdometryWriter:
-    """The Odometry MCAP, written as the poses come: messages of all topics in time order (ties
-    in the order the topics were registered), each topic's poses handed over in time order.
+COMPRESSIONS = ("zstd", "lz4", "none")
+"""Chunk compressions of the estimates MCAP (``--export-compression``): zstd by default;
+``none`` for readers without a decompressor (Foxglove's npm MCAP reader needs one passed)."""
 
-    A message is written once every topic has poses later than it; the rest wait (a window's
-    worth), :meth:`finish` writes them all. The ``late`` topics (of runs whose poses all come
-    after the others', the smoothed runs) are written as they come, after the others' up to
-    then: nothing waits for them.
+
+class OdometryWriter:
+    """The estimates MCAP, written as the poses come: messages of all streams in time order
+    (ties in the order the streams were registered), each stream's poses handed over in time
+    order.
+
+    A stream is an Odometry topic (a name) or a :class:`navreplay.export.foxglove.Topic`
+    (NavSatFix, the /tf of one filter: several streams may share a topic). A message is written
+    once every stream has poses later than it; the rest wait (a window's worth), :meth:`finish`
+    writes them all. The ``late`` streams (of runs whose poses all come after the others', the
+    smoothed runs) are written as they come, after the others' up to then: nothing waits for
+    them.
     """
 
-    def __init__(self, path: Path, topics: Sequence[str], late: Sequence[str] = ()) -> None:
+    def __init__(self, path: Path, topics: Sequence[Any], late: Sequence[str] = (),
+                 compression: str = "zstd") -> None:
+        from mcap.writer import CompressionType
+
         from navreplay.io.mcapwrite import BulkWriter
         from navreplay.io.schemas import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING
         from navreplay.io.writer import LIBRARY
 
         self._file = open(path, "wb")  # noqa: SIM115 (closed by finish or close)
-        self._w = BulkWriter(self._file)
+        self._w = BulkWriter(self._file, compression=CompressionType[compression.upper()])
         self._w.start(profile=PROFILE, library=LIBRARY)
-        sid = self._w.register_schema(ODOMETRY_TYPE, SCHEMA_ENCODING, _ODOMETRY_SCHEMA.encode())
-        self._ids = {topic: self._w.register_channel(topic, MESSAGE_ENCODING, sid)
-                     for topic in topics}
+        schemas: dict[str, int] = {}
+        channels: dict[str, int] = {}
+        self._ids: dict[str, int] = {}
+        self._encode: dict[str, Any] = {}
+        for t in topics:
+            key, name, kind, text, encode = ((t, t, ODOMETRY_TYPE, _ODOMETRY_SCHEMA,
+                                              encode_odometry) if isinstance(t, str)
+                                             else (t.key, t.name, t.type, t.schema, t.encode))
+            if kind not in schemas:
+                schemas[kind] = self._w.register_schema(kind, SCHEMA_ENCODING, text.encode())
+            if name not in channels:
+                channels[name] = self._w.register_channel(name, MESSAGE_ENCODING, schemas[kind])
+            self._ids[key] = channels[name]
+            self._encode[key] = encode
+        topics = list(self._ids)
         # per topic: (stamps, CDR messages as rows of bytes) not yet written
         self._queue: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {t: [] for t in topics}
         self._late = frozenset(late)
@@ -123,7 +146,7 @@ class OdometryWriter:
     def add(self, topic: str, poses: Poses) -> None:
         if not len(poses.stamps_ns):
             return
-        rec = encode_odometry(poses)  # as rows of bytes (concatenating records repacks them)
+        rec = self._encode[topic](poses)  # as rows of bytes (concatenating records repacks them)
         rows = rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize)
         if topic in self._late:
             self._w.add_messages([(self._ids[topic], poses.stamps_ns, rows)])

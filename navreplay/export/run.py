@@ -23,6 +23,7 @@ from navreplay.export.columns import (
     run_columns,
 )
 from navreplay.export.files import (
+    FOXGLOVE_LAYOUT,
     MANIFEST,
     ODOMETRY_FILE,
     REFERENCE_LABEL,
@@ -34,8 +35,17 @@ from navreplay.export.files import (
     topic_name,
     write_text,
 )
+from navreplay.export.foxglove import (
+    NAVSATFIX_TYPE,
+    TF_TOPIC,
+    TF_TYPE,
+    Topic,
+    body_frame,
+    topics_of,
+)
+from navreplay.export.foxglove import layout as foxglove_layout
 from navreplay.export.frames import BODY_FRAME, WORLD_FRAME, LocalFrame, reference_poses, ros_poses
-from navreplay.export.odometry import ODOMETRY_TYPE, OdometryWriter
+from navreplay.export.odometry import COMPRESSIONS, ODOMETRY_TYPE, OdometryWriter
 from navreplay.export.output import FilterOutput
 from navreplay.export.tum import TUM_HEADER, tum_lines
 from navreplay.filters.base import MeasurementKind
@@ -77,8 +87,12 @@ class RunExport:
     def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
                  source: str = "", force: bool = False,
                  late: Mapping[str, str] | None = None,
-                 origin: Mapping[str, Any] | None = None) -> None:
+                 origin: Mapping[str, Any] | None = None, compression: str = "zstd") -> None:
         self.out_dir = Path(out_dir)
+        if compression not in COMPRESSIONS:
+            raise ValueError(f"MCAP compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
+        self.compression = compression
+        """Chunk compression of ``estimates.mcap`` (:data:`COMPRESSIONS`)."""
         self.labels = tuple(labels)
         self.late = dict(late or {})
         """Labels whose rows come after every other's (smoothed runs), each with the label whose
@@ -100,6 +114,7 @@ class RunExport:
         self._entries: dict[str, dict[str, Any]] = {}
         self._odometry: OdometryWriter | None = None
         self._topics: dict[str, str] = {}  # label (or the reference) -> odometry topic
+        self._streams: dict[str, list[Topic]] = {}  # label (or the reference) -> its streams
         # label -> measurement -> its file's manifest entry; the rows and units of its columns
         self._innovations: dict[str, dict[str, dict[str, Any]]] = {}
         self._rows: dict[tuple[str, str], tuple[tuple[str, ...], tuple[str, ...]]] = {}
@@ -236,20 +251,26 @@ class RunExport:
             entry: dict[str, Any] = {"csv": f"{self.file_stems[label]}.csv"}
             if self._nav.get(label) and self._frame is not None:
                 entry["tum"] = f"{self.file_stems[label]}.tum"
-                entry["odometry_topic"] = f"/estimates/{topic_name(label)}/odom"
+                root = f"/estimates/{topic_name(label)}"
+                entry["odometry_topic"] = f"{root}/odom"
+                entry["navsatfix_topic"] = f"{root}/fix"
+                entry["tf_child_frame_id"] = body_frame(topic_name(label))
                 self._open(entry["tum"]).write(TUM_HEADER)
-                topics.append(entry["odometry_topic"])
+                self._streams[label] = topics_of(topic_name(label), root)
+                topics += self._streams[label]
                 self._topics[label] = entry["odometry_topic"]
             self._entries[label] = entry
         if self.has_reference and self._frame is not None:
             self._open(f"{REFERENCE_LABEL}.tum").write(TUM_HEADER)
-            topics.append("/reference/odom")
+            self._streams[REFERENCE_LABEL] = topics_of(REFERENCE_LABEL, f"/{REFERENCE_LABEL}")
+            topics += self._streams[REFERENCE_LABEL]
             self._topics[REFERENCE_LABEL] = "/reference/odom"
         if topics:
             target = self.out_dir / ODOMETRY_FILE
             tmp = temporary_path(target)
             self._odometry = OdometryWriter(
-                tmp, topics, late=[self._topics[x] for x in self.late if x in self._topics])
+                tmp, topics, late=[t.key for x in self.late for t in self._streams.get(x, [])],
+                compression=self.compression)
             self._tmp[target] = (tmp, self._odometry)
         held, self._held = self._held, []
         # estimates first: the reference then goes out piece by piece instead of queueing
@@ -267,7 +288,8 @@ class RunExport:
                 poses = reference_poses(frame, truth)
                 self._file(f"{REFERENCE_LABEL}.tum").write(tum_lines(poses))
                 assert self._odometry is not None  # opened with the first rows
-                self._odometry.add(self._topics[REFERENCE_LABEL], poses)
+                for stream in self._streams[REFERENCE_LABEL]:
+                    self._odometry.add(stream.key, poses)
             return
         out: FilterOutput = item
         entry = self._entries[out.label]
@@ -282,7 +304,8 @@ class RunExport:
             poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
                               out.nav_cov)
             self._file(entry["tum"]).write(tum_lines(poses))
-            self._odometry.add(entry["odometry_topic"], poses)
+            for stream in self._streams[out.label]:
+                self._odometry.add(stream.key, poses)
 
     def _file(self, name: str) -> Any:
         return self._tmp[self.out_dir / name][1]
@@ -331,6 +354,9 @@ class RunExport:
             os.replace(tmp, target)
             release(tmp, remove=False)
             written.append(target)
+        if self._topics:  # the Foxglove layout of the estimates MCAP
+            write_text(self.out_dir / FOXGLOVE_LAYOUT, json.dumps(self._layout(), indent=2) + "\n")
+            written.append(self.out_dir / FOXGLOVE_LAYOUT)
         manifest = self._manifest()
         write_text(self.out_dir / MANIFEST, json.dumps(manifest, indent=2) + "\n")
         written.append(self.out_dir / MANIFEST)
@@ -346,7 +372,8 @@ class RunExport:
                 "nav": "navreplay's NED / FRD: CSV velocities, attitudes and errors",
             },
             "origin": self._frame.to_json() if self._frame is not None else None,
-            "filters": {label: {k: e[k] for k in ("csv", "columns", "tum", "odometry_topic")
+            "filters": {label: {k: e[k] for k in ("csv", "columns", "tum", "odometry_topic",
+                                                  "navsatfix_topic", "tf_child_frame_id")
                                 if k in e}
                         for label, e in self._entries.items()},
         }
@@ -357,12 +384,36 @@ class RunExport:
                 manifest["filters"][label]["innovations"] = {n: files[n] for n in names}
         if REFERENCE_LABEL in self._topics:
             manifest["reference"] = {"tum": f"{REFERENCE_LABEL}.tum",
-                                     "odometry_topic": "/reference/odom"}
+                                     "odometry_topic": "/reference/odom",
+                                     "navsatfix_topic": "/reference/fix",
+                                     "tf_child_frame_id": body_frame(REFERENCE_LABEL)}
         if self._topics:
             manifest["odometry"] = {"file": ODOMETRY_FILE, "type": ODOMETRY_TYPE,
                                     "frame_id": WORLD_FRAME, "child_frame_id": BODY_FRAME,
-                                    "topics": sorted(self._topics.values())}
+                                    "topics": sorted(self._topics.values()),
+                                    "compression": self.compression,
+                                    "navsatfix": {"type": NAVSATFIX_TYPE, "topics": sorted(
+                                        f"{t[:-len('/odom')]}/fix"
+                                        for t in self._topics.values())},
+                                    "tf": {"type": TF_TYPE, "topic": TF_TOPIC,
+                                           "frame_id": WORLD_FRAME},
+                                    "foxglove_layout": FOXGLOVE_LAYOUT}
         return manifest
+
+    def _layout(self) -> dict[str, Any]:
+        from navreplay.core.colors import PALETTE, TRUTH_COLOR, color_index
+
+        taken: list[int] = []
+        sources = []
+        for label, topic in self._topics.items():
+            if label == REFERENCE_LABEL:
+                color = TRUTH_COLOR
+            else:
+                k = color_index(label, taken)
+                taken.append(k)
+                color = PALETTE[k]
+            sources.append((label, topic[:-len("/odom")], color))
+        return foxglove_layout(ODOMETRY_FILE, sources)
 
     def abort(self) -> None:
         """Stop without publishing: the temporaries are deleted, the targets untouched."""

@@ -23,11 +23,13 @@ from navreplay.io.outputs import writing
 
 def export_names(labels: Sequence[str]) -> tuple[str, ...]:
     """Names (glob patterns) of every file ``--export DIR`` may write for filters ``labels``,
-    a run's or a campaign's: the manifest, the Odometry MCAP, the reference's TUM and
+    a run's or a campaign's: the manifest, the estimates MCAP and its Foxglove layout, the
+    reference's TUM and
     ``STEM.*`` per filter (CSV, TUM, innovations, ensemble and NIS files; ``STEM_2.*``... for
     repeated labels). An input or another output there is refused before any work
     (:func:`navreplay.io.outputs.check_outputs`)."""
-    names = [export.MANIFEST, export.ODOMETRY_FILE, f"{export.REFERENCE_LABEL}.tum"]
+    names = [export.MANIFEST, export.ODOMETRY_FILE, export.FOXGLOVE_LAYOUT,
+             f"{export.REFERENCE_LABEL}.tum"]
     for stem in dict.fromkeys(export.file_stem(label) for label in labels):
         names += [f"{stem}.*", f"{stem}_[0-9]*.*"]
     return tuple(names)
@@ -50,6 +52,8 @@ class Outputs:
     force: bool = False
     command: str | None = None
     """The command line, for the report."""
+    compression: str = "zstd"
+    """Chunk compression of the estimates MCAP."""
     _export: export.RunExport | None = None
     _context: dict[str, Any] = dataclasses.field(default_factory=dict)
     _series: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -78,7 +82,7 @@ class Outputs:
             self._export = export.RunExport(self.export_dir, run.labels,
                                             has_reference=run.has_truth, source=run.source,
                                             force=self.force, late=getattr(run, "late", {}),
-                                            origin=_origin(run))
+                                            origin=_origin(run), compression=self.compression)
         if self.report_path is not None:
             from navreplay.report import RunSeries, run_context
 

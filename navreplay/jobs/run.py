@@ -111,6 +111,8 @@ class RunJob:
     output_rate: float = 10.0
     log: Any = None
     export_dir: Path | None = None
+    export_compression: str = "zstd"
+    """Chunk compression of the estimates MCAP (``zstd``, ``lz4``, ``none``)."""
     report_path: Path | None = None
     force: bool = False
     max_imu_gap: float | None = None
@@ -122,7 +124,8 @@ class RunJob:
 def outputs_of(job: Any) -> Outputs:
     """The ``--export`` / ``--report`` outputs of a run or Monte Carlo job."""
     return Outputs(job.export_dir, job.report_path, job.force,
-                   command=getattr(job, "command", None))
+                   command=getattr(job, "command", None),
+                   compression=getattr(job, "export_compression", "zstd"))
 
 
 def _check_files(paths: Sequence[Path]) -> None:

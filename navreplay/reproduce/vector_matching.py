@@ -437,21 +437,20 @@ class VectorMatchingReproduction(Reproduction):
     def log_view(sink: Any, figures: Mapping[str, Any]) -> None:
         """Log the Figs. 1-5 equivalents into an open :class:`navreplay.viz.Sink`.
 
-        Sweeps: one plot per axis and angle, ``/ensemble/fig<1..3> <axis> sweep: RMS <angle> at
-        10 s/<model>``, in tab "Sweeps", versus the acceleration [mg] on the sequence timeline
-        ``acceleration_mg`` (a sweep has no time). Yaw cases: ``/ensemble/fig<4..5> case <x|y>:
-        RMS <angle>/<model>`` versus time [s], tab "Yaw cases". Each model keeps its colour in
+        Sweeps: one bar chart per axis and angle, ``/ensemble/fig<1..3> <axis> sweep: RMS
+        <angle> at 10 s/<model>``, in tab "Sweeps": at each acceleration [mg] a bar per model
+        (a sweep has no time). Yaw cases: ``/ensemble/fig<4..5> case <x|y>: RMS
+        <angle>/<model>`` versus time [s], tab "Yaw cases". Each model keeps its colour in
         every plot.
         """
         a_mg = 1000.0 * np.asarray(figures["sweep"]["accel_g"], dtype=float)
         for fig, axis in enumerate(AXES, start=1):
             r = np.asarray(figures["sweep"]["rms_deg"][axis])
             for k, angle in enumerate(ANGLES):
-                sink.log_ensemble(
+                sink.log_sweep(
                     f"fig{fig} {axis} sweep: RMS {angle} at 10 s", a_mg,
                     {str(m): r[:, j, k] for j, m in enumerate(MODELS)}, unit="deg",
-                    timeline="acceleration_mg", tab="sweeps",
-                    tab_title="Sweeps (x: acceleration [mg])",
+                    x_name="acceleration", x_unit="mg", tab="sweeps", tab_title="Sweeps",
                 )
         t = np.asarray(figures["yaw"]["t"], dtype=float)
         for fig, case in enumerate(CASES, start=4):

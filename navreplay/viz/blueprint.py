@@ -40,6 +40,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from navreplay.viz.ranges import Envelope, YRange, time_range, y_range
+
 TABS: tuple[tuple[str, str], ...] = (
     ("compare", "Compare"),
     ("attitude", "Attitude"),
@@ -113,6 +115,15 @@ class Catalog:
     timeline: str = "time"
     covariances: list[str] = dataclasses.field(default_factory=list)
     """Ellipsoid entities under ``/world`` (left out of the top-down view)."""
+    envelopes: dict[str, Envelope] = dataclasses.field(default_factory=dict)
+    """Per series on the ``time`` timeline, the extent of its values over time (the y range
+    its pane opens on)."""
+    names: dict[str, list[str]] = dataclasses.field(default_factory=dict)
+    """Per series, the names its legend shows."""
+    legend: list[tuple[str, tuple[int, int, int]]] = dataclasses.field(default_factory=list)
+    """The filters drawn in the trajectory views and on the map, with their colours."""
+    scale_bar: float | None = None
+    """Length [m] of the scale bar drawn in the trajectory views and on the map."""
     _paths: set[str] = dataclasses.field(default_factory=set, repr=False)
 
     def add(
@@ -183,7 +194,8 @@ class Catalog:
         )
 
 
-def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint:
+def build_blueprint(catalog: Catalog, *, grid_columns: int = 3,
+                    ranges: bool = True) -> rrb.Blueprint:
     """Tabs of grids of time-series views for the catalogued plots, the trajectory views and
     the map.
 
@@ -192,33 +204,46 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
     catalog : Catalog
     grid_columns : int
         Views per grid row (a row per filter for the per-filter panes of N, E, D components).
+    ranges : bool
+        Open each time-series pane on the y range of its data (:func:`ranges.y_range`: a
+        minimum span, the start-up left out where it would flatten the result, room for the
+        legend) and every pane on the run's time span with a margin; else the viewer's
+        automatic ranges.
     """
+    rg = _Ranges(catalog.envelopes, catalog.names) if ranges else None
     tabs: list[rrb.Container] = []
     order = [k for k, _ in TABS] + [k for k in catalog.plots if k not in dict(TABS)]
     titles = {**dict(TABS), **catalog.tab_titles}
     for key in order:
         if key == "world":
             if catalog.world is not None:
-                tabs.append(_trajectory_tab(catalog.world, catalog.covariances, titles[key]))
+                tabs.append(_trajectory_tab(catalog.world, catalog.covariances, titles[key],
+                                            catalog))
             continue
         if key == "map":
             if catalog.geo:
-                tabs.append(rrb.Horizontal(
-                    rrb.MapView(origin="/map", name="latitude / longitude"), name=titles[key]
-                ))
+                views: list[rrb.View] = [rrb.MapView(origin="/map", name="latitude / longitude")]
+                if catalog.legend:
+                    views.append(_legend_view(catalog))
+                tabs.append(rrb.Vertical(*views, row_shares=[12.0, 1.0][:len(views)],
+                                         name=titles[key]))
             continue
         plots = catalog.plots.get(key, {})
         if not plots:
             continue
         ordered = sorted(plots.values(), key=lambda p: p.rank)  # stable: first use breaks ties
         if key == "compare":
-            tabs.append(_compare_tab(ordered, titles[key]))
+            tabs.append(_compare_tab(ordered, titles[key], rg))
         elif any(p.column is not None for p in ordered):
-            tabs.append(_column_tab(ordered, titles[key], grid_columns))
+            tabs.extend(_column_tabs(ordered, titles[key], grid_columns, rg))
         else:
-            views = [_view(p) for p in ordered]
-            tabs.append(rrb.Grid(*views, grid_columns=min(grid_columns, len(views)),
-                                 name=titles[key]))
+            views = [_view(p, rg) for p in ordered]
+            cols = min(grid_columns, len(views))
+            per_page = cols * GRID_ROWS_PER_PAGE if key.startswith("ensemble") else len(views)
+            pages = [views[i:i + per_page] for i in range(0, len(views), per_page)]
+            for k, page in enumerate(pages):
+                title = titles[key] if len(pages) == 1 else f"{titles[key]} ({k + 1}/{len(pages)})"
+                tabs.append(rrb.Grid(*page, grid_columns=cols, name=title))
     # side panels collapsed: the plots get the whole window (each panel opens with one click)
     panels = (
         rrb.BlueprintPanel(state="collapsed"),
@@ -232,7 +257,35 @@ def build_blueprint(catalog: Catalog, *, grid_columns: int = 3) -> rrb.Blueprint
     return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), *panels)
 
 
-def _view(plot: Plot) -> rrb.View:
+class _Ranges:
+    """The ranges the panes open on, from the series' envelopes."""
+
+    def __init__(self, envelopes: dict[str, Envelope], names: dict[str, list[str]]) -> None:
+        self.envelopes = envelopes
+        self.names = names
+        spans = [(e.t_first, e.t_last) for e in envelopes.values() if np.isfinite(e.t_first)]
+        self.time = (time_range(min(a for a, _ in spans), max(b for _, b in spans))
+                     if spans else None)
+
+    def y(self, plot: Plot) -> YRange | None:
+        envs = [self.envelopes[p] for p in plot.paths if p in self.envelopes]
+        entries = len({n for p in plot.paths for n in self.names.get(p, ())})
+        return y_range(envs, legend=entries if plot.legend else 0) if envs else None
+
+    def time_axis(self) -> rrb.TimeAxis:
+        if self.time is None:
+            return _WHOLE_RUN
+        lo, hi = self.time
+        return rrb.TimeAxis(view_range=rr.TimeRange(
+            start=rrb.TimeRangeBoundary.absolute(seconds=lo),
+            end=rrb.TimeRangeBoundary.absolute(seconds=hi)))
+
+
+SETTLED_NOTE = " (y: after start-up)"
+"""Appended to the title of a pane whose y range leaves out the start-up transient."""
+
+
+def _view(plot: Plot, rg: _Ranges | None = None) -> rrb.View:
     contents = [f"+ {p}" for p in plot.paths]
     if plot.kind == "text":
         return rrb.TextDocumentView(origin="/", contents=contents, name=plot.title)
@@ -241,83 +294,124 @@ def _view(plot: Plot) -> rrb.View:
             origin="/", contents=contents, name=plot.title,
             plot_legend=rrb.PlotLegend(rrb.Corner2D.RightBottom, visible=plot.legend),
         )
+    y = rg.y(plot) if rg is not None else None
+    on_time = y is not None  # a series of the time timeline (not a sweep's sequence)
     return rrb.TimeSeriesView(
         origin="/",
         contents=contents,
-        name=plot.title,
+        name=plot.title + (SETTLED_NOTE if y is not None and y.settled else ""),
         plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop, visible=plot.legend),
-        axis_x=_WHOLE_RUN,
+        axis_x=rg.time_axis() if on_time and rg is not None else _WHOLE_RUN,
+        axis_y=rrb.ScalarAxis(range=(y.lo, y.hi)) if y is not None else None,
     )
 
 
-def _compare_tab(plots: list[Plot], name: str) -> rrb.Container:
+def _compare_tab(plots: list[Plot], name: str, rg: _Ranges | None) -> rrb.Container:
     """The overlaid errors in a row, their CDFs in a row below, the table of headline metrics
     at the bottom."""
     rows = []
     shares = []
     for kind, share in (("series", 3.0), ("bars", 3.0), ("text", 2.6)):
-        views = [_view(p) for p in plots if p.kind == kind]
+        views = [_view(p, rg) for p in plots if p.kind == kind]
         if views:
             rows.append(rrb.Grid(*views, grid_columns=min(4, len(views))))
             shares.append(share * max(1, -(-len(views) // 4)))
     return rrb.Vertical(*rows, row_shares=shares, name=name)
 
 
-def _column_tab(plots: list[Plot], name: str, grid_columns: int) -> rrb.Container:
+GRID_ROWS_PER_PAGE = 4
+"""Rows of panes per tab in the tabs laid out as a grid (the Monte Carlo tabs): more go to
+further tabs, ``Ensemble states (2/4)``."""
+
+
+ROWS_PER_PAGE = 3
+"""Rows of panes per tab in the tabs laid out a column per filter: more rows go to further
+tabs (``Sensor errors: m_a, b_a, b_g``), so a pane keeps the height its tick labels need."""
+
+
+def _column_tabs(plots: list[Plot], name: str, grid_columns: int,
+                 rg: _Ranges | None) -> list[rrb.Container]:
     """A column per filter (its plots one row per group of components, so the same state of
-    two filters sits side by side), after a grid of the plots the filters share."""
-    shared = [_view(p) for p in plots if p.column is None]
+    two filters sits side by side), after a grid of the plots the filters share; at most
+    :data:`ROWS_PER_PAGE` rows per tab, each further tab titled by its rows."""
+    shared = [_view(p, rg) for p in plots if p.column is None]
     columns: dict[str, dict[str, list[Plot]]] = {}
     for p in plots:
         if p.column is not None:
             columns.setdefault(p.column, {}).setdefault(p.row or p.title, []).append(p)
-    rows = sorted({r for col in columns.values() for r in col},
-                  key=lambda r: min(p.rank for col in columns.values() for p in col.get(r, [])))
+    rows = sorted({r for col in columns.values() for r in col},  # by rank, then by name
+                  key=lambda r: (min(p.rank for col in columns.values() for p in col.get(r, [])),
+                                 r))
     width = max((len(ps) for col in columns.values() for ps in col.values()), default=1)
-    cols = []
-    for label, col in columns.items():
-        cells: list[rrb.Container | rrb.View] = []
-        for r in rows:
-            views = [_view(p) for p in col.get(r, [])]
-            cells.append(rrb.Horizontal(*views) if len(views) > 1 else views[0] if views
-                         else rrb.Horizontal())
-        cols.append(rrb.Vertical(*cells, name=label))
-    if not shared:
-        return rrb.Horizontal(*cols, name=name)
-    body = rrb.Horizontal(*cols)
-    top = rrb.Grid(*shared, grid_columns=min(max(grid_columns, width), len(shared)))
-    return rrb.Vertical(top, body, row_shares=[1.0, float(len(rows))], name=name)
+    pages = [rows[i:i + ROWS_PER_PAGE] for i in range(0, len(rows), ROWS_PER_PAGE)] or [[]]
+    tabs: list[rrb.Container] = []
+    for k, page in enumerate(pages):
+        title = name if len(pages) == 1 else f"{name}: {', '.join(page)}"
+        cols = []
+        for label, col in columns.items():
+            cells: list[rrb.Container | rrb.View] = []
+            for r in page:
+                views = [_view(p, rg) for p in col.get(r, [])]
+                cells.append(rrb.Horizontal(*views) if len(views) > 1 else views[0] if views
+                             else rrb.Horizontal())
+            cols.append(rrb.Vertical(*cells, name=label))
+        if not shared or k:
+            tabs.append(rrb.Horizontal(*cols, name=title))
+            continue
+        top = rrb.Grid(*shared, grid_columns=min(max(grid_columns, width), len(shared)))
+        tabs.append(rrb.Vertical(top, rrb.Horizontal(*cols), row_shares=[1.0, float(len(page))],
+                                 name=title))
+    return tabs
+
+
+def _legend_view(catalog: Catalog) -> rrb.View:
+    """The key of the trajectory views and the map: a dot per track in its colour (and the
+    scale bar's length)."""
+    n = len(catalog.legend) + (catalog.scale_bar is not None)
+    return rrb.Spatial2DView(origin="/legend", name="legend",
+                             visual_bounds=rrb.VisualBounds2D(x_range=[-3.0, 7.0 * n],
+                                                              y_range=[-1.0, 1.6]))
 
 
 def _trajectory_tab(
-    box: tuple[np.ndarray, np.ndarray], covariances: list[str], name: str
+    box: tuple[np.ndarray, np.ndarray], covariances: list[str], name: str,
+    catalog: Catalog | None = None,
 ) -> rrb.Container:
     """Top-down N/E view (camera above the trajectory, north up) beside the 3D view, both
-    framed on the NED box [m] of the trajectories."""
+    framed on the NED box [m] of the trajectories, with a grid of the scale bar's length and
+    the legend."""
     lo, hi = box
     centre = 0.5 * (lo + hi)
     span = float(max(np.max(hi[:2] - lo[:2]), 10.0))
+    bar = catalog.scale_bar if catalog is not None else None
+    grid = f", grid {bar:g} m" if bar else ""
     top = rrb.Spatial3DView(
         origin="/world",
-        name="top-down N/E [m] (north up)",
+        name=f"top-down N/E [m] (north up){grid}",
         contents=["+ /world/**", *(f"- {p}" for p in covariances)],
         eye_controls=rrb.EyeControls3D(
             position=(centre[0], centre[1], centre[2] - 1.25 * span),
             look_target=tuple(centre),
             eye_up=(1.0, 0.0, 0.0),  # north at the top of the screen
         ),
-        line_grid=rrb.LineGrid3D(visible=False),
+        line_grid=(rrb.LineGrid3D(visible=True, spacing=bar, plane=rr.components.Plane3D.XY)
+                   if bar else rrb.LineGrid3D(visible=False)),
     )
     persp = rrb.Spatial3DView(
         origin="/world",
-        name="3D NED [m], 3-sigma position ellipsoids",
+        name=f"3D NED [m], 3-sigma position ellipsoids{grid}",
         eye_controls=rrb.EyeControls3D(
             position=(centre[0] - 0.8 * span, centre[1] - 0.8 * span, centre[2] - 0.6 * span),
             look_target=tuple(centre),
             eye_up=(0.0, 0.0, -1.0),
         ),
+        line_grid=(rrb.LineGrid3D(visible=True, spacing=bar, plane=rr.components.Plane3D.XY)
+                   if bar else None),
     )
-    return rrb.Horizontal(top, persp, name=name)
+    if catalog is None or not catalog.legend:
+        return rrb.Horizontal(top, persp, name=name)
+    return rrb.Vertical(rrb.Horizontal(top, persp), _legend_view(catalog),
+                        row_shares=[12.0, 1.0], name=name)
 
 
 # Plots show the whole run (the viewer's default is a window around the time cursor).

@@ -17,6 +17,8 @@ import rerun.blueprint as rrb
 from navreplay.io.outputs import release
 from navreplay.viz import convert
 from navreplay.viz.blueprint import Catalog, build_blueprint
+from navreplay.viz.naming import legend_name
+from navreplay.viz.ranges import DRAWN_RATE_HZ, Envelope, envelope_rows
 from navreplay.viz.style import (
     BAND_LINES,
     BAND_WIDTH,
@@ -45,8 +47,32 @@ TIMESTAMP = "timestamp"
 """Absolute time (UNIX epoch)."""
 
 
+PENDING_ROWS = 4096
+"""Rows of a series a file's sink holds before sending them as one chunk: the blocks of a
+long run (a window each) would otherwise each be a chunk per series, and a chunk's overhead
+(about a kilobyte) would outweigh its rows at 100 Hz outputs."""
+
+
 def _remove(path: Path) -> None:
     release(path)
+
+
+class TimeIndex(list):
+    """The time columns of a send (``time`` and, with ``t0_ns``, ``timestamp``) and the times
+    [s] they were made of, so a series can be thinned to what is drawn."""
+
+    def __init__(self, t: np.ndarray, t0_ns: int | None) -> None:
+        self.t = np.asarray(t, dtype=np.float64)
+        self.t0_ns = t0_ns
+        dt_ns = np.rint(self.t * 1e9).astype(np.int64)
+        cols = [rr.TimeColumn(TIMELINE, duration=dt_ns.astype("timedelta64[ns]"))]
+        if t0_ns is not None:
+            cols.append(rr.TimeColumn(
+                TIMESTAMP, timestamp=(dt_ns + np.int64(t0_ns)).astype("datetime64[ns]")))
+        super().__init__(cols)
+
+    def take(self, k: np.ndarray) -> TimeIndex:
+        return TimeIndex(self.t[k], self.t0_ns)
 
 
 class Channel:
@@ -64,6 +90,7 @@ class Channel:
         url: str | None = None,
         web_url: str | None = None,
         keep_alive: bool = False,
+        drawn_rate: float | None = DRAWN_RATE_HZ,
     ) -> None:
         self._rec = rec
         self._keep_alive = keep_alive
@@ -74,6 +101,11 @@ class Channel:
         self.web_url = web_url
         self.recording_id = str(rec.get_recording_id())
         self.catalog = Catalog()
+        self.drawn_rate = drawn_rate
+        """Bins per second of a drawn series' min/max envelope (None: every row drawn)."""
+        self._pending: dict[str, tuple[Any, list[tuple[TimeIndex, np.ndarray]]]] = {}
+        """Per series of a file (not a live view): the rows of its unfinished bin, and the rows
+        drawn not yet sent (a chunk's worth is sent at once)."""
         self.live = not isinstance(target, Save)
         self._sent: tuple | None = None
         self._colors: dict[str, tuple[int, int, int]] = {}
@@ -91,6 +123,8 @@ class Channel:
         self._truth_wanted: dict[str, str] = {}
         self._outages: tuple[tuple[float, float], ...] = ()
         self._truth_columns: set[str] = set()
+        self._truth_widths: dict[str, int] = {}  # components of each truth column logged
+        self._truth_names: dict[str, dict[int, str]] = {}  # their names, from the states
         self._closed = False
         self._world_coords = False
         self._cleanup = weakref.finalize(self, _remove, tmp) if tmp is not None else None
@@ -121,32 +155,85 @@ class Channel:
         if plan:
             saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
                      self._extent, self._truth, self._truth_yaw, self._world_coords,
-                     set(self._truth_columns), self._box, copy.deepcopy(self._truth_log))
+                     set(self._truth_columns), self._box, copy.deepcopy(self._truth_log),
+                     copy.deepcopy(self._truth_names), copy.deepcopy(self._pending))
             self._rec = _NullStream()  # type: ignore[assignment]
             try:
                 log()
             finally:
                 (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
                  self._truth_yaw, self._world_coords, self._truth_columns, self._box,
-                 self._truth_log) = saved
+                 self._truth_log, self._truth_names, self._pending) = saved
             if self.catalog.signature() != self._sent:
-                self.send_blueprint()
+                self.send_blueprint(final=False)
         log()
         if self.catalog.signature() != self._sent:
-            self.send_blueprint()
+            self.send_blueprint(final=False)
 
     @staticmethod
-    def _indexes(t: np.ndarray, t0_ns: int) -> list[rr.TimeColumn]:
-        dt_ns = np.rint(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
-        return [
-            rr.TimeColumn(TIMELINE, duration=dt_ns.astype("timedelta64[ns]")),
-            rr.TimeColumn(TIMESTAMP, timestamp=(dt_ns + np.int64(t0_ns)).astype("datetime64[ns]")),
-        ]
+    def _indexes(t: np.ndarray, t0_ns: int) -> TimeIndex:
+        return TimeIndex(t, t0_ns)
 
-    def _scalars(self, path: str, idx: list[rr.TimeColumn], values: np.ndarray) -> None:
+    def _scalars(self, path: str, idx: list[rr.TimeColumn], values: np.ndarray,
+                 columns: tuple[int, ...] | None = None, maxima: tuple[int, ...] = ()) -> None:
+        """Send a series; of a :class:`TimeIndex` only the rows of its min/max envelope
+        (:func:`~navreplay.viz.ranges.envelope_rows` of ``columns`` and ``maxima``, at
+        :attr:`drawn_rate`), whose extent the pane's y range is made from."""
         values = np.ascontiguousarray(values, dtype=np.float64)
-        if values.shape[0]:
+        if not values.shape[0]:
+            return
+        if isinstance(idx, TimeIndex):
+            flat = values.reshape(values.shape[0], -1)
+            self.catalog.envelopes.setdefault(path, Envelope()).add(idx.t, flat)
+            # whole bins drawn (a live view's as they complete, a file's in chunks)
+            self._hold(path, idx, values, columns, maxima)
+            return
+        self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
+
+    def _drawn(self, idx: TimeIndex, values: np.ndarray, columns: tuple[int, ...] | None,
+               maxima: tuple[int, ...]) -> tuple[TimeIndex, np.ndarray]:
+        """The rows of a series drawn: its min/max envelope at :attr:`drawn_rate`."""
+        if self.drawn_rate is None:
+            return idx, values
+        k = envelope_rows(idx.t, values.reshape(values.shape[0], -1), self.drawn_rate, columns,
+                          maxima)
+        return (idx.take(k), values[k]) if k.shape[0] < values.shape[0] else (idx, values)
+
+    def _hold(self, path: str, idx: TimeIndex, values: np.ndarray,
+              columns: tuple[int, ...] | None, maxima: tuple[int, ...]) -> None:
+        """Draw the whole bins of a file's series as they complete (the rows of the last,
+        unfinished bin held, so the rows drawn do not depend on how the rows came) and send
+        them once :data:`PENDING_ROWS` are drawn."""
+        tail, ready = self._pending.get(path, (None, []))
+        if tail is not None:
+            idx = TimeIndex(np.concatenate([tail[0].t, idx.t]), idx.t0_ns)
+            values = np.concatenate([tail[1], values])
+        cut = values.shape[0]
+        if self.drawn_rate is not None:
+            bins = np.floor(idx.t * self.drawn_rate)
+            cut = int(np.searchsorted(bins, bins[-1], side="left"))
+        if cut:
+            ready.append(self._drawn(idx.take(np.arange(cut)), values[:cut], columns, maxima))
+        tail = ((idx.take(np.arange(cut, values.shape[0])), values[cut:], columns, maxima)
+                if cut < values.shape[0] else None)
+        self._pending[path] = (tail, ready)
+        if self.live or sum(v.shape[0] for _, v in ready) >= PENDING_ROWS:
+            self._send_ready(path, ready)
+            self._pending[path] = (tail, [])
+
+    def _send_ready(self, path: str, ready: list[tuple[TimeIndex, np.ndarray]]) -> None:
+        if ready:
+            idx = TimeIndex(np.concatenate([i.t for i, _ in ready]), ready[0][0].t0_ns)
+            values = np.concatenate([v for _, v in ready])
             self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
+
+    def _send_pending(self) -> None:
+        """Draw and send every series' rows held (their last bins too)."""
+        for path, (tail, ready) in list(self._pending.items()):
+            if tail is not None:
+                ready.append(self._drawn(*tail))
+            self._send_ready(path, ready)
+        self._pending.clear()
 
     def _style(
         self,
@@ -158,7 +245,10 @@ class Channel:
         if path in self._styled:
             return
         self._styled.add(path)
-        self._rec.log(path, rr.SeriesLines(names=names, colors=colors, widths=widths), static=True)
+        shown = [legend_name(n) for n in names]
+        self.catalog.names[path] = shown
+        self._rec.log(path, rr.SeriesLines(names=shown, colors=colors, widths=widths),
+                      static=True)
 
     def _bounded(
         self,
@@ -182,7 +272,9 @@ class Channel:
             [color, faint, faint],
             [1.5, 1.0, 1.0],
         )
-        self._scalars(path, idx, np.stack([value, N_SIGMA * sigma, -N_SIGMA * sigma], axis=1))
+        # drawn: the value's smallest and largest per bin, the bounds' widest (-3σ mirrors +3σ)
+        self._scalars(path, idx, np.stack([value, N_SIGMA * sigma, -N_SIGMA * sigma], axis=1),
+                      columns=(0,), maxima=(1,))
 
     def band(
         self,
@@ -201,17 +293,20 @@ class Channel:
         lines = lo[:, None] + (hi - lo)[:, None] * f[None, :]
         shade = dimmer(color, 0.8)
         self._style(path, [name] * BAND_LINES, [shade] * BAND_LINES, [BAND_WIDTH] * BAND_LINES)
-        self._scalars(path, idx, lines)
+        self._scalars(path, idx, lines, columns=(0, BAND_LINES - 1))
 
-    def blueprint(self) -> rrb.Blueprint:
-        """The default blueprint for what has been logged so far."""
-        return build_blueprint(self.catalog)
+    def blueprint(self, *, final: bool = True) -> rrb.Blueprint:
+        """The default blueprint for what has been logged so far; ``final``: the panes open on
+        the y and time ranges of their data (a live view's blueprint before the end leaves
+        them to the viewer, which follows the data as it comes)."""
+        return build_blueprint(self.catalog, ranges=final)
 
-    def send_blueprint(self) -> None:
+    def send_blueprint(self, *, final: bool = True) -> None:
         """Send the default blueprint now (also done by :meth:`close`, and by a live sink
-        before the data of every new plot)."""
+        before the data of every new plot, not ``final``)."""
         self._sent = self.catalog.signature()
-        self._rec.send_blueprint(self.blueprint(), make_active=True, make_default=True)
+        self._rec.send_blueprint(self.blueprint(final=final), make_active=True,
+                                 make_default=True)
 
 
 class _NullStream:

@@ -24,6 +24,7 @@ import rerun as rr
 
 from navreplay.io.outputs import temporary_path
 from navreplay.viz import targets
+from navreplay.viz.ranges import DRAWN_RATE_HZ
 from navreplay.viz.sink import APPLICATION_ID, Sink
 from navreplay.viz.targets import (
     Connect,
@@ -57,6 +58,7 @@ def open_sink(
     *,
     recording_name: str | None = None,
     recording_id: str | None = None,
+    drawn_rate: float | None = DRAWN_RATE_HZ,
 ) -> Sink:
     """Open a Rerun sink; checks that the viewer is reachable before anything is logged.
 
@@ -67,6 +69,10 @@ def open_sink(
         Name shown in the viewer (e.g. the recording file's name).
     recording_id : str, optional
         Rerun recording id; a fresh UUID by default, so every sink is its own recording.
+    drawn_rate : float or None
+        Bins per second of the min/max envelope a series is drawn with
+        (:func:`navreplay.viz.ranges.envelope_rows`: every peak kept, the .rrd bounded per
+        hour); None draws every row. Scores always use every row.
 
     Returns
     -------
@@ -80,6 +86,13 @@ def open_sink(
     FileExistsError
         Save with ``overwrite=False`` and the file exists.
     """
+    sink = _open(target, recording_name, recording_id)
+    sink.drawn_rate = drawn_rate
+    return sink
+
+
+def _open(target: Target | str | os.PathLike[str], recording_name: str | None,
+          recording_id: str | None) -> Sink:
     if isinstance(target, str | os.PathLike):
         target = Save(target)
     if isinstance(target, Save):

@@ -25,7 +25,7 @@ import rerun as rr
 from navreplay.filters.base import NavError, State
 from navreplay.metrics import EnsembleResult, RunMetrics, chi2_bounds_per_count
 from navreplay.metrics import outages as _outages
-from navreplay.viz.channel import TIMELINE, Channel
+from navreplay.viz.channel import TIMELINE, Channel, TimeIndex
 from navreplay.viz.naming import Tab, display_unit, entity_path, quantity_of, resolve_unit
 from navreplay.viz.style import OUTAGE_COLOR, SIGMA_SHADE, TRUTH_COLOR, lighter
 
@@ -224,8 +224,7 @@ class EnsemblePlots(Channel):
 
         def index(tt: np.ndarray) -> list[rr.TimeColumn]:
             if timeline is None:
-                return [rr.TimeColumn(TIMELINE,
-                                      duration=np.rint(tt * 1e9).astype("timedelta64[ns]"))]
+                return TimeIndex(tt, None)
             return [rr.TimeColumn(timeline, sequence=np.rint(tt).astype(np.int64))]
 
         idx = index(t)
@@ -266,6 +265,39 @@ class EnsemblePlots(Channel):
                           OUTAGE_COLOR, "GNSS outage")
                 self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
                                  legend=legend, tab_title=tab_title, behind=True)
+
+    def log_sweep(
+        self,
+        name: str,
+        x: np.ndarray,
+        series: Mapping[str, np.ndarray],
+        *,
+        unit: str,
+        x_name: str,
+        x_unit: str,
+        tab: str = "ensemble",
+        tab_title: str | None = None,
+        rank: int = 0,
+    ) -> None:
+        """A sweep (a result against a parameter, not time) as a bar chart on the parameter's
+        own axis: at each ``x`` a bar per series, side by side in the series' colours
+        (``/ensemble/<name>/<series>``), titled ``<name> [unit] vs <x_name> [x_unit]``."""
+        x = np.asarray(x, dtype=np.float64)
+        step = float(np.min(np.diff(np.unique(x)))) if np.unique(x).shape[0] > 1 else 1.0
+        width = 0.8 * step / max(len(series), 1)
+        title = f"{name} [{unit}] vs {x_name} [{x_unit}]"
+        for j, (key, values) in enumerate(series.items()):
+            values = np.asarray(values, dtype=np.float64)
+            if values.shape != x.shape:
+                raise ValueError(
+                    f"sweep {name!r}: series {key!r} has shape {values.shape}, x {x.shape}")
+            path = f"{entity_path('ensemble', name)}/{entity_path(key)[1:]}"
+            color, _ = self._variant_style(key)
+            offset = (j - 0.5 * (len(series) - 1)) * width
+            self._rec.log(path, rr.BarChart(values, abscissa=x + offset, color=color,
+                                            widths=np.full(x.shape, width)), static=True)
+            self.catalog.add(tab, f"ensemble:{name}", title, path, rank=rank, kind="bars",
+                             tab_title=tab_title)
 
     def _variant_style(self, key: str) -> tuple[tuple[int, int, int], float]:
         """Colour and width of an ensemble series named ``"<variant>[ RMS| sigma| σ]"``: the

@@ -79,6 +79,7 @@ _RULES: tuple[tuple[re.Pattern[str], str, Tab], ...] = tuple(
         (r"^d?(b_?g|bias_g|gyro_bias)(_?[xyz0-9])?$", "rad/s", Tab.SENSOR),
         (r"^d?(s|sf|k)_?[ag](_?[xyz0-9])?$", "-", Tab.SENSOR),
         (r"^d?(mu|m|misalign\w*|gamma)_?[NEDxyz0-9]?$", "rad", Tab.SENSOR),
+        (r"^d?m_?[ag]_?[xyz]{2}$", "rad", Tab.SENSOR),  # misalignment m_a_xy, m_g_zx
         (r"^d?(lever\w*|l)_?[xyz0-9]?$", "m", Tab.SENSOR),
         (r"^d?[vV]c_?[NED]$", "m/s", Tab.SENSOR),
         (r"^d?(T|tau|delay)$", "s", Tab.SENSOR),
@@ -126,7 +127,7 @@ NAV_TITLES: dict[str, str] = {
 }
 """Plot titles of the navigation quantities (the unit is appended)."""
 
-_COMPONENT = re.compile(r"(_[NEDxyz]|_?[0-9]+)$")
+_COMPONENT = re.compile(r"(_[NEDxyz]|_[xyz]{2}|_?[0-9]+)$")
 
 
 def guess_si_unit(name: str) -> str | None:
@@ -175,7 +176,8 @@ def tab_of(quantity: StateQuantity) -> Tab:
 
 
 def group_of(name: str) -> str:
-    """Name without its component suffix (``_x``, ``_N``, ``2``), to plot components together."""
+    """Name without its component suffix (``_x``, ``_N``, ``2``, a misalignment's ``_xy``), to
+    plot components together."""
     stem = _COMPONENT.sub("", name)
     return stem or name
 
@@ -227,3 +229,37 @@ def title(name: str, unit: DisplayUnit, what: str = "") -> str:
     """Plot title with its unit: ``title("roll", deg, "error") == "roll error [deg]"``."""
     base = NAV_TITLES.get(name, name)
     return f"{base} {what} [{unit.label}]" if what else f"{base} [{unit.label}]"
+
+
+_VARIANT = re.compile(r"([A-Za-z0-9_.-]+)\[([^\]]*)\]")
+
+
+LEGEND_CHARS = 30
+"""Longest legend entry; longer ones lose their middle."""
+
+
+def legend_name(name: str) -> str:
+    """A series' name as its legend shows it: a variant label ``filter[key=value,...]`` with
+    each key cut to its last word and a long filter name (over 14 characters) to its initials,
+    at most :data:`LEGEND_CHARS` characters (the plot titles keep the whole label).
+
+    >>> legend_name("gps-ins[gps_pos_sigma_scale=2] b_g_x")
+    'gps-ins[scale=2] b_g_x'
+    >>> legend_name("transfer-alignment[match=vel_only]")
+    'ta[match=vel_only]'
+    """
+    def short(m: re.Match[str]) -> str:
+        base = m.group(1)
+        if len(base) > 14:
+            base = "".join(w[0] for w in re.split(r"[-_]", base) if w)
+        params = ",".join(
+            f"{k.rsplit('_', 1)[-1]}={v}" if v else k
+            for k, _, v in (p.partition("=") for p in m.group(2).split(","))
+        )
+        return f"{base}[{params}]"
+
+    out = _VARIANT.sub(short, name)
+    if len(out) > LEGEND_CHARS:
+        half = (LEGEND_CHARS - 1) // 2
+        out = out[:half] + "…" + out[-(LEGEND_CHARS - 1 - half):]
+    return out

@@ -39,6 +39,9 @@ class VizOptions:
         otherwise (:class:`navreplay.viz.targets.Serve`).
     web_port, grpc_port : int
         The served viewer's ports (SERVE).
+    full_rate : bool
+        Draw every row of every series (default: each series drawn as its min/max envelope,
+        :data:`navreplay.viz.ranges.DRAWN_RATE_HZ` bins per second; scores use every row).
     """
 
     mode: VizMode = VizMode.SAVE
@@ -47,6 +50,7 @@ class VizOptions:
     bind: str = "127.0.0.1"
     web_port: int = 9090
     grpc_port: int = 9876
+    full_rate: bool = False
 
     def target(self, default: Path) -> Any:
         """The :mod:`navreplay.viz` target, or None for no output."""
@@ -73,8 +77,10 @@ def open_output(viz_options: VizOptions, default: Path, name: str) -> Any:
     if target is None:
         return None
     from navreplay.viz import open_sink
+    from navreplay.viz.ranges import DRAWN_RATE_HZ
 
-    return open_sink(target, recording_name=name)
+    return open_sink(target, recording_name=name,
+                     drawn_rate=None if viz_options.full_rate else DRAWN_RATE_HZ)
 
 
 def close_output(sink: Any, viz_options: VizOptions) -> str:

@@ -136,8 +136,9 @@ class RunView(TruthView):
                                             color=run.color,
                                             widths=np.full(frac.shape, 0.004 * span * u.scale)),
                           static=True)
+            # no legend (a bar chart's names its entity paths): the colours are those above
             self.catalog.add("compare", f"cdf:{key}", f"CDF of the {name} [%] vs [{u.label}]",
-                             path, rank=len(COMPARED) + rank, kind="bars")
+                             path, rank=len(COMPARED) + rank, kind="bars", legend=False)
 
     def _declare(self, run: RunState, result: RunResult) -> None:
         run.states = {s.name: s for s in (*result.states, *result.scored_extras)}
@@ -172,7 +173,10 @@ class RunView(TruthView):
         result: RunResult,
         a: int,
         b: int,
+        scored: frozenset[str] = frozenset(),
     ) -> None:
+        """Rows [a, b) of a run: states, sigmas (of the states not in ``scored``, whose
+        sigma is their error pane's ±3σ), extras and the navigation solution."""
         if b <= a:
             return
         self._declare(run, result)
@@ -193,30 +197,34 @@ class RunView(TruthView):
         for i, n in enumerate(names):
             label, scale = self._unit(run, n, result, a, b)
             g = group_of(n)
-            shade = lighter(run.color, min(0.3 * groups[g].index(n), 0.75))
+            step = min(0.3, 0.75 / max(len(groups[g]) - 1, 1))  # up to six components apart
+            shade = lighter(run.color, step * groups[g].index(n))
             legend = L if len(groups[g]) == 1 else f"{L} {n}"
             p_state = entity_path(L, "state", n)
-            self._style(p_state, [legend], [shade], [1.5])
-            self._scalars(p_state, idx, result.x[a:b, i] * scale)
-            # an error state that feedback keeps at zero is logged but gets no plot of its own
-            # (its error against the truth and its sigma are what is worth looking at)
             st = run.states.get(n)
-            # a column per filter in the State estimates tab, a row per group
+            # an error state that feedback keeps at zero is not drawn (its error against the
+            # truth and its sigma are what is worth looking at); the others get a column per
+            # filter in the State estimates tab, a row per group
             if np.any(result.x[a:b, i] != 0.0):
+                self._style(p_state, [legend], [shade], [1.5])
+                self._scalars(p_state, idx, result.x[a:b, i] * scale)
                 self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]", p_state,
                                  rank=RANK_STATE, column=L, row=g)
                 if st is not None and isinstance(st.truth, TruthColumn):
                     p_true = self._truth_column(st.truth.column, st.unit)
                     if p_true is not None:
+                        self._name_truth(st.truth.column, st.truth.index, n)
                         self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]",
                                          p_true, rank=RANK_STATE, column=L, row=g)
-            p_sig = entity_path(L, "sigma", n)
-            self._style(p_sig, [f"σ {legend}"], [shade], [1.5])
-            self._scalars(p_sig, idx, sigma[:, i] * scale)
             nav_state = st is not None and isinstance(st.truth, NavError)
             frozen = not np.any(sigma[:, i] > 0.0)  # a disabled or frozen state: left out
-            if not (nav_state or frozen or self.catalog.has(entity_path(L, "error", n))):
-                # sigma of an unscored state; a navigation-error state's is in the nav bounds
+            p_sig = entity_path(L, "sigma", n)
+            if not (nav_state or frozen or n in scored
+                    or self.catalog.has(entity_path(L, "error", n))):
+                # sigma of an unscored state; a scored state's is the ±3σ of its error pane,
+                # a navigation-error state's that of the navigation errors
+                self._style(p_sig, [f"σ {legend}"], [shade], [1.5])
+                self._scalars(p_sig, idx, sigma[:, i] * scale)
                 self.catalog.add("states", f"sigma:{g}@{L}", f"{L}: σ {g} [{label}]", p_sig,
                                  rank=RANK_SIGMA, column=L, row=f"σ {g}")
         for key, arr in result.extras.items():

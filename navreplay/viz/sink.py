@@ -179,7 +179,7 @@ class Sink(RunView, EnsemblePlots):
                 k = int(np.searchsorted(t, rows.t[-1], side="right")) - 1
                 if k >= 0:
                     box = (lo[k], hi[k])
-            self._log_rows(r, rows, 0, rows.t.shape[0])
+            self._log_rows(r, rows, 0, rows.t.shape[0], frozenset(errors))
             r.extent_box = box
             self._log_errors(r, rows, errors)
             if nees is not None:
@@ -219,6 +219,7 @@ class Sink(RunView, EnsemblePlots):
 
     def flush(self, timeout: float = 30.0) -> None:
         """Wait until the logged data has left the process (raises VizUnavailableError)."""
+        self._send_pending()
         try:
             self._rec.flush(timeout_sec=timeout)
         except RuntimeError as e:
@@ -233,6 +234,7 @@ class Sink(RunView, EnsemblePlots):
             self._finish_truth()
             for run in self._runs.values():
                 self._finish_run(run)
+            self._log_legend()
             self.send_blueprint()
             self.flush(timeout)
             if not self._keep_alive:  # a served stream keeps its server up for late browsers

@@ -4,8 +4,9 @@ inside a tab."""
 
 from __future__ import annotations
 
-import zlib
-from collections.abc import Collection
+from navreplay.core.colors import PALETTE as PALETTE  # the colours, shared with the exports
+from navreplay.core.colors import TRUTH_COLOR as TRUTH_COLOR
+from navreplay.core.colors import color_index as color_index
 
 N_SIGMA = 3.0
 
@@ -19,31 +20,13 @@ BAND_WIDTH = 8.0
 """Width of each band line [px]."""
 
 
-TRUTH_COLOR = (150, 150, 150)
+TRUTH_COMPONENT_COLORS = ((235, 150, 150), (150, 225, 150), (160, 180, 245))
+"""The components x, y, z of a truth column drawn beside an estimate's: the axis colours
+(x red, y green, z blue) greyed, so the three are told apart and still read as the truth."""
 
 
 OUTAGE_COLOR = (235, 160, 40)
 """GNSS outages: the true track inside them, and (dimmed) the bands that shade them."""
-
-
-PALETTE = (
-    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207),
-)  # fmt: skip
-"""Filter colours (grey is reserved for the truth): a label's colour is picked by its name
-(:func:`color_index`), so a filter keeps its colour from run to run."""
-
-
-def color_index(label: str, taken: Collection[int] = ()) -> int:
-    """The :data:`PALETTE` index of a label: a CRC-32 of its name, or the next index not
-    ``taken`` by another label of the same view when two names fall on one colour (then the
-    label that came first keeps its own). The built-in filters have distinct colours."""
-    k = zlib.crc32(label.encode()) % len(PALETTE)
-    if len(taken) >= len(PALETTE):
-        return k
-    while k in taken:
-        k = (k + 1) % len(PALETTE)
-    return k
 
 
 AXIS_COLORS = ((230, 60, 60), (60, 200, 60), (70, 110, 240))

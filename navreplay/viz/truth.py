@@ -18,8 +18,8 @@ from navreplay.viz.naming import (
     quantity_of,
     title,
 )
-from navreplay.viz.style import RANK_NAV, TRUTH_COLOR, lighter
-from navreplay.viz.world import WORLD_RATE_HZ, Track, WorldView, axis_size, xyzw
+from navreplay.viz.style import RANK_NAV, TRUTH_COLOR, TRUTH_COMPONENT_COLORS
+from navreplay.viz.world import BODY_RATE_HZ, Track, WorldView, axis_size, xyzw
 
 TRUTH_RATE_HZ = 20.0
 """Default rate of the truth time series [Hz]; None in :meth:`Sink.log_truth` keeps all rows."""
@@ -81,7 +81,7 @@ class TruthView(WorldView):
                              rank=RANK_NAV)
         # 3D and map
         world = f"/world{root}"
-        w = convert.decimate(nav.t, WORLD_RATE_HZ, after=log.last)
+        w = convert.decimate(nav.t, BODY_RATE_HZ, after=log.last)
         if w.shape[0]:
             self._rec.send_columns(
                 f"{world}/body",
@@ -105,6 +105,33 @@ class TruthView(WorldView):
         self._log_track(log.root.strip("/"), log.track, TRUTH_COLOR, 1.5, 1.5)
         self._log_outage_track(log.root, log.track)
 
+    def _truth_style(self, column: str) -> tuple[list[str], list[tuple[int, ...]],
+                                                 list[float]]:
+        """Names, colours and widths of a truth column's components: named after the states
+        that estimate them (``b_a_x (truth)``) once a filter has declared them, else
+        ``truth <column>[j]``; one component grey, three the greyed axis colours."""
+        k = self._truth_widths.get(column, 1)
+        named = self._truth_names.get(column, {})
+        names = [named.get(j, "truth" if k == 1 else f"truth {column}[{j}]") for j in range(k)]
+        colors: list[tuple[int, ...]] = (
+            [TRUTH_COLOR] if k == 1
+            else [TRUTH_COMPONENT_COLORS[j % len(TRUTH_COMPONENT_COLORS)] for j in range(k)])
+        return names, colors, [2.0] * k
+
+    def _name_truth(self, column: str, index: tuple[int, ...], state: str) -> None:
+        """A state estimates component ``index`` of truth ``column``: the component takes its
+        name (``<state> (truth)``) in the legends."""
+        j = index[0] if len(index) == 1 else 0
+        named = self._truth_names.setdefault(column, {})
+        if named.get(j) == f"{state} (truth)":
+            return
+        named[j] = f"{state} (truth)"
+        path = self._truth_column(column, "")
+        if path is not None:
+            names, colors, widths = self._truth_style(column)
+            self._styled.discard(path)
+            self._style(path, names, colors, widths)
+
     def _truth_column(self, column: str, unit: str) -> str | None:
         """Entity of a truth column logged with the truth (:meth:`start` named it), or None
         when the truth lacks it or it has more than 3 components."""
@@ -124,8 +151,8 @@ class TruthView(WorldView):
             return False
         k = flat.shape[1]
         path = f"{root}/extra/{entity_path(column)[1:]}"
-        names = ["truth"] if k == 1 else [f"truth {column}[{j}]" for j in range(k)]
-        self._style(path, names, [lighter(TRUTH_COLOR, 0.3 * j) for j in range(k)], [2.0] * k)
+        self._truth_widths[column] = k
+        self._style(path, *self._truth_style(column))
         u = display_unit(unit)
         t = (stream.t_ns[keep] - np.int64(t0)).astype(np.float64) * 1e-9
         self._scalars(path, self._indexes(t, t0), flat * u.scale)

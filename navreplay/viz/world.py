@@ -12,13 +12,11 @@ import rerun as rr
 
 from navreplay.filters.base import Nav, NavError
 from navreplay.filters.result import RunResult
-from navreplay.geo import quat_wxyz_to_xyzw
+from navreplay.geo import ned_offset_to_lla, quat_wxyz_to_xyzw
 from navreplay.metrics import outages as _outages
 from navreplay.viz import convert
 from navreplay.viz.channel import Channel
-from navreplay.viz.naming import (
-    entity_path,
-)
+from navreplay.viz.naming import entity_path, legend_name
 from navreplay.viz.style import AXIS_COLORS, N_SIGMA, OUTAGE_COLOR
 
 if TYPE_CHECKING:
@@ -26,7 +24,11 @@ if TYPE_CHECKING:
 
 
 WORLD_RATE_HZ = 10.0
-"""Rate of attitude transforms in /world [Hz]."""
+"""Starting rate of the points of the trajectory strips and map tracks [Hz]."""
+
+
+BODY_RATE_HZ = 2.0
+"""Rate of the body transforms (position and attitude) in /world [Hz]."""
 
 
 COVARIANCE_RATE_HZ = 1.0
@@ -85,9 +87,43 @@ class WorldView(Channel):
     def _axes(self, path: str, size: float) -> None:
         self._rec.log(
             path,
-            rr.Arrows3D(vectors=np.eye(3) * size, colors=AXIS_COLORS, labels=["x", "y", "z"]),
+            # no x/y/z badges: those of every filter would pile up where the tracks meet
+            rr.Arrows3D(vectors=np.eye(3) * size, colors=AXIS_COLORS),
             static=True,
         )
+
+    def _log_legend(self) -> None:
+        """The key of the trajectory views and the map (``/legend``: a dot per track in its
+        colour, named) and a scale bar of :func:`scale_length` metres, white, east from below
+        the south-west corner of the tracks (``/world/scale``, ``/map/scale``)."""
+        if not self.catalog.legend:
+            return
+        entries = list(self.catalog.legend)
+        box = self.catalog.world
+        if box is not None:
+            lo, hi = box
+            length = scale_length(float(np.max(hi[:2] - lo[:2])))
+            self.catalog.scale_bar = length
+            n = lo[0] - 0.06 * max(float(hi[0] - lo[0]), length)
+            bar = np.array([[n, lo[1], 0.5 * (lo[2] + hi[2])],
+                            [n, lo[1] + length, 0.5 * (lo[2] + hi[2])]])
+            self._rec.log("/world/scale", rr.LineStrips3D([bar], colors=[SCALE_COLOR],
+                                                          radii=[-1.5],
+                                                          labels=[f"{length:g} m"]),
+                          static=True)
+            if self._ref is not None:
+                ref = self._ref
+                lat, lon, _ = ned_offset_to_lla(ref[0], ref[1], ref[2], bar)
+                self._rec.log("/map/scale",
+                              rr.GeoLineStrings(lat_lon=[np.degrees(np.stack([lat, lon], 1))],
+                                                colors=[SCALE_COLOR],
+                                                radii=rr.Radius.ui_points(1.5)),
+                              static=True)
+            entries.append((f"white bar: {length:g} m", SCALE_COLOR))
+        self._rec.log("/legend", rr.Points2D(
+            positions=[(LEGEND_STEP * i, 0.0) for i in range(len(entries))],
+            radii=[0.4] * len(entries), colors=[c for _, c in entries],
+            labels=[name for name, _ in entries], show_labels=True), static=True)
 
     def _strip(
         self, path: str, ned: np.ndarray, color: tuple[int, int, int], width: float = 2.5
@@ -139,6 +175,8 @@ class WorldView(Channel):
             return
         track.logged = True
         self._strip(entity_path("world", label, "trajectory"), track.ned, color, width=width)
+        if np.isfinite(track.ned).all(axis=1).sum() >= 2:
+            self.catalog.legend.append((legend_name(label), color))
         ok = np.isfinite(track.pos[:, :2]).all(axis=1)
         if ok.sum() >= 2:
             self._rec.log(
@@ -186,7 +224,7 @@ class WorldView(Channel):
     ) -> None:
         L = run.label
         ned = np.stack([values["p_N"], values["p_E"], values["p_D"]], axis=1)
-        w = convert.decimate(nav.t, WORLD_RATE_HZ, after=run.world_t)
+        w = convert.decimate(nav.t, BODY_RATE_HZ, after=run.world_t)
         w = w[np.isfinite(ned[w]).all(axis=1) & np.isfinite(nav.q_nb[w]).all(axis=1)]
         if w.shape[0]:
             self._set_world()
@@ -232,6 +270,7 @@ class WorldView(Channel):
         if not parts:
             return
         strips = [_thin(track.ned[k]) for k in parts]
+        self.catalog.legend.append(("GNSS outage (truth)", OUTAGE_COLOR))
         self._rec.log(f"/world{root}/gnss_outages",
                       rr.LineStrips3D(strips, colors=[OUTAGE_COLOR], radii=[-2.5]), static=True)
         geo = [np.degrees(track.pos[k, :2]) for k in parts]
@@ -255,6 +294,25 @@ def xyzw(q_nb: np.ndarray) -> np.ndarray:
 
 def axis_size(extent: float) -> float:
     return max(1.0, 0.03 * extent)
+
+
+SCALE_COLOR = (255, 255, 255)
+
+
+LEGEND_STEP = 7.0
+"""Spacing of the legend's entries, left to right (a dot with its name under it)."""
+
+
+def scale_length(span: float) -> float:
+    """A round length [m] (1, 2 or 5 times a power of ten) near a fifth of ``span`` [m]: the
+    scale bar and the grid spacing of the trajectory views.
+
+    >>> scale_length(2300.0), scale_length(40.0), scale_length(0.0)
+    (200.0, 5.0, 1.0)
+    """
+    target = max(span / 5.0, 1.0)
+    k = 10.0 ** np.floor(np.log10(target))
+    return float(max(m * k for m in (1.0, 2.0, 5.0) if m * k <= target))
 
 
 _POSITION_STATES = ((Nav.LAT, Nav.LON, Nav.H, -1.0), (Nav.LAT, Nav.LON, Nav.DEPTH, 1.0))

@@ -191,7 +191,10 @@ def test_exports_do_not_wait_for_the_smoothed_run(drive):
             for _, channel, _ in make_reader(f).iter_messages():
                 counts[channel.topic] = counts.get(channel.topic, 0) + 1
     assert counts == {"/estimates/gps_ins/odom": fwd.t.shape[0],
-                      "/estimates/gps_ins_rts/odom": rts.t.shape[0]}
+                      "/estimates/gps_ins_rts/odom": rts.t.shape[0],
+                      "/estimates/gps_ins/fix": fwd.t.shape[0],
+                      "/estimates/gps_ins_rts/fix": rts.t.shape[0],
+                      "/tf": fwd.t.shape[0] + rts.t.shape[0]}
 
 
 def test_the_progress_bar_takes_a_total_that_grows(monkeypatch):

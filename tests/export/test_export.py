@@ -43,8 +43,8 @@ def runs(tmp_path_factory):
 def _odometry(path: Path) -> dict[str, list]:
     msgs: dict[str, list] = {}
     with AnyReader([path]) as reader:
-        for conn, stamp, raw in reader.messages():
-            assert conn.msgtype == "nav_msgs/msg/Odometry"
+        odometry = [c for c in reader.connections if c.msgtype == "nav_msgs/msg/Odometry"]
+        for conn, stamp, raw in reader.messages(connections=odometry):
             msg = reader.deserialize(raw, conn.msgtype)
             assert msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec == stamp
             msgs.setdefault(conn.topic, []).append(msg)
@@ -56,7 +56,7 @@ def test_files_written(runs) -> None:
     assert sorted(p.name for p in written) == sorted(
         ["ins.csv", "ins.tum", "gps-ins.csv", "gps-ins.tum", "reference.tum",
          "gps-ins.innovations.gps_pos.csv", "gps-ins.innovations.gps_vel.csv",
-         "estimates.mcap", "manifest.json"])
+         "estimates.mcap", "estimates.foxglove-layout.json", "manifest.json"])
     manifest = json.loads((out / "manifest.json").read_text())
     truth0 = rec["truth"]["pos"][0]
     assert manifest["origin"]["lat_deg"] == pytest.approx(math.degrees(truth0[0]), abs=1e-12)

@@ -118,7 +118,7 @@ def test_a_plug_in_ahrs_is_scored_and_shown_for_its_attitude_only(plugins, drive
 
     rrd, summary, export = tmp_path / "v.rrd", tmp_path / "s.json", tmp_path / "exp"
     res = CliRunner().invoke(cli, ["run", "--filter", f"{plugins}:Complementary", str(drive),
-                                   "--save", str(rrd), "--summary", str(summary),
+                                   "--save", str(rrd), "--full-rate", "--summary", str(summary),
                                    "--export", str(export)])
     assert res.exit_code == 0, res.output
     s = json.loads(summary.read_text())["filters"]["complementary"]

@@ -129,7 +129,7 @@ def test_the_summary_and_the_rrd_carry_the_same_navigation_errors(drive, tmp_pat
 
     rrd, summary = tmp_path / "v.rrd", tmp_path / "s.json"
     res = CliRunner().invoke(cli, ["run", "gps-ins", str(drive), "--save", str(rrd),
-                                   "--summary", str(summary)])
+                                   "--full-rate", "--summary", str(summary)])
     assert res.exit_code == 0, res.output
     s = json.loads(summary.read_text())["filters"]["gps-ins"]
     data = read_rrd(rrd)

@@ -179,7 +179,7 @@ def test_the_outages_are_shaded_in_the_view(outage_drive, tmp_path) -> None:
     rec, path = outage_drive
     out = tmp_path / "run.rrd"
     run_job.run(run_job.RunJob(filters=(FilterSpec("gps-ins"),), recordings=(path,),
-                               viz=VizOptions(mode=VizMode.SAVE, path=out)))
+                               viz=VizOptions(mode=VizMode.SAVE, path=out, full_rate=True)))
     data = read_rrd(out)
     for axis in ("p_N", "p_E", "p_D"):
         error = scalars(data, f"/gps-ins/error/{axis}")  # error, +3σ, -3σ

@@ -94,9 +94,10 @@ def test_cli_export_report_and_force(drive, tmp_path) -> None:
 
     res = invoke("--report", str(tmp_path / "r.html"))
     assert res.exit_code == 0, res.output
-    assert "Report written to" in res.output and "Exported 7 files" in res.output
+    assert "Report written to" in res.output and "Exported 8 files" in res.output
     assert {p.name for p in (tmp_path / "exp").iterdir()} == {
         "gps-ins.csv", "gps-ins.tum", "reference.tum", "estimates.mcap", "manifest.json",
+        "estimates.foxglove-layout.json",
         "gps-ins.innovations.gps_pos.csv", "gps-ins.innovations.gps_vel.csv"}
     page = (tmp_path / "r.html").read_text()
     assert len(_images(page)) == 2 + 4

@@ -128,7 +128,7 @@ def saved(tmp_path_factory):
     b = make_result("gps-ins[q=2]", 2, truth)  # a label that needs escaping
     path = tmp_path_factory.mktemp("rrd") / "run.rrd"
     err = a.x[:, 12] - GYRO_BIAS[0]
-    with open_sink(Save(path), recording_name="synthetic") as sink:
+    with open_sink(Save(path), recording_name="synthetic", drawn_rate=None) as sink:
         log_runs(sink, [a, b], truth)
         sink.log_ensemble(
             "NEES", a.t, {"gps-ins": np.full(M, 15.2)}, unit="-", bounds=chi2_bounds(15, 50)
@@ -144,7 +144,7 @@ def test_entity_tree(saved):
     b = naming.entity_path("gps-ins[q=2]")
     expected = [
         "/truth/nav/roll", "/truth/nav/v_N", "/truth/nav/p_E",
-        "/gps-ins/state/phi_N", "/gps-ins/sigma/db_g_z", "/gps-ins/error/db_g_x",
+        "/gps-ins/state/phi_N", "/gps-ins/error/db_g_z", "/gps-ins/error/db_g_x",
         "/gps-ins/error/phi_N", "/gps-ins/error/p_N", "/gps-ins/nav/yaw",
         "/gps-ins/extra/misalignment_euler", "/gps-ins/innovation/gps_pos/0",
         "/gps-ins/innovation/gps_pos/nis", f"{b}/state/db_a_y", f"{b}/error/v_D",
@@ -154,6 +154,8 @@ def test_entity_tree(saved):
     ]  # fmt: skip
     missing = [p for p in expected if p not in data]
     assert not missing
+    # a scored state's sigma is the ±3σ of its error pane, not a series of its own
+    assert "/gps-ins/sigma/db_g_z" not in data
     for p in ("/world", "/world/truth/trajectory", "/world/gps-ins/trajectory",
               "/gps-ins/error/db_g_x", "/world/gps-ins/body/axes", "/map/truth/track",
               "/map/gps-ins/track"):  # fmt: skip
@@ -178,8 +180,8 @@ def test_state_sigma_and_time_columns(saved):
         scalars(data, "/gps-ins/state/db_a_x")[:, 0], a.x[:, 9] / MILLI_G, rtol=1e-12
     )
     np.testing.assert_allclose(
-        scalars(data, "/gps-ins/sigma/db_g_z")[:, 0],
-        np.sqrt(a.P[:, 14, 14]) / DEG_PER_HOUR,
+        scalars(data, "/gps-ins/error/db_g_z")[:, 1],
+        3.0 * np.sqrt(a.P[:, 14, 14]) / DEG_PER_HOUR,
         rtol=1e-12,
     )
 
@@ -217,13 +219,15 @@ def test_navigation_errors_and_bounds(saved):
 def test_world_attitude_is_xyzw_and_ned(saved):
     path, truth, a, *_, data = saved
     body = data["/world/gps-ins/body"]
-    assert body["time"].shape == (M,)  # 10 Hz outputs, 10 Hz transforms
+    k = np.arange(0, M, 5)  # 10 Hz outputs, 2 Hz transforms
+    assert body["time"].shape == k.shape
     np.testing.assert_allclose(
-        body["Transform3D:quaternion"].reshape(M, 4), quat_wxyz_to_xyzw(a.nav_q_nb), atol=1e-7
+        body["Transform3D:quaternion"].reshape(-1, 4), quat_wxyz_to_xyzw(a.nav_q_nb[k]),
+        atol=1e-7
     )
     ref = truth[StreamKind.TRUTH]["pos"][0]
-    ned = lla_to_ned_offset(*ref, a.nav_pos[:, 0], a.nav_pos[:, 1], a.nav_pos[:, 2])
-    np.testing.assert_allclose(body["Transform3D:translation"].reshape(M, 3), ned, atol=2e-3)
+    ned = lla_to_ned_offset(*ref, a.nav_pos[k, 0], a.nav_pos[k, 1], a.nav_pos[k, 2])
+    np.testing.assert_allclose(body["Transform3D:translation"].reshape(-1, 3), ned, atol=2e-3)
     cov = data["/world/gps-ins/covariance"]
     assert cov["time"].shape == (M // 10,)  # 1 Hz ellipsoids
 
@@ -293,7 +297,7 @@ def test_rows_block_by_block_log_each_row_once(tmp_path):
     truth = make_truth(duration=60.0)
     r = make_result("live", 3, truth, m=600)
     path = tmp_path / "live.rrd"
-    with open_sink(path) as sink:
+    with open_sink(path, drawn_rate=None) as sink:
         log_runs(sink, [r.rows(0, 0)], truth)
         for a, b in ((0, 150), (150, 151), (151, 400), (400, 600)):
             sink.rows(r.rows(a, b), None, truth[StreamKind.TRUTH])
@@ -302,14 +306,14 @@ def test_rows_block_by_block_log_each_row_once(tmp_path):
     col = data["/live/state/dv_N"]
     np.testing.assert_array_equal(col["time"], np.rint(r.t * 1e9).astype(np.int64))
     np.testing.assert_allclose(col["Scalars:scalars"][:, 0], r.x[:, 3])
-    assert data["/world/live/body"]["time"].shape == (600,)
+    assert data["/world/live/body"]["time"].shape == (120,)  # 2 Hz transforms
     assert "/live/innovation/gps_pos/nis" in data
 
 
 def test_rows_without_navigation_solution(tmp_path):
     r = make_result("bare", 7, m=300)
     path = tmp_path / "bare.rrd"
-    with open_sink(path) as sink:
+    with open_sink(path, drawn_rate=None) as sink:
         for a, b in ((0, 100), (100, 300)):
             sink.rows(r.rows(a, b))
     data = read_rrd(path)
@@ -320,7 +324,7 @@ def test_rows_without_navigation_solution(tmp_path):
 def test_two_sinks_are_two_recordings(tmp_path):
     ids = []
     for i in range(2):
-        with open_sink(tmp_path / f"{i}.rrd") as sink:
+        with open_sink(tmp_path / f"{i}.rrd", drawn_rate=None) as sink:
             sink.rows(make_result("f", i, m=10))
             ids.append(sink.recording_id)
     assert ids[0] != ids[1]
@@ -487,8 +491,12 @@ def test_blueprint_in_the_file_has_tabs_units_and_per_filter_panes(saved):
     path, *_ = saved
     tabs, views = read_blueprint(path)
     assert list(tabs)[:4] == ["Compare", "Attitude", "Velocity", "Position"]
-    assert {"Sensor errors", "State estimates", "NEES / NIS", "Innovations", "Trajectory",
-            "Map", "Ensemble"} <= set(tabs)
+    assert {"Sensor errors", "NEES / NIS", "Innovations", "Trajectory", "Map",
+            "Ensemble"} <= set(tabs)
+    # more than ROWS_PER_PAGE rows of a column tab go to further tabs, titled by their rows
+    states = [t for t in tabs if t.startswith("State estimates")]
+    assert len(states) >= 2 and all(t.startswith("State estimates: ") for t in states)
+    assert all(len(t.split(": ", 1)[1].split(", ")) <= 3 for t in states)
     for name, (kind, _) in views.items():
         if kind == "TimeSeries":  # every plot says its unit, never a placeholder
             assert name.endswith("]") or "[" in name, name
@@ -539,7 +547,7 @@ def test_single_run_nees_with_band(tmp_path):
                             scored_extras=(theta,))
     m = run_metrics(r, truth)
     path = tmp_path / "nees.rrd"
-    with open_sink(path) as sink:
+    with open_sink(path, drawn_rate=None) as sink:
         log_runs(sink, [r], truth)
     data = read_rrd(path)
     np.testing.assert_allclose(scalars(data, "/f/nees")[:, 0], m.nees, rtol=1e-12)
@@ -567,12 +575,16 @@ def test_ensemble_view_colours_tabs_and_bands(tmp_path):
             st.add(m)
             per_run[k + 1][label] = m
     path = tmp_path / "ens.rrd"
-    with open_sink(path) as sink:
+    with open_sink(path, drawn_rate=None) as sink:
         for label, st in stats.items():
             log_ensemble(sink, label, st.result(), STATES)
         log_runs(sink, per_run)
     data = read_rrd(path)
-    tabs, _ = read_blueprint(path)
+    pages, _ = read_blueprint(path)
+    tabs: dict[str, list[str]] = {}  # a tab of more than four rows is in pages "(k/n)"
+    for title, views in pages.items():
+        tabs.setdefault(title.split(" (")[0], []).extend(views)
+    assert all(len(v) <= 3 * 4 for v in pages.values())
     assert {"Ensemble position", "Ensemble velocity", "Ensemble attitude",
             "Ensemble NEES / NIS", "Ensemble runs"} <= set(tabs)
     # navigation-error states (scored: dlat, dv_N, phi_N..) are not repeated as states; their
@@ -639,7 +651,7 @@ def test_sweep_on_its_own_axis_and_one_colour_per_variant(tmp_path):
 
     a_mg = np.arange(-1500.0, 1501.0, 100.0)
     path = tmp_path / "sweep.rrd"
-    with open_sink(path) as sink:
+    with open_sink(path, drawn_rate=None) as sink:
         for k in range(2):
             sink.log_ensemble(f"sweep {k}", a_mg, {"gravity": a_mg * 0 + k, "specific-force": a_mg},
                               unit="deg", timeline="acceleration_mg")
@@ -714,7 +726,7 @@ def test_filter_colours_follow_their_names_not_their_order(tmp_path):
     colours = []
     for name, order in (("a", runs), ("b", runs[::-1]), ("c", runs[1:])):
         path = tmp_path / f"{name}.rrd"
-        with open_sink(path) as sink:
+        with open_sink(path, drawn_rate=None) as sink:
             log_runs(sink, order, truth)
         data = read_rrd(path)
         colours.append({r.label: first_color(data, naming.entity_path(r.label, "nav", "roll"))

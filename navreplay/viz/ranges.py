@@ -1,0 +1,230 @@
+"""What a time-series pane draws and the ranges it opens on: the rows kept of a long series (a
+min/max envelope per time bin, so no peak is lost), and the y and time ranges that make a pane
+readable (a minimum span for values that can be all zero, the start-up transient left out of
+the y range when it would flatten the result, headroom above the data for the legend).
+
+No rerun import here: the blueprint turns the ranges into axes.
+
+Examples
+--------
+>>> import numpy as np
+>>> t = np.arange(1000) * 0.01                       # 100 Hz for 10 s
+>>> v = np.sin(t); v[537] = 5.0                      # a one-sample peak
+>>> k = envelope_rows(t, v[:, None], 2.0)            # bins of 0.5 s
+>>> len(k) <= 2 * 20 + 1, 537 in k
+(True, True)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+DRAWN_RATE_HZ = 0.5
+"""Default bins per second of a drawn series: each 2 s bin keeps the rows of the smallest and
+the largest value (and of a ±3σ bound's largest), so a 10 Hz or a 100 Hz output draws at
+about one row per second, a pane holds about a bin per pixel of its width even for an hour,
+and every peak stays. Scores, summaries and exports use every row."""
+
+
+def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
+                  columns: tuple[int, ...] | None = None,
+                  maxima: tuple[int, ...] = ()) -> np.ndarray:
+    """Indices of the rows of ``values`` (M, k) at times ``t`` [s] to draw: per bin of
+    ``1 / rate_hz`` seconds, the row of the smallest and of the largest value of each of
+    ``columns`` (all by default), the row of the largest value of each of ``maxima`` (a +3σ
+    bound: its peaks): rows of whole bins give the same rows however they were split. NaN
+    values are never a minimum or maximum; rows where column 0 is NaN between finite ones
+    are kept once per bin (a gap stays a gap)."""
+    M = t.shape[0]
+    if M <= 2:
+        return np.arange(M)
+    bins = np.floor(np.asarray(t, dtype=np.float64) * rate_hz)
+    starts = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
+    if starts.shape[0] * 3 >= M:  # already sparse: everything
+        return np.arange(M)
+    seg = np.repeat(np.arange(starts.shape[0]), np.diff(np.r_[starts, M]))
+    keep = np.zeros(M, dtype=bool)
+    cols = range(values.shape[1]) if columns is None else columns
+    for j, signs in [*((j, (1.0, -1.0)) for j in cols), *((j, (-1.0,)) for j in maxima)]:
+        v = values[:, j]
+        for sign in signs:  # NaN sorts last: a bin's first row is its minimum (maximum)
+            order = np.lexsort((sign * v, seg))
+            first = order[starts]
+            keep[first[np.isfinite(v[first])]] = True
+    gap = np.isnan(values[:, 0])
+    if gap.any():
+        first_gap = np.flatnonzero(gap & np.r_[True, ~gap[:-1]])
+        keep[first_gap] = True
+        keep[np.flatnonzero(gap[:-1] & ~gap[1:]) + 1] = True  # first finite after a gap
+    return np.flatnonzero(keep)
+
+
+class Envelope:
+    """The smallest and largest value of a series per time bin, in bounded memory (at most
+    :data:`BINS` bins, their width doubled as the series grows): what the y range of its pane
+    is computed from."""
+
+    BINS = 256
+
+    def __init__(self) -> None:
+        self.width = 1.0
+        self.lo = np.full(self.BINS, np.inf)
+        self.hi = np.full(self.BINS, -np.inf)
+        self.t_first = np.inf
+        self.t_last = -np.inf
+
+    def add(self, t: np.ndarray, values: np.ndarray) -> None:
+        """Rows at times ``t`` [s, >= 0 after the recording start] of ``values`` (M, k)."""
+        v = np.asarray(values, dtype=np.float64).reshape(t.shape[0], -1)
+        ok = np.isfinite(v)
+        rows = ok.any(axis=1) & np.isfinite(t)
+        if not rows.any():
+            return
+        t, v, ok = t[rows], v[rows], ok[rows]
+        self.t_first = min(self.t_first, float(t[0]))
+        self.t_last = max(self.t_last, float(t[-1]))
+        while self.t_last >= self.width * self.BINS:
+            self.lo = np.minimum(self.lo[0::2], self.lo[1::2])
+            self.hi = np.maximum(self.hi[0::2], self.hi[1::2])
+            self.lo = np.r_[self.lo, np.full(self.BINS // 2, np.inf)]
+            self.hi = np.r_[self.hi, np.full(self.BINS // 2, -np.inf)]
+            self.width *= 2.0
+        b = np.clip((np.maximum(t, 0.0) // self.width).astype(np.int64), 0, self.BINS - 1)
+        np.minimum.at(self.lo, b, np.where(ok, v, np.inf).min(axis=1))
+        np.maximum.at(self.hi, b, np.where(ok, v, -np.inf).max(axis=1))
+
+    def extent(self, after: float = -np.inf) -> tuple[float, float] | None:
+        """Smallest and largest value of the bins that start at or after ``after`` [s]."""
+        start = np.arange(self.BINS) * self.width
+        sel = (start >= after) & np.isfinite(self.lo)
+        if not sel.any():
+            return None
+        return float(self.lo[sel].min()), float(self.hi[sel].max())
+
+
+@dataclasses.dataclass(frozen=True)
+class YRange:
+    """The y range a pane opens on; ``settled``: the start-up transient is left out (it
+    would flatten the result under it)."""
+
+    lo: float
+    hi: float
+    settled: bool = False
+
+
+START_UP = 0.2
+"""The first fraction of a pane's time span that counts as start-up."""
+
+
+TRANSIENT = 5.0
+"""The start-up is left out of the y range when the whole span exceeds the span after it by
+this factor."""
+
+
+LEGEND_ENTRY = 0.09
+"""The height of a legend entry as a fraction of a pane's (about 20 px of about 220)."""
+
+
+def legend_headroom(entries: int) -> float:
+    """Space above the data of a pane whose legend has ``entries`` entries, as a fraction of
+    the data's span: the legend (top corner) sits over it, off the data (0.3 for two
+    entries, 1.4 for six)."""
+    share = min(0.7, 0.05 + LEGEND_ENTRY * max(entries, 1))
+    return share / (1.0 - share)
+
+
+def y_range(envelopes: list[Envelope], *, legend: int = 0) -> YRange | None:
+    """The y range of a pane drawing these series: the data's extent padded by 5 %; values
+    that never vary (all zero) get a span of 2 (or 20 % of their magnitude) instead of a lone
+    tick; a start-up transient that makes the span :data:`TRANSIENT` times that of the rest is
+    left out; with a legend of ``legend`` entries, :func:`legend_headroom` above."""
+    envs = [e for e in envelopes if np.isfinite(e.t_first)]
+    if not envs:
+        return None
+    t0 = min(e.t_first for e in envs)
+    t1 = max(e.t_last for e in envs)
+    full = _union([e.extent() for e in envs])
+    if full is None:
+        return None
+    lo, hi = full
+    settled = False
+    if t1 > t0:
+        after = _union([e.extent(t0 + START_UP * (t1 - t0)) for e in envs])
+        if after is not None and after[1] > after[0] and (hi - lo) > TRANSIENT * (
+                after[1] - after[0]):
+            lo, hi, settled = after[0], after[1], True
+    span = hi - lo
+    mag = max(abs(lo), abs(hi))
+    if span <= 1e-9 * max(mag, 1.0):
+        half = 0.1 * mag if mag > 0.0 else 1.0
+        return YRange(lo - half, hi + half, settled)
+    pad = 0.05 * span
+    lo, hi = labelled(lo - pad, hi + pad)
+    return YRange(lo, hi + (legend_headroom(legend) * span if legend else 0.0), settled)
+
+
+LABELLED_INTERVALS = 7
+"""The most tick intervals a pane of the default layout labels (its axis labels only powers of
+ten, each at least about 28 px apart)."""
+
+
+def labelled(lo: float, hi: float) -> tuple[float, float]:
+    """``[lo, hi]`` grown, on the side that costs less, until it holds two labelled ticks: the
+    viewer labels multiples of one power of ten ``S``, the finest with at most
+    :data:`LABELLED_INTERVALS` intervals in the range; a range holding one multiple of ``S``
+    (often just "0") shows a lone tick.
+
+    >>> labelled(-0.06, 0.06)          # ticks at -0.1 and 0 (or 0 and 0.1) instead of 0 alone
+    (-0.1, 0.06)
+    >>> labelled(-1.5, 1.5)            # -1, 0, 1: unchanged
+    (-1.5, 1.5)
+    """
+    for _ in range(4):  # a grown range may call for a coarser step: again
+        span = hi - lo
+        if not (np.isfinite(span) and span > 0.0):
+            return lo, hi
+        step = 10.0 ** np.ceil(np.log10(span / LABELLED_INTERVALS))
+        first, last = np.ceil(lo / step - 1e-6), np.floor(hi / step + 1e-6)
+        if last - first >= 1:
+            break
+        if last == first:  # one multiple inside: add the nearer of its neighbours
+            down, up = (first - 1) * step, (first + 1) * step
+            lo, hi = (float(down), hi) if lo - down <= up - hi else (lo, float(up))
+        else:
+            lo, hi = float(np.floor(lo / step) * step), float(np.ceil(hi / step) * step)
+    return lo, hi
+
+
+def _union(parts: list[tuple[float, float] | None]) -> tuple[float, float] | None:
+    found = [p for p in parts if p is not None]
+    if not found:
+        return None
+    return min(p[0] for p in found), max(p[1] for p in found)
+
+
+TIME_STEPS = (1.0, 10.0, 60.0, 600.0, 3600.0, 36000.0, 86400.0)
+"""The steps [s] of the viewer's duration ticks (``+10s``, ``+1m``, ``+10m``, ``+1h``)."""
+
+
+TIME_INTERVALS = 5
+"""The most tick intervals a pane of the default layout labels on its time axis (four panes
+side by side, ``+1m``-wide labels)."""
+
+
+def time_range(t_first: float, t_last: float) -> tuple[float, float]:
+    """The time span [s] a pane shows: the run, up to the next labelled tick if only one
+    would be labelled (a 480 s run up to +10m: ``+0s`` and ``+10m``, never ``+0s`` alone), with
+    margins (2 % before, 7 % after) so the first and the last tick labels are not clipped by
+    the pane's edges.
+
+    >>> [round(v) for v in time_range(0.0, 480.0)], [round(v) for v in time_range(0.0, 240.0)]
+    ([-12, 642], [-5, 257])
+    """
+    span = max(t_last - t_first, 1e-3)
+    step = next((s for s in TIME_STEPS if span / s <= TIME_INTERVALS), TIME_STEPS[-1])
+    if np.floor(t_last / step + 1e-6) - np.ceil(t_first / step - 1e-6) < 1:
+        t_last = float(np.ceil(t_last / step - 1e-6) * step)
+        span = t_last - t_first
+    return t_first - 0.02 * span, t_last + 0.07 * span
