@@ -102,10 +102,8 @@ class ForwardStore:
             b = self._buf
             k = min(m - i, self.chunk - self._m)
             for name, col in b.items():
-                if name in rows:
-                    col[self._m:self._m + k] = rows[name][i:i + k]
-                else:  # a reset not given: the identity
-                    col[self._m:self._m + k] = np.eye(n)
+                given = name != "reset" or reset_given
+                col[self._m:self._m + k] = rows[name][i:i + k] if given else np.eye(n)
             self._m += k
             self.epochs += k
             i += k
