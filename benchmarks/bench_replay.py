@@ -83,7 +83,7 @@ _RSS_CHILD = """
 import sys
 if sys.argv[1] != "-":
     from navreplay.filters.registry import load_filter
-    from navreplay.io import read_recording
+    from navreplay.io import ReadOptions, read_recording
     from navreplay.replay import replay
     rec = read_recording(sys.argv[1])
     res = replay(rec, load_filter("gps-ins"), validate=False)
@@ -125,11 +125,11 @@ def _read_streamed(path: Path) -> int:
     """Decode a file the way a streamed run of gps-ins does (one pass, every stream the run
     needs in windows); the number of IMU rows."""
     from navreplay.filters.registry import load_filter
-    from navreplay.io import open_recording
+    from navreplay.io import ReadOptions, open_recording
     from navreplay.logs.prepare import streams_needed
 
     kinds = streams_needed([load_filter("gps-ins")])
-    with open_recording(path, kinds=kinds) as source:
+    with open_recording(path, ReadOptions(kinds=kinds)) as source:
         return sum(len(w["imu"]) for w in source if "imu" in w)
 
 
@@ -137,7 +137,7 @@ def _throughput(path: Path) -> tuple[Any, Any, float]:
     """Print the replay timings; return the gps-ins result, the recording and the filter time."""
     from navreplay.filters.registry import load_filter
     from navreplay.geo import strapdown
-    from navreplay.io import read_recording
+    from navreplay.io import ReadOptions, read_recording
     from navreplay.replay import replay
 
     gps_ins = load_filter("gps-ins")
@@ -153,7 +153,7 @@ def _throughput(path: Path) -> tuple[Any, Any, float]:
     t_e2e, (result, recording) = _timed(end_to_end, repeat=2)
     t_all, _ = _timed(lambda: read_recording(path), repeat=3)
     needed = [k.value for k in (*gps_ins.requires, *gps_ins.optional)]
-    t_dec, _ = _timed(lambda: read_recording(path, kinds=needed), repeat=3)
+    t_dec, _ = _timed(lambda: read_recording(path, ReadOptions(kinds=needed)), repeat=3)
     t_win, _ = _timed(lambda: _read_streamed(path), repeat=3)
     t_filt, _ = _timed(lambda: replay(recording, gps_ins, validate=False), repeat=2)
     t_sum, _ = _timed(lambda: _summary(result, recording), repeat=2)

@@ -168,14 +168,17 @@ def output_of(path: str | Path | None, option: str, **kw: Any) -> Any:
     return None if path is None else Output(Path(path), option, **kw)
 
 
-def export_output(path: str | None, specs: Sequence[Any], smooth: bool = False) -> Any:
+def export_output(path: str | None, specs: Sequence[Any], smooth: bool = False,
+                  onboard: Sequence[str] = ()) -> Any:
     """The ``--export DIR`` output, with the names of the files it writes for these filters
-    (and their smoothed runs with ``smooth``)."""
+    (and their smoothed runs with ``smooth``, and the rows of the recorded solutions
+    ``onboard``)."""
     from navreplay.jobs.results import export_names
     from navreplay.jobs.smooth import output_labels
+    from navreplay.logs.onboard import onboard_label
 
-    return output_of(path, "--export", directory=True,
-                     writes=export_names(output_labels(specs, smooth)))
+    labels = [*output_labels(specs, smooth), *(onboard_label(s) for s in onboard)]
+    return output_of(path, "--export", directory=True, writes=export_names(labels))
 
 
 def viz_output(save: str | None, no_viz: bool, live: bool) -> Any:

@@ -62,6 +62,10 @@ from navreplay.cli.options import (
 @click.option("--reference", "reference", metavar="TOPIC|FILE",
               help="Score against a topic (Odometry, PoseStamped, PoseWithCovarianceStamped, "
                    "NavSatFix, navreplay truth) or a TUM / CSV file.")
+@click.option("--onboard", "onboard", multiple=True, metavar="ekf2|master_ins|TOPIC|FILE",
+              help="A navigation solution the log recorded, shown, scored and exported as a "
+                   "row beside the filters: PX4's estimate in a ULog file (ekf2), the master "
+                   "INS, or a topic / file as --reference reads it; repeatable.")
 @click.option("--no-frame-check", is_flag=True,
               help="Skip the gravity and magnetic-dip checks of the frames.")
 @result_flags
@@ -75,9 +79,9 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         output_rate: float,
         topics: Sequence[str], frames: Sequence[str], force_frame: bool, time: str,
         start: str | None, end: str | None,
-        imu_range: str | None, init: str | None, reference: str | None, no_frame_check: bool,
-        export: str | None, report: str | None, max_imu_gap: float | None,
-        smooth: bool, force: bool) -> None:
+        imu_range: str | None, init: str | None, reference: str | None,
+        onboard: Sequence[str], no_frame_check: bool, export: str | None, report: str | None,
+        max_imu_gap: float | None, smooth: bool, force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b
@@ -89,22 +93,29 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
       navreplay run gps-ins runs/*.mcap --workers 2      # ensemble statistics
       navreplay run ins,gps-ins drive.mcap --export out/drive --report out/drive.html
       navreplay run gps-ins drive.mcap --smooth --export out/drive   # + gps-ins/rts
+      navreplay run gps-ins flight.ulg --onboard ekf2    # beside PX4's own estimate
     """
     from navreplay import jobs
 
     args = list(args)
     names: str | None = None
-    if not (refs and looks_like_recording(args[0])):
+    if not ((refs or onboard) and looks_like_recording(args[0])):
         names = args.pop(0)
     if not args:
         raise click.UsageError("no RECORDING given")
     from navreplay.logs.options import log_options
 
     cfg = load_config(config, "filter", "topics", "frames", "initial", "sensors", "imu_range")
-    specs = jobs.filter_specs(names, refs, params, cfg)
-    check_command_outputs(force, [*args, config, reference if is_file(reference) else None],
+    # a recorded solution alone (--onboard without a filter) is a run of no filter
+    specs = jobs.filter_specs(names, refs, params, cfg) if names or refs or not onboard else ()
+    log = log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
+                      sensors=sensor_config(config, cfg), imu_range_text=imu_range,
+                      force_frames=force_frame, start=start, end=end, onboard=onboard)
+    check_command_outputs(force, [*args, config, reference if is_file(reference) else None,
+                                  *(s for s in onboard if is_file(s))],
                           viz_output(save, no_viz, spawn or serve or bool(connect)),
-                          output_of(summary, "--summary"), export_output(export, specs, smooth),
+                          output_of(summary, "--summary"),
+                          export_output(export, specs, smooth, log.onboard),
                           output_of(report, "--report"))
     job = jobs.RunJob(
         filters=specs,
@@ -113,9 +124,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         summary_path=Path(summary) if summary else None,
         workers=workers, executor=executor, pacing=rate, output_rate=output_rate,
         max_imu_gap=max_imu_gap,
-        log=log_options(topics, frames, init, reference, cfg, not no_frame_check, time,
-                        sensors=sensor_config(config, cfg), imu_range_text=imu_range,
-                        force_frames=force_frame, start=start, end=end),
+        log=log,
         export_dir=Path(export) if export else None,
         report_path=Path(report) if report else None, force=force, smooth=smooth,
         command=command_line(),

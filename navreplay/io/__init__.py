@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from navreplay.io.files import open_recording, read_recording
     from navreplay.io.info import RecordingInfo, TopicInfo, format_info, recording_info
     from navreplay.io.schemas import TOPICS
+    from navreplay.io.source import ReadOptions
     from navreplay.io.writer import write_recording
 
 _LAZY = {
@@ -47,6 +48,7 @@ _LAZY = {
     "format_info": "navreplay.io.info",
     "recording_info": "navreplay.io.info",
     "TOPICS": "navreplay.io.schemas",
+    "ReadOptions": "navreplay.io.source",
     "write_recording": "navreplay.io.writer",
 }
 """Names imported at their first use: the readers and writers load mcap and rosbags, which a
@@ -65,6 +67,7 @@ __all__ = [
     "TOPICS",
     "RecordingError",
     "RecordingExistsError",
+    "ReadOptions",
     "RecordingInfo",
     "RecordingWarning",
     "TopicInfo",

@@ -11,9 +11,7 @@ a type its stream reads), the sample checks, and one window.
 from __future__ import annotations
 
 import dataclasses
-import os
-from collections.abc import Iterable, Iterator, Mapping
-from pathlib import Path
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -21,19 +19,19 @@ from navreplay.core.streams import Metadata, Stream, StreamKind
 from navreplay.io.checks import first_problem, gap_report
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
-from navreplay.io.source import COMPLETE, Source, Window
+from navreplay.io.source import COMPLETE, FileSource, Window
 from navreplay.io.topics import TopicSource, warn
 
 
 @dataclasses.dataclass(frozen=True)
 class Topic:
-    """A topic of a log: its name, type, message count and the stream it can feed (None: it
-    feeds none, e.g. a reference)."""
+    """A topic of a log: its name, type, message count and the streams it can feed (none: a
+    reference, say; a GNSS receiver's topic can feed both position and velocity)."""
 
     name: str
     type_name: str
     count: int
-    kind: StreamKind | None = None
+    kinds: tuple[StreamKind, ...] = ()
 
 
 @dataclasses.dataclass
@@ -48,33 +46,12 @@ class Columns:
     notes: list[str] = dataclasses.field(default_factory=list)
 
 
-class DirectSource(Source):
+class DirectSource(FileSource):
     """A log read straight into streams, one window (arguments as
-    :class:`navreplay.io.mcapread.McapSource`; ``time`` is not used: these logs have one time
-    per sample)."""
+    :class:`navreplay.io.source.FileSource`; ``time`` and ``window`` are not used: these logs
+    have one time per sample, and are read whole)."""
 
     what = "log"
-
-    def __init__(
-        self,
-        path: str | os.PathLike[str],
-        *,
-        kinds: Iterable[StreamKind | str] | None = None,
-        explicit: bool = False,
-        topics: Mapping[StreamKind | str, str] | None = None,
-        frames: Mapping[StreamKind | str, Convention | str] | None = None,
-        time: str = "header",
-        validate: bool = True,
-        window: int | None = None,
-    ) -> None:
-        super().__init__(str(path))
-        self.path = Path(path)
-        self._wanted = None if kinds is None else {StreamKind(k) for k in kinds}
-        self._explicit = explicit
-        self._named = {StreamKind(k): v for k, v in (topics or {}).items()}
-        self._declared = {StreamKind(k): Convention(str(v).lower())
-                          for k, v in (frames or {}).items()}
-        self._validate = validate
 
     # -- what a kind of log provides ---------------------------------------------------------
 
@@ -86,6 +63,15 @@ class DirectSource(Source):
         """One topic as the columns of stream ``kind``."""
         raise NotImplementedError
 
+    def listing(self) -> list[Topic]:
+        """Every topic of the log (``navreplay info``; :meth:`topics` may list only those a
+        read parses)."""
+        return self.topics()
+
+    def readers(self, kind: StreamKind) -> tuple[str, ...]:
+        """The topic types of this kind of log that feed stream ``kind`` (for messages)."""
+        return ()
+
     def metadata(self) -> Metadata:
         return Metadata()
 
@@ -94,31 +80,32 @@ class DirectSource(Source):
     def choose(self, listing: list[Topic]) -> dict[StreamKind, tuple[Topic, tuple[str, ...]]]:
         """The topic of each stream and the others that could have fed it; every named topic
         must be in the log and feed its stream."""
-        where = self.name
+        where, opts = self.name, self.options
         by_name = {t.name: t for t in listing}
         available = ", ".join(f"{t.name} ({t.type_name})" for t in listing) or "no topics"
-        for kind, name in self._named.items():
+        for kind, name in opts.topics.items():
             t = by_name.get(name)
             if t is None:
                 raise RecordingError(f"{where}: topic {name} named for stream {kind.value} is "
                                      f"not in the {self.what}; it has {available}")
-            if t.kind is not kind:
-                readers = sorted({c.type_name for c in listing if c.kind is kind})
+            if kind not in t.kinds:
+                readers = sorted({c.type_name for c in listing if kind in c.kinds}
+                                 | set(self.readers(kind)))
                 raise RecordingError(
                     f"{where}: topic {name} has type {t.type_name}; stream {kind.value} "
                     f"needs {' or '.join(readers) or 'a type this log does not have'}")
         chosen: dict[StreamKind, tuple[Topic, tuple[str, ...]]] = {}
         for kind in StreamKind:
-            cands = [t for t in listing if t.kind is kind and t.count]
-            if kind in self._named:
-                pick = by_name[self._named[kind]]
+            cands = [t for t in listing if kind in t.kinds and t.count]
+            if kind in opts.topics:
+                pick = by_name[opts.topics[kind]]
             elif cands:
                 pick = cands[0]
             else:
                 continue
             chosen[kind] = (pick, tuple(t.name for t in cands if t.name != pick.name))
-        if self._explicit and self._wanted is not None:
-            missing = [k.value for k in StreamKind if k in self._wanted and k not in chosen]
+        if opts.explicit and opts.kinds is not None:
+            missing = [k.value for k in StreamKind if k in opts.kinds and k not in chosen]
             if missing:
                 raise RecordingError(f"{where}: no topic for stream(s) {', '.join(missing)}; "
                                      f"the {self.what} has {available}")
@@ -127,10 +114,11 @@ class DirectSource(Source):
     def _windows(self) -> Iterator[Window]:
         listing = self.topics()
         chosen = self.choose(listing)
-        read = {k: v for k, v in chosen.items() if self._wanted is None or k in self._wanted}
+        opts = self.options
+        read = {k: v for k, v in chosen.items() if k in opts.wanted()}
         got: dict[StreamKind, tuple[Columns, Topic, tuple[str, ...]]] = {}
         for kind, (topic, others) in read.items():
-            got[kind] = (self.read(topic, kind, self._declared.get(kind)), topic, others)
+            got[kind] = (self.read(topic, kind, opts.frames.get(kind)), topic, others)
         firsts = [int(c.t_ns[0]) for c, _, _ in got.values() if len(c.t_ns)]
         t0_ns = min(firsts) if firsts else 0
         streams: dict[StreamKind, Stream] = {}
@@ -140,7 +128,7 @@ class DirectSource(Source):
                 warn(f"{label}: {note}")
             stream = Stream(kind, np.asarray(cols.t_ns, dtype=np.int64), cols.columns,
                             cols.frame_id)
-            if self._validate:
+            if opts.validate:
                 problem = first_problem(stream, t0_ns)
                 if problem:
                     raise RecordingError(f"{label}: {problem}")

@@ -151,7 +151,7 @@ class GinsSource(DirectSource):
         if not self.path.is_dir():  # the IMU file given: it first among its kind
             files.sort(key=lambda p: p != self.path)
         out = []
-        kinds = {IMU_TYPE: StreamKind.IMU, GNSS_TYPE: StreamKind.GPS, NAV_TYPE: None}
+        kinds = {IMU_TYPE: (StreamKind.IMU,), GNSS_TYPE: (StreamKind.GPS,), NAV_TYPE: ()}
         for p in files:
             ty = file_type(p)
             assert ty is not None

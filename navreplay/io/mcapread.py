@@ -16,7 +16,7 @@ not hold the IMU samples of the pause.
 A file without a summary and chunk index (truncated, unfinished, or written without one) is
 read to its end and handed out as one window: a damaged file yields the messages before the
 damage with a :class:`~navreplay.io.errors.SalvagedWarning` telling the time of the last one.
-So is any file read with ``window=None``.
+So is any file read with a ``window`` of None (:class:`~navreplay.io.source.ReadOptions`).
 
 The warnings of the read (header stamps replaced by log times, conversions, gaps, frame ids
 that change) are given once, when it ends, each with the number of windows it concerns; gaps
@@ -30,7 +30,7 @@ from __future__ import annotations
 import os
 import re
 import warnings
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
@@ -38,23 +38,18 @@ import numpy as np
 
 from navreplay.core.streams import Metadata, Stream, StreamKind
 from navreplay.io.checks import GAP_FACTOR, check_frame_ids, gap_text, when
-from navreplay.io.convert import AuxColumn, Convention
+from navreplay.io.convert import AuxColumn
 from navreplay.io.decode import ChannelDecoder, Decoding, describe_topics, file_metadata
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.mcapfile import FileContents, read_chunk, walk
 from navreplay.io.schemas import SPECS
-from navreplay.io.source import COMPLETE, Source, Window
+from navreplay.io.source import COMPLETE, FileSource, ReadOptions, Window
 from navreplay.io.topics import (
-    FrameNames,
-    TopicNames,
     build_stream,
     choose_topics,
     sample_times,
     topic_map,
 )
-
-WINDOW_MESSAGES = 60_000
-"""Messages of one stream per window (10 minutes of 100 Hz samples)."""
 
 
 def accepts(path: Path) -> bool:
@@ -62,29 +57,16 @@ def accepts(path: Path) -> bool:
     return True
 
 
-class McapSource(Source):
+class McapSource(FileSource):
     """The streams of an MCAP file, window by window (see the module docstring). The file is
     opened here, once, and closed when the windows are read or :meth:`close` is called.
 
     Parameters
     ----------
     path : path-like
-    kinds : iterable of StreamKind, optional
-        Streams to read (all known ones when None); those the file lacks are left out.
-    explicit : bool
-        A stream of ``kinds`` that the file lacks, or holds on several topics, is an error.
-    topics : mapping of StreamKind or str to str, optional
-        Topic to read for a stream, overriding :data:`~navreplay.io.schemas.TOPICS`.
-    frames : mapping of StreamKind or str to Convention or str, optional
-        Declared axis convention of a stream's topic, replacing the guess from the frame id.
-    time : {"header", "log"}
-        Sample times (:func:`navreplay.io.topics.sample_times`).
-    validate : bool
-        Check every stream: non-finite values, time that does not increase (errors), gaps
-        (warnings).
-    window : int or None
-        Decoded messages of a stream that close a window (default :data:`WINDOW_MESSAGES`);
-        None: the whole file in one window.
+    options : ReadOptions, optional
+        Streams, topics, frames, time source, checks; ``window`` decoded messages of a stream
+        close a window (None: the whole file in one window).
 
     Raises
     ------
@@ -98,28 +80,9 @@ class McapSource(Source):
 
     kind = "mcap"
 
-    def __init__(
-        self,
-        path: str | os.PathLike[str],
-        *,
-        kinds: Iterable[StreamKind | str] | None = None,
-        explicit: bool = False,
-        topics: TopicNames | None = None,
-        frames: FrameNames | None = None,
-        time: str = "header",
-        validate: bool = True,
-        window: int | None = WINDOW_MESSAGES,
-    ) -> None:
-        super().__init__(str(path))
-        self.path = Path(path)
-        self._wanted = set(SPECS) if kinds is None else {StreamKind(k) for k in kinds}
-        self._explicit = explicit
-        self._topics = topics
-        self._declared = {StreamKind(k): Convention(str(v).lower())
-                          for k, v in (frames or {}).items()}
-        self._time = time
-        self._validate = validate
-        self._window = window
+    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None
+                 ) -> None:
+        super().__init__(path, options)
         try:
             self._file: BinaryIO = open(self.path, "rb")  # noqa: SIM115 (closed by the read)
         except FileNotFoundError:
@@ -133,16 +96,17 @@ class McapSource(Source):
 
     def _windows(self) -> Iterator[Window]:
         where, f = self.name, self._file
-        plan = Decoding(where, self._wanted, topic_map(self._topics))
+        opts = self.options
+        plan = Decoding(where, opts.wanted(), topic_map(opts.topics))
         reading: _Reading | None = None
         try:
             with f:
                 contents = FileContents(size=os.fstat(f.fileno()).st_size)
                 for block in walk(f, where, contents, plan.wants_chunk):
-                    if self._window is not None and contents.intact and reading is None:
+                    if opts.window is not None and contents.intact and reading is None:
                         reading = self._start(plan, contents)
                     plan.feed(contents, block)
-                    size = self._window  # reading: windows of this many rows
+                    size = opts.window  # reading: windows of this many rows
                     if reading is not None and size is not None and any(
                             d.rows() >= size for d in reading.chosen.values()):
                         yield reading.window()
@@ -155,16 +119,15 @@ class McapSource(Source):
                 reading.report()
 
     def _start(self, plan: Decoding, contents: FileContents) -> _Reading:
-        where = self.name
+        where, opts = self.name, self.options
         available = describe_topics(contents)
-        chosen = choose_topics(where, plan.all_candidates(contents), self._wanted,
-                               explicit=self._explicit, named=self._topics,
-                               available=available)
-        every = Decoding(where, set(SPECS), topic_map(self._topics))
+        chosen = choose_topics(where, plan.all_candidates(contents), opts.wanted(),
+                               explicit=opts.explicit, named=opts.topics, available=available)
+        every = Decoding(where, set(SPECS), topic_map(opts.topics))
         with warnings.catch_warnings():  # (said once, for the streams read)
             warnings.simplefilter("ignore", RecordingWarning)
             present = choose_topics(where, every.all_candidates(contents), set(SPECS),
-                                    explicit=False, named=self._topics, available=available)
+                                    explicit=False, named=opts.topics, available=available)
         counts = contents.statistics.channel_message_counts if contents.statistics else {}
         decoders = {k: plan.decoder_of(c) for k, (c, _) in chosen.items()}
         totals = {k: counts.get(d.channel.id) if contents.intact else None
@@ -279,7 +242,7 @@ class _Reading:
         rows = np.flatnonzero(block.channel == decoder.channel.id)
         log = block.log_time[rows]
         first = int(log.min())
-        if self.source._time == "header":
+        if self.source.options.time == "header":
             ahead = ChannelDecoder(decoder.channel, decoder.schema, decoder.message,
                                    decoder.where)
             ahead.add(block, rows)
@@ -289,17 +252,17 @@ class _Reading:
         return first
 
     def _stream(self, kind: StreamKind, decoder: ChannelDecoder) -> Stream:
-        src = self.source
+        src, opts = self.source, self.source.options
         fields = decoder.drain()
         fields["t_ns"] = self._times(kind, decoder, fields["t_ns"])
         self.frame.setdefault(kind, decoder.first_frame_id or SPECS[kind].frame_id)
-        note = check_frame_ids(kind, decoder.label, decoder.frame_ids, src._declared.get(kind),
+        note = check_frame_ids(kind, decoder.label, decoder.frame_ids, opts.frames.get(kind),
                                self.frame[kind])  # an error stops the read at this window
         if note:
             self.notes[kind] = f"{decoder.label}: {note}"  # said once, by report()
         stream, topic_source = build_stream(
-            kind, fields, self.frame[kind], decoder.label, self.aux, self.t0_ns, src._validate,
-            src._declared.get(kind), decoder.channel.topic, self.others[kind],
+            kind, fields, self.frame[kind], decoder.label, self.aux, self.t0_ns, opts.validate,
+            opts.frames.get(kind), decoder.channel.topic, self.others[kind],
             report_gaps=False)
         src.sources.setdefault(kind, topic_source)
         if len(stream):
@@ -318,7 +281,7 @@ class _Reading:
                     f"({when(floor, self.t0_ns)}): the topic's messages are out of order"
                 )
             self.last[kind] = int(stream.t_ns[-1])
-            if src._validate:
+            if opts.validate:
                 self.gaps[kind].add(stream.t_ns)
         return stream
 
@@ -328,7 +291,7 @@ class _Reading:
         stamps, or log times once the stamps were unusable there (as a read in one window
         chooses for the whole topic). Stamps that turn unusable after windows that used them
         are refused: the windows already replayed cannot move to log times."""
-        t = sample_times(stamps, decoder.log_ns, self.source._time, decoder.label)
+        t = sample_times(stamps, decoder.log_ns, self.source.options.time, decoder.label)
         used = "header" if t is stamps else "log"
         base = self.base.setdefault(kind, used)
         if used == base:

@@ -17,10 +17,9 @@ topic whose stamps are zero or do not increase takes the log times, with a warni
 from __future__ import annotations
 
 import dataclasses
-import os
 import sqlite3
 import warnings
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,13 +28,11 @@ import numpy as np
 from navreplay.core.streams import Metadata, Stream, StreamKind
 from navreplay.io.cdr import fields_of_messages
 from navreplay.io.checks import check_frame_ids
-from navreplay.io.convert import REDUCE, Convention
+from navreplay.io.convert import REDUCE
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
 from navreplay.io.schemas import MESSAGE_ENCODING, SPECS, normalize_type_name
-from navreplay.io.source import COMPLETE, Source, Window
+from navreplay.io.source import COMPLETE, FileSource, Window
 from navreplay.io.topics import (
-    FrameNames,
-    TopicNames,
     build_stream,
     candidate,
     choose_topics,
@@ -159,37 +156,16 @@ def accepts(path: Path) -> bool:
     return path.is_dir() or path.suffix == ".db3" or path.name == "metadata.yaml"
 
 
-class BagSource(Source):
+class BagSource(FileSource):
     """The streams of a rosbag2 folder or ``.db3`` as one window (arguments as
-    :class:`navreplay.io.mcapread.McapSource`; bags are read whole)."""
+    :class:`navreplay.io.source.FileSource`; bags are read whole, whatever the options'
+    ``window``)."""
 
     kind = "rosbag2"
 
-    def __init__(
-        self,
-        path: str | os.PathLike[str],
-        *,
-        kinds: Iterable[StreamKind | str] | None = None,
-        explicit: bool = False,
-        topics: TopicNames | None = None,
-        frames: FrameNames | None = None,
-        time: str = "header",
-        validate: bool = True,
-        window: int | None = None,
-    ) -> None:
-        super().__init__(str(path))
-        self.path = Path(path)
-        self._wanted = set(SPECS) if kinds is None else {StreamKind(k) for k in kinds}
-        self._explicit = explicit
-        self._topics = topics
-        self._declared = {StreamKind(k): Convention(str(v).lower())
-                          for k, v in (frames or {}).items()}
-        self._time = time
-        self._validate = validate
-
     def _windows(self) -> Iterator[Window]:
-        where = self.name
-        topic_kinds = topic_map(self._topics)
+        where, opts = self.name, self.options
+        topic_kinds = topic_map(opts.topics)
         metadata = self._check()
         with _open(self.path) as bag:
             listing = bag.topics()
@@ -198,12 +174,12 @@ class BagSource(Source):
             cands = [c for t, ty, fmt, _ in listing
                      if (c := candidate(t, ty, MESSAGE_ENCODING if fmt == ROS1_FORMAT else fmt,
                                         topic_kinds)) is not None]
-            chosen = choose_topics(where, cands, self._wanted, explicit=self._explicit,
-                                   named=self._topics, available=available, what="bag")
+            chosen = choose_topics(where, cands, opts.wanted(), explicit=opts.explicit,
+                                   named=opts.topics, available=available, what="bag")
             with warnings.catch_warnings():  # (said once, for the streams read)
                 warnings.simplefilter("ignore", RecordingWarning)
                 present = choose_topics(where, cands, set(SPECS), explicit=False,
-                                        named=self._topics, available=available, what="bag")
+                                        named=opts.topics, available=available, what="bag")
             gathered: dict[StreamKind, tuple[list[Any], list[int]]] = {}
             for kind, (c, _) in chosen.items():
                 msgs, times = [], []
@@ -224,15 +200,15 @@ class BagSource(Source):
             if np.any(order != np.arange(order.size)):
                 fields = {k: v[order] for k, v in fields.items()}
                 log_ns = log_ns[order]
-            fields["t_ns"] = sample_times(fields["t_ns"], log_ns, self._time, label)
+            fields["t_ns"] = sample_times(fields["t_ns"], log_ns, opts.time, label)
             frames = {m.header.frame_id for m in msgs}
             frame_id = msgs[0].header.frame_id if msgs else SPECS[kind].frame_id
-            note = check_frame_ids(kind, label, frames, self._declared.get(kind), frame_id)
+            note = check_frame_ids(kind, label, frames, opts.frames.get(kind), frame_id)
             if note:
                 warnings.warn(RecordingWarning(f"{label}: {note}"), stacklevel=2)
             streams[kind], self.sources[kind] = build_stream(
-                kind, fields, frame_id, label, [], t0_ns, self._validate,
-                self._declared.get(kind), topic, others)
+                kind, fields, frame_id, label, [], t0_ns, opts.validate,
+                opts.frames.get(kind), topic, others)
         yield Window(streams, dict.fromkeys(streams, COMPLETE), metadata, t0_ns,
                      frozenset(present), final=True)
 

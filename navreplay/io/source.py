@@ -19,14 +19,112 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import dataclasses
+import enum
+import os
+import types
+from collections.abc import Iterable, Iterator, Mapping
+from pathlib import Path
 from typing import Self
 
 from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
-from navreplay.io.topics import TopicSource
+from navreplay.io.convert import Convention
+from navreplay.io.solution import RecordedSolution
+from navreplay.io.topics import TIME_SOURCES, FrameNames, TopicNames, TopicSource
 
 COMPLETE = 2**63 - 1
 """The time [ns] a stream whose every sample has been read is complete up to."""
+
+WINDOW_MESSAGES = 60_000
+"""Messages of one stream per window of a reader that reads in windows (10 minutes of 100 Hz
+samples; :mod:`navreplay.io.mcapread`)."""
+
+
+class _Default(enum.Enum):
+    WINDOW = "the reader's window"
+
+
+@dataclasses.dataclass(frozen=True, init=False)
+class ReadOptions:
+    """How a recording is read: the same for every kind of recording file
+    (:func:`navreplay.io.files.open_recording` hands them to the file's reader).
+
+    Keys may be given as stream kinds or their names; they are stored as
+    :class:`~navreplay.core.streams.StreamKind` (and frames as
+    :class:`~navreplay.io.convert.Convention`).
+
+    Attributes
+    ----------
+    kinds : frozenset of StreamKind, optional
+        Streams to read (every stream the recording holds when None).
+    explicit : bool
+        A stream of ``kinds`` that the recording lacks, or holds on several topics, is an error
+        (else it is left out, or skipped with a warning).
+    topics : mapping of StreamKind to str
+        Topic to read for a stream (``--topic``), overriding the recording's canonical topics
+        and the choice by message type; each must be in the recording with a usable type.
+    frames : mapping of StreamKind to Convention
+        Declared axis convention of a stream's topic (``--frame``: ``flu``/``frd`` for imu and
+        mag, ``enu``/``ned`` for gps_vel), replacing the guess from the frame id.
+    time : {"header", "log"}
+        Sample times: the messages' ``header.stamp`` (falling back to the log times, with a
+        warning, for a topic whose stamps are zero or do not increase), or the log (receive)
+        times (:func:`navreplay.io.topics.sample_times`). Logs with one time per sample (text
+        logs, ULog) ignore it.
+    validate : bool
+        Check every stream: a non-finite value or a timestamp that repeats or goes backwards
+        raises :class:`~navreplay.io.errors.RecordingError`; gaps longer than 5x the median
+        interval give a :class:`~navreplay.io.errors.RecordingWarning`.
+    window : int or None
+        Messages of one stream that close a window, for a reader that reads in windows
+        (default :data:`WINDOW_MESSAGES`); None: the whole recording in one window.
+
+    Examples
+    --------
+    >>> opts = ReadOptions(kinds=["imu"], topics={"imu": "/imu/data"}, frames={"imu": "FLU"})
+    >>> [str(k) for k in opts.kinds], opts.topics[StreamKind.IMU], opts.frames[StreamKind.IMU].value
+    (['imu'], '/imu/data', 'flu')
+    >>> opts.whole().window is None
+    True
+    """
+
+    kinds: frozenset[StreamKind] | None
+    explicit: bool
+    topics: Mapping[StreamKind, str]
+    frames: Mapping[StreamKind, Convention]
+    time: str
+    validate: bool
+    window: int | None
+
+    def __init__(self, *, kinds: Iterable[StreamKind | str] | None = None,
+                 explicit: bool = False, topics: TopicNames | None = None,
+                 frames: FrameNames | None = None, time: str = "header",
+                 validate: bool = True, window: int | None | _Default = _Default.WINDOW
+                 ) -> None:
+        if time not in TIME_SOURCES:
+            raise ValueError(f"time source {time!r}: use {' or '.join(TIME_SOURCES)}")
+        if isinstance(window, _Default):
+            window = WINDOW_MESSAGES  # read now: a test may set a smaller window
+        if window is not None and not (isinstance(window, int) and window > 0):
+            raise ValueError(f"window {window!r}: a positive number of messages, or None")
+        put = object.__setattr__
+        put(self, "kinds", None if kinds is None else frozenset(StreamKind(k) for k in kinds))
+        put(self, "explicit", explicit)
+        put(self, "topics", types.MappingProxyType(
+            {StreamKind(k): str(v) for k, v in (topics or {}).items()}))
+        put(self, "frames", types.MappingProxyType(
+            {StreamKind(k): Convention(str(v).lower()) for k, v in (frames or {}).items()}))
+        put(self, "time", time)
+        put(self, "validate", validate)
+        put(self, "window", window)
+
+    def whole(self) -> ReadOptions:
+        """The same options, the recording read in one window."""
+        return dataclasses.replace(self, window=None)
+
+    def wanted(self) -> set[StreamKind]:
+        """The streams to read (every kind when :attr:`kinds` is None)."""
+        return set(StreamKind) if self.kinds is None else set(self.kinds)
 
 
 class Window(dict[StreamKind, Stream]):
@@ -84,6 +182,9 @@ class Source:
         The topic, frame and convention of each stream, as it first appears.
     salvaged : bool
         Messages were lost to damage (known once the windows are read).
+    recorded : list of RecordedSolution
+        Navigation solutions the log recorded, replayed as rows beside the filters
+        (``run --onboard``; known once the first window is read).
     """
 
     kind = ""
@@ -91,6 +192,7 @@ class Source:
     def __init__(self, name: str) -> None:
         self.name = name
         self.sources: dict[StreamKind, TopicSource] = {}
+        self.recorded: list[RecordedSolution] = []
         self._salvaged = False
         self._metadata: Metadata | None = None
         self._t0_ns = 0
@@ -155,6 +257,24 @@ class Source:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class FileSource(Source):
+    """A recording file read with :class:`ReadOptions` (the readers of
+    :data:`navreplay.io.files.FILE_KINDS`).
+
+    Parameters
+    ----------
+    path : path-like
+    options : ReadOptions, optional
+        How to read it (the defaults when None).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None
+                 ) -> None:
+        super().__init__(str(path))
+        self.path = Path(path)
+        self.options = options if options is not None else ReadOptions()
 
 
 class MemorySource(Source):

@@ -20,6 +20,7 @@ from navreplay.core.streams import StreamKind
 from navreplay.io import RecordingError
 from navreplay.io.files import read_streams
 from navreplay.io.outputs import atomic_path
+from navreplay.io.source import ReadOptions
 from navreplay.io.span import TimeSpan, TimeSpanError
 from navreplay.sensors import allan
 from navreplay.sensors.imu import ImuModel
@@ -204,9 +205,9 @@ def plot_format(path: Path) -> str:
 def read_segment(job: AllanJob) -> Segment:
     """The IMU samples of ``job``'s segment, checked (still, contiguous)."""
     path = Path(job.recording)
-    recording, sources = read_streams(
-        path, kinds=[StreamKind.IMU], time=job.time,
-        topics={StreamKind.IMU: job.topic} if job.topic else None)
+    recording, sources = read_streams(path, ReadOptions(
+        kinds=[StreamKind.IMU], time=job.time,
+        topics={StreamKind.IMU: job.topic} if job.topic else None))
     imu = recording[StreamKind.IMU]
     topic = sources[StreamKind.IMU].topic
     t = (imu.t_ns - recording.t0_ns) * 1e-9

@@ -144,6 +144,8 @@ def run(job: RunJob, progress: Progress | None = None) -> RunReport:
             return _run_one(job, progress)
     if job.pacing is not None:
         raise _params.ParamError("--rate (paced replay) needs a single recording")
+    if job.log is not None and job.log.onboard:
+        raise _params.ParamError("--onboard needs a single recording")
     tasks = file_tasks(job.recordings, job.log)
     default = DEFAULT_OUT / "ensemble.rrd"
     title = (f"{', '.join(s.label for s in job.filters)} over {len(tasks)} recordings")
@@ -166,12 +168,14 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     """Replay the filters over one recording, window by window (memory flat in its length):
     the .rrd or the live view, the exports and the report's series fed block by block
     (:func:`navreplay.replay.replay_file`)."""
+    from navreplay.logs.onboard import onboard_label
     from navreplay.logs.prepare import open_log, streams_needed
     from navreplay.metrics.coverage import add_coverage
 
     path = Path(job.recordings[0])
     classes = [spec.filter_cls for spec in job.filters]
     labels = [spec.label for spec in job.filters]
+    labels += [onboard_label(s) for s in (job.log.onboard if job.log is not None else ())]
     source = open_log(path, job.log, kinds=streams_needed(classes, job.log))
     try:
         source.peek()  # read and made ready: the log's problems are raised before any output

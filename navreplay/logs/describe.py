@@ -9,13 +9,14 @@ import dataclasses
 import warnings
 from pathlib import Path
 
-from navreplay.core.streams import seconds
+from navreplay.core.streams import StreamKind, seconds
 from navreplay.io.checks import gap_report, read_policy
 from navreplay.io.direct import DirectSource
 from navreplay.io.errors import RecordingError
 from navreplay.io.files import BAGS, file_kind, read_streams
 from navreplay.io.gins import NAV_TYPE
 from navreplay.io.info import format_info, recording_info
+from navreplay.io.ulog import EKF2_TOPICS
 from navreplay.logs.options import LogOptions
 from navreplay.logs.reference import REFERENCE_TYPES
 
@@ -74,9 +75,9 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             damage = "; ".join(check.problems)
             lines.append(f"DAMAGED: the data files disagree with metadata.yaml: {damage}")
     elif container.name != "mcap":  # a log read straight into streams (io.direct)
-        direct = container.source(path)
+        direct = container.source(path, None)
         assert isinstance(direct, DirectSource)  # the kinds read straight into streams
-        listing = [(t.name, t.type_name, t.count, None, None) for t in direct.topics()]
+        listing = [(t.name, t.type_name, t.count, None, None) for t in direct.listing()]
         lines = [f"{path}  ({container.name}, {sum(r[2] for r in listing)} messages)"]
     else:
         info = recording_info(path)
@@ -90,9 +91,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         warnings.simplefilter("always")
         try:
             with read_policy(options.policy):
-                recording, sources = read_streams(path, topics=options.topics,
-                                                  frames=options.stream_frames, validate=False,
-                                                  time=options.time)
+                recording, sources = read_streams(path, options.read_options(validate=False))
         except RecordingError as exc:
             recording, sources, problem = None, {}, str(exc)
     if recording is not None and options.span is not None:
@@ -106,16 +105,21 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             a = 0 if lo is None else int(s.t_ns.searchsorted(lo))
             b = len(s) if hi is None else int(s.t_ns.searchsorted(hi, side="right"))
             recording.streams[stream_kind] = s.slice(a, max(a, b))
-    by_topic = {src.topic: kind for kind, src in sources.items()}
+    by_topic: dict[str, list[StreamKind]] = {}  # a GNSS topic can feed gps and gps_vel
+    for stream_kind, src in sources.items():
+        by_topic.setdefault(src.topic, []).append(stream_kind)
     rows = [("topic", "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
              "end [s]", "gaps")]
     for topic, type_name, count, start, end in listing:
-        kind = by_topic.get(topic)
-        stream = "(reference)" if type_name in (*REFERENCE_TYPES, NAV_TYPE) else "-"
+        fed = by_topic.get(topic, [])
+        stream = ("(reference)" if type_name in (*REFERENCE_TYPES, NAV_TYPE)
+                  else "(onboard ekf2)" if container.name == "ulog" and type_name in EKF2_TOPICS
+                  else "-")
         frame, axes, gaps = "", "", ""
-        if kind is not None and recording is not None:
+        if fed and recording is not None:
+            kind = fed[0]
             s, src = recording[kind], sources[kind]
-            stream, frame = kind.value, src.frame_id
+            stream, frame = ",".join(k.value for k in fed), src.frame_id
             axes = src.convention.value.upper() if src.convention else "-"
             gaps = "yes" if gap_report(s, recording.t0_ns) else "no"
             if len(s):  # the stream's sample times (header stamps or log times)
@@ -138,8 +142,9 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         return LogDescription("\n".join([*lines, "", f"streams: cannot be read: {problem}"]),
                               damage, problem)
     assert recording is not None  # read, or a problem above
-    lines += ["", f"streams (what `navreplay run` replays; times from {options.time} "
-                  f"{'stamps' if options.time == 'header' else 'times'}):"]
+    times = (f"{options.time} {'stamps' if options.time == 'header' else 'times'}"
+             if container.name in (*BAGS, "mcap") else "the log's sample times")
+    lines += ["", f"streams (what `navreplay run` replays; times from {times}):"]
     for kind, src in sources.items():
         picked = f"; picked over {', '.join(src.picked_from)}" if src.picked_from else ""
         axes = (f"{src.convention.value.upper()}: {src.reason}" if src.convention

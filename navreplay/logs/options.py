@@ -7,13 +7,14 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from navreplay.core.params import ParamError
 from navreplay.core.streams import StreamKind
 from navreplay.io.checks import STANDARD_GRAVITY, ImuRange, ReadPolicy
 from navreplay.io.convert import Convention
+from navreplay.io.source import ReadOptions
 from navreplay.io.span import TimeSpan, TimeSpanError
 
 REFERENCE = "reference"
@@ -107,6 +108,9 @@ class LogOptions:
         ``--force-frame``: ``--frame`` wins over frame ids that name other axes.
     span : TimeSpan or None
         ``--start`` / ``--end``: the part of the log read (:mod:`navreplay.io.span`).
+    onboard : tuple of str
+        ``--onboard``: recorded navigation solutions shown, scored and exported beside the
+        filters (:mod:`navreplay.logs.onboard`).
     """
 
     topics: Mapping[StreamKind, str] = dataclasses.field(default_factory=dict)
@@ -121,10 +125,18 @@ class LogOptions:
     imu_range: ImuRange = ImuRange()
     force_frames: bool = False
     span: TimeSpan | None = None
+    onboard: tuple[str, ...] = ()
 
     @property
     def stream_frames(self) -> dict[StreamKind, Convention]:
         return {StreamKind(k): v for k, v in self.frames.items() if k != REFERENCE}
+
+    def read_options(self, kinds: Iterable[StreamKind] | None = None, *,
+                     validate: bool = True) -> ReadOptions:
+        """The options of the log's reader (:class:`~navreplay.io.source.ReadOptions`):
+        ``kinds`` (all when None), the topics, the streams' frames and the time source."""
+        return ReadOptions(kinds=kinds, topics=self.topics, frames=self.stream_frames,
+                           time=self.time, validate=validate)
 
     @property
     def policy(self) -> ReadPolicy:
@@ -228,6 +240,7 @@ def log_options(
     force_frames: bool = False,
     start: str | None = None,
     end: str | None = None,
+    onboard: Sequence[str] = (),
 ) -> LogOptions:
     """Parse ``--topic``/``--frame``/``--imu-range`` items and the TOML tables into
     :class:`LogOptions`; every value is checked for its type and range here (``sensors``: the
@@ -275,4 +288,21 @@ def log_options(
     return LogOptions(topic_map, frame_map, method, dict(initial), reference, check_frames,
                       time, sensors=sensors or None,
                       imu_range=imu_range(imu_range_text, config.get("imu_range")),
-                      force_frames=force_frames, span=span)
+                      force_frames=force_frames, span=span, onboard=_onboard(onboard))
+
+
+def _onboard(sources: Sequence[str]) -> tuple[str, ...]:
+    """``--onboard`` sources, each once (a repeated one is read once), their labels
+    distinct."""
+    from navreplay.logs.onboard import onboard_label
+
+    out = tuple(dict.fromkeys(s.strip() for s in sources))
+    if "" in out:
+        raise ParamError("--onboard: an empty source")
+    labels = [onboard_label(s) for s in out]
+    for label in labels:
+        if labels.count(label) > 1:
+            twins = " and ".join(s for s in out if onboard_label(s) == label)
+            raise ParamError(f"--onboard {twins}: two recorded solutions would be named "
+                             f"{label}")
+    return out

@@ -24,6 +24,7 @@ from navreplay.io.span import cut_windows
 from navreplay.io.topics import TopicSource
 from navreplay.logs.framecheck import check_frames
 from navreplay.logs.initial import initial_nav
+from navreplay.logs.onboard import read_onboard
 from navreplay.logs.options import REFERENCE, LogOptions
 from navreplay.logs.reference import read_reference, reference_stream
 
@@ -85,6 +86,14 @@ class LogSource(Source):
             first.present = first.present | {StreamKind.TRUTH}
             self.notes.append(note)
         self.notes += make_ready(first.recording(), self.sources, self.options)
+        for spec in self.options.onboard:
+            solution, note = read_onboard(spec, self.path, first.recording(), self.inner,
+                                          frames=self.options.frames, time=self.options.time,
+                                          initial=self.options.initial)
+            if self.options.span is not None:
+                solution = solution.cut(*self.options.span.bounds(first.t0_ns))
+            self.recorded.append(solution)
+            self.notes.append(note)
         if self.options.span is not None:
             self.notes.append(f"replayed {self.options.span.describe(first.t0_ns)}")
         yield first
@@ -99,17 +108,17 @@ def open_log(path: str | Path, options: LogOptions | None = None, *,
     ----------
     path : path-like
     options : LogOptions, optional
-        Topics, frames, time source, initialisation and reference.
+        Topics, frames, time source, initialisation, reference and recorded solutions.
     kinds : iterable of StreamKind, optional
         Streams to read (all when None; those the log lacks are left out).
     whole : bool
-        Read it in one window (always so with a reference).
+        Read it in one window (always so with a reference or a recorded solution).
     """
     options = options or LogOptions()
     path = Path(path)
-    inner = open_recording(path, kinds=kinds, topics=options.topics,
-                           frames=options.stream_frames, time=options.time,
-                           whole=whole or options.reference is not None)
+    read = options.read_options(kinds)
+    one = whole or options.reference is not None or bool(options.onboard)
+    inner = open_recording(path, read.whole() if one else read)
     return LogSource(inner, path, options)
 
 
@@ -124,6 +133,8 @@ def streams_needed(classes: Iterable[type[Filter]], options: LogOptions | None =
         kinds |= set(StreamKind) if consumed is None else set(consumed)
     if options.check_frames or options.init is not None or options.initial:
         kinds |= {StreamKind.GPS, StreamKind.GPS_VEL, StreamKind.MAG}
+    if options.onboard:  # a recorded solution: the master INS, or a local one placed by GNSS
+        kinds |= {StreamKind.GPS, StreamKind.MASTER_INS}
     return kinds
 
 

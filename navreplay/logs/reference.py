@@ -99,6 +99,11 @@ class Reference:
     q_nb : ndarray (N, 4) or None
     world : Convention or None
         The axes a local reference was read in (ENU or NED), and ``world_reason`` why.
+    pos_sigma, vel_sigma, att_sigma : ndarray (N, 3) or None
+        1-sigma north, east, down of position [m], velocity [m/s] and attitude [rad], where
+        the messages carry a covariance (NavSatFix, Odometry, PoseWithCovarianceStamped; a
+        covariance of zeros, or of unknown type, is none): what a recorded solution
+        (``--onboard``) is scored against for its NEES.
     """
 
     source: str
@@ -109,6 +114,9 @@ class Reference:
     q_nb: np.ndarray | None = None
     world: Convention | None = None
     world_reason: str = ""
+    pos_sigma: np.ndarray | None = None
+    vel_sigma: np.ndarray | None = None
+    att_sigma: np.ndarray | None = None
 
     @property
     def has(self) -> tuple[str, ...]:
@@ -187,7 +195,10 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
         keep = np.array([m.status.status >= 0 for m in msgs])
         pos = np.array([[math.radians(m.latitude), math.radians(m.longitude), m.altitude]
                         for m in msgs])
-        return Reference(source, t_ns[keep], pos=pos[keep])
+        cov = np.array([np.asarray(m.position_covariance, dtype=float).reshape(3, 3)
+                        if m.position_covariance_type > 0 else np.zeros((3, 3)) for m in msgs])
+        return Reference(source, t_ns[keep], pos=pos[keep],
+                         pos_sigma=_sigmas(cov[keep], Convention.ENU))
     if type_name == TRUTH:
         return Reference(source, t_ns, pos=np.array([list(m.pos) for m in msgs]),
                          v_n=np.array([list(m.v_n) for m in msgs]),
@@ -202,14 +213,35 @@ def from_messages(source: str, type_name: str, items: list[tuple[int, Any]],
     q_given = bool(np.any(np.abs(q_raw) > 0))
     local, q_nb = to_ned(world, xyz, q_raw if q_given else None, frd)
     ref = Reference(source, t_ns, local_ned=local, q_nb=q_nb, world=world, world_reason=why)
+    if type_name in (ODOMETRY, POSE_COV):
+        cov = np.array([np.asarray(m.pose.covariance, dtype=float).reshape(6, 6)
+                        for m in msgs])
+        ref.pos_sigma = _sigmas(cov[:, :3, :3], world)
+        ref.att_sigma = _sigmas(cov[:, 3:, 3:], world) if q_nb is not None else None
     if type_name == ODOMETRY and q_nb is not None:
         v_b = np.array([_xyz(m.twist.twist.linear) for m in msgs])
-        if not frd:
-            v_b = v_b * np.array([1.0, -1.0, -1.0])
+        flip = np.diag([1.0, 1.0, 1.0] if frd else [1.0, -1.0, -1.0])
+        v_b = v_b @ flip
         from navreplay.geo.rotations import quat_to_dcm
 
-        ref.v_n = np.einsum("kij,kj->ki", quat_to_dcm(q_nb), v_b)
+        C = quat_to_dcm(q_nb)
+        ref.v_n = np.einsum("kij,kj->ki", C, v_b)
+        cov_b = np.array([np.asarray(m.twist.covariance, dtype=float).reshape(6, 6)[:3, :3]
+                          for m in msgs])
+        cov_n = np.einsum("kij,jl,klm,mn,kpn->kip", C, flip, cov_b, flip, C)
+        ref.vel_sigma = _sigmas(cov_n, Convention.NED)
     return ref
+
+
+def _sigmas(cov: np.ndarray, world: Convention) -> np.ndarray | None:
+    """1-sigma N, E, D of (N, 3, 3) covariances in ``world`` axes; None when none is given
+    (all zeros, as ROS messages say "unknown")."""
+    var = np.diagonal(cov, axis1=1, axis2=2)
+    if not np.any(var > 0):
+        return None
+    if world is Convention.ENU:
+        var = var[:, [1, 0, 2]]
+    return np.sqrt(np.where(var > 0, var, np.nan))
 
 
 def _check_type(source: str, type_name: str) -> None:

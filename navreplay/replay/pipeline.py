@@ -8,8 +8,11 @@ each block of estimates as the truth around it arrives
 (:class:`~navreplay.metrics.RunScorer`) and hands truth, scored rows and innovations to the
 output stages (:class:`Stage`: the Rerun view, the exports, the report's series, or
 :class:`Collect`), which keep nothing that grows with the recording unless they mean to. A
-whole run is one block. :func:`replay` is the same over a recording in memory, collected into
-a :class:`~navreplay.filters.result.RunResult`.
+whole run is one block. The navigation solutions the log recorded (``source.recorded``,
+``run --onboard``) are rows beside the filters'
+(:class:`~navreplay.replay.recorded.RecordedSession`), scored and handed to the stages the same
+way. :func:`replay` is the same over a recording in memory, collected into a
+:class:`~navreplay.filters.result.RunResult`.
 
 Examples
 --------
@@ -41,6 +44,7 @@ from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, MemorySource, Source, Window
 from navreplay.metrics import RunMetrics, RunScorer
 from navreplay.replay.checks import validate_recording
+from navreplay.replay.recorded import RecordedSession
 from navreplay.replay.session import Progress, ReplaySession
 from navreplay.replay.smoothing import (
     BACKWARD_COST,
@@ -275,7 +279,7 @@ def _replay_file(
             outages = recorded_outages(metadata.extra)
         except ValueError as e:
             raise RecordingError(f"{source.name}: {e}") from None
-        tracker = _Progress(progress, len(specs), first, len(stores))
+        tracker = _Progress(progress, len(specs) + len(source.recorded), first, len(stores))
         scorers: list[RunScorer | None] = []
         sessions = []
         for k, spec in enumerate(specs):
@@ -291,11 +295,21 @@ def _replay_file(
         columns = {st.truth.column: st.unit for s in sessions for st in s.states
                    if isinstance(st.truth, TruthColumn)}
         late = {smoothed_label(sessions[k].label): sessions[k].label for k in stores}
-        start = RunStart(source.name, tuple(all_labels), t0_ns, has_truth, metadata, columns,
+        runs: list[ReplaySession | RecordedSession] = list(sessions)
+        for solution in source.recorded:  # the log's own solutions, rows beside the filters
+            if solution.label in all_labels:
+                raise ValueError(f"filter labels must be unique; {solution.label} is a filter's "
+                                 "and a recorded solution's")
+            runs.append(RecordedSession(solution, source=source.name, t0_ns=t0_ns))
+            scorers.append(RunScorer(solution.label, t0_ns, metadata.true_errors, has_truth,
+                                     outages=outages, scored=_fan_out(stages))
+                           if score else None)
+        labels = [*all_labels, *(r.label for r in runs[len(sessions):])]
+        start = RunStart(source.name, tuple(labels), t0_ns, has_truth, metadata, columns,
                          late, outages)
         for stage in stages:
             stage.start(start)
-        estimates = [0] * len(specs)
+        estimates = [0] * len(runs)
         window: Window | None = first
         del first  # each window goes once it is replayed
         keep_empty = True
@@ -309,7 +323,7 @@ def _replay_file(
                         stage.truth(truth)
                     if truth_store is not None:
                         truth_store.add(truth)
-                for k, (session, scorer) in enumerate(zip(sessions, scorers, strict=True)):
+                for k, (session, scorer) in enumerate(zip(runs, scorers, strict=True)):
                     if scorer is not None:
                         scorer.add_truth(truth, final=final)
                     block = session.feed(piece, final=final, known=piece_known)
@@ -330,11 +344,9 @@ def _replay_file(
             keep_empty = False
             tracker.window(window)
             window = None if window.final else next(source)
-        summaries = {spec.label: {**scorer.result(), **summary_entries(session.settings)}
-                     for spec, scorer, session in zip(specs, scorers, sessions, strict=True)
-                     if scorer is not None}
-        covered = {spec.label: scorer.coverage()
-                   for spec, scorer in zip(specs, scorers, strict=True)
+        summaries = {run.label: {**scorer.result(), **_row_entries(run)}
+                     for scorer, run in zip(scorers, runs, strict=True) if scorer is not None}
+        covered = {run.label: scorer.coverage() for scorer, run in zip(scorers, runs, strict=True)
                    if scorer is not None and has_truth}
         for i, (k, store) in enumerate(stores.items()):
             session = sessions[k]
@@ -351,7 +363,7 @@ def _replay_file(
                 summaries[label] = {**scorer.result(), **summary_entries(session.settings)}
                 if has_truth:
                     covered[label] = scorer.coverage()
-        summaries = {x: summaries[x] for x in all_labels if x in summaries}
+        summaries = {x: summaries[x] for x in labels if x in summaries}
     except BaseException:
         source.close()  # the reader's warnings so far, before the error
         for stage in stages:
@@ -359,6 +371,14 @@ def _replay_file(
         raise
     source.close()
     return FileRun(summaries, has_truth, source.salvaged, source.coverage(), covered)
+
+
+def _row_entries(row: ReplaySession | RecordedSession) -> dict[str, Any]:
+    """A row's entries of the summary beside its scores: a filter's settings, or what a
+    recorded solution is."""
+    if isinstance(row, RecordedSession):
+        return {"recorded": row.solution.source}
+    return summary_entries(row.settings)
 
 
 PIECE_OUTPUTS = 6_000
@@ -451,7 +471,8 @@ def _live(scorer: RunScorer | None, stages: Sequence[Stage]) -> Callable[[RunRes
 
 
 class _Progress:
-    """Progress over the filters: seconds of the recording replayed, over the filters' total
+    """Progress over the rows (the filters, and the recorded solutions, which follow the
+    windows): seconds of the recording replayed, over the rows' total
     (events, when the recording's length is not known), then the smoothed runs: each one's
     backward pass and scoring count for :data:`~navreplay.replay.smoothing.BACKWARD_COST` and
     :data:`~navreplay.replay.smoothing.SCORING_COST` of a forward pass, by epochs done, so the
@@ -475,8 +496,8 @@ class _Progress:
         return float(sum(e[1] for e in self.events))
 
     def _total(self, forward: float) -> int:
-        return int(forward * (1.0 + self.runs_smoothed * (BACKWARD_COST + SCORING_COST) / self.n)
-                   + 1e-6)
+        smoothing = self.runs_smoothed * (BACKWARD_COST + SCORING_COST) / max(self.n, 1)
+        return int(forward * (1.0 + smoothing) + 1e-6)
 
     def of(self, k: int) -> Progress:
         def report(done: int, total: int) -> None:

@@ -16,6 +16,7 @@ from mcap_ros2._cdr import CdrWriter, EncapsulationKind
 from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.io import (
     TOPICS,
+    ReadOptions,
     RecordingError,
     RecordingExistsError,
     RecordingWarning,
@@ -80,7 +81,7 @@ def test_round_trip_every_kind(recording: Recording, written: Path) -> None:
 
 
 def test_kinds_subset(recording: Recording, written: Path) -> None:
-    back = read_recording(written, kinds=["imu", StreamKind.DEPTH])
+    back = read_recording(written, ReadOptions(kinds=["imu", StreamKind.DEPTH]))
     assert list(back.streams) == [StreamKind.IMU, StreamKind.DEPTH]
     np.testing.assert_array_equal(back["imu"]["f_b"], recording["imu"]["f_b"])
     assert back.t0_ns == recording.t0_ns and back.metadata == recording.metadata
@@ -90,7 +91,7 @@ def test_missing_kind_names_what_the_file_has(tmp_path: Path) -> None:
     rng = np.random.default_rng(1)
     path = write_recording(tmp_path / "a.mcap", random_recording(rng, duration_s=1, kinds=["imu"]))
     with pytest.raises(RecordingError, match=r"a\.mcap.*no topic for stream\(s\) gps.*/imu"):
-        read_recording(path, kinds=["imu", "gps"])
+        read_recording(path, ReadOptions(kinds=["imu", "gps"]))
 
 
 def test_gyro_free_imu_and_optional_sigmas(tmp_path: Path) -> None:
@@ -219,7 +220,7 @@ def test_read_reports_nan_with_file_topic_and_time(tmp_path: Path) -> None:
     msg = str(info.value)
     assert str(path) in msg and "/gps/fix" in msg and "non-finite" in msg and "'pos'" in msg
     assert f"t = {(t - T0_NS) * 1e-9:.9f} s ({t} ns)" in msg
-    assert read_recording(path, validate=False)["gps"]["pos"][3, 2] == np.inf
+    assert read_recording(path, ReadOptions(validate=False))["gps"]["pos"][3, 2] == np.inf
 
 
 @pytest.mark.parametrize("how", ["goes backwards", "repeats"])
@@ -244,7 +245,7 @@ def test_read_reports_bad_time_with_file_topic_and_time(tmp_path: Path, how: str
     path = _raw_file(tmp_path / "back_log.mcap", "/depth", "depth", stream, log_times=t_ns)
     t = t_ns[6]
     with pytest.raises(RecordingError) as info:
-        read_recording(path, time="log")
+        read_recording(path, ReadOptions(time="log"))
     msg = str(info.value)
     assert msg.startswith(f"{path}: topic /depth (navreplay_msgs/msg/Depth): timestamp {how}")
     assert f"at t = {(t - depth.t_ns[0]) * 1e-9:.9f} s ({t} ns)" in msg
@@ -310,7 +311,7 @@ def test_foreign_file_without_metadata_maps_by_schema(tmp_path: Path) -> None:
     np.testing.assert_array_equal(got["omega_ib_b"], imu["omega_ib_b"] * [1, -1, -1])
     # an explicit topic for a kind works too
     with pytest.warns(RecordingWarning, match="FLU"):
-        back = read_recording(path, topics={"imu": "/vectornav/imu"}, kinds=["imu"])
+        back = read_recording(path, ReadOptions(topics={"imu": "/vectornav/imu"}, kinds=["imu"]))
     assert len(back["imu"]) == len(imu)
 
 

@@ -15,7 +15,8 @@ from mcap_edits import write_small_chunks as _write
 from mcap_edits import zero_imu_stamps as _zero_imu_stamps
 
 from navreplay.core.streams import StreamKind
-from navreplay.io import files, mcapread, open_recording, read_recording, rosbag
+from navreplay.io import ReadOptions, files, mcapread, open_recording, read_recording, rosbag
+from navreplay.io import source as source_module
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, MemorySource
 from navreplay.sim.scenario import simulate
@@ -29,8 +30,8 @@ def drive(tmp_path_factory):
 
 def _windows(path, window: int, **kw) -> list:
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(mcapread, "WINDOW_MESSAGES", window)
-        with open_recording(path, **kw) as source:
+        mp.setattr(source_module, "WINDOW_MESSAGES", window)
+        with open_recording(path, ReadOptions(**kw)) as source:
             return list(source)
 
 
@@ -69,7 +70,7 @@ def test_the_file_is_opened_once_and_its_kind_decided_once(drive, monkeypatch) -
         for k in files.FILE_KINDS))
     windows = _windows(path, 150)
     assert len(windows) >= 10 and len(opened) == 1
-    assert asked == ["rosbag1", "gins", "rosbag2", "mcap"]  # each kind asked once, in order
+    assert asked == ["rosbag1", "gins", "ulog", "rosbag2", "mcap"]  # each asked once, in order
 
 
 def _counting(fn, seen: list, name: str):

@@ -17,7 +17,7 @@ from mcap_edits import write_small_chunks
 
 from navreplay import metrics
 from navreplay.core.streams import Recording
-from navreplay.io import mcapread
+from navreplay.io import source
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import MemorySource
 from navreplay.metrics import tables
@@ -66,7 +66,7 @@ def test_a_run_scored_whole_or_window_by_window_gives_the_same_outages(
     job = run_job.RunJob(filters=(FilterSpec("gps-ins"),), recordings=(path,),
                          viz=VizOptions(mode=VizMode.NONE), report_path=tmp_path / "r.html")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(mcapread, "WINDOW_MESSAGES", 1000)  # several windows
+        mp.setattr(source, "WINDOW_MESSAGES", 1000)  # several windows
         streamed = run_job.run(job)
     outages = whole["gnss_outages"]
     assert [(o["start"], o["end"]) for o in outages] == [(20.0, 35.0), (50.0, 80.0)]

@@ -24,7 +24,7 @@ from rosbags.highlevel import AnyReader
 from rrd import read_rrd
 
 from navreplay.core.streams import Recording, Stream, StreamKind
-from navreplay.io import mcapread, open_recording, read_recording
+from navreplay.io import ReadOptions, open_recording, read_recording, source
 from navreplay.io.errors import RecordingError, RecordingWarning
 from navreplay.logs.options import LogOptions
 from navreplay.replay import FilterSpec, ReplayError
@@ -51,7 +51,7 @@ def _run(path: Path, window: int, filters=FILTERS, **kw):
     report and the warnings of the run."""
     job = run_job.RunJob(filters=filters, recordings=(path,), **kw)
     with pytest.MonkeyPatch.context() as mp, warnings.catch_warnings(record=True) as ws:
-        mp.setattr(mcapread, "WINDOW_MESSAGES", window)
+        mp.setattr(source, "WINDOW_MESSAGES", window)
         warnings.simplefilter("always")
         report = run_job.run(job)
     return report, [str(w.message) for w in ws if issubclass(w.category, RecordingWarning)]
@@ -59,8 +59,8 @@ def _run(path: Path, window: int, filters=FILTERS, **kw):
 
 def _windows(path: Path, window: int) -> int:
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(mcapread, "WINDOW_MESSAGES", window)
-        return sum(1 for _ in open_recording(path, kinds={StreamKind.IMU}))
+        mp.setattr(source, "WINDOW_MESSAGES", window)
+        return sum(1 for _ in open_recording(path, ReadOptions(kinds={StreamKind.IMU})))
 
 
 def _same_summaries(a: dict, b: dict) -> None:
@@ -294,9 +294,9 @@ def _without(stream: Stream, t0_ns: int, lo: float, hi: float) -> Stream:
 
 def _imu_window_ends(path: Path, window: int) -> list[int]:
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(mcapread, "WINDOW_MESSAGES", window)
+        mp.setattr(source, "WINDOW_MESSAGES", window)
         return [int(w[StreamKind.IMU].t_ns[-1])
-                for w in open_recording(path, kinds={StreamKind.IMU})
+                for w in open_recording(path, ReadOptions(kinds={StreamKind.IMU}))
                 if StreamKind.IMU in w and len(w[StreamKind.IMU])]
 
 
@@ -348,8 +348,8 @@ def test_a_paused_aiding_stream_holds_no_imu(drive_rec, tmp_path, monkeypatch) -
     gps = rec[StreamKind.GPS].t_ns
     resume = int(gps[np.searchsorted(gps, rec.t0_ns + 30 * 10**9)])
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(mcapread, "WINDOW_MESSAGES", 150)
-        during = [w for w in open_recording(path, kinds={StreamKind.IMU, StreamKind.GPS})
+        mp.setattr(source, "WINDOW_MESSAGES", 150)
+        during = [w for w in open_recording(path, ReadOptions(kinds={StreamKind.IMU, StreamKind.GPS}))
                   if StreamKind.IMU in w and StreamKind.GPS not in w]
     assert len(during) >= 5 and all(w.known[StreamKind.GPS] == resume - 1 for w in during)
     held: list[int] = []
