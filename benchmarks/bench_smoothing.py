@@ -4,11 +4,11 @@ backward pass against the forward pass, and the peak memory against the log's le
 Each figure comes from a fresh interpreter running the job on a simulated ``vehicle-drive``
 recording (100 Hz IMU and truth, outputs at 10 Hz; the recordings of
 :mod:`benchmarks.bench_memory`, simulated once into ``--dir`` and reused): ``forward`` is the
-replay up to the last window (with ``--smooth`` the filter takes its events one by one and
-stores each output's transition and covariances on disk), ``backward`` the backward pass over
-the stored chunks (:func:`navreplay.replay.smoothing.backward`), ``scoring`` the smoothed run
-through its scorer; ``plain`` is the same job without ``--smooth`` (the compiled fast path),
-for comparison. The peak is ``VmHWM`` (:func:`benchmarks.peak_rss`) of the process with and
+replay up to the last window (with ``--smooth`` the filter's compiled runs of events also
+keep each output's transition and covariances, which are stored on disk), ``backward`` the
+backward pass over the stored chunks (:func:`navreplay.replay.smoothing.backward`),
+``scoring`` the smoothed run through its scorer; ``plain`` is the same job without
+``--smooth``, for comparison. The peak is ``VmHWM`` (:func:`benchmarks.peak_rss`) of the process with and
 without ``--smooth``. The exports and the chunks go to a temporary directory beside the
 recording.
 

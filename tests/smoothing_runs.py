@@ -26,11 +26,17 @@ DEV_SEEDS = (100, 101, 102, 103)
 """Seeds the smoother was developed on (and nothing else)."""
 OUTPUT_RATE = 1.0
 """[Hz]"""
+NO_G_SENSITIVITY = {"gyro_g_sensitivity": "0 deg/h/g"}
+"""The consumer IMU without the gyro g-sensitivity, the one error term whose change under
+the drive's manoeuvres, ``K_g (f - f_0)``, the filters leave out (docs/smoothing.md)."""
 
 
-def values(duration: float = DURATION, outages=OUTAGES) -> dict:
-    """The scenario's parameters."""
-    return {"duration": duration, "imu_grade": GRADE, "gps_outages": outages, **GNSS}
+def values(duration: float = DURATION, outages=OUTAGES, imu: dict | None = None) -> dict:
+    """The scenario's parameters (``imu``: fields of its ``[sensors.imu]`` table)."""
+    out = {"duration": duration, "imu_grade": GRADE, "gps_outages": outages, **GNSS}
+    if imu:
+        out["sensors"] = {"imu": dict(imu)}
+    return out
 
 
 def drive(seed: int, duration: float = DURATION, outages=OUTAGES) -> Recording:
@@ -68,11 +74,13 @@ class Ensembles:
 
 
 def smoothed_ensembles(seed: int, runs: int, workers: int = 1,
-                       filter_name: str = "gps-ins") -> Ensembles:
+                       filter_name: str = "gps-ins", imu: dict | None = None) -> Ensembles:
     """The ensembles of ``navreplay montecarlo vehicle-drive FILTER --smooth`` over seeds
-    ``seed`` .. ``seed + runs - 1`` (the campaign's tasks, extractor and statistics)."""
+    ``seed`` .. ``seed + runs - 1`` (the campaign's tasks, extractor and statistics;
+    ``imu``: fields of the IMU's ``[sensors.imu]`` table)."""
     tasks = [dataclasses.replace(t, smooth=True)
-             for t in monte_carlo_tasks("vehicle-drive", runs, values=values(), seed=seed)]
+             for t in monte_carlo_tasks("vehicle-drive", runs, values=values(imu=imu),
+                                        seed=seed)]
     labels = (filter_name, filter_name + "/rts")
     stats = {label: metrics.EnsembleStats(label) for label in labels}
     ratio = [0.0]

@@ -76,6 +76,7 @@ import numpy as np
 from navreplay.core.streams import Metadata, StreamKind
 
 if TYPE_CHECKING:
+    from navreplay.filters.smoothable import SmoothingSteps
     from navreplay.sensors.specs import SensorSpecs
 
 
@@ -554,9 +555,12 @@ class EventRun(abc.ABC):
         :meth:`add_rows` then says how many were written."""
 
     @abc.abstractmethod
-    def add_rows(self, m: int, checked: bool = False) -> None:
+    def add_rows(self, m: int, checked: bool = False,
+                 steps: SmoothingSteps | None = None) -> None:
         """The first ``m`` rows of :meth:`out` hold estimates; ``checked``: their covariances
-        were checked as :func:`navreplay.filters.kalman.check_covariance` checks them."""
+        were checked as :func:`navreplay.filters.kalman.check_covariance` checks them;
+        ``steps``: what a smoother needs of each (a :class:`~navreplay.filters.smoothable.
+        Smoothable` filter after ``start_smoothing``; required then)."""
 
     @abc.abstractmethod
     def add_innovation_rows(self, name: str, t: np.ndarray, nu: np.ndarray,

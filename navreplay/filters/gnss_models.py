@@ -264,12 +264,14 @@ def feedback(nav: np.ndarray, dx: np.ndarray, est: Estimates, layout: Layout) ->
 def gps_update(kind: int, nav: np.ndarray, P: np.ndarray, t: float, sample: np.ndarray,
                sigma: np.ndarray, scale: float, lag: float, omega: np.ndarray,
                est: Estimates, layout: Layout, gauss_markov: GaussMarkov, rtol: float,
-               ) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+               dx_sum: np.ndarray) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One GPS update (``kind`` :data:`POSITION` or :data:`VELOCITY`) of the error state 0 at
     time t [s] (that of P).
 
-    Returns (ok, nav, P, nu, S). When ok, nav and P are the corrected ones and the estimates
-    were corrected in place (the Gauss-Markov estimate carried to t first, :func:`gm_at`);
+    Returns (ok, nav, P, nu, S). When ok, nav and P are the corrected ones, the estimates
+    were corrected in place (the Gauss-Markov estimate carried to t first, :func:`gm_at`) and
+    the error state fed back was added to ``dx_sum`` (n,) (for a smoother; shape (0,): not
+    kept);
     when not (z, H or R not finite, R not PSD, S not positive definite, or the corrected x or
     P not finite / not PSD within ``rtol``: the checks of
     :func:`navreplay.filters.kalman.correct`), nothing was changed and the caller reports
@@ -297,4 +299,7 @@ def gps_update(kind: int, nav: np.ndarray, P: np.ndarray, t: float, sample: np.n
         for i in range(3):
             est.gm[i] = gm[i]
         est.gm_t[0] = t
+    if dx_sum.shape[0] == n:
+        for i in range(n):
+            dx_sum[i] += x[i]
     return True, feedback(nav, x, est, layout), P_new, nu, S

@@ -144,8 +144,11 @@ from navreplay.filters.base import (
 from navreplay.filters.ins import InsFilter, InsParams
 from navreplay.filters.ins_time_update import Imu
 from navreplay.filters.registry import register_filter
+from navreplay.filters.smoothable import SmoothingSteps
 from navreplay.sensors.specs import SensorSpecs
 
+_NO_SUM = np.zeros(0)
+"""The corrections of the updates are not summed (no smoother)."""
 LEVER = slice(15, 18)
 """Lever-arm error states (present with ``estimate_lever_arm``)."""
 LEVER_STATES: tuple[State, ...] = tuple(
@@ -467,14 +470,12 @@ class GpsInsFilter(InsFilter):
         self._sync_covariance()
         f64 = np.ascontiguousarray
         value, sigma = f64(value, dtype=float), f64(sigma, dtype=float)
-        ok = False
-        if self._smoothing is None:
-            ok, nav, P, nu, S = gnss.gps_update(
-                code, self.nav, self.P, self.t, value, sigma, scale, lag, self.omega_ib_b,
-                self._estimates(), self._layout(), self._gauss_markov(),
-                kalman.DEFAULT_RTOL)  # (4)-(12)
-        else:  # smoothing: the same update, its correction kept (in _feedback)
-            self._smoothing_prior()
+        self._smoothing_prior()
+        log = self._smoothing
+        ok, nav, P, nu, S = gnss.gps_update(
+            code, self.nav, self.P, self.t, value, sigma, scale, lag, self.omega_ib_b,
+            self._estimates(), self._layout(), self._gauss_markov(), kalman.DEFAULT_RTOL,
+            _NO_SUM if log is None else log.dx)  # (4)-(12), the correction kept for a smoother
         if not ok:  # the checked path names what is wrong (and keeps the correction)
             c = kalman.correct(np.zeros(self.P.shape[0]), self.P, *self._measurement(
                 code, value, sigma * scale, lag), t=t)
@@ -537,13 +538,13 @@ class GpsInsFilter(InsFilter):
         its IMU segment, apply its GPS sample (if any) and write the estimate after it into
         the run's rows, bit for bit as :meth:`propagate`, :meth:`update` and :meth:`estimate`
         one by one, every estimate checked as :func:`navreplay.filters.kalman.check_covariance`
-        checks it. The kernel stops before an event that fails a check (undone): the default
+        checks it; with a smoother, each estimate's smoothing step too (handed over with the
+        rows, :class:`~navreplay.filters.smoothable.SmoothingSteps`). The kernel stops before an event that fails a check (undone): the default
         then applies it, which names the problem. A subclass that changes ``propagate``,
         ``update`` or ``estimate`` gets the default (its runs of ticks still compiled when
         :class:`~navreplay.filters.ins.InsFilter`'s kernel applies).
         """
-        if (overrides(self, GpsInsFilter, "propagate", "update", "estimate")
-                or self._smoothing is not None):
+        if overrides(self, GpsInsFilter, "propagate", "update", "estimate"):
             return super().run_events(run)
         p = self.params
         kinds, samples = run.kinds, run.samples
@@ -570,6 +571,11 @@ class GpsInsFilter(InsFilter):
         inn_code = np.zeros(n_inn, np.int64)
         inn_t, inn_nu, inn_S = np.empty(n_inn), np.empty((n_inn, 3)), np.empty((n_inn, 3, 3))
         f64 = np.ascontiguousarray
+        smoothing, log = ev.NO_SMOOTHING, self._smoothing
+        if log is not None:  # the smoother's rows, one per estimate
+            r, n = int(np.count_nonzero(run.record)), self.P.shape[0]
+            smoothing = ev.Smoothing(log.dx, log.P_prior, log.has_prior, np.empty((r, n, n)),
+                                     np.empty((r, n, n)), np.empty((r, n)))
         pos, pos_sigma = (f64(a, dtype=float) for a in cols[gnss.POSITION])
         vel, vel_sigma = (f64(a, dtype=float) for a in cols[gnss.VELOCITY])
         done, m, k, self.nav, self.P, self.t = ev.run_events(
@@ -581,10 +587,11 @@ class GpsInsFilter(InsFilter):
                        gnss.GaussMarkov(float(p.gps_pos_gm_tau), self._gm_var),
                        kalman.DEFAULT_RTOL),
             tu.step, tu.model, tu.work, ev.Rows(*run.out()),
-            ev.Updates(inn_code, inn_t, inn_nu, inn_S))
+            ev.Updates(inn_code, inn_t, inn_nu, inn_S), smoothing)
         for key, (a, _) in ev.LAYOUT.items():  # the filter's arrays are updated in place
             state[key][:] = s[a:a + len(state[key])]
-        run.add_rows(m, checked=True)
+        run.add_rows(m, checked=True, steps=None if log is None else SmoothingSteps(
+            smoothing.phi_out[:m], smoothing.P_prior_out[:m], smoothing.dx_out[:m]))
         for code, name in ((gnss.POSITION, "gps_pos"), (gnss.VELOCITY, "gps_vel")):
             sel = inn_code[:k] == code
             if sel.any():

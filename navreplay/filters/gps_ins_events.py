@@ -93,6 +93,28 @@ class Rows(NamedTuple):
     nav: np.ndarray
 
 
+class Smoothing(NamedTuple):
+    """What a smoother needs of the run (:class:`~navreplay.filters.ins_smoothing.InsSmoothing`;
+    off when ``dx`` has no entries): the sum of the corrections fed back since the last
+    output (n,), the covariance before the first update since then (n, n) and whether it is
+    kept (1,), all carried over between runs and updated in place; and the rows each output
+    of the run writes: the transition from the previous output (R, n, n, the product kept in
+    the time update's ``work.Phi``), the covariance before the updates (R, n, n) and the
+    corrections (R, n)."""
+
+    dx: np.ndarray
+    P_prior: np.ndarray
+    has_prior: np.ndarray
+    phi_out: np.ndarray
+    P_prior_out: np.ndarray
+    dx_out: np.ndarray
+
+
+NO_SMOOTHING = Smoothing(np.zeros(0), np.zeros((0, 0)), np.zeros(1), np.zeros((0, 0, 0)),
+                         np.zeros((0, 0, 0)), np.zeros((0, 0)))
+"""A run without a smoother."""
+
+
 class Updates(NamedTuple):
     """The rows the innovations go to: measurement code (U,), time (U,), nu (U, 3),
     S (U, 3, 3)."""
@@ -112,10 +134,27 @@ def _any(a: np.ndarray) -> bool:
 
 
 @numba.njit(cache=True)
+def _smoothing_row(sm: Smoothing, m: int, Phi: np.ndarray, P: np.ndarray) -> None:
+    """Row m of the smoother's rows at an estimate with covariance P: the transition since
+    the previous one, the covariance before the updates (P without update), the corrections;
+    then the next step starts."""
+    n = P.shape[0]
+    held = sm.has_prior[0] != 0.0
+    for r in range(n):
+        sm.dx_out[m, r] = sm.dx[r]
+        sm.dx[r] = 0.0
+        for c in range(n):
+            sm.phi_out[m, r, c] = Phi[r, c]
+            Phi[r, c] = 1.0 if r == c else 0.0
+            sm.P_prior_out[m, r, c] = sm.P_prior[r, c] if held else P[r, c]
+    sm.has_prior[0] = 0.0
+
+
+@numba.njit(cache=True)
 def run_events(
     nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray, imu: Imu, events: Events,
     gnss_samples: Gnss, options: Options, step: float, model: Model, work: Work, out: Rows,
-    updates: Updates,
+    updates: Updates, smoothing: Smoothing,
 ) -> tuple[int, int, int, np.ndarray, np.ndarray, float]:
     """Apply the events of ``events`` in order (see the module docstring).
 
@@ -124,7 +163,9 @@ def run_events(
     sample in row ``rows[e]`` of its columns in ``gnss_samples``; ``record[e]`` asks for an
     estimate after it. Estimates go to the rows of ``out``, innovations to ``updates``; ``s``
     is the packed state (:data:`LAYOUT`), ``step``, ``model`` and ``work`` those of the
-    filter's :class:`~navreplay.filters.ins_time_update.TimeUpdate`.
+    filter's :class:`~navreplay.filters.ins_time_update.TimeUpdate`. With a smoother
+    (``smoothing``), each estimate also writes its row of ``smoothing`` as
+    :meth:`~navreplay.filters.ins_smoothing.InsSmoothing.smoothing_step` returns it.
 
     Returns (done, estimates, innovations, nav, P, t_nav): the events applied (all, or up to
     the first that failed, undone), the rows written and the state after them; ``s`` holds
@@ -152,6 +193,11 @@ def run_events(
     layout = gnss.Layout(lever_states, gz, ng, ga, na, gp)
     gm_now = np.empty(3)
     snap = np.empty(s.shape[0])
+    smooth = smoothing.dx.shape[0] == n
+    acc, prior, has_prior = smoothing.dx, smoothing.P_prior, smoothing.has_prior
+    Phi = work.Phi
+    phi_snap = np.empty(Phi.shape)
+    acc_snap = np.empty(acc.shape[0])
     m = 0
     k = 0
     a = 0
@@ -159,6 +205,10 @@ def run_events(
         for c in range(s.shape[0]):  # (loops: an array assignment compiles numba's
             snap[c] = s[c]  # formatted shape error)
         nav0, P0, t0, k0 = nav, P, t_nav, k
+        prior0 = has_prior[0]
+        if smooth:
+            phi_snap[:, :] = Phi
+            acc_snap[:] = acc
         ok = True
         b = ends[e]
         if b > a:
@@ -189,16 +239,19 @@ def run_events(
                 P = _close_step(P, model, open_step, work)
                 ok = _covariance_ok(P, rtol)
             if ok:
+                if smooth and not has_prior[0]:
+                    prior[:, :] = P
+                    has_prior[0] = 1.0
                 r = rows[e]
                 if kind == gnss.POSITION:
                     lag = max(t_ev[e] - t_nav, 0.0)
                     ok, nav, P, nu, S = gnss.gps_update(
                         kind, nav, P, t_nav, gps_pos[r], gps_pos_sigma[r], pos_scale, lag,
-                        w_last, est, layout, gauss_markov, rtol)
+                        w_last, est, layout, gauss_markov, rtol, acc)
                 else:
                     ok, nav, P, nu, S = gnss.gps_update(
                         kind, nav, P, t_nav, gps_vel[r], gps_vel_sigma[r], vel_scale, 0.0,
-                        w_last, est, layout, gauss_markov, rtol)
+                        w_last, est, layout, gauss_markov, rtol, acc)
                 if ok:
                     inn_code[k] = kind
                     inn_t[k] = t_ev[e]
@@ -233,10 +286,16 @@ def run_events(
                         P_out[m, r, c] = P[r, c]
                 for c in range(nav.shape[0]):
                     nav_out[m, c] = nav[c]
+                if smooth:
+                    _smoothing_row(smoothing, m, Phi, P)
                 m += 1
         if not ok:  # undo the event: the engine replays it one by one
             for c in range(s.shape[0]):
                 s[c] = snap[c]
+            if smooth:
+                Phi[:, :] = phi_snap
+                acc[:] = acc_snap
+                has_prior[0] = prior0
             return e, m, k0, nav0, P0, t0
         a = b
     return codes.shape[0], m, k, nav, P, t_nav

@@ -7,7 +7,8 @@ transitions (``Phi = I + F T + (F T)^2 / 2`` each), kept by the compiled time up
 (:meth:`~navreplay.filters.ins_time_update.TimeUpdate.keep_transition`); an IMU gap bridged
 in between adds its own (:func:`navreplay.filters.imu_gap.bridge`). The updates' corrections
 are summed as they are fed back, and the covariance before the first update of an output is
-kept. The filters reset their error state to 0 after each feedback and leave P as it is, so
+kept, in arrays that ``gps-ins``'s compiled runs of events update as well
+(:class:`navreplay.filters.gps_ins_events.Smoothing`). The filters reset their error state to 0 after each feedback and leave P as it is, so
 the reset Jacobian is the identity. A smoothed error state ``d`` corrects an output as the
 feedback does: the navigation solution by :func:`~navreplay.filters.ins_error.apply_correction`
 and each estimate held in ``x`` (biases, scale factors, ...) by ``x - d``; the navigation
@@ -27,10 +28,14 @@ from navreplay.filters.smoothable import Smoothable, SmoothingStep
 
 
 class _Log:
-    """What the forward pass keeps between two outputs for the smoother."""
+    """What the forward pass keeps between two outputs for the smoother, in arrays that a
+    compiled run of events updates in place: the covariance before the first update
+    (``P_prior``, valid when ``has_prior[0]`` is 1) and the sum of the corrections fed back
+    (``dx``)."""
 
     def __init__(self, n: int) -> None:
-        self.P_prior: np.ndarray | None = None
+        self.P_prior = np.zeros((n, n))
+        self.has_prior = np.zeros(1)
         self.dx = np.zeros(n)
 
 
@@ -53,8 +58,9 @@ class InsSmoothing(Smoothable):
     def _smoothing_prior(self) -> None:
         """Before a correction: the covariance before this output's first update."""
         log = self._smoothing
-        if log is not None and log.P_prior is None:
-            log.P_prior = self.P.copy()
+        if log is not None and not log.has_prior[0]:
+            log.P_prior[:, :] = self.P
+            log.has_prior[0] = 1.0
 
     def _smoothing_feedback(self, dx: np.ndarray) -> None:
         """The errors an update fed back."""
@@ -73,9 +79,9 @@ class InsSmoothing(Smoothable):
             raise RuntimeError("smoothing_step before start_smoothing")
         self._sync_covariance()
         step = SmoothingStep(self._time_update.take_transition(),
-                             self.P.copy() if log.P_prior is None else log.P_prior,
+                             (log.P_prior if log.has_prior[0] else self.P).copy(),
                              log.dx.copy())
-        log.P_prior = None
+        log.has_prior[0] = 0.0
         log.dx[:] = 0.0
         return step
 

@@ -6,10 +6,11 @@ pass stored at every estimate the filter output. A filter opts in by deriving fr
 three methods; the replay then, with ``--smooth``:
 
 1. calls :meth:`Smoothable.start_smoothing` once, before the first event (the filter then
-   takes its events one by one, :meth:`Filter.run_events`' default, and keeps the transition
-   of its error state since its last output);
+   keeps the transition of its error state since its last output);
 2. after every estimate it records, calls :meth:`Smoothable.smoothing_step` and stores the
-   estimate and the step on disk;
+   estimate and the step on disk; a filter whose :meth:`Filter.run_events` writes its
+   estimates in a compiled run hands the steps of those estimates over with them instead
+   (:class:`SmoothingSteps`, :meth:`navreplay.filters.base.EventRun.add_rows`);
 3. after the last window, runs the backward pass over the stored chunks, latest first, and
    hands each smoothed correction to :meth:`Smoothable.apply_smoothed`, which turns the forward
    estimate into the smoothed one (as its feedback turns an update into a corrected solution).
@@ -52,6 +53,17 @@ class SmoothingStep:
     P_prior: np.ndarray
     dx: np.ndarray
     reset: np.ndarray | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class SmoothingSteps:
+    """The :class:`SmoothingStep` of each of m estimates a compiled run of events wrote
+    (:meth:`navreplay.filters.base.EventRun.add_rows`), stacked: ``phi`` (m, n, n),
+    ``P_prior`` (m, n, n), ``dx`` (m, n); the reset is the identity."""
+
+    phi: np.ndarray
+    P_prior: np.ndarray
+    dx: np.ndarray
 
 
 class Smoothable(abc.ABC):

@@ -55,7 +55,7 @@ from navreplay.filters.base import (
 from navreplay.filters.kalman import FilterDivergedError
 from navreplay.filters.result import RunResult
 from navreplay.filters.settings import FilterSettings, build_params
-from navreplay.filters.smoothable import Smoothable
+from navreplay.filters.smoothable import Smoothable, SmoothingSteps
 from navreplay.io.errors import RecordingError
 from navreplay.io.lifecycle import from_signal
 from navreplay.io.source import COMPLETE, Window
@@ -542,16 +542,23 @@ class _Events:
             self.columns = Columns(None, self.upper, len(s.states), s.navigation)
         return self.columns.free(k)
 
-    def written(self, m: int, nav: np.ndarray, checked: bool) -> None:
+    def written(self, m: int, nav: np.ndarray, checked: bool,
+                steps: SmoothingSteps | None) -> None:
         s = self.session
-        if s.smoothing is not None:
+        if s.smoothing is not None and steps is None:
             raise ReplayError(f"filter {s.label!r}: a compiled run wrote estimates while "
-                              "smoothing; a Smoothable filter takes its events one by one "
-                              "once start_smoothing is called")
+                              "smoothing without their smoothing steps (EventRun.add_rows' "
+                              "steps)")
         columns = self.columns
         assert columns is not None
         m0 = columns.m
         columns.written(m, nav)
+        if s.smoothing is not None and steps is not None:
+            if not steps.phi.shape[0] == steps.P_prior.shape[0] == steps.dx.shape[0] == m:
+                raise BadOutput(f"{m} rows written with {steps.phi.shape[0]} smoothing steps")
+            s.smoothing.add_rows(columns.t[m0:m0 + m], columns.x[m0:m0 + m],
+                                 columns.P[m0:m0 + m], nav[:m] if columns.has_nav else None,
+                                 steps)
         if checked:
             if self.checked == m0:  # the kernel checked its estimates
                 self.checked = columns.m
@@ -625,10 +632,11 @@ class _Run(EventRun):
         self._nav = np.empty((k, 10))
         return t, x, P, self._nav
 
-    def add_rows(self, m: int, checked: bool = False) -> None:
+    def add_rows(self, m: int, checked: bool = False,
+                 steps: SmoothingSteps | None = None) -> None:
         if self._nav is None:
             raise BadOutput("add_rows before out(): no rows to add")
-        self.events.written(m, self._nav, checked)
+        self.events.written(m, self._nav, checked, steps)
 
     def add_innovation_rows(self, name: str, t: np.ndarray, nu: np.ndarray,
                             S: np.ndarray) -> None:

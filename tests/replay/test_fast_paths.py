@@ -153,3 +153,41 @@ def test_a_subclass_keeps_the_decay_of_the_markov_states(
     assert_same_results(fast, _one_by_one(monkeypatch, banked, Changed, params, **kw))
     gm = fast.x[:, fast.state_names.index("gm_N")]
     assert np.count_nonzero(np.diff(gm)) > 0.9 * (len(gm) - 1)  # not held between fixes
+
+
+def _smoothed(rec: Recording, **kw: Any) -> dict[str, Any]:
+    from navreplay.io.source import MemorySource
+    from navreplay.replay.pipeline import Collect, replay_file
+    from navreplay.replay.spec import FilterSpec
+
+    collect = Collect()
+    replay_file(MemorySource(rec, "rec"), [FilterSpec("gps-ins")], stages=[collect],
+                smooth=True, score=False, **kw)
+    return collect.results()
+
+
+@pytest.mark.parametrize("output_rate", [1.0, 20.0])
+def test_smoothed_compiled_runs_are_bitwise_the_events_one_by_one(
+        banked: Recording, monkeypatch: pytest.MonkeyPatch, output_rate: float) -> None:
+    """With a smoother, the compiled runs of ``gps-ins`` keep the transition, the covariance
+    before the updates and the corrections of every output as the events one by one do: the
+    forward and the smoothed runs have the same bits (full models, Gauss-Markov GNSS states,
+    an outage; runs cut short by the progress bar and by the check interval)."""
+    monkeypatch.setattr(session, "CHECK_EVERY", 64)
+    kw = {"output_rate": output_rate, "progress": lambda done, total: None}
+    calls: list[int] = []
+    compiled = GpsInsFilter.run_events
+
+    def spy(self: GpsInsFilter, run: Any) -> int:
+        calls.append(len(run))
+        return compiled(self, run)
+
+    monkeypatch.setattr(GpsInsFilter, "run_events", spy)
+    fast = _smoothed(banked, **kw)
+    assert sum(calls) > 100  # the events went through the compiled runs
+    monkeypatch.setattr(GpsInsFilter, "run_events", Filter.run_events)
+    slow = _smoothed(banked, **kw)
+    assert_same_results(fast["gps-ins"], slow["gps-ins"])
+    for name in ("t", "x", "P", "nav_pos", "nav_v_n", "nav_q_nb"):
+        np.testing.assert_array_equal(getattr(fast["gps-ins/rts"], name),
+                                      getattr(slow["gps-ins/rts"], name), err_msg=name)

@@ -7,7 +7,13 @@ one), the smoothed runs one by one; ins and rpm-aided-ins smoothed; the progress
 
 import numpy as np
 import pytest
-from smoothing_runs import OUTAGES, drive, smoothed_ensembles, smoothed_pair
+from smoothing_runs import (
+    NO_G_SENSITIVITY,
+    OUTAGES,
+    drive,
+    smoothed_ensembles,
+    smoothed_pair,
+)
 
 from navreplay.io.source import MemorySource
 from navreplay.replay.pipeline import Collect, replay_file
@@ -19,12 +25,28 @@ SLOW_SEEDS = (6000, 40)
 """(first seed, runs)"""
 
 
-def _check(seed: int, runs: int, workers: int = 1) -> tuple[dict, dict]:
+BIASES = ("b_a_x", "b_a_y", "b_a_z", "b_g_x", "b_g_y", "b_g_z")
+UNMODELLED = ("b_g_x", "b_g_y")
+"""The smoothed states the gyro g-sensitivity under manoeuvre, ``K_g (f - f_0)``, makes
+over-confident: the consumer IMU's 100 deg/h/g times the drive's 0.1-0.2 g of acceleration
+and turn is an error as large as its bias instability that the filters leave out. The
+forward filter leans on the fixes and stays in its bands; the smoother also leans on the bias
+model between them and reads RMS/sigma 1.09-1.21 (docs/smoothing.md; in its bands with the
+g-sensitivity off, :func:`test_smoothed_biases_without_g_sensitivity`)."""
+UNMODELLED_MARGIN = 1.25
+"""The RMS/sigma of the states of :data:`UNMODELLED` is expected at most this factor above the
+upper end of its band (10-20 % over-confident)."""
+
+
+def _check(seed: int, runs: int, workers: int = 1, imu: dict | None = None
+           ) -> tuple[dict, dict]:
     """The ensemble checks of the issue: each outage's horizontal RMS error at least 5x smaller
     smoothed; the smoothed time-averaged NEES and the RMS/sigma of each state in it inside the
     ensemble's own bands (docs/methods/consistency.md); the smoothed sigma never above the
-    forward one (every run, scored state and epoch)."""
-    ens = smoothed_ensembles(seed, runs, workers)
+    forward one (every run, scored state and epoch). The smoothed IMU biases in their bands
+    too, but for the states of :data:`UNMODELLED` (up to :data:`UNMODELLED_MARGIN` times their
+    band's upper end) when the IMU has its g-sensitivity."""
+    ens = smoothed_ensembles(seed, runs, workers, imu=imu)
     fwd, rts = ens.forward.summary(), ens.smoothed.summary()
     lengths = [o["end"] - o["start"] for o in rts["gnss_outages"]]
     assert lengths == [length for _, length in OUTAGES] == [30.0, 60.0]
@@ -35,6 +57,13 @@ def _check(seed: int, runs: int, workers: int = 1) -> tuple[dict, dict]:
     checked = {k: c for k, c in rts["rms_over_sigma"].items() if c["nees"]}
     assert len(checked) == 9 and all(c["passed"] for c in checked.values()), checked
     assert ens.sigma_ratio_max <= 1.0 + 1e-9
+    g_sensitivity = imu is None or "gyro_g_sensitivity" not in imu
+    for name in BIASES:
+        c = rts["rms_over_sigma"][name]
+        if g_sensitivity and name in UNMODELLED:
+            assert c["band"][0] <= c["ratio"] <= UNMODELLED_MARGIN * c["band"][1], (name, c)
+        else:
+            assert c["passed"], (name, c)
     return fwd, rts
 
 
@@ -49,7 +78,16 @@ def test_outages_and_consistency_ensemble():
           [(f["rms_h"], s["rms_h"]) for f, s in zip(fwd["gnss_outages"], rts["gnss_outages"],
                                                     strict=True)],
           "NEES/dof", rts["nees_time_averaged"]["mean"] / 9,
-          "RMS/sigma", {k: c["ratio"] for k, c in rts["rms_over_sigma"].items() if c["nees"]})
+          "RMS/sigma", {k: round(c["ratio"], 3) for k, c in rts["rms_over_sigma"].items()})
+
+
+@pytest.mark.slow
+def test_smoothed_biases_without_g_sensitivity():
+    """The same drives with the IMU's gyro g-sensitivity off: the smoothed gyro biases are in
+    their bands too (the bias instability a Gauss-Markov process, the filter's a random walk:
+    no matter)."""
+    _, rts = _check(*SLOW_SEEDS, workers=2, imu=NO_G_SENSITIVITY)
+    print("RMS/sigma", {k: round(c["ratio"], 3) for k, c in rts["rms_over_sigma"].items()})
 
 
 def test_smoothed_runs_one_by_one():
