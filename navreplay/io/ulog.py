@@ -65,6 +65,7 @@ from typing import Any
 import numpy as np
 
 from navreplay.core.streams import Metadata, StreamKind
+from navreplay.core.units import GAUSS
 from navreplay.io.convert import Convention
 from navreplay.io.direct import Columns, DirectSource, Topic, body_axes
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
@@ -73,9 +74,6 @@ from navreplay.io.source import ReadOptions
 
 MAGIC = b"ULog\x01\x12\x35"
 """The first bytes of a ULog file (its version byte follows)."""
-
-GAUSS = 1e-4
-"""One gauss [T]."""
 
 EXTRA = "ulog"
 """The optional extra that installs pyulog."""

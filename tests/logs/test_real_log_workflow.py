@@ -30,6 +30,18 @@ def invoke(*args: str) -> tuple[int, str]:
     return res.exit_code, res.output
 
 
+
+def _initial_toml(path: Path, tab: dict, k: int) -> Path:
+    """A config whose [initial] table is the truth at row k of the drive's truth table."""
+    lat, lon, h = (float(x) for x in tab["lla"][k])
+    roll, pitch, yaw = (float(x) for x in np.degrees(tab["euler"][k]))
+    path.write_text(
+        f"[initial]\nlat_deg = {math.degrees(lat)!r}\nlon_deg = {math.degrees(lon)!r}\n"
+        f"h = {h!r}\nv_n = {[float(v) for v in tab['v_n'][k]]!r}\nroll_deg = {roll!r}\n"
+        f"pitch_deg = {pitch!r}\nyaw_deg = {yaw!r}\npos_sigma = 0.5\nvel_sigma = 0.05\n"
+        "att_sigma_deg = [0.1, 0.1, 0.5]\n")
+    return path
+
 def _reference_csv(path: Path, header: str, rows: list[str]) -> Path:
     path.write_text("\n".join([header, *rows]) + "\n")
     return path
@@ -162,14 +174,7 @@ def test_run_over_a_span_starts_there(drive: Path, tmp_path: Path) -> None:
     assert np.all(np.diff(t) > 0)
     tab = truth_table(DRIVE)
     k = int(np.searchsorted(tab["t_ns"], tab["t_ns"][0] + 70 * 10**9))
-    lat, lon, h = (float(x) for x in tab["lla"][k])
-    roll, pitch, yaw = (float(x) for x in np.degrees(tab["euler"][k]))
-    config = tmp_path / "init.toml"
-    config.write_text(
-        f"[initial]\nlat_deg = {math.degrees(lat)!r}\nlon_deg = {math.degrees(lon)!r}\n"
-        f"h = {h!r}\nv_n = {[float(v) for v in tab['v_n'][k]]!r}\nroll_deg = {roll!r}\n"
-        f"pitch_deg = {pitch!r}\nyaw_deg = {yaw!r}\npos_sigma = 0.5\nvel_sigma = 0.05\n"
-        "att_sigma_deg = [0.1, 0.1, 0.5]\n")
+    config = _initial_toml(tmp_path / "init.toml", tab, k)
     ref = _reference_csv(tmp_path / "ref.csv", "t_ns,lat,lon,h,vn,ve,vd", _rows("t_ns pos vel"))
     code, out = invoke("run", "ins", str(drive), "--start", "70", "--end", "75", "--init",
                        "table", "--config", str(config), "--reference", str(ref),
@@ -383,14 +388,7 @@ def test_initial_position_is_the_origin_at_the_start(drive: Path, tmp_path: Path
     tab = truth_table(DRIVE)
     k = int(np.searchsorted(tab["t_ns"], tab["t_ns"][0] + 85 * 10**9))
     assert np.hypot(*tab["enu"][k, :2]) > 100.0  # the start is far from the TUM's origin
-    lat, lon, h = (float(x) for x in tab["lla"][k])
-    roll, pitch, yaw = (float(x) for x in np.degrees(tab["euler"][k]))
-    config = tmp_path / "init.toml"
-    config.write_text(
-        f"[initial]\nlat_deg = {math.degrees(lat)!r}\nlon_deg = {math.degrees(lon)!r}\n"
-        f"h = {h!r}\nv_n = {[float(v) for v in tab['v_n'][k]]!r}\nroll_deg = {roll!r}\n"
-        f"pitch_deg = {pitch!r}\nyaw_deg = {yaw!r}\npos_sigma = 0.5\nvel_sigma = 0.05\n"
-        "att_sigma_deg = [0.1, 0.1, 0.5]\n")
+    config = _initial_toml(tmp_path / "init.toml", tab, k)
     tum = tmp_path / "ref.tum"
     tum.write_text("".join(
         f"{t * 1e-9:.9f} {p[0]:.6f} {p[1]:.6f} {p[2]:.6f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f} "
@@ -407,6 +405,7 @@ def test_initial_position_is_the_origin_at_the_start(drive: Path, tmp_path: Path
     assert s["pos_rms_h"] < 0.05 and s["att_rms_heading"] < 0.01
     origin = json.loads((tmp_path / "exp" / "manifest.json").read_text())["origin"]
     assert origin["source"] == "[initial] lat_deg, lon_deg, h (the position at the start)"
+    lat, lon, h = (float(x) for x in tab["lla"][k])
     assert (origin["lat_deg"], origin["lon_deg"], origin["h_m"]) == pytest.approx(
         (math.degrees(lat), math.degrees(lon), h), abs=1e-12)
     first = np.loadtxt(tmp_path / "exp" / "ins.tum")[0]
