@@ -19,14 +19,14 @@ from __future__ import annotations
 import dataclasses
 import sqlite3
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from navreplay.core.streams import Metadata, Stream, StreamKind
-from navreplay.io.cdr import fields_of_messages
+from navreplay.io.cdr import decode_payloads, fields_of_messages
 from navreplay.io.checks import check_frame_ids
 from navreplay.io.convert import REDUCE
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
@@ -126,25 +126,46 @@ class _Bag:
         return [(n, normalize_type_name(t), f, int(c)) for n, t, f, c in rows]
 
     def messages(self, topics: list[str]) -> Iterator[tuple[int, Any]]:
+        """(log time [ns], deserialised message) of ``topics``, in log-time order."""
+        for t, raw, msgtype, fmt in self.raw(topics):
+            yield t, self.deserialize(raw, msgtype, fmt)
+
+    def raw(self, topics: list[str]) -> Iterator[tuple[int, bytes, str, str]]:
+        """(log time [ns], serialised message, type, serialisation format) of ``topics``, in
+        log-time order."""
         try:
             if self._reader is not None:
                 conns = [c for c in self._reader.connections if c.topic in topics]
                 for conn, t, raw in self._reader.messages(connections=conns):
-                    yield int(t), self._reader.deserialize(raw, conn.msgtype)
+                    fmt = getattr(conn.ext, "serialization_format", ROS1_FORMAT)
+                    yield int(t), raw, conn.msgtype, fmt
                 return
             assert self._db is not None
             marks = ",".join("?" * len(topics))
-            query = (f"SELECT m.timestamp, t.type, m.data FROM messages m JOIN topics t "
-                     f"ON m.topic_id = t.id WHERE t.name IN ({marks}) ORDER BY m.timestamp")
-            for t, msgtype, raw in self._db.execute(query, topics):
-                yield int(t), self._store.deserialize_cdr(bytes(raw), msgtype)
+            query = (f"SELECT m.timestamp, t.type, t.serialization_format, m.data FROM "
+                     f"messages m JOIN topics t ON m.topic_id = t.id WHERE t.name IN ({marks}) "
+                     "ORDER BY m.timestamp")
+            for t, msgtype, fmt, raw in self._db.execute(query, topics):
+                yield int(t), bytes(raw), msgtype, fmt
         except RecordingError:
             raise
         except Exception as exc:
-            raise RecordingError(
-                f"{self.where}: messages of {', '.join(topics)} cannot be read "
-                f"({type(exc).__name__}: {' '.join(str(exc).split())})"
-            ) from None
+            raise self._unreadable(topics, exc) from None
+
+    def deserialize(self, raw: bytes, msgtype: str, fmt: str) -> Any:
+        """A message of :meth:`raw` as rosbags' message object (a ROS 1 one in the types of
+        the ROS 2 one)."""
+        try:
+            if self._reader is not None:
+                return self._reader.deserialize(raw, msgtype)
+            return self._store.deserialize_cdr(raw, msgtype)
+        except Exception as exc:
+            raise self._unreadable([msgtype], exc) from None
+
+    def _unreadable(self, topics: list[str], exc: Exception) -> RecordingError:
+        return RecordingError(
+            f"{self.where}: messages of {', '.join(topics)} cannot be read "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())})")
 
 
 def _open(path: Path) -> _Bag:
@@ -180,29 +201,26 @@ class BagSource(FileSource):
                 warnings.simplefilter("ignore", RecordingWarning)
                 present = choose_topics(where, cands, set(SPECS), explicit=False,
                                         named=opts.topics, available=available, what="bag")
-            gathered: dict[StreamKind, tuple[list[Any], list[int]]] = {}
+            gathered: dict[StreamKind, tuple[dict[str, np.ndarray], list[int]]] = {}
             for kind, (c, _) in chosen.items():
-                msgs, times = [], []
-                for t, msg in bag.messages([c.topic]):
-                    times.append(t)
-                    msgs.append(msg)
-                gathered[kind] = (msgs, times)
+                label = f"{where}: topic {c.topic} ({SPECS[kind].message.name})"
+                gathered[kind] = _read_topic(bag, c.topic, kind, label)
         # t0: first log time over the chosen topics
         firsts = [min(ts) for _, ts in gathered.values() if ts]
         t0_ns = min(firsts) if firsts else 0
         streams: dict[StreamKind, Stream] = {}
-        for kind, (msgs, log_t) in gathered.items():
+        for kind, (fields, log_t) in gathered.items():
             topic, others = chosen[kind][0].topic, chosen[kind][1]
             label = f"{where}: topic {topic} ({SPECS[kind].message.name})"
-            fields = _fields(msgs, kind, label)
             log_ns = np.asarray(log_t, dtype=np.int64)
             order = np.argsort(log_ns, kind="stable")
             if np.any(order != np.arange(order.size)):
                 fields = {k: v[order] for k, v in fields.items()}
                 log_ns = log_ns[order]
             fields["t_ns"] = sample_times(fields["t_ns"], log_ns, opts.time, label)
-            frames = {m.header.frame_id for m in msgs}
-            frame_id = msgs[0].header.frame_id if msgs else SPECS[kind].frame_id
+            ids = fields.pop("frame_id")
+            frames = set(ids.tolist()) if ids.size else set()
+            frame_id = str(ids[0]) if ids.size else SPECS[kind].frame_id
             note = check_frame_ids(kind, label, frames, opts.frames.get(kind), frame_id)
             if note:
                 warnings.warn(RecordingWarning(f"{label}: {note}"), stacklevel=2)
@@ -233,18 +251,41 @@ class BagSource(FileSource):
         return metadata
 
 
-def _fields(msgs: list[Any], kind: StreamKind, label: str) -> dict[str, np.ndarray]:
-    try:
-        fields = fields_of_messages(msgs, SPECS[kind].message)
-    except (AttributeError, TypeError, ValueError) as exc:
-        raise RecordingError(f"{label}: messages lack a field of "
-                             f"{SPECS[kind].message.name} ({exc})") from None
+def _read_topic(bag: _Bag, topic: str, kind: StreamKind, label: str
+                ) -> tuple[dict[str, np.ndarray], list[int]]:
+    """The fields of one topic's messages (``t_ns``, ``frame_id`` and the stream's reduced
+    columns) and their log times, in the bag's order. CDR messages of a fixed layout are
+    decoded in bulk (:func:`navreplay.io.cdr.decode_payloads`, as an MCAP file's); the others,
+    and ROS 1 messages, are deserialised one by one by rosbags."""
+    message = SPECS[kind].message
+    times: list[int] = []
+    payloads: list[bytes] = []
+    types: list[str] = []
+    formats: set[str] = set()
+    for t, raw, msgtype, fmt in bag.raw([topic]):
+        times.append(t)
+        payloads.append(raw)
+        types.append(msgtype)
+        formats.add(fmt)
+
+    def one_by_one(index: Sequence[int]) -> dict[str, np.ndarray]:
+        fmt = next(iter(formats), MESSAGE_ENCODING)
+        msgs = [bag.deserialize(payloads[i], types[i], fmt) for i in index]
+        try:
+            return fields_of_messages(msgs, message)
+        except (AttributeError, TypeError, ValueError) as exc:
+            raise RecordingError(f"{label}: messages lack a field of {message.name} ({exc})"
+                                 ) from None
+
+    if formats == {MESSAGE_ENCODING}:
+        fields = decode_payloads(payloads, message, lambda index: one_by_one(index.tolist()))
+    else:
+        fields = one_by_one(range(len(payloads)))
     out: dict[str, np.ndarray] = {"frame_id": fields["frame_id"], "t_ns": fields["t_ns"]}
     for name, columns in REDUCE[kind].items():
         value = np.asarray(fields[name])
         out[name] = np.array(value if columns is None else value[:, columns])
-    return out
-
+    return out, times
 
 
 # --------------------------------------------------------------------------------------------
