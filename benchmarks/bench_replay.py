@@ -89,7 +89,7 @@ if sys.argv[1] != "-":
     res = replay(rec, load_filter("gps-ins"), validate=False)
     assert res.t.shape[0] > 0
 else:
-    import navreplay.filters.builtins, navreplay.io, navreplay.replay  # noqa: F401
+    import navreplay.filters.gps_ins, navreplay.io, navreplay.replay  # noqa: F401
 from benchmarks import peak_rss  # VmHWM: ru_maxrss would carry the parent's peak over
 print(peak_rss())
 """

@@ -64,6 +64,13 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
         (rf"^(no-viz|export|rrd) peak RSS 100 Hz / 10 Hz: {_N}x \(target <= 1\.2x: "
          r"(met|NOT met)\)$", 3),
     ],
+    "bench_realdrive": [
+        (rf"^  (numpy|bag default|bag --no-viz) +{_N} +{_N} +{_N} MB +[+-]{_N} MB$", 3),
+        (rf"^bag \(drive_bag\) (default|--no-viz): {_N} s CPU = {_N}x KF-GINS's 1\.1 s "
+         r"\(target <= 1\.65 s: (met|NOT met)\)$", 2),
+        (rf"^bag \(drive_bag\) --no-viz: peak RSS [+-]{_N} MB over bare numpy \(target <= "
+         r"\+150 MB: (met|NOT met)\)$", 1),
+    ],
     "bench_replay": [
         (rf"^end to end \(decode \+ gps-ins \+ summary\) +{_N} s +{_N}k IMU samples/s", 1),
         (rf"^ratios: end to end / strapdown = {_N}$", 1),
