@@ -16,6 +16,7 @@ topic whose stamps are zero or do not increase takes the log times, with a warni
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import sqlite3
 import warnings
@@ -187,9 +188,11 @@ class BagSource(FileSource):
     def _windows(self) -> Iterator[Window]:
         where, opts = self.name, self.options
         topic_kinds = topic_map(opts.topics)
-        metadata = self._check()
-        with _open(self.path) as bag:
-            listing = bag.topics()
+        metadata, check = self._check()
+        data = _mcap_data(self.path, check)
+        with contextlib.ExitStack() as stack:
+            bag = stack.enter_context(_open(self.path)) if data is None else None
+            listing = data[1] if data is not None else bag.topics()  # type: ignore[union-attr]
             available = ", ".join(f"{t} ({ty})" for t, ty, _, _ in listing) or "no topics"
             # rosbags deserialises ROS 1 messages into the types of the ROS 2 ones
             cands = [c for t, ty, fmt, _ in listing
@@ -201,27 +204,27 @@ class BagSource(FileSource):
                 warnings.simplefilter("ignore", RecordingWarning)
                 present = choose_topics(where, cands, set(SPECS), explicit=False,
                                         named=opts.topics, available=available, what="bag")
-            gathered: dict[StreamKind, tuple[dict[str, np.ndarray], list[int]]] = {}
-            for kind, (c, _) in chosen.items():
-                label = f"{where}: topic {c.topic} ({SPECS[kind].message.name})"
-                gathered[kind] = _read_topic(bag, c.topic, kind, label)
+            topics = {kind: c.topic for kind, (c, _) in chosen.items()}
+            if data is not None:
+                gathered = _read_mcap_topics(data[0], topics, where)
+            else:
+                assert bag is not None
+                gathered = {kind: _read_topic(bag, topic, kind, _label(where, topic, kind))
+                            for kind, topic in topics.items()}
         # t0: first log time over the chosen topics
-        firsts = [min(ts) for _, ts in gathered.values() if ts]
+        firsts = [int(log_ns.min()) for _, log_ns, _ in gathered.values() if log_ns.size]
         t0_ns = min(firsts) if firsts else 0
         streams: dict[StreamKind, Stream] = {}
-        for kind, (fields, log_t) in gathered.items():
+        for kind, (fields, log_ns, frames) in gathered.items():
             topic, others = chosen[kind][0].topic, chosen[kind][1]
-            label = f"{where}: topic {topic} ({SPECS[kind].message.name})"
-            log_ns = np.asarray(log_t, dtype=np.int64)
+            label = _label(where, topic, kind)
             order = np.argsort(log_ns, kind="stable")
             if np.any(order != np.arange(order.size)):
                 fields = {k: v[order] for k, v in fields.items()}
                 log_ns = log_ns[order]
             fields["t_ns"] = sample_times(fields["t_ns"], log_ns, opts.time, label)
-            ids = fields.pop("frame_id")
-            frames = set(ids.tolist()) if ids.size else set()
-            frame_id = str(ids[0]) if ids.size else SPECS[kind].frame_id
-            note = check_frame_ids(kind, label, frames, opts.frames.get(kind), frame_id)
+            frame_id = frames[0] if frames else SPECS[kind].frame_id
+            note = check_frame_ids(kind, label, set(frames), opts.frames.get(kind), frame_id)
             if note:
                 warnings.warn(RecordingWarning(f"{label}: {note}"), stacklevel=2)
             streams[kind], self.sources[kind] = build_stream(
@@ -230,7 +233,7 @@ class BagSource(FileSource):
         yield Window(streams, dict.fromkeys(streams, COMPLETE), metadata, t0_ns,
                      frozenset(present), final=True)
 
-    def _check(self) -> Metadata:
+    def _check(self) -> tuple[Metadata, BagCheck | None]:
         """The data files against metadata.yaml (:func:`check_bag`): a disagreement is a
         warning, data lost a salvage (the part kept goes into the metadata:
         :attr:`Source.coverage`)."""
@@ -248,11 +251,104 @@ class BagSource(FileSource):
                 metadata.extra["messages_kept"] = check.kept
             else:
                 warnings.warn(RecordingWarning(text), stacklevel=4)
-        return metadata
+        return metadata, check
 
 
-def _read_topic(bag: _Bag, topic: str, kind: StreamKind, label: str
-                ) -> tuple[dict[str, np.ndarray], list[int]]:
+def _label(where: str, topic: str, kind: StreamKind) -> str:
+    return f"{where}: topic {topic} ({SPECS[kind].message.name})"
+
+
+Gathered = tuple[dict[str, np.ndarray], np.ndarray, list[str]]
+"""A topic's fields (``t_ns`` and the stream's reduced columns), their log times [ns] and its
+frame ids (the first message's first)."""
+
+
+def _mcap_data(path: Path, check: BagCheck | None
+               ) -> tuple[list[Path], list[tuple[str, str, str, int]]] | None:
+    """The data files of a rosbag2 folder whose messages can be read in bulk as an MCAP
+    file's, and its topics as :meth:`_Bag.topics` lists them (from metadata.yaml); None unless
+    the storage is MCAP, uncompressed, every topic CDR and the data agree with metadata.yaml."""
+    folder = bag_folder(path)
+    if folder is None or check is None or check.problems or check.found is None:
+        return None
+    info = bag_metadata(folder)
+    if info.get("storage_identifier") != "mcap" or info.get("compression_mode"):
+        return None
+    listing = []
+    for item in info.get("topics_with_message_count") or []:
+        topic = item["topic_metadata"]
+        if topic.get("serialization_format") != MESSAGE_ENCODING:
+            return None
+        listing.append((str(topic["name"]), normalize_type_name(str(topic["type"])),
+                        MESSAGE_ENCODING, int(item["message_count"])))
+    files = [folder / str(f) for f in info.get("relative_file_paths") or []]
+    return files, sorted(listing)
+
+
+def _read_mcap_topics(files: list[Path], topics: dict[StreamKind, str], where: str
+                      ) -> dict[StreamKind, Gathered]:
+    """The chosen topics of a rosbag2 folder's MCAP data files, decoded in bulk chunk by
+    chunk as an MCAP recording's (:class:`navreplay.io.decode.ChannelDecoder`: fixed layouts
+    viewed as records, others through the file's own schema), the files one after another."""
+    from navreplay.io.decode import empty_leaf
+
+    kinds = {topic: kind for kind, topic in topics.items()}
+    parts: dict[StreamKind, list[Gathered]] = {kind: [] for kind in topics}
+    for path in files:
+        for kind, topic_part in _read_mcap_file(path, kinds, where):
+            parts[kind].append(topic_part)
+    out: dict[StreamKind, Gathered] = {}
+    for kind, got in parts.items():
+        if not got:  # a topic without messages
+            message = SPECS[kind].message
+            empty = {"t_ns": np.zeros(0, np.int64), **{
+                name: empty_leaf(message, name, columns) for name, columns in REDUCE[kind].items()}}
+            out[kind] = (empty, np.zeros(0, np.int64), [])
+        elif len(got) == 1:
+            out[kind] = got[0]
+        else:
+            out[kind] = ({k: np.concatenate([g[0][k] for g in got]) for k in got[0][0]},
+                         np.concatenate([g[1] for g in got]),
+                         list(dict.fromkeys(f for g in got for f in g[2])))
+    return out
+
+
+def _read_mcap_file(path: Path, kinds: dict[str, StreamKind], where: str
+                    ) -> list[tuple[StreamKind, Gathered]]:
+    """The topics ``kinds`` (topic -> stream) of one MCAP data file (see
+    :func:`_read_mcap_topics`)."""
+    from navreplay.io.decode import ChannelDecoder
+    from navreplay.io.mcapfile import FileContents, walk
+
+    contents = FileContents(size=path.stat().st_size)
+    decoders: dict[int, tuple[StreamKind, ChannelDecoder] | None] = {}
+
+    def decoder(cid: int) -> tuple[StreamKind, ChannelDecoder] | None:
+        if cid not in decoders:
+            ch = contents.channels.get(cid)
+            kind = kinds.get(ch.topic) if ch is not None else None
+            decoders[cid] = None if ch is None or kind is None else (kind, ChannelDecoder(
+                ch, contents.schemas.get(ch.schema_id), SPECS[kind].message, where))
+        return decoders[cid]
+
+    with open(path, "rb") as f:
+        for block in walk(f, str(path), contents,
+                          lambda _, ids: any(decoder(c) is not None for c in ids)):
+            for cid in set(block.channel.tolist()):
+                if (found := decoder(cid)) is not None:
+                    found[1].add(block, np.flatnonzero(block.channel == cid))
+    out = []
+    for found in decoders.values():
+        if found is not None:
+            kind, dec = found
+            fields = dec.finish()
+            assert dec.log_ns is not None
+            first = [] if dec.first_frame_id is None else [dec.first_frame_id]
+            out.append((kind, (fields, dec.log_ns, [*first, *sorted(dec.frame_ids - set(first))])))
+    return out
+
+
+def _read_topic(bag: _Bag, topic: str, kind: StreamKind, label: str) -> Gathered:
     """The fields of one topic's messages (``t_ns``, ``frame_id`` and the stream's reduced
     columns) and their log times, in the bag's order. CDR messages of a fixed layout are
     decoded in bulk (:func:`navreplay.io.cdr.decode_payloads`, as an MCAP file's); the others,
@@ -281,11 +377,12 @@ def _read_topic(bag: _Bag, topic: str, kind: StreamKind, label: str
         fields = decode_payloads(payloads, message, lambda index: one_by_one(index.tolist()))
     else:
         fields = one_by_one(range(len(payloads)))
-    out: dict[str, np.ndarray] = {"frame_id": fields["frame_id"], "t_ns": fields["t_ns"]}
+    out: dict[str, np.ndarray] = {"t_ns": fields["t_ns"]}
     for name, columns in REDUCE[kind].items():
         value = np.asarray(fields[name])
         out[name] = np.array(value if columns is None else value[:, columns])
-    return out, times
+    ids = fields["frame_id"].tolist()
+    return out, np.asarray(times, dtype=np.int64), list(dict.fromkeys(ids))
 
 
 # --------------------------------------------------------------------------------------------
