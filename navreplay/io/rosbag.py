@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import sqlite3
 import warnings
 from collections.abc import Iterator, Sequence
@@ -189,10 +190,10 @@ class BagSource(FileSource):
         where, opts = self.name, self.options
         topic_kinds = topic_map(opts.topics)
         metadata, check = self._check()
-        data = _mcap_data(self.path, check)
+        data = _bulk_data(self.path, check)
         with contextlib.ExitStack() as stack:
             bag = stack.enter_context(_open(self.path)) if data is None else None
-            listing = data[1] if data is not None else bag.topics()  # type: ignore[union-attr]
+            listing = data[2] if data is not None else bag.topics()  # type: ignore[union-attr]
             available = ", ".join(f"{t} ({ty})" for t, ty, _, _ in listing) or "no topics"
             # rosbags deserialises ROS 1 messages into the types of the ROS 2 ones
             cands = [c for t, ty, fmt, _ in listing
@@ -205,8 +206,10 @@ class BagSource(FileSource):
                 present = choose_topics(where, cands, set(SPECS), explicit=False,
                                         named=opts.topics, available=available, what="bag")
             topics = {kind: c.topic for kind, (c, _) in chosen.items()}
-            if data is not None:
-                gathered = _read_mcap_topics(data[0], topics, where)
+            if data is not None and data[0] == "mcap":
+                gathered = _read_mcap_topics(data[1], topics, where)
+            elif data is not None:
+                gathered = _read_sqlite_topics(self.path, data[1], topics, where)
             else:
                 assert bag is not None
                 gathered = {kind: _read_topic(bag, topic, kind, _label(where, topic, kind))
@@ -263,16 +266,18 @@ Gathered = tuple[dict[str, np.ndarray], np.ndarray, list[str]]
 frame ids (the first message's first)."""
 
 
-def _mcap_data(path: Path, check: BagCheck | None
-               ) -> tuple[list[Path], list[tuple[str, str, str, int]]] | None:
-    """The data files of a rosbag2 folder whose messages can be read in bulk as an MCAP
-    file's, and its topics as :meth:`_Bag.topics` lists them (from metadata.yaml); None unless
-    the storage is MCAP, uncompressed, every topic CDR and the data agree with metadata.yaml."""
+def _bulk_data(path: Path, check: BagCheck | None
+               ) -> tuple[str, list[Path], list[tuple[str, str, str, int]]] | None:
+    """The storage (``mcap``, ``sqlite3``) and data files of a rosbag2 folder whose messages
+    are read without rosbags' reader, and its topics as :meth:`_Bag.topics` lists them (from
+    metadata.yaml); None unless the files are uncompressed, every topic CDR and the data agree
+    with metadata.yaml."""
     folder = bag_folder(path)
     if folder is None or check is None or check.problems or check.found is None:
         return None
     info = bag_metadata(folder)
-    if info.get("storage_identifier") != "mcap" or info.get("compression_mode"):
+    storage = info.get("storage_identifier")
+    if storage not in ("mcap", "sqlite3") or info.get("compression_mode"):
         return None
     listing = []
     for item in info.get("topics_with_message_count") or []:
@@ -282,7 +287,66 @@ def _mcap_data(path: Path, check: BagCheck | None
         listing.append((str(topic["name"]), normalize_type_name(str(topic["type"])),
                         MESSAGE_ENCODING, int(item["message_count"])))
     files = [folder / str(f) for f in info.get("relative_file_paths") or []]
-    return files, sorted(listing)
+    return str(storage), files, sorted(listing)
+
+
+def _read_sqlite_topics(path: Path, files: list[Path], topics: dict[StreamKind, str],
+                        where: str) -> dict[StreamKind, Gathered]:
+    """The chosen topics of a rosbag2 folder's sqlite3 data files, their messages taken from
+    the files' tables (the files one after another) and decoded in bulk
+    (:func:`navreplay.io.cdr.decode_payloads`); a message of no fixed layout is deserialised
+    by rosbags with the bag's own message definitions."""
+    out: dict[StreamKind, Gathered] = {}
+    with contextlib.ExitStack() as stack:
+        dbs = [stack.enter_context(contextlib.closing(
+            sqlite3.connect(f"file:{f}?mode=ro", uri=True))) for f in files]
+        bag: list[_Bag] = []  # opened for the first message that needs rosbags
+
+        def one_by_one(payloads: list[bytes], types: list[str], label: str, message: Any,
+                       index: np.ndarray) -> dict[str, np.ndarray]:
+            if not bag:
+                bag.append(stack.enter_context(_open(path)))
+            msgs = [bag[0].deserialize(payloads[i], types[i], MESSAGE_ENCODING)
+                    for i in index.tolist()]
+            return _fields_of(msgs, label, message)
+
+        for kind, topic in topics.items():
+            label = _label(where, topic, kind)
+            rows: list[tuple[int, str, bytes]] = []
+            try:
+                for db in dbs:
+                    rows += db.execute(
+                        "SELECT m.timestamp, t.type, m.data FROM messages m JOIN topics t ON "
+                        "m.topic_id = t.id WHERE t.name = ? ORDER BY m.timestamp", (topic,))
+            except sqlite3.Error as exc:
+                raise RecordingError(f"{label}: messages cannot be read ({exc})") from None
+            times = np.fromiter((r[0] for r in rows), dtype=np.int64, count=len(rows))
+            types = [r[1] for r in rows]
+            payloads = [bytes(r[2]) for r in rows]
+            del rows
+            message = SPECS[kind].message
+            fields = decode_payloads(payloads, message, functools.partial(
+                one_by_one, payloads, types, label, message))
+            out[kind] = _gathered(fields, times, kind)
+    return out
+
+
+def _fields_of(msgs: list[Any], label: str, message: Any) -> dict[str, np.ndarray]:
+    """:func:`navreplay.io.cdr.fields_of_messages`, a message lacking a field one line."""
+    try:
+        return fields_of_messages(msgs, message)
+    except (AttributeError, TypeError, ValueError) as exc:
+        raise RecordingError(f"{label}: messages lack a field of {message.name} ({exc})"
+                             ) from None
+
+
+def _gathered(fields: dict[str, np.ndarray], times: np.ndarray, kind: StreamKind) -> Gathered:
+    """Decoded fields reduced to the stream's columns, with their log times and frame ids."""
+    out: dict[str, np.ndarray] = {"t_ns": fields["t_ns"]}
+    for name, columns in REDUCE[kind].items():
+        value = np.asarray(fields[name])
+        out[name] = np.array(value if columns is None else value[:, columns])
+    return out, times, list(dict.fromkeys(fields["frame_id"].tolist()))
 
 
 def _read_mcap_topics(files: list[Path], topics: dict[StreamKind, str], where: str
@@ -349,10 +413,9 @@ def _read_mcap_file(path: Path, kinds: dict[str, StreamKind], where: str
 
 
 def _read_topic(bag: _Bag, topic: str, kind: StreamKind, label: str) -> Gathered:
-    """The fields of one topic's messages (``t_ns``, ``frame_id`` and the stream's reduced
-    columns) and their log times, in the bag's order. CDR messages of a fixed layout are
-    decoded in bulk (:func:`navreplay.io.cdr.decode_payloads`, as an MCAP file's); the others,
-    and ROS 1 messages, are deserialised one by one by rosbags."""
+    """One topic's messages read with rosbags' reader: CDR messages of a fixed layout decoded
+    in bulk (:func:`navreplay.io.cdr.decode_payloads`, as an MCAP file's); the others, and ROS 1
+    messages, deserialised one by one by rosbags."""
     message = SPECS[kind].message
     times: list[int] = []
     payloads: list[bytes] = []
@@ -366,23 +429,14 @@ def _read_topic(bag: _Bag, topic: str, kind: StreamKind, label: str) -> Gathered
 
     def one_by_one(index: Sequence[int]) -> dict[str, np.ndarray]:
         fmt = next(iter(formats), MESSAGE_ENCODING)
-        msgs = [bag.deserialize(payloads[i], types[i], fmt) for i in index]
-        try:
-            return fields_of_messages(msgs, message)
-        except (AttributeError, TypeError, ValueError) as exc:
-            raise RecordingError(f"{label}: messages lack a field of {message.name} ({exc})"
-                                 ) from None
+        return _fields_of([bag.deserialize(payloads[i], types[i], fmt) for i in index], label,
+                          message)
 
     if formats == {MESSAGE_ENCODING}:
         fields = decode_payloads(payloads, message, lambda index: one_by_one(index.tolist()))
     else:
         fields = one_by_one(range(len(payloads)))
-    out: dict[str, np.ndarray] = {"t_ns": fields["t_ns"]}
-    for name, columns in REDUCE[kind].items():
-        value = np.asarray(fields[name])
-        out[name] = np.array(value if columns is None else value[:, columns])
-    ids = fields["frame_id"].tolist()
-    return out, np.asarray(times, dtype=np.int64), list(dict.fromkeys(ids))
+    return _gathered(fields, np.asarray(times, dtype=np.int64), kind)
 
 
 # --------------------------------------------------------------------------------------------
