@@ -1,13 +1,19 @@
-"""rosbag2 folders and sqlite3 (``.db3``) bags, read with ``rosbags`` into the same streams.
+"""rosbag2 folders and sqlite3 (``.db3``) bags, read into the same streams as an MCAP file.
 
 An MCAP file is read in bulk by :mod:`navreplay.io.mcapread`. A rosbag2 folder (``metadata.yaml``
-with MCAP or sqlite3 storage, one or several split files) is read with ``rosbags``' AnyReader,
-which also brings the message definitions stored in the bag; a ``.db3`` file is read from its
-folder when that has a ``metadata.yaml``, else straight from its sqlite tables with rosbags'
-standard type store. Messages are deserialised one by one (rosbags), their fields gathered by the
-same leaf paths as the bulk decoder (:mod:`navreplay.io.schemas`), and then decoded, converted
-and checked exactly like an MCAP topic (:func:`navreplay.io.topics.build_stream`). A bag is
-one window (:class:`BagSource`).
+with MCAP or sqlite3 storage, one or several split files) whose data files agree with its
+``metadata.yaml`` (:func:`check_bag`), are not compressed and hold CDR messages is read from
+its data files directly: MCAP files chunk by chunk through :class:`navreplay.io.decode.ChannelDecoder`
+as an MCAP recording's topics, sqlite3 files from their ``messages`` table, the payloads of a
+fixed layout viewed as numpy records (:func:`navreplay.io.cdr.decode_payloads`). Any other bag
+(compressed, damaged, ROS 1, a lone ``.db3``) goes through ``rosbags``' AnyReader, which also
+brings the message definitions stored in the bag; a ``.db3`` file is read from its folder when
+that has a ``metadata.yaml``, else straight from its sqlite tables with rosbags' standard type
+store. Its CDR messages of a fixed layout are decoded in bulk the same way; the others (and a
+message of no fixed layout in a bag read directly) are deserialised one by one by rosbags and
+gathered by the same leaf paths (:mod:`navreplay.io.schemas`). Either way the fields are
+converted and checked exactly like an MCAP topic (:func:`navreplay.io.topics.build_stream`). A
+bag is one window (:class:`BagSource`).
 
 Times: ``header.stamp`` is the sample time, or the log (receive) time with ``--time log``; a
 topic whose stamps are zero or do not increase takes the log times, with a warning
