@@ -13,7 +13,11 @@ simulate``), since each is read by its own path. The files are made once into ``
 Each figure is a fresh interpreter running the command to its end: its user + system CPU time
 (every thread: numba, Rerun's encoder) and its peak resident memory (``VmHWM`` read at exit, so
 not the parent's peak carried over by fork), medians of ``--repeat`` runs alternated with the
-other commands. The commands:
+other commands, after one default run that is not measured (it writes navreplay's byte code
+and loads the files into the page cache, as any earlier run has for a user). The runs go
+without ``PYTHONDONTWRITEBYTECODE`` even where it is set: with it an editable install compiles
+navreplay's modules from source in every run (about 0.2 s of CPU), which an installed package
+never does. The commands:
 
 - ``default``: ``navreplay run gps-ins LOG --config drive.toml --init table`` as typed: the run
   is drawn into ``out/LOG.rrd`` (the default without ``--no-viz``, ``--spawn``...);
@@ -183,6 +187,10 @@ def _config(rec: Any) -> str:
             "[sensors.imu]\ngrade = \"consumer\"\n")
 
 
+ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+"""The children's environment: byte code cached, as in a user's shell."""
+
+
 def measure(argv: list[str], cwd: Path) -> tuple[float, int, float]:
     """(CPU [s], peak RSS [bytes], wall [s]) of a fresh interpreter running ``argv`` (``-c
     CODE`` or a module and its arguments)."""
@@ -191,7 +199,7 @@ def measure(argv: list[str], cwd: Path) -> tuple[float, int, float]:
     try:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
-        subprocess.run([sys.executable, "-c", _CHILD, str(peak_file), *argv], cwd=cwd,
+        subprocess.run([sys.executable, "-c", _CHILD, str(peak_file), *argv], cwd=cwd, env=ENV,
                        check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         wall = time.perf_counter() - start
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -219,6 +227,7 @@ def run_all(cmds: dict[str, list[str]], repeat: int) -> dict[str, tuple[float, i
     command once (alternated, so a change of load touches all alike)."""
     rows: dict[str, list[tuple[float, int, float]]] = {k: [] for k in cmds}
     with tempfile.TemporaryDirectory() as cwd:  # the default run's out/ goes here
+        measure(next(v for k, v in cmds.items() if k.endswith(" default")), Path(cwd))
         for _ in range(repeat):
             for label, argv in cmds.items():
                 rows[label].append(measure(argv, Path(cwd)))
@@ -230,6 +239,9 @@ def report(m: dict[str, tuple[float, int, float]], logs: list[str], repeat: int)
     numpy_peak = m["numpy"][1]
     print(f"gps-ins over a {DURATION / 60:g}-minute drive (100 Hz consumer MEMS IMU, 1 Hz GNSS), "
           f"fresh interpreters, medians of {repeat}; load average {os.getloadavg()[0]:.2f}")
+    if "PYTHONDONTWRITEBYTECODE" in os.environ:
+        print("  (PYTHONDONTWRITEBYTECODE is set here: the runs go without it, as an installed "
+              "package's)")
     print(f"  {'command':18s} {'CPU [s]':>8s} {'wall [s]':>9s} {'peak RSS':>9s} {'- numpy':>9s}")
     for label, (cpu, peak, wall) in m.items():
         print(f"  {label:18s} {cpu:8.2f} {wall:9.2f} {peak / 1e6:6.0f} MB "
