@@ -25,6 +25,12 @@ never does. The commands:
 - ``numpy``: a bare ``python -c "import numpy"``, measured in the same command: the memory
   target is its peak plus 150 MB.
 
+Then the memory floor of a run: the resident memory of one fresh interpreter as it imports,
+step by step, what ``run gps-ins BAG --no-viz`` loads before it reads any data (numpy, the
+command line, llvmlite's LLVM library, numba, the run's navreplay modules, scipy.linalg which
+numba's BLAS check imports, numba's CPU target with one cached kernel), and then rerun, which
+the default run adds to draw.
+
 Targets (issue 26): the CPU time within 1.5x that of a C++ filter on such a drive: KF-GINS
 took 1.1 s in the issue's own measurement (KF-GINS is not run here), so 1.65 s; the
 ``--no-viz`` peak RSS at most 150 MB (10^6 bytes) above the bare numpy process.
@@ -191,6 +197,56 @@ ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 """The children's environment: byte code cached, as in a user's shell."""
 
 
+_FLOOR_CHILD = """
+import json
+def rss():
+    with open("/proc/self/status") as f:
+        return next(int(x.split()[1]) * 1024 for x in f if x.startswith("VmRSS:"))
+steps = [("python", rss())]
+import numpy
+steps.append(("numpy", rss()))
+import navreplay.cli
+steps.append(("the command line (navreplay.cli)", rss()))
+import llvmlite.binding
+steps.append(("llvmlite.binding (LLVM)", rss()))
+import numba
+steps.append(("numba", rss()))
+import navreplay.filters.gps_ins, navreplay.io.rosbag, navreplay.jobs.run, navreplay.logs.prepare
+steps.append(("the run's navreplay modules", rss()))
+import scipy.linalg
+steps.append(("scipy.linalg (numba's BLAS check)", rss()))
+from navreplay.filters import kalman
+kalman.check_covariance(numpy.eye(3))
+steps.append(("numba's CPU target, one cached kernel", rss()))
+import rerun
+steps.append(("rerun (to draw)", rss()))
+print(json.dumps(steps))
+"""
+"""Resident memory [bytes] of a fresh interpreter after each step of a run's imports."""
+
+
+def floor() -> list[tuple[str, int]]:
+    """(step, resident memory [bytes] after it) of :data:`_FLOOR_CHILD`."""
+    import json
+
+    out = subprocess.run([sys.executable, "-c", _FLOOR_CHILD], env=ENV, check=True,
+                         capture_output=True, text=True)
+    return [(k, int(v)) for k, v in json.loads(out.stdout.strip().splitlines()[-1])]
+
+
+def report_floor(steps: list[tuple[str, int]]) -> None:
+    print("memory floor of a run (resident memory of one fresh interpreter after each import):")
+    last = steps[0][1]
+    for name, rss in steps:
+        print(f"  + {name:38s} {(rss - last) / 1e6:+5.0f} MB = {rss / 1e6:4.0f} MB")
+        last = rss
+    rss = [r for _, r in steps]
+    numba = (rss[3] - rss[2]) + (rss[4] - rss[3]) + (rss[6] - rss[5]) + (rss[7] - rss[6])
+    print(f"before reading any data: {(rss[7] - rss[1]) / 1e6:+.0f} MB over numpy, of which "
+          f"LLVM and numba (with the scipy.linalg it imports and its CPU target) "
+          f"{numba / 1e6:+.0f} MB")
+
+
 def measure(argv: list[str], cwd: Path) -> tuple[float, int, float]:
     """(CPU [s], peak RSS [bytes], wall [s]) of a fresh interpreter running ``argv`` (``-c
     CODE`` or a module and its arguments)."""
@@ -277,6 +333,7 @@ def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
         made = make_drive(directory.resolve())
         logs = {k: made[k] for k in args.logs}
         report(run_all(commands(logs, made["config"]), args.repeat), args.logs, args.repeat)
+        report_floor(floor())
 
 
 if __name__ == "__main__":

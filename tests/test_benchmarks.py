@@ -70,6 +70,9 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
          r"\(target <= 1\.65 s: (met|NOT met)\)$", 2),
         (rf"^bag \(drive_bag\) --no-viz: peak RSS [+-]{_N} MB over bare numpy \(target <= "
          r"\+150 MB: (met|NOT met)\)$", 1),
+        (rf"^  \+ .+ +[+-]{_N} MB = +{_N} MB$", 9),
+        (rf"^before reading any data: [+-]{_N} MB over numpy, of which LLVM and numba .+ "
+         rf"[+-]{_N} MB$", 1),
     ],
     "bench_replay": [
         (rf"^end to end \(decode \+ gps-ins \+ summary\) +{_N} s +{_N}k IMU samples/s", 1),
