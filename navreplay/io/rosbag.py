@@ -198,8 +198,12 @@ class BagSource(FileSource):
         metadata, check = self._check()
         data = _bulk_data(self.path, check)
         with contextlib.ExitStack() as stack:
-            bag = stack.enter_context(_open(self.path)) if data is None else None
-            listing = data[2] if data is not None else bag.topics()  # type: ignore[union-attr]
+            bag: _Bag | None = None
+            if data is None:  # through rosbags' reader
+                bag = stack.enter_context(_open(self.path))
+                listing = bag.topics()
+            else:
+                listing = data[2]
             available = ", ".join(f"{t} ({ty})" for t, ty, _, _ in listing) or "no topics"
             # rosbags deserialises ROS 1 messages into the types of the ROS 2 ones
             cands = [c for t, ty, fmt, _ in listing
@@ -288,8 +292,8 @@ def _bulk_data(path: Path, check: BagCheck | None
     listing = []
     for item in info.get("topics_with_message_count") or []:
         topic = item["topic_metadata"]
-        if topic.get("serialization_format") != MESSAGE_ENCODING:
-            return None
+        if topic.get("serialization_format") != MESSAGE_ENCODING or "type" not in topic:
+            return None  # rosbags' reader says what it makes of it
         listing.append((str(topic["name"]), normalize_type_name(str(topic["type"])),
                         MESSAGE_ENCODING, int(item["message_count"])))
     files = [folder / str(f) for f in info.get("relative_file_paths") or []]
