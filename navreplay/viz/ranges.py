@@ -49,10 +49,11 @@ def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
     cols = range(values.shape[1]) if columns is None else columns
     for j, signs in [*((j, (1.0, -1.0)) for j in cols), *((j, (-1.0,)) for j in maxima)]:
         v = values[:, j]
-        for sign in signs:  # NaN sorts last: a bin's first row is its minimum (maximum)
-            order = np.lexsort((sign * v, seg))
-            first = order[starts]
-            keep[first[np.isfinite(v[first])]] = True
+        for sign in signs:  # the first row of a bin holding its smallest (largest) value
+            extreme = (np.fmin if sign > 0 else np.fmax).reduceat(v, starts)  # NaN: none
+            hit = np.flatnonzero((v == extreme[seg]) & np.isfinite(v))
+            s = seg[hit]
+            keep[hit[np.r_[True, s[1:] != s[:-1]]]] = True
     gap = np.isnan(values[:, 0])
     if gap.any():
         first_gap = np.flatnonzero(gap & np.r_[True, ~gap[:-1]])
@@ -79,10 +80,12 @@ class Envelope:
         """Rows at times ``t`` [s, >= 0 after the recording start] of ``values`` (M, k)."""
         v = np.asarray(values, dtype=np.float64).reshape(t.shape[0], -1)
         ok = np.isfinite(v)
-        rows = ok.any(axis=1) & np.isfinite(t)
+        lo = np.where(ok, v, np.inf).min(axis=1)  # of each row's finite values
+        rows = np.isfinite(lo) & np.isfinite(t)  # rows with one at least
         if not rows.any():
             return
-        t, v, ok = t[rows], v[rows], ok[rows]
+        hi = np.where(ok, v, -np.inf).max(axis=1)
+        t, lo, hi = t[rows], lo[rows], hi[rows]
         self.t_first = min(self.t_first, float(t[0]))
         self.t_last = max(self.t_last, float(t[-1]))
         while self.t_last >= self.width * self.BINS:
@@ -92,8 +95,8 @@ class Envelope:
             self.hi = np.r_[self.hi, np.full(self.BINS // 2, -np.inf)]
             self.width *= 2.0
         b = np.clip((np.maximum(t, 0.0) // self.width).astype(np.int64), 0, self.BINS - 1)
-        np.minimum.at(self.lo, b, np.where(ok, v, np.inf).min(axis=1))
-        np.maximum.at(self.hi, b, np.where(ok, v, -np.inf).max(axis=1))
+        np.minimum.at(self.lo, b, lo)
+        np.maximum.at(self.hi, b, hi)
 
     def extent(self, after: float = -np.inf) -> tuple[float, float] | None:
         """Smallest and largest value of the bins that start at or after ``after`` [s]."""
