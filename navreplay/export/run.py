@@ -15,8 +15,8 @@ import numpy as np
 from navreplay.core.streams import Stream
 from navreplay.export.columns import (
     Column,
+    csv_blocks,
     csv_header,
-    csv_rows,
     innovation_columns,
     innovation_rows,
     no_updates,
@@ -47,7 +47,7 @@ from navreplay.export.foxglove import layout as foxglove_layout
 from navreplay.export.frames import BODY_FRAME, WORLD_FRAME, LocalFrame, reference_poses, ros_poses
 from navreplay.export.odometry import COMPRESSIONS, ODOMETRY_TYPE, OdometryWriter
 from navreplay.export.output import FilterOutput
-from navreplay.export.tum import TUM_HEADER, tum_lines
+from navreplay.export.tum import TUM_HEADER, tum_blocks
 from navreplay.filters.base import MeasurementKind
 from navreplay.filters.result import InnovationSeries
 
@@ -173,7 +173,8 @@ class RunExport:
         for name, series in innovations.items():
             f = self._innovation_file(label, name, int(series.nu.shape[1]))
             if len(series.t):
-                f.write(csv_rows(innovation_columns(t0_ns, series, *self._rows[label, name])))
+                f.writelines(csv_blocks(innovation_columns(t0_ns, series,
+                                                           *self._rows[label, name])))
 
     def _innovation_file(self, label: str, name: str, dim: int) -> Any:
         """The open file of a measurement's innovations (opened with its header at first)."""
@@ -193,7 +194,7 @@ class RunExport:
         self._innovations[label][name] = {"csv": csv_name, "dof": dim,
                                           "columns": [c.to_json() for c in cols]}
         f = self._open(csv_name)
-        f.write(csv_header(cols))
+        f.write(csv_header(cols).encode())
         return f
 
     def _first_nav(self) -> str | None:
@@ -237,7 +238,8 @@ class RunExport:
 
         target = self.out_dir / name
         tmp = temporary_path(target)
-        f = open(tmp, "w", encoding="utf-8", newline="")  # noqa: SIM115 (closed on close/abort)
+        # binary: the rows come as ASCII bytes (headers encoded as UTF-8)
+        f = open(tmp, "wb")  # noqa: SIM115 (closed on close/abort)
         self._tmp[target] = (tmp, f)
         return f
 
@@ -255,13 +257,13 @@ class RunExport:
                 entry["odometry_topic"] = f"{root}/odom"
                 entry["navsatfix_topic"] = f"{root}/fix"
                 entry["tf_child_frame_id"] = body_frame(topic_name(label))
-                self._open(entry["tum"]).write(TUM_HEADER)
+                self._open(entry["tum"]).write(TUM_HEADER.encode())
                 self._streams[label] = topics_of(topic_name(label), root)
                 topics += self._streams[label]
                 self._topics[label] = entry["odometry_topic"]
             self._entries[label] = entry
         if self.has_reference and self._frame is not None:
-            self._open(f"{REFERENCE_LABEL}.tum").write(TUM_HEADER)
+            self._open(f"{REFERENCE_LABEL}.tum").write(TUM_HEADER.encode())
             self._streams[REFERENCE_LABEL] = topics_of(REFERENCE_LABEL, f"/{REFERENCE_LABEL}")
             topics += self._streams[REFERENCE_LABEL]
             self._topics[REFERENCE_LABEL] = "/reference/odom"
@@ -286,7 +288,7 @@ class RunExport:
             for a in range(0, len(item), _REFERENCE_ROWS):  # bounded temporaries
                 truth = item.slice(a, min(a + _REFERENCE_ROWS, len(item)))
                 poses = reference_poses(frame, truth)
-                self._file(f"{REFERENCE_LABEL}.tum").write(tum_lines(poses))
+                self._file(f"{REFERENCE_LABEL}.tum").writelines(tum_blocks(poses))
                 assert self._odometry is not None  # opened with the first rows
                 for stream in self._streams[REFERENCE_LABEL]:
                     self._odometry.add(stream.key, poses)
@@ -296,14 +298,14 @@ class RunExport:
         cols = run_columns(out, frame)
         if "columns" not in entry:
             entry["columns"] = [c.to_json() for c in cols]
-            self._open(entry["csv"]).write(csv_header(cols))
-        self._file(entry["csv"]).write(csv_rows(cols))
+            self._open(entry["csv"]).write(csv_header(cols).encode())
+        self._file(entry["csv"]).writelines(csv_blocks(cols))
         if "tum" in entry and out.has_nav:
             assert frame is not None and self._odometry is not None  # the first navigation rows
             assert out.nav_pos is not None and out.nav_v_n is not None and out.nav_q_nb is not None
             poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
                               out.nav_cov)
-            self._file(entry["tum"]).write(tum_lines(poses))
+            self._file(entry["tum"]).writelines(tum_blocks(poses))
             for stream in self._streams[out.label]:
                 self._odometry.add(stream.key, poses)
 
@@ -333,7 +335,7 @@ class RunExport:
                                "%d"),
                         Column("t", "s", "time since the recording start", np.zeros(0))]
                     entry["columns"] = [c.to_json() for c in cols]
-                    self._open(entry["csv"]).write(csv_header(cols))
+                    self._open(entry["csv"]).write(csv_header(cols).encode())
             if self._odometry is not None:
                 self._odometry.finish()
             for _, f in self._tmp.values():

@@ -80,11 +80,11 @@ class Envelope:
         """Rows at times ``t`` [s, >= 0 after the recording start] of ``values`` (M, k)."""
         v = np.asarray(values, dtype=np.float64).reshape(t.shape[0], -1)
         ok = np.isfinite(v)
-        lo = np.where(ok, v, np.inf).min(axis=1)  # of each row's finite values
+        lo = _across(np.minimum, np.where(ok, v, np.inf))  # of each row's finite values
         rows = np.isfinite(lo) & np.isfinite(t)  # rows with one at least
         if not rows.any():
             return
-        hi = np.where(ok, v, -np.inf).max(axis=1)
+        hi = _across(np.maximum, np.where(ok, v, -np.inf))
         t, lo, hi = t[rows], lo[rows], hi[rows]
         self.t_first = min(self.t_first, float(t[0]))
         self.t_last = max(self.t_last, float(t[-1]))
@@ -105,6 +105,15 @@ class Envelope:
         if not sel.any():
             return None
         return float(self.lo[sel].min()), float(self.hi[sel].max())
+
+
+def _across(op: np.ufunc, v: np.ndarray) -> np.ndarray:
+    """``op`` reduced across the columns of ``v`` (M, k), column by column (a reduction along
+    the short axis of each row costs ten times as much)."""
+    out = v[:, 0].copy()
+    for j in range(1, v.shape[1]):
+        op(out, v[:, j], out=out)
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
