@@ -82,12 +82,20 @@ class RunExport:
     origin : mapping, optional
         The frame's origin the user gave (``metadata.extra[LOCAL_ORIGIN]``: ``pos`` [rad, rad,
         m] and ``source``).
+    reference_rate : float, optional
+        The reference written at this rate [Hz] (the run's output rate): of each interval
+        ``[k, k + 1) / reference_rate`` after ``t0_ns``, its first sample (the truth's own
+        samples, none moved or interpolated; on the output grid when the truth's clock is the
+        IMU's). None: every sample.
+    t0_ns : int
+        The recording start [ns]: the origin of the intervals.
     """
 
     def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
                  source: str = "", force: bool = False,
                  late: Mapping[str, str] | None = None,
-                 origin: Mapping[str, Any] | None = None, compression: str = "zstd") -> None:
+                 origin: Mapping[str, Any] | None = None, compression: str = "zstd",
+                 reference_rate: float | None = None, t0_ns: int = 0) -> None:
         self.out_dir = Path(out_dir)
         if compression not in COMPRESSIONS:
             raise ValueError(f"MCAP compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
@@ -98,6 +106,9 @@ class RunExport:
         """Labels whose rows come after every other's (smoothed runs), each with the label whose
         solution parts it shares: nothing waits for them."""
         self.has_reference = has_reference
+        self.reference_rate = reference_rate
+        self._t0_ns = int(t0_ns)
+        self._ref_interval = -1  # the last interval a reference sample was kept of
         self.source = source
         self.force = force
         check_targets(run_targets(self.out_dir, self.labels, has_reference), force)
@@ -133,11 +144,26 @@ class RunExport:
             self.has_reference = False
             self._feed("ref", None)
             return
+        if self.reference_rate is not None:
+            truth = self._decimated(truth)
+            if not len(truth):
+                return
         if self._frame is None:
             p = truth["pos"][0]
             self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
                                      "first reference sample")
         self._feed("ref", truth)
+
+    def _decimated(self, truth: Stream) -> Stream:
+        """The first sample of each interval of ``1 / reference_rate`` (not kept before)."""
+        assert self.reference_rate is not None
+        k = np.floor((truth.t_ns - self._t0_ns) * (self.reference_rate * 1e-9) + 1e-6)
+        first = np.flatnonzero(k > np.r_[self._ref_interval, k[:-1]])
+        self._ref_interval = int(max(self._ref_interval, k[-1]))
+        if len(first) == len(truth):
+            return truth
+        return Stream(truth.kind, truth.t_ns[first],
+                      {name: v[first] for name, v in truth.columns.items()}, truth.frame_id)
 
     def add(self, out: FilterOutput) -> None:
         """A block of one filter's estimates (:func:`filter_output` of its rows) and the

@@ -53,7 +53,7 @@ def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
             extreme = (np.fmin if sign > 0 else np.fmax).reduceat(v, starts)  # NaN: none
             hit = np.flatnonzero((v == extreme[seg]) & np.isfinite(v))
             s = seg[hit]
-            keep[hit[np.r_[True, s[1:] != s[:-1]]]] = True
+            keep[hit[np.r_[True, s[1:] != s[:-1]][:len(hit)]]] = True
     gap = np.isnan(values[:, 0])
     if gap.any():
         first_gap = np.flatnonzero(gap & np.r_[True, ~gap[:-1]])

@@ -283,7 +283,8 @@ def test_envelope_rows_are_those_of_the_sorted_bins(seed):
     v[rng.random((M, 3)) < 0.02] = -np.inf
     v[rng.random((M, 3)) < 0.05] = -0.0
     v[(t > 20.0) & (t < 27.0), 0] = np.nan  # whole bins without a value
-    for columns, maxima in ((None, ()), ((0,), (1,)), ((0, 2), ())):
+    v = np.column_stack([v, np.full(M, np.nan)])  # a column without any
+    for columns, maxima in ((None, ()), ((0,), (1,)), ((0, 2), ()), ((3,), (3,))):
         for rate in (0.5, 2.0):
             got = envelope_rows(t, v, rate, columns, maxima)
             np.testing.assert_array_equal(got, _lexsort_rows(t, v, rate, columns, maxima))
