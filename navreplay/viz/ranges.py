@@ -80,12 +80,17 @@ class Envelope:
         """Rows at times ``t`` [s, >= 0 after the recording start] of ``values`` (M, k)."""
         v = np.asarray(values, dtype=np.float64).reshape(t.shape[0], -1)
         ok = np.isfinite(v)
-        lo = _across(np.minimum, np.where(ok, v, np.inf))  # of each row's finite values
-        rows = np.isfinite(lo) & np.isfinite(t)  # rows with one at least
-        if not rows.any():
-            return
-        hi = _across(np.maximum, np.where(ok, v, -np.inf))
-        t, lo, hi = t[rows], lo[rows], hi[rows]
+        if ok.all():
+            lo, hi = _across(np.minimum, v), _across(np.maximum, v)
+            rows = np.isfinite(t)
+        else:  # of each row's finite values
+            lo = _across(np.minimum, np.where(ok, v, np.inf))
+            hi = _across(np.maximum, np.where(ok, v, -np.inf))
+            rows = np.isfinite(lo) & np.isfinite(t)  # rows with one at least
+        if not rows.all():
+            if not rows.any():
+                return
+            t, lo, hi = t[rows], lo[rows], hi[rows]
         self.t_first = min(self.t_first, float(t[0]))
         self.t_last = max(self.t_last, float(t[-1]))
         while self.t_last >= self.width * self.BINS:
