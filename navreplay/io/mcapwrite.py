@@ -157,31 +157,35 @@ class BulkWriter:
         batches = [b for b in batches if len(b[1])]
         if not batches:
             return
-        rows = []
         for cid, t, data in batches:
             if data.ndim != 2 or data.shape[0] != len(t):
                 raise ValueError(f"channel {cid}: payloads must be {len(t)} rows of bytes")
-            rows.append(np.concatenate([_record_header(np.asarray(t), cid, data.shape[1]),
-                                        np.asarray(data, np.uint8)], axis=1))
         t = np.concatenate([np.asarray(b[1], np.int64) for b in batches])
         if np.any(t < 0):
             raise ValueError("message times must not be negative")
         t0 = np.asarray(batches[0][1], np.int64)
+        widths = np.array([_PREFIX + b[2].shape[1] for b in batches], np.int64)
         if (len(batches) > 1 and np.all(t0[1:] > t0[:-1])
                 and all(np.array_equal(b[1], t0) for b in batches[1:])):
             # the batches share their times (the streams of a filter and the reference at
             # one output rate), none repeated: the merged order is row by row, batch by batch,
-            # which the rows placed side by side are already (no gather)
-            widths = np.array([r.shape[1] for r in rows], np.int64)
+            # which the records placed side by side are already (no gather)
+            table = np.empty((len(t0), int(widths.sum())), np.uint8)
+            at = 0
+            for (cid, _, data), w in zip(batches, widths.tolist(), strict=True):
+                table[:, at:at + _PREFIX] = _record_header(t0, cid, w - _PREFIX)
+                table[:, at + _PREFIX:at + w] = data
+                at += w
             self._add_records(np.tile([b[0] for b in batches], len(t0)),
                               np.repeat(t0, len(batches)), np.tile(widths, len(t0)),
-                              np.concatenate(rows, axis=1).reshape(-1))
+                              table.reshape(-1))
             return
+        rows = [np.concatenate([_record_header(np.asarray(t), cid, data.shape[1]),
+                                np.asarray(data, np.uint8)], axis=1) for cid, t, data in batches]
         order = np.argsort(t, kind="stable")
         t = t[order]
         which = np.repeat(np.arange(len(batches)), [len(b[1]) for b in batches])[order]
         cids = np.array([b[0] for b in batches])[which]
-        widths = np.array([r.shape[1] for r in rows], np.int64)
         sizes = widths[which]
         if np.all(widths == widths[0]):  # records of one size: rows gathered
             self._add_records(cids, t, sizes, np.concatenate(rows)[order].reshape(-1))
