@@ -41,10 +41,10 @@ def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
     if M <= 2:
         return np.arange(M)
     bins = np.floor(np.asarray(t, dtype=np.float64) * rate_hz)
-    starts = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
+    starts = _changes(bins)
     if starts.shape[0] * 3 >= M:  # already sparse: everything
         return np.arange(M)
-    seg = np.repeat(np.arange(starts.shape[0]), np.diff(np.r_[starts, M]))
+    seg = np.repeat(np.arange(starts.shape[0]), np.diff(starts, append=M))
     keep = np.zeros(M, dtype=bool)
     cols = range(values.shape[1]) if columns is None else columns
     for j, signs in [*((j, (1.0, -1.0)) for j in cols), *((j, (-1.0,)) for j in maxima)]:
@@ -52,14 +52,23 @@ def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
         for sign in signs:  # the first row of a bin holding its smallest (largest) value
             extreme = (np.fmin if sign > 0 else np.fmax).reduceat(v, starts)  # NaN: none
             hit = np.flatnonzero((v == extreme[seg]) & np.isfinite(v))
-            s = seg[hit]
-            keep[hit[np.r_[True, s[1:] != s[:-1]][:len(hit)]]] = True
+            keep[hit[_changes(seg[hit])]] = True
     gap = np.isnan(values[:, 0])
     if gap.any():
         first_gap = np.flatnonzero(gap & np.r_[True, ~gap[:-1]])
         keep[first_gap] = True
         keep[np.flatnonzero(gap[:-1] & ~gap[1:]) + 1] = True  # first finite after a gap
     return np.flatnonzero(keep)
+
+
+def _changes(a: np.ndarray) -> np.ndarray:
+    """Indices where a run of equal values of ``a`` starts (0 first, if ``a`` is not empty)."""
+    if not a.shape[0]:
+        return np.zeros(0, dtype=np.intp)
+    d = np.empty(a.shape[0], dtype=bool)
+    d[0] = True
+    np.not_equal(a[1:], a[:-1], out=d[1:])
+    return np.flatnonzero(d)
 
 
 class Envelope:
