@@ -311,8 +311,8 @@ class RunExport:
         if kind == "ref":
             if frame is None:
                 return
-            for a in range(0, len(item), _REFERENCE_ROWS):  # bounded temporaries
-                truth = item.slice(a, min(a + _REFERENCE_ROWS, len(item)))
+            for a in range(0, len(item), _POSE_ROWS):  # bounded temporaries
+                truth = item.slice(a, min(a + _POSE_ROWS, len(item)))
                 poses = reference_poses(frame, truth)
                 self._file(f"{REFERENCE_LABEL}.tum").writelines(tum_blocks(poses))
                 assert self._odometry is not None  # opened with the first rows
@@ -329,11 +329,14 @@ class RunExport:
         if "tum" in entry and out.has_nav:
             assert frame is not None and self._odometry is not None  # the first navigation rows
             assert out.nav_pos is not None and out.nav_v_n is not None and out.nav_q_nb is not None
-            poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
-                              out.nav_cov)
-            self._file(entry["tum"]).writelines(tum_blocks(poses))
-            for stream in self._streams[out.label]:
-                self._odometry.add(stream.key, poses)
+            stamps = out.stamps_ns
+            for a in range(0, len(stamps), _POSE_ROWS):  # bounded temporaries
+                k = slice(a, a + _POSE_ROWS)
+                poses = ros_poses(frame, stamps[k], out.nav_pos[k], out.nav_v_n[k],
+                                  out.nav_q_nb[k], None if out.nav_cov is None else out.nav_cov[k])
+                self._file(entry["tum"]).writelines(tum_blocks(poses))
+                for stream in self._streams[out.label]:
+                    self._odometry.add(stream.key, poses)
 
     def _file(self, name: str) -> Any:
         return self._tmp[self.out_dir / name][1]
@@ -455,6 +458,6 @@ class RunExport:
         self._tmp.clear()
 
 
-_REFERENCE_ROWS = 5_000
-"""Reference rows converted and queued at once (a window's 9x9 covariances and messages are
-not all held)."""
+_POSE_ROWS = 2_000
+"""Rows converted to poses and queued at once (a window's 9x9 covariances, their products and
+messages are not all held)."""
