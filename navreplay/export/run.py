@@ -108,7 +108,7 @@ class RunExport:
         self.has_reference = has_reference
         self.reference_rate = reference_rate
         self._t0_ns = int(t0_ns)
-        self._ref_interval = -1  # the last interval a reference sample was kept of
+        self._ref_interval = -np.inf  # the last interval a reference sample was kept of
         self.source = source
         self.force = force
         check_targets(run_targets(self.out_dir, self.labels, has_reference), force)
@@ -159,7 +159,7 @@ class RunExport:
         assert self.reference_rate is not None
         k = np.floor((truth.t_ns - self._t0_ns) * (self.reference_rate * 1e-9) + 1e-6)
         first = np.flatnonzero(k > np.r_[self._ref_interval, k[:-1]])
-        self._ref_interval = int(max(self._ref_interval, k[-1]))
+        self._ref_interval = max(self._ref_interval, float(k[-1]))
         if len(first) == len(truth):
             return truth
         return Stream(truth.kind, truth.t_ns[first],

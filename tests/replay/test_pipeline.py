@@ -209,8 +209,9 @@ def test_an_interrupted_export_publishes_nothing(drive, tmp_path, monkeypatch) -
 
     monkeypatch.setattr(scoring.RunScorer, "add", failing)
     with pytest.raises(KeyboardInterrupt):
+        # at the IMU rate: an MCAP chunk (1 MB) fills in the first windows
         _run(drive, 1500, filters=(FilterSpec("gps-ins"),), viz=VizOptions(mode=VizMode.NONE),
-             export_dir=out, force=True)
+             export_dir=out, force=True, output_rate=100.0)
     # the files were being written as the rows came: CSV, TUM, reference TUM, MCAP
     assert len(calls) == 3 and sorted(calls[-1]) == [
         "estimates.mcap", "gps-ins.csv", "gps-ins.innovations.gps_pos.csv",
