@@ -75,6 +75,10 @@ from navreplay.cli.options import (
               type=click.Choice(["zstd", "lz4", "none"]),
               help="Chunk compression of the estimates MCAP of --export (none: readable "
                    "without a decompressor, e.g. by Foxglove's npm MCAP reader).")
+@click.option("--export-reference", "export_reference", default="output", show_default=True,
+              type=click.Choice(["output", "full"]),
+              help="The reference (truth) in --export at the output rate (its first sample of "
+                   "each output interval: beside every grid estimate) or at its own rate.")
 @smooth_option
 @click.option("--force", is_flag=True, help=FORCE_HELP)
 def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config: str | None,
@@ -86,7 +90,8 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         start: str | None, end: str | None,
         imu_range: str | None, init: str | None, reference: str | None,
         onboard: Sequence[str], no_frame_check: bool, export: str | None, report: str | None,
-        max_imu_gap: float | None, export_compression: str, smooth: bool, force: bool) -> None:
+        max_imu_gap: float | None, export_compression: str, export_reference: str, smooth: bool,
+        force: bool) -> None:
     """Replay FILTER(s) over RECORDING(s); several filters overlay in one Rerun view.
 
     \b
@@ -139,6 +144,7 @@ def run(args: Sequence[str], refs: Sequence[str], params: Sequence[str], config:
         max_imu_gap=max_imu_gap,
         log=log,
         export_dir=Path(export) if export else None, export_compression=export_compression,
+        export_reference=export_reference,
         report_path=Path(report) if report else None, force=force, smooth=smooth,
         command=command_line(),
     )

@@ -55,6 +55,7 @@ The package, one module per concept: :mod:`~navreplay.export.output` (the adapte
 from navreplay.export.columns import (
     UNKNOWN_UNIT,
     Column,
+    csv_blocks,
     csv_header,
     csv_rows,
     csv_text,
@@ -112,6 +113,7 @@ from navreplay.export.run import (
 )
 from navreplay.export.tum import (
     TUM_HEADER,
+    tum_blocks,
     tum_lines,
 )
 
@@ -138,6 +140,7 @@ __all__ = [
     "UNKNOWN_VARIANCE",
     "WORLD_FRAME",
     "check_targets",
+    "csv_blocks",
     "csv_header",
     "csv_rows",
     "csv_text",
@@ -160,6 +163,7 @@ __all__ = [
     "run_columns",
     "run_targets",
     "topic_name",
+    "tum_blocks",
     "tum_lines",
     "write_text",
 ]

@@ -8,13 +8,13 @@ import csv
 import dataclasses
 import io
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from navreplay.export.frames import LocalFrame
-from navreplay.export.numbers import format_rows
+from navreplay.export.numbers import format_rows, row_blocks
 from navreplay.export.output import NAV_AXES, NAV_ROWS, FilterOutput
 from navreplay.filters.base import NAV_PARTS, MeasurementKind
 from navreplay.filters.result import InnovationSeries
@@ -119,6 +119,11 @@ def csv_header(cols: Sequence[Column]) -> str:
 def csv_rows(cols: Sequence[Column]) -> str:
     """The rows of the columns' values, comma-separated (numbers need no quoting)."""
     return format_rows([(np.asarray(c.values), c.fmt) for c in cols])
+
+
+def csv_blocks(cols: Sequence[Column]) -> Iterator[bytes]:
+    """:func:`csv_rows` as ASCII bytes, a block of rows at a time (for a binary file)."""
+    return row_blocks([(np.asarray(c.values), c.fmt) for c in cols])
 
 
 def csv_text(cols: Sequence[Column]) -> str:

@@ -106,29 +106,47 @@ def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np
     J = np.concatenate([np.broadcast_to(np.eye(3), (M, 3, 3)), -skew(v_n)], axis=2)
     J = F_FRD_FLU @ C_nb.transpose(0, 2, 1) @ J
     if cov.any() or np.isnan(cov).any():
-        pose_cov = B @ cov[:, [0, 1, 2, 6, 7, 8]][:, :, [0, 1, 2, 6, 7, 8]] @ B.transpose(0, 2, 1)
+        pose_cov = B @ cov[:, _POSE[:, None], _POSE[None, :]] @ B.transpose(0, 2, 1)
         lin = J @ cov[:, 3:9, 3:9] @ J.transpose(0, 2, 1)
     else:  # a zero covariance (the reference's): the products' zeros and NaN, without them
         pose_cov, lin = _zero_product(B), _zero_product(J)
+    # the twist: the linear block, and the angular rate not estimated (unknown: zero rows and
+    # columns, UNKNOWN_VARIANCE on the diagonal, as _mark_unknown makes of NaN there)
     twist_cov = np.zeros((M, 6, 6))
-    twist_cov[:, :3, :3] = lin
-    twist_cov[:, 3:, 3:] = np.full((M, 3, 3), np.nan)  # angular rate: not estimated
+    twist_cov[:, :3, :3] = _mark_unknown(lin)
+    twist_cov[:, _ANGULAR, _ANGULAR] = UNKNOWN_VARIANCE
     fix_cov = T_NED_ENU @ cov[:, :3, :3] @ T_NED_ENU
     return Poses(np.asarray(stamps_ns, dtype=np.int64), frame.position(pos),
                  np.concatenate([q[:, 1:], q[:, :1]], axis=1), _mark_unknown(pose_cov),
-                 v_b * np.diagonal(F_FRD_FLU), _mark_unknown(twist_cov),
+                 v_b * np.diagonal(F_FRD_FLU), twist_cov,
                  np.asarray(pos, dtype=np.float64), fix_cov)
+
+
+_POSE = np.array([0, 1, 2, 6, 7, 8])
+"""Rows of the position and attitude errors in the navigation covariance."""
+
+
+_ANGULAR = np.arange(3, 6)
+"""The angular rate's rows of a twist covariance."""
 
 
 def _zero_product(A: np.ndarray) -> np.ndarray:
     """``A @ 0 @ A^T`` (M, n, n) for A (M, n, k): NaN in the rows and columns of the rows of A
     with a value that is not finite (times zero), else 0."""
-    bad = ~np.isfinite(A).all(axis=2)
+    finite = np.isfinite(A)
+    good = finite[:, :, 0].copy()
+    for j in range(1, A.shape[2]):  # across the short axis column by column: ten times faster
+        good &= finite[:, :, j]
+    if good.all():
+        return np.zeros(A.shape[:2] + A.shape[1:2])
+    bad = ~good
     return np.where(bad[:, :, None] | bad[:, None, :], np.nan, 0.0)
 
 
 def _mark_unknown(cov: np.ndarray) -> np.ndarray:
     """Rows/columns whose variance is not finite: 0, and UNKNOWN_VARIANCE on the diagonal."""
+    if np.isfinite(cov).all():  # nothing to mark
+        return cov
     bad = ~np.isfinite(np.diagonal(cov, axis1=1, axis2=2))
     cov = np.where(bad[:, :, None] | bad[:, None, :] | ~np.isfinite(cov), 0.0, cov)
     d = np.arange(cov.shape[1])

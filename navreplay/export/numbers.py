@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numba
 import numpy as np
@@ -63,8 +63,15 @@ def format_rows(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
     sep, end : str
         One ASCII character each: between the values of a row; after each row.
     """
+    return b"".join(row_blocks(columns, sep, end)).decode("ascii")
+
+
+def row_blocks(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
+               end: str = "\n") -> Iterator[bytes]:
+    """The rows of :func:`format_rows` as ASCII bytes, :data:`BLOCK_ROWS` rows at a time (for
+    a binary file: no text built, decoded or encoded)."""
     if not columns:
-        return ""
+        return
     k = len(columns)
     arrays = [np.asarray(v) for v, _ in columns]
     fmts = [f for _, f in columns]
@@ -72,7 +79,6 @@ def format_rows(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
     kind, prec = kinds // 100 - 1, kinds % 100
     ints = [a.dtype.kind in "iu" for a in arrays]
     n = arrays[0].shape[0]
-    out = []
     for a in range(0, n, BLOCK_ROWS):
         b = min(n, a + BLOCK_ROWS)
         # one row per column (contiguous copies); the kernel reads each column's own row
@@ -86,14 +92,17 @@ def format_rows(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
         buf = np.empty((b - a) * (k * _CELL + 1), dtype=np.uint8)
         marks = np.empty(2 * (b - a) * k, dtype=np.int64)
         size, count = _write(F, Ii, kind, prec, ord(sep), ord(end), buf, marks)
+        if not count:
+            yield buf[:size].tobytes()
+            continue
         text, done = [], 0  # the values left to Python go in at their marks
         for pos, flat in marks[:2 * count].reshape(count, 2).tolist():
             r, j = divmod(flat, k)
-            text += [buf[done:pos].tobytes().decode("ascii"), _python(arrays[j][a + r:a + r + 1].tolist()[0], fmts[j])]
+            value = arrays[j][a + r:a + r + 1].tolist()[0]
+            text += [buf[done:pos].tobytes(), _python(value, fmts[j]).encode("ascii")]
             done = pos
-        text.append(buf[done:size].tobytes().decode("ascii"))
-        out.append("".join(text))
-    return "".join(out)
+        text.append(buf[done:size].tobytes())
+        yield b"".join(text)
 
 
 def _kind(values: np.ndarray, fmt: str) -> int:

@@ -159,17 +159,21 @@ class OdometryWriter:
 
     def _write(self, limit: int | None) -> None:
         """Write the queued messages earlier than ``limit`` (all with None)."""
-        batches = []  # in the order of the topics
+        batches = []  # in the order of the topics, one per topic
         for topic, queue in self._queue.items():
-            cid = self._ids[topic]
-            kept = []
+            kept, ready = [], []
             for t, rows in queue:
                 n = t.shape[0] if limit is None else int(np.searchsorted(t, limit, side="left"))
                 if n:
-                    batches.append((cid, t[:n], rows[:n]))
+                    ready.append((t[:n], rows[:n]))
                 if n < t.shape[0]:
                     kept.append((t[n:], rows[n:]))
             self._queue[topic] = kept
+            if ready:  # one batch: streams at the same times are then merged without a gather
+                batches.append((self._ids[topic],
+                                *((ready[0][0], ready[0][1]) if len(ready) == 1 else
+                                  (np.concatenate([t for t, _ in ready]),
+                                   np.concatenate([r for _, r in ready])))))
         self._w.add_messages(batches)
 
     def finish(self) -> None:

@@ -15,8 +15,8 @@ import numpy as np
 from navreplay.core.streams import Stream
 from navreplay.export.columns import (
     Column,
+    csv_blocks,
     csv_header,
-    csv_rows,
     innovation_columns,
     innovation_rows,
     no_updates,
@@ -47,7 +47,7 @@ from navreplay.export.foxglove import layout as foxglove_layout
 from navreplay.export.frames import BODY_FRAME, WORLD_FRAME, LocalFrame, reference_poses, ros_poses
 from navreplay.export.odometry import COMPRESSIONS, ODOMETRY_TYPE, OdometryWriter
 from navreplay.export.output import FilterOutput
-from navreplay.export.tum import TUM_HEADER, tum_lines
+from navreplay.export.tum import TUM_HEADER, tum_blocks
 from navreplay.filters.base import MeasurementKind
 from navreplay.filters.result import InnovationSeries
 
@@ -82,12 +82,20 @@ class RunExport:
     origin : mapping, optional
         The frame's origin the user gave (``metadata.extra[LOCAL_ORIGIN]``: ``pos`` [rad, rad,
         m] and ``source``).
+    reference_rate : float, optional
+        The reference written at this rate [Hz] (the run's output rate): of each interval
+        ``[k, k + 1) / reference_rate`` after ``t0_ns``, its first sample (the truth's own
+        samples, none moved or interpolated; on the output grid when the truth's clock is the
+        IMU's). None: every sample.
+    t0_ns : int
+        The recording start [ns]: the origin of the intervals.
     """
 
     def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
                  source: str = "", force: bool = False,
                  late: Mapping[str, str] | None = None,
-                 origin: Mapping[str, Any] | None = None, compression: str = "zstd") -> None:
+                 origin: Mapping[str, Any] | None = None, compression: str = "zstd",
+                 reference_rate: float | None = None, t0_ns: int = 0) -> None:
         self.out_dir = Path(out_dir)
         if compression not in COMPRESSIONS:
             raise ValueError(f"MCAP compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
@@ -98,6 +106,9 @@ class RunExport:
         """Labels whose rows come after every other's (smoothed runs), each with the label whose
         solution parts it shares: nothing waits for them."""
         self.has_reference = has_reference
+        self.reference_rate = reference_rate
+        self._t0_ns = int(t0_ns)
+        self._ref_interval = -np.inf  # the last interval a reference sample was kept of
         self.source = source
         self.force = force
         check_targets(run_targets(self.out_dir, self.labels, has_reference), force)
@@ -133,11 +144,26 @@ class RunExport:
             self.has_reference = False
             self._feed("ref", None)
             return
+        if self.reference_rate is not None:
+            truth = self._decimated(truth)
+            if not len(truth):
+                return
         if self._frame is None:
             p = truth["pos"][0]
             self._frame = LocalFrame(float(p[0]), float(p[1]), float(p[2]),
                                      "first reference sample")
         self._feed("ref", truth)
+
+    def _decimated(self, truth: Stream) -> Stream:
+        """The first sample of each interval of ``1 / reference_rate`` (not kept before)."""
+        assert self.reference_rate is not None
+        k = np.floor((truth.t_ns - self._t0_ns) * (self.reference_rate * 1e-9) + 1e-6)
+        first = np.flatnonzero(k > np.r_[self._ref_interval, k[:-1]])
+        self._ref_interval = max(self._ref_interval, float(k[-1]))
+        if len(first) == len(truth):
+            return truth
+        return Stream(truth.kind, truth.t_ns[first],
+                      {name: v[first] for name, v in truth.columns.items()}, truth.frame_id)
 
     def add(self, out: FilterOutput) -> None:
         """A block of one filter's estimates (:func:`filter_output` of its rows) and the
@@ -173,7 +199,8 @@ class RunExport:
         for name, series in innovations.items():
             f = self._innovation_file(label, name, int(series.nu.shape[1]))
             if len(series.t):
-                f.write(csv_rows(innovation_columns(t0_ns, series, *self._rows[label, name])))
+                f.writelines(csv_blocks(innovation_columns(t0_ns, series,
+                                                           *self._rows[label, name])))
 
     def _innovation_file(self, label: str, name: str, dim: int) -> Any:
         """The open file of a measurement's innovations (opened with its header at first)."""
@@ -193,7 +220,7 @@ class RunExport:
         self._innovations[label][name] = {"csv": csv_name, "dof": dim,
                                           "columns": [c.to_json() for c in cols]}
         f = self._open(csv_name)
-        f.write(csv_header(cols))
+        f.write(csv_header(cols).encode())
         return f
 
     def _first_nav(self) -> str | None:
@@ -237,7 +264,8 @@ class RunExport:
 
         target = self.out_dir / name
         tmp = temporary_path(target)
-        f = open(tmp, "w", encoding="utf-8", newline="")  # noqa: SIM115 (closed on close/abort)
+        # binary: the rows come as ASCII bytes (headers encoded as UTF-8)
+        f = open(tmp, "wb")  # noqa: SIM115 (closed on close/abort)
         self._tmp[target] = (tmp, f)
         return f
 
@@ -255,13 +283,13 @@ class RunExport:
                 entry["odometry_topic"] = f"{root}/odom"
                 entry["navsatfix_topic"] = f"{root}/fix"
                 entry["tf_child_frame_id"] = body_frame(topic_name(label))
-                self._open(entry["tum"]).write(TUM_HEADER)
+                self._open(entry["tum"]).write(TUM_HEADER.encode())
                 self._streams[label] = topics_of(topic_name(label), root)
                 topics += self._streams[label]
                 self._topics[label] = entry["odometry_topic"]
             self._entries[label] = entry
         if self.has_reference and self._frame is not None:
-            self._open(f"{REFERENCE_LABEL}.tum").write(TUM_HEADER)
+            self._open(f"{REFERENCE_LABEL}.tum").write(TUM_HEADER.encode())
             self._streams[REFERENCE_LABEL] = topics_of(REFERENCE_LABEL, f"/{REFERENCE_LABEL}")
             topics += self._streams[REFERENCE_LABEL]
             self._topics[REFERENCE_LABEL] = "/reference/odom"
@@ -283,10 +311,10 @@ class RunExport:
         if kind == "ref":
             if frame is None:
                 return
-            for a in range(0, len(item), _REFERENCE_ROWS):  # bounded temporaries
-                truth = item.slice(a, min(a + _REFERENCE_ROWS, len(item)))
+            for a in range(0, len(item), _POSE_ROWS):  # bounded temporaries
+                truth = item.slice(a, min(a + _POSE_ROWS, len(item)))
                 poses = reference_poses(frame, truth)
-                self._file(f"{REFERENCE_LABEL}.tum").write(tum_lines(poses))
+                self._file(f"{REFERENCE_LABEL}.tum").writelines(tum_blocks(poses))
                 assert self._odometry is not None  # opened with the first rows
                 for stream in self._streams[REFERENCE_LABEL]:
                     self._odometry.add(stream.key, poses)
@@ -296,16 +324,19 @@ class RunExport:
         cols = run_columns(out, frame)
         if "columns" not in entry:
             entry["columns"] = [c.to_json() for c in cols]
-            self._open(entry["csv"]).write(csv_header(cols))
-        self._file(entry["csv"]).write(csv_rows(cols))
+            self._open(entry["csv"]).write(csv_header(cols).encode())
+        self._file(entry["csv"]).writelines(csv_blocks(cols))
         if "tum" in entry and out.has_nav:
             assert frame is not None and self._odometry is not None  # the first navigation rows
             assert out.nav_pos is not None and out.nav_v_n is not None and out.nav_q_nb is not None
-            poses = ros_poses(frame, out.stamps_ns, out.nav_pos, out.nav_v_n, out.nav_q_nb,
-                              out.nav_cov)
-            self._file(entry["tum"]).write(tum_lines(poses))
-            for stream in self._streams[out.label]:
-                self._odometry.add(stream.key, poses)
+            stamps = out.stamps_ns
+            for a in range(0, len(stamps), _POSE_ROWS):  # bounded temporaries
+                k = slice(a, a + _POSE_ROWS)
+                poses = ros_poses(frame, stamps[k], out.nav_pos[k], out.nav_v_n[k],
+                                  out.nav_q_nb[k], None if out.nav_cov is None else out.nav_cov[k])
+                self._file(entry["tum"]).writelines(tum_blocks(poses))
+                for stream in self._streams[out.label]:
+                    self._odometry.add(stream.key, poses)
 
     def _file(self, name: str) -> Any:
         return self._tmp[self.out_dir / name][1]
@@ -333,7 +364,7 @@ class RunExport:
                                "%d"),
                         Column("t", "s", "time since the recording start", np.zeros(0))]
                     entry["columns"] = [c.to_json() for c in cols]
-                    self._open(entry["csv"]).write(csv_header(cols))
+                    self._open(entry["csv"]).write(csv_header(cols).encode())
             if self._odometry is not None:
                 self._odometry.finish()
             for _, f in self._tmp.values():
@@ -427,6 +458,6 @@ class RunExport:
         self._tmp.clear()
 
 
-_REFERENCE_ROWS = 5_000
-"""Reference rows converted and queued at once (a window's 9x9 covariances and messages are
-not all held)."""
+_POSE_ROWS = 2_000
+"""Rows converted to poses and queued at once (a window's 9x9 covariances, their products and
+messages are not all held)."""

@@ -157,43 +157,74 @@ class BulkWriter:
         batches = [b for b in batches if len(b[1])]
         if not batches:
             return
-        rows = []
         for cid, t, data in batches:
             if data.ndim != 2 or data.shape[0] != len(t):
                 raise ValueError(f"channel {cid}: payloads must be {len(t)} rows of bytes")
-            rows.append(np.concatenate([_record_header(np.asarray(t), cid, data.shape[1]),
-                                        np.asarray(data, np.uint8)], axis=1))
         t = np.concatenate([np.asarray(b[1], np.int64) for b in batches])
         if np.any(t < 0):
             raise ValueError("message times must not be negative")
+        t0 = np.asarray(batches[0][1], np.int64)
+        widths = np.array([_PREFIX + b[2].shape[1] for b in batches], np.int64)
+        if (len(batches) > 1 and np.all(t0[1:] > t0[:-1])
+                and all(np.array_equal(b[1], t0) for b in batches[1:])):
+            # the batches share their times (the streams of a filter and the reference at
+            # one output rate), none repeated: the merged order is row by row, batch by batch,
+            # which the records placed side by side are already (no gather)
+            table = np.empty((len(t0), int(widths.sum())), np.uint8)
+            at = 0
+            for (cid, _, data), w in zip(batches, widths.tolist(), strict=True):
+                table[:, at:at + _PREFIX] = _record_header(t0, cid, w - _PREFIX)
+                table[:, at + _PREFIX:at + w] = data
+                at += w
+            self._add_records(np.tile([b[0] for b in batches], len(t0)),
+                              np.repeat(t0, len(batches)), np.tile(widths, len(t0)),
+                              table.reshape(-1))
+            return
+        rows = [np.concatenate([_record_header(np.asarray(t), cid, data.shape[1]),
+                                np.asarray(data, np.uint8)], axis=1) for cid, t, data in batches]
         order = np.argsort(t, kind="stable")
         t = t[order]
         which = np.repeat(np.arange(len(batches)), [len(b[1]) for b in batches])[order]
         cids = np.array([b[0] for b in batches])[which]
-        widths = np.array([r.shape[1] for r in rows], np.int64)
         sizes = widths[which]
-        same = bool(np.all(widths == widths[0]))
-        if same:
-            table = np.concatenate(rows)
-        else:  # each record's bytes gathered from its batch's block
-            table = np.concatenate([r.reshape(-1) for r in rows])
-            starts = np.concatenate([[0], np.cumsum([r.size for r in rows])[:-1]])
-            first = np.concatenate([[0], np.cumsum([len(b[1]) for b in batches])[:-1]])
-            src = starts[which] + (order - first[which]) * sizes
+        if np.all(widths == widths[0]):  # records of one size: rows gathered
+            self._add_records(cids, t, sizes, np.concatenate(rows)[order].reshape(-1))
+            return
+        # else each record's bytes gathered from its batch's block
+        table = np.concatenate([r.reshape(-1) for r in rows])
+        starts = np.concatenate([[0], np.cumsum([r.size for r in rows])[:-1]])
+        first = np.concatenate([[0], np.cumsum([len(b[1]) for b in batches])[:-1]])
+        src = starts[which] + (order - first[which]) * sizes
         ends = np.cumsum(sizes)
         a = 0
         while a < len(t):
-            # the chunk closes after the message that takes it past chunk_size
             lo = int(ends[a - 1]) if a else 0
-            b = min(len(t), int(np.searchsorted(ends, self._chunk_size - self._size + lo,
-                                                side="right")) + 1)
+            b = self._chunk_end(ends, a)
             offsets = ends[a:b] - sizes[a:b] - lo
-            if same:
-                records = table[order[a:b]]
-            else:
-                records = table[np.repeat(src[a:b] - offsets, sizes[a:b])
-                                + np.arange(int(ends[b - 1]) - lo)]
+            records = table[np.repeat(src[a:b] - offsets, sizes[a:b])
+                            + np.arange(int(ends[b - 1]) - lo)]
             self._add_chunk_messages(cids[a:b], t[a:b], offsets, [records.tobytes()],
+                                     int(ends[b - 1]) - lo)
+            a = b
+
+    def _chunk_end(self, ends: np.ndarray, a: int) -> int:
+        """The end of the messages from ``a`` that go into the open chunk: it closes after
+        the message that takes it past chunk_size (``ends``: the records' cumulative ends)."""
+        lo = int(ends[a - 1]) if a else 0
+        return min(len(ends), int(np.searchsorted(ends, self._chunk_size - self._size + lo,
+                                                  side="right")) + 1)
+
+    def _add_records(self, cids: np.ndarray, t: np.ndarray, sizes: np.ndarray,
+                     records: np.ndarray) -> None:
+        """Messages whose records lie one after the other in ``records`` (uint8), in the
+        order they are written, cut into chunks."""
+        ends = np.cumsum(sizes)
+        a = 0
+        while a < len(t):
+            lo = int(ends[a - 1]) if a else 0
+            b = self._chunk_end(ends, a)
+            self._add_chunk_messages(cids[a:b], t[a:b], ends[a:b] - sizes[a:b] - lo,
+                                     [records[lo:int(ends[b - 1])].tobytes()],
                                      int(ends[b - 1]) - lo)
             a = b
 

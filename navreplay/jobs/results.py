@@ -54,6 +54,8 @@ class Outputs:
     """The command line, for the report."""
     compression: str = "zstd"
     """Chunk compression of the estimates MCAP."""
+    reference_rate: float | None = None
+    """The rate [Hz] the reference is exported at (the run's output rate), None: its own."""
     _export: export.RunExport | None = None
     _context: dict[str, Any] = dataclasses.field(default_factory=dict)
     _series: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -82,7 +84,9 @@ class Outputs:
             self._export = export.RunExport(self.export_dir, run.labels,
                                             has_reference=run.has_truth, source=run.source,
                                             force=self.force, late=getattr(run, "late", {}),
-                                            origin=_origin(run), compression=self.compression)
+                                            origin=_origin(run), compression=self.compression,
+                                            reference_rate=self.reference_rate,
+                                            t0_ns=getattr(run, "t0_ns", 0))
         if self.report_path is not None:
             from navreplay.report import RunSeries, run_context
 

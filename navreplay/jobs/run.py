@@ -113,6 +113,8 @@ class RunJob:
     export_dir: Path | None = None
     export_compression: str = "zstd"
     """Chunk compression of the estimates MCAP (``zstd``, ``lz4``, ``none``)."""
+    export_reference: str = "output"
+    """The reference exported at the output rate (``output``) or at its own (``full``)."""
     report_path: Path | None = None
     force: bool = False
     max_imu_gap: float | None = None
@@ -125,7 +127,9 @@ def outputs_of(job: Any) -> Outputs:
     """The ``--export`` / ``--report`` outputs of a run or Monte Carlo job."""
     return Outputs(job.export_dir, job.report_path, job.force,
                    command=getattr(job, "command", None),
-                   compression=getattr(job, "export_compression", "zstd"))
+                   compression=getattr(job, "export_compression", "zstd"),
+                   reference_rate=(job.output_rate if getattr(job, "export_reference", "full")
+                                   == "output" else None))
 
 
 def _check_files(paths: Sequence[Path]) -> None:

@@ -103,9 +103,10 @@ class Channel:
         self.catalog = Catalog()
         self.drawn_rate = drawn_rate
         """Bins per second of a drawn series' min/max envelope (None: every row drawn)."""
-        self._pending: dict[str, tuple[Any, list[tuple[TimeIndex, np.ndarray]]]] = {}
-        """Per series of a file (not a live view): the rows of its unfinished bin, and the rows
-        drawn not yet sent (a chunk's worth is sent at once)."""
+        self._pending: dict[str, tuple[Any, list[tuple[np.ndarray, np.ndarray]],
+                                       int | None]] = {}
+        """Per series of a file (not a live view): the times and rows of its unfinished bin,
+        those drawn not yet sent (a chunk's worth is sent at once) and the recording start."""
         self.live = not isinstance(target, Save)
         self._sent: tuple | None = None
         self._colors: dict[str, tuple[int, int, int]] = {}
@@ -190,49 +191,51 @@ class Channel:
             return
         self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
 
-    def _drawn(self, idx: TimeIndex, values: np.ndarray, columns: tuple[int, ...] | None,
-               maxima: tuple[int, ...]) -> tuple[TimeIndex, np.ndarray]:
-        """The rows of a series drawn: its min/max envelope at :attr:`drawn_rate`."""
+    def _drawn(self, t: np.ndarray, values: np.ndarray, columns: tuple[int, ...] | None,
+               maxima: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """The times [s] and rows of a series drawn: its min/max envelope at
+        :attr:`drawn_rate`."""
         if self.drawn_rate is None:
-            return idx, values
-        k = envelope_rows(idx.t, values.reshape(values.shape[0], -1), self.drawn_rate, columns,
+            return t, values
+        k = envelope_rows(t, values.reshape(values.shape[0], -1), self.drawn_rate, columns,
                           maxima)
-        return (idx.take(k), values[k]) if k.shape[0] < values.shape[0] else (idx, values)
+        return (t[k], values[k]) if k.shape[0] < values.shape[0] else (t, values)
 
     def _hold(self, path: str, idx: TimeIndex, values: np.ndarray,
               columns: tuple[int, ...] | None, maxima: tuple[int, ...]) -> None:
         """Draw the whole bins of a file's series as they complete (the rows of the last,
         unfinished bin held, so the rows drawn do not depend on how the rows came) and send
-        them once :data:`PENDING_ROWS` are drawn."""
-        tail, ready = self._pending.get(path, (None, []))
+        them once :data:`PENDING_ROWS` are drawn (the time columns made once, at the send)."""
+        tail, ready, _ = self._pending.get(path, (None, [], idx.t0_ns))
+        t = idx.t
         if tail is not None:
-            idx = TimeIndex(np.concatenate([tail[0].t, idx.t]), idx.t0_ns)
+            t = np.concatenate([tail[0], t])
             values = np.concatenate([tail[1], values])
         cut = values.shape[0]
         if self.drawn_rate is not None:
-            bins = np.floor(idx.t * self.drawn_rate)
+            bins = np.floor(t * self.drawn_rate)
             cut = int(np.searchsorted(bins, bins[-1], side="left"))
         if cut:
-            ready.append(self._drawn(idx.take(np.arange(cut)), values[:cut], columns, maxima))
-        tail = ((idx.take(np.arange(cut, values.shape[0])), values[cut:], columns, maxima)
-                if cut < values.shape[0] else None)
-        self._pending[path] = (tail, ready)
+            ready.append(self._drawn(t[:cut], values[:cut], columns, maxima))
+        tail = (t[cut:], values[cut:], columns, maxima) if cut < values.shape[0] else None
+        self._pending[path] = (tail, ready, idx.t0_ns)
         if self.live or sum(v.shape[0] for _, v in ready) >= PENDING_ROWS:
-            self._send_ready(path, ready)
-            self._pending[path] = (tail, [])
+            self._send_ready(path, ready, idx.t0_ns)
+            self._pending[path] = (tail, [], idx.t0_ns)
 
-    def _send_ready(self, path: str, ready: list[tuple[TimeIndex, np.ndarray]]) -> None:
+    def _send_ready(self, path: str, ready: list[tuple[np.ndarray, np.ndarray]],
+                    t0_ns: int | None) -> None:
         if ready:
-            idx = TimeIndex(np.concatenate([i.t for i, _ in ready]), ready[0][0].t0_ns)
+            idx = TimeIndex(np.concatenate([t for t, _ in ready]), t0_ns)
             values = np.concatenate([v for _, v in ready])
             self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
 
     def _send_pending(self) -> None:
         """Draw and send every series' rows held (their last bins too)."""
-        for path, (tail, ready) in list(self._pending.items()):
+        for path, (tail, ready, t0_ns) in list(self._pending.items()):
             if tail is not None:
                 ready.append(self._drawn(*tail))
-            self._send_ready(path, ready)
+            self._send_ready(path, ready, t0_ns)
         self._pending.clear()
 
     def _style(

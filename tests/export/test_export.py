@@ -260,3 +260,91 @@ def test_ensemble_export(runs, tmp_path) -> None:
     assert np.all(col["nees_lo [-]"] < col["nees_hi [-]"])
     with pytest.raises(OutputError):
         export.export_ensemble(tmp_path, {"gps-ins": ens})
+
+
+def test_pose_covariances_as_the_straightforward_products() -> None:
+    """ros_poses' shortcuts (the twist's angular block set, no marking of finite covariances,
+    the zero products of the reference) give the bits of the plain products marked after."""
+    from navreplay.export import frames
+    from navreplay.geo.rotations import skew
+
+    rng = np.random.default_rng(11)
+    M = 40
+    pos = np.column_stack([0.65 + 1e-5 * rng.standard_normal(M),
+                           2.2 + 1e-5 * rng.standard_normal(M), 40 + rng.standard_normal(M)])
+    v_n = rng.standard_normal((M, 3))
+    q = rng.standard_normal((M, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    A = rng.standard_normal((M, 9, 9))
+    full = A @ A.transpose(0, 2, 1)
+    no_velocity = full.copy()
+    no_velocity[:, 3:6, :] = np.nan
+    no_velocity[:, :, 3:6] = np.nan
+    v_bad = v_n.copy()
+    v_bad[3] = np.nan
+    frame = frames.LocalFrame(0.65, 2.2, 40.0, "test")
+    for cov, v in ((full, v_n), (no_velocity, v_n), (np.zeros((M, 9, 9)), v_n),
+                   (np.zeros((M, 9, 9)), v_bad)):
+        got = frames.ros_poses(frame, np.arange(M), pos, v, q, cov)
+        R = frame.rotation(pos)
+        C_nb = quat_to_dcm(q)
+        B = np.zeros((M, 6, 6))
+        B[:, :3, :3] = R
+        B[:, 3:, 3:] = R
+        J = np.concatenate([np.broadcast_to(np.eye(3), (M, 3, 3)), -skew(v)], axis=2)
+        J = frames.F_FRD_FLU @ C_nb.transpose(0, 2, 1) @ J
+        with np.errstate(invalid="ignore"):
+            pose = B @ cov[:, [0, 1, 2, 6, 7, 8]][:, :, [0, 1, 2, 6, 7, 8]] @ B.transpose(0, 2, 1)
+            lin = J @ cov[:, 3:9, 3:9] @ J.transpose(0, 2, 1)
+        twist = np.zeros((M, 6, 6))
+        twist[:, :3, :3] = lin
+        twist[:, 3:, 3:] = np.nan
+
+        def marked(c):
+            bad = ~np.isfinite(np.diagonal(c, axis1=1, axis2=2))
+            c = np.where(bad[:, :, None] | bad[:, None, :] | ~np.isfinite(c), 0.0, c)
+            d = np.arange(c.shape[1])
+            c[:, d, d] = np.where(bad, frames.UNKNOWN_VARIANCE, c[:, d, d])
+            return c
+
+        np.testing.assert_array_equal(got.pose_cov, marked(pose))
+        np.testing.assert_array_equal(got.twist_cov, marked(twist))
+    assert (got.twist_cov[3, :3, :3] == np.diag([-1.0] * 3)).all()  # the velocity unknown
+
+
+def _truth_stream(n: int, rate: float, t0_ns: int, offset_ns: int = 0):
+    from navreplay.core.streams import Stream, StreamKind
+
+    t = t0_ns + offset_ns + np.rint(np.arange(n) / rate * 1e9).astype(np.int64)
+    s = np.arange(n) / rate
+    pos = np.column_stack([0.65 + 1e-7 * s, 2.2 + 2e-7 * s, 40.0 + 0.01 * s])
+    v_n = np.column_stack([np.cos(s), np.sin(s), 0.0 * s])
+    q = np.column_stack([np.cos(0.01 * s), 0.0 * s, 0.0 * s, np.sin(0.01 * s)])
+    return Stream(StreamKind.TRUTH, t, {"pos": pos, "v_n": v_n, "q_nb": q})
+
+
+@pytest.mark.parametrize("offset_ns", [0, 3_000_000])
+def test_reference_at_the_output_rate(tmp_path, offset_ns) -> None:
+    """The reference exported at the output rate: of each output interval its first sample,
+    the very lines (and messages) of the full-rate export, however the windows were cut."""
+    t0 = 1_483_228_800_000_000_000
+    truth = _truth_stream(2000, 100.0, t0, offset_ns)
+    full, dec = tmp_path / "full", tmp_path / "dec"
+    w = export.RunExport(full, [], has_reference=True, t0_ns=t0)
+    w.add_reference(truth)
+    w.close()
+    w = export.RunExport(dec, [], has_reference=True, reference_rate=10.0, t0_ns=t0)
+    for a, b in ((0, 7), (7, 333), (333, 1500), (1500, 2000)):
+        w.add_reference(truth.slice(a, b))
+    w.close()
+    lines = (full / "reference.tum").read_text().splitlines()
+    kept = (dec / "reference.tum").read_text().splitlines()
+    header = [x for x in lines if x.startswith("#")]
+    assert kept[:len(header)] == header
+    assert kept[len(header):] == lines[len(header)::10]  # 100 Hz -> 10 Hz
+    stamps = np.array([int(x.split()[0].replace(".", "")) for x in kept[len(header):]])
+    np.testing.assert_array_equal(np.diff(stamps), 100_000_000)
+    assert stamps[0] == t0 + offset_ns
+    with AnyReader([dec / export.ODOMETRY_FILE]) as reader:
+        n = sum(1 for c, _, _ in reader.messages() if c.topic == "/reference/odom")
+    assert n == 200

@@ -59,6 +59,29 @@ def test_same_bytes_as_mcaps_writer(widths, chunk_size, compression) -> None:
     assert _write(BulkWriter, calls, chunk_size, compression, single=True) == reference
 
 
+def _shared(rng: np.random.Generator, widths: list[int], n: int, t0: int, repeat: bool):
+    """Batches at the same times (strictly increasing, or with a repeated time)."""
+    t = t0 + np.cumsum(rng.integers(1, 5, n)) * 1000
+    if repeat and n > 2:
+        t[n // 2] = t[n // 2 - 1]
+    return [(k + 1, t.astype(np.int64), rng.integers(0, 256, (n, w), dtype=np.uint8))
+            for k, w in enumerate(widths)]
+
+
+@pytest.mark.parametrize("repeat", [False, True])
+@pytest.mark.parametrize("chunk_size", [1 << 20, 700, 1])
+def test_batches_at_shared_times_as_mcaps_writer(repeat, chunk_size) -> None:
+    """Batches of one set of times (the streams of a filter and the reference at an output
+    rate) are placed side by side without a gather: the bytes of mcap's Writer, chunks cut
+    at the same messages; a repeated time takes the general path."""
+    rng = np.random.default_rng(9)
+    calls = [_shared(rng, [40, 17, 300], n, 10**9 * i, repeat) for i, n in
+             enumerate((50, 1, 120))]
+    for compression in (CompressionType.ZSTD, CompressionType.NONE):
+        reference = _write(Writer, calls, chunk_size, compression, single=True)
+        assert _write(BulkWriter, calls, chunk_size, compression, single=False) == reference
+
+
 def test_reads_back_with_crcs() -> None:
     rng = np.random.default_rng(8)
     calls = [_batches(rng, [24, 56], 2000, 10**9 * i) for i in range(3)]

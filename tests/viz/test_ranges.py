@@ -246,3 +246,62 @@ def test_a_sweep_is_a_bar_chart_on_its_own_axis(tmp_path):
     np.testing.assert_allclose(width["gravity"], 40.0)
     np.testing.assert_allclose(bars["gravity"]["BarChart:values"][-1][0]["buffer"],
                                [0.1, 0.2, 0.4, 0.8])
+
+
+def _lexsort_rows(t, values, rate_hz, columns=None, maxima=()):
+    """The straightforward envelope: per bin, the first row of the sorted values."""
+    M = t.shape[0]
+    bins = np.floor(t * rate_hz)
+    starts = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
+    if M <= 2 or starts.shape[0] * 3 >= M:
+        return np.arange(M)
+    seg = np.repeat(np.arange(starts.shape[0]), np.diff(np.r_[starts, M]))
+    keep = np.zeros(M, dtype=bool)
+    cols = range(values.shape[1]) if columns is None else columns
+    for j, signs in [*((j, (1.0, -1.0)) for j in cols), *((j, (-1.0,)) for j in maxima)]:
+        v = values[:, j]
+        for sign in signs:
+            first = np.lexsort((sign * v, seg))[starts]
+            keep[first[np.isfinite(v[first])]] = True
+    gap = np.isnan(values[:, 0])
+    if gap.any():
+        keep[np.flatnonzero(gap & np.r_[True, ~gap[:-1]])] = True
+        keep[np.flatnonzero(gap[:-1] & ~gap[1:]) + 1] = True
+    return np.flatnonzero(keep)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_envelope_rows_are_those_of_the_sorted_bins(seed):
+    """The envelope's rows (per-bin extremes found by reduction) are those a sort of each bin
+    finds: ties (the first row), +-0, infinities, NaN gaps and all-NaN bins included."""
+    rng = np.random.default_rng(seed)
+    M = int(rng.integers(50, 3000))
+    t = np.sort(rng.uniform(0.0, 60.0, M))
+    v = rng.integers(-3, 4, (M, 3)).astype(float)  # many ties
+    v[rng.random((M, 3)) < 0.05] = np.nan
+    v[rng.random((M, 3)) < 0.02] = np.inf
+    v[rng.random((M, 3)) < 0.02] = -np.inf
+    v[rng.random((M, 3)) < 0.05] = -0.0
+    v[(t > 20.0) & (t < 27.0), 0] = np.nan  # whole bins without a value
+    v = np.column_stack([v, np.full(M, np.nan)])  # a column without any
+    for columns, maxima in ((None, ()), ((0,), (1,)), ((0, 2), ()), ((3,), (3,))):
+        for rate in (0.5, 2.0):
+            got = envelope_rows(t, v, rate, columns, maxima)
+            np.testing.assert_array_equal(got, _lexsort_rows(t, v, rate, columns, maxima))
+
+
+def test_envelope_extent_is_that_of_the_finite_values():
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.uniform(0.0, 900.0, 5000))
+    v = rng.standard_normal((5000, 2))
+    v[rng.random((5000, 2)) < 0.1] = np.nan
+    v[rng.random((5000, 2)) < 0.05] = np.inf
+    env = Envelope()
+    for a in range(0, 5000, 700):
+        env.add(t[a:a + 700], v[a:a + 700])
+    finite = np.where(np.isfinite(v), v, np.nan)
+    for after in (-np.inf, 300.0):
+        sel = t >= after + env.width  # bins that start after `after` hold these rows
+        lo, hi = env.extent(after)
+        assert lo <= np.nanmin(finite[sel]) and hi >= np.nanmax(finite[sel])
+    assert env.extent() == (np.nanmin(finite), np.nanmax(finite))
