@@ -381,7 +381,7 @@ def _row_entries(row: ReplaySession | RecordedSession) -> dict[str, Any]:
     return summary_entries(row.settings)
 
 
-PIECE_OUTPUTS = 6_000
+PIECE_OUTPUTS = 2_000
 """Output ticks (at the output rate) of the longest piece of a window fed to the filters at
 once: a block of estimates carries a covariance per row, so at high output rates a reader's
 window (about 60 000 IMU samples) is replayed in pieces of bounded memory."""
