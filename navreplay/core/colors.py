@@ -28,3 +28,27 @@ def color_index(label: str, taken: Collection[int] = ()) -> int:
     while k in taken:
         k = (k + 1) % len(PALETTE)
     return k
+
+
+class LabelColors:
+    """The colours of the labels drawn together in one output (a view, a figure, a layout), in
+    first-use order: each label's own :func:`color_index`, moved on only when an earlier label
+    holds it, so the labels stay distinct while the palette lasts."""
+
+    def __init__(self) -> None:
+        self._index: dict[str, int] = {}
+
+    def index(self, label: str) -> int:
+        """The :data:`PALETTE` index of ``label`` (given on its first use)."""
+        if label not in self._index:
+            self._index[label] = color_index(label, set(self._index.values()))
+        return self._index[label]
+
+    def rgb(self, label: str) -> tuple[int, int, int]:
+        """The colour of ``label`` as 8-bit RGB."""
+        return PALETTE[self.index(label)]
+
+    def order(self, label: str) -> int:
+        """The position of ``label`` in first-use order."""
+        self.index(label)
+        return list(self._index).index(label)

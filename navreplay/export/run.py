@@ -432,18 +432,12 @@ class RunExport:
         return manifest
 
     def _layout(self) -> dict[str, Any]:
-        from navreplay.core.colors import PALETTE, TRUTH_COLOR, color_index
+        from navreplay.core.colors import TRUTH_COLOR, LabelColors
 
-        taken: list[int] = []
-        sources = []
-        for label, topic in self._topics.items():
-            if label == REFERENCE_LABEL:
-                color = TRUTH_COLOR
-            else:
-                k = color_index(label, taken)
-                taken.append(k)
-                color = PALETTE[k]
-            sources.append((label, topic[:-len("/odom")], color))
+        colors = LabelColors()
+        sources = [(label, topic[:-len("/odom")],
+                    TRUTH_COLOR if label == REFERENCE_LABEL else colors.rgb(label))
+                   for label, topic in self._topics.items()]
         return foxglove_layout(ODOMETRY_FILE, sources)
 
     def abort(self) -> None:

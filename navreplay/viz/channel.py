@@ -23,9 +23,8 @@ from navreplay.viz.style import (
     BAND_LINES,
     BAND_WIDTH,
     N_SIGMA,
-    PALETTE,
     TRUTH_COLOR,
-    color_index,
+    LabelColors,
     dimmer,
     lighter,
 )
@@ -109,7 +108,7 @@ class Channel:
         those drawn not yet sent (a chunk's worth is sent at once) and the recording start."""
         self.live = not isinstance(target, Save)
         self._sent: tuple | None = None
-        self._colors: dict[str, tuple[int, int, int]] = {}
+        self._colors = LabelColors()
         self._runs: dict[str, RunState] = {}
         self._styled: set[str] = set()
         self._ref: np.ndarray | None = None
@@ -132,17 +131,13 @@ class Channel:
 
     def color_of(self, label: str) -> tuple[int, int, int]:
         """The colour of a filter label (or an ensemble variant) in every plot of this sink:
-        picked from :data:`PALETTE` by its name (:func:`~navreplay.viz.style.color_index`), the
+        picked from the palette by its name (:class:`~navreplay.core.colors.LabelColors`), the
         same in every run."""
-        if label not in self._colors:
-            taken = {PALETTE.index(c) for c in self._colors.values()}
-            self._colors[label] = PALETTE[color_index(label, taken)]
-        return self._colors[label]
+        return self._colors.rgb(label)
 
     def order_of(self, label: str) -> int:
         """Position of a label in first-use order (the row of its panes)."""
-        self.color_of(label)
-        return list(self._colors).index(label)
+        return self._colors.order(label)
 
     def _layout_first(self, log: Callable[[], None], *, plan: bool = True) -> None:
         """Run ``log``; on a live sink, first send the blueprint for what it will log: with

@@ -8,7 +8,7 @@ Each function takes plain arrays and returns a matplotlib Figure, so the HTML re
 * :func:`rms_vs_sigma` — ensemble RMS error (solid) against the mean predicted sigma (dashed);
 * :func:`allan_deviation` — Allan deviation per axis (log-log) with the fitted noise terms.
 
-A filter keeps its colour (:func:`filter_color`, by its position in the command) in every
+A filter keeps its colour (:func:`filter_colors`, by its name) in every
 figure. Importing this module loads matplotlib: import it only when figures are wanted.
 """
 
@@ -34,20 +34,13 @@ PANEL_SIZE = (4.2, 2.4)
 """Width and height of one panel [in]."""
 
 
-def filter_color(label: str, taken: Sequence[str] = ()) -> str:
-    """The colour of a filter label: the Rerun view's (:func:`navreplay.viz.style.color_index`,
-    by name), ``taken`` the colours of the labels before it in the same figure."""
-    from navreplay.viz.style import color_index
-
-    return COLORS[color_index(label, {COLORS.index(c) for c in taken})]
-
-
 def filter_colors(labels: Sequence[str]) -> dict[str, str]:
-    """The colours of several labels drawn together (distinct while the palette lasts)."""
-    out: dict[str, str] = {}
-    for label in labels:
-        out[label] = filter_color(label, list(out.values()))
-    return out
+    """The colours of the labels drawn together in a figure: the Rerun view's, by name
+    (:class:`navreplay.core.colors.LabelColors`; distinct while the palette lasts)."""
+    from navreplay.core.colors import LabelColors
+
+    colors = LabelColors()
+    return {label: COLORS[colors.index(label)] for label in labels}
 
 
 @dataclasses.dataclass(frozen=True)

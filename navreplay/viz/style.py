@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from navreplay.core.colors import PALETTE as PALETTE  # the colours, shared with the exports
 from navreplay.core.colors import TRUTH_COLOR as TRUTH_COLOR
+from navreplay.core.colors import LabelColors as LabelColors
 from navreplay.core.colors import color_index as color_index
 
 N_SIGMA = 3.0
