@@ -18,9 +18,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from navreplay.core.jit import kernel
 from navreplay.filters import gnss_models as gnss
 from navreplay.filters.ins_time_update import (
     _TIME_TOL,
@@ -125,7 +125,7 @@ class Updates(NamedTuple):
     S: np.ndarray
 
 
-@numba.njit(cache=True)
+@kernel
 def _any(a: np.ndarray) -> bool:
     for v in a:
         if v != 0.0:
@@ -133,7 +133,7 @@ def _any(a: np.ndarray) -> bool:
     return False
 
 
-@numba.njit(cache=True)
+@kernel
 def _smoothing_row(sm: Smoothing, m: int, Phi: np.ndarray, P: np.ndarray) -> None:
     """Row m of the smoother's rows at an estimate with covariance P: the transition since
     the previous one, the covariance before the updates (P without update), the corrections;
@@ -150,7 +150,7 @@ def _smoothing_row(sm: Smoothing, m: int, Phi: np.ndarray, P: np.ndarray) -> Non
     sm.has_prior[0] = 0.0
 
 
-@numba.njit(cache=True)
+@kernel
 def run_events(
     nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray, imu: Imu, events: Events,
     gnss_samples: Gnss, options: Options, step: float, model: Model, work: Work, out: Rows,
