@@ -14,6 +14,9 @@ A shipped kernel is used only when all of these hold, else numba compiles it as 
 without a store (nothing is ever half-used):
 
 - the manifest names this numba, llvmlite, Python and target triple;
+- every module of the package that declares kernels hashes as it did at the build (a kernel's
+  code holds the kernels it calls, from other modules: an edited callee makes the whole store
+  stale);
 - the index and data files of the function hash as the manifest says (a changed or truncated
   file is never unpickled);
 - numba's own index checks pass: its version, the source file's stamp (numba stamps it by its
@@ -77,6 +80,17 @@ def _environment() -> dict[str, Any]:
 
 def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _kernel_sources() -> dict[str, str]:
+    """SHA-256 of each module of the package that declares kernels, by path in the package."""
+    return {p.relative_to(PACKAGE).as_posix(): hashlib.sha256(text).hexdigest()
+            for p in sorted(PACKAGE.rglob("*.py"))
+            if _DECLARES in (text := p.read_bytes())}
+
+
+_DECLARES = b"from navreplay.core.jit import kernel"
+"""How a module that declares kernels imports the decorator."""
 
 
 class _Codegen:
@@ -157,6 +171,9 @@ def _open(root: Path) -> Store | None:
     if not isinstance(manifest, dict) or any(
             manifest.get(k) != v for k, v in _environment().items()):
         return None
+    if manifest.get("sources") != _kernel_sources():
+        STATS["refused"] += 1  # built from other sources
+        return None
     try:
         return Store(root, manifest)
     except (KeyError, TypeError):
@@ -200,7 +217,8 @@ def write(cache_dir: Path, out: Path, magic: tuple[Any, ...]) -> int:
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(path, dest)
                 files[dest.relative_to(out).as_posix()] = _sha256(dest)
-    manifest = {**_environment(), "magic": list(magic), "files": files}
+    manifest = {**_environment(), "magic": list(magic), "files": files,
+                "sources": _kernel_sources()}
     (out / MANIFEST).write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
     _open.cache_clear()
     return sum(name.endswith(".nbi") for name in files)

@@ -85,15 +85,23 @@ def test_a_changed_file_is_refused_and_numba_compiles(store, tmp_path):
     np.testing.assert_array_equal(got["Phi"], host)  # host-compiled, as without a store
 
 
-def test_a_store_built_elsewhere_is_not_opened(store, tmp_path):
+@pytest.mark.parametrize("change", ["numba", "sources"])
+def test_a_store_built_elsewhere_or_from_other_sources_is_not_opened(store, tmp_path, change):
+    """Another numba version; a module that declares kernels edited since the build (a
+    kernel's code holds its callees from other modules)."""
     path, host = store
     copy = tmp_path / "store"
     subprocess.run(["cp", "-r", str(path), str(copy)], check=True)
     manifest = json.loads((copy / shipped.MANIFEST).read_text())
-    manifest["numba"] = "0.0.0"
+    if change == "numba":
+        manifest["numba"] = "0.0.0"
+    else:
+        assert "geo/kernels.py" in manifest["sources"]
+        manifest["sources"]["geo/kernels.py"] = "0" * 64
     (copy / shipped.MANIFEST).write_text(json.dumps(manifest))
     got = _child(copy, tmp_path / "user")
-    assert got["misses"] == 1 and not got["stats"]
+    assert got["misses"] == 1
+    assert got["stats"] == ({} if change == "numba" else {"refused": 1})
     np.testing.assert_array_equal(got["Phi"], host)
 
 
@@ -125,3 +133,7 @@ def test_every_kernel_of_the_package_goes_through_the_store():
 
     assert len(jit.KERNELS) > 10
     assert all(isinstance(k._cache, jit.KernelCache) for k in jit.KERNELS)
+    declaring = set(shipped._kernel_sources())  # the modules whose edits make a store stale
+    for k in jit.KERNELS:
+        assert Path(k.py_func.__code__.co_filename).relative_to(shipped.PACKAGE).as_posix() \
+            in declaring, k
