@@ -29,7 +29,7 @@ from typing import Any
 
 import numba
 from numba.core import event
-from numba.core.caching import FunctionCache
+from numba.core.caching import CompileResultCacheImpl, FunctionCache
 
 from navreplay.core import shipped
 
@@ -39,10 +39,27 @@ KERNELS: list[Any] = []
 """Every kernel declared with :func:`kernel` so far (numba dispatchers), in declaration order."""
 
 
+class _Impl(CompileResultCacheImpl):
+    """numba's serialisation of a compile result, without its type annotation when
+    :attr:`KernelCache.annotations` is off."""
+
+    def reduce(self, cres: Any) -> Any:
+        data = super().reduce(cres)
+        if not KernelCache.annotations and len(data) == 9 and isinstance(data[6], str):
+            data = (*data[:6], "", *data[7:])  # the typed IR as text, with object addresses
+        return data
+
+
 class KernelCache(FunctionCache):
     """numba's cache of one kernel (the user cache) with the shipped kernels behind it: a
     signature the user cache does not hold is looked up among the shipped kernels before
     numba compiles it. What numba compiles goes to the user cache only."""
+
+    _impl_class = _Impl
+    annotations = True
+    """Whether a saved kernel keeps numba's type annotation (``inspect_types`` of a loaded
+    kernel): the shipped kernels' build turns it off, as the text holds the addresses of
+    Python objects and would differ from one build to the next."""
 
     def load_overload(self, sig: Any, target_context: Any) -> Any:
         cres = super().load_overload(sig, target_context)

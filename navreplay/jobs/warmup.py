@@ -23,6 +23,8 @@ import argparse
 import concurrent.futures as cf
 import json
 import os
+import platform
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -117,17 +119,23 @@ PORTABLE = {"NUMBA_CPU_NAME": "generic", "NUMBA_CPU_FEATURES": ""}
 
 def ship(out: Path) -> int:
     """Build the shipped kernels into ``out``: every filter of :data:`PLAN` replayed in one
-    child process (in :data:`PLAN`'s order, so the build is repeatable) whose numba compiles
-    for :data:`PORTABLE` into an empty cache, then stored with its manifest
+    child process whose numba compiles for :data:`PORTABLE` into an empty cache (in
+    :data:`PLAN`'s order, with a fixed hash seed, without address randomisation where
+    ``setarch -R`` is at hand and without numba's type annotations, so that the same sources
+    and tools give the same files), then stored with its manifest
     (:func:`navreplay.core.shipped.write`). Returns the number of kernels stored; raises
     ``subprocess.CalledProcessError`` when the child fails."""
     from navreplay.core import shipped
 
     with tempfile.TemporaryDirectory(prefix="navreplay-kernels-") as tmp:
         cache = Path(tmp) / "cache"
-        env = {**os.environ, **PORTABLE, "NUMBA_CACHE_DIR": str(cache), shipped.ENV: "0"}
-        subprocess.run([sys.executable, "-m", "navreplay.jobs.warmup", "--compile"],
-                       env=env, cwd=tmp, check=True)
+        env = {**os.environ, **PORTABLE, "NUMBA_CACHE_DIR": str(cache), shipped.ENV: "0",
+               "PYTHONHASHSEED": "0"}  # numba names some constants by their hash
+        cmd = [sys.executable, "-m", "navreplay.jobs.warmup", "--compile"]
+        setarch = shutil.which("setarch") if sys.platform == "linux" else None
+        if setarch:  # without address randomisation: numba names array expressions by the
+            cmd = [setarch, platform.machine(), "-R", *cmd]  # address of an object
+        subprocess.run(cmd, env=env, cwd=tmp, check=True)
         magic = json.loads((cache / "magic.json").read_text())
         return shipped.write(cache, out, tuple(magic))
 
@@ -137,6 +145,9 @@ def _compile_plan() -> None:
     code-generation key next to the cache."""
     from numba.core.registry import cpu_target
 
+    from navreplay.core.jit import KernelCache
+
+    KernelCache.annotations = False  # the same files from the same sources
     with tempfile.TemporaryDirectory() as tmp:
         for name in PLAN:
             warm_filter(name, tmp)
