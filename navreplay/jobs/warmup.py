@@ -131,13 +131,20 @@ def ship(out: Path) -> int:
         cache = Path(tmp) / "cache"
         env = {**os.environ, **PORTABLE, "NUMBA_CACHE_DIR": str(cache), shipped.ENV: "0",
                "PYTHONHASHSEED": "0"}  # numba names some constants by their hash
-        cmd = [sys.executable, "-m", "navreplay.jobs.warmup", "--compile"]
-        setarch = shutil.which("setarch") if sys.platform == "linux" else None
-        if setarch:  # without address randomisation: numba names array expressions by the
-            cmd = [setarch, platform.machine(), "-R", *cmd]  # address of an object
+        # no address randomisation: numba names array expressions by an object's address
+        cmd = [*_no_aslr(), sys.executable, "-m", "navreplay.jobs.warmup", "--compile"]
         subprocess.run(cmd, env=env, cwd=tmp, check=True)
         magic = json.loads((cache / "magic.json").read_text())
         return shipped.write(cache, out, tuple(magic))
+
+
+def _no_aslr() -> list[str]:
+    """``setarch ARCH -R`` (run a command without address randomisation) where it works."""
+    setarch = shutil.which("setarch")
+    if sys.platform != "linux" or setarch is None:
+        return []
+    cmd = [setarch, platform.machine(), "-R"]
+    return cmd if subprocess.run([*cmd, "true"], capture_output=True).returncode == 0 else []
 
 
 def _compile_plan() -> None:
@@ -163,6 +170,9 @@ if __name__ == "__main__":
     if args.compile:
         _compile_plan()
     elif args.ship:
-        print(f"navreplay: {ship(args.ship)} kernels compiled for a portable CPU into {args.ship}")
+        n = ship(args.ship)
+        print(f"navreplay: {n} kernels compiled for a portable CPU into {args.ship}")
+        if n == 0:
+            sys.exit("navreplay: no kernel was compiled")
     else:
         ap.error("--ship DIR is required")
