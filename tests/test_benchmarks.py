@@ -45,8 +45,9 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
          rf"{_N}, peak with / without = {_N}; ", 1),
     ],
     "bench_io": [
-        (rf"^write Imu .*: ratio {_N}x \(target >= 5x\)$", 1),
-        (rf"^read\+decode Imu .*: ratio {_N}x \(target >= 10x\); identical columns: True$", 1),
+        (rf"^write Imu .*: ratio {_N}x \(target >= 5x: (met|NOT met)\)$", 1),
+        (rf"^read\+decode Imu .*: ratio {_N}x \(target >= 10x: (met|NOT met)\); identical "
+         r"columns: True$", 1),
         (r"^file size .*; message payloads identical: True$", 1),
         (rf"^write .* at 200 Hz .*: peak RSS {_N} MiB", 1),
         (rf"^read the same file in {_N} s: peak RSS {_N} MiB", 1),
@@ -63,6 +64,16 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
          4),
         (rf"^(no-viz|export|rrd) peak RSS 100 Hz / 10 Hz: {_N}x \(target <= 1\.2x: "
          r"(met|NOT met)\)$", 3),
+    ],
+    "bench_realdrive": [
+        (rf"^  (numpy|bag default|bag --no-viz) +{_N} +{_N} +{_N} MB +[+-]{_N} MB$", 3),
+        (rf"^bag \(drive_bag\) (default|--no-viz): {_N} s CPU = {_N}x KF-GINS's 1\.1 s "
+         r"\(target <= 1\.65 s: (met|NOT met)\)$", 2),
+        (rf"^bag \(drive_bag\) --no-viz: peak RSS [+-]{_N} MB over bare numpy \(target <= "
+         r"\+150 MB: (met|NOT met)\)$", 1),
+        (rf"^  \+ .+ +[+-]{_N} MB = +{_N} MB$", 9),
+        (rf"^before reading any data: [+-]{_N} MB over numpy, of which LLVM and numba .+ "
+         rf"[+-]{_N} MB$", 1),
     ],
     "bench_replay": [
         (rf"^end to end \(decode \+ gps-ins \+ summary\) +{_N} s +{_N}k IMU samples/s", 1),
@@ -97,7 +108,7 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
         (rf"^projected campaign .*: reference {_N} s, fast path {_N} s \({_N}x\)$", 1),
     ],
     "bench_viz": [
-        (rf"^ratio logging / filter: +{_N} +\(design: <= 1\)$", 1),
+        (rf"^ratio logging / filter: +{_N} +\(target <= 1: (met|NOT met)\)$", 1),
         (rf"^per-sample rr\.log, extrapolated: +{_N} s .*x the columnar sink\)$", 1),
     ],
 }

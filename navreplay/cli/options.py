@@ -63,9 +63,9 @@ def load_config(path: str | None, *tables: str) -> dict[str, Any] | None:
     allowed: dict[str, Any] = {"scenario": None, "topics": None, "frames": None,
                                "initial": None, "sensors": list(SPEC_KINDS), "imu_range": None}
     if "filter" in tables:
-        from navreplay.filters.registry import filters
+        from navreplay.filters.registry import names
 
-        allowed["filter"] = list(filters())
+        allowed["filter"] = names()
     config = load_toml(path, tables={t: allowed[t] for t in tables})
     specs_from_tables(config.get("sensors"), where=path)
     return config
@@ -230,9 +230,11 @@ smooth_option = click.option(
 
 
 def check_executor(ctx: click.Context, param: click.Parameter, value: str) -> str:
+    if value in ("process", "dask"):
+        return value
     from navreplay.campaign.dask_executor import is_address
 
-    if value in ("process", "dask") or is_address(value):
+    if is_address(value):
         return value
     raise click.BadParameter(f"{value!r}: use process, dask or dask://HOST:PORT")
 

@@ -1,7 +1,9 @@
 """Filter registry: built-ins, the ``navreplay.filters`` entry-point group, ``module:Class``.
 
-The entry points of the installed packages are scanned once per process (:func:`refresh`
-scans them again, for a package installed while the process runs).
+A built-in name imports only its own module (:mod:`navreplay.filters.builtins`; a built-in
+wins over a plug-in of the same name). The entry points of the installed packages are scanned
+once per process, when a name is not a built-in or the whole table is asked for
+(:func:`refresh` scans them again, for a package installed while the process runs).
 """
 
 from __future__ import annotations
@@ -62,8 +64,9 @@ def filters() -> dict[str, type[Filter]]:
 
     A plug-in that fails to load is left out with a :class:`FilterPluginWarning`.
     """
-    import navreplay.filters.builtins  # noqa: F401  (registers the built-ins)
+    from navreplay.filters import builtins
 
+    builtins.load_all()
     table = dict(_REGISTRY)
     plugins, broken = _load_entry_points()
     for message in broken.values():
@@ -71,6 +74,15 @@ def filters() -> dict[str, type[Filter]]:
     for name, cls in plugins.items():
         table.setdefault(name, cls)
     return dict(sorted(table.items()))
+
+
+def names() -> list[str]:
+    """The names of the built-in and plug-in filters (and of any other registered one),
+    sorted, without importing their modules (a broken plug-in is named too)."""
+    from navreplay.filters import builtins
+
+    plugins = {ep.name for ep in _md.entry_points(group=ENTRY_POINT_GROUP)}
+    return sorted(set(builtins.MODULES) | set(_REGISTRY) | plugins)
 
 
 def load_filter(ref: str) -> type[Filter]:
@@ -88,6 +100,11 @@ def load_filter(ref: str) -> type[Filter]:
         if not (isinstance(cls, type) and issubclass(cls, Filter)):
             raise FilterLoadError(f"{ref!r} is not a navreplay Filter class")
         return cls
+    from navreplay.filters import builtins
+
+    if ref in builtins.MODULES:  # only its module: a built-in wins over a plug-in's name
+        builtins.load(ref)
+        return _REGISTRY[ref]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FilterPluginWarning)
         table = filters()

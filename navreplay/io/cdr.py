@@ -19,12 +19,11 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from mcap.records import Schema
-from mcap_ros2.decoder import DecoderFactory
 
 from navreplay.io.errors import RecordingError
 from navreplay.io.schemas import MessageType
@@ -252,6 +251,66 @@ def view_records(rows: np.ndarray, lay: Layout) -> np.ndarray:
     return rows.view(lay.dtype).reshape(len(rows))
 
 
+def decode_fixed(
+    rows: np.ndarray, message: MessageType
+) -> tuple[list[tuple[np.ndarray, dict[str, np.ndarray]]], np.ndarray]:
+    """Decode equally long payloads by their fixed layouts, as far as they have one.
+
+    Parameters
+    ----------
+    rows : ndarray, shape (N, L), uint8
+        N message payloads of L bytes each.
+    message : MessageType
+
+    Returns
+    -------
+    groups : list of (ndarray, dict)
+        The rows of each layout met (indices into ``rows``, in order) and their fields
+        (:func:`records_to_fields`).
+    rest : ndarray of int
+        The rows left from the first one whose layout is not a fixed one (for the generic
+        decoder), in order.
+    """
+    groups: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+    remaining = np.arange(len(rows))
+    while remaining.size:
+        lay = peek_layout(rows[remaining[:1]], message)
+        if lay is None:
+            break
+        sub = rows if remaining.size == len(rows) else rows[remaining]
+        ok = matches_layout(sub, lay)  # true for the first row, which defined `lay`
+        take = remaining[ok]
+        records = view_records(rows[take] if take.size != len(rows) else rows, lay)
+        groups.append((take, records_to_fields(records, message)))
+        remaining = remaining[~ok]
+    return groups, remaining
+
+
+def decode_payloads(
+    payloads: Sequence[bytes], message: MessageType,
+    generic: Callable[[np.ndarray], dict[str, np.ndarray]],
+) -> dict[str, np.ndarray]:
+    """The fields (:func:`records_to_fields`) of CDR payloads in their order: those of a fixed
+    layout viewed in bulk (:func:`decode_fixed`, per payload length), the others decoded by
+    ``generic`` (the indices of those payloads, in order -> their fields)."""
+    lengths = np.fromiter((len(p) for p in payloads), dtype=np.int64, count=len(payloads))
+    parts: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+    for width in np.unique(lengths).tolist():
+        index = np.flatnonzero(lengths == width)
+        data = b"".join(payloads[i] for i in index.tolist())
+        rows = np.frombuffer(data, dtype=np.uint8).reshape(len(index), width)
+        groups, rest = decode_fixed(rows, message)
+        parts += [(index[take], fields) for take, fields in groups]
+        if rest.size:
+            parts.append((index[rest], generic(index[rest])))
+    if len(parts) == 1:
+        return parts[0][1]
+    if not parts:
+        return generic(np.zeros(0, dtype=np.int64))
+    order = np.argsort(np.concatenate([i for i, _ in parts]), kind="stable")
+    return {name: np.concatenate([f[name] for _, f in parts])[order] for name in parts[0][1]}
+
+
 # ---------------------------------------------------------------------------------------------
 # Generic path
 
@@ -266,6 +325,8 @@ class GenericDecoder:
     """
 
     def __init__(self, schema: Schema) -> None:
+        from mcap_ros2.decoder import DecoderFactory
+
         decode = DecoderFactory().decoder_for("cdr", schema)
         if decode is None:
             raise RecordingError(f"no ROS 2 decoder for schema {schema.name!r}")

@@ -76,23 +76,12 @@ class ChannelDecoder:
             self._add_equal(block, index[sel], ordinal[sel], int(width))
 
     def _add_equal(self, block: MessageBlock, index: np.ndarray, ordinal: np.ndarray, width: int):
-        rows = block.rows(index, width)
-        remaining = np.arange(len(index))
-        while remaining.size:
-            lay = cdr.peek_layout(rows[remaining[:1]], self.message)
-            if lay is None:
-                payloads = [block.payload(int(i)) for i in index[remaining]]
-                self._keep(
-                    self._decode_generic(payloads), block, index[remaining], ordinal[remaining]
-                )
-                return
-            sub = rows if remaining.size == len(rows) else rows[remaining]
-            ok = cdr.matches_layout(sub, lay)  # true for the first row, which defined `lay`
-            take = remaining[ok]
-            records = cdr.view_records(rows[take] if take.size != len(rows) else rows, lay)
-            fields = cdr.records_to_fields(records, self.message)
+        groups, rest = cdr.decode_fixed(block.rows(index, width), self.message)
+        for take, fields in groups:
             self._keep(fields, block, index[take], ordinal[take])
-            remaining = remaining[~ok]
+        if rest.size:
+            payloads = [block.payload(int(i)) for i in index[rest]]
+            self._keep(self._decode_generic(payloads), block, index[rest], ordinal[rest])
 
     def _decode_generic(self, payloads: list[bytes]) -> dict[str, np.ndarray]:
         try:

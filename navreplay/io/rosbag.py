@@ -1,13 +1,19 @@
-"""rosbag2 folders and sqlite3 (``.db3``) bags, read with ``rosbags`` into the same streams.
+"""rosbag2 folders and sqlite3 (``.db3``) bags, read into the same streams as an MCAP file.
 
 An MCAP file is read in bulk by :mod:`navreplay.io.mcapread`. A rosbag2 folder (``metadata.yaml``
-with MCAP or sqlite3 storage, one or several split files) is read with ``rosbags``' AnyReader,
-which also brings the message definitions stored in the bag; a ``.db3`` file is read from its
-folder when that has a ``metadata.yaml``, else straight from its sqlite tables with rosbags'
-standard type store. Messages are deserialised one by one (rosbags), their fields gathered by the
-same leaf paths as the bulk decoder (:mod:`navreplay.io.schemas`), and then decoded, converted
-and checked exactly like an MCAP topic (:func:`navreplay.io.topics.build_stream`). A bag is
-one window (:class:`BagSource`).
+with MCAP or sqlite3 storage, one or several split files) whose data files agree with its
+``metadata.yaml`` (:func:`check_bag`), are not compressed and hold CDR messages is read from
+its data files directly: MCAP files chunk by chunk through :class:`navreplay.io.decode.ChannelDecoder`
+as an MCAP recording's topics, sqlite3 files from their ``messages`` table, the payloads of a
+fixed layout viewed as numpy records (:func:`navreplay.io.cdr.decode_payloads`). Any other bag
+(compressed, damaged, ROS 1, a lone ``.db3``) goes through ``rosbags``' AnyReader, which also
+brings the message definitions stored in the bag; a ``.db3`` file is read from its folder when
+that has a ``metadata.yaml``, else straight from its sqlite tables with rosbags' standard type
+store. Its CDR messages of a fixed layout are decoded in bulk the same way; the others (and a
+message of no fixed layout in a bag read directly) are deserialised one by one by rosbags and
+gathered by the same leaf paths (:mod:`navreplay.io.schemas`). Either way the fields are
+converted and checked exactly like an MCAP topic (:func:`navreplay.io.topics.build_stream`). A
+bag is one window (:class:`BagSource`).
 
 Times: ``header.stamp`` is the sample time, or the log (receive) time with ``--time log``; a
 topic whose stamps are zero or do not increase takes the log times, with a warning
@@ -16,17 +22,19 @@ topic whose stamps are zero or do not increase takes the log times, with a warni
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import functools
 import sqlite3
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from navreplay.core.streams import Metadata, Stream, StreamKind
-from navreplay.io.cdr import fields_of_messages
+from navreplay.io.cdr import decode_payloads, fields_of_messages
 from navreplay.io.checks import check_frame_ids
 from navreplay.io.convert import REDUCE
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
@@ -126,25 +134,46 @@ class _Bag:
         return [(n, normalize_type_name(t), f, int(c)) for n, t, f, c in rows]
 
     def messages(self, topics: list[str]) -> Iterator[tuple[int, Any]]:
+        """(log time [ns], deserialised message) of ``topics``, in log-time order."""
+        for t, raw, msgtype, fmt in self.raw(topics):
+            yield t, self.deserialize(raw, msgtype, fmt)
+
+    def raw(self, topics: list[str]) -> Iterator[tuple[int, bytes, str, str]]:
+        """(log time [ns], serialised message, type, serialisation format) of ``topics``, in
+        log-time order."""
         try:
             if self._reader is not None:
                 conns = [c for c in self._reader.connections if c.topic in topics]
                 for conn, t, raw in self._reader.messages(connections=conns):
-                    yield int(t), self._reader.deserialize(raw, conn.msgtype)
+                    fmt = getattr(conn.ext, "serialization_format", ROS1_FORMAT)
+                    yield int(t), raw, conn.msgtype, fmt
                 return
             assert self._db is not None
             marks = ",".join("?" * len(topics))
-            query = (f"SELECT m.timestamp, t.type, m.data FROM messages m JOIN topics t "
-                     f"ON m.topic_id = t.id WHERE t.name IN ({marks}) ORDER BY m.timestamp")
-            for t, msgtype, raw in self._db.execute(query, topics):
-                yield int(t), self._store.deserialize_cdr(bytes(raw), msgtype)
+            query = (f"SELECT m.timestamp, t.type, t.serialization_format, m.data FROM "
+                     f"messages m JOIN topics t ON m.topic_id = t.id WHERE t.name IN ({marks}) "
+                     "ORDER BY m.timestamp")
+            for t, msgtype, fmt, raw in self._db.execute(query, topics):
+                yield int(t), bytes(raw), msgtype, fmt
         except RecordingError:
             raise
         except Exception as exc:
-            raise RecordingError(
-                f"{self.where}: messages of {', '.join(topics)} cannot be read "
-                f"({type(exc).__name__}: {' '.join(str(exc).split())})"
-            ) from None
+            raise self._unreadable(topics, exc) from None
+
+    def deserialize(self, raw: bytes, msgtype: str, fmt: str) -> Any:
+        """A message of :meth:`raw` as rosbags' message object (a ROS 1 one in the types of
+        the ROS 2 one)."""
+        try:
+            if self._reader is not None:
+                return self._reader.deserialize(raw, msgtype)
+            return self._store.deserialize_cdr(raw, msgtype)
+        except Exception as exc:
+            raise self._unreadable([msgtype], exc) from None
+
+    def _unreadable(self, topics: list[str], exc: Exception) -> RecordingError:
+        return RecordingError(
+            f"{self.where}: messages of {', '.join(topics)} cannot be read "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())})")
 
 
 def _open(path: Path) -> _Bag:
@@ -166,9 +195,15 @@ class BagSource(FileSource):
     def _windows(self) -> Iterator[Window]:
         where, opts = self.name, self.options
         topic_kinds = topic_map(opts.topics)
-        metadata = self._check()
-        with _open(self.path) as bag:
-            listing = bag.topics()
+        metadata, check = self._check()
+        data = _bulk_data(self.path, check)
+        with contextlib.ExitStack() as stack:
+            bag: _Bag | None = None
+            if data is None:  # through rosbags' reader
+                bag = stack.enter_context(_open(self.path))
+                listing = bag.topics()
+            else:
+                listing = data[2]
             available = ", ".join(f"{t} ({ty})" for t, ty, _, _ in listing) or "no topics"
             # rosbags deserialises ROS 1 messages into the types of the ROS 2 ones
             cands = [c for t, ty, fmt, _ in listing
@@ -180,30 +215,29 @@ class BagSource(FileSource):
                 warnings.simplefilter("ignore", RecordingWarning)
                 present = choose_topics(where, cands, set(SPECS), explicit=False,
                                         named=opts.topics, available=available, what="bag")
-            gathered: dict[StreamKind, tuple[list[Any], list[int]]] = {}
-            for kind, (c, _) in chosen.items():
-                msgs, times = [], []
-                for t, msg in bag.messages([c.topic]):
-                    times.append(t)
-                    msgs.append(msg)
-                gathered[kind] = (msgs, times)
+            topics = {kind: c.topic for kind, (c, _) in chosen.items()}
+            if data is not None and data[0] == "mcap":
+                gathered = _read_mcap_topics(data[1], topics, where)
+            elif data is not None:
+                gathered = _read_sqlite_topics(self.path, data[1], topics, where)
+            else:
+                assert bag is not None
+                gathered = {kind: _read_topic(bag, topic, kind, _label(where, topic, kind))
+                            for kind, topic in topics.items()}
         # t0: first log time over the chosen topics
-        firsts = [min(ts) for _, ts in gathered.values() if ts]
+        firsts = [int(log_ns.min()) for _, log_ns, _ in gathered.values() if log_ns.size]
         t0_ns = min(firsts) if firsts else 0
         streams: dict[StreamKind, Stream] = {}
-        for kind, (msgs, log_t) in gathered.items():
+        for kind, (fields, log_ns, frames) in gathered.items():
             topic, others = chosen[kind][0].topic, chosen[kind][1]
-            label = f"{where}: topic {topic} ({SPECS[kind].message.name})"
-            fields = _fields(msgs, kind, label)
-            log_ns = np.asarray(log_t, dtype=np.int64)
+            label = _label(where, topic, kind)
             order = np.argsort(log_ns, kind="stable")
             if np.any(order != np.arange(order.size)):
                 fields = {k: v[order] for k, v in fields.items()}
                 log_ns = log_ns[order]
             fields["t_ns"] = sample_times(fields["t_ns"], log_ns, opts.time, label)
-            frames = {m.header.frame_id for m in msgs}
-            frame_id = msgs[0].header.frame_id if msgs else SPECS[kind].frame_id
-            note = check_frame_ids(kind, label, frames, opts.frames.get(kind), frame_id)
+            frame_id = frames[0] if frames else SPECS[kind].frame_id
+            note = check_frame_ids(kind, label, set(frames), opts.frames.get(kind), frame_id)
             if note:
                 warnings.warn(RecordingWarning(f"{label}: {note}"), stacklevel=2)
             streams[kind], self.sources[kind] = build_stream(
@@ -212,7 +246,7 @@ class BagSource(FileSource):
         yield Window(streams, dict.fromkeys(streams, COMPLETE), metadata, t0_ns,
                      frozenset(present), final=True)
 
-    def _check(self) -> Metadata:
+    def _check(self) -> tuple[Metadata, BagCheck | None]:
         """The data files against metadata.yaml (:func:`check_bag`): a disagreement is a
         warning, data lost a salvage (the part kept goes into the metadata:
         :attr:`Source.coverage`)."""
@@ -230,21 +264,189 @@ class BagSource(FileSource):
                 metadata.extra["messages_kept"] = check.kept
             else:
                 warnings.warn(RecordingWarning(text), stacklevel=4)
-        return metadata
+        return metadata, check
 
 
-def _fields(msgs: list[Any], kind: StreamKind, label: str) -> dict[str, np.ndarray]:
+def _label(where: str, topic: str, kind: StreamKind) -> str:
+    return f"{where}: topic {topic} ({SPECS[kind].message.name})"
+
+
+Gathered = tuple[dict[str, np.ndarray], np.ndarray, list[str]]
+"""A topic's fields (``t_ns`` and the stream's reduced columns), their log times [ns] and its
+frame ids (the first message's first)."""
+
+
+def _bulk_data(path: Path, check: BagCheck | None
+               ) -> tuple[str, list[Path], list[tuple[str, str, str, int]]] | None:
+    """The storage (``mcap``, ``sqlite3``) and data files of a rosbag2 folder whose messages
+    are read without rosbags' reader, and its topics as :meth:`_Bag.topics` lists them (from
+    metadata.yaml); None unless the files are uncompressed, every topic CDR and the data agree
+    with metadata.yaml."""
+    folder = bag_folder(path)
+    if folder is None or check is None or check.problems or check.found is None:
+        return None
+    info = bag_metadata(folder)
+    storage = info.get("storage_identifier")
+    if storage not in ("mcap", "sqlite3") or info.get("compression_mode"):
+        return None
+    listing = []
+    for item in info.get("topics_with_message_count") or []:
+        topic = item["topic_metadata"]
+        if topic.get("serialization_format") != MESSAGE_ENCODING or "type" not in topic:
+            return None  # rosbags' reader says what it makes of it
+        listing.append((str(topic["name"]), normalize_type_name(str(topic["type"])),
+                        MESSAGE_ENCODING, int(item["message_count"])))
+    files = [folder / str(f) for f in info.get("relative_file_paths") or []]
+    return str(storage), files, sorted(listing)
+
+
+def _read_sqlite_topics(path: Path, files: list[Path], topics: dict[StreamKind, str],
+                        where: str) -> dict[StreamKind, Gathered]:
+    """The chosen topics of a rosbag2 folder's sqlite3 data files, their messages taken from
+    the files' tables (the files one after another) and decoded in bulk
+    (:func:`navreplay.io.cdr.decode_payloads`); a message of no fixed layout is deserialised
+    by rosbags with the bag's own message definitions."""
+    out: dict[StreamKind, Gathered] = {}
+    with contextlib.ExitStack() as stack:
+        dbs = [stack.enter_context(contextlib.closing(
+            sqlite3.connect(f"file:{f}?mode=ro", uri=True))) for f in files]
+        bag: list[_Bag] = []  # opened for the first message that needs rosbags
+
+        def one_by_one(payloads: list[bytes], types: list[str], label: str, message: Any,
+                       index: np.ndarray) -> dict[str, np.ndarray]:
+            if not bag:
+                bag.append(stack.enter_context(_open(path)))
+            msgs = [bag[0].deserialize(payloads[i], types[i], MESSAGE_ENCODING)
+                    for i in index.tolist()]
+            return _fields_of(msgs, label, message)
+
+        for kind, topic in topics.items():
+            label = _label(where, topic, kind)
+            rows: list[tuple[int, str, bytes]] = []
+            try:
+                for db in dbs:
+                    rows += db.execute(
+                        "SELECT m.timestamp, t.type, m.data FROM messages m JOIN topics t ON "
+                        "m.topic_id = t.id WHERE t.name = ? ORDER BY m.timestamp", (topic,))
+            except sqlite3.Error as exc:
+                raise RecordingError(f"{label}: messages cannot be read ({exc})") from None
+            times = np.fromiter((r[0] for r in rows), dtype=np.int64, count=len(rows))
+            types = [r[1] for r in rows]
+            payloads = [bytes(r[2]) for r in rows]
+            del rows
+            message = SPECS[kind].message
+            fields = decode_payloads(payloads, message, functools.partial(
+                one_by_one, payloads, types, label, message))
+            out[kind] = _gathered(fields, times, kind)
+    return out
+
+
+def _fields_of(msgs: list[Any], label: str, message: Any) -> dict[str, np.ndarray]:
+    """:func:`navreplay.io.cdr.fields_of_messages`, a message lacking a field one line."""
     try:
-        fields = fields_of_messages(msgs, SPECS[kind].message)
+        return fields_of_messages(msgs, message)
     except (AttributeError, TypeError, ValueError) as exc:
-        raise RecordingError(f"{label}: messages lack a field of "
-                             f"{SPECS[kind].message.name} ({exc})") from None
-    out: dict[str, np.ndarray] = {"frame_id": fields["frame_id"], "t_ns": fields["t_ns"]}
+        raise RecordingError(f"{label}: messages lack a field of {message.name} ({exc})"
+                             ) from None
+
+
+def _gathered(fields: dict[str, np.ndarray], times: np.ndarray, kind: StreamKind) -> Gathered:
+    """Decoded fields reduced to the stream's columns, with their log times and frame ids."""
+    out: dict[str, np.ndarray] = {"t_ns": fields["t_ns"]}
     for name, columns in REDUCE[kind].items():
         value = np.asarray(fields[name])
         out[name] = np.array(value if columns is None else value[:, columns])
+    return out, times, list(dict.fromkeys(fields["frame_id"].tolist()))
+
+
+def _read_mcap_topics(files: list[Path], topics: dict[StreamKind, str], where: str
+                      ) -> dict[StreamKind, Gathered]:
+    """The chosen topics of a rosbag2 folder's MCAP data files, decoded in bulk chunk by
+    chunk as an MCAP recording's (:class:`navreplay.io.decode.ChannelDecoder`: fixed layouts
+    viewed as records, others through the file's own schema), the files one after another."""
+    from navreplay.io.decode import empty_leaf
+
+    kinds = {topic: kind for kind, topic in topics.items()}
+    parts: dict[StreamKind, list[Gathered]] = {kind: [] for kind in topics}
+    for path in files:
+        for kind, topic_part in _read_mcap_file(path, kinds, where):
+            parts[kind].append(topic_part)
+    out: dict[StreamKind, Gathered] = {}
+    for kind, got in parts.items():
+        if not got:  # a topic without messages
+            message = SPECS[kind].message
+            empty = {"t_ns": np.zeros(0, np.int64), **{
+                name: empty_leaf(message, name, columns) for name, columns in REDUCE[kind].items()}}
+            out[kind] = (empty, np.zeros(0, np.int64), [])
+        elif len(got) == 1:
+            out[kind] = got[0]
+        else:
+            out[kind] = ({k: np.concatenate([g[0][k] for g in got]) for k in got[0][0]},
+                         np.concatenate([g[1] for g in got]),
+                         list(dict.fromkeys(f for g in got for f in g[2])))
     return out
 
+
+def _read_mcap_file(path: Path, kinds: dict[str, StreamKind], where: str
+                    ) -> list[tuple[StreamKind, Gathered]]:
+    """The topics ``kinds`` (topic -> stream) of one MCAP data file (see
+    :func:`_read_mcap_topics`)."""
+    from navreplay.io.decode import ChannelDecoder
+    from navreplay.io.mcapfile import FileContents, walk
+
+    contents = FileContents(size=path.stat().st_size)
+    decoders: dict[int, tuple[StreamKind, ChannelDecoder] | None] = {}
+
+    def decoder(cid: int) -> tuple[StreamKind, ChannelDecoder] | None:
+        if cid not in decoders:
+            ch = contents.channels.get(cid)
+            kind = kinds.get(ch.topic) if ch is not None else None
+            decoders[cid] = None if ch is None or kind is None else (kind, ChannelDecoder(
+                ch, contents.schemas.get(ch.schema_id), SPECS[kind].message, where))
+        return decoders[cid]
+
+    with open(path, "rb") as f:
+        for block in walk(f, str(path), contents,
+                          lambda _, ids: any(decoder(c) is not None for c in ids)):
+            for cid in set(block.channel.tolist()):
+                if (found := decoder(cid)) is not None:
+                    found[1].add(block, np.flatnonzero(block.channel == cid))
+    out = []
+    for found in decoders.values():
+        if found is not None:
+            kind, dec = found
+            fields = dec.finish()
+            assert dec.log_ns is not None
+            first = [] if dec.first_frame_id is None else [dec.first_frame_id]
+            out.append((kind, (fields, dec.log_ns, [*first, *sorted(dec.frame_ids - set(first))])))
+    return out
+
+
+def _read_topic(bag: _Bag, topic: str, kind: StreamKind, label: str) -> Gathered:
+    """One topic's messages read with rosbags' reader: CDR messages of a fixed layout decoded
+    in bulk (:func:`navreplay.io.cdr.decode_payloads`, as an MCAP file's); the others, and ROS 1
+    messages, deserialised one by one by rosbags."""
+    message = SPECS[kind].message
+    times: list[int] = []
+    payloads: list[bytes] = []
+    types: list[str] = []
+    formats: set[str] = set()
+    for t, raw, msgtype, fmt in bag.raw([topic]):
+        times.append(t)
+        payloads.append(raw)
+        types.append(msgtype)
+        formats.add(fmt)
+
+    def one_by_one(index: Sequence[int]) -> dict[str, np.ndarray]:
+        fmt = next(iter(formats), MESSAGE_ENCODING)
+        return _fields_of([bag.deserialize(payloads[i], types[i], fmt) for i in index], label,
+                          message)
+
+    if formats == {MESSAGE_ENCODING}:
+        fields = decode_payloads(payloads, message, lambda index: one_by_one(index.tolist()))
+    else:
+        fields = one_by_one(range(len(payloads)))
+    return _gathered(fields, np.asarray(times, dtype=np.int64), kind)
 
 
 # --------------------------------------------------------------------------------------------

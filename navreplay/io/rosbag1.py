@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from navreplay.core.streams import Metadata
-from navreplay.io.rosbag import BagSource
+from navreplay.io.rosbag import BagCheck, BagSource
 
 MAGIC = b"#ROSBAG V2.0"
 """The first bytes of a ROS 1 bag (format 2.0, every ROS 1 release since 2010)."""
@@ -41,5 +41,5 @@ class Bag1Source(BagSource):
 
     kind = "rosbag1"
 
-    def _check(self) -> Metadata:
-        return Metadata()  # nothing declares what the file should hold
+    def _check(self) -> tuple[Metadata, BagCheck | None]:
+        return Metadata(), None  # nothing declares what the file should hold

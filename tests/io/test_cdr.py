@@ -14,7 +14,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from navreplay.core.streams import Recording, StreamKind
 from navreplay.io import TOPICS, read_recording, write_recording
-from navreplay.io.cdr import encode, layout, records_to_fields, view_records
+from navreplay.io.cdr import decode_payloads, encode, layout, records_to_fields, view_records
 from navreplay.io.convert import ENCODERS, aux_columns
 from navreplay.io.schemas import (
     DEPTH_MSG,
@@ -201,3 +201,43 @@ def test_rosbags_typesys_from_msg_text(recorded: tuple[Recording, Path]) -> None
     }
     back = read_recording(path)
     np.testing.assert_array_equal(back["truth"]["misalignment"], rec["truth"]["misalignment"])
+
+
+def test_payloads_of_several_layouts_decode_in_their_order() -> None:
+    """decode_payloads: two frame-id lengths (two fixed layouts) interleaved, and payloads of
+    no fixed layout (big-endian) handed to the generic decoder by index; the fields come back
+    in the payloads' order, equal to those of each payload decoded alone."""
+    rng = np.random.default_rng(7)
+    stream = random_stream(StreamKind.IMU, rng, duration_s=2.0)
+    message = SPECS[StreamKind.IMU].message
+    payloads: list[bytes] = []
+    for frame in ("imu_frd", "a_rather_long_frame_name"):
+        lay = layout(message, len(frame) + 1)
+        data = encode(lay, stream.t_ns, frame.encode(), ENCODERS[StreamKind.IMU](stream, [])
+                      ).tobytes()
+        payloads.append(data)
+    size = [len(p) // len(stream) for p in payloads]
+    order = rng.permutation(2 * len(stream))  # message k of frame k // n, interleaved
+    n = len(stream)
+    chosen = [payloads[k // n][(k % n) * size[k // n]:(k % n + 1) * size[k // n]] for k in order]
+    foreign = {3, 4, len(chosen) - 1}
+    for k in foreign:  # big-endian encapsulation: no fixed layout, the generic decoder's
+        chosen[k] = bytes((0, 0)) + chosen[k][2:]
+    asked: list[list[int]] = []
+
+    def generic(index: np.ndarray) -> dict[str, np.ndarray]:
+        asked.append(index.tolist())
+        fixed = [bytes((0, 1)) + chosen[i][2:] for i in index.tolist()]
+        return decode_payloads(fixed, message, generic)
+
+    fields = decode_payloads(chosen, message, generic)
+    assert sorted(i for a in asked for i in a) == sorted(foreign)
+    assert all(a == sorted(a) for a in asked)
+    expected_t = stream.t_ns[order % n]
+    np.testing.assert_array_equal(fields["t_ns"], expected_t)
+    frames = np.where(order < n, "imu_frd", "a_rather_long_frame_name")
+    assert fields["frame_id"].tolist() == frames.tolist()
+    for k in (0, 1, 3, len(chosen) - 1):  # each alone (a foreign one as its little-endian twin)
+        alone = decode_payloads([bytes((0, 1)) + chosen[k][2:]], message, generic)
+        for name in fields:
+            np.testing.assert_array_equal(fields[name][k], alone[name][0])

@@ -399,3 +399,64 @@ def test_levelling_sigma_follows_the_grade_the_gyro_shows(short_bags: dict[str, 
         claimed[name] = math.degrees(s_level)
         assert ("navigation grade" if name == "nav" else "MEMS grade") in " ".join(notes)
     assert claimed["nav"] < 0.01 and 0.3 < claimed["mems"] < 3.0
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_bag_decoded_in_bulk_equals_rosbags_message_by_message(tmp_path, storage):
+    """A rosbag2 bag's CDR messages are viewed in bulk by their fixed layouts: the same fields
+    as rosbags' deserialiser gives message by message, in the bag's order, across a frame id
+    that changes length halfway (two layouts) and in both storages."""
+    from navreplay.io.cdr import fields_of_messages
+    from navreplay.io.convert import REDUCE
+    from navreplay.io.rosbag import _open, _read_topic, iter_messages
+    from navreplay.io.schemas import SPECS
+
+    bag = write_bag(tmp_path / "bag", ned=True, noisy=True, duration=20.0, storage=storage,
+                    imu_frame_after=(10.0, "imu_link_frd_after_the_change"))
+    for topic, kind in (("/imu/data", StreamKind.IMU), ("/gnss/fix", StreamKind.GPS)):
+        with _open(bag) as b:
+            bulk, times, frames = _read_topic(b, topic, kind, topic)
+        pairs = list(iter_messages(bag, topic))
+        assert times.tolist() == [t for t, _ in pairs]
+        ref = fields_of_messages([m for _, m in pairs], SPECS[kind].message)
+        assert frames == list(dict.fromkeys(ref["frame_id"].tolist()))
+        np.testing.assert_array_equal(bulk["t_ns"], ref["t_ns"])
+        assert set(bulk) == {"t_ns", *REDUCE[kind]}
+        for name, columns in REDUCE[kind].items():
+            want = ref[name] if columns is None else ref[name][:, columns]
+            np.testing.assert_array_equal(bulk[name], want)
+        assert len(frames) == (2 if kind is StreamKind.IMU else 1)
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_an_intact_bag_read_without_rosbags_reader_gives_the_same_streams(tmp_path, storage,
+                                                                           monkeypatch):
+    """An intact rosbag2 folder is read from its data files directly (MCAP chunks, sqlite
+    tables); the streams equal those read through rosbags' reader, across a frame id that
+    changes length (declared, so the read goes on), and rosbags' reader is not opened."""
+    from navreplay.io import ReadOptions, read_recording, rosbag
+    from navreplay.io.errors import RecordingWarning
+
+    bag = write_bag(tmp_path / "bag", ned=True, noisy=True, duration=20.0, storage=storage,
+                    imu_frame_after=(10.0, "imu_link_frd_after_the_change"))
+    opts = ReadOptions(frames={StreamKind.IMU: "frd"})
+    opened: list[Path] = []
+    real_open = rosbag._open
+    monkeypatch.setattr(rosbag, "_open", lambda p: opened.append(p) or real_open(p))
+    with pytest.warns(RecordingWarning, match="frame_id changes between messages"):
+        direct = read_recording(bag, opts)
+    assert opened == []
+    monkeypatch.setattr(rosbag, "_bulk_data", lambda *_: None)
+    with pytest.warns(RecordingWarning, match="frame_id changes between messages"):
+        through_rosbags = read_recording(bag, opts)
+    assert opened == [bag]
+    assert set(direct.streams) == set(through_rosbags.streams) == {StreamKind.IMU,
+                                                                    StreamKind.GPS}
+    assert direct.t0_ns == through_rosbags.t0_ns
+    for kind, s in direct.streams.items():
+        r = through_rosbags.streams[kind]
+        assert s.frame_id == r.frame_id
+        np.testing.assert_array_equal(s.t_ns, r.t_ns)
+        assert set(s.columns) == set(r.columns)
+        for name in s.columns:
+            np.testing.assert_array_equal(s.columns[name], r.columns[name])

@@ -70,10 +70,13 @@ def test_the_registry_scans_the_plug_ins_once(monkeypatch) -> None:
     try:
         for name in ("ins", "gps-ins", "ins"):
             registry.load_filter(name)
+        assert scans == []  # a built-in name needs no scan (a built-in wins over a plug-in)
         registry.filters()
+        with pytest.raises(registry.FilterLoadError, match="unknown filter 'no-such'"):
+            registry.load_filter("no-such")
         assert len(scans) == 1
         registry.refresh()
-        registry.load_filter("ins")
+        registry.filters()
         assert len(scans) == 2
     finally:
         registry.refresh()
