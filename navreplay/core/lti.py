@@ -11,13 +11,12 @@ block of :mod:`navreplay.filters.kalman`::
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
-from navreplay.core import jit  # noqa: F401  (the collector rests while numba compiles)
+from navreplay.core.jit import kernel
 
 
-@numba.njit(cache=True)
+@kernel
 def discretize(F: np.ndarray, dt: float) -> np.ndarray:
     """Transition matrix by the second-order series, eq. (3) (compiled: callable from Python
     and from the filters' numba kernels).

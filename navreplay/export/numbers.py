@@ -22,10 +22,9 @@ import math
 import re
 from collections.abc import Iterator, Sequence
 
-import numba
 import numpy as np
 
-from navreplay.core import jit  # noqa: F401  (the collector rests while numba compiles)
+from navreplay.core.jit import kernel
 
 SECONDS_NS = "seconds.nanoseconds"
 """Format of an int64 column of nanoseconds printed as ``f"{s}.{ns:09d}"`` (``divmod`` by 1e9)."""
@@ -38,7 +37,7 @@ _FIXED_RE = re.compile(r"%\.(\d+)f")
 _GENERAL_RE = re.compile(r"%\.(\d+)g")
 _CELL = 34  # the longest cell the kernel writes: "-" + 15 + "." + 15 digits, and a separator
 
-_kernel = numba.njit(cache=True, error_model="numpy", _nrt=False)  # type: ignore[call-overload]
+_kernel = kernel(error_model="numpy", _nrt=False)
 """The kernels allocate nothing, so they run without numba's reference counting of arrays: its
 atomic counts on every call between them cost about as much as formatting a value."""
 

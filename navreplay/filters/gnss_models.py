@@ -20,9 +20,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from navreplay.core.jit import kernel
 from navreplay.filters.ins_error import GYRO_COLUMNS
 from navreplay.filters.kalman import _correct_kernel, _covariance_ok
 from navreplay.geo import kernels
@@ -75,7 +75,7 @@ class GaussMarkov(NamedTuple):
     var: np.ndarray
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def gm_at(gm: np.ndarray, gm_t: float, t: float, tau: float, out: np.ndarray) -> None:
     """The Gauss-Markov estimate ``gm`` of time ``gm_t`` carried to time t: ``gm exp(-(t -
     gm_t) / tau)`` (the mean of a first-order Markov process decays), into ``out`` (3,)."""
@@ -84,7 +84,7 @@ def gm_at(gm: np.ndarray, gm_t: float, t: float, tau: float, out: np.ndarray) ->
         out[i] = gm[i] * a
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _all_finite(a: np.ndarray) -> bool:
     for v in a.flat:
         if not math.isfinite(v):
@@ -92,7 +92,7 @@ def _all_finite(a: np.ndarray) -> bool:
     return True
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _skew_into(M: np.ndarray, r: int, c: int, x: float, y: float, z: float) -> None:
     """M[r:r+3, c:c+3] = [v x], v = (x, y, z)."""
     M[r, c] = 0.0
@@ -106,7 +106,7 @@ def _skew_into(M: np.ndarray, r: int, c: int, x: float, y: float, z: float) -> N
     M[r + 2, c + 2] = 0.0
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _matmul3(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
     for i in range(3):
         for j in range(3):
@@ -116,7 +116,7 @@ def _matmul3(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
             out[i, j] = s
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _matvec3(A: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
     for i in range(3):
         s = 0.0
@@ -125,7 +125,7 @@ def _matvec3(A: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
         out[i] = s
 
 
-@numba.njit(cache=True)
+@kernel
 def position_model(nav: np.ndarray, lever: np.ndarray, pos_gps: np.ndarray,
                    pos_sigma: np.ndarray, scale: float, lag: float, lever_states: bool,
                    gp: int, gm: np.ndarray, gm_var: np.ndarray,
@@ -169,7 +169,7 @@ def position_model(nav: np.ndarray, lever: np.ndarray, pos_gps: np.ndarray,
             R[i, i] = max(R[i, i] - gm_var[i], WHITE_FLOOR * R[i, i])
 
 
-@numba.njit(cache=True)
+@kernel
 def velocity_model(nav: np.ndarray, lever: np.ndarray, omega: np.ndarray, v_gps: np.ndarray,
                    vel_sigma: np.ndarray, scale: float, lever_states: bool, gz: int, ng: int,
                    z: np.ndarray, H: np.ndarray, R: np.ndarray) -> None:
@@ -231,7 +231,7 @@ def velocity_model(nav: np.ndarray, lever: np.ndarray, omega: np.ndarray, v_gps:
         R[i, i] = sig * sig
 
 
-@numba.njit(cache=True)
+@kernel
 def feedback(nav: np.ndarray, dx: np.ndarray, est: Estimates, layout: Layout) -> np.ndarray:
     """Eq. (12): subtract the estimated errors dx from a new copy of the navigation vector
     (returned; :func:`navreplay.filters.ins_error.apply_correction`, height form) and, in
@@ -260,7 +260,7 @@ def feedback(nav: np.ndarray, dx: np.ndarray, est: Estimates, layout: Layout) ->
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def gps_update(kind: int, nav: np.ndarray, P: np.ndarray, t: float, sample: np.ndarray,
                sigma: np.ndarray, scale: float, lag: float, omega: np.ndarray,
                est: Estimates, layout: Layout, gauss_markov: GaussMarkov, rtol: float,

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from navreplay.core.jit import kernel
 from navreplay.filters import gnss_models as gnss
 from navreplay.filters.ins_time_update import (
     _TIME_TOL,
@@ -125,7 +125,7 @@ class Updates(NamedTuple):
     S: np.ndarray
 
 
-@numba.njit(cache=True)
+@kernel
 def _any(a: np.ndarray) -> bool:
     for v in a:
         if v != 0.0:
@@ -133,7 +133,15 @@ def _any(a: np.ndarray) -> bool:
     return False
 
 
-@numba.njit(cache=True)
+@kernel(inline="always")
+def _copy(dst: np.ndarray, src: np.ndarray) -> None:
+    """``dst[...] = src`` (same shape, 1 or 2 dimensions) by loops: an array assignment
+    compiles numba's formatted shape error, a few seconds of a first compilation."""
+    for i in range(src.size):
+        dst.flat[i] = src.flat[i]
+
+
+@kernel
 def _smoothing_row(sm: Smoothing, m: int, Phi: np.ndarray, P: np.ndarray) -> None:
     """Row m of the smoother's rows at an estimate with covariance P: the transition since
     the previous one, the covariance before the updates (P without update), the corrections;
@@ -150,7 +158,7 @@ def _smoothing_row(sm: Smoothing, m: int, Phi: np.ndarray, P: np.ndarray) -> Non
     sm.has_prior[0] = 0.0
 
 
-@numba.njit(cache=True)
+@kernel
 def run_events(
     nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray, imu: Imu, events: Events,
     gnss_samples: Gnss, options: Options, step: float, model: Model, work: Work, out: Rows,
@@ -207,8 +215,8 @@ def run_events(
         nav0, P0, t0, k0 = nav, P, t_nav, k
         prior0 = has_prior[0]
         if smooth:
-            phi_snap[:, :] = Phi
-            acc_snap[:] = acc
+            _copy(phi_snap, Phi)
+            _copy(acc_snap, acc)
         ok = True
         b = ends[e]
         if b > a:
@@ -240,7 +248,7 @@ def run_events(
                 ok = _covariance_ok(P, rtol)
             if ok:
                 if smooth and not has_prior[0]:
-                    prior[:, :] = P
+                    _copy(prior, P)
                     has_prior[0] = 1.0
                 r = rows[e]
                 if kind == gnss.POSITION:
@@ -293,8 +301,8 @@ def run_events(
             for c in range(s.shape[0]):
                 s[c] = snap[c]
             if smooth:
-                Phi[:, :] = phi_snap
-                acc[:] = acc_snap
+                _copy(Phi, phi_snap)
+                _copy(acc, acc_snap)
                 has_prior[0] = prior0
             return e, m, k0, nav0, P0, t0
         a = b

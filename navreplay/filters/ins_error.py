@@ -138,9 +138,9 @@ from __future__ import annotations
 import enum
 import math
 
-import numba
 import numpy as np
 
+from navreplay.core.jit import kernel
 from navreplay.core.units import G0
 from navreplay.filters.base import Nav, NavError, Quantity, State, TruthColumn
 from navreplay.geo import earth, kernels, strapdown
@@ -228,7 +228,7 @@ def nav_states(vertical: Vertical = Vertical.HEIGHT) -> tuple[State, ...]:
     )
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _set_skew(M: np.ndarray, r: int, c: int, x: float, y: float, z: float, k: float) -> None:
     """M[r:r+3, c:c+3] += k [v x] with v = (x, y, z)."""
     M[r, c + 1] -= k * z
@@ -239,7 +239,7 @@ def _set_skew(M: np.ndarray, r: int, c: int, x: float, y: float, z: float, k: fl
     M[r + 2, c + 1] += k * x
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def fill_system_matrix(
     lat: float, h: float, vN: float, vE: float, vD: float,
     C: np.ndarray, f_b: np.ndarray, depth: bool, curvature: bool, F: np.ndarray,

@@ -19,9 +19,9 @@ import dataclasses
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from navreplay.core.jit import kernel
 from navreplay.core.units import G0
 from navreplay.filters import kalman
 from navreplay.filters.ins_error import (
@@ -118,7 +118,7 @@ class Outputs(NamedTuple):
     w_last: np.ndarray
 
 
-@numba.njit(cache=True)
+@kernel
 def _covariance_step(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: float,
     model: Model, work: Work,
@@ -183,7 +183,7 @@ def _covariance_step(
     return P
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _chain_transition(Phi: np.ndarray, M: np.ndarray, cols: np.ndarray, T: np.ndarray) -> None:
     """``Phi <- Phi_step Phi`` for a step transition that is the identity but for its first r
     rows, ``Phi_step[0:r, cols] = M`` (as :func:`navreplay.filters.kalman.predict_rows_kernel`
@@ -216,7 +216,7 @@ def _scratch(n: int, gz: int, ga: int, ng: int, na: int) -> Work:
                 np.zeros((n, n)), cols, np.zeros((2, 3)), np.zeros((0, 0)))
 
 
-@numba.njit(cache=True)
+@kernel
 def _propagate_covariance(
     P: np.ndarray, nav: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     model: Model, work: Work,
@@ -226,7 +226,7 @@ def _propagate_covariance(
     return P
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _close_step(P: np.ndarray, model: Model, open_step: Open, work: Work) -> np.ndarray:
     """P propagated over the open step, with F at its start and the mean specific force and
     body rate over it; the step is then cleared (P itself when none is open)."""
@@ -244,7 +244,7 @@ def _close_step(P: np.ndarray, model: Model, open_step: Open, work: Work) -> np.
     return P
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _accumulate_covariance(
     P: np.ndarray, hist: np.ndarray, f_b: np.ndarray, omega_b: np.ndarray, dt: np.ndarray,
     step: float, model: Model, open_step: Open, work: Work,
@@ -263,7 +263,7 @@ def _accumulate_covariance(
     return P
 
 
-@numba.njit(cache=True)
+@kernel
 def compensate_gyro(omega: np.ndarray, b_g: np.ndarray, k_g: np.ndarray) -> np.ndarray:
     """Gyro samples (k, 3) compensated for the scale-factor and misalignment errors of
     ins_error eq. (22), ``k_g`` the estimates of the first ``len(k_g) / 3`` columns of
@@ -286,7 +286,7 @@ compensate_gyro_z = compensate_gyro
 """The gyro compensation of the column z alone (``k_g`` of three: m_xz, m_yz, s_z)."""
 
 
-@numba.njit(cache=True)
+@kernel
 def compensate_accel(f: np.ndarray, b_a: np.ndarray, k_a: np.ndarray) -> np.ndarray:
     """Accelerometer samples (k, 3) compensated for the errors of ins_error eq. (23), ``k_a``
     the estimates of the first ``len(k_a) / 3`` columns of
@@ -754,7 +754,7 @@ _ZERO3 = _NO_GYRO_Z
 _NO_ACCEL = np.zeros(N_ACCEL_HF)
 
 
-@numba.njit(cache=True)
+@kernel
 def _propagate_segment(
     nav: np.ndarray, P: np.ndarray, t: np.ndarray, t_nav: float, w: np.ndarray, f: np.ndarray,
     b_a: np.ndarray, b_g: np.ndarray, first: int, b: int, prev: np.ndarray, step: float,
@@ -797,7 +797,7 @@ def _propagate_segment(
     return -1, hist[k], P
 
 
-@numba.njit(cache=True)
+@kernel
 def _propagate_outputs(
     nav: np.ndarray, P: np.ndarray, t_nav: float, imu: Imu, comp: Compensation,
     prev: np.ndarray, step: float, model: Model, open_step: Open, work: Work, ends: np.ndarray,

@@ -64,9 +64,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from navreplay.core.jit import kernel
 from navreplay.core.lti import discrete_noise, discretize, van_loan  # noqa: F401  (part of this API)
 from navreplay.filters.base import Innovation
 
@@ -145,7 +145,7 @@ class Correction(NamedTuple):
 # checks
 
 
-@numba.njit(cache=True)
+@kernel
 def _covariance_ok(P: np.ndarray, rtol: float) -> bool:
     """Fast path of :func:`check_covariance`: True when all its checks pass."""
     n = P.shape[0]
@@ -261,7 +261,7 @@ def _finite(a: np.ndarray, name: str, t: float | None) -> None:
 # predict / correct
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def transition_rows_kernel(F: np.ndarray, r: int, dt: float, M: np.ndarray) -> None:
     """Eq. (3) compiled for an F that is zero outside its first r rows: those rows of Phi.
 
@@ -284,7 +284,7 @@ def transition_rows_kernel(F: np.ndarray, r: int, dt: float, M: np.ndarray) -> N
         M[i, i] += 1.0
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def markov_rows_kernel(P: np.ndarray, rate: np.ndarray, q: np.ndarray, dt: float) -> None:
     """Eqs. (5a), (6) in place for the first-order Markov states of ``P``: those with
     ``rate[i] = 1 / tau_i > 0`` (the others are left as they are), whose rows and columns of
@@ -325,7 +325,7 @@ def markov_transition(rate: np.ndarray, q: np.ndarray, dt: float
     return a, qd
 
 
-@numba.njit(cache=True)
+@kernel
 def predict_kernel(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> np.ndarray:
     """Eq. (6) compiled, dense: a new ``P = Phi P Phi^T + Qd``, symmetrised; no checks."""
     n = P.shape[0]
@@ -348,7 +348,7 @@ def predict_kernel(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> np.ndarray
     return out
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def predict_rows_kernel(
     P: np.ndarray, M: np.ndarray, cols: np.ndarray, Qd: np.ndarray, T: np.ndarray
 ) -> np.ndarray:
@@ -437,7 +437,7 @@ def predict(
 _NO_FROZEN = np.zeros(0, dtype=np.bool_)
 
 
-@numba.njit(cache=True)
+@kernel
 def _correct_kernel(
     x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray,
     frozen: np.ndarray,

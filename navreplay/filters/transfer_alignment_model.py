@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from navreplay.core.jit import kernel
 from navreplay.filters import kalman
 from navreplay.geo import earth, kernels
 
@@ -39,7 +39,7 @@ ZQ = slice(2, None)
 """Quaternion rows s."""
 
 
-@numba.njit(cache=True)
+@kernel
 def _mm(A, B):
     """A @ B for small matrices (loops: no BLAS call, quick to compile)."""
     n, k = A.shape
@@ -54,7 +54,7 @@ def _mm(A, B):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def _mmt(A, B):
     """A @ B.T for small matrices."""
     n, k = A.shape
@@ -69,7 +69,7 @@ def _mmt(A, B):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def _mv(A, x):
     """A @ x."""
     n, k = A.shape
@@ -80,7 +80,7 @@ def _mv(A, x):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def _put(A, i0, j0, B, scale):
     """A[i0:i0+k, j0:j0+m] = scale B (loops: 2-D slice expressions compile slowly in numba)."""
     for i in range(B.shape[0]):
@@ -88,7 +88,7 @@ def _put(A, i0, j0, B, scale):
             A[i0 + i, j0 + j] = scale * B[i, j]
 
 
-@numba.njit(cache=True)
+@kernel
 def _normalise(q):
     """q / |q| in place."""
     k = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -96,21 +96,21 @@ def _normalise(q):
         q[i] *= k
 
 
-@numba.njit(cache=True)
+@kernel
 def rmat(q):
     """The paper's R(q), (4, 3): ``[0, w] (x) q = R(q) w``, columns 1-3 of the right-product
     matrix M(q) (:func:`navreplay.geo.kernels.quat_right_matrix`)."""
     return kernels.quat_right_matrix(q)[:, 1:]
 
 
-@numba.njit(cache=True)
+@kernel
 def tmat(q):
     """The paper's T(q), (4, 3): ``q (x) [0, w] = T(q) w``, columns 1-3 of the left-product
     matrix L(q) (:func:`navreplay.geo.kernels.quat_left_matrix`)."""
     return kernels.quat_left_matrix(q)[:, 1:]
 
 
-@numba.njit(cache=True)
+@kernel
 def rate_matrix(w_ib, w_in):
     """The 4x4 ``[w_ib^b - w_in^n]`` of eq. (2): ``M([0, w_ib]) - L([0, w_in])``, (4, 4)."""
     W = kernels.quat_right_matrix(np.array([0.0, w_ib[0], w_ib[1], w_ib[2]]))
@@ -118,7 +118,7 @@ def rate_matrix(w_ib, w_in):
     return W
 
 
-@numba.njit(cache=True)
+@kernel
 def earth_terms(lat, h, v_n):
     """Earth radius of eq. (14) and w_in^n at a position and velocity.
 
@@ -139,7 +139,7 @@ def earth_terms(lat, h, v_n):
     return math.sqrt(R_M * R_N) + h, w_in
 
 
-@numba.njit(cache=True)
+@kernel
 def system_matrix(q_bn, v_n, lat, R, w_ib_b, w_in_n, f_b, n):
     """A of eq. (14) (errata E1-E5 applied) and G of the process noise, at the estimate.
 
@@ -205,7 +205,7 @@ _BENT_BY = np.array([2, 3, 0, 1])
 _BENT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0])
 
 
-@numba.njit(cache=True)
+@kernel
 def flexed(q_rb, theta, recovered):
     """Q_br as the GINS and SDINS attitudes show it when the hull is bent by theta [rad] about
     the ship's Y axis: ``Ry(theta) (x) Q_br``, its matrix in the estimated components and its
@@ -238,7 +238,7 @@ def flexed(q_rb, theta, recovered):
     return Lf, q_pred, dq_theta
 
 
-@numba.njit(cache=True)
+@kernel
 def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
     """(6): ``C_nb (w_nb^b x L^b)`` with ``L^b = C_nb^T C(Q_m) L^r``, NED [m/s], (3,).
 
@@ -255,7 +255,7 @@ def lever_velocity(q_bn, q_m, w_ib_b, w_in_n, lever_arm_r):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def lever_attitude_jacobian(q_bn, q_m, w_ib_b, lever_arm_r):
     """d z_V / d dQ_bn of the lever-arm velocity term, (3, 4).
 
@@ -302,7 +302,7 @@ def velocity_noise(q_m: np.ndarray, lever_arm_r: np.ndarray, vel_sigma: float,
     return vel_sigma**2 * np.eye(2) + rate_sigma**2 * np.outer(d[:2], d[:2])
 
 
-@numba.njit(cache=True)
+@kernel
 def euler_rate_matrix(euler):
     """E of ``w = E d(euler)/dt``: the body rate of the ZYX Euler angle rates, (3, 3).
 
@@ -321,7 +321,7 @@ def euler_rate_matrix(euler):
     return E
 
 
-@numba.njit(cache=True)
+@kernel
 def quaternion_noise(z, euler, sigma):
     """Covariance of the measured Q_br ``z = Q_m* (x) Q_bn_hat`` under white GINS Euler-angle
     noise of 1 sigma ``sigma`` [rad] per angle, (4, 4).
@@ -337,7 +337,7 @@ def quaternion_noise(z, euler, sigma):
     return _mmt(J, J) * (0.25 * sigma * sigma)
 
 
-@numba.njit(cache=True)
+@kernel
 def lever_position(pos, q_m, lever_arm_r):
     """The GINS position displaced by the lever arm ``C(Q_m) L^r`` (NED, first order), (3,).
 
@@ -359,7 +359,7 @@ def lever_position(pos, q_m, lever_arm_r):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, lever_arm_r,
                         dt, qc, q_br, nf, theta, phi_f, qd_f, euler, euler_sigma):
     """Steps 2-3 of a cycle up to the correction: the predicted P, z and H.
@@ -524,7 +524,7 @@ def predict_and_measure(nav, q_rb, P, s, q_m, v_r, sums, count, w_last, w_prev, 
     return P, z, H, R2, q_m, w_now, w_in
 
 
-@numba.njit(cache=True)
+@kernel
 def feedback(nav, q_rb, dx, P, s, u, q_m, v_r, pos, w_now, w_in, lever_arm_r):
     """Steps 4-6 of a cycle, in place on nav and q_rb; returns the predicted sigma of phi.
 
@@ -577,7 +577,7 @@ def feedback(nav, q_rb, dx, P, s, u, q_m, v_r, pos, w_now, w_in, lever_arm_r):
     return attitude_sigma(q, P)
 
 
-@numba.njit(cache=True)
+@kernel
 def attitude_sigma(q_bn, P):
     """Predicted 1 sigma of phi N, E, D [rad], (3,): phi = -2 R(Q_bn)^T dQ_bn, so
     ``Sigma_phi = 4 R^T P_qq R`` with P_qq the dQ_bn block of P (n, n)."""
@@ -592,7 +592,7 @@ def attitude_sigma(q_bn, P):
     return sigma_phi
 
 
-@numba.njit(cache=True)
+@kernel
 def block_intervals(t, t_prev, omega_ib_b, f_b, sums, last):
     """Sample intervals of an IMU block, the running sums for the means of eq. (14) and the
     increments of the block's last sample.

@@ -51,10 +51,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
-from navreplay.core import jit  # noqa: F401  (the collector rests while numba compiles)
+from navreplay.core.jit import kernel
 from navreplay.geo import earth
 
 __all__ = [
@@ -90,7 +89,7 @@ _M_GRAV = earth.M_GRAV
 # earth model (geo.earth)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def radii(lat):
     """Meridian and transverse radii ``(R_M, R_N)`` [m] at latitude ``lat`` [rad]."""
     s = math.sin(lat)
@@ -99,7 +98,7 @@ def radii(lat):
     return _A * (1.0 - _E2) / (w * sw), _A / sw  # independent: a short dependency chain
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def radii_derivatives(lat):
     """``(dR_M/dlat, dR_N/dlat)`` [m/rad]."""
     s, c = math.sin(lat), math.cos(lat)
@@ -107,7 +106,7 @@ def radii_derivatives(lat):
     return 3.0 * _A * (1.0 - _E2) * _E2 * s * c / w**2.5, _A * _E2 * s * c / w**1.5
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def gravity(lat, h):
     """Normal gravity [m/s^2]: Somigliana with the second-order height term (h [m])."""
     s = math.sin(lat)
@@ -120,7 +119,7 @@ def gravity(lat, h):
     )
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def gravity_derivatives(lat, h):
     """Derivatives of :func:`gravity`: ``(dg/dlat [m/s^2 per rad], dg/dh [m/s^2 per m])``."""
     s, c = math.sin(lat), math.cos(lat)
@@ -137,13 +136,13 @@ def gravity_derivatives(lat, h):
     return dg0 * hfac + g0 * dhfac_dlat, g0 * dhfac_dh
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def earth_rate(lat):
     """Earth rate in NED ``(w_N, w_E, w_D)`` [rad/s]; w_E is 0."""
     return _W * math.cos(lat), 0.0, -_W * math.sin(lat)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def transport_rate(lat, h, v_N, v_E):
     """Transport rate w_en in NED ``(w_N, w_E, w_D)`` [rad/s] at height h [m], velocity [m/s]."""
     R_M, R_N = radii(lat)
@@ -158,13 +157,13 @@ def transport_rate(lat, h, v_N, v_E):
 # rotations, scalar forms (geo.rotations)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def cross(ax, ay, az, bx, by, bz):
     """``a x b``."""
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def quat_mult(p0, p1, p2, p3, q0, q1, q2, q3):
     """Hamilton product ``p (x) q``."""
     return (
@@ -175,7 +174,7 @@ def quat_mult(p0, p1, p2, p3, q0, q1, q2, q3):
     )
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def correct_quat(a, b, c, q0, q1, q2, q3):
     """Attitude feedback of a small error phi = 2 (a, b, c): ``[1, a, b, c] (x) q``
     normalised, its scalar part made non-negative."""
@@ -186,7 +185,7 @@ def correct_quat(a, b, c, q0, q1, q2, q3):
     return r0 * k, r1 * k, r2 * k, r3 * k
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def _dcm(q0, q1, q2, q3):
     """The nine entries of C(q), row by row."""
     return (
@@ -202,7 +201,7 @@ def _dcm(q0, q1, q2, q3):
     )
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def rotate(q0, q1, q2, q3, x, y, z):
     """``C(q) v`` for v = (x, y, z)."""
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _dcm(q0, q1, q2, q3)
@@ -213,13 +212,13 @@ def rotate(q0, q1, q2, q3, x, y, z):
     )
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def rotate_inverse(q0, q1, q2, q3, x, y, z):
     """``C(q)^T v = C(q*) v`` for v = (x, y, z)."""
     return rotate(q0, -q1, -q2, -q3, x, y, z)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def rotvec_to_quat(x, y, z):
     """Quaternion of the rotation vector (x, y, z) [rad]."""
     a = math.sqrt(x * x + y * y + z * z)
@@ -227,7 +226,7 @@ def rotvec_to_quat(x, y, z):
     return math.cos(0.5 * a), k * x, k * y, k * z
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def quat_to_rotvec(q0, q1, q2, q3):
     """Rotation vector [rad] of a unit quaternion (principal value, angle <= pi)."""
     if q0 < 0.0:
@@ -241,7 +240,7 @@ def quat_to_rotvec(q0, q1, q2, q3):
 # rotations, array forms
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def quat_to_dcm(q):
     """DCM ``C(q)``, shape (3, 3), of a unit quaternion q (4,)."""
     C = np.empty((3, 3))
@@ -250,7 +249,7 @@ def quat_to_dcm(q):
     return C
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def quat_left_matrix(p):
     """``L(p)`` with ``p (x) q = L(p) q``, shape (4, 4)."""
     L = np.empty((4, 4))
@@ -261,7 +260,7 @@ def quat_left_matrix(p):
     return L
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def quat_right_matrix(q):
     """``M(q)`` with ``p (x) q = M(q) p``, shape (4, 4)."""
     M = np.empty((4, 4))
@@ -272,7 +271,7 @@ def quat_right_matrix(q):
     return M
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def euler_to_quat(euler):
     """Quaternion of ZYX ``[roll, pitch, yaw]`` [rad], shape (4,) (q0 of either sign)."""
     r, p, y = 0.5 * euler[0], 0.5 * euler[1], 0.5 * euler[2]
@@ -287,7 +286,7 @@ def euler_to_quat(euler):
     return q
 
 
-@numba.njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def quat_to_euler(q):
     """ZYX ``[roll, pitch, yaw]`` [rad] of a unit quaternion away from gimbal lock, (3,)."""
     q0, q1, q2, q3 = q[0], q[1], q[2], q[3]

@@ -81,10 +81,10 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from navreplay.core.jit import kernel
 from navreplay.geo import earth, kernels, rotations
 
 __all__ = [
@@ -141,7 +141,7 @@ def nav_vector(pos: ArrayLike, v_n: ArrayLike, q_nb: ArrayLike) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _solve_skew(ax, ay, az, bx, by, bz):
     """x with (I + [a x]) x = b: x = (b - a x b + (a.b) a) / (1 + |a|^2)."""
     cx, cy, cz = kernels.cross(ax, ay, az, bx, by, bz)
@@ -150,7 +150,7 @@ def _solve_skew(ax, ay, az, bx, by, bz):
     return (bx - cx + d * ax) * s, (by - cy + d * ay) * s, (bz - cz + d * az) * s
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _position_step(lat0, lon0, h0, vn, ve, vd, dt):
     """Eqs. (7)-(9) with the interval-mean velocity (vn, ve, vd); returns lat, lon, h."""
     h1 = h0 - vd * dt  # (7)
@@ -169,7 +169,7 @@ def _position_step(lat0, lon0, h0, vn, ve, vd, dt):
     return lat1, lon1, h1
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _mid_terms(lat_m, h_m, vn, ve, vd, dt):
     """Eq. (1) and the non-inertial terms of (6) at the mid-point.
 
@@ -184,7 +184,7 @@ def _mid_terms(lat_m, h_m, vn, ve, vd, dt):
     return (ie_n + en_n) * dt, en_e * dt, (ie_d + en_d) * dt, -cx, -cy, g - cz
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _step(nav, out, tx, ty, tz, ax, ay, az, ptx, pty, ptz, pax, pay, paz, dt):
     """One update, eqs. (1)-(9): ``nav`` (10,) at t_{k-1} -> ``out`` (10,) at t_k.
 
@@ -255,7 +255,7 @@ def _step(nav, out, tx, ty, tz, ax, ay, az, ptx, pty, ptz, pax, pay, paz, dt):
     out[9] = p3 * norm
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _first_bad(nav, omega, f, dt, prev):
     """Index of the first non-finite sample or non-positive dt; -1 if all are valid,
     -2 for a non-finite state or ``prev``."""
@@ -274,7 +274,7 @@ def _first_bad(nav, omega, f, dt, prev):
     return -1
 
 
-@numba.njit(cache=True)
+@kernel
 def propagate_kernel(nav, omega, f, dt, prev, out):
     """numba kernel of :func:`propagate` (no validation; callable from other numba code).
 
@@ -314,7 +314,7 @@ def propagate_kernel(nav, omega, f, dt, prev, out):
     return -1
 
 
-@numba.njit(cache=True)
+@kernel
 def integrate_kernel(nav0, omega, f, dt, prev, hist):
     """numba kernel of :func:`integrate`: fills ``hist`` (k+1, 10); returns as
     :func:`propagate_kernel`."""
@@ -333,7 +333,7 @@ def integrate_kernel(nav0, omega, f, dt, prev, hist):
     return -1
 
 
-@numba.njit(cache=True)
+@kernel
 def inverse_kernel(t, pos, v_n, q_nb, omega_out, f_out):
     """Exact inverse of eqs. (1)-(6): the IMU samples that carry the state from each truth
     sample to the next.
@@ -398,7 +398,7 @@ def inverse_kernel(t, pos, v_n, q_nb, omega_out, f_out):
         ptx, pty, ptz, pax, pay, paz = tx, ty, tz, ax, ay, az
 
 
-@numba.njit(cache=True)
+@kernel
 def position_kernel(t, v_n, pos0, out):
     """Eqs. (7)-(9) along a velocity history: ``out`` (N, 3) receives lat, lon, h from
     ``pos0`` (3,) and ``v_n`` (N, 3) [m/s] at times ``t`` (N,) [s]."""

@@ -23,7 +23,6 @@ from collections.abc import Callable, Iterator
 from io import BytesIO
 from typing import BinaryIO
 
-import numba
 import numpy as np
 import zstandard
 from mcap.data_stream import ReadDataStream
@@ -44,6 +43,7 @@ from mcap.records import (
 )
 from mcap.stream_reader import CRCValidationError, StreamReader, get_chunk_data_stream
 
+from navreplay.core.jit import kernel
 from navreplay.io.errors import RecordingError
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -248,7 +248,7 @@ class MessageBlock:
 _WALK_OK, _WALK_BAD_RECORD, _WALK_BAD_MESSAGE = 0, 1, 2
 
 
-@numba.njit(cache=True)
+@kernel
 def _u64(u8: np.ndarray, at: int) -> int:
     value = 0
     for b in range(7, -1, -1):
@@ -256,7 +256,7 @@ def _u64(u8: np.ndarray, at: int) -> int:
     return value
 
 
-@numba.njit(cache=True)
+@kernel
 def _walk_records(u8: np.ndarray, message: int, schema: int, channel: int):  # noqa: ANN202
     """Walk the records (opcode u8, length u64 little-endian, body) of a decompressed chunk.
 

@@ -9,13 +9,24 @@ replays it with ``navreplay run``'s own code path (decode, filter, summary, no v
 filter per process, as many processes as cores. ``make install`` calls it.
 
 The cache is keyed by the source files and the CPU: after an upgrade of navreplay or numba, or
-on another machine kind, a first run compiles again (and warms the cache as it goes).
+on another machine kind, a first run compiles again (and warms the cache as it goes). Warm-up
+compiles for this CPU, so it turns the shipped kernels off (:mod:`navreplay.core.shipped`).
+
+:func:`ship` builds those shipped kernels: the same plan, in one process whose numba compiles
+for a portable CPU into an empty cache, then stored as the package's store. The wheel build
+runs it (``python -m navreplay.jobs.warmup --ship DIR``, from ``setup.py``).
 """
 
 from __future__ import annotations
 
+import argparse
 import concurrent.futures as cf
+import json
 import os
+import platform
+import shutil
+import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
@@ -77,6 +88,10 @@ def warm_up(
                          f"{', '.join(PLAN)}")
     workers = max(1, min(len(names), workers or os.cpu_count() or 1))
     start = time.perf_counter()
+    from navreplay.core import shipped
+
+    before = os.environ.get(shipped.ENV)
+    os.environ[shipped.ENV] = "0"  # compile for this CPU (the worker processes inherit it)
     with tempfile.TemporaryDirectory(prefix="navreplay-warm-up-") as tmp:
         if workers == 1:
             done = (warm_filter(n, tmp) for n in names)
@@ -91,4 +106,73 @@ def warm_up(
         finally:
             if workers > 1:
                 ex.shutdown(cancel_futures=True)
+            if before is None:
+                del os.environ[shipped.ENV]
+            else:
+                os.environ[shipped.ENV] = before
     return time.perf_counter() - start
+
+
+PORTABLE = {"NUMBA_CPU_NAME": "generic", "NUMBA_CPU_FEATURES": ""}
+"""numba's settings for code that runs on any CPU of the architecture (its baseline)."""
+
+
+def ship(out: Path) -> int:
+    """Build the shipped kernels into ``out``: every filter of :data:`PLAN` replayed in one
+    child process whose numba compiles for :data:`PORTABLE` into an empty cache (in
+    :data:`PLAN`'s order, with a fixed hash seed, without address randomisation where
+    ``setarch -R`` is at hand and without numba's type annotations, so that the same sources
+    and tools give the same files), then stored with its manifest
+    (:func:`navreplay.core.shipped.write`). Returns the number of kernels stored; raises
+    ``subprocess.CalledProcessError`` when the child fails."""
+    from navreplay.core import shipped
+
+    with tempfile.TemporaryDirectory(prefix="navreplay-kernels-") as tmp:
+        cache = Path(tmp) / "cache"
+        env = {**os.environ, **PORTABLE, "NUMBA_CACHE_DIR": str(cache), shipped.ENV: "0",
+               "PYTHONHASHSEED": "0"}  # numba names some constants by their hash
+        # no address randomisation: numba names array expressions by an object's address
+        cmd = [*_no_aslr(), sys.executable, "-m", "navreplay.jobs.warmup", "--compile"]
+        subprocess.run(cmd, env=env, cwd=tmp, check=True)
+        magic = json.loads((cache / "magic.json").read_text())
+        return shipped.write(cache, out, tuple(magic))
+
+
+def _no_aslr() -> list[str]:
+    """``setarch ARCH -R`` (run a command without address randomisation) where it works."""
+    setarch = shutil.which("setarch")
+    if sys.platform != "linux" or setarch is None:
+        return []
+    cmd = [setarch, platform.machine(), "-R"]
+    return cmd if subprocess.run([*cmd, "true"], capture_output=True).returncode == 0 else []
+
+
+def _compile_plan() -> None:
+    """The child of :func:`ship`: warm every filter in this process, then write numba's
+    code-generation key next to the cache."""
+    from numba.core.registry import cpu_target
+
+    from navreplay.core.jit import KernelCache
+
+    KernelCache.annotations = False  # the same files from the same sources
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in PLAN:
+            warm_filter(name, tmp)
+    magic = cpu_target.target_context.codegen().magic_tuple()
+    (Path(os.environ["NUMBA_CACHE_DIR"]) / "magic.json").write_text(json.dumps(list(magic)))
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description="Build the shipped kernels (navreplay.core.shipped).")
+    ap.add_argument("--ship", type=Path, help="store to write")
+    ap.add_argument("--compile", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.compile:
+        _compile_plan()
+    elif args.ship:
+        n = ship(args.ship)
+        print(f"navreplay: {n} kernels compiled for a portable CPU into {args.ship}")
+        if n == 0:
+            sys.exit("navreplay: no kernel was compiled")
+    else:
+        ap.error("--ship DIR is required")
