@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from reference_files import write_reference_csv
 from ulog_maker import write_px4_log
 
 from navreplay.cli import cli
@@ -31,15 +32,9 @@ def flight(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("ulog")
     rec = simulate("vehicle-drive", {"duration": 60.0}, seed=1)
     tr = rec[StreamKind.TRUTH]
-    e = np.degrees(quat_to_euler(tr["q_nb"]))
-    lines = ["t,lat_deg,lon_deg,h,v_N,v_E,v_D,roll_deg,pitch_deg,yaw_deg"]
-    for k in range(0, len(tr), 10):
-        p, v = tr["pos"][k], tr["v_n"][k]
-        lines.append(",".join([f"{(tr.t_ns[k] - rec.t0_ns) * 1e-9:.3f}",
-                               f"{np.degrees(p[0]):.10f}", f"{np.degrees(p[1]):.10f}",
-                               f"{p[2]:.4f}", *(f"{x:.5f}" for x in v),
-                               *(f"{x:.6f}" for x in e[k])]))
-    (d / "ref.csv").write_text("\n".join(lines) + "\n")
+    k = slice(None, None, 10)
+    write_reference_csv(d / "ref.csv", tr.t_ns[k], tr["pos"][k], tr["v_n"][k],
+                        quat_to_euler(tr["q_nb"][k]), t0_ns=rec.t0_ns)
     (d / "sensors.toml").write_text(specs_toml(SensorSpecs.from_metadata(rec.metadata.sensors)))
     return {"mcap": write_recording(d / "drive.mcap", rec),
             "ulg": write_px4_log(d / "drive.ulg", rec),

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from reference_files import write_reference_csv
 from rosbag_maker import write_bag
 from rrd import read_rrd
 from ulog_maker import EKF2_ERRORS, write_px4_log
@@ -36,14 +37,9 @@ def flight(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("onboard")
     rec = simulate("vehicle-drive", {"duration": 60.0}, seed=2)
     tr = rec[StreamKind.TRUTH]
-    e = np.degrees(quat_to_euler(tr["q_nb"]))
-    lines = ["t_ns,lat_deg,lon_deg,h,v_N,v_E,v_D,roll_deg,pitch_deg,yaw_deg"]
-    for k in range(0, len(tr), 5):
-        p, v = tr["pos"][k], tr["v_n"][k]
-        lines.append(",".join([str(tr.t_ns[k]), f"{np.degrees(p[0]):.10f}",
-                               f"{np.degrees(p[1]):.10f}", f"{p[2]:.4f}",
-                               *(f"{x:.6f}" for x in v), *(f"{x:.7f}" for x in e[k])]))
-    (d / "ref.csv").write_text("\n".join(lines) + "\n")
+    k = slice(None, None, 5)
+    write_reference_csv(d / "ref.csv", tr.t_ns[k], tr["pos"][k], tr["v_n"][k],
+                        quat_to_euler(tr["q_nb"][k]))
     return {"ulg": write_px4_log(d / "flight.ulg", rec), "ref": d / "ref.csv",
             "mcap": write_recording(d / "flight.mcap", rec)}
 

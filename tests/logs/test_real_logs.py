@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from reference_files import write_reference_csv
 from rosbag_maker import LAT, LON, H, truth_table, write_bag
 
 from navreplay.campaign.tasks import replay_filters
@@ -162,13 +163,7 @@ def _write_tum(path: Path, tab: dict) -> Path:
 
 
 def _write_csv(path: Path, tab: dict) -> Path:
-    rows = ["t_ns,lat_deg,lon_deg,h,v_N,v_E,v_D,roll_deg,pitch_deg,yaw_deg"]
-    for t, p, v, e in zip(tab["t_ns"], tab["lla"], tab["v_n"], tab["euler"], strict=True):
-        rows.append(f"{t},{math.degrees(p[0]):.10f},{math.degrees(p[1]):.10f},{p[2]:.4f},"
-                    + ",".join(f"{x:.6f}" for x in v) + ","
-                    + ",".join(f"{math.degrees(x):.7f}" for x in e))
-    path.write_text("\n".join(rows) + "\n")
-    return path
+    return write_reference_csv(path, tab["t_ns"], tab["lla"], tab["v_n"], tab["euler"])
 
 
 def test_reference_files_score_like_the_topic(short_bags: dict[str, Path],
