@@ -88,10 +88,12 @@ def euler(q_nb: np.ndarray) -> np.ndarray:
     return quat_to_euler(q_nb)
 
 
-def nav_values(nav: NavColumns, ref: np.ndarray) -> dict[str, np.ndarray]:
-    """Plotted navigation quantities (SI): roll, pitch, yaw [rad], v_N.. [m/s], p_N.. [m]."""
+def nav_values(nav: NavColumns, ref: np.ndarray,
+               ned: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Plotted navigation quantities (SI): roll, pitch, yaw [rad], v_N.. [m/s], p_N.. [m]
+    (``ned``: the positions' :func:`local_ned` from ``ref``, when known)."""
     e = euler(nav.q_nb)
-    p = local_ned(nav.pos, ref)
+    p = local_ned(nav.pos, ref) if ned is None else ned
     return {
         "roll": e[:, 0], "pitch": e[:, 1], "yaw": e[:, 2],
         "v_N": nav.v_n[:, 0], "v_E": nav.v_n[:, 1], "v_D": nav.v_n[:, 2],

@@ -265,6 +265,7 @@ class EnsemblePlots(Channel):
                           OUTAGE_COLOR, "GNSS outage")
                 self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
                                  legend=legend, tab_title=tab_title, behind=True)
+        self._draw_queued()
 
     def log_sweep(
         self,

@@ -15,7 +15,7 @@ from navreplay import metrics as _metrics
 from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import radii
-from navreplay.metrics import nav_errors
+from navreplay.metrics import RunMetrics, nav_errors
 from navreplay.metrics import outages as _outages
 from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors
 from navreplay.viz import convert
@@ -174,9 +174,11 @@ class RunView(TruthView):
         a: int,
         b: int,
         scored: frozenset[str] = frozenset(),
+        scores: RunMetrics | None = None,
     ) -> None:
         """Rows [a, b) of a run: states, sigmas (of the states not in ``scored``, whose
-        sigma is their error pane's ±3σ), extras and the navigation solution."""
+        sigma is their error pane's ±3σ), extras and the navigation solution (its errors those
+        of ``scores`` when given)."""
         if b <= a:
             return
         self._declare(run, result)
@@ -239,7 +241,7 @@ class RunView(TruthView):
             self.catalog.add("states", f"extra:{key}@{L}", f"{L}: {key} [{label}]", path,
                              rank=RANK_EXTRA, column=L, row=key)
         if any(result.has(part) for part in ("pos", "v_n", "q_nb")):
-            self._log_nav(run, result, a, b, idx)
+            self._log_nav(run, result, a, b, idx, scores)
         run.rows = b
 
     def _log_nav(
@@ -249,8 +251,10 @@ class RunView(TruthView):
         a: int,
         b: int,
         idx: list[rr.TimeColumn],
+        scores: RunMetrics | None = None,
     ) -> None:
-        """Navigation solution rows [a, b): values, errors vs truth, 3D; of the parts the filter
+        """Navigation solution rows [a, b): values, errors vs truth (those of ``scores``, the
+        rows' :func:`~navreplay.metrics.run_metrics`, when given), 3D; of the parts the filter
         outputs only (an attitude-only filter has no position, velocity or 3D trajectory)."""
         L = run.label
         t = result.t[a:b]
@@ -274,16 +278,19 @@ class RunView(TruthView):
             self._style(path, [L], [run.color], [1.5])
             self._scalars(path, idx, v * u.scale)
             self.catalog.add(quantity_of(n).value, f"nav:{n}", title(n, u), path, rank=RANK_NAV)
-        part = result.rows(a, b)
-        sig = _metrics.nav_sigma(part)
-        nav_sigma = {f"{p}_{ax}": sig[k][:, i]
-                     for k, p in (("pos_ned", "p"), ("v_n", "v"), ("phi", "phi"))
-                     for i, ax in enumerate("NED")}
         errors: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
-        if self._truth is not None:
+        ne = None
+        if scores is not None and scores.nav is not None and scores.t.shape[0] == b - a:
+            ne, sig = scores.nav, scores.nav_sigma  # the errors the rows were scored with
+        elif self._truth is not None:
             tr = self._truth.at(t)
             ne = nav_errors(nav.pos, nav.v_n, nav.q_nb,
                             {"pos": tr.pos, "v_n": tr.v_n, "q_nb": tr.q_nb}, parts)
+            sig = _metrics.nav_sigma(result.rows(a, b))
+        if ne is not None:
+            nav_sigma = {f"{p}_{ax}": sig[k][:, i]
+                         for k, p in (("pos_ned", "p"), ("v_n", "v"), ("phi", "phi"))
+                         for i, ax in enumerate("NED")}
             for n, e in ne.columns().items():
                 if nav_part(n) not in parts:
                     continue
