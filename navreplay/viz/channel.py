@@ -98,7 +98,7 @@ class _Held(NamedTuple):
 
     tail: tuple[np.ndarray, np.ndarray] | None
     ready: list[tuple[np.ndarray, np.ndarray]]
-    count: int
+    n_ready: int
     t0_ns: int | None
     columns: tuple[int, ...] | None
     maxima: tuple[int, ...]
@@ -158,7 +158,7 @@ class Channel:
         self._truth_yaw: tuple[np.ndarray, np.ndarray] | None = None  # t [s], unwrapped yaw
         self._truth_log: TruthLog | None = None
         # extent of the true track up to each time (ellipsoid caps): times [s], extents [m]
-        self._extent_curve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._extent_curve: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         # the box of the true track row by row over the last truth windows logged (times,
         # low and high corners), and whether they hold every row logged
         self._track_box: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -297,7 +297,7 @@ class Channel:
                 ready.append((t[:cut], values[:cut]) if k is None or k.shape[0] >= cut
                              else (t[k], values[k]))
             tail = (t[cut:], values[cut:]) if cut < t.shape[0] else None
-            count = (0 if h is None else h.count) + (ready[-1][1].shape[0] if cut else 0)
+            count = (0 if h is None else h.n_ready) + (ready[-1][1].shape[0] if cut else 0)
             if self.live or count >= PENDING_ROWS:
                 self._send_ready(q.path, ready, idx.t0_ns, q.band)
                 ready, count = [], 0

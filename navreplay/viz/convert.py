@@ -77,6 +77,15 @@ class NavColumns:
         return NavColumns(t, lerp(self.pos), lerp(self.v_n), q)
 
 
+def finite_rows(a: np.ndarray) -> np.ndarray:
+    """Whether each row of ``a`` (N, k) is finite throughout (column by column: a reduction
+    along the short axis of every row costs several times as much)."""
+    ok = np.isfinite(a[:, 0])
+    for j in range(1, a.shape[1]):
+        ok &= np.isfinite(a[:, j])
+    return ok
+
+
 def local_ned(pos: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """NED offsets [m] of positions ``pos`` (N, 3) from the reference ``ref`` (3,), via ECEF."""
     pos = np.asarray(pos, dtype=np.float64)

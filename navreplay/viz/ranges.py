@@ -97,27 +97,37 @@ def envelope_rows_of(t: np.ndarray, series: list[tuple[np.ndarray, tuple[int, ..
     keep = np.zeros((S, M), dtype=bool)
     n = M // nb
     regular = M == nb * n and np.array_equal(starts, np.arange(0, M, n))
-    low_nan = np.isnan(low)
+    low_nan = None
     for v, kinds, owner in parts:
-        nan = low_nan if v is low else np.isnan(v)
+        finite = np.isfinite(v)
+        whole = bool(finite.all())  # then every bin's extremes are rows of the series
+        nan = None if whole else np.isnan(v)
+        if v is low:
+            low_nan = nan
         for smallest in kinds:
             # per bin, the first row holding its smallest (largest) finite value, if any
             if regular:
                 w = v.reshape(v.shape[0], nb, n)
-                if nan.any():
+                if nan is not None and nan.any():
                     w = np.where(nan.reshape(w.shape), np.inf if smallest else -np.inf, w)
                 at = w.argmin(axis=2) if smallest else w.argmax(axis=2)
-                found = np.isfinite(np.take_along_axis(w, at[:, :, None], axis=2)[:, :, 0])
+                found = (None if whole else
+                         np.isfinite(np.take_along_axis(w, at[:, :, None], axis=2)[:, :, 0]))
                 at += starts
             else:
                 seg = np.repeat(np.arange(nb), np.diff(starts, append=M))
                 extreme = (np.fmin if smallest else np.fmax).reduceat(v, starts, axis=1)
-                hit = (v == extreme[:, seg]) & np.isfinite(v)
+                hit = (v == extreme[:, seg]) & finite
                 at = np.minimum.reduceat(np.where(hit, np.arange(M), M), starts, axis=1)
                 found = at < M
-            keep[np.broadcast_to(owner[:, None], at.shape)[found], at[found]] = True
-    if low_nan.any() or min(zero) < 0:  # the first row of a gap and the first finite after it
-        gap = np.stack([low_nan[z] if z >= 0 else np.isnan(v[:, 0])
+            series_of = np.broadcast_to(owner[:, None], at.shape)
+            if found is None:
+                keep[series_of, at] = True
+            else:
+                keep[series_of[found], at[found]] = True
+    if (low_nan is not None and low_nan.any()) or min(zero) < 0:
+        # the first row of a gap and the first finite row after it
+        gap = np.stack([np.isnan(v[:, 0]) if z < 0 or low_nan is None else low_nan[z]
                         for z, (v, _, _) in zip(zero, series, strict=True)])
         keep[:, 0] |= gap[:, 0]
         keep[:, 1:] |= gap[:, 1:] & ~gap[:, :-1]
@@ -173,13 +183,16 @@ class Envelope:
 
     def _grow(self, t_first: float, t_last: float) -> None:
         """Rows from ``t_first`` to ``t_last`` [s] come: the bins widened to hold them."""
-        self.t_first = min(self.t_first, t_first)
-        self.t_last = max(self.t_last, t_last)
+        if t_first < self.t_first:
+            self.t_first = t_first
+        if t_last > self.t_last:
+            self.t_last = t_last
         while self.t_last >= self.width * self.BINS:
-            self.lo = np.minimum(self.lo[0::2], self.lo[1::2])
-            self.hi = np.maximum(self.hi[0::2], self.hi[1::2])
-            self.lo = np.r_[self.lo, np.full(self.BINS // 2, np.inf)]
-            self.hi = np.r_[self.hi, np.full(self.BINS // 2, -np.inf)]
+            half = self.BINS // 2
+            lo, hi = np.full(self.BINS, np.inf), np.full(self.BINS, -np.inf)
+            np.minimum(self.lo[0::2], self.lo[1::2], out=lo[:half])
+            np.maximum(self.hi[0::2], self.hi[1::2], out=hi[:half])
+            self.lo, self.hi = lo, hi
             self.width *= 2.0
 
     def extent(self, after: float = -np.inf) -> tuple[float, float] | None:

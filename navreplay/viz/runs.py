@@ -263,7 +263,7 @@ class RunView(TruthView):
         assert result.nav_q_nb is not None  # logged for a result with a navigation solution
         nav = convert.NavColumns(t, result.nav_pos[a:b], result.nav_v_n[a:b], result.nav_q_nb[a:b])
         if self._ref is None and "pos" in parts:
-            finite = np.flatnonzero(np.isfinite(nav.pos).all(axis=1))
+            finite = np.flatnonzero(convert.finite_rows(nav.pos))
             if finite.shape[0] == 0:
                 return
             self._ref = nav.pos[finite[0]].copy()

@@ -55,7 +55,7 @@ class TruthView(WorldView):
             self._ref = nav.pos[0].copy()
         assert self._ref is not None, "the first truth window has rows"
         ned = convert.local_ned(nav.pos, self._ref)
-        finite = np.isfinite(ned).all(axis=1)
+        finite = convert.finite_rows(ned)
         if finite.any():
             inside = ned if finite.all() else ned[finite]
             lo, hi = inside.min(axis=0), inside.max(axis=0)
@@ -63,7 +63,7 @@ class TruthView(WorldView):
                 lo, hi = np.minimum(self._box[0], lo), np.maximum(self._box[1], hi)
             self._box = (lo, hi)
             self._extent = max(self._extent, float(np.max(hi - lo)))
-        self._add_track_rows(nav.t, ned)
+        self._add_track_rows(nav.t, ned, finite)
         keep = (convert.decimate(nav.t, rate_hz, after=log.last) if rate_hz
                 else np.flatnonzero(nav.t > log.last))
         # the plotted rows only (the yaw unwrapped along them, continuing the rows before)

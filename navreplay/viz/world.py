@@ -147,11 +147,15 @@ class WorldView(Channel):
     ) -> None:
         """Latitude/longitude for the map view at :data:`COVARIANCE_RATE_HZ` over time (rows
         later than ``after`` [s])."""
-        ok = np.flatnonzero(np.isfinite(pos[:, :2]).all(axis=1))
-        if not ok.shape[0]:
+        finite = convert.finite_rows(pos[:, :2])
+        if not finite.any():
             return
+        if finite.all():
+            k = convert.decimate(t, COVARIANCE_RATE_HZ, after=after)
+        else:
+            ok = np.flatnonzero(finite)
+            k = ok[convert.decimate(t[ok], COVARIANCE_RATE_HZ, after=after)]
         root = entity_path("map", label)
-        k = ok[convert.decimate(t[ok], COVARIANCE_RATE_HZ, after=after)]
         if k.shape[0]:
             self._rec.send_columns(
                 f"{root}/position",
@@ -187,38 +191,35 @@ class WorldView(Channel):
             self.catalog.geo = True
 
     def _track_extent(self, truth: convert.NavColumns, box: tuple[np.ndarray, np.ndarray] | None,
-                      first: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                      first: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """The NED box of the true track [m] up to each row of ``truth`` (rows from before
-        ``first`` [s] on, the box grown from ``box``, that of the rows before): times, and the
-        box's low and high corners row by row; those of the truth logged
-        (:meth:`_add_track_rows`) when they reach back far enough."""
+        ``first`` [s] on, the box grown from ``box``, that of the rows before): in consecutive
+        parts, their times, and the box's low and high corners row by row; those of the truth
+        logged (:meth:`_add_track_rows`) when they reach back far enough."""
         kept = self._track_box
         if kept and (self._track_box_whole or kept[0][0][0] <= first):
-            if len(kept) == 1:
-                return kept[0]
-            t, lo, hi = (np.concatenate(parts) for parts in zip(*kept, strict=True))
-            return t, lo, hi
+            return kept
         ned = convert.local_ned(truth.pos, self._ref) if self._ref is not None else truth.pos
-        return (truth.t, *_box_rows(ned, box))
+        return [(truth.t, *_box_rows(ned, box, convert.finite_rows(ned)))]
 
-    def _add_track_rows(self, t: np.ndarray, ned: np.ndarray) -> None:
-        """The true track's box row by row over the rows logged (times [s], NED [m]), those
-        of this window and the last kept: the times of a block of estimates lie in them."""
+    def _add_track_rows(self, t: np.ndarray, ned: np.ndarray, finite: np.ndarray) -> None:
+        """The true track's box row by row over the rows logged (times [s], NED [m], which
+        rows are finite), those of this window and the last kept: the times of a block of
+        estimates lie in them."""
         kept = self._track_box
         box = (kept[-1][1][-1], kept[-1][2][-1]) if kept and kept[-1][0].shape[0] else None
-        self._track_box = [*kept[-1:], (t, *_box_rows(ned, box))]
+        self._track_box = [*kept[-1:], (t, *_box_rows(ned, box, finite))]
         self._track_box_whole = self._track_box_whole and len(kept) < 2
 
     def _extent_at(self, t: np.ndarray) -> np.ndarray | float:
         """Extent of the true track up to times ``t`` [m] (ellipsoids are capped relative to
         the track drawn so far); the whole extent without a truth."""
-        if self._extent_curve is None or not self._extent_curve[0].shape[0]:
+        if self._extent_curve is None:
             return self._extent
-        tt, lo, hi = self._extent_curve
-        k = np.searchsorted(tt, t, side="right") - 1
+        lo, hi, found = box_at(self._extent_curve, t)
         with np.errstate(invalid="ignore"):
-            ext = np.max(hi[np.clip(k, 0, None)] - lo[np.clip(k, 0, None)], axis=1)
-        return np.where((k >= 0) & np.isfinite(ext), ext, 0.0)
+            ext = np.max(hi - lo, axis=1)
+        return np.where(found & np.isfinite(ext), ext, 0.0)
 
     def _log_world(
         self,
@@ -341,13 +342,32 @@ def _position_cov(run: RunState, result: RunResult, rows: np.ndarray) -> np.ndar
     return None
 
 
-def _box_rows(ned: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """The box of the finite rows of ``ned`` (N, 3) up to each row, grown from ``box``: its
-    low and high corners row by row (+-inf before any)."""
-    ok = np.isfinite(ned).all(axis=1)[:, None]
-    lo = np.where(ok, ned, np.inf)
-    hi = np.where(ok, ned, -np.inf)
+def box_at(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], t: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The box of :meth:`WorldView._track_extent` (its parts in time order) at its last row at
+    or before each of times ``t`` [s]: low and high corners, and whether there is one."""
+    lo = np.full((t.shape[0], 3), np.inf)
+    hi = np.full((t.shape[0], 3), -np.inf)
+    found = np.zeros(t.shape[0], dtype=bool)
+    for times, low, high in parts:  # a later part holds the later rows
+        k = np.searchsorted(times, t, side="right") - 1
+        inside = k >= 0
+        lo[inside], hi[inside] = low[k[inside]], high[k[inside]]
+        found |= inside
+    return lo, hi, found
+
+
+def _box_rows(ned: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None,
+              finite: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box of the ``finite`` rows of ``ned`` (N, 3) up to each row, grown from ``box``:
+    its low and high corners row by row (+-inf before any)."""
+    if finite.all():
+        lo, hi = ned.copy(), ned.copy()
+    else:
+        lo = np.where(finite[:, None], ned, np.inf)
+        hi = np.where(finite[:, None], ned, -np.inf)
     if box is not None and lo.shape[0]:
         lo[0], hi[0] = np.minimum(lo[0], box[0]), np.maximum(hi[0], box[1])
-    return np.minimum.accumulate(lo, axis=0), np.maximum.accumulate(hi, axis=0)
+    np.minimum.accumulate(lo, axis=0, out=lo)
+    np.maximum.accumulate(hi, axis=0, out=hi)
+    return lo, hi
