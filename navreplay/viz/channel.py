@@ -62,22 +62,27 @@ def _remove(path: Path) -> None:
     release(path)
 
 
-class TimeIndex(list):
-    """The time columns of a send (``time`` and, with ``t0_ns``, ``timestamp``) and the times
-    [s] they were made of, so a series can be thinned to what is drawn."""
+class TimeIndex:
+    """The times [s] of a block of rows and the recording start: the time columns of a send
+    (``time`` and, with ``t0_ns``, ``timestamp``) are made when it is sent."""
 
     def __init__(self, t: np.ndarray, t0_ns: int | None) -> None:
         self.t = np.asarray(t, dtype=np.float64)
         self.t0_ns = t0_ns
+
+    @property
+    def columns(self) -> list[rr.TimeColumn]:
         dt_ns = np.rint(self.t * 1e9).astype(np.int64)
         cols = [rr.TimeColumn(TIMELINE, duration=dt_ns.astype("timedelta64[ns]"))]
-        if t0_ns is not None:
+        if self.t0_ns is not None:
             cols.append(rr.TimeColumn(
-                TIMESTAMP, timestamp=(dt_ns + np.int64(t0_ns)).astype("datetime64[ns]")))
-        super().__init__(cols)
+                TIMESTAMP, timestamp=(dt_ns + np.int64(self.t0_ns)).astype("datetime64[ns]")))
+        return cols
 
-    def take(self, k: np.ndarray) -> TimeIndex:
-        return TimeIndex(self.t[k], self.t0_ns)
+
+Index = TimeIndex | list[rr.TimeColumn]
+"""The times of a series: a :class:`TimeIndex` (drawn as its envelope) or the time columns
+themselves (sent as they are: a sequence timeline)."""
 
 
 class _Queued(NamedTuple):
@@ -220,7 +225,7 @@ class Channel:
     def _indexes(t: np.ndarray, t0_ns: int) -> TimeIndex:
         return TimeIndex(t, t0_ns)
 
-    def _scalars(self, path: str, idx: list[rr.TimeColumn], values: np.ndarray,
+    def _scalars(self, path: str, idx: Index, values: np.ndarray,
                  columns: tuple[int, ...] | None = None, maxima: tuple[int, ...] = (),
                  band: bool = False) -> None:
         """Send a series; of a :class:`TimeIndex` only the rows of its min/max envelope
@@ -319,7 +324,7 @@ class Channel:
         if ready:
             idx = TimeIndex(np.concatenate([t for t, _ in ready]), t0_ns)
             values = np.concatenate([v for _, v in ready])
-            self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(
+            self._rec.send_columns(path, indexes=idx.columns, columns=rr.Scalars.columns(
                 scalars=_band_lines(values) if band else values))
 
     def _send_pending(self) -> None:
@@ -349,7 +354,7 @@ class Channel:
     def _bounded(
         self,
         path: str,
-        idx: list[rr.TimeColumn],
+        idx: Index,
         value: np.ndarray,
         sigma: np.ndarray | None,
         name: str,
@@ -375,7 +380,7 @@ class Channel:
     def band(
         self,
         path: str,
-        idx: list[rr.TimeColumn],
+        idx: Index,
         lo: np.ndarray,
         hi: np.ndarray,
         color: tuple[int, ...] = TRUTH_COLOR,

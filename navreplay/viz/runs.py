@@ -19,6 +19,7 @@ from navreplay.metrics import RunMetrics, nav_errors
 from navreplay.metrics import outages as _outages
 from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors
 from navreplay.viz import convert
+from navreplay.viz.channel import TimeIndex
 from navreplay.viz.naming import (
     NAV_ERROR_NAMES,
     NAV_UNITS,
@@ -105,7 +106,7 @@ class RunView(TruthView):
         self._log_track(run.label, run.track, run.color, 2.5, 3.0)
         self._log_cdfs(run)
 
-    def _log_compare(self, run: RunState, idx: list[rr.TimeColumn], errors: Any) -> None:
+    def _log_compare(self, run: RunState, idx: TimeIndex, errors: Any) -> None:
         """The run's error magnitudes in the Compare tab, overlaid with the other filters'
         (one plot per quantity), and into the distributions of its CDFs."""
         mags = compared_errors(errors.pos_ned, errors.v_n, errors.phi)
@@ -250,7 +251,7 @@ class RunView(TruthView):
         result: RunResult,
         a: int,
         b: int,
-        idx: list[rr.TimeColumn],
+        idx: TimeIndex,
         scores: RunMetrics | None = None,
     ) -> None:
         """Navigation solution rows [a, b): values, errors vs truth (those of ``scores``, the

@@ -89,7 +89,7 @@ class TruthView(WorldView):
         if w.shape[0]:
             self._rec.send_columns(
                 f"{world}/body",
-                indexes=self._indexes(nav.t[w], t0),
+                indexes=self._indexes(nav.t[w], t0).columns,
                 columns=rr.Transform3D.columns(translation=ned[w], quaternion=xyzw(nav.q_nb[w])),
             )
         log.track.add(nav.t, ned, nav.pos)

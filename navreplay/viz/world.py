@@ -159,7 +159,7 @@ class WorldView(Channel):
         if k.shape[0]:
             self._rec.send_columns(
                 f"{root}/position",
-                indexes=self._indexes(t[k], t0_ns),
+                indexes=self._indexes(t[k], t0_ns).columns,
                 columns=rr.GeoPoints.columns(positions=np.degrees(pos[k, :2])),
             )
             if f"{root}/position" not in self._styled:
@@ -239,7 +239,7 @@ class WorldView(Channel):
             self.catalog.frame(ned[w].min(axis=0), ned[w].max(axis=0))
             self._rec.send_columns(
                 entity_path("world", L, "body"),
-                indexes=self._indexes(nav.t[w], result.t0_ns),
+                indexes=self._indexes(nav.t[w], result.t0_ns).columns,
                 columns=rr.Transform3D.columns(translation=ned[w], quaternion=xyzw(nav.q_nb[w])),
             )
             run.world_t = float(nav.t[w[-1]])
@@ -260,7 +260,7 @@ class WorldView(Channel):
             self.catalog.covariances.append(cov_path)
         self._rec.send_columns(
             cov_path,
-            indexes=self._indexes(nav.t[c], result.t0_ns),
+            indexes=self._indexes(nav.t[c], result.t0_ns).columns,
             columns=rr.Ellipsoids3D.columns(
                 centers=ned[c],
                 half_sizes=half * factor[:, None],
