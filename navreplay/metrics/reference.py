@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Any
 
 import numpy as np
@@ -55,8 +55,9 @@ class Reference:
     def __contains__(self, column: str) -> bool:
         return column in self.stream.columns
 
-    def at(self, t: np.ndarray) -> dict[str, np.ndarray]:
-        """The columns at filter times ``t`` [s since the recording start].
+    def at(self, t: np.ndarray, columns: Collection[str] | None = None) -> dict[str, np.ndarray]:
+        """The columns at filter times ``t`` [s since the recording start] (those of
+        ``columns`` only, when given).
 
         Samples at equal times are taken as they are; between samples, vectors are interpolated
         linearly (longitude unwrapped) and quaternions normalised-linearly. Times within half a
@@ -80,6 +81,8 @@ class Reference:
             w = np.clip((t - ts[i]) / (ts[j] - ts[i]), 0.0, 1.0)
         out = {}
         for name, col in ref.columns.items():
+            if columns is not None and name not in columns:
+                continue
             a, b = col[i], col[j]
             if name == "pos":
                 b = b.copy()
