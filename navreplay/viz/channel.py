@@ -149,6 +149,9 @@ class Channel:
         """Bins per second of a drawn series' min/max envelope (None: every row drawn)."""
         self._pending: dict[str, _Held] = {}
         """What is held of each series (a live view's: its unfinished bin only)."""
+        self._rows_held: dict[str, tuple[Callable[..., Any], int, list[np.ndarray],
+                                         dict[str, list[Any]]]] = {}
+        """The rows of each entity that is not a drawn series not sent yet (a file's)."""
         self._queued: list[_Queued] = []
         """Series logged in the current call of the sink, not yet drawn (:meth:`_scalars`)."""
         self.live = not isinstance(target, Save)
@@ -335,6 +338,28 @@ class Channel:
                 held.ready.append(self._drawn(*held.tail, held.columns, held.maxima))
             self._send_ready(path, held.ready, held.t0_ns, held.band)
         self._pending.clear()
+        for path in list(self._rows_held):
+            self._send_rows_held(path)
+
+    def _send_rows(self, path: str, t: np.ndarray, t0_ns: int,
+                   make: Callable[..., Any], **fields: np.ndarray | list[str]) -> None:
+        """Rows at times ``t`` [s] of an entity that is not a drawn series (body transforms,
+        ellipsoids, map positions): ``make(**fields)`` gives their columns. A live view's are
+        sent as they come, a file's in chunks of :data:`PENDING_ROWS` rows (the time columns
+        and the archetype's made once per chunk)."""
+        held = self._rows_held.setdefault(path, (make, t0_ns, [], {k: [] for k in fields}))
+        held[2].append(t)
+        for k, v in fields.items():
+            held[3][k].append(v)
+        if self.live or sum(x.shape[0] for x in held[2]) >= PENDING_ROWS:
+            self._send_rows_held(path)
+
+    def _send_rows_held(self, path: str) -> None:
+        make, t0_ns, times, fields = self._rows_held.pop(path)
+        columns = make(**{k: (sum(v, []) if isinstance(v[0], list) else np.concatenate(v))
+                          for k, v in fields.items()})
+        self._rec.send_columns(path, indexes=TimeIndex(np.concatenate(times), t0_ns).columns,
+                               columns=columns)
 
     def _style(
         self,

@@ -87,11 +87,8 @@ class TruthView(WorldView):
         world = f"/world{root}"
         w = convert.decimate(nav.t, BODY_RATE_HZ, after=log.last)
         if w.shape[0]:
-            self._rec.send_columns(
-                f"{world}/body",
-                indexes=self._indexes(nav.t[w], t0).columns,
-                columns=rr.Transform3D.columns(translation=ned[w], quaternion=xyzw(nav.q_nb[w])),
-            )
+            self._send_rows(f"{world}/body", nav.t[w], t0, rr.Transform3D.columns,
+                            translation=ned[w], quaternion=xyzw(nav.q_nb[w]))
         log.track.add(nav.t, ned, nav.pos)
         self._geo(root.strip("/"), nav.t, nav.pos, t0, TRUTH_COLOR, after=log.last)
         if nav.t.shape[0]:

@@ -157,11 +157,8 @@ class WorldView(Channel):
             k = ok[convert.decimate(t[ok], COVARIANCE_RATE_HZ, after=after)]
         root = entity_path("map", label)
         if k.shape[0]:
-            self._rec.send_columns(
-                f"{root}/position",
-                indexes=self._indexes(t[k], t0_ns).columns,
-                columns=rr.GeoPoints.columns(positions=np.degrees(pos[k, :2])),
-            )
+            self._send_rows(f"{root}/position", t[k], t0_ns, rr.GeoPoints.columns,
+                            positions=np.degrees(pos[k, :2]))
             if f"{root}/position" not in self._styled:
                 self._styled.add(f"{root}/position")
                 self._rec.log(
@@ -237,11 +234,9 @@ class WorldView(Channel):
         if w.shape[0]:
             self._set_world()
             self.catalog.frame(ned[w].min(axis=0), ned[w].max(axis=0))
-            self._rec.send_columns(
-                entity_path("world", L, "body"),
-                indexes=self._indexes(nav.t[w], result.t0_ns).columns,
-                columns=rr.Transform3D.columns(translation=ned[w], quaternion=xyzw(nav.q_nb[w])),
-            )
+            self._send_rows(entity_path("world", L, "body"), nav.t[w], result.t0_ns,
+                            rr.Transform3D.columns, translation=ned[w],
+                            quaternion=xyzw(nav.q_nb[w]))
             run.world_t = float(nav.t[w[-1]])
         c = convert.decimate(nav.t, COVARIANCE_RATE_HZ, after=run.cov_t)
         P_ned = _position_cov(run, result, a + c)  # of the rows drawn only
@@ -258,17 +253,9 @@ class WorldView(Channel):
         cov_path = entity_path("world", L, "covariance")
         if cov_path not in self.catalog.covariances:
             self.catalog.covariances.append(cov_path)
-        self._rec.send_columns(
-            cov_path,
-            indexes=self._indexes(nav.t[c], result.t0_ns).columns,
-            columns=rr.Ellipsoids3D.columns(
-                centers=ned[c],
-                half_sizes=half * factor[:, None],
-                quaternions=q,
-                colors=np.tile((*run.color, 90), (c.shape[0], 1)),
-                labels=labels,
-            ),
-        )
+        self._send_rows(cov_path, nav.t[c], result.t0_ns, rr.Ellipsoids3D.columns,
+                        centers=ned[c], half_sizes=half * factor[:, None], quaternions=q,
+                        colors=np.tile((*run.color, 90), (c.shape[0], 1)), labels=labels)
         run.cov_t = float(nav.t[c[-1]])
 
     def _log_outage_track(self, root: str, track: Track) -> None:
