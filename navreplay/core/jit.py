@@ -20,13 +20,17 @@ of the compile time. Importing this module registers a numba event listener that
 the collector for each outermost compilation and re-enables it after, if it was enabled; the
 garbage of the compilation is then collected as usual.
 
-numba's CPU target, when it first loads or compiles a kernel, imports ``numba.np.arraymath``,
-which decides whether ``np.dot`` may call BLAS by importing ``scipy.linalg.cython_blas``: scipy
-with its linear algebra, about 20 MB of resident memory and 0.1 s, in every run, although no
-kernel of the package calls BLAS. :class:`KernelCache` has that module imported with the
-question answered by finding scipy's module file instead (:func:`_arraymath_without_scipy`);
-a kernel that does call BLAS still has numba import scipy when it is compiled, and numba's
-helper library imports it at the kernel's first BLAS call.
+Before it loads a cached kernel, numba's cache has its CPU target load every registry of
+implementations (about 60 modules of numba's: 8 MB of resident memory and 0.1 s of CPU), which
+only a compilation uses, and among them ``numba.np.arraymath``, which decides whether ``np.dot``
+may call BLAS by importing ``scipy.linalg.cython_blas`` (scipy's linear algebra: 20 MB and
+0.1 s more), although no kernel of the package calls BLAS. :class:`KernelCache` loads a kernel
+with what its machine code needs only: numba's runtime and the symbols of Python's hash
+secret (the C helpers' symbols numba registers as it creates the target). When numba must
+compile, its compiler loads the registries as usual, ``numba.np.arraymath`` imported first
+with the BLAS question answered by finding scipy's module file
+(:func:`_arraymath_without_scipy`); a kernel that does call BLAS still has numba import scipy
+when it is compiled, and numba's helper library imports it at the kernel's first BLAS call.
 
 numba's runtime (NRT: reference counting, the arrays' memory) is a small LLVM module that
 numba compiles in every process, before its first kernel: that compilation runs LLVM's
@@ -53,7 +57,7 @@ from typing import Any
 import numba
 from numba.core import event
 from numba.core.caching import CompileResultCacheImpl, FunctionCache
-from numba.core.runtime import nrtdynmod
+from numba.core.runtime import nrtdynmod, rtsys
 
 from navreplay.core import shipped
 
@@ -86,11 +90,25 @@ class KernelCache(FunctionCache):
     Python objects and would differ from one build to the next."""
 
     def load_overload(self, sig: Any, target_context: Any) -> Any:
-        _arraymath_without_scipy()  # before numba's target loads its registries
-        cres = super().load_overload(sig, target_context)
+        """numba's ``load_overload`` without its refresh of the target context's registries
+        (the machine code needs none of them), then the shipped kernels; before a compilation
+        (nothing found), ``numba.np.arraymath`` is imported without scipy."""
+        _load_ready(target_context)
+        with self._guard_against_spurious_io_errors():
+            cres = self._load_overload(sig, target_context)
         if cres is None:
             cres = shipped.load(self._py_func, self._impl, sig, target_context, self._index_key)
+        if cres is None:
+            _arraymath_without_scipy()  # numba compiles next, and loads its registries
         return cres
+
+
+def _load_ready(target_context: Any) -> None:
+    """What a kernel's machine code needs of numba beyond its target: its runtime (which
+    numba's refresh of the registries would initialise) and the symbols of Python's hash
+    secret (registered as ``numba.cpython.hashing`` is imported)."""
+    rtsys.initialize(target_context)
+    import numba.cpython.hashing  # noqa: F401
 
 
 def _blas_findable() -> None:
