@@ -155,6 +155,7 @@ RUNTIME: dict[str, str] = {}
 """Where this process's numba runtime came from: ``source`` is ``user cache``, ``shipped`` or
 ``compiled``."""
 
+
 def runtime_file(magic: tuple[Any, ...]) -> str:
     """The file name of the runtime's machine code for numba's code-generation key ``magic``
     (this numba, llvmlite and Python)."""

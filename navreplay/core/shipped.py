@@ -8,7 +8,9 @@ source directory in the package (``filters/``, ``geo/``, ...), and ``manifest.js
 numba, llvmlite and Python it was built with, numba's code-generation key (target triple, CPU
 ``generic``: the architecture's baseline, so any CPU of that architecture runs it; no
 instruction set extension is assumed) and the SHA-256 of every file.
-``navreplay.jobs.warmup.ship`` builds it; the wheel build runs that (``setup.py``).
+``navreplay.jobs.warmup.ship`` builds it; the wheel build runs that (``setup.py``). Beside the
+kernels, ``core/`` holds numba's runtime library built with them (``numba-runtime-*.nrt``,
+:func:`load_runtime`; :func:`navreplay.core.jit.runtime_library` uses it).
 
 A shipped kernel is used only when all of these hold, else numba compiles it as it would
 without a store (nothing is ever half-used):
@@ -36,6 +38,7 @@ import os
 import shutil
 import sys
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -196,7 +199,8 @@ def load(py_func: Any, impl: Any, sig: Any, target_context: Any, index_key: Any)
         return None
 
 
-def load_runtime(target_context: Any, file_name: Any) -> bytes | None:
+def load_runtime(target_context: Any, file_name: Callable[[tuple[Any, ...]], str]
+                 ) -> bytes | None:
     """The saved machine code of numba's runtime library in the store
     (:func:`navreplay.core.jit.runtime_library`; ``file_name(magic)`` names it for the store's
     code-generation key), or None: no store, turned off, built elsewhere or changed."""
