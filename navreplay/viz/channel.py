@@ -165,7 +165,8 @@ class Channel:
         self._truth: convert.NavColumns | None = None
         self._truth_yaw: tuple[np.ndarray, np.ndarray] | None = None  # t [s], unwrapped yaw
         self._truth_log: TruthLog | None = None
-        # extent of the true track up to each time (ellipsoid caps): times [s], extents [m]
+        # the box of the true track up to each time of a block (its ellipsoids' caps), in
+        # parts: times [s], low and high NED corners [m]
         self._extent_curve: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         # the box of the true track row by row over the last truth windows logged (times,
         # low and high corners), and whether they hold every row logged
