@@ -153,7 +153,10 @@ class Channel:
                                          dict[str, list[Any]]]] = {}
         """The rows of each entity that is not a drawn series not sent yet (a file's)."""
         self._queued: list[_Queued] = []
-        """Series logged in the current call of the sink, not yet drawn (:meth:`_scalars`)."""
+        """Series logged and not yet drawn (:meth:`_scalars`): a live view's in the current
+        call of the sink, a file's until one holds :data:`PENDING_ROWS` rows."""
+        self._queued_rows: dict[str, int] = {}
+        self._queued_most = 0
         self.live = not isinstance(target, Save)
         self._sent: tuple | None = None
         self._colors = LabelColors()
@@ -200,7 +203,8 @@ class Channel:
         announced right after its first rows."""
         if not self.live:
             log()
-            self._draw_queued()
+            if self._queued_most >= PENDING_ROWS:
+                self._draw_queued()
             return
         if plan:
             saved = (self._rec, copy.deepcopy(self._runs), set(self._styled), self._ref,
@@ -213,7 +217,7 @@ class Channel:
                 log()
                 self._draw_queued()
             finally:
-                self._queued = []
+                self._queued, self._queued_rows, self._queued_most = [], {}, 0
                 (self._rec, self._runs, self._styled, self._ref, self._extent, self._truth,
                  self._truth_yaw, self._world_coords, self._truth_columns, self._box,
                  self._truth_log, self._truth_names, self._pending, self._track_box,
@@ -243,24 +247,36 @@ class Channel:
             return
         if isinstance(idx, TimeIndex):
             self._queued.append(_Queued(path, idx, values, columns, maxima, band))
+            rows = self._queued_rows.get(path, 0) + values.shape[0]
+            self._queued_rows[path] = rows
+            self._queued_most = max(self._queued_most, rows)
             return
         self._rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(
             scalars=_band_lines(values) if band else values))
 
     def _draw_queued(self) -> None:
-        """Draw the queued series (:meth:`_scalars`); a series queued twice after its first
-        rows."""
+        """Draw the queued series (:meth:`_scalars`): each one's pieces as one, those that
+        came on the same time indexes on one time index."""
         queue, self._queued = self._queued, []
-        wave: list[_Queued] = []
-        seen: set[str] = set()
+        self._queued_rows, self._queued_most = {}, 0
+        pieces: dict[str, list[_Queued]] = {}
         for item in queue:
-            if item.path in seen:
-                self._draw(wave)
-                wave, seen = [], set()
-            wave.append(item)
-            seen.add(item.path)
-        if wave:
-            self._draw(wave)
+            pieces.setdefault(item.path, []).append(item)
+        merged: list[_Queued] = []
+        joined: dict[tuple[int, ...], TimeIndex] = {}
+        for items in pieces.values():
+            if len(items) == 1:
+                merged.append(items[0])
+                continue
+            key = tuple(id(q.idx) for q in items)
+            idx = joined.get(key)
+            if idx is None:
+                idx = joined[key] = TimeIndex(np.concatenate([q.idx.t for q in items]),
+                                              items[0].idx.t0_ns)
+            merged.append(items[0]._replace(
+                idx=idx, values=np.concatenate([q.values for q in items])))
+        if merged:
+            self._draw(merged)
 
     def _draw(self, queued: list[_Queued]) -> None:
         """Series of distinct entities into their panes' envelopes, their whole bins drawn (the
@@ -427,6 +443,7 @@ class Channel:
         """The default blueprint for what has been logged so far; ``final``: the panes open on
         the y and time ranges of their data (a live view's blueprint before the end leaves
         them to the viewer, which follows the data as it comes)."""
+        self._draw_queued()  # the panes' ranges hold every row logged
         return build_blueprint(self.catalog, ranges=final)
 
     def send_blueprint(self, *, final: bool = True) -> None:
