@@ -1,5 +1,5 @@
 """Sample checks shared by the writer and the reader: finite values, increasing time, physical
-ranges, gaps, frame ids.
+ranges, gaps (those of declared GNSS outages excused), frame ids.
 
 Byte damage in a file without checksums (an uncompressed MCAP without CRCs, a rosbag2 sqlite or
 MCAP bag) reads without error; what it changes mostly shows as a value no sensor gives (an
@@ -19,10 +19,12 @@ import contextlib
 import contextvars
 import dataclasses
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
+from navreplay.core.outages import recorded_outages
 from navreplay.core.streams import Stream, StreamKind
 from navreplay.io.convert import BODY_KINDS, NAV_KINDS, Convention, assumed_convention
 from navreplay.io.errors import RecordingError
@@ -198,15 +200,53 @@ def first_problem(stream: Stream, t0_ns: int, ranges: bool = True) -> str | None
     return None
 
 
-def gap_report(stream: Stream, t0_ns: int, factor: float = GAP_FACTOR) -> str | None:
-    """Describe intervals longer than ``factor`` x the median interval, or return None."""
+def declared_outages(kind: StreamKind, extra: Mapping[str, Any], t0_ns: int) -> np.ndarray:
+    """The spans a recording declares its ``kind`` stream silent in, (K, 2) int64 [ns]: the
+    GNSS outages of ``metadata.extra["gnss_outages"]`` (:mod:`navreplay.core.outages`) for the
+    GNSS fix and velocity streams, none for the others. A malformed entry declares nothing here
+    (the scoring, which reads the same entry, names it)."""
+    if kind not in (StreamKind.GPS, StreamKind.GPS_VEL):
+        return NO_SPANS
+    try:
+        spans = recorded_outages(extra)
+    except ValueError:
+        return NO_SPANS
+    if not spans:
+        return NO_SPANS
+    return t0_ns + np.round(np.asarray(spans, dtype=float) * 1e9).astype(np.int64)
+
+
+NO_SPANS = np.zeros((0, 2), dtype=np.int64)
+"""No declared outage."""
+
+
+def gap_steps(t_ns: np.ndarray, median: float, factor: float = GAP_FACTOR,
+              declared: np.ndarray = NO_SPANS) -> np.ndarray:
+    """Indices ``i`` of the intervals ``t_ns[i] -> t_ns[i + 1]`` longer than ``factor`` x
+    ``median`` [ns] that no declared outage explains (:func:`declared_outages`): an outage
+    explains a gap whose two samples lie within ``factor`` x ``median`` of its span."""
+    step = np.diff(t_ns)
+    gaps = np.flatnonzero(step > factor * median)
+    if gaps.size and len(declared):
+        slack = factor * median
+        before, after = t_ns[gaps][:, None], t_ns[gaps + 1][:, None]
+        explained = ((before >= declared[:, 0] - slack)
+                     & (after <= declared[:, 1] + slack)).any(axis=1)
+        gaps = gaps[~explained]
+    return gaps
+
+
+def gap_report(stream: Stream, t0_ns: int, factor: float = GAP_FACTOR,
+               declared: np.ndarray = NO_SPANS) -> str | None:
+    """Describe intervals longer than ``factor`` x the median interval that no ``declared``
+    outage explains (:func:`gap_steps`), or return None."""
     if len(stream) < 3:
         return None
     step = np.diff(stream.t_ns)
     median = float(np.median(step))
     if median <= 0:
         return None
-    gaps = np.flatnonzero(step > factor * median)
+    gaps = gap_steps(stream.t_ns, median, factor, declared)
     if not gaps.size:
         return None
     worst = int(gaps[np.argmax(step[gaps])])

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from navreplay.core.streams import Metadata, Stream, StreamKind
-from navreplay.io.checks import first_problem, gap_report
+from navreplay.io.checks import declared_outages, first_problem, gap_report
 from navreplay.io.convert import Convention
 from navreplay.io.errors import RecordingError
 from navreplay.io.source import COMPLETE, FileSource, Window
@@ -133,6 +133,7 @@ class DirectSource(FileSource):
         firsts = [int(c.t_ns[0]) for c, _, _ in got.values() if len(c.t_ns)]
         t0_ns = min(firsts) if firsts else 0
         streams: dict[StreamKind, Stream] = {}
+        metadata = self.metadata()
         for kind, (cols, topic, others) in got.items():
             label = f"{self.name}: topic {topic.name} ({topic.type_name})"
             for note in cols.notes:
@@ -143,13 +144,14 @@ class DirectSource(FileSource):
                 problem = first_problem(stream, t0_ns)
                 if problem:
                     raise RecordingError(f"{label}: {problem}")
-                gaps = gap_report(stream, t0_ns)
+                gaps = gap_report(stream, t0_ns,
+                                  declared=declared_outages(kind, metadata.extra, t0_ns))
                 if gaps:
                     warn(f"{label}: {gaps}")
             streams[kind] = stream
             self.sources[kind] = TopicSource(topic.name, topic.type_name, cols.frame_id,
                                              cols.convention, cols.reason, others)
-        yield Window(streams, dict.fromkeys(streams, COMPLETE), self.metadata(), t0_ns,
+        yield Window(streams, dict.fromkeys(streams, COMPLETE), metadata, t0_ns,
                      frozenset(chosen), final=True)
 
 

@@ -37,7 +37,7 @@ from typing import BinaryIO
 import numpy as np
 
 from navreplay.core.streams import Metadata, Stream, StreamKind
-from navreplay.io.checks import GAP_FACTOR, check_frame_ids, gap_text, when
+from navreplay.io.checks import check_frame_ids, declared_outages, gap_steps, gap_text, when
 from navreplay.io.convert import AuxColumn
 from navreplay.io.decode import ChannelDecoder, Decoding, describe_topics, file_metadata
 from navreplay.io.errors import RecordingError, RecordingWarning, SalvagedWarning
@@ -180,7 +180,8 @@ class _Reading:
         self.ahead: dict[StreamKind, tuple[int, int]] = {}  # kind -> (chunk, first time)
         self.floor: dict[StreamKind, int] = {}  # no sample of the kind may come before
         self.base: dict[StreamKind, str] = {}  # kind -> "header" or "log", as first chosen
-        self.gaps = {kind: _Gaps() for kind in chosen}
+        self.gaps = {kind: _Gaps(declared_outages(kind, metadata.extra, t0_ns))
+                     for kind in chosen}
         self.warnings = _Warnings()
         self.windows = 0
         self.newest = -COMPLETE  # the latest sample of any kind in the previous windows
@@ -320,9 +321,11 @@ class _Reading:
 
 class _Gaps:
     """The gaps of one stream read in windows: counted against the median interval of the
-    first samples (at least three), across window boundaries too."""
+    first samples (at least three), across window boundaries too; those the recording's
+    ``declared`` outages explain are not (:func:`navreplay.io.checks.gap_steps`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, declared: np.ndarray) -> None:
+        self.declared = declared
         self.median = 0.0
         self.head = np.zeros(0, np.int64)  # samples until the median is known
         self.prev: int | None = None
@@ -341,13 +344,13 @@ class _Gaps:
             return
         t = t_ns if self.prev is None else np.concatenate([[self.prev], t_ns])
         self.prev = int(t_ns[-1])
-        step = np.diff(t)
-        gaps = np.flatnonzero(step > GAP_FACTOR * self.median)
+        gaps = gap_steps(t, self.median, declared=self.declared)
         if gaps.size:
+            step = t[gaps + 1] - t[gaps]
             self.count += gaps.size
-            worst = int(gaps[np.argmax(step[gaps])])
+            worst = int(np.argmax(step))
             if step[worst] > self.longest:
-                self.longest, self.start = int(step[worst]), int(t[worst])
+                self.longest, self.start = int(step[worst]), int(t[gaps[worst]])
 
     def line(self, t0_ns: int) -> str | None:
         if not self.count:

@@ -9,8 +9,10 @@ import dataclasses
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from navreplay.core.streams import StreamKind, seconds
-from navreplay.io.checks import gap_report, read_policy
+from navreplay.io.checks import declared_outages, gap_report, read_policy
 from navreplay.io.direct import DirectSource
 from navreplay.io.errors import RecordingError
 from navreplay.io.files import BAGS, file_kind, read_streams
@@ -110,6 +112,11 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             b = len(s) if hi is None else int(s.t_ns.searchsorted(hi, side="right"))
             recording.streams[stream_kind] = s.slice(a, max(a, b))
     by_topic: dict[str, list[StreamKind]] = {}  # a GNSS topic can feed gps and gps_vel
+
+    def declared(kind: StreamKind) -> np.ndarray:  # the recording's declared GNSS outages
+        assert recording is not None
+        return declared_outages(kind, recording.metadata.extra, recording.t0_ns)
+
     for stream_kind, src in sources.items():
         by_topic.setdefault(src.topic, []).append(stream_kind)
     rows = [(item, "type", "stream", "frame id", "axes", "count", "rate [Hz]", "start [s]",
@@ -125,7 +132,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
             s, src = recording[kind], sources[kind]
             stream, frame = ",".join(k.value for k in fed), src.frame_id
             axes = src.convention.value.upper() if src.convention else "-"
-            gaps = "yes" if gap_report(s, recording.t0_ns) else "no"
+            gaps = "yes" if gap_report(s, recording.t0_ns, declared=declared(kind)) else "no"
             if len(s):  # the stream's sample times (header stamps or log times)
                 start, end = int(s.t_ns[0]), int(s.t_ns[-1])
             if options.span is not None:
@@ -152,7 +159,7 @@ def describe_log(path: str | Path, options: LogOptions | None = None) -> LogDesc
         axes = (f"{src.convention.value.upper()}: {src.reason}" if src.convention
                 else "no axes to convert")
         lines.append(f"  {kind.value:<8} <- {src.topic}: {axes}{picked}")
-        stream_gaps = gap_report(recording[kind], recording.t0_ns)
+        stream_gaps = gap_report(recording[kind], recording.t0_ns, declared=declared(kind))
         if stream_gaps:
             lines.append(f"  {'':<8}    {stream_gaps}")
     for w in caught:

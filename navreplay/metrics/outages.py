@@ -1,5 +1,5 @@
 """GNSS outages scored one by one, as a field test reports them: for each outage of a
-recording (``metadata.extra["gnss_outages"]``, :func:`navreplay.sensors.gps.recorded_outages`)
+recording (``metadata.extra["gnss_outages"]``, :func:`navreplay.core.outages.recorded_outages`)
 the horizontal and vertical position error at its end, the last estimate before the GNSS
 returns, against the filter's predicted sigma there, and the RMS of both errors over the
 outage.

@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.outages import recorded_outages
 from navreplay.core.streams import Recording, Stream, StreamKind, seconds
 from navreplay.geo.rotations import wrap_angle
 from navreplay.metrics.errors import position_error_ned
-from navreplay.sensors.gps import recorded_outages
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,7 +32,7 @@ class Reference:
         The constants ``TrueConstant`` states name (``metadata.true_errors``).
     outages : tuple of (start, end)
         The recording's GNSS outages [s since its start] (``metadata.extra["gnss_outages"]``,
-        :func:`navreplay.sensors.gps.recorded_outages`), scored one by one
+        :func:`navreplay.core.outages.recorded_outages`), scored one by one
         (:mod:`navreplay.metrics.outages`).
     """
 

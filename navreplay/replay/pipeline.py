@@ -35,6 +35,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from navreplay.core.outages import recorded_outages
 from navreplay.core.streams import Metadata, Recording, Stream, StreamKind
 from navreplay.filters.base import Filter, FilterParams, TruthColumn
 from navreplay.filters.result import RunResult, concat, concat_innovations
@@ -56,7 +57,6 @@ from navreplay.replay.smoothing import (
     smoothed_label,
 )
 from navreplay.replay.spec import FilterSpec
-from navreplay.sensors.gps import recorded_outages
 
 
 @dataclasses.dataclass(frozen=True)

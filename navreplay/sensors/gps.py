@@ -15,7 +15,8 @@ Outages
     underneath. Scenarios with GNSS take it as the parameter ``gps_outages``
     (``-p gps_outages=120:30,300:60``, or ``gps_outages = [[120, 30], [300, 60]]`` in TOML;
     :func:`check_outages`) and record it in ``metadata.extra["gnss_outages"]`` as
-    ``[[start, end], ...]`` [s] (:data:`OUTAGES_KEY`, :func:`recorded_outages`), where the
+    ``[[start, end], ...]`` [s] (:data:`navreplay.core.outages.OUTAGES_KEY`, read by
+    :func:`navreplay.core.outages.recorded_outages`), where the
     scoring and the view find it whatever the scenario.
 
 Examples
@@ -34,7 +35,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Iterable, Mapping
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
@@ -209,10 +210,6 @@ class GpsMeasurement:
 
 # -- outages ----------------------------------------------------------------------------------
 
-OUTAGES_KEY = "gnss_outages"
-"""The key of ``Metadata.extra`` holding a recording's GNSS outages, ``[[start, end], ...]``
-[s since the recording start]."""
-
 Outages = tuple[tuple[float, float], ...]
 """A GNSS outage schedule: ``(start, length)`` pairs [s since the recording start]."""
 
@@ -265,25 +262,6 @@ def outage_mask(t: np.ndarray, outages: Outages) -> np.ndarray:
 
 
 def outages_extra(outages: Outages) -> list[list[float]]:
-    """The ``metadata.extra`` entry (:data:`OUTAGES_KEY`) of a schedule: ``[[start, end], ...]``
-    [s]."""
+    """The ``metadata.extra`` entry (:data:`navreplay.core.outages.OUTAGES_KEY`) of a
+    schedule: ``[[start, end], ...]`` [s]."""
     return [[start, start + length] for start, length in outages]
-
-
-def recorded_outages(extra: Mapping[str, Any]) -> tuple[tuple[float, float], ...]:
-    """The GNSS outages a recording's ``metadata.extra`` holds, as ``((start, end), ...)`` [s
-    since the recording start]; empty when it holds none. Raises ``ValueError`` on an entry
-    that is not a list of increasing ``[start, end]`` pairs."""
-    raw = extra.get(OUTAGES_KEY) or []
-    out = []
-    for item in raw:
-        try:
-            start, end = (float(v) for v in item)
-        except (TypeError, ValueError):
-            raise ValueError(f"metadata.extra[{OUTAGES_KEY!r}]: {item!r} is not a [start, end] "
-                             "pair [s]") from None
-        if not (math.isfinite(start) and math.isfinite(end) and end > start):
-            raise ValueError(f"metadata.extra[{OUTAGES_KEY!r}]: {item!r} is not a [start, end] "
-                             "pair with end > start [s]")
-        out.append((start, end))
-    return tuple(out)

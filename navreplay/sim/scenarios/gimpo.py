@@ -77,13 +77,13 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
+from navreplay.core.outages import OUTAGES_KEY
 from navreplay.core.params import check_nonnegative, check_positive
 from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.core.units import DEG, G0, GAUSS, MICRO_G_PER_SQRT_HZ, MILLI_G
 from navreplay.geo.earth import gravity, gravity_n, ned_offset_to_lla, omega_en_n, omega_ie_n
 from navreplay.geo.rotations import euler_to_quat
 from navreplay.sensors.gps import (
-    OUTAGES_KEY,
     GpsModel,
     check_outages,
     outage_mask,

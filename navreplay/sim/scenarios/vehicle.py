@@ -40,7 +40,7 @@ Metadata
     ``phi``} (1-sigma per axis) for a filter's P0. ``extra``: ``site``, ``date``,
     ``decimal_year``, ``rates`` [Hz], ``truth_columns``, and for the drive ``mag_field_n``
     [T, NED] (the WMM field at the start, used for every magnetometer sample), ``wmm`` and
-    ``gnss_outages`` (``[[start, end], ...]`` [s], :data:`navreplay.sensors.gps.OUTAGES_KEY`).
+    ``gnss_outages`` (``[[start, end], ...]`` [s], :data:`navreplay.core.outages.OUTAGES_KEY`).
 ``t0_ns`` is the scenario date (UTC) in UNIX nanoseconds; the streams start there.
 """
 
@@ -52,6 +52,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from navreplay.core.outages import OUTAGES_KEY
 from navreplay.core.params import (
     check_divides,
     check_nonnegative,
@@ -61,7 +62,6 @@ from navreplay.core.params import (
 from navreplay.core.streams import Recording, Stream, StreamKind, nanoseconds
 from navreplay.core.units import DEG
 from navreplay.sensors.gps import (
-    OUTAGES_KEY,
     GpsModel,
     check_outages,
     outage_mask,
