@@ -6,10 +6,11 @@ A column's format is ``%d``, ``%.Nf`` (N <= 15), ``%.Ng`` (1 <= N <= 17) or
 integer arithmetic: a value is scaled by an exact power of ten (one correctly rounded
 multiplication or division; the decimal exponent estimated from the binary one in its bits)
 and rounded to an integer, whose digits are written four at a time (two pairs from a table),
-then the decimal point is put in and ``%g``'s trailing zeros are dropped. Where that rounding could differ from
-the correctly rounded decimal Python prints (the scaled value within 1e-6 of a half beyond its
-rounding error, or outside the exactly representable range) the value is formatted by Python
-instead (the kernel leaves a mark where it goes), as is every value of any other format.
+then the decimal point is put in and ``%g``'s trailing zeros are dropped. Where that rounding
+could differ from the correctly rounded decimal Python prints (the scaled value within 1e-6 of
+a half beyond its rounding error, or outside the exactly representable range) the value is
+formatted by Python instead (the kernel leaves a mark where it goes), as is every value of any
+other format.
 
 Examples
 --------
