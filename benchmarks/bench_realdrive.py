@@ -27,9 +27,16 @@ never does. The commands:
 
 Then the memory floor of a run: the resident memory of one fresh interpreter as it imports,
 step by step, what ``run gps-ins BAG --no-viz`` loads before it reads any data (numpy, the
-command line, llvmlite's LLVM library, numba, the run's navreplay modules, scipy.linalg which
-numba's BLAS check imports, numba's CPU target with one cached kernel), and then rerun, which
-the default run adds to draw.
+command line, llvmlite's LLVM library, numba, the run's navreplay modules, numba's CPU target
+with its runtime library, one cached kernel), and then rerun, which the default
+run adds to draw; each step split into pages of mapped files (libraries' code and data) and
+anonymous memory (heap, Python objects, arrays). Then how much of LLVM's library is resident:
+its pages are shared with the page cache, and how many a touch maps depends on the kernel and
+on how the file came into the page cache (a kernel that maps a large folio whole maps up to
+2 MB per touch of a library just written by ``pip install``, 4 kB after the file was read back
+from disk), whether numba's runtime library came from a cache, and whether numba's
+registries of implementations or scipy.linalg were imported (they must not be: a cached
+kernel needs neither, ``navreplay.core.jit``).
 
 Targets (issue 26): the CPU time within 1.5x that of a C++ filter on such a drive: KF-GINS
 took 1.1 s in the issue's own measurement (KF-GINS is not run here), so 1.65 s; the
@@ -201,50 +208,84 @@ _FLOOR_CHILD = """
 import json
 def rss():
     with open("/proc/self/status") as f:
-        return next(int(x.split()[1]) * 1024 for x in f if x.startswith("VmRSS:"))
-steps = [("python", rss())]
+        d = {x.split(":")[0]: int(x.split()[1]) * 1024 for x in f
+             if x.startswith(("VmRSS:", "RssAnon:", "RssFile:"))}
+    return d["VmRSS"], d["RssFile"], d["RssAnon"]
+def llvm():
+    rss_kib = size_kib = 0
+    with open("/proc/self/smaps") as f:
+        inside = False
+        for line in f:
+            if "-" in line.split()[0] and len(line.split()) >= 5:
+                inside = line.rstrip().endswith("libllvmlite.so")
+            elif inside and line.startswith(("Rss:", "Size:")):
+                kib = int(line.split()[1])
+                rss_kib, size_kib = ((rss_kib + kib, size_kib) if line.startswith("Rss:")
+                                     else (rss_kib, size_kib + kib))
+    return rss_kib * 1024, size_kib * 1024
+steps = [("python", *rss())]
 import numpy
-steps.append(("numpy", rss()))
+steps.append(("numpy", *rss()))
 import navreplay.cli
-steps.append(("the command line (navreplay.cli)", rss()))
+steps.append(("the command line (navreplay.cli)", *rss()))
 import llvmlite.binding
-steps.append(("llvmlite.binding (LLVM)", rss()))
+steps.append(("llvmlite.binding (LLVM)", *rss()))
 import numba
-steps.append(("numba", rss()))
+steps.append(("numba", *rss()))
 import navreplay.filters.gps_ins, navreplay.io.rosbag, navreplay.jobs.run, navreplay.logs.prepare
-steps.append(("the run's navreplay modules", rss()))
-import scipy.linalg
-steps.append(("scipy.linalg (numba's BLAS check)", rss()))
+steps.append(("the run's navreplay modules", *rss()))
+from navreplay.core import jit
+from numba.core.registry import cpu_target
+jit._load_ready(cpu_target.target_context)  # as the first kernel's load does
+steps.append(("numba's CPU target and runtime", *rss()))
 from navreplay.filters import kalman
 kalman.check_covariance(numpy.eye(3))
-steps.append(("numba's CPU target, one cached kernel", rss()))
+steps.append(("one cached kernel", *rss()))
+library = llvm()
 import rerun
-steps.append(("rerun (to draw)", rss()))
-print(json.dumps(steps))
+steps.append(("rerun (to draw)", *rss()))
+import sys
+unneeded = [m for m in ("numba.np.arraymath", "scipy.linalg") if m in sys.modules]
+print(json.dumps([steps, library, jit.RUNTIME.get("source"), unneeded]))
 """
-"""Resident memory [bytes] of a fresh interpreter after each step of a run's imports."""
+"""Resident memory [bytes] of a fresh interpreter after each step of a run's imports: (step,
+resident, of it mapped files, anonymous); LLVM's library (resident, mapped) before rerun;
+where numba's runtime library came from; which of numba's registries (only a compilation
+needs them) and scipy.linalg were imported."""
 
 
-def floor() -> list[tuple[str, int]]:
-    """(step, resident memory [bytes] after it) of :data:`_FLOOR_CHILD`."""
+Floor = tuple[list[tuple[str, int, int, int]], tuple[int, int], str, list[str]]
+
+
+def floor() -> Floor:
+    """What :data:`_FLOOR_CHILD` prints."""
     import json
 
     out = subprocess.run([sys.executable, "-c", _FLOOR_CHILD], env=ENV, check=True,
                          capture_output=True, text=True)
-    return [(k, int(v)) for k, v in json.loads(out.stdout.strip().splitlines()[-1])]
+    steps, library, runtime, unneeded = json.loads(out.stdout.strip().splitlines()[-1])
+    return [tuple(s) for s in steps], tuple(library), runtime, unneeded
 
 
-def report_floor(steps: list[tuple[str, int]]) -> None:
-    print("memory floor of a run (resident memory of one fresh interpreter after each import):")
-    last = steps[0][1]
-    for name, rss in steps:
-        print(f"  + {name:38s} {(rss - last) / 1e6:+5.0f} MB = {rss / 1e6:4.0f} MB")
-        last = rss
-    rss = [r for _, r in steps]
-    numba = (rss[3] - rss[2]) + (rss[4] - rss[3]) + (rss[6] - rss[5]) + (rss[7] - rss[6])
-    print(f"before reading any data: {(rss[7] - rss[1]) / 1e6:+.0f} MB over numpy, of which "
-          f"LLVM and numba (with the scipy.linalg it imports and its CPU target) "
+def report_floor(found: Floor) -> None:
+    steps, (lib_rss, lib_size), runtime, unneeded = found
+    print("memory floor of a run (resident memory of one fresh interpreter after each import; "
+          "pages of mapped files and anonymous memory):")
+    print(f"  {'':40s} {'files':>6s} {'anon':>5s} {'resident':>9s}")
+    last = steps[0][1:]
+    for name, rss, files, anon in steps:
+        print(f"  + {name:38s} {(files - last[1]) / 1e6:+6.0f} {(anon - last[2]) / 1e6:+5.0f} "
+              f"{(rss - last[0]) / 1e6:+5.0f} MB = {rss / 1e6:4.0f} MB")
+        last = (rss, files, anon)
+    at = [r for _, r, _, _ in steps]
+    numba = (at[4] - at[2]) + (at[7] - at[5])
+    print(f"before reading any data: {(at[7] - at[1]) / 1e6:+.0f} MB over numpy, of which LLVM "
+          f"and numba (their libraries, numba's CPU target and runtime, one cached kernel) "
           f"{numba / 1e6:+.0f} MB")
+    print(f"  LLVM's library: {lib_rss / 1e6:.0f} MB of its {lib_size / 1e6:.0f} MB mapped are "
+          f"resident (file pages: how many a touch maps depends on the page cache's folio "
+          f"size); numba's runtime from: {runtime}; numba's registries or scipy.linalg "
+          f"imported: {', '.join(unneeded) or 'none'}")
 
 
 def measure(argv: list[str], cwd: Path) -> tuple[float, int, float]:

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent
 RECORDING = ROOT / "recordings" / "golden" / "vehicle-drive.mcap"
 
 # `navreplay run gps-ins REC --no-viz` in this process; then, on the last line, the kernels
-# numba compiled and what the shipped store served
+# numba compiled, what the shipped store served and where numba's runtime library came from
 _RUN = """
 import json, sys
 from navreplay.cli import main
@@ -33,7 +33,8 @@ except SystemExit as e:
     assert not e.code, e.code
 from navreplay.core import jit, shipped
 misses = sorted(k.__name__ for k in jit.KERNELS if k._cache_misses)
-print(json.dumps({"misses": misses, "stats": dict(shipped.STATS)}))
+print(json.dumps({"misses": misses, "stats": dict(shipped.STATS),
+                  "runtime": jit.RUNTIME.get("source")}))
 """
 
 
@@ -67,11 +68,12 @@ def test_pip_install_ships_the_kernels_and_the_first_run_compiles_nothing(tmp_pa
     (tmp_path / "a").mkdir()
     printed, stats = _run(python, tmp_path / "a")
     assert stats["misses"] == [] and stats["stats"].get("loaded", 0) >= 1, stats
-    assert "refused" not in stats["stats"]
+    assert "refused" not in stats["stats"] and stats["runtime"] == "shipped"
     (tmp_path / "b").mkdir()  # this checkout's interpreter, kernels compiled for this CPU
     host_printed, host = _run(sys.executable, tmp_path / "b", NAVREPLAY_SHIPPED_KERNELS="0",
                               PYTHONPATH=str(ROOT))
     assert "run_events" in host["misses"] and not host["stats"]
+    assert host["runtime"] == "compiled"
     table = [line for line in printed if line.startswith("gps-ins")]
     assert table and table == [line for line in host_printed if line.startswith("gps-ins")]
 

@@ -8,7 +8,9 @@ source directory in the package (``filters/``, ``geo/``, ...), and ``manifest.js
 numba, llvmlite and Python it was built with, numba's code-generation key (target triple, CPU
 ``generic``: the architecture's baseline, so any CPU of that architecture runs it; no
 instruction set extension is assumed) and the SHA-256 of every file.
-``navreplay.jobs.warmup.ship`` builds it; the wheel build runs that (``setup.py``).
+``navreplay.jobs.warmup.ship`` builds it; the wheel build runs that (``setup.py``). Beside the
+kernels, ``core/`` holds numba's runtime library built with them (``numba-runtime-*.nrt``,
+:func:`load_runtime`; :func:`navreplay.core.jit.runtime_library` uses it).
 
 A shipped kernel is used only when all of these hold, else numba compiles it as it would
 without a store (nothing is ever half-used):
@@ -36,6 +38,7 @@ import os
 import shutil
 import sys
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +51,7 @@ from numba.core.caching import (
     _SourceFileBackedLocatorMixin,
 )
 
-__all__ = ["ENV", "STATS", "STORE", "load", "write"]
+__all__ = ["ENV", "STATS", "STORE", "load", "load_runtime", "write"]
 
 PACKAGE = Path(__file__).resolve().parents[1]
 """The installed ``navreplay`` package directory."""
@@ -196,10 +199,36 @@ def load(py_func: Any, impl: Any, sig: Any, target_context: Any, index_key: Any)
         return None
 
 
+def load_runtime(target_context: Any, file_name: Callable[[tuple[Any, ...]], str]
+                 ) -> bytes | None:
+    """The saved machine code of numba's runtime library in the store
+    (:func:`navreplay.core.jit.runtime_library`; ``file_name(magic)`` names it for the store's
+    code-generation key), or None: no store, turned off, built elsewhere or changed."""
+    if not enabled():
+        return None
+    store = _open(STORE)
+    if store is None or not store.runs_here(target_context):
+        return None
+    name = f"core/{file_name(store.magic)}"
+    digest = store.files.get(name)
+    if digest is None:
+        return None
+    try:
+        data = (store.root / name).read_bytes()
+    except OSError:
+        STATS["refused"] += 1
+        return None
+    if hashlib.sha256(data).hexdigest() != digest:
+        STATS["refused"] += 1
+        return None
+    return data
+
+
 def write(cache_dir: Path, out: Path, magic: tuple[Any, ...]) -> int:
     """Make the store ``out`` from a numba cache directory (``NUMBA_CACHE_DIR`` of a process
     that compiled the package's kernels with the code-generation key ``magic``): each source
-    directory's cache files under the directory's path in the package, and the manifest.
+    directory's cache files (and numba's runtime library, saved beside ``core``'s) under the
+    directory's path in the package, and the manifest.
     Returns the number of kernels (index files)."""
     if out.exists():
         shutil.rmtree(out)
@@ -212,7 +241,7 @@ def write(cache_dir: Path, out: Path, magic: tuple[Any, ...]) -> int:
         if not src.is_dir():
             continue
         for path in sorted(src.iterdir()):
-            if path.suffix in (".nbi", ".nbc"):
+            if path.suffix in (".nbi", ".nbc", ".nrt"):
                 dest = out / rel / path.name
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(path, dest)

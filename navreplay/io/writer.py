@@ -4,14 +4,16 @@ Messages of all streams are merged by time (ties in :class:`StreamKind` order) a
 windows of about :data:`WINDOW` messages: each window's messages are CDR-encoded per stream as one
 numpy structured array and handed to :class:`~navreplay.io.mcapwrite.BulkWriter` (mcap's file
 layout, the records assembled in bulk). Memory stays bounded by the window, not
-the recording. The file is written under a temporary name beside the target, fsynced, and renamed
+the recording; a recording too long to hold is written from pieces in time order (``more``). The file is written under a temporary name beside the target, fsynced, and renamed
 only once complete, so the target name never shows a partial file.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import os
+from collections.abc import Iterable
 from pathlib import Path
 from typing import BinaryIO
 
@@ -114,7 +116,36 @@ def _windows(plan: list[_Topic]) -> list[tuple[int, ...]]:
     return bounds
 
 
-def _write_mcap(out: BinaryIO, recording: Recording, plan: list[_Topic]) -> None:
+def _continued(piece: Recording, first: Recording, plan: list[_Topic], last: dict[StreamKind, int],
+               where: str, validate: bool, index: int) -> list[_Topic]:
+    """The plan of piece ``index`` (from 1) of a recording written in pieces: the streams,
+    frame ids and columns of the first piece, on its clock, each stream after its last sample
+    so far (``last``)."""
+    label = f"{where}: piece {index + 1} of the recording"
+    kinds = sorted(k.value for k in piece.streams)
+    firsts = sorted(t.spec.kind.value for t in plan)
+    if kinds != firsts:
+        raise RecordingError(f"{label} has the streams {', '.join(kinds)}; the first piece has "
+                             f"{', '.join(firsts)}")
+    if piece.t0_ns != first.t0_ns:
+        raise RecordingError(f"{label} starts its clock at {piece.t0_ns} ns, the first piece at "
+                             f"{first.t0_ns} ns")
+    out = _plan(piece, where, validate)
+    for new, old in zip(out, plan, strict=True):
+        what = f"{label}: stream {new.spec.kind.value}"
+        if (new.frame_id, new.layout, [(c.name, c.shape) for c in new.aux]) != (
+                old.frame_id, old.layout, [(c.name, c.shape) for c in old.aux]):
+            raise RecordingError(f"{what} has another frame id or other columns than in the "
+                                 "first piece")
+        previous = last.get(new.spec.kind)
+        if len(new.stream) and previous is not None and int(new.stream.t_ns[0]) <= previous:
+            raise RecordingError(f"{what} starts at {int(new.stream.t_ns[0])} ns, not after the "
+                                 f"previous piece's last sample ({previous} ns)")
+    return out
+
+
+def _write_mcap(out: BinaryIO, recording: Recording, plan: list[_Topic],
+                more: Iterable[Recording] = (), where: str = "", validate: bool = True) -> None:
     writer = BulkWriter(
         out,
         chunk_size=CHUNK_SIZE,
@@ -132,11 +163,17 @@ def _write_mcap(out: BinaryIO, recording: Recording, plan: list[_Topic]) -> None
             message.name, SCHEMA_ENCODING, message.schema_text.encode("utf-8")
         )
         channel_ids.append(writer.register_channel(topic.spec.topic, MESSAGE_ENCODING, schema_id))
-    bounds = _windows(plan)
-    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
-        writer.add_messages([(cid, topic.stream.t_ns[a:b], _encode(topic, a, b))
-                             for topic, cid, a, b in zip(plan, channel_ids, lo, hi, strict=True)
-                             if b > a])
+    last: dict[StreamKind, int] = {}
+    for index, piece in enumerate(itertools.chain([recording], more)):
+        part = plan if index == 0 else _continued(piece, recording, plan, last, where, validate,
+                                                   index)
+        bounds = _windows(part)
+        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+            writer.add_messages([(cid, topic.stream.t_ns[a:b], _encode(topic, a, b))
+                                 for topic, cid, a, b in zip(part, channel_ids, lo, hi,
+                                                             strict=True)
+                                 if b > a])
+        last.update((t.spec.kind, int(t.stream.t_ns[-1])) for t in part if len(t.stream))
     writer.finish()
 
 
@@ -146,6 +183,7 @@ def write_recording(
     *,
     force: bool = False,
     validate: bool = True,
+    more: Iterable[Recording] = (),
 ) -> Path:
     """Write a recording as an MCAP file (ROS 2 profile, CDR), atomically.
 
@@ -163,6 +201,11 @@ def write_recording(
     validate : bool
         Refuse non-finite samples and timestamps that repeat or go backwards (a file with them
         would not read back with validation on).
+    more : iterable of Recording
+        Further pieces of the recording, in time order, made one at a time while the file is
+        written (a recording too long to hold at once): the streams, frame ids and columns of
+        ``recording``, on its clock (``t0_ns``), each stream's samples after its previous
+        piece's; their metadata is not written.
 
     Returns
     -------
@@ -175,7 +218,7 @@ def write_recording(
         If the target exists and ``force`` is False.
     RecordingError
         If a stream cannot be written (missing columns, bad samples, times outside the message
-        range). Nothing is written then; a failure while writing leaves no file under the target
+        range, a piece that does not continue the recording). Nothing is written then; a failure while writing leaves no file under the target
         name and an existing one untouched.
     """
     target = Path(path)
@@ -189,7 +232,7 @@ def write_recording(
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0),
                      0o666)
         with os.fdopen(fd, "wb") as out:
-            _write_mcap(out, recording, plan)
+            _write_mcap(out, recording, plan, more, where, validate)
             out.flush()
             os.fsync(out.fileno())
         _commit(tmp, target, force)

@@ -340,6 +340,7 @@ def _replay_file(
                         empty = block.rows(0, 0)  # no estimate at all: the outputs' headers
                         for stage in stages:
                             stage.rows(empty, None, None)
+                    del block  # handed over: not held while the next run replays its piece
                 del piece, truth  # the piece's estimates go before the next is replayed
             keep_empty = False
             tracker.window(window)
@@ -381,7 +382,7 @@ def _row_entries(row: ReplaySession | RecordedSession) -> dict[str, Any]:
     return summary_entries(row.settings)
 
 
-PIECE_OUTPUTS = 2_000
+PIECE_OUTPUTS = 1_000
 """Output ticks (at the output rate) of the longest piece of a window fed to the filters at
 once: a block of estimates carries a covariance per row, so at high output rates a reader's
 window (about 60 000 IMU samples) is replayed in pieces of bounded memory."""

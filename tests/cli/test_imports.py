@@ -15,14 +15,16 @@ ROOT = Path(__file__).resolve().parent.parent.parent
 GOLDEN = ROOT / "recordings" / "golden" / "vehicle-drive.mcap"
 
 NEVER_ON_A_RUN = {
-    "scipy.stats", "scipy.signal", "scipy.optimize", "scipy.interpolate", "pandas",
+    "scipy.linalg", "scipy.stats", "scipy.signal", "scipy.optimize", "scipy.interpolate",
+    "pandas",
     "matplotlib", "dask", "distributed", "optuna", "allantools", "pyulog",
     "navreplay.sim", "navreplay.report", "navreplay.campaign.dask_executor",
     "navreplay.filters.transfer_alignment", "navreplay.filters.vector_matching",
     "navreplay.filters.rpm_aided_ins",
 }
-"""Never imported by ``navreplay run gps-ins REC`` (with or without the view): the statistics
-and plotting libraries, the simulator, the report, the campaign executors and the filters not
+"""Never imported by ``navreplay run gps-ins REC`` (with or without the view): scipy's linear
+algebra (numba's BLAS check would import it: ``navreplay.core.jit``), the statistics and
+plotting libraries, the simulator, the report, the campaign executors and the filters not
 run."""
 VIEWER = {"rerun", "pyarrow", "navreplay.viz.sink"}
 """Imported only to draw."""

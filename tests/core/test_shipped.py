@@ -20,13 +20,14 @@ from navreplay.core import jit, shipped
 ROOT = Path(__file__).resolve().parents[2]
 
 # A child process: lti.discretize (a small kernel of the package) on a fixed system, with the
-# store at argv[1] (or none); prints the result, the compiles, and what the store did. With
+# store at argv[1] (or none); prints the result, the compiles, what the store did and where
+# numba's runtime came from. With
 # argv[2] == "write", writes the store from its own cache (NUMBA_CACHE_DIR) after the call.
 _CHILD = """
 import json, os, sys
 from pathlib import Path
 import numpy as np
-from navreplay.core import shipped
+from navreplay.core import jit, shipped
 shipped.STORE = Path(sys.argv[1])
 from navreplay.core import lti
 F = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-0.3, -0.2, -0.1]])
@@ -37,7 +38,7 @@ if sys.argv[2] == "write":
     shipped.write(Path(os.environ["NUMBA_CACHE_DIR"]), Path(sys.argv[1]), magic)
 k = lti.discretize
 print(json.dumps({"Phi": Phi.tolist(), "misses": sum(k._cache_misses.values()),
-                  "stats": dict(shipped.STATS)}))
+                  "stats": dict(shipped.STATS), "runtime": jit.RUNTIME["source"]}))
 """
 
 
@@ -57,7 +58,7 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, np.ndarray]:
     store = tmp / "store"
     _child(store, tmp / "build", "write", NUMBA_CPU_NAME="generic", NUMBA_CPU_FEATURES="")
     host = _child(tmp / "none", tmp / "host")
-    assert host["misses"] == 1 and not host["stats"]
+    assert host["misses"] == 1 and not host["stats"] and host["runtime"] == "compiled"
     return store, np.array(host["Phi"])
 
 
@@ -66,23 +67,35 @@ def test_the_store_serves_a_process_with_an_empty_cache(store, tmp_path):
     manifest = json.loads((path / shipped.MANIFEST).read_text())
     assert manifest["magic"][1:] == [shipped.PORTABLE_CPU, ""]
     assert any(name.startswith("core/lti.discretize-") for name in manifest["files"])
+    assert [name for name in manifest["files"] if name.endswith(".nrt")] == [
+        f"core/{jit.runtime_file(tuple(manifest['magic']))}"]
     got = _child(path, tmp_path / "user")
     assert got["misses"] == 0 and got["stats"] == {"loaded": 1}
+    assert got["runtime"] == "shipped"
     np.testing.assert_allclose(got["Phi"], host, rtol=1e-14, atol=1e-15)
-    assert not list((tmp_path / "user").rglob("*.nbi"))  # nothing compiled, nothing saved
+    for pattern in ("*.nbi", "*.nrt"):  # nothing compiled, nothing saved
+        assert not list((tmp_path / "user").rglob(pattern))
 
 
-def test_a_changed_file_is_refused_and_numba_compiles(store, tmp_path):
+@pytest.mark.parametrize("pattern", ["lti.discretize-*.nbc", "numba-runtime-*.nrt"])
+def test_a_changed_file_is_refused_and_numba_compiles(store, tmp_path, pattern):
+    """A kernel's data file, or numba's runtime library."""
     path, host = store
     copy = tmp_path / "store"
     subprocess.run(["cp", "-r", str(path), str(copy)], check=True)
-    data = sorted(copy.rglob("lti.discretize-*.nbc"))[0]
+    data = sorted(copy.rglob(pattern))[0]
     raw = bytearray(data.read_bytes())
     raw[len(raw) // 2] ^= 0xFF  # same size, one byte changed
     data.write_bytes(bytes(raw))
     got = _child(copy, tmp_path / "user")
-    assert got["misses"] == 1 and got["stats"] == {"refused": 1}
-    np.testing.assert_array_equal(got["Phi"], host)  # host-compiled, as without a store
+    if pattern.endswith(".nbc"):
+        assert got["misses"] == 1 and got["stats"] == {"refused": 1}
+        assert got["runtime"] == "shipped"
+        np.testing.assert_array_equal(got["Phi"], host)  # host-compiled, as without a store
+    else:  # the kernel from the store, numba's runtime compiled
+        assert got["misses"] == 0 and got["stats"] == {"loaded": 1, "refused": 1}
+        assert got["runtime"] == "compiled"
+        np.testing.assert_allclose(got["Phi"], host, rtol=1e-14, atol=1e-15)
 
 
 @pytest.mark.parametrize("change", ["numba", "sources"])

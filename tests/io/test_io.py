@@ -176,6 +176,53 @@ def test_small_windows_give_the_same_file(
     assert write_recording(tmp_path / "w.mcap", recording).read_bytes() == written.read_bytes()
 
 
+def _pieces(rec: Recording, cuts_s: list[float]) -> list[Recording]:
+    """``rec`` cut at ``cuts_s`` [s after t0] into pieces on its clock."""
+    edges = [None, *(rec.t0_ns + int(c * 1e9) for c in cuts_s), None]
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        streams = {}
+        for kind, s in rec.streams.items():
+            a = 0 if lo is None else int(s.t_ns.searchsorted(lo))
+            b = len(s) if hi is None else int(s.t_ns.searchsorted(hi))
+            streams[kind] = s.slice(a, b)
+        out.append(Recording(streams, rec.metadata, rec.t0_ns))
+    return out
+
+
+def test_a_recording_written_in_pieces_is_the_file_written_whole(
+    recording: Recording, written: Path, tmp_path: Path
+) -> None:
+    first, *more = _pieces(recording, [2.5, 6.0005, 6.0006])  # the third piece is empty
+    assert max(len(s) for s in more[1].streams.values()) == 0
+    pieces = iter(more)  # made one at a time, as a generator would
+    path = write_recording(tmp_path / "p.mcap", first, more=pieces)
+    assert path.read_bytes() == written.read_bytes()
+
+
+@pytest.mark.parametrize("how, match", [
+    ("overlap", r"p\.mcap: piece 3 of the recording: stream imu starts at \d+ ns, not after "
+                r"the previous piece's last sample"),
+    ("streams", r"p\.mcap: piece 2 of the recording has the streams imu; the first piece has "),
+    ("clock", r"piece 2 of the recording starts its clock at"),
+])
+def test_a_piece_that_does_not_continue_the_recording_writes_nothing(
+    recording: Recording, tmp_path: Path, how: str, match: str
+) -> None:
+    first, second, third = _pieces(recording, [3.0, 6.0])
+    if how == "overlap":
+        third = Recording({**third.streams, StreamKind.IMU: second[StreamKind.IMU]},
+                          third.metadata, third.t0_ns)
+    elif how == "streams":
+        second = Recording({StreamKind.IMU: second[StreamKind.IMU]}, second.metadata,
+                           second.t0_ns)
+    else:
+        second = Recording(second.streams, second.metadata, second.t0_ns + 1)
+    with pytest.raises(RecordingError, match=match):
+        write_recording(tmp_path / "p.mcap", first, more=[second, third])
+    assert list(tmp_path.iterdir()) == []
+
+
 def _with(stream: Stream, **columns: np.ndarray) -> Recording:
     s = Stream(stream.kind, stream.t_ns.copy(), {**stream.columns, **columns}, stream.frame_id)
     return Recording({stream.kind: s}, Metadata(), T0_NS)
