@@ -100,22 +100,28 @@ def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np
     q = dcm_to_quat(C)
     v_b = np.einsum("mji,mj->mi", C_nb, v_n)
     cov = np.full((M, 9, 9), np.nan) if nav_cov is None else nav_cov
-    B = np.zeros((M, 6, 6))
-    B[:, :3, :3] = R
-    B[:, 3:, 3:] = R
-    J = np.concatenate([np.broadcast_to(np.eye(3), (M, 3, 3)), -skew(v_n)], axis=2)
-    J = F_FRD_FLU @ C_nb.transpose(0, 2, 1) @ J
-    if cov.any() or np.isnan(cov).any():
-        pose_cov = B @ cov[:, _POSE[:, None], _POSE[None, :]] @ B.transpose(0, 2, 1)
-        lin = J @ cov[:, 3:9, 3:9] @ J.transpose(0, 2, 1)
-    else:  # a zero covariance (the reference's): the products' zeros and NaN, without them
-        pose_cov, lin = _zero_product(B), _zero_product(J)
+    zero = not cov.any()  # the reference's (NaN counts as not zero)
+    if zero and np.isfinite(R).all() and np.isfinite(C_nb).all() and np.isfinite(v_n).all():
+        # the products' zeros, without the products or their factors
+        pose_cov, lin = np.zeros((M, 6, 6)), np.zeros((M, 3, 3))
+        fix_cov = np.zeros((M, 3, 3))
+    else:
+        B = np.zeros((M, 6, 6))
+        B[:, :3, :3] = R
+        B[:, 3:, 3:] = R
+        J = np.concatenate([np.broadcast_to(np.eye(3), (M, 3, 3)), -skew(v_n)], axis=2)
+        J = F_FRD_FLU @ C_nb.transpose(0, 2, 1) @ J
+        if zero:  # the products' zeros and NaN (of the factors' NaN), without them
+            pose_cov, lin = _zero_product(B), _zero_product(J)
+        else:
+            pose_cov = B @ cov[:, _POSE[:, None], _POSE[None, :]] @ B.transpose(0, 2, 1)
+            lin = J @ cov[:, 3:9, 3:9] @ J.transpose(0, 2, 1)
+        fix_cov = T_NED_ENU @ cov[:, :3, :3] @ T_NED_ENU
     # the twist: the linear block, and the angular rate not estimated (unknown: zero rows and
     # columns, UNKNOWN_VARIANCE on the diagonal, as _mark_unknown makes of NaN there)
     twist_cov = np.zeros((M, 6, 6))
     twist_cov[:, :3, :3] = _mark_unknown(lin)
     twist_cov[:, _ANGULAR, _ANGULAR] = UNKNOWN_VARIANCE
-    fix_cov = T_NED_ENU @ cov[:, :3, :3] @ T_NED_ENU
     return Poses(np.asarray(stamps_ns, dtype=np.int64), frame.position(pos),
                  np.concatenate([q[:, 1:], q[:, :1]], axis=1), _mark_unknown(pose_cov),
                  v_b * np.diagonal(F_FRD_FLU), twist_cov,

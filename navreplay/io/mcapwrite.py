@@ -72,17 +72,21 @@ class BulkWriter:
         A chunk is closed once its uncompressed records pass this many bytes.
     compression : CompressionType
         Of the chunks: ZSTD (default), LZ4 or NONE.
+    zstd_level : int
+        zstd's compression level (3: zstd's default, as mcap's ``Writer``; negative levels
+        are zstd's fast ones).
     enable_crcs, enable_data_crcs : bool
         CRCs of the chunks and the summary; of the data section.
     """
 
     def __init__(self, output: IO[bytes], chunk_size: int = 1024 * 1024,
                  compression: CompressionType = CompressionType.ZSTD,
-                 enable_crcs: bool = True, enable_data_crcs: bool = False) -> None:
+                 enable_crcs: bool = True, enable_data_crcs: bool = False,
+                 zstd_level: int = 3) -> None:
         if compression is CompressionType.ZSTD:
             import zstandard
 
-            self._compress: Any = zstandard.compress
+            self._compress: Any = zstandard.ZstdCompressor(level=zstd_level).compress
             self._compression = "zstd"
         elif compression is CompressionType.LZ4:
             import lz4.frame  # type: ignore[import-untyped]
@@ -106,7 +110,7 @@ class BulkWriter:
         self._start_time = 0
         self._end_time = 0
         # the open chunk: its records, their size, and per message its channel, time, offset
-        self._parts: list[bytes] = []
+        self._parts: list[bytes | memoryview] = []  # views of numpy's records: not copied
         self._size = 0
         self._index: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
@@ -203,7 +207,7 @@ class BulkWriter:
             offsets = ends[a:b] - sizes[a:b] - lo
             records = table[np.repeat(src[a:b] - offsets, sizes[a:b])
                             + np.arange(int(ends[b - 1]) - lo)]
-            self._add_chunk_messages(cids[a:b], t[a:b], offsets, [records.tobytes()],
+            self._add_chunk_messages(cids[a:b], t[a:b], offsets, [records.data],
                                      int(ends[b - 1]) - lo)
             a = b
 
@@ -224,7 +228,7 @@ class BulkWriter:
             lo = int(ends[a - 1]) if a else 0
             b = self._chunk_end(ends, a)
             self._add_chunk_messages(cids[a:b], t[a:b], ends[a:b] - sizes[a:b] - lo,
-                                     [records[lo:int(ends[b - 1])].tobytes()],
+                                     [records[lo:int(ends[b - 1])].data],
                                      int(ends[b - 1]) - lo)
             a = b
 
@@ -237,7 +241,7 @@ class BulkWriter:
             self._close_chunk()
 
     def _add_chunk_messages(self, cids: np.ndarray, t: np.ndarray, offsets: np.ndarray,
-                            parts: list[bytes], size: int) -> None:
+                            parts: list[bytes | memoryview], size: int) -> None:
         """Messages (channel, time, offset within ``parts``) whose records are ``parts``,
         appended to the open chunk, which then closes if it is past chunk_size."""
         self._index.append((cids, t, offsets + self._size))
@@ -261,8 +265,9 @@ class BulkWriter:
         cids = np.concatenate([i[0] for i in self._index])
         t = np.concatenate([i[1] for i in self._index])
         offsets = np.concatenate([i[2] for i in self._index])
-        data = b"".join(self._parts)
-        compressed = data if self._compress is None else self._compress(data)
+        # the compressors and the CRC read the records' buffer: one part is not copied
+        data = self._parts[0] if len(self._parts) == 1 else b"".join(self._parts)
+        compressed = bytes(data) if self._compress is None else self._compress(data)
         chunk = Chunk(compression=self._compression, data=compressed,
                       message_start_time=int(t.min()), message_end_time=int(t.max()),
                       uncompressed_crc=zlib.crc32(data) if self._crcs else 0,

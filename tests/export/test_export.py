@@ -264,7 +264,8 @@ def test_ensemble_export(runs, tmp_path) -> None:
 
 def test_pose_covariances_as_the_straightforward_products() -> None:
     """ros_poses' shortcuts (the twist's angular block set, no marking of finite covariances,
-    the zero products of the reference) give the bits of the plain products marked after."""
+    the zero products of the reference, without their factors when these are finite) give the
+    bits of the plain products marked after."""
     from navreplay.export import frames
     from navreplay.geo.rotations import skew
 
@@ -309,6 +310,8 @@ def test_pose_covariances_as_the_straightforward_products() -> None:
 
         np.testing.assert_array_equal(got.pose_cov, marked(pose))
         np.testing.assert_array_equal(got.twist_cov, marked(twist))
+        fix = frames.T_NED_ENU @ cov[:, :3, :3] @ frames.T_NED_ENU
+        assert got.fix_cov.tobytes() == fix.tobytes()  # the signs of zeros too
     assert (got.twist_cov[3, :3, :3] == np.diag([-1.0] * 3)).all()  # the velocity unknown
 
 

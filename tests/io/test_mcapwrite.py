@@ -23,10 +23,11 @@ def _batches(rng: np.random.Generator, widths: list[int], n: int, t0: int):
     return out
 
 
-def _write(cls, calls, chunk_size: int, compression: CompressionType, single: bool) -> bytes:
+def _write(cls, calls, chunk_size: int, compression: CompressionType, single: bool,
+           **options) -> bytes:
     buf = io.BytesIO()
     w = cls(buf, chunk_size=chunk_size, compression=compression, enable_crcs=True,
-            enable_data_crcs=True)
+            enable_data_crcs=True, **options)
     w.start(profile="ros2", library="test")
     w.add_metadata("meta", {"a": "1", "b": "two"})
     sid = w.register_schema("pkg/msg/A", "ros2msg", b"float64 x\n")
@@ -50,7 +51,8 @@ def _write(cls, calls, chunk_size: int, compression: CompressionType, single: bo
 
 @pytest.mark.parametrize("widths", [[40, 40, 40], [40, 17, 300]])
 @pytest.mark.parametrize("chunk_size", [1 << 20, 700, 1])
-@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.NONE])
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4,
+                                         CompressionType.NONE])
 def test_same_bytes_as_mcaps_writer(widths, chunk_size, compression) -> None:
     rng = np.random.default_rng(7)
     calls = [_batches(rng, widths, 60, 100_000 * i) for i in range(5)]
@@ -82,10 +84,13 @@ def test_batches_at_shared_times_as_mcaps_writer(repeat, chunk_size) -> None:
         assert _write(BulkWriter, calls, chunk_size, compression, single=False) == reference
 
 
-def test_reads_back_with_crcs() -> None:
+@pytest.mark.parametrize("level", [3, -1])
+def test_reads_back_with_crcs(level) -> None:
     rng = np.random.default_rng(8)
     calls = [_batches(rng, [24, 56], 2000, 10**9 * i) for i in range(3)]
-    data = _write(BulkWriter, calls, 4096, CompressionType.ZSTD, single=False)
+    data = _write(BulkWriter, calls, 4096, CompressionType.ZSTD, single=False, zstd_level=level)
+    if level != 3:  # the level is the compressor's: the same records, other compressed bytes
+        assert data != _write(Writer, calls, 4096, CompressionType.ZSTD, single=True)
     got = [(ch.topic, m.log_time, m.data) for _, ch, m in
            make_reader(io.BytesIO(data), validate_crcs=True).iter_messages(log_time_order=False)]
     want = []
