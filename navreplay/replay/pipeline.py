@@ -99,7 +99,10 @@ class Stage(Protocol):
     :class:`navreplay.viz.Sink`, the exports and report :class:`navreplay.jobs.results.Outputs`,
     :class:`Collect`). Calls come in this order: :meth:`start`; per window, :meth:`truth`, then
     per filter :meth:`innovations` and :meth:`rows` as the estimates are scored; :meth:`abort`
-    when the replay fails. Finishing (closing files) is the caller's."""
+    when the replay fails. Finishing (closing files) is the caller's.
+
+    A stage whose work is partly per block may ask for longer pieces of the windows with an
+    attribute ``piece_outputs`` (output ticks; :data:`PIECE_OUTPUTS` is the least)."""
 
     def start(self, run: RunStart) -> None: ...
 
@@ -309,13 +312,14 @@ def _replay_file(
                          late, outages)
         for stage in stages:
             stage.start(start)
+        piece_outputs = max([PIECE_OUTPUTS, *(getattr(s, "piece_outputs", 0) for s in stages)])
         estimates = [0] * len(runs)
         window: Window | None = first
         del first  # each window goes once it is replayed
         keep_empty = True
         while window is not None:
             known = {k: (COMPLETE if window.final else t) for k, t in window.known.items()}
-            for piece, piece_known, final in _pieces(window, known, output_rate,
+            for piece, piece_known, final in _pieces(window, known, output_rate, piece_outputs,
                                                      keep_empty=keep_empty):
                 truth = piece.get(StreamKind.TRUTH)
                 if truth is not None and len(truth):
@@ -385,19 +389,20 @@ def _row_entries(row: ReplaySession | RecordedSession) -> dict[str, Any]:
 PIECE_OUTPUTS = 1_000
 """Output ticks (at the output rate) of the longest piece of a window fed to the filters at
 once: a block of estimates carries a covariance per row, so at high output rates a reader's
-window (about 60 000 IMU samples) is replayed in pieces of bounded memory."""
+window (about 60 000 IMU samples) is replayed in pieces of bounded memory. A stage may ask
+for longer ones (:class:`Stage`: the view, whose work is partly per block)."""
 
 
-def _pieces(window: Window, known: dict[StreamKind, int], output_rate: float | None, *,
-            keep_empty: bool) -> Iterator[tuple[dict[StreamKind, Stream],
-                                                dict[StreamKind, int], bool]]:
-    """A window as consecutive pieces of at most :data:`PIECE_OUTPUTS` output ticks of the
+def _pieces(window: Window, known: dict[StreamKind, int], output_rate: float | None,
+            piece_outputs: int = PIECE_OUTPUTS, *, keep_empty: bool
+            ) -> Iterator[tuple[dict[StreamKind, Stream], dict[StreamKind, int], bool]]:
+    """A window as consecutive pieces of at most ``piece_outputs`` output ticks of the
     IMU's time: (streams, the time each is known to, final). The pieces are what a reader of
     shorter windows would hand over; the estimates do not depend on where the cuts fall.
     ``keep_empty``: the first piece keeps every stream (the first window holds every stream
     read), later ones only those with rows."""
     imu = window.get(StreamKind.IMU)
-    span = int(PIECE_OUTPUTS / output_rate * 1e9) if output_rate else 0
+    span = int(piece_outputs / output_rate * 1e9) if output_rate else 0
     if not span or imu is None or len(imu) < 2 or int(imu.t_ns[-1] - imu.t_ns[0]) <= span:
         yield window, known, window.final
         return

@@ -107,6 +107,11 @@ class Sink(RunView, EnsemblePlots):
         The plots logged so far (the default blueprint is built from it).
     """
 
+    piece_outputs = 2000
+    """Output ticks of the pieces a replay drawn here hands over (:class:`navreplay.replay.Stage`):
+    part of the view's work is per block (about 5 ms), so it takes twice the replay's least, at
+    9 MB more of estimates held than 1000 ticks (gps-ins), beside the view's own buffers."""
+
     def __enter__(self) -> Sink:
         return self
 

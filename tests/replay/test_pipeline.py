@@ -417,3 +417,37 @@ def test_pieces_of_a_window_give_the_estimates_of_the_whole(monkeypatch) -> None
     for k, s in a.innovations.items():
         assert np.array_equal(s.nu, b.innovations[k].nu) and np.array_equal(s.t,
                                                                             b.innovations[k].t)
+
+
+def test_a_stage_may_ask_for_longer_pieces() -> None:
+    """A stage's ``piece_outputs`` (the view's) lengthens the pieces for every stage of the run;
+    the replay's own least stays the floor for a stage that asks for less."""
+    from navreplay.io.source import MemorySource
+    from navreplay.replay import pipeline
+
+    rec = simulate("vehicle-drive", {"duration": 40.0}, seed=3)
+
+    class Counting(pipeline.Collect):
+        def __init__(self, piece_outputs: int | None) -> None:
+            super().__init__()
+            if piece_outputs is not None:
+                self.piece_outputs = piece_outputs
+            self.blocks: list[int] = []
+
+        def rows(self, rows, metrics, truth) -> None:  # type: ignore[no-untyped-def]
+            super().rows(rows, metrics, truth)
+            self.blocks.append(len(rows.t))
+
+    def blocks(*asks: int | None) -> list[list[int]]:
+        stages = [Counting(a) for a in asks]
+        pipeline.replay_file(MemorySource(rec, "drive"), [FilterSpec("gps-ins")],
+                             stages=stages, output_rate=100.0, score=False)
+        return [s.blocks for s in stages]
+
+    (least,) = blocks(None)
+    longer, plain = blocks(2500, None)
+    assert longer == plain  # every stage gets the same blocks
+    assert sum(least) == sum(longer) > 3000
+    assert max(least) <= pipeline.PIECE_OUTPUTS + 1 < max(longer) <= 2501
+    assert len(longer) < len(least)
+    assert blocks(10) == [least]  # less than the floor asks for nothing
