@@ -199,6 +199,7 @@ def measure_all(hours_list: list[float], modes: list[str], directory: Path,
     if parked:
         print("a vehicle parked for the whole log, with the simulated drive's sensors")
     print(f"{'log':>6} {'mode':>9} {'peak RSS':>10} {'vs first':>9} {'seconds':>8}")
+    warm: set[str] = set()  # a first run of each mode fills numba's cache (a compile raises a peak)
     for hours in hours_list:
         path = (parked_recording(hours, directory) if parked
                 else paused_recording(hours, gps_pause, directory) if gps_pause
@@ -206,6 +207,9 @@ def measure_all(hours_list: list[float], modes: list[str], directory: Path,
         for mode in modes:
             if parked and mode == "whole" and hours > PARKED_WHOLE_HOURS:
                 continue  # holds the whole log: its memory grows with the length by design
+            if mode not in warm:
+                measure(mode, path)
+                warm.add(mode)
             r = measure(mode, path)
             base.setdefault(mode, r["peak_mib"])
             log = f"{hours:>5g}h" if hours >= 0.01 else f"{hours * 3600:>5g}s"
