@@ -1,4 +1,4 @@
-"""Replay throughput, Rerun logging cost and peak memory.
+"""Replay throughput and peak memory (the Rerun view's cost: :mod:`benchmarks.bench_viz`).
 
 Measured in one run, on one 1-hour 100 Hz ``vehicle-drive`` recording (IMU 100 Hz, GPS fix and
 velocity 1 Hz, magnetometer 10 Hz):
@@ -16,8 +16,6 @@ velocity 1 Hz, magnetometer 10 Hz):
   the engine alone (a filter that does nothing, so every event goes through the one-by-one
   path: merge, slicing and bookkeeping per event; gps-ins takes its events in runs), and
   the strapdown integrator over the whole record in one call (the arithmetic floor);
-- Rerun logging of the gps-ins result (+ truth) into an .rrd, relative to the filter time (must
-  not exceed it);
 - peak resident memory of a fresh process that reads a 1-hour 200 Hz recording and replays
   gps-ins over it (must stay below 1 GiB), next to that of a process that only imports.
 
@@ -191,8 +189,8 @@ def _read_streamed(path: Path) -> int:
         return sum(len(w["imu"]) for w in source if "imu" in w)
 
 
-def _throughput(path: Path) -> tuple[Any, Any, float]:
-    """Print the replay timings; return the gps-ins result, the recording and the filter time."""
+def _throughput(path: Path) -> None:
+    """Print the replay timings."""
     from navreplay.filters.registry import load_filter
     from navreplay.geo import strapdown
     from navreplay.io import ReadOptions, read_recording
@@ -264,41 +262,6 @@ def _throughput(path: Path) -> tuple[Any, Any, float]:
     print(f"decode (the replay's topics) + replay {throughput / 1e3:.0f}k IMU samples/s "
           f"(target >= 500k: {_met(throughput >= 500e3)}); streamed decode + replay "
           f"{n_imu / (t_win + f_filt) / 1e3:.0f}k")
-    t_filt = f_filt
-    return result, recording, t_filt
-
-
-def log_one_block(sink: Any, result: Any, recording: Any, metrics: Any) -> None:
-    """A whole run into a sink as the replay pipeline hands a recording of one window over: the
-    truth, the innovations, the rows with their scores."""
-    from navreplay.core.streams import StreamKind
-    from navreplay.filters.base import TruthColumn
-    from navreplay.replay import RunStart
-
-    truth = recording[StreamKind.TRUTH]
-    columns = {st.truth.column: st.unit for st in result.states
-               if isinstance(st.truth, TruthColumn)}
-    sink.start(RunStart(result.recording, (result.label,), recording.t0_ns, True,
-                        recording.metadata, columns))
-    sink.truth(truth)
-    sink.innovations(result)
-    sink.rows(result.rows(0, result.t.shape[0]), metrics, truth)
-
-
-def _rerun_cost(result: Any, recording: Any, t_filt: float, rrd: Path) -> None:
-    from navreplay import metrics
-    from navreplay.viz import Save, open_sink
-
-    errors = metrics.run_metrics(result, recording)
-
-    def log() -> None:  # what `navreplay run` does with the run as one block
-        with open_sink(Save(rrd), recording_name="drive.mcap") as sink:
-            log_one_block(sink, result, recording, errors)
-
-    t_viz, _ = _timed(log)
-    print(f"Rerun logging of the gps-ins run + truth {t_viz:6.2f} s = {t_viz / t_filt:.2f} x "
-          f"the filter time in a fresh interpreter (target <= 1: {_met(t_viz <= t_filt)}); "
-          f".rrd {rrd.stat().st_size / 1e6:.1f} MB")
 
 
 def main(duration: float = 3600.0, *, quick: bool = False) -> None:
@@ -307,9 +270,7 @@ def main(duration: float = 3600.0, *, quick: bool = False) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "drive.mcap"
         print("recording:", _make_recording(path, duration))
-        result, recording, t_filt = _throughput(path)
-        _rerun_cost(result, recording, t_filt, Path(tmp) / "drive.rrd")
-        result = recording = None  # free them before the memory measurement
+        _throughput(path)  # its result and recording are freed before the memory figure
         path.unlink()
         path200 = Path(tmp) / "drive200.mcap"
         print("recording:", _make_recording(path200, duration, imu_rate=200.0, seed=2))

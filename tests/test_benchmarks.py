@@ -79,7 +79,6 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
         (rf"^end to end \(decode \+ gps-ins \+ summary\) +{_N} s +{_N}k IMU samples/s", 1),
         (rf"^ratios: end to end / strapdown = {_N}$", 1),
         (rf"^gps-ins replay / strapdown on the same samples = {_N} ", 1),
-        (rf"^Rerun logging of the gps-ins run \+ truth +{_N} s = {_N} x the filter time", 1),
         (rf"^peak RSS of a process reading \+ replaying gps-ins over it: {_N} MiB", 1),
     ],
     "bench_rpm_aided_ins": [
@@ -108,7 +107,8 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
         (rf"^projected campaign .*: reference {_N} s, fast path {_N} s \({_N}x\)$", 1),
     ],
     "bench_viz": [
-        (rf"^ratio logging / filter: +{_N} +\(target <= 1: (met|NOT met)\)$", 1),
+        (rf"^ratio \(scoring \+ logging\) / filter: +{_N} +\(target <= 1: (met|NOT met)\); "
+         rf"logging / filter {_N}$", 1),
         (rf"^per-sample rr\.log, extrapolated: +{_N} s .*x the columnar sink\)$", 1),
     ],
 }

@@ -21,7 +21,7 @@ from navreplay.filters.base import (
 )
 from navreplay.filters.result import RunResult
 from navreplay.geo import earth
-from navreplay.geo.rotations import attitude_error, quat_to_dcm, quat_to_euler, wrap_angle
+from navreplay.geo.rotations import attitude_error, dcm_to_euler, quat_to_dcm, wrap_angle
 
 
 @dataclasses.dataclass
@@ -94,8 +94,9 @@ def nav_errors(
     pos_ned = position_error_ned(pos, truth["pos"]) if "pos" in truth else nan
     dv = np.asarray(v_n) - truth["v_n"] if "v_n" in truth else nan
     if "q_nb" in truth:
-        phi = attitude_error(quat_to_dcm(q_nb), quat_to_dcm(truth["q_nb"]))
-        euler = wrap_angle(quat_to_euler(q_nb) - quat_to_euler(truth["q_nb"]))
+        C_hat, C_true = quat_to_dcm(q_nb), quat_to_dcm(truth["q_nb"])
+        phi = attitude_error(C_hat, C_true)
+        euler = wrap_angle(dcm_to_euler(C_hat) - dcm_to_euler(C_true))  # as quat_to_euler
     else:
         phi = euler = nan
     return NavErrors(pos_ned=pos_ned, v_n=dv, phi=phi, euler=euler)

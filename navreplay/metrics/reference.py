@@ -5,8 +5,9 @@ reference) with whichever of ``pos``, ``v_n``, ``q_nb`` it has, plus the true co
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Any
 
 import numpy as np
@@ -54,8 +55,9 @@ class Reference:
     def __contains__(self, column: str) -> bool:
         return column in self.stream.columns
 
-    def at(self, t: np.ndarray) -> dict[str, np.ndarray]:
-        """The columns at filter times ``t`` [s since the recording start].
+    def at(self, t: np.ndarray, columns: Collection[str] | None = None) -> dict[str, np.ndarray]:
+        """The columns at filter times ``t`` [s since the recording start] (those of
+        ``columns`` only, when given).
 
         Samples at equal times are taken as they are; between samples, vectors are interpolated
         linearly (longitude unwrapped) and quaternions normalised-linearly. Times within half a
@@ -68,7 +70,7 @@ class Reference:
             Column name -> array (M, ...).
         """
         ref = self.stream
-        ts = seconds(ref.t_ns, self.t0_ns)
+        ts = self._times
         t = np.asarray(t, dtype=float)
         j = np.clip(np.searchsorted(ts, t, side="left"), 1, max(len(ts) - 1, 1))
         i = j - 1
@@ -79,6 +81,8 @@ class Reference:
             w = np.clip((t - ts[i]) / (ts[j] - ts[i]), 0.0, 1.0)
         out = {}
         for name, col in ref.columns.items():
+            if columns is not None and name not in columns:
+                continue
             a, b = col[i], col[j]
             if name == "pos":
                 b = b.copy()
@@ -106,19 +110,30 @@ class Reference:
         the position steps when there is no velocity; NaN with neither.
 
         With filter times ``t`` (M,): the distance up to each."""
+        cum = self._travelled
+        if cum is None:
+            return np.full(np.shape(t), np.nan) if t is not None else math.nan
+        if t is None:
+            return float(cum[-1])
+        return np.interp(t, self._times, cum)
+
+    @functools.cached_property
+    def _times(self) -> np.ndarray:
+        """The reference's times [s since the recording start]."""
+        return seconds(self.stream.t_ns, self.t0_ns)
+
+    @functools.cached_property
+    def _travelled(self) -> np.ndarray | None:
+        """Length of the path up to each sample [m] (None without velocity or position)."""
         ref = self.stream
-        ts = seconds(ref.t_ns, self.t0_ns)
         if "v_n" in ref.columns:
             speed = np.linalg.norm(ref["v_n"], axis=1)
-            steps = 0.5 * (speed[1:] + speed[:-1]) * np.diff(ts)
+            steps = 0.5 * (speed[1:] + speed[:-1]) * np.diff(self._times)
         elif "pos" in ref.columns:
             steps = np.linalg.norm(position_error_ned(ref["pos"][1:], ref["pos"][:-1]), axis=1)
         else:
-            return np.full(np.shape(t), np.nan) if t is not None else math.nan
-        cum = np.concatenate([[0.0], np.cumsum(steps)])
-        if t is None:
-            return float(cum[-1])
-        return np.interp(t, ts, cum)
+            return None
+        return np.concatenate([[0.0], np.cumsum(steps)])
 
 
 def truth_at(recording: Recording | Reference, t: np.ndarray) -> dict[str, np.ndarray]:

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from navreplay.core.streams import Recording, StreamKind
-from navreplay.filters.base import State
+from navreplay.filters.base import NAV_PARTS, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.metrics.errors import (
     NavErrors,
@@ -147,7 +147,10 @@ def run_metrics(
     if tuple(s.name for s in states) != result.state_names:
         raise ValueError(f"{result.label}: the scoring declarations name other states than "
                          f"the result ({', '.join(result.state_names)})")
-    truth = ref.at(result.t)
+    # the columns scored: the navigation solution's and those the declarations name
+    named = {s.truth.column for s in (*states, *result.scored_extras)
+             if isinstance(s.truth, TruthColumn)}
+    truth = ref.at(result.t, {*NAV_PARTS, *named})
     nav = None
     if result.nav_pos is not None:
         assert result.nav_v_n is not None and result.nav_q_nb is not None  # with the position

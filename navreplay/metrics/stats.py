@@ -88,7 +88,7 @@ def nees(e: np.ndarray, P: np.ndarray) -> np.ndarray:
     C = P[ok] / s[:, :, None] / s[:, None, :]
     try:
         L = np.linalg.cholesky(C)
-        w = np.linalg.solve(L, en[..., None])[..., 0]
+        w = _forward(L, en)
         out[ok] = np.einsum("ki,ki->k", w, w)
     except np.linalg.LinAlgError:
         vals = np.empty(en.shape[0])
@@ -101,6 +101,15 @@ def nees(e: np.ndarray, P: np.ndarray) -> np.ndarray:
                 vals[i] = np.nan
         out[ok] = vals
     return out
+
+
+def _forward(L: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``L^-1 b`` of lower-triangular ``L`` (M, k, k) and ``b`` (M, k) by forward substitution,
+    a component at a time for all M (a general solve would factorise L again)."""
+    w = np.empty_like(b)
+    for i in range(b.shape[1]):
+        w[:, i] = (b[:, i] - np.einsum("kj,kj->k", L[:, i, :i], w[:, :i])) / L[:, i, i]
+    return w
 
 
 def chi2_bounds_per_count(

@@ -158,6 +158,8 @@ class Catalog:
 
     def discard(self, tab: str, plot: str, path: str) -> None:
         """Take ``path`` out of a plot; a plot left empty disappears."""
+        if path not in self._paths:  # in no plot
+            return
         plots = self.plots.get(tab, {})
         if plot in plots and path in plots[plot].paths:
             plots[plot].paths.remove(path)

@@ -77,6 +77,15 @@ class NavColumns:
         return NavColumns(t, lerp(self.pos), lerp(self.v_n), q)
 
 
+def finite_rows(a: np.ndarray) -> np.ndarray:
+    """Whether each row of ``a`` (N, k) is finite throughout (column by column: a reduction
+    along the short axis of every row costs several times as much)."""
+    ok = np.isfinite(a[:, 0])
+    for j in range(1, a.shape[1]):
+        ok &= np.isfinite(a[:, j])
+    return ok
+
+
 def local_ned(pos: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """NED offsets [m] of positions ``pos`` (N, 3) from the reference ``ref`` (3,), via ECEF."""
     pos = np.asarray(pos, dtype=np.float64)
@@ -88,10 +97,12 @@ def euler(q_nb: np.ndarray) -> np.ndarray:
     return quat_to_euler(q_nb)
 
 
-def nav_values(nav: NavColumns, ref: np.ndarray) -> dict[str, np.ndarray]:
-    """Plotted navigation quantities (SI): roll, pitch, yaw [rad], v_N.. [m/s], p_N.. [m]."""
+def nav_values(nav: NavColumns, ref: np.ndarray,
+               ned: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Plotted navigation quantities (SI): roll, pitch, yaw [rad], v_N.. [m/s], p_N.. [m]
+    (``ned``: the positions' :func:`local_ned` from ``ref``, when known)."""
     e = euler(nav.q_nb)
-    p = local_ned(nav.pos, ref)
+    p = local_ned(nav.pos, ref) if ned is None else ned
     return {
         "roll": e[:, 0], "pitch": e[:, 1], "yaw": e[:, 2],
         "v_N": nav.v_n[:, 0], "v_E": nav.v_n[:, 1], "v_D": nav.v_n[:, 2],

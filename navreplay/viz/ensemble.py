@@ -25,7 +25,7 @@ import rerun as rr
 from navreplay.filters.base import NavError, State
 from navreplay.metrics import EnsembleResult, RunMetrics, chi2_bounds_per_count
 from navreplay.metrics import outages as _outages
-from navreplay.viz.channel import TIMELINE, Channel, TimeIndex
+from navreplay.viz.channel import TIMELINE, Channel, Index, TimeIndex
 from navreplay.viz.naming import Tab, display_unit, entity_path, quantity_of, resolve_unit
 from navreplay.viz.style import OUTAGE_COLOR, SIGMA_SHADE, TRUTH_COLOR, lighter
 
@@ -222,7 +222,7 @@ class EnsemblePlots(Channel):
         """
         t = np.asarray(t, dtype=np.float64)
 
-        def index(tt: np.ndarray) -> list[rr.TimeColumn]:
+        def index(tt: np.ndarray) -> Index:
             if timeline is None:
                 return TimeIndex(tt, None)
             return [rr.TimeColumn(timeline, sequence=np.rint(tt).astype(np.int64))]
@@ -265,6 +265,7 @@ class EnsemblePlots(Channel):
                           OUTAGE_COLOR, "GNSS outage")
                 self.catalog.add(tab, f"ensemble:{name}", plot_title, path, rank=rank,
                                  legend=legend, tab_title=tab_title, behind=True)
+        self._draw_queued()
 
     def log_sweep(
         self,

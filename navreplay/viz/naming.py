@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import re
 from collections.abc import Mapping
 
@@ -220,6 +221,7 @@ def entity_path(*parts: str) -> str:
     return "/" + "/".join(_escape(p) for p in parts)
 
 
+@functools.lru_cache(maxsize=4096)
 def _escape(part: str) -> str:
     # the rule of rerun.escape_entity_path_part, kept here so this module stays rerun-free
     return "".join(c if (c.isalnum() or c in "_-.") else "\\" + c for c in part)

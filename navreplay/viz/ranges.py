@@ -61,6 +61,82 @@ def envelope_rows(t: np.ndarray, values: np.ndarray, rate_hz: float,
     return np.flatnonzero(keep)
 
 
+def envelope_rows_of(t: np.ndarray, series: list[tuple[np.ndarray, tuple[int, ...] | None,
+                                                       tuple[int, ...]]],
+                     rate_hz: float) -> list[np.ndarray | None]:
+    """:func:`envelope_rows` of several series at the same times ``t`` [s], computed together:
+    ``series`` holds each one's ``(values (M, k), columns, maxima)``; returns the rows of each
+    (None: every row). The same rows as a call per series, in a few array operations over all
+    of them (bins of as many rows each, as a steady output rate gives, as a reshaped array)."""
+    M, S = t.shape[0], len(series)
+    if M <= 2 or not S:
+        return [None] * S
+    starts = _changes(np.floor(np.asarray(t, dtype=np.float64) * rate_hz))
+    nb = starts.shape[0]
+    if nb * 3 >= M:  # already sparse: everything
+        return [None] * S
+    # the columns whose smallest and largest rows are kept, a row each, then the maxima's
+    lows: list[np.ndarray] = []
+    highs: list[np.ndarray] = []
+    low_of: list[int] = []
+    high_of: list[int] = []
+    zero: list[int] = []  # the row of each series' column 0 among the lows (-1: not there)
+    for s, (v, columns, maxima) in enumerate(series):
+        cols = list(range(v.shape[1])) if columns is None else list(columns)
+        zero.append(len(low_of) + cols.index(0) if 0 in cols else -1)
+        lows.append(v.T if columns is None else v.T[cols])
+        low_of += [s] * len(cols)
+        if maxima:
+            highs.append(v.T[list(maxima)])
+            high_of += [s] * len(maxima)
+    low = np.concatenate(lows) if len(lows) > 1 else np.ascontiguousarray(lows[0])
+    parts: list[tuple[np.ndarray, tuple[bool, ...], np.ndarray]] = [
+        (low, (True, False), np.asarray(low_of))]
+    if highs:
+        parts.append((np.concatenate(highs), (False,), np.asarray(high_of)))
+    keep = np.zeros((S, M), dtype=bool)
+    n = M // nb
+    regular = M == nb * n and np.array_equal(starts, np.arange(0, M, n))
+    low_nan = None
+    for v, kinds, owner in parts:
+        finite = np.isfinite(v)
+        whole = bool(finite.all())  # then every bin's extremes are rows of the series
+        nan = None if whole else np.isnan(v)
+        if v is low:
+            low_nan = nan
+        for smallest in kinds:
+            # per bin, the first row holding its smallest (largest) finite value, if any
+            if regular:
+                w = v.reshape(v.shape[0], nb, n)
+                if nan is not None and nan.any():
+                    w = np.where(nan.reshape(w.shape), np.inf if smallest else -np.inf, w)
+                at = w.argmin(axis=2) if smallest else w.argmax(axis=2)
+                found = (None if whole else
+                         np.isfinite(np.take_along_axis(w, at[:, :, None], axis=2)[:, :, 0]))
+                at += starts
+            else:
+                seg = np.repeat(np.arange(nb), np.diff(starts, append=M))
+                extreme = (np.fmin if smallest else np.fmax).reduceat(v, starts, axis=1)
+                hit = (v == extreme[:, seg]) & finite
+                at = np.minimum.reduceat(np.where(hit, np.arange(M), M), starts, axis=1)
+                found = at < M
+            series_of = np.broadcast_to(owner[:, None], at.shape)
+            if found is None:
+                keep[series_of, at] = True
+            else:
+                keep[series_of[found], at[found]] = True
+    if (low_nan is not None and low_nan.any()) or min(zero) < 0:
+        # the first row of a gap and the first finite row after it
+        gap = np.stack([np.isnan(v[:, 0]) if z < 0 or low_nan is None else low_nan[z]
+                        for z, (v, _, _) in zip(zero, series, strict=True)])
+        keep[:, 0] |= gap[:, 0]
+        keep[:, 1:] |= gap[:, 1:] & ~gap[:, :-1]
+        keep[:, 1:] |= gap[:, :-1] & ~gap[:, 1:]
+    of, rows = np.nonzero(keep)
+    ends = np.cumsum(np.bincount(of, minlength=S)).tolist()
+    return [rows[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True)]
+
+
 def _changes(a: np.ndarray) -> np.ndarray:
     """Indices where a run of equal values of ``a`` starts (0 first, if ``a`` is not empty)."""
     if not a.shape[0]:
@@ -100,17 +176,24 @@ class Envelope:
             if not rows.any():
                 return
             t, lo, hi = t[rows], lo[rows], hi[rows]
-        self.t_first = min(self.t_first, float(t[0]))
-        self.t_last = max(self.t_last, float(t[-1]))
-        while self.t_last >= self.width * self.BINS:
-            self.lo = np.minimum(self.lo[0::2], self.lo[1::2])
-            self.hi = np.maximum(self.hi[0::2], self.hi[1::2])
-            self.lo = np.r_[self.lo, np.full(self.BINS // 2, np.inf)]
-            self.hi = np.r_[self.hi, np.full(self.BINS // 2, -np.inf)]
-            self.width *= 2.0
+        self._grow(float(t[0]), float(t[-1]))
         b = np.clip((np.maximum(t, 0.0) // self.width).astype(np.int64), 0, self.BINS - 1)
         np.minimum.at(self.lo, b, lo)
         np.maximum.at(self.hi, b, hi)
+
+    def _grow(self, t_first: float, t_last: float) -> None:
+        """Rows from ``t_first`` to ``t_last`` [s] come: the bins widened to hold them."""
+        if t_first < self.t_first:
+            self.t_first = t_first
+        if t_last > self.t_last:
+            self.t_last = t_last
+        while self.t_last >= self.width * self.BINS:
+            half = self.BINS // 2
+            lo, hi = np.full(self.BINS, np.inf), np.full(self.BINS, -np.inf)
+            np.minimum(self.lo[0::2], self.lo[1::2], out=lo[:half])
+            np.maximum(self.hi[0::2], self.hi[1::2], out=hi[:half])
+            self.lo, self.hi = lo, hi
+            self.width *= 2.0
 
     def extent(self, after: float = -np.inf) -> tuple[float, float] | None:
         """Smallest and largest value of the bins that start at or after ``after`` [s]."""
@@ -119,6 +202,42 @@ class Envelope:
         if not sel.any():
             return None
         return float(self.lo[sel].min()), float(self.hi[sel].max())
+
+
+def add_rows(envelopes: list[Envelope], t: np.ndarray, values: list[np.ndarray]) -> None:
+    """:meth:`Envelope.add` of several series at the same times ``t`` [s]: ``values[i]``
+    (M, k_i) to ``envelopes[i]``, the bins of the times found once for all (times increasing:
+    a bin's rows are consecutive, reduced at once)."""
+    M = t.shape[0]
+    if not M or not np.isfinite(t).all() or (M > 1 and not (t[1:] >= t[:-1]).all()):
+        for e, v in zip(envelopes, values, strict=True):
+            e.add(t, v)
+        return
+    bins: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+    after0 = np.maximum(t, 0.0)
+    for e, v in zip(envelopes, values, strict=True):
+        ok = np.isfinite(v)
+        if ok.all():
+            lo = hi = v[:, 0]
+            if v.shape[1] > 1:
+                lo, hi = _across(np.minimum, v), _across(np.maximum, v)
+            first, last = 0, M - 1
+        else:  # of each row's finite values (a row without any holds inf, which changes nothing)
+            lo = _across(np.minimum, np.where(ok, v, np.inf))
+            hi = _across(np.maximum, np.where(ok, v, -np.inf))
+            rows = np.flatnonzero(np.isfinite(lo))
+            if not rows.shape[0]:
+                continue
+            first, last = int(rows[0]), int(rows[-1])
+        e._grow(float(t[first]), float(t[last]))
+        found = bins.get(e.width)
+        if found is None:
+            b = np.minimum((after0 // e.width).astype(np.int64), Envelope.BINS - 1)
+            starts = _changes(b)
+            found = bins[e.width] = (b[starts], starts)
+        at, starts = found
+        e.lo[at] = np.minimum(e.lo[at], np.minimum.reduceat(lo, starts))
+        e.hi[at] = np.maximum(e.hi[at], np.maximum.reduceat(hi, starts))
 
 
 def _across(op: np.ufunc, v: np.ndarray) -> np.ndarray:

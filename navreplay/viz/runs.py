@@ -15,10 +15,11 @@ from navreplay import metrics as _metrics
 from navreplay.filters.base import Nav, NavError, State, TruthColumn
 from navreplay.filters.result import RunResult
 from navreplay.geo import radii
-from navreplay.metrics import nav_errors
+from navreplay.metrics import RunMetrics, nav_errors
 from navreplay.metrics import outages as _outages
 from navreplay.metrics.compare import COMPARED, Quantiles, compared_errors
 from navreplay.viz import convert
+from navreplay.viz.channel import TimeIndex
 from navreplay.viz.naming import (
     NAV_ERROR_NAMES,
     NAV_UNITS,
@@ -105,7 +106,7 @@ class RunView(TruthView):
         self._log_track(run.label, run.track, run.color, 2.5, 3.0)
         self._log_cdfs(run)
 
-    def _log_compare(self, run: RunState, idx: list[rr.TimeColumn], errors: Any) -> None:
+    def _log_compare(self, run: RunState, idx: TimeIndex, errors: Any) -> None:
         """The run's error magnitudes in the Compare tab, overlaid with the other filters'
         (one plot per quantity), and into the distributions of its CDFs."""
         mags = compared_errors(errors.pos_ned, errors.v_n, errors.phi)
@@ -174,9 +175,11 @@ class RunView(TruthView):
         a: int,
         b: int,
         scored: frozenset[str] = frozenset(),
+        scores: RunMetrics | None = None,
     ) -> None:
         """Rows [a, b) of a run: states, sigmas (of the states not in ``scored``, whose
-        sigma is their error pane's ±3σ), extras and the navigation solution."""
+        sigma is their error pane's ±3σ), extras and the navigation solution (its errors those
+        of ``scores`` when given)."""
         if b <= a:
             return
         self._declare(run, result)
@@ -239,7 +242,7 @@ class RunView(TruthView):
             self.catalog.add("states", f"extra:{key}@{L}", f"{L}: {key} [{label}]", path,
                              rank=RANK_EXTRA, column=L, row=key)
         if any(result.has(part) for part in ("pos", "v_n", "q_nb")):
-            self._log_nav(run, result, a, b, idx)
+            self._log_nav(run, result, a, b, idx, scores)
         run.rows = b
 
     def _log_nav(
@@ -248,9 +251,11 @@ class RunView(TruthView):
         result: RunResult,
         a: int,
         b: int,
-        idx: list[rr.TimeColumn],
+        idx: TimeIndex,
+        scores: RunMetrics | None = None,
     ) -> None:
-        """Navigation solution rows [a, b): values, errors vs truth, 3D; of the parts the filter
+        """Navigation solution rows [a, b): values, errors vs truth (those of ``scores``, the
+        rows' :func:`~navreplay.metrics.run_metrics`, when given), 3D; of the parts the filter
         outputs only (an attitude-only filter has no position, velocity or 3D trajectory)."""
         L = run.label
         t = result.t[a:b]
@@ -259,7 +264,7 @@ class RunView(TruthView):
         assert result.nav_q_nb is not None  # logged for a result with a navigation solution
         nav = convert.NavColumns(t, result.nav_pos[a:b], result.nav_v_n[a:b], result.nav_q_nb[a:b])
         if self._ref is None and "pos" in parts:
-            finite = np.flatnonzero(np.isfinite(nav.pos).all(axis=1))
+            finite = np.flatnonzero(convert.finite_rows(nav.pos))
             if finite.shape[0] == 0:
                 return
             self._ref = nav.pos[finite[0]].copy()
@@ -274,16 +279,19 @@ class RunView(TruthView):
             self._style(path, [L], [run.color], [1.5])
             self._scalars(path, idx, v * u.scale)
             self.catalog.add(quantity_of(n).value, f"nav:{n}", title(n, u), path, rank=RANK_NAV)
-        part = result.rows(a, b)
-        sig = _metrics.nav_sigma(part)
-        nav_sigma = {f"{p}_{ax}": sig[k][:, i]
-                     for k, p in (("pos_ned", "p"), ("v_n", "v"), ("phi", "phi"))
-                     for i, ax in enumerate("NED")}
         errors: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
-        if self._truth is not None:
+        ne = None
+        if scores is not None and scores.nav is not None and scores.t.shape[0] == b - a:
+            ne, sig = scores.nav, scores.nav_sigma  # the errors the rows were scored with
+        elif self._truth is not None:
             tr = self._truth.at(t)
             ne = nav_errors(nav.pos, nav.v_n, nav.q_nb,
                             {"pos": tr.pos, "v_n": tr.v_n, "q_nb": tr.q_nb}, parts)
+            sig = _metrics.nav_sigma(result.rows(a, b))
+        if ne is not None:
+            nav_sigma = {f"{p}_{ax}": sig[k][:, i]
+                         for k, p in (("pos_ned", "p"), ("v_n", "v"), ("phi", "phi"))
+                         for i, ax in enumerate("NED")}
             for n, e in ne.columns().items():
                 if nav_part(n) not in parts:
                     continue

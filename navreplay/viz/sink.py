@@ -78,6 +78,7 @@ from navreplay.viz.targets import (
     rrd_problem,
 )
 from navreplay.viz.truth import TRUTH_RATE_HZ, truth_nav
+from navreplay.viz.world import box_at
 
 APPLICATION_ID = "navreplay"
 
@@ -174,12 +175,11 @@ class Sink(RunView, EnsemblePlots):
             self._truth = None if truth is None else truth_nav(truth, rows.t0_ns)
             box = r.extent_box
             if self._truth is not None and rows.t.shape[0]:
-                t, ext, lo, hi = self._track_extent(self._truth, box)
-                self._extent_curve = (t, ext)
-                k = int(np.searchsorted(t, rows.t[-1], side="right")) - 1
-                if k >= 0:
-                    box = (lo[k], hi[k])
-            self._log_rows(r, rows, 0, rows.t.shape[0], frozenset(errors))
+                self._extent_curve = self._track_extent(self._truth, box, float(rows.t[0]))
+                lo, hi, found = box_at(self._extent_curve, rows.t[-1:])
+                if found[0]:
+                    box = (lo[0], hi[0])
+            self._log_rows(r, rows, 0, rows.t.shape[0], frozenset(errors), metrics)
             r.extent_box = box
             self._log_errors(r, rows, errors)
             if nees is not None:

@@ -4,6 +4,8 @@ inside a tab."""
 
 from __future__ import annotations
 
+import functools
+
 from navreplay.core.colors import PALETTE as PALETTE  # the colours, shared with the exports
 from navreplay.core.colors import TRUTH_COLOR as TRUTH_COLOR
 from navreplay.core.colors import LabelColors as LabelColors
@@ -49,7 +51,12 @@ RANK_NAV, RANK_ERROR, RANK_STATE, RANK_SIGMA, RANK_EXTRA, RANK_TRUTH = (
 
 def lighter(color: tuple[int, ...], f: float) -> tuple[int, int, int]:
     """``color`` moved a fraction ``f`` towards white."""
-    r, g, b = (int(round(c + (255 - c) * f)) for c in color[:3])
+    return _lighter(tuple(color[:3]), float(f))
+
+
+@functools.lru_cache(maxsize=1024)
+def _lighter(color: tuple[int, ...], f: float) -> tuple[int, int, int]:
+    r, g, b = (int(round(c + (255 - c) * f)) for c in color)
     return r, g, b
 
 

@@ -55,39 +55,40 @@ class TruthView(WorldView):
             self._ref = nav.pos[0].copy()
         assert self._ref is not None, "the first truth window has rows"
         ned = convert.local_ned(nav.pos, self._ref)
-        finite = ned[np.isfinite(ned).all(axis=1)]
-        if finite.shape[0]:
-            lo, hi = finite.min(axis=0), finite.max(axis=0)
+        finite = convert.finite_rows(ned)
+        if finite.any():
+            inside = ned if finite.all() else ned[finite]
+            lo, hi = inside.min(axis=0), inside.max(axis=0)
             if self._box is not None:
                 lo, hi = np.minimum(self._box[0], lo), np.maximum(self._box[1], hi)
             self._box = (lo, hi)
             self._extent = max(self._extent, float(np.max(hi - lo)))
-        values = convert.nav_values(nav, self._ref)
+        self._add_track_rows(nav.t, ned, finite)
+        keep = (convert.decimate(nav.t, rate_hz, after=log.last) if rate_hz
+                else np.flatnonzero(nav.t > log.last))
+        # the plotted rows only (the yaw unwrapped along them, continuing the rows before)
+        kept = convert.NavColumns(nav.t[keep], nav.pos[keep], nav.v_n[keep], nav.q_nb[keep])
+        values = convert.nav_values(kept, self._ref, ned[keep])
         raw = values["yaw"]
         values["yaw"] = _unwrap_after(raw, log.yaw)
         if raw.shape[0]:
             log.yaw = (float(raw[-1]), float(values["yaw"][-1]))
         if self._truth_yaw is None:
-            self._truth_yaw = (nav.t, values["yaw"])
-        keep = (convert.decimate(nav.t, rate_hz, after=log.last) if rate_hz
-                else np.flatnonzero(nav.t > log.last))
-        idx = self._indexes(nav.t[keep], t0)
+            self._truth_yaw = (kept.t, values["yaw"])
+        idx = self._indexes(kept.t, t0)
         for name, v in values.items():
             u = display_unit(NAV_UNITS[name])
             path = f"{root}/nav/{name}"
             self._style(path, ["truth"], [TRUTH_COLOR], [2.0])
-            self._scalars(path, idx, v[keep] * u.scale)
+            self._scalars(path, idx, v * u.scale)
             self.catalog.add(quantity_of(name).value, f"nav:{name}", title(name, u), path,
                              rank=RANK_NAV)
         # 3D and map
         world = f"/world{root}"
         w = convert.decimate(nav.t, BODY_RATE_HZ, after=log.last)
         if w.shape[0]:
-            self._rec.send_columns(
-                f"{world}/body",
-                indexes=self._indexes(nav.t[w], t0),
-                columns=rr.Transform3D.columns(translation=ned[w], quaternion=xyzw(nav.q_nb[w])),
-            )
+            self._send_rows(f"{world}/body", nav.t[w], t0, rr.Transform3D.columns,
+                            translation=ned[w], quaternion=xyzw(nav.q_nb[w]))
         log.track.add(nav.t, ned, nav.pos)
         self._geo(root.strip("/"), nav.t, nav.pos, t0, TRUTH_COLOR, after=log.last)
         if nav.t.shape[0]:

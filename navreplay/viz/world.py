@@ -147,18 +147,18 @@ class WorldView(Channel):
     ) -> None:
         """Latitude/longitude for the map view at :data:`COVARIANCE_RATE_HZ` over time (rows
         later than ``after`` [s])."""
-        ok = np.isfinite(pos[:, :2]).all(axis=1)
-        if not ok.any():
+        finite = convert.finite_rows(pos[:, :2])
+        if not finite.any():
             return
-        deg = np.degrees(pos[ok, :2])
+        if finite.all():
+            k = convert.decimate(t, COVARIANCE_RATE_HZ, after=after)
+        else:
+            ok = np.flatnonzero(finite)
+            k = ok[convert.decimate(t[ok], COVARIANCE_RATE_HZ, after=after)]
         root = entity_path("map", label)
-        k = convert.decimate(t[ok], COVARIANCE_RATE_HZ, after=after)
         if k.shape[0]:
-            self._rec.send_columns(
-                f"{root}/position",
-                indexes=self._indexes(t[ok][k], t0_ns),
-                columns=rr.GeoPoints.columns(positions=deg[k]),
-            )
+            self._send_rows(f"{root}/position", t[k], t0_ns, rr.GeoPoints.columns,
+                            positions=np.degrees(pos[k, :2]))
             if f"{root}/position" not in self._styled:
                 self._styled.add(f"{root}/position")
                 self._rec.log(
@@ -187,31 +187,36 @@ class WorldView(Channel):
             )
             self.catalog.geo = True
 
-    def _track_extent(
-        self, truth: convert.NavColumns, box: tuple[np.ndarray, np.ndarray] | None = None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Extent of the true track [m] up to each of its rows (the NED box grown from
-        ``box``): times, extents, and the box's low and high corners row by row."""
+    def _track_extent(self, truth: convert.NavColumns, box: tuple[np.ndarray, np.ndarray] | None,
+                      first: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """The NED box of the true track [m] up to each row of ``truth`` (rows from before
+        ``first`` [s] on, the box grown from ``box``, that of the rows before): in consecutive
+        parts, their times, and the box's low and high corners row by row; those of the truth
+        logged (:meth:`_add_track_rows`) when they reach back far enough."""
+        kept = self._track_box
+        if kept and (self._track_box_whole or kept[0][0][0] <= first):
+            return kept
         ned = convert.local_ned(truth.pos, self._ref) if self._ref is not None else truth.pos
-        ok = np.isfinite(ned).all(axis=1)[:, None]
-        lo = np.where(ok, ned, np.inf)
-        hi = np.where(ok, ned, -np.inf)
-        if box is not None and lo.shape[0]:
-            lo[0], hi[0] = np.minimum(lo[0], box[0]), np.maximum(hi[0], box[1])
-        lo = np.minimum.accumulate(lo, axis=0)
-        hi = np.maximum.accumulate(hi, axis=0)
-        with np.errstate(invalid="ignore"):
-            ext = np.max(hi - lo, axis=1) if lo.shape[0] else np.empty(0)
-        return truth.t, np.where(np.isfinite(ext), ext, 0.0), lo, hi
+        return [(truth.t, *_box_rows(ned, box, convert.finite_rows(ned)))]
+
+    def _add_track_rows(self, t: np.ndarray, ned: np.ndarray, finite: np.ndarray) -> None:
+        """The true track's box row by row over the rows logged (times [s], NED [m], which
+        rows are finite), those of this window and the last kept: the times of a block of
+        estimates lie in them."""
+        kept = self._track_box
+        box = (kept[-1][1][-1], kept[-1][2][-1]) if kept and kept[-1][0].shape[0] else None
+        self._track_box = [*kept[-1:], (t, *_box_rows(ned, box, finite))]
+        self._track_box_whole = self._track_box_whole and len(kept) < 2
 
     def _extent_at(self, t: np.ndarray) -> np.ndarray | float:
         """Extent of the true track up to times ``t`` [m] (ellipsoids are capped relative to
         the track drawn so far); the whole extent without a truth."""
-        if self._extent_curve is None or not self._extent_curve[0].shape[0]:
+        if self._extent_curve is None:
             return self._extent
-        tt, ext = self._extent_curve
-        k = np.searchsorted(tt, t, side="right") - 1
-        return np.where(k >= 0, ext[np.clip(k, 0, None)], 0.0)
+        lo, hi, found = box_at(self._extent_curve, t)
+        with np.errstate(invalid="ignore"):
+            ext = np.max(hi - lo, axis=1)
+        return np.where(found & np.isfinite(ext), ext, 0.0)
 
     def _log_world(
         self,
@@ -229,37 +234,28 @@ class WorldView(Channel):
         if w.shape[0]:
             self._set_world()
             self.catalog.frame(ned[w].min(axis=0), ned[w].max(axis=0))
-            self._rec.send_columns(
-                entity_path("world", L, "body"),
-                indexes=self._indexes(nav.t[w], result.t0_ns),
-                columns=rr.Transform3D.columns(translation=ned[w], quaternion=xyzw(nav.q_nb[w])),
-            )
+            self._send_rows(entity_path("world", L, "body"), nav.t[w], result.t0_ns,
+                            rr.Transform3D.columns, translation=ned[w],
+                            quaternion=xyzw(nav.q_nb[w]))
             run.world_t = float(nav.t[w[-1]])
-        P_ned = _position_cov(run, result, a, b)
+        c = convert.decimate(nav.t, COVARIANCE_RATE_HZ, after=run.cov_t)
+        P_ned = _position_cov(run, result, a + c)  # of the rows drawn only
         if P_ned is None:
             return
-        c = convert.decimate(nav.t, COVARIANCE_RATE_HZ, after=run.cov_t)
-        c = c[np.isfinite(ned[c]).all(axis=1) & np.isfinite(P_ned[c]).all(axis=(1, 2))]
+        drawn = np.isfinite(ned[c]).all(axis=1) & np.isfinite(P_ned).all(axis=(1, 2))
+        c, P_ned = c[drawn], P_ned[drawn]
         if not c.shape[0]:
             return
-        half, q = convert.ellipsoids(P_ned[c], N_SIGMA)
+        half, q = convert.ellipsoids(P_ned, N_SIGMA)
         cap = ELLIPSOID_CAP * np.maximum(self._extent_at(nav.t[c]), 10.0)
         factor = np.minimum(1.0, cap / np.maximum(half.max(axis=1), 1e-12))
         labels = ["" if f >= 1.0 else f"{L} 3σ drawn × {f:.2g}" for f in factor]
         cov_path = entity_path("world", L, "covariance")
         if cov_path not in self.catalog.covariances:
             self.catalog.covariances.append(cov_path)
-        self._rec.send_columns(
-            cov_path,
-            indexes=self._indexes(nav.t[c], result.t0_ns),
-            columns=rr.Ellipsoids3D.columns(
-                centers=ned[c],
-                half_sizes=half * factor[:, None],
-                quaternions=q,
-                colors=np.tile((*run.color, 90), (c.shape[0], 1)),
-                labels=labels,
-            ),
-        )
+        self._send_rows(cov_path, nav.t[c], result.t0_ns, rr.Ellipsoids3D.columns,
+                        centers=ned[c], half_sizes=half * factor[:, None], quaternions=q,
+                        colors=np.tile((*run.color, 90), (c.shape[0], 1)), labels=labels)
         run.cov_t = float(nav.t[c[-1]])
 
     def _log_outage_track(self, root: str, track: Track) -> None:
@@ -318,8 +314,8 @@ def scale_length(span: float) -> float:
 _POSITION_STATES = ((Nav.LAT, Nav.LON, Nav.H, -1.0), (Nav.LAT, Nav.LON, Nav.DEPTH, 1.0))
 
 
-def _position_cov(run: RunState, result: RunResult, a: int, b: int) -> np.ndarray | None:
-    """Position-error covariance in NED metres for rows [a, b) from the declared latitude,
+def _position_cov(run: RunState, result: RunResult, rows: np.ndarray) -> np.ndarray | None:
+    """Position-error covariance in NED metres of ``rows`` from the declared latitude,
     longitude and height (or depth) error states, or None."""
     where = {
         s.truth.q: i for i, s in enumerate(result.states) if isinstance(s.truth, NavError)
@@ -329,5 +325,36 @@ def _position_cov(run: RunState, result: RunResult, a: int, b: int) -> np.ndarra
     for lat, lon, vert, sign in _POSITION_STATES:
         if lat in where and lon in where and vert in where:
             states = convert.PositionStates((where[lat], where[lon], where[vert]), True, sign)
-            return convert.position_cov_ned(result.P[a:b], states, result.nav_pos[a:b])
+            return convert.position_cov_ned(result.P[rows], states, result.nav_pos[rows])
     return None
+
+
+def box_at(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], t: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The box of :meth:`WorldView._track_extent` (its parts in time order) at its last row at
+    or before each of times ``t`` [s]: low and high corners, and whether there is one."""
+    lo = np.full((t.shape[0], 3), np.inf)
+    hi = np.full((t.shape[0], 3), -np.inf)
+    found = np.zeros(t.shape[0], dtype=bool)
+    for times, low, high in parts:  # a later part holds the later rows
+        k = np.searchsorted(times, t, side="right") - 1
+        inside = k >= 0
+        lo[inside], hi[inside] = low[k[inside]], high[k[inside]]
+        found |= inside
+    return lo, hi, found
+
+
+def _box_rows(ned: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None,
+              finite: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box of the ``finite`` rows of ``ned`` (N, 3) up to each row, grown from ``box``:
+    its low and high corners row by row (+-inf before any)."""
+    if finite.all():
+        lo, hi = ned.copy(), ned.copy()
+    else:
+        lo = np.where(finite[:, None], ned, np.inf)
+        hi = np.where(finite[:, None], ned, -np.inf)
+    if box is not None and lo.shape[0]:
+        lo[0], hi[0] = np.minimum(lo[0], box[0]), np.maximum(hi[0], box[1])
+    np.minimum.accumulate(lo, axis=0, out=lo)
+    np.maximum.accumulate(hi, axis=0, out=hi)
+    return lo, hi

@@ -170,6 +170,19 @@ def test_nees_block_and_singular_epochs():
     assert np.isnan(v[2])
 
 
+def test_nees_is_the_quadratic_form_of_correlated_covariances():
+    """e^T P^-1 e of full covariances whose states differ in scale by ten orders (metres and
+    radians, a rad/s bias), against an explicit inverse of each."""
+    rng = np.random.default_rng(8)
+    M, k = 300, 9
+    scale = 10.0 ** rng.uniform(-6.0, 3.0, k)
+    A = rng.normal(size=(M, k, k))
+    P = (A @ A.transpose(0, 2, 1) + 0.1 * np.eye(k)) * scale[:, None] * scale[None, :]
+    e = rng.normal(size=(M, k)) * scale
+    want = np.einsum("ki,kij,kj->k", e, np.linalg.inv(P), e)
+    np.testing.assert_allclose(metrics.nees(e, P), want, rtol=1e-8)
+
+
 def test_ensemble_stats_equals_batch_computation():
     rng = np.random.default_rng(5)
     runs, M = 7, 40

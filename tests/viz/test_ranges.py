@@ -16,7 +16,9 @@ from navreplay.viz.ranges import (
     DRAWN_RATE_HZ,
     LEGEND_ENTRY,
     Envelope,
+    add_rows,
     envelope_rows,
+    envelope_rows_of,
     time_range,
     y_range,
 )
@@ -305,3 +307,56 @@ def test_envelope_extent_is_that_of_the_finite_values():
         lo, hi = env.extent(after)
         assert lo <= np.nanmin(finite[sel]) and hi >= np.nanmax(finite[sel])
     assert env.extent() == (np.nanmin(finite), np.nanmax(finite))
+
+
+def _series(rng, M):
+    """Series of 1 to 4 columns: many ties, +-0, infinities, NaN gaps, all-NaN bins."""
+    out = []
+    for k in (1, 3, 1, 4, 2):
+        v = rng.integers(-3, 4, (M, k)).astype(float)
+        v[rng.random((M, k)) < 0.05] = np.nan
+        v[rng.random((M, k)) < 0.02] = np.inf
+        v[rng.random((M, k)) < 0.02] = -np.inf
+        v[rng.random((M, k)) < 0.05] = -0.0
+        out.append(v)
+    out[2][M // 3:M // 2, 0] = np.nan  # whole bins without a value
+    out.append(rng.standard_normal((M, 2)))  # finite everywhere
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("regular", [True, False])
+def test_envelope_rows_of_several_series_are_those_of_each(seed, regular):
+    """Drawn together (bins of as many rows each, as a steady output rate gives, or uneven
+    ones), the rows of each series are those of a call per series."""
+    rng = np.random.default_rng(seed)
+    M = int(rng.integers(200, 3000))
+    t = (np.arange(M) * 0.1 if regular else np.sort(rng.uniform(0.0, 60.0, M)))
+    series = _series(rng, M)
+    ways = [(None, ()), ((0,), (1,)), ((0,), ()), ((0, 3), (1,)), ((1,), ()), (None, (0,))]
+    drawn = [(v, *ways[i % len(ways)]) for i, v in enumerate(series)]
+    drawn = [(v, c, m) for v, c, m in drawn
+             if all(j < v.shape[1] for j in (*(c or ()), *m))]
+    for rate in (0.5, 2.0):
+        got = envelope_rows_of(t, drawn, rate)
+        for (v, c, m), k in zip(drawn, got, strict=True):
+            want = envelope_rows(t, v, rate, c, m)
+            np.testing.assert_array_equal(np.arange(M) if k is None else k, want)
+    assert envelope_rows_of(t[:2], drawn, 0.5) == [None] * len(drawn)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_envelopes_added_together_are_those_added_one_by_one(seed):
+    rng = np.random.default_rng(seed)
+    M = 4000
+    t = np.sort(rng.uniform(0.0, 900.0, M))
+    series = _series(rng, M)
+    one, together = [Envelope() for _ in series], [Envelope() for _ in series]
+    for a in range(0, M, 700):
+        for e, v in zip(one, series, strict=True):
+            e.add(t[a:a + 700], v[a:a + 700])
+        add_rows(together, t[a:a + 700], [v[a:a + 700] for v in series])
+    for e, f in zip(one, together, strict=True):
+        assert (e.width, e.t_first, e.t_last) == (f.width, f.t_first, f.t_last)
+        np.testing.assert_array_equal(e.lo, f.lo)
+        np.testing.assert_array_equal(e.hi, f.hi)
