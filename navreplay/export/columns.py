@@ -121,7 +121,7 @@ def csv_rows(cols: Sequence[Column]) -> str:
     return format_rows([(np.asarray(c.values), c.fmt) for c in cols])
 
 
-def csv_blocks(cols: Sequence[Column]) -> Iterator[bytes]:
+def csv_blocks(cols: Sequence[Column]) -> Iterator[bytes | memoryview]:
     """:func:`csv_rows` as ASCII bytes, a block of rows at a time (for a binary file)."""
     return row_blocks([(np.asarray(c.values), c.fmt) for c in cols])
 

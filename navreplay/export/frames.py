@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.core.jit import kernel
 from navreplay.core.streams import Stream
 from navreplay.geo import earth
 from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, skew
@@ -92,7 +93,179 @@ class Poses:
 def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np.ndarray,
               q_nb: np.ndarray, nav_cov: np.ndarray | None) -> Poses:
     """Convert a NED/FRD navigation solution and its error covariance to ROS frames
-    (see the module docstring for the formulas)."""
+    (see the module docstring for the formulas).
+
+    The orientation, the body velocity and the covariance products come from one compiled
+    kernel, row by row (:func:`_pose_kernel`), with the sums of numpy's products term by term
+    (zeros included: a NaN spreads as through numpy's): they may differ from numpy's matrix
+    products (BLAS) in the last bit."""
+    M = len(stamps_ns)
+    cov = np.full((M, 9, 9), np.nan) if nav_cov is None else np.ascontiguousarray(nav_cov,
+                                                                                   np.float64)
+    zero = not cov.any()  # the reference's (NaN counts as not zero)
+    q_xyzw, v_flu = np.empty((M, 4)), np.empty((M, 3))
+    pose_cov, lin = np.empty((M, 6, 6)), np.empty((M, 3, 3))
+    pos = np.asarray(pos, dtype=np.float64)
+    finite = _pose_kernel(pos[:, 0].copy(), pos[:, 1].copy(), frame.C_enu_e,
+                          np.ascontiguousarray(q_nb, np.float64),
+                          np.ascontiguousarray(v_n, np.float64), cov, not zero, q_xyzw, v_flu,
+                          pose_cov, lin)
+    if zero:
+        if not finite:  # the products' zeros and NaN (of the factors' NaN)
+            return _numpy_poses(frame, stamps_ns, pos, v_n, q_nb, cov)
+        # the products' zeros, without the products or their factors
+        pose_cov, lin, fix_cov = np.zeros((M, 6, 6)), np.zeros((M, 3, 3)), np.zeros((M, 3, 3))
+    else:
+        fix_cov = T_NED_ENU @ cov[:, :3, :3] @ T_NED_ENU
+    # the twist: the linear block, and the angular rate not estimated (unknown: zero rows and
+    # columns, UNKNOWN_VARIANCE on the diagonal, as _mark_unknown makes of NaN there)
+    twist_cov = np.zeros((M, 6, 6))
+    twist_cov[:, :3, :3] = _mark_unknown(lin)
+    twist_cov[:, _ANGULAR, _ANGULAR] = UNKNOWN_VARIANCE
+    return Poses(np.asarray(stamps_ns, dtype=np.int64), frame.position(pos), q_xyzw,
+                 _mark_unknown(pose_cov), v_flu, twist_cov, pos, fix_cov)
+
+
+@kernel(error_model="numpy")
+def _pose_kernel(lat: np.ndarray, lon: np.ndarray, C0: np.ndarray, q_nb: np.ndarray,
+                 v_n: np.ndarray, cov: np.ndarray, with_cov: bool, q_out: np.ndarray,
+                 v_out: np.ndarray, pose_out: np.ndarray, lin_out: np.ndarray) -> bool:
+    """Per row: ``R = C0 C_en(lat, lon)``, ``C_nb`` of ``q_nb``, the quaternion (x, y, z, w;
+    Shepperd's method, the scalar part >= 0) of ``R C_nb F``, the FLU body velocity
+    ``F C_nb^T v_n``, and (``with_cov``) ``B P_pose B^T`` and ``J P_vel,att J^T`` with
+    ``B = diag(R, R)``, ``J = F C_nb^T [I, -[v_n x]]`` (``F``: FRD <-> FLU). Returns whether
+    every R, C_nb and v_n is finite. The formulas, and the order of each sum, are those of
+    :func:`navreplay.geo.rotations.quat_to_dcm`, ``dcm_to_quat`` and :func:`_numpy_poses`."""
+    R = np.empty((3, 3))
+    Cn = np.empty((3, 3))
+    Cb = np.empty((3, 3))
+    C = np.empty((3, 3))
+    B = np.zeros((6, 6))
+    P = np.empty((6, 6))
+    T = np.empty((6, 6))
+    J = np.empty((3, 6))
+    J0 = np.zeros((3, 6))
+    A = np.empty((3, 3))
+    f = (1.0, -1.0, -1.0)
+    finite = True
+    for m in range(lat.shape[0]):
+        sl, cl, so, co = np.sin(lat[m]), np.cos(lat[m]), np.sin(lon[m]), np.cos(lon[m])
+        Cn[0, 0], Cn[0, 1], Cn[0, 2] = -sl * co, -so, -cl * co
+        Cn[1, 0], Cn[1, 1], Cn[1, 2] = -sl * so, co, -cl * so
+        Cn[2, 0], Cn[2, 1], Cn[2, 2] = cl, 0.0, -sl
+        for i in range(3):
+            for k in range(3):
+                R[i, k] = C0[i, 0] * Cn[0, k] + C0[i, 1] * Cn[1, k] + C0[i, 2] * Cn[2, k]
+        q0, q1, q2, q3 = q_nb[m, 0], q_nb[m, 1], q_nb[m, 2], q_nb[m, 3]
+        Cb[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
+        Cb[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
+        Cb[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
+        Cb[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
+        Cb[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
+        Cb[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
+        Cb[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
+        Cb[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
+        Cb[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+        for i in range(3):
+            for k in range(3):
+                finite = finite and np.isfinite(R[i, k]) and np.isfinite(Cb[i, k])
+                C[i, k] = (R[i, 0] * Cb[0, k] + R[i, 1] * Cb[1, k] + R[i, 2] * Cb[2, k]) * f[k]
+        tr = C[0, 0] + C[1, 1] + C[2, 2]
+        piv, best = 0, tr  # numpy's argmax: the first largest, the first NaN
+        if not np.isnan(tr):
+            for k in range(1, 4):
+                d = C[k - 1, k - 1]
+                if np.isnan(d) or d > best:
+                    piv, best = k, d
+                    if np.isnan(d):
+                        break
+        if piv == 0:
+            s = _root(1.0 + tr)
+            w, x = 0.25 * s, (C[2, 1] - C[1, 2]) / s
+            y, z = (C[0, 2] - C[2, 0]) / s, (C[1, 0] - C[0, 1]) / s
+        elif piv == 1:
+            s = _root(1.0 + C[0, 0] - C[1, 1] - C[2, 2])
+            w, x = (C[2, 1] - C[1, 2]) / s, 0.25 * s
+            y, z = (C[0, 1] + C[1, 0]) / s, (C[0, 2] + C[2, 0]) / s
+        elif piv == 2:
+            s = _root(1.0 - C[0, 0] + C[1, 1] - C[2, 2])
+            w, x = (C[0, 2] - C[2, 0]) / s, (C[0, 1] + C[1, 0]) / s
+            y, z = 0.25 * s, (C[1, 2] + C[2, 1]) / s
+        else:
+            s = _root(1.0 - C[0, 0] - C[1, 1] + C[2, 2])
+            w, x = (C[1, 0] - C[0, 1]) / s, (C[0, 2] + C[2, 0]) / s
+            y, z = (C[1, 2] + C[2, 1]) / s, 0.25 * s
+        n = np.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w / n, x / n, y / n, z / n
+        if w < 0.0:
+            w, x, y, z = -w, -x, -y, -z
+        q_out[m, 0], q_out[m, 1], q_out[m, 2], q_out[m, 3] = x, y, z, w
+        v0, v1, v2 = v_n[m, 0], v_n[m, 1], v_n[m, 2]
+        finite = finite and np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2)
+        for i in range(3):
+            v_out[m, i] = (Cb[0, i] * v0 + Cb[1, i] * v1 + Cb[2, i] * v2) * f[i]
+        if not with_cov:
+            continue
+        for i in range(3):
+            for k in range(3):
+                B[i, k] = R[i, k]
+                B[i + 3, k + 3] = R[i, k]
+        for i in range(6):
+            for k in range(6):
+                P[i, k] = cov[m, _POSE_ROWS[i], _POSE_ROWS[k]]
+        _product(B, P, B, T, pose_out[m])
+        # J = (F C_nb^T) [I, -[v x]]
+        for i in range(3):
+            for k in range(3):
+                A[i, k] = f[i] * Cb[k, i]
+        J0[0, 0], J0[1, 1], J0[2, 2] = 1.0, 1.0, 1.0
+        J0[0, 3], J0[0, 4], J0[0, 5] = -0.0, v2, -v1
+        J0[1, 3], J0[1, 4], J0[1, 5] = -v2, -0.0, v0
+        J0[2, 3], J0[2, 4], J0[2, 5] = v1, -v0, -0.0
+        for i in range(3):
+            for k in range(6):
+                J[i, k] = A[i, 0] * J0[0, k] + A[i, 1] * J0[1, k] + A[i, 2] * J0[2, k]
+        for i in range(6):
+            for k in range(6):
+                P[i, k] = cov[m, 3 + i, 3 + k]
+        _product(J, P, J, T, lin_out[m])
+    return finite
+
+
+@kernel(error_model="numpy", inline="always")
+def _root(x: float) -> float:
+    """``sqrt(max(x, 0)) * 2`` (a NaN stays NaN)."""
+    return np.sqrt(0.0 if x < 0.0 else x) * 2.0
+
+
+@kernel(error_model="numpy", inline="always")
+def _product(X: np.ndarray, P: np.ndarray, Y: np.ndarray, T: np.ndarray,
+             out: np.ndarray) -> None:
+    """``out = (X P) Y^T`` for X, Y (n, 6), P (6, 6); ``T``: room for ``X P``. Every term of
+    each sum, zeros included."""
+    n = X.shape[0]
+    for i in range(n):
+        for k in range(6):
+            acc = X[i, 0] * P[0, k]
+            for j in range(1, 6):
+                acc += X[i, j] * P[j, k]
+            T[i, k] = acc
+    for i in range(n):
+        for k in range(n):
+            acc = T[i, 0] * Y[k, 0]
+            for j in range(1, 6):
+                acc += T[i, j] * Y[k, j]
+            out[i, k] = acc
+
+
+_POSE_ROWS = (0, 1, 2, 6, 7, 8)
+"""Rows of the position and attitude errors in the navigation covariance (of the kernel)."""
+
+
+def _numpy_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np.ndarray,
+              q_nb: np.ndarray, nav_cov: np.ndarray | None) -> Poses:
+    """:func:`ros_poses` by numpy's products: the reference's zero covariance when its
+    factors are not all finite (the NaN of the products' rows and columns)."""
     M = len(stamps_ns)
     R = frame.rotation(pos)
     C_nb = quat_to_dcm(q_nb)

@@ -21,6 +21,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections.abc import Iterator, Sequence
@@ -75,15 +76,17 @@ def format_rows(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
 
 
 def row_blocks(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
-               end: str = "\n") -> Iterator[bytes]:
+               end: str = "\n") -> Iterator[bytes | memoryview]:
     """The rows of :func:`format_rows` as ASCII bytes, :data:`BLOCK_ROWS` rows at a time (for
-    a binary file: no text built, decoded or encoded)."""
+    a binary file: no text built, decoded or encoded). A block is a view of the kernel's own
+    buffer (each block its own: they may all be kept), not a copy of it."""
     if not columns:
         return
     k = len(columns)
     arrays = [np.asarray(v) for v, _ in columns]
     fmts = [f for _, f in columns]
-    kinds = np.array([_kind(a, f) for a, f in zip(arrays, fmts, strict=True)], dtype=np.int64)
+    kinds = np.array([_kind(a.dtype, f) for a, f in zip(arrays, fmts, strict=True)],
+                     dtype=np.int64)
     kind, prec = kinds // 100 - 1, kinds % 100
     ints = [a.dtype.kind in "iu" for a in arrays]
     n = arrays[0].shape[0]
@@ -102,7 +105,7 @@ def row_blocks(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
         size, count = _write(F, F.view(np.int64), Ii, kind, prec, ord(sep), ord(end), buf,
                              marks)
         if not count:
-            yield buf[:size].tobytes()
+            yield buf[:size].data
             continue
         text, done = [], 0  # the values left to Python go in at their marks
         for pos, flat in marks[:2 * count].reshape(count, 2).tolist():
@@ -114,15 +117,17 @@ def row_blocks(columns: Sequence[tuple[np.ndarray, str]], sep: str = ",",
         yield b"".join(text)
 
 
-def _kind(values: np.ndarray, fmt: str) -> int:
-    """100 * (kind + 1) + precision of a column."""
-    integer = values.dtype.kind in "iu" and values.dtype.itemsize <= 8 and not (
-        values.dtype.kind == "u" and values.dtype.itemsize == 8)
+@functools.lru_cache(maxsize=256)
+def _kind(dtype: np.dtype, fmt: str) -> int:
+    """100 * (kind + 1) + precision of a column of ``dtype`` (the same for every block of a
+    file: cached)."""
+    integer = dtype.kind in "iu" and dtype.itemsize <= 8 and not (
+        dtype.kind == "u" and dtype.itemsize == 8)
     if fmt == "%d" and integer:
         return 100 * (_INT + 1)
     if fmt == SECONDS_NS and integer:
         return 100 * (_SECONDS + 1)
-    if values.dtype.kind == "f":
+    if dtype.kind == "f":
         if (m := _FIXED_RE.fullmatch(fmt)) and int(m.group(1)) <= 15:
             return 100 * (_FIXED + 1) + int(m.group(1))
         if (m := _GENERAL_RE.fullmatch(fmt)) and 1 <= int(m.group(1)) <= 17:

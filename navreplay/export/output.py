@@ -151,11 +151,18 @@ def _nav_covariance(result: RunResult) -> np.ndarray:
             idx.append(i)
             rows.append(_NAV_ROWS[q])
             scales.append(scale_of.get(q, np.ones(M)))
-    out = np.full((M, 9, 9), np.nan)
+    # NaN where no state is (every element is written when all nine are)
+    out = np.empty((M, 9, 9)) if len(rows) == 9 else np.full((M, 9, 9), np.nan)
     if idx:
         s = np.stack(scales, axis=1)
-        sub = result.P[:, _block(idx), _block(idx, True)] * s[:, :, None] * s[:, None, :]
-        out[:, _block(rows), _block(rows, True)] = sub
+        sub = result.P[:, _block(idx), _block(idx, True)]
+        at = _block(rows), _block(rows, True)
+        if isinstance(at[0], slice):  # the products formed in place (no temporaries)
+            view = out[:, at[0], at[1]]
+            np.multiply(sub, s[:, :, None], out=view)
+            view *= s[:, None, :]
+        else:
+            out[:, at[0], at[1]] = sub * s[:, :, None] * s[:, None, :]
     return out
 
 

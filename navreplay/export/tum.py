@@ -21,7 +21,7 @@ def tum_lines(poses: Poses) -> str:
     return format_rows(_tum_columns(poses), sep=" ")
 
 
-def tum_blocks(poses: Poses) -> Iterator[bytes]:
+def tum_blocks(poses: Poses) -> Iterator[bytes | memoryview]:
     """:func:`tum_lines` as ASCII bytes, a block of lines at a time (for a binary file)."""
     return row_blocks(_tum_columns(poses), sep=" ")
 

@@ -263,11 +263,13 @@ def test_ensemble_export(runs, tmp_path) -> None:
 
 
 def test_pose_covariances_as_the_straightforward_products() -> None:
-    """ros_poses' shortcuts (the twist's angular block set, no marking of finite covariances,
-    the zero products of the reference, without their factors when these are finite) give the
-    bits of the plain products marked after."""
+    """ros_poses' compiled kernel and shortcuts (the twist's angular block set, no marking of
+    finite covariances, the zero products of the reference, without their factors when these
+    are finite) give the plain numpy products marked after: the zeros, NaN and unknown marks
+    exactly, the values to the last bits (the kernel sums term by term, numpy's matrix
+    products may use fused multiply-adds); the orientation is dcm_to_quat's."""
     from navreplay.export import frames
-    from navreplay.geo.rotations import skew
+    from navreplay.geo.rotations import dcm_to_quat, skew
 
     rng = np.random.default_rng(11)
     M = 40
@@ -308,8 +310,15 @@ def test_pose_covariances_as_the_straightforward_products() -> None:
             c[:, d, d] = np.where(bad, frames.UNKNOWN_VARIANCE, c[:, d, d])
             return c
 
-        np.testing.assert_array_equal(got.pose_cov, marked(pose))
-        np.testing.assert_array_equal(got.twist_cov, marked(twist))
+        for have, want in ((got.pose_cov, marked(pose)), (got.twist_cov, marked(twist))):
+            assert np.array_equal(have == 0.0, want == 0.0)  # the zeros and marks exactly
+            np.testing.assert_allclose(have, want, rtol=1e-12,
+                                       atol=1e-13 * np.abs(want).max() + 1e-300)
+        C = R @ C_nb @ frames.F_FRD_FLU
+        np.testing.assert_allclose(got.q_xyzw, dcm_to_quat(C)[:, [1, 2, 3, 0]], rtol=0,
+                                   atol=1e-15)
+        np.testing.assert_allclose(got.v_flu, np.einsum("mji,mj->mi", C_nb, v)
+                                   * np.diagonal(frames.F_FRD_FLU), rtol=1e-14, atol=1e-14)
         fix = frames.T_NED_ENU @ cov[:, :3, :3] @ frames.T_NED_ENU
         assert got.fix_cov.tobytes() == fix.tobytes()  # the signs of zeros too
     assert (got.twist_cov[3, :3, :3] == np.diag([-1.0] * 3)).all()  # the velocity unknown
