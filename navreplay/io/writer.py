@@ -4,8 +4,9 @@ Messages of all streams are merged by time (ties in :class:`StreamKind` order) a
 windows of about :data:`WINDOW` messages: each window's messages are CDR-encoded per stream as one
 numpy structured array and handed to :class:`~navreplay.io.mcapwrite.BulkWriter` (mcap's file
 layout, the records assembled in bulk). Memory stays bounded by the window, not
-the recording; a recording too long to hold is written from pieces in time order (``more``). The file is written under a temporary name beside the target, fsynced, and renamed
-only once complete, so the target name never shows a partial file.
+the recording; a recording too long to hold is written from pieces in time order (``more``).
+The file is written under a temporary name beside the target, fsynced, and renamed only once
+complete, so the target name never shows a partial file.
 """
 
 from __future__ import annotations
@@ -218,8 +219,9 @@ def write_recording(
         If the target exists and ``force`` is False.
     RecordingError
         If a stream cannot be written (missing columns, bad samples, times outside the message
-        range, a piece that does not continue the recording). Nothing is written then; a failure while writing leaves no file under the target
-        name and an existing one untouched.
+        range, a piece that does not continue the recording). Nothing is written then; a
+        failure while writing leaves no file under the target name and an existing one
+        untouched.
     """
     target = Path(path)
     where = str(target)
