@@ -13,6 +13,7 @@ import numpy as np
 from navreplay.core.jit import kernel
 from navreplay.core.streams import Stream
 from navreplay.geo import earth
+from navreplay.geo import kernels as geo_kernels
 from navreplay.geo.rotations import dcm_to_quat, quat_to_dcm, skew
 
 WORLD_FRAME = "map"
@@ -134,8 +135,10 @@ def _pose_kernel(lat: np.ndarray, lon: np.ndarray, C0: np.ndarray, q_nb: np.ndar
     Shepperd's method, the scalar part >= 0) of ``R C_nb F``, the FLU body velocity
     ``F C_nb^T v_n``, and (``with_cov``) ``B P_pose B^T`` and ``J P_vel,att J^T`` with
     ``B = diag(R, R)``, ``J = F C_nb^T [I, -[v_n x]]`` (``F``: FRD <-> FLU). Returns whether
-    every R, C_nb and v_n is finite. The formulas, and the order of each sum, are those of
-    :func:`navreplay.geo.rotations.quat_to_dcm`, ``dcm_to_quat`` and :func:`_numpy_poses`."""
+    every R, C_nb and v_n is finite. ``C_nb`` and the quaternion are
+    :func:`navreplay.geo.kernels.dcm_entries` and :func:`~navreplay.geo.kernels.dcm_to_quat`
+    (the formulas of :mod:`navreplay.geo.rotations`); the order of each sum is that of
+    :func:`_numpy_poses`."""
     R = np.empty((3, 3))
     Cn = np.empty((3, 3))
     Cb = np.empty((3, 3))
@@ -156,49 +159,15 @@ def _pose_kernel(lat: np.ndarray, lon: np.ndarray, C0: np.ndarray, q_nb: np.ndar
         for i in range(3):
             for k in range(3):
                 R[i, k] = C0[i, 0] * Cn[0, k] + C0[i, 1] * Cn[1, k] + C0[i, 2] * Cn[2, k]
-        q0, q1, q2, q3 = q_nb[m, 0], q_nb[m, 1], q_nb[m, 2], q_nb[m, 3]
-        Cb[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
-        Cb[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
-        Cb[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
-        Cb[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
-        Cb[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
-        Cb[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
-        Cb[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
-        Cb[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
-        Cb[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+        (Cb[0, 0], Cb[0, 1], Cb[0, 2], Cb[1, 0], Cb[1, 1], Cb[1, 2],
+         Cb[2, 0], Cb[2, 1], Cb[2, 2]) = geo_kernels.dcm_entries(q_nb[m, 0], q_nb[m, 1],
+                                                                 q_nb[m, 2], q_nb[m, 3])  # fmt: skip
         for i in range(3):
             for k in range(3):
                 finite = finite and np.isfinite(R[i, k]) and np.isfinite(Cb[i, k])
                 C[i, k] = (R[i, 0] * Cb[0, k] + R[i, 1] * Cb[1, k] + R[i, 2] * Cb[2, k]) * f[k]
-        tr = C[0, 0] + C[1, 1] + C[2, 2]
-        piv, best = 0, tr  # numpy's argmax: the first largest, the first NaN
-        if not np.isnan(tr):
-            for k in range(1, 4):
-                d = C[k - 1, k - 1]
-                if np.isnan(d) or d > best:
-                    piv, best = k, d
-                    if np.isnan(d):
-                        break
-        if piv == 0:
-            s = _root(1.0 + tr)
-            w, x = 0.25 * s, (C[2, 1] - C[1, 2]) / s
-            y, z = (C[0, 2] - C[2, 0]) / s, (C[1, 0] - C[0, 1]) / s
-        elif piv == 1:
-            s = _root(1.0 + C[0, 0] - C[1, 1] - C[2, 2])
-            w, x = (C[2, 1] - C[1, 2]) / s, 0.25 * s
-            y, z = (C[0, 1] + C[1, 0]) / s, (C[0, 2] + C[2, 0]) / s
-        elif piv == 2:
-            s = _root(1.0 - C[0, 0] + C[1, 1] - C[2, 2])
-            w, x = (C[0, 2] - C[2, 0]) / s, (C[0, 1] + C[1, 0]) / s
-            y, z = 0.25 * s, (C[1, 2] + C[2, 1]) / s
-        else:
-            s = _root(1.0 - C[0, 0] - C[1, 1] + C[2, 2])
-            w, x = (C[1, 0] - C[0, 1]) / s, (C[0, 2] + C[2, 0]) / s
-            y, z = (C[1, 2] + C[2, 1]) / s, 0.25 * s
-        n = np.sqrt(w * w + x * x + y * y + z * z)
-        w, x, y, z = w / n, x / n, y / n, z / n
-        if w < 0.0:
-            w, x, y, z = -w, -x, -y, -z
+        w, x, y, z = geo_kernels.dcm_to_quat(C[0, 0], C[0, 1], C[0, 2], C[1, 0], C[1, 1],
+                                             C[1, 2], C[2, 0], C[2, 1], C[2, 2])
         q_out[m, 0], q_out[m, 1], q_out[m, 2], q_out[m, 3] = x, y, z, w
         v0, v1, v2 = v_n[m, 0], v_n[m, 1], v_n[m, 2]
         finite = finite and np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2)
@@ -230,12 +199,6 @@ def _pose_kernel(lat: np.ndarray, lon: np.ndarray, C0: np.ndarray, q_nb: np.ndar
                 P[i, k] = cov[m, 3 + i, 3 + k]
         _product(J, P, J, T, lin_out[m])
     return finite
-
-
-@kernel(error_model="numpy", inline="always")
-def _root(x: float) -> float:
-    """``sqrt(max(x, 0)) * 2`` (a NaN stays NaN)."""
-    return np.sqrt(0.0 if x < 0.0 else x) * 2.0
 
 
 @kernel(error_model="numpy", inline="always")

@@ -9,8 +9,8 @@ angles ``[roll, pitch, yaw]``.
 Two kinds of kernels:
 
 - scalar forms take and return floats (tuples), for inner loops: :func:`cross`,
-  :func:`quat_mult`, :func:`rotate`, :func:`rotate_inverse`, :func:`rotvec_to_quat`,
-  :func:`quat_to_rotvec` and the earth model (:func:`radii`, :func:`radii_derivatives`,
+  :func:`quat_mult`, :func:`dcm_entries`, :func:`dcm_to_quat`, :func:`rotate`,
+  :func:`rotate_inverse`, :func:`rotvec_to_quat`, :func:`quat_to_rotvec` and the earth model (:func:`radii`, :func:`radii_derivatives`,
   :func:`gravity`, :func:`gravity_derivatives`, :func:`earth_rate`, :func:`transport_rate`);
 - array forms return a new small array: :func:`quat_to_dcm` (3, 3),
   :func:`quat_left_matrix` and :func:`quat_right_matrix` (4, 4), :func:`euler_to_quat` (4,),
@@ -58,6 +58,8 @@ from navreplay.geo import earth
 
 __all__ = [
     "cross",
+    "dcm_entries",
+    "dcm_to_quat",
     "earth_rate",
     "euler_to_quat",
     "gravity",
@@ -186,7 +188,7 @@ def correct_quat(a, b, c, q0, q1, q2, q3):
 
 
 @kernel(error_model="numpy", inline="always")
-def _dcm(q0, q1, q2, q3):
+def dcm_entries(q0, q1, q2, q3):
     """The nine entries of C(q), row by row."""
     return (
         q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3,
@@ -202,9 +204,48 @@ def _dcm(q0, q1, q2, q3):
 
 
 @kernel(error_model="numpy", inline="always")
+def dcm_to_quat(c00, c01, c02, c10, c11, c12, c20, c21, c22):
+    """Unit quaternion (scalar part >= 0) of the DCM of the nine entries (row by row), by
+    Shepperd's method with the pivot of :func:`navreplay.geo.rotations.dcm_to_quat` (numpy's
+    argmax of the trace and the diagonal: the first largest, the first NaN)."""
+    tr = c00 + c11 + c22
+    piv, best = 0, tr
+    if not math.isnan(tr):
+        for k, d in ((1, c00), (2, c11), (3, c22)):
+            if math.isnan(d):
+                piv = k
+                break
+            if d > best:
+                piv, best = k, d
+    if piv == 0:
+        s = _twice_root(1.0 + tr)
+        w, x, y, z = 0.25 * s, (c21 - c12) / s, (c02 - c20) / s, (c10 - c01) / s
+    elif piv == 1:
+        s = _twice_root(1.0 + c00 - c11 - c22)
+        w, x, y, z = (c21 - c12) / s, 0.25 * s, (c01 + c10) / s, (c02 + c20) / s
+    elif piv == 2:
+        s = _twice_root(1.0 - c00 + c11 - c22)
+        w, x, y, z = (c02 - c20) / s, (c01 + c10) / s, 0.25 * s, (c12 + c21) / s
+    else:
+        s = _twice_root(1.0 - c00 - c11 + c22)
+        w, x, y, z = (c10 - c01) / s, (c02 + c20) / s, (c12 + c21) / s, 0.25 * s
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    if w < 0.0:
+        return -w, -x, -y, -z
+    return w, x, y, z
+
+
+@kernel(error_model="numpy", inline="always")
+def _twice_root(x):
+    """``2 sqrt(max(x, 0))`` (a NaN stays NaN)."""
+    return math.sqrt(0.0 if x < 0.0 else x) * 2.0
+
+
+@kernel(error_model="numpy", inline="always")
 def rotate(q0, q1, q2, q3, x, y, z):
     """``C(q) v`` for v = (x, y, z)."""
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _dcm(q0, q1, q2, q3)
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = dcm_entries(q0, q1, q2, q3)
     return (
         c00 * x + c01 * y + c02 * z,
         c10 * x + c11 * y + c12 * z,
@@ -245,7 +286,7 @@ def quat_to_dcm(q):
     """DCM ``C(q)``, shape (3, 3), of a unit quaternion q (4,)."""
     C = np.empty((3, 3))
     (C[0, 0], C[0, 1], C[0, 2], C[1, 0], C[1, 1], C[1, 2],
-     C[2, 0], C[2, 1], C[2, 2]) = _dcm(q[0], q[1], q[2], q[3])  # fmt: skip
+     C[2, 0], C[2, 1], C[2, 2]) = dcm_entries(q[0], q[1], q[2], q[3])  # fmt: skip
     return C
 
 

@@ -444,6 +444,31 @@ def test_scalar_rotation_kernels_equal_geo_rotations(p, q, a, b):
     np.testing.assert_allclose(kernels.quat_to_rotvec(*q), rot.quat_to_rotvec(q), atol=1e-12)
 
 
+@given(quat)
+def test_dcm_kernels_equal_geo_rotations(q):
+    C = rot.quat_to_dcm(q)
+    entries = kernels.dcm_entries(*q)
+    np.testing.assert_allclose(np.reshape(entries, (3, 3)), C, atol=1e-15)
+    np.testing.assert_allclose(kernels.dcm_to_quat(*entries), rot.dcm_to_quat(C), atol=1e-15)
+
+
+@pytest.mark.parametrize("axis", [None, 0, 1, 2])
+def test_dcm_to_quat_kernel_takes_each_pivot_as_numpy(axis):
+    """Half turns about x, y and z make each diagonal entry the pivot; the quaternion is
+    numpy's to the last bits, with the scalar part >= 0."""
+    rv = np.zeros(3) if axis is None else np.eye(3)[axis] * (np.pi - 1e-3)
+    C = rot.rotvec_to_dcm(rv + np.array([0.01, -0.02, 0.015]))
+    got = np.array(kernels.dcm_to_quat(*C.ravel()))
+    np.testing.assert_allclose(got, rot.dcm_to_quat(C), atol=1e-15)
+    assert got[0] >= 0.0
+    d = np.array([np.trace(C), *np.diag(C)])
+    assert int(np.argmax(d)) == (0 if axis is None else axis + 1)  # the pivot meant
+    nan = C.copy()
+    nan[1, 1] = np.nan
+    assert np.isnan(kernels.dcm_to_quat(*nan.ravel())).all()
+    assert np.isnan(rot.dcm_to_quat(nan)).all()
+
+
 @given(quat, quat)
 def test_array_rotation_kernels_equal_geo_rotations(p, q):
     np.testing.assert_allclose(kernels.quat_to_dcm(q), rot.quat_to_dcm(q), atol=1e-15)
