@@ -59,9 +59,9 @@ RATIO_LINES: dict[str, list[tuple[str, int]]] = {
         (rf"^ *{_N}[hs] +(streamed|rrd|outputs|whole) +{_N} MiB +1\.00x +{_N}$", 4),
     ],
     "bench_outputs": [
-        (rf"^ +{_N} Hz +(no-viz|export|rrd) +{_N} +{_N}$", 6),
-        (rf"^(export|rrd) / no-viz CPU at {_N} Hz, {_N} min: {_N}x \(target <= {_N}x: "
-         r"(met|NOT met)\)$", 4),
+        (rf"^ +{_N} Hz +(no-viz|export|rrd) +{_N} +{_N} +{_N}$", 6),
+        (rf"^(export|rrd) / no-viz wall at {_N} Hz, {_N} min: {_N}x \(target <= {_N}x: "
+         rf"(met|NOT met)\); CPU {_N}x$", 4),
         (rf"^(no-viz|export|rrd) peak RSS 100 Hz / 10 Hz, {_N} min: {_N}x \(target <= 1\.2x: "
          r"(met|NOT met)\)$", 3),
     ],

@@ -127,7 +127,7 @@ def ros_poses(frame: LocalFrame, stamps_ns: np.ndarray, pos: np.ndarray, v_n: np
                  _mark_unknown(pose_cov), v_flu, twist_cov, pos, fix_cov)
 
 
-@kernel(error_model="numpy")
+@kernel(error_model="numpy", nogil=True)
 def _pose_kernel(lat: np.ndarray, lon: np.ndarray, C0: np.ndarray, q_nb: np.ndarray,
                  v_n: np.ndarray, cov: np.ndarray, with_cov: bool, q_out: np.ndarray,
                  v_out: np.ndarray, pose_out: np.ndarray, lin_out: np.ndarray) -> bool:

@@ -41,9 +41,10 @@ _FIXED_RE = re.compile(r"%\.(\d+)f")
 _GENERAL_RE = re.compile(r"%\.(\d+)g")
 _CELL = 34  # the longest cell the kernel writes: "-" + 15 + "." + 15 digits, and a separator
 
-_kernel = kernel(error_model="numpy", _nrt=False)
+_kernel = kernel(error_model="numpy", _nrt=False, nogil=True)
 """The kernels allocate nothing, so they run without numba's reference counting of arrays: its
-atomic counts on every call between them cost about as much as formatting a value."""
+atomic counts on every call between them cost about as much as formatting a value. They
+release Python's lock (an export written in its own thread runs beside the replay)."""
 
 _inline = kernel(error_model="numpy", _nrt=False, inline="always")
 """The helpers of :func:`_write`, inlined into it by numba (its IR): an eighth faster than calls

@@ -50,6 +50,7 @@ from navreplay.export.output import FilterOutput
 from navreplay.export.tum import TUM_HEADER, tum_blocks
 from navreplay.filters.base import MeasurementKind
 from navreplay.filters.result import InnovationSeries
+from navreplay.io.background import Background
 
 
 class RunExport:
@@ -58,9 +59,15 @@ class RunExport:
 
     Feed it the truth window by window (:meth:`add_reference`), each filter's estimates
     block by block (:meth:`add`, blocks of one label in time order) and its updates
-    (:meth:`add_innovations`, or with the estimates), then :meth:`close`; or :meth:`abort`. Every file goes to a temporary beside its target, renamed when complete, so
-    an interrupted run leaves the directory as it was. The files are those of one call with the
-    whole run: what is written depends on the rows, not on how they were split into blocks.
+    (:meth:`add_innovations`, or with the estimates), then :meth:`close`; or :meth:`abort`.
+    Every file goes to a temporary beside its target, renamed when complete, so an interrupted
+    run leaves the directory as it was. The files are those of one call with the whole run:
+    what is written depends on the rows, not on how they were split into blocks.
+
+    With ``background`` (the default) the blocks are written by a thread of their own
+    (:class:`~navreplay.io.background.Background`), in the order they came, while the caller
+    goes on: the caller must not change the arrays it hands over. An error met there (a full
+    disk) is raised by the next call or by :meth:`close`.
 
     The first rows are held until the export frame's origin (``origin`` when given, else the
     reference's first sample, else the first filter's first navigation estimate) and which
@@ -89,13 +96,17 @@ class RunExport:
         IMU's). None: every sample.
     t0_ns : int
         The recording start [ns]: the origin of the intervals.
+    background : bool
+        Write in a thread of its own (False: in the caller's, each call returning when its
+        rows are written).
     """
 
     def __init__(self, out_dir: Path, labels: Sequence[str], *, has_reference: bool,
                  source: str = "", force: bool = False,
                  late: Mapping[str, str] | None = None,
                  origin: Mapping[str, Any] | None = None, compression: str = "zstd",
-                 reference_rate: float | None = None, t0_ns: int = 0) -> None:
+                 reference_rate: float | None = None, t0_ns: int = 0,
+                 background: bool = True) -> None:
         self.out_dir = Path(out_dir)
         if compression not in COMPRESSIONS:
             raise ValueError(f"MCAP compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
@@ -131,11 +142,24 @@ class RunExport:
         self._rows: dict[tuple[str, str], tuple[tuple[str, ...], tuple[str, ...]]] = {}
         self._declared: dict[str, dict[str, MeasurementKind]] = {}
         self._done = False
+        self._work = Background("navreplay export") if background else None
 
     # -- feeding -------------------------------------------------------------------------
 
+    def _call(self, fn: Any, *args: Any) -> None:
+        """``fn(*args)`` in the writing thread (or here, without one)."""
+        if self._done:
+            raise ValueError("the export is already closed")
+        if self._work is None:
+            fn(*args)
+        else:
+            self._work.submit(fn, *args)
+
     def add_reference(self, truth: Stream) -> None:
         """A window of the truth stream (``pos``, ``v_n``, ``q_nb``), later than before."""
+        self._call(self._add_reference, truth)
+
+    def _add_reference(self, truth: Stream) -> None:
         if not len(truth):
             return
         if "pos" not in truth.columns:
@@ -168,7 +192,12 @@ class RunExport:
     def add(self, out: FilterOutput) -> None:
         """A block of one filter's estimates (:func:`filter_output` of its rows) and the
         innovations it carries."""
-        self.add_innovations(out.label, out.t0_ns, out.innovations, out.measurements)
+        if out.label not in self.file_stems:
+            raise ValueError(f"{out.label!r} is not one of the exported filters")
+        self._call(self._add, out)
+
+    def _add(self, out: FilterOutput) -> None:
+        self._add_innovations(out.label, out.t0_ns, out.innovations, out.measurements)
         if not len(out.t):
             self._empty.setdefault(out.label, out)
             return
@@ -191,6 +220,11 @@ class RunExport:
         ``measurements``: the filter's declarations (each gets a file, updates or not)."""
         if label not in self.file_stems:
             raise ValueError(f"{label!r} is not one of the exported filters")
+        self._call(self._add_innovations, label, t0_ns, dict(innovations), tuple(measurements))
+
+    def _add_innovations(self, label: str, t0_ns: int,
+                         innovations: Mapping[str, InnovationSeries],
+                         measurements: Sequence[MeasurementKind]) -> None:
         if label not in self._declared:
             self._declared[label] = {m.name: m for m in measurements}
             self._innovations[label] = {}
@@ -351,6 +385,9 @@ class RunExport:
         if self._done:
             raise ValueError("the export is already closed")
         try:
+            if self._work is not None:  # every block written, then the thread stopped
+                self._work.drain()
+                self._work.close()
             if not self._started:
                 if self._frame is None and not self.has_reference:
                     self._frame = self._held_frame()
@@ -445,6 +482,8 @@ class RunExport:
         from navreplay.io.outputs import release
 
         self._done = True
+        if self._work is not None:  # the blocks queued dropped, the one in hand finished
+            self._work.cancel()
         for tmp, f in self._tmp.values():
             with contextlib.suppress(OSError):
                 f.close()

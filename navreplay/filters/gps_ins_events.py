@@ -158,7 +158,7 @@ def _smoothing_row(sm: Smoothing, m: int, Phi: np.ndarray, P: np.ndarray) -> Non
     sm.has_prior[0] = 0.0
 
 
-@kernel
+@kernel(nogil=True)  # an export's writing thread goes on meanwhile
 def run_events(
     nav: np.ndarray, P: np.ndarray, t_nav: float, s: np.ndarray, imu: Imu, events: Events,
     gnss_samples: Gnss, options: Options, step: float, model: Model, work: Work, out: Rows,
