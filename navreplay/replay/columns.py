@@ -16,6 +16,11 @@ _NAV_COLUMN = {"pos": "position", "v_n": "velocity", "q_nb": "attitude"}
 """The name of each part of the navigation solution in messages."""
 
 
+CHECK_ROWS = 1024
+"""Covariances checked at once (:meth:`Columns.check`; the checks' temporaries are several
+copies of the rows checked: a whole run's would be gigabytes)."""
+
+
 class Columns:
     """Estimate columns allocated at a known upper bound of rows (the operating system backs
     only the rows written with memory, so they are neither grown nor copied)."""
@@ -136,9 +141,10 @@ class Columns:
         the recording and the time)."""
         bad = self.first_nonfinite(start)
         stop = self.m if bad is None else bad[0]
-        cov = covariance_problem(self.P[start:stop], names)
-        if cov is not None:
-            raise invalid(label, source, float(self.t[start + cov[0]]), cov[1])
+        for a in range(start, stop, CHECK_ROWS):  # temporaries of a bounded size
+            cov = covariance_problem(self.P[a:min(stop, a + CHECK_ROWS)], names)
+            if cov is not None:
+                raise invalid(label, source, float(self.t[a + cov[0]]), cov[1])
         if bad is not None:
             raise diverged(label, source, float(self.t[bad[0]]), f"{bad[1]} estimate")
 

@@ -120,7 +120,12 @@ class Stage(Protocol):
 
 
 class Collect:
-    """A stage that keeps every filter's blocks: :meth:`results` joins them per label."""
+    """A stage that keeps every filter's blocks: :meth:`results` joins them per label.
+
+    It holds the whole run anyway, so it asks for pieces of whole windows: fewer, larger
+    blocks, each in memory of its own that goes back to the system once it is joined."""
+
+    piece_outputs = 100_000_000
 
     def __init__(self) -> None:
         self._rows: dict[str, list[RunResult]] = {}
@@ -147,9 +152,12 @@ class Collect:
     def results(self) -> dict[str, RunResult]:
         """The whole run of each filter (its blocks' estimates and innovations)."""
         out = {}
-        for label, blocks in self._rows.items():
+        for label in list(self._rows):
+            blocks = self._rows.pop(label)  # let go of as they are joined
             full = [b for b in blocks if b.t.size] or blocks[:1]
-            rows = full[0] if len(full) == 1 else concat(full)
+            del blocks
+            rows = full[0] if len(full) == 1 else concat(full, consume=True)
+            del full
             out[label] = dataclasses.replace(
                 rows, innovations=concat_innovations(self._innovations[label]))
         return out

@@ -430,8 +430,7 @@ def test_a_stage_may_ask_for_longer_pieces() -> None:
     class Counting(pipeline.Collect):
         def __init__(self, piece_outputs: int | None) -> None:
             super().__init__()
-            if piece_outputs is not None:
-                self.piece_outputs = piece_outputs
+            self.piece_outputs = piece_outputs or 0  # (Collect's own: whole windows)
             self.blocks: list[int] = []
 
         def rows(self, rows, metrics, truth) -> None:  # type: ignore[no-untyped-def]
@@ -451,3 +450,8 @@ def test_a_stage_may_ask_for_longer_pieces() -> None:
     assert max(least) <= pipeline.PIECE_OUTPUTS + 1 < max(longer) <= 2501
     assert len(longer) < len(least)
     assert blocks(10) == [least]  # less than the floor asks for nothing
+    whole = pipeline.Collect()  # the in-memory replay's: the window in one piece
+    pipeline.replay_file(MemorySource(rec, "drive"), [FilterSpec("gps-ins")], stages=[whole],
+                         output_rate=100.0, score=False)
+    (joined,) = whole._rows.values()
+    assert [len(b.t) for b in joined] == [sum(least)]

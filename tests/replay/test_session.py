@@ -383,7 +383,9 @@ def _time_windows(rec: Recording, cls: type, ends_ns: list[int], **kw) -> RunRes
                            int(s.t_ns[b - 1]) if b else -COMPLETE)
         blocks.append(session.feed(part, final=final, known=known))
         lo = hi
-    return concat(blocks)
+    joined = concat(blocks, consume=True)  # each block let go of as it is copied
+    assert blocks == []
+    return joined
 
 
 def _ends(rec: Recording, seconds: list[float]) -> list[int]:
