@@ -200,7 +200,7 @@ def replay_filters(
     src = MemorySource(recording, source)
     if validate:
         validate_recording(recording, src.name)
-    collect = Collect()
+    collect = Collect(whole=not smooth)
     replay_file(src, filters, stages=[collect], output_rate=output_rate,
                 max_imu_gap=max_imu_gap, score=False, smooth=smooth)
     return collect.results()

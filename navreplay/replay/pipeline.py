@@ -122,12 +122,17 @@ class Stage(Protocol):
 class Collect:
     """A stage that keeps every filter's blocks: :meth:`results` joins them per label.
 
-    It holds the whole run anyway, so it asks for pieces of whole windows: fewer, larger
-    blocks, each in memory of its own that goes back to the system once it is joined."""
+    It holds the whole run anyway, so it asks for pieces of whole windows (``whole``): the
+    estimates of a window land in one set of columns, handed back without a copy. Not with a
+    smoother, whose forward pass keeps two more covariances per output for each piece (a
+    window's would be three times the run).
+    """
 
-    piece_outputs = 100_000_000
+    WHOLE = 100_000_000
+    """Output ticks of a piece asked for whole windows."""
 
-    def __init__(self) -> None:
+    def __init__(self, whole: bool = True) -> None:
+        self.piece_outputs = self.WHOLE if whole else 0
         self._rows: dict[str, list[RunResult]] = {}
         self._innovations: dict[str, list[RunResult]] = {}
 
@@ -625,7 +630,7 @@ def replay(
     src = MemorySource(recording, name)
     if validate:
         validate_recording(recording, src.name)
-    stages: list[Stage] = [collect := Collect()]
+    stages: list[Stage] = [collect := Collect()]  # (no smoother here)
     if observer is not None:
         stages.append(_Observer(observer))
     replay_file(src, [spec], stages=stages, output_rate=output_rate, pacing=pacing,

@@ -429,8 +429,9 @@ def test_a_stage_may_ask_for_longer_pieces() -> None:
 
     class Counting(pipeline.Collect):
         def __init__(self, piece_outputs: int | None) -> None:
-            super().__init__()
-            self.piece_outputs = piece_outputs or 0  # (Collect's own: whole windows)
+            super().__init__(whole=False)
+            if piece_outputs is not None:
+                self.piece_outputs = piece_outputs
             self.blocks: list[int] = []
 
         def rows(self, rows, metrics, truth) -> None:  # type: ignore[no-untyped-def]
