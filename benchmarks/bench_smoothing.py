@@ -8,8 +8,8 @@ replay up to the last window (with ``--smooth`` the filter's compiled runs of ev
 keep each output's transition and covariances, which are stored on disk), ``backward`` the
 backward pass over the stored chunks (:func:`navreplay.replay.smoothing.backward`),
 ``scoring`` the smoothed run through its scorer; ``plain`` is the same job without
-``--smooth``, for comparison. The peak is ``VmHWM`` (:func:`benchmarks.peak_rss`) of the process with and
-without ``--smooth``. The exports and the chunks go to a temporary directory beside the
+``--smooth``, for comparison. The peak is ``VmHWM`` (:func:`benchmarks.peak_rss`) of the process
+with and without ``--smooth``. The exports and the chunks go to a temporary directory beside the
 recording.
 
 Usage::

@@ -136,8 +136,8 @@ def main(argv: list[str] | None = None, *, quick: bool = False) -> None:
     ap.add_argument("--speed-duration", type=float, default=3600.0)
     args = ap.parse_args([] if argv is None else argv)
     m = measure(args.recording, args.repeat, args.filter)
-    print(f"navreplay run {args.filter} {args.recording.name} --no-viz, fresh interpreters, medians "
-          f"of {args.repeat}; load average {os.getloadavg()[0]:.2f}")
+    print(f"navreplay run {args.filter} {args.recording.name} --no-viz, fresh interpreters, "
+          f"medians of {args.repeat}; load average {os.getloadavg()[0]:.2f}")
     for name, (cpu, wall) in m.items():
         print(f"  {name:10s} {cpu:6.2f} s CPU  {wall:6.2f} s wall")
     first, warm = m["first run"][0], m["warm run"][0]

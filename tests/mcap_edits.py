@@ -1,6 +1,6 @@
-"""MCAP files for the reader and pipeline tests: written in small chunks (many windows in a
-short file), and copies with the IMU header stamps zeroed (a driver that never sets them), and uncompressed
-copies (to damage a file at a known place)."""
+"""MCAP files for the reader and pipeline tests: written in small chunks (many windows in a short
+file), and copies with the IMU header stamps zeroed (a driver that never sets them), and
+uncompressed copies (to damage a file at a known place)."""
 
 from __future__ import annotations
 

@@ -36,8 +36,8 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
 
         EXPECTED_ERRORS = (
             RecordingError, OutputError, ParamError, FilterLoadError, FilterDivergedError,
-            ReplayError, RunFailedError, VizUnavailableError, SummaryError, KeyError, FileExistsError,
-            FileNotFoundError, IsADirectoryError, PermissionError,
+            ReplayError, RunFailedError, VizUnavailableError, SummaryError, KeyError,
+            FileExistsError, FileNotFoundError, IsADirectoryError, PermissionError,
         )
     return EXPECTED_ERRORS
 

@@ -42,7 +42,8 @@ def scenarios(verbose: bool) -> None:
 @cli.command()
 @click.argument("scenario")
 @click.option("-o", "--output", required=True, metavar="FILE.mcap|DIR",
-              help="Recording to write; with --runs, NAME_0001.mcap... or DIR/SCENARIO_0001.mcap...")
+              help="Recording to write; with --runs, NAME_0001.mcap... or "
+                   "DIR/SCENARIO_0001.mcap...")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed (run i of --runs uses seed + i).")
 @click.option("--duration", type=float, help="Length [s] (same as -p duration=...).")

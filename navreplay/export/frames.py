@@ -160,8 +160,8 @@ def _pose_kernel(lat: np.ndarray, lon: np.ndarray, C0: np.ndarray, q_nb: np.ndar
             for k in range(3):
                 R[i, k] = C0[i, 0] * Cn[0, k] + C0[i, 1] * Cn[1, k] + C0[i, 2] * Cn[2, k]
         (Cb[0, 0], Cb[0, 1], Cb[0, 2], Cb[1, 0], Cb[1, 1], Cb[1, 2],
-         Cb[2, 0], Cb[2, 1], Cb[2, 2]) = geo_kernels.dcm_entries(q_nb[m, 0], q_nb[m, 1],
-                                                                 q_nb[m, 2], q_nb[m, 3])  # fmt: skip
+         Cb[2, 0], Cb[2, 1], Cb[2, 2]) = geo_kernels.dcm_entries(q_nb[m, 0], q_nb[m, 1], q_nb[m, 2],
+                                                                 q_nb[m, 3])  # fmt: skip
         for i in range(3):
             for k in range(3):
                 finite = finite and np.isfinite(R[i, k]) and np.isfinite(Cb[i, k])

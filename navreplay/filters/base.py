@@ -26,7 +26,8 @@ shown exactly as a built-in one::
     states = (
         State("dlat", "rad", Quantity.POSITION, NavError(Nav.LAT), nees=True),
         State("b_a_x", "m/s^2", Quantity.ACCEL_BIAS, TruthColumn("accel_bias", (0,))),
-        State("s_g_z", "-", Quantity.GYRO_SCALE_FACTOR, TrueConstant("imu.gyro_scale_factor", (2,))),
+        State("s_g_z", "-", Quantity.GYRO_SCALE_FACTOR,
+              TrueConstant("imu.gyro_scale_factor", (2,))),
     )
 
 What a state is scored against (``truth``), with e the estimation error of the state:

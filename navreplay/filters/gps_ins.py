@@ -539,10 +539,10 @@ class GpsInsFilter(InsFilter):
         the run's rows, bit for bit as :meth:`propagate`, :meth:`update` and :meth:`estimate`
         one by one, every estimate checked as :func:`navreplay.filters.kalman.check_covariance`
         checks it; with a smoother, each estimate's smoothing step too (handed over with the
-        rows, :class:`~navreplay.filters.smoothable.SmoothingSteps`). The kernel stops before an event that fails a check (undone): the default
-        then applies it, which names the problem. A subclass that changes ``propagate``,
-        ``update`` or ``estimate`` gets the default (its runs of ticks still compiled when
-        :class:`~navreplay.filters.ins.InsFilter`'s kernel applies).
+        rows, :class:`~navreplay.filters.smoothable.SmoothingSteps`). The kernel stops before an
+        event that fails a check (undone): the default then applies it, which names the problem. A
+        subclass that changes ``propagate``, ``update`` or ``estimate`` gets the default (its runs
+        of ticks still compiled when :class:`~navreplay.filters.ins.InsFilter`'s kernel applies).
         """
         if overrides(self, GpsInsFilter, "propagate", "update", "estimate"):
             return super().run_events(run)

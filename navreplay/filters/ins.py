@@ -156,8 +156,10 @@ def imu_settings(sensors: SensorSpecs) -> dict[str, float]:
         accel_vrw, gyro_arw               = the white-noise densities
         accel_bias_sigma   (x, y)         = sqrt(b_a^2 + (m_a g)^2 + s_GM,a^2)   gravity through a
                                             misalignment into a level axis
-        accel_bias_sigma_z (z)            = sqrt(b_a^2 + (k_a g)^2 + s_GM,a^2)   ... the z scale factor
-        gyro_bias_sigma                   = sqrt(b_g^2 + (K_g g)^2 + s_GM,g^2 + (sqrt(k_g^2 + 2 m_g^2) W)^2)
+        accel_bias_sigma_z (z)            = sqrt(b_a^2 + (k_a g)^2 + s_GM,a^2)   ... the z scale
+                                            factor
+        gyro_bias_sigma                   = sqrt(b_g^2 + (K_g g)^2 + s_GM,g^2
+                                                 + (sqrt(k_g^2 + 2 m_g^2) W)^2)
         accel_bias_rw, gyro_bias_rw       = sqrt(q_RW + 2 s_GM^2 / tau)          the random walk and
                                             the initial slope of the Gauss-Markov variance
         gyro_misalignment_sigma, gyro_scale_factor_sigma, accel_scale_factor_sigma,

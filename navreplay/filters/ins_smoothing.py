@@ -8,11 +8,11 @@ transitions (``Phi = I + F T + (F T)^2 / 2`` each), kept by the compiled time up
 in between adds its own (:func:`navreplay.filters.imu_gap.bridge`). The updates' corrections
 are summed as they are fed back, and the covariance before the first update of an output is
 kept, in arrays that ``gps-ins``'s compiled runs of events update as well
-(:class:`navreplay.filters.gps_ins_events.Smoothing`). The filters reset their error state to 0 after each feedback and leave P as it is, so
-the reset Jacobian is the identity. A smoothed error state ``d`` corrects an output as the
-feedback does: the navigation solution by :func:`~navreplay.filters.ins_error.apply_correction`
-and each estimate held in ``x`` (biases, scale factors, ...) by ``x - d``; the navigation
-error states of ``x`` stay 0.
+(:class:`navreplay.filters.gps_ins_events.Smoothing`). The filters reset their error state to 0
+after each feedback and leave P as it is, so the reset Jacobian is the identity. A smoothed error
+state ``d`` corrects an output as the feedback does: the navigation solution by
+:func:`~navreplay.filters.ins_error.apply_correction` and each estimate held in ``x`` (biases, scale
+factors, ...) by ``x - d``; the navigation error states of ``x`` stay 0.
 """
 
 from __future__ import annotations

@@ -1,13 +1,14 @@
 """RPM velocity-aided underwater INS with sea-current estimation ("rpm-aided-ins").
 
 An indirect feedback Kalman filter with the 24 error states of Choi (JANT 23(3), 2019) and
-three gyro z-rate and six accelerometer scale-factor / misalignment states (method docs/methods/rpm-aided-ins.md §4). The NED strapdown
-mechanization of :mod:`navreplay.geo.strapdown` runs on the compensated IMU at the IMU rate; every
-``cov_step`` (0.1 s) the error covariance is propagated with the 33-state error model; at
-``update_rate`` (1 Hz) the propeller-RPM water speed and the depth sensor correct the errors, and the estimates are fed
-back. Besides the navigation errors and the IMU biases the filter estimates the RPM scale
-factor, the RPM-axis misalignment and the horizontal sea current, which removes the drift a
-current causes when water-relative speed is used as ground speed.
+three gyro z-rate and six accelerometer scale-factor / misalignment states (method
+docs/methods/rpm-aided-ins.md §4). The NED strapdown mechanization of :mod:`navreplay.geo.strapdown`
+runs on the compensated IMU at the IMU rate; every ``cov_step`` (0.1 s) the error covariance is
+propagated with the 33-state error model; at ``update_rate`` (1 Hz) the propeller-RPM water speed
+and the depth sensor correct the errors, and the estimates are fed back. Besides the navigation
+errors and the IMU biases the filter estimates the RPM scale factor, the RPM-axis misalignment and
+the horizontal sea current, which removes the drift a current causes when water-relative speed is
+used as ground speed.
 
 States (eq. 20, NED order)
 --------------------------

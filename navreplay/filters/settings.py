@@ -12,7 +12,8 @@ source        where the value came from
 ``given``     a value handed to :func:`build_params` by a program (a mapping without sources
               or a ready ``Params`` instance)
 ``spec``      derived from the recording's sensor specifications by
-              :meth:`Filter.settings_from_sensors <navreplay.filters.base.Filter.settings_from_sensors>`
+              :meth:`Filter.settings_from_sensors
+              <navreplay.filters.base.Filter.settings_from_sensors>`
 ``default``   the default of the filter's ``Params``
 ============  ================================================================================
 

@@ -136,8 +136,8 @@ Cycle (at every GINS sample)
 Initialisation, eqs. (16), (17)
 -------------------------------
 At the first GINS sample after an IMU sample: ``Q_bn_hat = Q_m``, ``Q_br_hat = [1, 0, 0, 0]``,
-``V_B_hat = V_R_meas + lever-arm velocity``, the position as in step 6. Because the SDINS starts from the GINS attitude,
-``dQ_bn = L(Q_m) dQ_br`` (eq. 16) and P0 is full (eq. 17, E16), with
+``V_B_hat = V_R_meas + lever-arm velocity``, the position as in step 6. Because the SDINS starts
+from the GINS attitude, ``dQ_bn = L(Q_m) dQ_br`` (eq. 16) and P0 is full (eq. 17, E16), with
 ``P_hat = diag(p0, p1, p1, p1)``, ``p0 = init_q0_sigma^2``,
 ``p1 = sin(init_misalignment / 2)^2``, ``r_V = init_vel_sigma^2``::
 
@@ -158,9 +158,9 @@ Implementation
 --------------
 The model, the prediction and the feedback (steps 2, 3 and 4-6) are numba kernels,
 :func:`predict_and_measure` and :func:`feedback`, around the shared discretisation, prediction
-kernel, correction and covariance check of :mod:`navreplay.filters.kalman`. The tests check the model functions against finite
-differences of the nonlinear equations and against :mod:`navreplay.geo`, and the prediction
-against :func:`navreplay.filters.kalman.predict`."""
+kernel, correction and covariance check of :mod:`navreplay.filters.kalman`. The tests check the
+model functions against finite differences of the nonlinear equations and against
+:mod:`navreplay.geo`, and the prediction against :func:`navreplay.filters.kalman.predict`."""
 
 from __future__ import annotations
 
@@ -494,7 +494,9 @@ class TransferAlignment(Filter):
                 )
         self.lever_arm_r = np.asarray(arm, dtype=float)
         if self.lever_arm_r.shape != (3,) or not np.all(np.isfinite(self.lever_arm_r)):
-            raise ValueError(f"transfer-alignment: lever arm needs three finite values, got {arm!r}")
+            raise ValueError(
+                f"transfer-alignment: lever arm needs three finite values, got {arm!r}"
+            )
         paper = p.quat_model == QuatModel.PAPER
         self.s = np.array([c for c in p.match.components if c or paper], dtype=np.int64)
         self.u = np.array([i for i in range(4) if i not in p.match.components], dtype=np.int64)

@@ -59,7 +59,8 @@ initialisation are the same for both models: the model only chooses u_n.
 
 Noise (11), (15), E3, E5, E10, variant ``paper``::
 
-    R_g = diag(s_v(k)^2 + s_v(k-1)^2) / dt^2 + s_f^2 I3     (= (2/dt^2) s_v^2 + s_f^2 for constant s_v)
+    R_g = diag(s_v(k)^2 + s_v(k-1)^2) / dt^2 + s_f^2 I3     (= (2/dt^2) s_v^2 + s_f^2 for
+                                                             constant s_v)
     R_h = C_nb_hat (s_h^2 I3) C_nb_hat^T = s_h^2 I3
     R   = blkdiag(R_g, R_h)
 
@@ -108,8 +109,9 @@ with e the attitude error (q_ev) and d the error of the measured rotation, whose
 with e and the consider states P carries (states 18-20: d between epochs, e(k-1) during the
 update). Q_d is added only at an epoch whose NIS without it rejects the prediction ("no rotation
 since the last epoch", or "the same rotation again") at the false-alarm probability
-``manoeuvre_false_alarm``; the epoch is then updated again with it. The initial fix is the TRIAD attitude corrected by the first epoch's measurement (at rest: a_n = 0)
-from a prior of p0_sigma, which gives P its correlation with the sensor constants.
+``manoeuvre_false_alarm``; the epoch is then updated again with it. The initial fix is the TRIAD
+attitude corrected by the first epoch's measurement (at rest: a_n = 0) from a prior of p0_sigma,
+which gives P its correlation with the sensor constants.
 
 Initialisation (navreplay's choice): TRIAD at the first complete epoch, which must be at rest:
 primary pair (-g_n/|g_n|, f_b/|f_b|), secondary pair (h_n, m_b); variant ``paper``:

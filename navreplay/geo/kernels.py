@@ -10,8 +10,9 @@ Two kinds of kernels:
 
 - scalar forms take and return floats (tuples), for inner loops: :func:`cross`,
   :func:`quat_mult`, :func:`dcm_entries`, :func:`dcm_to_quat`, :func:`rotate`,
-  :func:`rotate_inverse`, :func:`rotvec_to_quat`, :func:`quat_to_rotvec` and the earth model (:func:`radii`, :func:`radii_derivatives`,
-  :func:`gravity`, :func:`gravity_derivatives`, :func:`earth_rate`, :func:`transport_rate`);
+  :func:`rotate_inverse`, :func:`rotvec_to_quat`, :func:`quat_to_rotvec` and the earth model
+  (:func:`radii`, :func:`radii_derivatives`, :func:`gravity`, :func:`gravity_derivatives`,
+  :func:`earth_rate`, :func:`transport_rate`);
 - array forms return a new small array: :func:`quat_to_dcm` (3, 3),
   :func:`quat_left_matrix` and :func:`quat_right_matrix` (4, 4), :func:`euler_to_quat` (4,),
   :func:`quat_to_euler` (3,).

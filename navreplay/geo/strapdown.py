@@ -30,7 +30,8 @@ Mid-point quantities use ``lat_m = (lat_{k-1} + lat_k)/2``, ``h_m`` likewise and
         w_en = [v_E/(R_N+h), -v_N/(R_M+h), -v_E tan(lat)/(R_N+h)]  transport rate in n
         zeta = (w_ie + w_en)(mid) dt                               n-frame rotation over dt
     (2) alpha_k = dtheta_k + 1/12 dtheta_{k-1} x dtheta_k          two-sample coning
-    (3) q_k = q{-zeta} (x) q_{k-1} (x) q{alpha_k}                  q{x} = [cos|x|/2, sin(|x|/2) x/|x|]
+    (3) q_k = q{-zeta} (x) q_{k-1} (x) q{alpha_k}                  q{x} = [cos|x|/2,
+                                                                           sin(|x|/2) x/|x|]
     (4) dv_b = dv_k + 1/2 dtheta_k x dv_k                          rotation compensation
                + 1/12 (dtheta_{k-1} x dv_k + dv_{k-1} x dtheta_k)  two-sample sculling
     (5) dv_n = (I - 1/2 [zeta x]) C(q_{k-1}) dv_b                  resolved in n at mid-interval
@@ -368,7 +369,8 @@ def inverse_kernel(t, pos, v_n, q_nb, omega_out, f_out):
         # (the second form keeps full relative precision of slow body motion)
         zx, zy, zz = kernels.rotate_inverse(q0, q1, q2, q3, zn, ze, zd)
         n0, n1, n2, n3 = kernels.rotvec_to_quat(zx, zy, zz)
-        p0, p1, p2, p3 = kernels.quat_mult(q0, -q1, -q2, -q3, q_nb[k, 0], q_nb[k, 1], q_nb[k, 2], q_nb[k, 3])
+        p0, p1, p2, p3 = kernels.quat_mult(q0, -q1, -q2, -q3,
+                                           q_nb[k, 0], q_nb[k, 1], q_nb[k, 2], q_nb[k, 3])
         p0, p1, p2, p3 = kernels.quat_mult(n0, n1, n2, n3, p0, p1, p2, p3)
         alx, aly, alz = kernels.quat_to_rotvec(p0, p1, p2, p3)
         # (2): (I + [dtheta_{k-1}/12 x]) dtheta_k = alpha_k

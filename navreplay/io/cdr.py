@@ -231,7 +231,8 @@ def peek_layout(rows: np.ndarray, message: MessageType) -> Layout | None:
 
 
 def matches_layout(rows: np.ndarray, lay: Layout) -> np.ndarray:
-    """Which payloads (N, L) uint8 share ``lay``'s encapsulation, frame_id length and sequence length.
+    """Which payloads (N, L) uint8 share ``lay``'s encapsulation, frame_id length and sequence
+    length.
 
     Returns
     -------

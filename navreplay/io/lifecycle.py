@@ -1,9 +1,9 @@
 """Stopping cleanly: signals in the command process, and workers that die with their parent.
 
-* :func:`handle_signals` (the command line wraps every command in it) turns SIGTERM and SIGHUP
-  into :class:`Terminated` and SIGINT into :class:`Interrupted` (a ``KeyboardInterrupt``), after
-  deleting the live temporary files (:func:`navreplay.io.outputs.remove_temporaries`): whatever was being written is
-  gone at once, even if unwinding takes a while, and existing targets are untouched.
+* :func:`handle_signals` (the command line wraps every command in it) turns SIGTERM and SIGHUP into
+  :class:`Terminated` and SIGINT into :class:`Interrupted` (a ``KeyboardInterrupt``), after deleting
+  the live temporary files (:func:`navreplay.io.outputs.remove_temporaries`): whatever was being
+  written is gone at once, even if unwinding takes a while, and existing targets are untouched.
 * :func:`worker_init` is the initializer of the process pools: a worker ignores Ctrl-C (the parent
   cancels the campaign), deletes its temporaries and exits on SIGTERM/SIGHUP, and exits when its
   parent dies — at once on Linux (``prctl(PR_SET_PDEATHSIG)``), within a second elsewhere (a

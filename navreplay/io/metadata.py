@@ -1,4 +1,5 @@
-"""The ``navreplay`` MCAP metadata record: :class:`~navreplay.core.streams.Metadata` as string pairs.
+"""The ``navreplay`` MCAP metadata record: :class:`~navreplay.core.streams.Metadata` as string
+pairs.
 
 Keys (all values are strings; JSON where noted):
 

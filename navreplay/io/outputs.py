@@ -7,12 +7,12 @@ goes through this module:
   ``force``), a target that is one of the command's inputs or lies inside an input folder (a
   rosbag2 folder), a directory output that would write over an input (even with ``force``:
   resolved paths and device/inode are compared, so links and ``./x`` spellings are caught), two
-  outputs on the same file, an output inside another's directory (``--export x --summary
-  x/summary.json``; the default view folder ``out/`` holds only its ``.rrd`` files), a target that is a directory, and a target whose directory cannot be
-  created or written. Each refusal is one line naming the option and the file. With ``lock``
-  it then takes an exclusive lock on every explicit target (:func:`lock_outputs`), so that two
-  commands running at once cannot write the same file: the second stops at once, naming the
-  first one's PID.
+  outputs on the same file, an output inside another's directory
+  (``--export x --summary x/summary.json``; the default view folder ``out/`` holds only its ``.rrd``
+  files), a target that is a directory, and a target whose directory cannot be created or written.
+  Each refusal is one line naming the option and the file. With ``lock`` it then takes an exclusive
+  lock on every explicit target (:func:`lock_outputs`), so that two commands running at once cannot
+  write the same file: the second stops at once, naming the first one's PID.
 * :func:`temporary_path` names the file the work writes into: ``.NAME.PID.XXXXXXXX.part`` beside
   the target, renamed onto it only when complete (:func:`atomic_path` does both). Live
   temporaries are registered so that :func:`remove_temporaries` (called by the signal handlers of

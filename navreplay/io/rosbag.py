@@ -3,9 +3,10 @@
 An MCAP file is read in bulk by :mod:`navreplay.io.mcapread`. A rosbag2 folder (``metadata.yaml``
 with MCAP or sqlite3 storage, one or several split files) whose data files agree with its
 ``metadata.yaml`` (:func:`check_bag`), are not compressed and hold CDR messages is read from
-its data files directly: MCAP files chunk by chunk through :class:`navreplay.io.decode.ChannelDecoder`
-as an MCAP recording's topics, sqlite3 files from their ``messages`` table, the payloads of a
-fixed layout viewed as numpy records (:func:`navreplay.io.cdr.decode_payloads`). Any other bag
+its data files directly: MCAP files chunk by chunk through
+:class:`navreplay.io.decode.ChannelDecoder` as an MCAP recording's topics, sqlite3 files from their
+``messages`` table, the payloads of a fixed layout viewed as numpy records
+(:func:`navreplay.io.cdr.decode_payloads`). Any other bag
 (compressed, damaged, ROS 1, a lone ``.db3``) goes through ``rosbags``' AnyReader, which also
 brings the message definitions stored in the bag; a ``.db3`` file is read from its folder when
 that has a ``metadata.yaml``, else straight from its sqlite tables with rosbags' standard type

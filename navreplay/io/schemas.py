@@ -1,9 +1,9 @@
 """Topics and message schemas of a navreplay recording.
 
-One topic per :class:`~navreplay.core.streams.StreamKind`. Standard ROS 2 messages are used where their
-meaning matches exactly; project messages (package ``navreplay_msgs``) carry what none fits. Every
-message starts with a ``std_msgs/Header`` whose stamp is the sample time (equal to the MCAP log
-time) and whose ``frame_id`` names the frame (REP-103 ``_frd`` / ``_ned`` suffixes).
+One topic per :class:`~navreplay.core.streams.StreamKind`. Standard ROS 2 messages are used where
+their meaning matches exactly; project messages (package ``navreplay_msgs``) carry what none fits.
+Every message starts with a ``std_msgs/Header`` whose stamp is the sample time (equal to the MCAP
+log time) and whose ``frame_id`` names the frame (REP-103 ``_frd`` / ``_ned`` suffixes).
 
 The definitions below are the exact ``ros2msg`` schema texts written to the file (the message
 definition followed by its dependencies, each after a line of 80 ``=`` and ``MSG: pkg/Type``), and

@@ -14,8 +14,9 @@ so the same jobs run from Python::
 
 One module per command (:mod:`~navreplay.jobs.simulate`, :mod:`~navreplay.jobs.run`,
 :mod:`~navreplay.jobs.montecarlo`, :mod:`~navreplay.jobs.demo`), the filter-list grammar in
-:mod:`~navreplay.jobs.config` and reports in :mod:`~navreplay.jobs.report`. Jobs never print; they return reports with a ``format()`` method and report progress through
-a ``progress(done, total)`` callback.
+:mod:`~navreplay.jobs.config` and reports in :mod:`~navreplay.jobs.report`. Jobs never print; they
+return reports with a ``format()`` method and report progress through a ``progress(done, total)``
+callback.
 """
 
 from navreplay.jobs.compare import CompareJob, compare

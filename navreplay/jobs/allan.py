@@ -286,8 +286,8 @@ def spec_text(specs: SensorSpecs, triads: dict[str, allan.TriadAnalysis],
                 lines.append(f"#   {field}: {_show(field, lo)} to {_show(field, hi)}")
         lines += [f"#   {triad.name} {note}" for note in a.fit.notes]
         if allan.Term.RANDOM_WALK not in a.fit.terms and math.isfinite(a.fit.walk_bound):
-            lines.append(f"#   {triad.fields['walk']} <= {_show(triad.fields['walk'], a.fit.walk_bound)}"
-                         " (95 %)")
+            lines.append(f"#   {triad.fields['walk']} <= "
+                         f"{_show(triad.fields['walk'], a.fit.walk_bound)} (95 %)")
     lines.append("# Not observable in a still record: turn-on bias, scale factor, misalignment,"
                  " g-sensitivity")
     lines.append("# (add them from the datasheet, or `grade = \"...\"` to start from a grade).")
@@ -356,7 +356,8 @@ def figure_panels(triads: dict[str, allan.TriadAnalysis]) -> list[Any]:
         k = units.convert(1.0, triad.unit, triad.shown)
         fit = a.fit
         tau = a.curve.tau
-        terms = [AllanTerm(f"white: {triad.labels['white']} {_value(fit.white, triad.fields['white'])}"
+        terms = [AllanTerm(f"white: {triad.labels['white']} "
+                           f"{_value(fit.white, triad.fields['white'])}"
                            f" {ImuModel.field_units[triad.fields['white']].datasheet}",
                            tau, k * fit.white / np.sqrt(tau), 1.0, k * fit.white)]
         if allan.Term.GAUSS_MARKOV in fit.terms:

@@ -121,7 +121,10 @@ def parse_ranges(items: Sequence[str], filter_ref: str) -> tuple[SearchRange, ..
         raise _params.ParamError("give at least one --param NAME=LOW:HIGH to tune")
     names = [r.name for r in out]
     if len(set(names)) < len(names):
-        raise _params.ParamError(f"--param: {', '.join(sorted(n for n in set(names) if names.count(n) > 1))} given twice")
+        raise _params.ParamError(
+            f"--param: {', '.join(sorted(n for n in set(names) if names.count(n) > 1))}"
+            " given twice"
+        )
     return tuple(out)
 
 
@@ -200,8 +203,8 @@ class Score:
         What it is made of, for the report: ``NEES/dof`` (time-averaged), ``NEES in band``
         (1 or 0, :mod:`navreplay.metrics.consistency` at its false alarm), ``worst RMS/σ`` (the NEES
         state's ratio furthest from 1) and the ensemble summary's ``pos_rms_h`` [m],
-        ``att_rms_level`` and ``att_rms_heading`` [rad] (truth); ``held-out RMS [m]`` and ``NIS/dof <name>``
-        per measurement (held-out).
+        ``att_rms_level`` and ``att_rms_heading`` [rad] (truth); ``held-out RMS [m]`` and
+        ``NIS/dof <name>`` per measurement (held-out).
     """
 
     value: float

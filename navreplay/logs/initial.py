@@ -6,7 +6,8 @@ Each method produces a ``metadata.initial_nav`` of the shape the filters read
 ``accel_bias`` [m/s^2] and ``gyro_bias`` [rad/s]. Values of the ``[initial]`` table replace the
 method's, one by one (with their sigmas).
 
-``align`` (self-alignment, while still at the start, :func:`~navreplay.logs.framecheck.still_window`):
+``align`` (self-alignment, while still at the start,
+:func:`~navreplay.logs.framecheck.still_window`):
 
 * levelling: roll = atan2(-f_y, -f_z), pitch = atan2(f_x, hypot(f_y, f_z)) of the mean specific
   force (FRD); 1-sigma sqrt(b_a^2 + s_f^2 / n) / g with s_f the sample scatter and b_a the

@@ -244,7 +244,8 @@ def log_options(
 ) -> LogOptions:
     """Parse ``--topic``/``--frame``/``--imu-range`` items and the TOML tables into
     :class:`LogOptions`; every value is checked for its type and range here (``sensors``: the
-    config's ``[sensors.*]`` tables already read, :func:`navreplay.sensors.specs.specs_from_tables`)."""
+    config's ``[sensors.*]`` tables already read,
+    :func:`navreplay.sensors.specs.specs_from_tables`)."""
     config = config or {}
     topic_items = _strings("topics", config.get("topics", {}), "a topic")
     frame_items = _strings("frames", config.get("frames", {}), "axes")

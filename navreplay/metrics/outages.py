@@ -18,8 +18,9 @@ Examples
 >>> t = np.arange(6.0)
 >>> e = np.zeros((6, 3)); e[:, 0] = t      # 1 m/s north, no error east or down
 >>> s.add(t, e, np.ones((6, 3)))
->>> {k: round(v, 3) for k, v in s.result()[0].items()}
-{'start': 2.0, 'end': 4.0, 't_end': 3.0, 'err_end_h': 3.0, 'err_end_v': 0.0, 'sigma_end_h': 1.414, 'sigma_end_v': 1.0, 'rms_h': 2.55, 'rms_v': 0.0}
+>>> {k: round(v, 3) for k, v in s.result()[0].items()}  # doctest: +NORMALIZE_WHITESPACE
+{'start': 2.0, 'end': 4.0, 't_end': 3.0, 'err_end_h': 3.0, 'err_end_v': 0.0,
+ 'sigma_end_h': 1.414, 'sigma_end_v': 1.0, 'rms_h': 2.55, 'rms_v': 0.0}
 """
 
 from __future__ import annotations

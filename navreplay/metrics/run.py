@@ -81,8 +81,8 @@ class RunMetrics:
     outages: tuple[tuple[float, float], ...] = ()
 
     def summary(self, probability: float = 0.95) -> dict[str, Any]:
-        """Scalar scores (SI; see :data:`navreplay.metrics.tables.SUMMARY_UNITS`) for tables and JSON:
-        those of :class:`~navreplay.metrics.summary.RunSummary` with the run as one block."""
+        """Scalar scores (SI; see :data:`navreplay.metrics.tables.SUMMARY_UNITS`) for tables and
+        JSON: those of :class:`~navreplay.metrics.summary.RunSummary` with the run as one block."""
         summary = RunSummary(probability)
         summary.add(self)
         return summary.result()

@@ -8,8 +8,9 @@ Examples
 >>> import numpy as np
 >>> s = RunSummary()
 >>> s.add_nis("gps_pos", np.array([2.0, 4.0]), 3)
->>> {k: round(v, 3) for k, v in s.result().items()}
-{'duration': 0.0, 'distance': 0.0, 'nis_dof_gps_pos': 3, 'nis_mean_gps_pos': 3.0, 'nis_in_bounds_gps_pos': 1.0}
+>>> {k: round(v, 3) for k, v in s.result().items()}  # doctest: +NORMALIZE_WHITESPACE
+{'duration': 0.0, 'distance': 0.0, 'nis_dof_gps_pos': 3, 'nis_mean_gps_pos': 3.0,
+ 'nis_in_bounds_gps_pos': 1.0}
 """
 
 from __future__ import annotations

@@ -4,12 +4,11 @@ An IMU interval longer than :data:`GAP_FACTOR` times the median interval is a ga
 after a gap cannot say how the vehicle moved during it, so the engine does not let the filter
 integrate the first of them over the whole gap: it asks the filter to *bridge* the gap
 (``filter.bridge_imu_gap(t, since)``: bring the state to time ``t`` without IMU samples since
-``since``, with a covariance that covers the unknown motion) up to each aiding sample inside the gap and up to one
-nominal interval before the next IMU sample, which is then integrated as usual. A filter without
-that method cannot be replayed over a gap: any gap stops the run with one line naming the
-filter, the recording, the gap and its time. A gap longer than ``max_gap`` stops the run with
-one line naming the recording, the topic and the time; so does an IMU stream too short to
-replay.
+``since``, with a covariance that covers the unknown motion) up to each aiding sample inside the gap
+and up to one nominal interval before the next IMU sample, which is then integrated as usual. A
+filter without that method cannot be replayed over a gap: any gap stops the run with one line naming
+the filter, the recording, the gap and its time. A gap longer than ``max_gap`` stops the run with
+one line naming the recording, the topic and the time; so does an IMU stream too short to replay.
 """
 
 from __future__ import annotations

@@ -171,7 +171,9 @@ class SensorSpecs:
         kind = next(k for k, cls in SPEC_KINDS.items() if cls is model)
         found = self.models.get(kind)
         if found is None:
-            raise ValueError(f"no {kind} specification (sensors: {', '.join(self.models) or 'none'})")
+            raise ValueError(
+                f"no {kind} specification (sensors: {', '.join(self.models) or 'none'})"
+            )
         return found  # checked against SPEC_KINDS on creation
 
     @property

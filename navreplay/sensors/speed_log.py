@@ -162,7 +162,8 @@ def ground_velocity(
 def water_speed_along_axis(
     q_nb: np.ndarray, v_n: np.ndarray, misalignment: np.ndarray, v_c_n: np.ndarray
 ) -> np.ndarray:
-    """Inverse of :func:`ground_velocity` for the along-axis part: ``[C_bv^T C_bn (v_n - v_c_n)]_x``.
+    """Inverse of :func:`ground_velocity` for the along-axis part:
+    ``[C_bv^T C_bn (v_n - v_c_n)]_x``.
 
     Parameters
     ----------

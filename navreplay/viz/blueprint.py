@@ -165,7 +165,8 @@ class Catalog:
             plots[plot].paths.remove(path)
             if not plots[plot].paths:
                 del plots[plot]
-        if not any(path in p.paths for tab_plots in self.plots.values() for p in tab_plots.values()):
+        if not any(path in p.paths
+                   for tab_plots in self.plots.values() for p in tab_plots.values()):
             self._paths.discard(path)
 
     def has(self, path: str) -> bool:
@@ -188,7 +189,8 @@ class Catalog:
         world = (None if self.world is None
                  else tuple(float(v) for v in np.round(np.concatenate(self.world), 1)))
         return (
-            tuple((t, k, len(p.paths)) for t, plots in self.plots.items() for k, p in plots.items()),
+            tuple((t, k, len(p.paths))
+                  for t, plots in self.plots.items() for k, p in plots.items()),
             world,
             len(self.covariances),
             self.geo,

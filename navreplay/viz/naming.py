@@ -6,8 +6,8 @@ declarations (:class:`navreplay.filters.base.State`): :func:`tab_of` maps a quan
 Measurements carry the rows and units of their innovations in theirs
 (:class:`navreplay.filters.base.MeasurementKind`, :func:`innovation_rows`). Only for what is
 not declared (other extras, the measurements of a filter that declares none, truth columns) the
-unit comes from the caller (``units={"dk": "-"}``) or, failing that, from the naming conventions of the
-project's filters (``dlat``, ``dv_N``, ``phi_D``, ``db_a_x``, ...); an unknown name is plotted
+unit comes from the caller (``units={"dk": "-"}``) or, failing that, from the naming conventions of
+the project's filters (``dlat``, ``dv_N``, ``phi_D``, ``db_a_x``, ...); an unknown name is plotted
 unscaled and titled ``[-]``.
 
 Examples
@@ -205,7 +205,8 @@ def innovation_rows(name: str, dim: int, declared: MeasurementKind | None = None
     :func:`resolve_unit` (the caller's, else guessed from the name).
 
     >>> from navreplay.filters.base import MeasurementKind
-    >>> innovation_rows("rpm", 3, MeasurementKind("rpm", ("forward", "lateral", "vertical"), "m/s"))[1]
+    >>> innovation_rows("rpm", 3,
+    ...                 MeasurementKind("rpm", ("forward", "lateral", "vertical"), "m/s"))[1]
     ('lateral', DisplayUnit(label='m/s', scale=1.0))
     >>> innovation_rows("gps_pos", 3)[2]
     ('D', DisplayUnit(label='m', scale=1.0))

@@ -200,7 +200,8 @@ def test_summary_report_and_notes_through_the_command_line(tmp_path):
     write_recording(path, simulate("vehicle-drive", {"duration": 20.0, "imu_grade": "mems"},
                                    seed=1))
     cfg = tmp_path / "c.toml"
-    cfg.write_text('[filter.ins]\naccel_vrw = 5e-4\n\n[sensors.imu]\ngyro_arw = "0.5 deg/sqrt(h)"\n')
+    cfg.write_text('[filter.ins]\naccel_vrw = 5e-4\n\n'
+                   '[sensors.imu]\ngyro_arw = "0.5 deg/sqrt(h)"\n')
     res = CliRunner().invoke(cli, ["run", "ins,gps-ins", str(path), "--no-viz", "--config",
                                    str(cfg), "-p", "gps-ins.gyro_bias_sigma=1e-5", "--summary",
                                    str(tmp_path / "s.json"), "--report", str(tmp_path / "r.html")])

@@ -103,8 +103,8 @@ def test_declared_rows_and_units_win_over_the_name():
 
 
 @pytest.mark.parametrize(("cls", "label", "what"), [
-    ("Undeclared", "undeclared", "innovation 'gps_fix' is not a declared measurement (declared: gps_pos, "
-                   "gps_vel"),
+    ("Undeclared", "undeclared", "innovation 'gps_fix' is not a declared measurement (declared: "
+                   "gps_pos, gps_vel"),
     ("WrongRows", "wrong-rows", "innovation 'gps_pos' has shape (2,); the filter declares 3 rows"),
 ])
 def test_an_innovation_against_its_declaration_stops_with_one_line(plugins, drive, cls, label,

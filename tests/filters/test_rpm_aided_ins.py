@@ -273,7 +273,8 @@ def test_second_order_terms_of_the_rpm_residual():
                  - raim.rpm_second_order(nav, u_hat, k, m, v_c, np.outer(y, y))[0]) / 4
             np.testing.assert_allclose(2 * q, hess, atol=0.03, err_msg=f"{a}, {b}")
     sig = np.zeros(24)
-    sig[3:6], sig[6:9], sig[15], sig[16:18], sig[18:20] = 0.1, [7e-4, 7e-4, 3e-3], 0.02, 1.7e-3, 0.18
+    sig[3:6], sig[6:9], sig[15], sig[16:18], sig[18:20] = (
+        0.1, [7e-4, 7e-4, 3e-3], 0.02, 1.7e-3, 0.18)
     P = np.diag(sig**2)
     P[6 + 2, 16 + 1] = P[16 + 1, 6 + 2] = 0.5 * sig[8] * sig[17]  # heading and m_z correlated
     dx = np.random.default_rng(5).multivariate_normal(np.zeros(24), P, size=20_000)
@@ -534,9 +535,10 @@ def test_estimates_converge_to_the_true_sensor_errors(rec):
 
 def test_gyro_z_rate_states_are_estimated_in_the_turns_or_frozen(rec):
     """The turns tilt the solution through m_g_xz, m_g_yz: their sigma falls below 0.8 of the
-    prior (the accelerometer states share what the turns reveal), the estimates stay within 4 sigma of the truth, and the level sigma after the first
-    turn is larger than with white gyro noise alone (the error is a constant acting in the
-    turn). With gyro_z_states off the three states stay 0 with no variance."""
+    prior (the accelerometer states share what the turns reveal), the estimates stay within 4 sigma
+    of the truth, and the level sigma after the first turn is larger than with white gyro noise
+    alone (the error is a constant acting in the turn). With gyro_z_states off the three states stay
+    0 with no variance."""
     res = replay(rec, rai.RpmAidedIns, {"mode": "rpm_current"}, output_rate=1.0)
     imu = rec.metadata.true_errors["imu"]
     truth = np.array([imu["gyro_misalignment"][0][2], imu["gyro_misalignment"][1][2],

@@ -345,7 +345,8 @@ def test_flexure_states_bend_the_predicted_misalignment(s):
     Lc = quat_left_matrix(quat_conj(q_m))
     np.testing.assert_allclose(z[2:], (Lc @ nav[6:])[s] - q_pred[s], atol=1e-15)
     h = 1e-6
-    dz = (tam.flexed(q_rb, theta + h, recovered)[1] - tam.flexed(q_rb, theta - h, recovered)[1]) / (2 * h)
+    dz = (tam.flexed(q_rb, theta + h, recovered)[1]
+          - tam.flexed(q_rb, theta - h, recovered)[1]) / (2 * h)
     np.testing.assert_allclose(H_[2:, -2], -dz[s], atol=1e-9)
     assert not H_[2:, -1].any()
     if recovered:  # q_br0, q_br2 are not bent: rows 0 (and 2) carry no theta

@@ -1,4 +1,5 @@
-"""Bulk CDR equals mcap-ros2-support's encoding; recordings open in mcap-ros2-support and rosbags."""
+"""Bulk CDR equals mcap-ros2-support's encoding; recordings open in mcap-ros2-support and
+rosbags."""
 
 from __future__ import annotations
 

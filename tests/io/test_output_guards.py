@@ -303,7 +303,8 @@ def test_disk_errors_are_one_line_wherever_they_happen(drive, tmp_path, monkeypa
     monkeypatch.undo()
     import importlib
 
-    monkeypatch.setattr(importlib.import_module("navreplay.jobs.run"), "write_json", full)  # a write with no file name at all
+    # a write with no file name at all
+    monkeypatch.setattr(importlib.import_module("navreplay.jobs.run"), "write_json", full)
     one_line_error(invoke("run", "gps-ins", drive, "--no-viz", "--summary", tmp_path / "s"),
                    "No space left on device; nothing was written")
 

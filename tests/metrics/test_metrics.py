@@ -277,7 +277,8 @@ def test_a_reference_that_ends_early_leaves_later_outputs_unscored():
     res = _result(rec, t, pos_ned_err=err, states=states, P=np.tile(np.eye(1), (3, 1, 1)))
     truth = rec[StreamKind.TRUTH]
     keep = slice(0, 11)  # 0..10 s
-    short = Stream(StreamKind.TRUTH, truth.t_ns[keep], {k: v[keep] for k, v in truth.columns.items()})
+    short = Stream(StreamKind.TRUTH, truth.t_ns[keep],
+                   {k: v[keep] for k, v in truth.columns.items()})
     m = metrics.run_metrics(res, metrics.Reference(short, T0_NS))
     assert np.isfinite(m.nav.pos_ned[:2]).all() and np.isnan(m.nav.pos_ned[2]).all()
     assert np.isnan(m.nees[2])

@@ -358,8 +358,10 @@ def test_a_paused_aiding_stream_holds_no_imu(drive_rec, tmp_path, monkeypatch) -
     resume = int(gps[np.searchsorted(gps, rec.t0_ns + 30 * 10**9)])
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(source, "WINDOW_MESSAGES", 150)
-        during = [w for w in open_recording(path, ReadOptions(kinds={StreamKind.IMU, StreamKind.GPS}))
-                  if StreamKind.IMU in w and StreamKind.GPS not in w]
+        during = [
+            w for w in open_recording(path, ReadOptions(kinds={StreamKind.IMU, StreamKind.GPS}))
+            if StreamKind.IMU in w and StreamKind.GPS not in w
+        ]
     assert len(during) >= 5 and all(w.known[StreamKind.GPS] == resume - 1 for w in during)
     held: list[int] = []
     real = ReplaySession.feed

@@ -268,14 +268,17 @@ def test_required_columns_replace_the_standard_ones():
 def test_nan_sample_named_with_stream_and_time():
     rec = make_recording()
     rec["gps"]["pos"][3, 1] = np.nan
-    with pytest.raises(InvalidRecordingError, match=r"stream gps: non-finite value in column 'pos' .* at t = 4\.0+ s"):
+    with pytest.raises(InvalidRecordingError,
+                       match=r"stream gps: non-finite value in column 'pos' .* at t = 4\.0+ s"):
         replay(rec, Recorder)
 
 
 def test_time_going_backwards_or_repeating():
     rec = make_recording()
     rec["imu"].t_ns[500] = rec["imu"].t_ns[498]
-    with pytest.raises(InvalidRecordingError, match=r"stream imu: timestamp goes backwards at t = 4\.99.*previous message is at t = 5\.0"):
+    with pytest.raises(InvalidRecordingError,
+                       match=r"stream imu: timestamp goes backwards at t = 4\.99.*"
+                             r"previous message is at t = 5\.0"):
         replay(rec, Recorder)
     rec = make_recording()
     rec["mag"].t_ns[5] = rec["mag"].t_ns[4]

@@ -60,7 +60,8 @@ def test_noise_conversions():
     # (docs/methods/vector-matching.md §3.1)
     assert nyquist_sample_sigma(80 * MICRO_G, 0.25) / MICRO_G == pytest.approx(113.137, abs=1e-3)
     # transfer-alignment reading: 20 ug as the 1-sigma of a 1-s average, at 100 Hz
-    assert sample_sigma(density_from_average_sigma(20 * MICRO_G), 0.01) / MICRO_G == pytest.approx(200.0)
+    assert (sample_sigma(density_from_average_sigma(20 * MICRO_G), 0.01) / MICRO_G
+            == pytest.approx(200.0))
 
 
 def test_one_second_average_reading_reproduces_the_specified_value():
@@ -404,7 +405,8 @@ def test_master_ins_tilt_sign_matches_paper_to_first_order():
     effect = np.abs(out - euler)
     effect[:, 2] = np.abs((effect[:, 2] + math.pi) % (2 * math.pi) - math.pi)
     assert effect.max() > 5e-4  # the tilt shows ...
-    assert np.abs(diff).max() < 3e-6  # ... and agrees with (20)-(22) up to second order (eps^2 ~ 2e-6)
+    # ... and agrees with (20)-(22) up to second order (eps^2 ~ 2e-6)
+    assert np.abs(diff).max() < 3e-6
     # the opposite tilt sign would be off by twice the effect
     flipped = paper_eqs_20_22(euler, -eps) - out
     assert np.abs(flipped[:, :2]).max() > 5e-4

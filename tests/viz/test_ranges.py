@@ -206,7 +206,8 @@ def test_trajectory_and_map_have_a_legend_and_a_scale(tmp_path):
     store = reader.stream(store=reader.blueprints()[0]).collect()
     for chunk in store.stream().to_chunks():
         rb = chunk.to_record_batch()
-        if chunk.entity_path == "/time_panel" and "TimePanelBlueprint:play_state" in rb.schema.names:
+        if (chunk.entity_path == "/time_panel"
+                and "TimePanelBlueprint:play_state" in rb.schema.names):
             assert rb.column("TimePanelBlueprint:play_state").to_pylist()[-1] == [3]  # following
 
 

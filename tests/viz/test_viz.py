@@ -464,7 +464,8 @@ def read_blueprint(path) -> tuple[dict[str, list[str]], dict[str, tuple[str, lis
     views = {}
     for key, f in fields.items():
         if key.startswith("view/") and "ViewBlueprint:display_name" in f:
-            views[key] = (f["ViewBlueprint:display_name"][0], f["ViewBlueprint:class_identifier"][0],
+            views[key] = (f["ViewBlueprint:display_name"][0],
+                          f["ViewBlueprint:class_identifier"][0],
                           f.get("ViewContents:query", []))
     (tabs_box,) = [f for f in fields.values() if "ContainerBlueprint:active_tab" in f]
     tabs = {}
