@@ -35,9 +35,11 @@ from navreplay.io.topics import TIME_SOURCES, FrameNames, TopicNames, TopicSourc
 COMPLETE = 2**63 - 1
 """The time [ns] a stream whose every sample has been read is complete up to."""
 
-WINDOW_MESSAGES = 60_000
-"""Messages of one stream per window of a reader that reads in windows (10 minutes of 100 Hz
-samples; :mod:`navreplay.io.mcapread`)."""
+WINDOW_MESSAGES = 20_000
+"""Messages of one stream per window of a reader that reads in windows (200 s of 100 Hz
+samples; :mod:`navreplay.io.mcapread`). A window's decoded columns and their truth are what a
+run holds of the log: 20 000 hold a streamed hour of 100 Hz 40-50 MB below 60 000, for the
+same CPU time (``python -m benchmarks memory``)."""
 
 
 class _Default(enum.Enum):

@@ -1,7 +1,7 @@
 """Check a log's data against the frames it is read in, before any replay.
 
 The checks read the samples at hand: the whole log when it is read whole, the first window of
-it (ten minutes) when it is replayed in windows; their notes give the span averaged.
+it (200 s of a 100 Hz IMU) when it is replayed in windows; their notes give the span averaged.
 
 Accelerometer: over the still window at the start (:func:`still_window`), else averaged over the
 samples at hand, the specific force in FRD must point up, i.e. its z component must be negative

@@ -402,7 +402,7 @@ def _row_entries(row: ReplaySession | RecordedSession) -> dict[str, Any]:
 PIECE_OUTPUTS = 1_000
 """Output ticks (at the output rate) of the longest piece of a window fed to the filters at
 once: a block of estimates carries a covariance per row, so at high output rates a reader's
-window (about 60 000 IMU samples) is replayed in pieces of bounded memory. A stage may ask
+window (about 20 000 IMU samples) is replayed in pieces of bounded memory. A stage may ask
 for longer ones (:class:`Stage`: the view, whose work is partly per block)."""
 
 
