@@ -39,7 +39,8 @@ WINDOW_MESSAGES = 20_000
 """Messages of one stream per window of a reader that reads in windows (200 s of 100 Hz
 samples; :mod:`navreplay.io.mcapread`). A window's decoded columns and their truth are what a
 run holds of the log: 20 000 hold a streamed hour of 100 Hz 40-50 MB below 60 000, for the
-same CPU time (``python -m benchmarks memory``)."""
+same CPU time (``python -m benchmarks memory``). A run that draws the view reads longer ones
+(:data:`navreplay.viz.options.DRAWN_WINDOW_MESSAGES`)."""
 
 
 class _Default(enum.Enum):

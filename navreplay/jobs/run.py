@@ -24,7 +24,13 @@ from navreplay.metrics.initial import format_initial_state, initial_state
 from navreplay.replay.pipeline import replay_file
 from navreplay.replay.session import Progress
 from navreplay.replay.spec import FilterSpec
-from navreplay.viz.options import VizMode, VizOptions, close_output, open_output
+from navreplay.viz.options import (
+    DRAWN_WINDOW_MESSAGES,
+    VizMode,
+    VizOptions,
+    close_output,
+    open_output,
+)
 
 
 @dataclasses.dataclass
@@ -187,7 +193,8 @@ def _run_one(job: RunJob, progress: Progress | None) -> RunReport:
     classes = [spec.filter_cls for spec in job.filters]
     labels = [spec.label for spec in job.filters]
     labels += [onboard_label(s) for s in (job.log.onboard if job.log is not None else ())]
-    source = open_log(path, job.log, kinds=streams_needed(classes, job.log))
+    source = open_log(path, job.log, kinds=streams_needed(classes, job.log),
+                      window=DRAWN_WINDOW_MESSAGES if job.viz.draws else None)
     try:
         first = source.peek()  # read and made ready: the log's problems raised before output
     except BaseException:

@@ -132,11 +132,13 @@ class LogOptions:
         return {StreamKind(k): v for k, v in self.frames.items() if k != REFERENCE}
 
     def read_options(self, kinds: Iterable[StreamKind] | None = None, *,
-                     validate: bool = True) -> ReadOptions:
+                     validate: bool = True, window: int | None = None) -> ReadOptions:
         """The options of the log's reader (:class:`~navreplay.io.source.ReadOptions`):
-        ``kinds`` (all when None), the topics, the streams' frames and the time source."""
-        return ReadOptions(kinds=kinds, topics=self.topics, frames=self.stream_frames,
-                           time=self.time, validate=validate)
+        ``kinds`` (all when None), the topics, the streams' frames and the time source;
+        ``window``: messages of a stream per window (None: the reader's default)."""
+        options = ReadOptions(kinds=kinds, topics=self.topics, frames=self.stream_frames,
+                              time=self.time, validate=validate)
+        return options if window is None else dataclasses.replace(options, window=window)
 
     @property
     def policy(self) -> ReadPolicy:

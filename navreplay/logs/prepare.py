@@ -103,7 +103,8 @@ class LogSource(Source):
 
 
 def open_log(path: str | Path, options: LogOptions | None = None, *,
-             kinds: Iterable[StreamKind] | None = None, whole: bool = False) -> LogSource:
+             kinds: Iterable[StreamKind] | None = None, whole: bool = False,
+             window: int | None = None) -> LogSource:
     """Open a log to replay it (see the module docstring).
 
     Parameters
@@ -115,10 +116,12 @@ def open_log(path: str | Path, options: LogOptions | None = None, *,
         Streams to read (all when None; those the log lacks are left out).
     whole : bool
         Read it in one window (always so with a reference or a recorded solution).
+    window : int, optional
+        Messages of a stream per window otherwise (None: the reader's default).
     """
     options = options or LogOptions()
     path = Path(path)
-    read = options.read_options(kinds)
+    read = options.read_options(kinds, window=window)
     one = whole or options.reference is not None or bool(options.onboard)
     inner = open_recording(path, read.whole() if one else read)
     return LogSource(inner, path, options)

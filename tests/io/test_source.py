@@ -129,3 +129,27 @@ def test_the_time_base_a_topic_starts_with_holds_for_all_its_windows(drive, tmp_
     assert len(parts) >= 10
     np.testing.assert_array_equal(np.concatenate(parts), whole[StreamKind.IMU].t_ns)
     np.testing.assert_array_equal(whole[StreamKind.IMU].t_ns, rec[StreamKind.IMU].t_ns + 3_000_000)
+
+
+def test_a_log_opened_to_draw_reads_longer_windows(drive) -> None:
+    """``open_log(window=...)`` sets the messages per window (a run that draws the view asks
+    for :data:`navreplay.viz.options.DRAWN_WINDOW_MESSAGES`); without it the reader's own."""
+    from navreplay.logs.prepare import open_log
+    from navreplay.viz.options import DRAWN_WINDOW_MESSAGES, VizMode, VizOptions
+
+    _, path = drive
+    assert DRAWN_WINDOW_MESSAGES > source_module.WINDOW_MESSAGES
+    assert VizOptions().draws and not VizOptions(mode=VizMode.NONE).draws
+
+    def imu_lengths(**kw) -> list[int]:
+        with open_log(path, **kw) as source:
+            return [len(w[StreamKind.IMU]) for w in source if StreamKind.IMU in w]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(source_module, "WINDOW_MESSAGES", 500)
+        short = imu_lengths()
+        long = imu_lengths(window=2000)
+    assert sum(short) == sum(long) == 4000  # 40 s of 100 Hz
+    # a window closes at the end of the chunk in which a stream reaches its count
+    assert max(short) < 1000 and len(short) >= 6
+    assert max(long) >= 2000 and len(long) <= 2
