@@ -29,7 +29,8 @@ Ensemble ...       Monte Carlo statistics, one tab per group (position, velocity
 =================  =====================================================================
 
 Empty tabs are left out. Legends are shown only where several series share a view and take
-little space (top right, filter labels only); a per-filter pane names its filter in its title.
+little space (top right, filter labels only); a per-filter pane names its filter in its title
+(after what it shows in the tabs of a column per filter, where panes are narrow).
 """
 
 from __future__ import annotations

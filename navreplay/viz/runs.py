@@ -211,14 +211,15 @@ class RunView(TruthView):
             if np.any(result.x[a:b, i] != 0.0):
                 self._style(p_state, [legend], [shade], [1.5])
                 self._scalars(p_state, idx, result.x[a:b, i] * scale)
-                self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]", p_state,
-                                 rank=RANK_STATE, column=L, row=g)
+                self.catalog.add("states", f"state:{g}@{L}", _in_column(f"{g} [{label}]", L),
+                                 p_state, rank=RANK_STATE, column=L, row=g)
                 if st is not None and isinstance(st.truth, TruthColumn):
                     p_true = self._truth_column(st.truth.column, st.unit)
                     if p_true is not None:
                         self._name_truth(st.truth.column, st.truth.index, n)
-                        self.catalog.add("states", f"state:{g}@{L}", f"{L}: {g} [{label}]",
-                                         p_true, rank=RANK_STATE, column=L, row=g)
+                        self.catalog.add("states", f"state:{g}@{L}",
+                                         _in_column(f"{g} [{label}]", L), p_true,
+                                         rank=RANK_STATE, column=L, row=g)
             nav_state = st is not None and isinstance(st.truth, NavError)
             frozen = not np.any(sigma[:, i] > 0.0)  # a disabled or frozen state: left out
             p_sig = entity_path(L, "sigma", n)
@@ -228,8 +229,8 @@ class RunView(TruthView):
                 # a navigation-error state's that of the navigation errors
                 self._style(p_sig, [f"σ {legend}"], [shade], [1.5])
                 self._scalars(p_sig, idx, sigma[:, i] * scale)
-                self.catalog.add("states", f"sigma:{g}@{L}", f"{L}: σ {g} [{label}]", p_sig,
-                                 rank=RANK_SIGMA, column=L, row=f"σ {g}")
+                self.catalog.add("states", f"sigma:{g}@{L}", _in_column(f"σ {g} [{label}]", L),
+                                 p_sig, rank=RANK_SIGMA, column=L, row=f"σ {g}")
         for key, arr in result.extras.items():
             arr = np.asarray(arr[a:b], dtype=np.float64)
             flat = arr.reshape(b - a, int(np.prod(arr.shape[1:], dtype=np.int64)))
@@ -239,8 +240,8 @@ class RunView(TruthView):
             names = [L] if k == 1 else [f"{L} {key}[{j}]" for j in range(k)]
             self._style(path, names, [lighter(run.color, min(0.3 * j, 0.75)) for j in range(k)])
             self._scalars(path, idx, flat * scale)
-            self.catalog.add("states", f"extra:{key}@{L}", f"{L}: {key} [{label}]", path,
-                             rank=RANK_EXTRA, column=L, row=key)
+            self.catalog.add("states", f"extra:{key}@{L}", _in_column(f"{key} [{label}]", L),
+                             path, rank=RANK_EXTRA, column=L, row=key)
         if any(result.has(part) for part in ("pos", "v_n", "q_nb")):
             self._log_nav(run, result, a, b, idx, scores)
         run.rows = b
@@ -381,9 +382,12 @@ class RunView(TruthView):
             self._bounded(path, idx, e * scale, sig, L, run.color)
             bounds = "" if s is None else ", ±3σ"
             # Sensor errors: a column per filter, a row per group of components
-            self.catalog.add(tab, f"error:{n}@{L}", f"{L}: {n} error [{label}]{bounds}", path,
-                             rank=RANK_ERROR + run.order, legend=False,
-                             column=L if tab == "sensor" else None, row=_row(key))
+            what = f"{n} error [{label}]{bounds}"
+            column = L if tab == "sensor" else None
+            self.catalog.add(tab, f"error:{n}@{L}",
+                             _in_column(what, L) if column else f"{L}: {what}", path,
+                             rank=RANK_ERROR + run.order, legend=False, column=column,
+                             row=_row(key))
             if n in states:
                 self.catalog.discard("states", f"sigma:{group_of(n)}@{L}",
                                      entity_path(L, "sigma", n))
@@ -438,3 +442,10 @@ class RunView(TruthView):
             self._style(root, [f"{L} NIS"], [run.color], [1.5])
             self._scalars(root, idx, np.asarray(s.nis, dtype=np.float64))
             self.catalog.add("consistency", plot, ttl, root, rank=run.order, legend=False)
+
+
+def _in_column(what: str, label: str) -> str:
+    """The title of a pane in a filter's column (the Sensor errors and State estimates tabs):
+    what it shows first, its filter after, so that a narrow pane cut at its width still says
+    which state it is (the column and the colour say which filter)."""
+    return f"{what} ({label})"

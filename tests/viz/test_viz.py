@@ -273,8 +273,9 @@ def test_blueprint_adapts_to_what_was_logged(saved):
     sensor = [p for p in plots["sensor"].values()]
     assert sensor and all(p.column in ("gps-ins", "gps-ins[q=2]") for p in sensor)
     tabs, _ = read_blueprint(path)
-    assert tabs["Sensor errors"][:2] == ["gps-ins: db_g_x error [deg/h], ±3σ",
-                                         "gps-ins: db_g_y error [deg/h], ±3σ"]
+    # in a column per filter, the state first: a narrow pane cut at its width still names it
+    assert tabs["Sensor errors"][:2] == ["db_g_x error [deg/h], ±3σ (gps-ins)",
+                                         "db_g_y error [deg/h], ±3σ (gps-ins)"]
     # a state with an error plot leaves the sigma plot (its bounds are in the error plot)
     # (the gyro biases are scored, the accelerometer biases are not: the truth lacks them)
     assert "sigma:db_g@gps-ins" not in plots["states"]
@@ -558,7 +559,7 @@ def test_single_run_nees_with_band(tmp_path):
     tabs, _ = read_blueprint(path)
     assert f"f: NEES ({len(m.nees_states)} states), 95 % band [-]" in tabs["NEES / NIS"]
     np.testing.assert_allclose(scalars(data, "/f/error/theta")[:, 0], 1e-3 / DEG, rtol=1e-9)
-    assert "f: theta error [deg]" in tabs["Sensor errors"]
+    assert "theta error [deg] (f)" in tabs["Sensor errors"]
 
 
 def test_ensemble_view_colours_tabs_and_bands(tmp_path):
