@@ -135,9 +135,10 @@ def _pose_kernel(lat: np.ndarray, lon: np.ndarray, C0: np.ndarray, q_nb: np.ndar
     Shepperd's method, the scalar part >= 0) of ``R C_nb F``, the FLU body velocity
     ``F C_nb^T v_n``, and (``with_cov``) ``B P_pose B^T`` and ``J P_vel,att J^T`` with
     ``B = diag(R, R)``, ``J = F C_nb^T [I, -[v_n x]]`` (``F``: FRD <-> FLU). Returns whether
-    every R, C_nb and v_n is finite. ``C_nb`` and the quaternion are
-    :func:`navreplay.geo.kernels.dcm_entries` and :func:`~navreplay.geo.kernels.dcm_to_quat`
-    (the formulas of :mod:`navreplay.geo.rotations`); the order of each sum is that of
+    every R, C_nb and v_n is finite. ``C_en``, ``C_nb`` and the quaternion are
+    :func:`navreplay.geo.kernels.c_en_entries`, :func:`~navreplay.geo.kernels.dcm_entries`
+    and :func:`~navreplay.geo.kernels.dcm_to_quat` (the formulas of :mod:`navreplay.geo.earth`
+    and :mod:`navreplay.geo.rotations`); the order of each sum is that of
     :func:`_numpy_poses`."""
     R = np.empty((3, 3))
     Cn = np.empty((3, 3))
@@ -152,10 +153,8 @@ def _pose_kernel(lat: np.ndarray, lon: np.ndarray, C0: np.ndarray, q_nb: np.ndar
     f = (1.0, -1.0, -1.0)
     finite = True
     for m in range(lat.shape[0]):
-        sl, cl, so, co = np.sin(lat[m]), np.cos(lat[m]), np.sin(lon[m]), np.cos(lon[m])
-        Cn[0, 0], Cn[0, 1], Cn[0, 2] = -sl * co, -so, -cl * co
-        Cn[1, 0], Cn[1, 1], Cn[1, 2] = -sl * so, co, -cl * so
-        Cn[2, 0], Cn[2, 1], Cn[2, 2] = cl, 0.0, -sl
+        (Cn[0, 0], Cn[0, 1], Cn[0, 2], Cn[1, 0], Cn[1, 1], Cn[1, 2],
+         Cn[2, 0], Cn[2, 1], Cn[2, 2]) = geo_kernels.c_en_entries(lat[m], lon[m])  # fmt: skip
         for i in range(3):
             for k in range(3):
                 R[i, k] = C0[i, 0] * Cn[0, k] + C0[i, 1] * Cn[1, k] + C0[i, 2] * Cn[2, k]

@@ -11,8 +11,8 @@ Two kinds of kernels:
 - scalar forms take and return floats (tuples), for inner loops: :func:`cross`,
   :func:`quat_mult`, :func:`dcm_entries`, :func:`dcm_to_quat`, :func:`rotate`,
   :func:`rotate_inverse`, :func:`rotvec_to_quat`, :func:`quat_to_rotvec` and the earth model
-  (:func:`radii`, :func:`radii_derivatives`, :func:`gravity`, :func:`gravity_derivatives`,
-  :func:`earth_rate`, :func:`transport_rate`);
+  (:func:`c_en_entries`, :func:`radii`, :func:`radii_derivatives`, :func:`gravity`,
+  :func:`gravity_derivatives`, :func:`earth_rate`, :func:`transport_rate`);
 - array forms return a new small array: :func:`quat_to_dcm` (3, 3),
   :func:`quat_left_matrix` and :func:`quat_right_matrix` (4, 4), :func:`euler_to_quat` (4,),
   :func:`quat_to_euler` (3,).
@@ -58,6 +58,7 @@ from navreplay.core.jit import kernel
 from navreplay.geo import earth
 
 __all__ = [
+    "c_en_entries",
     "cross",
     "dcm_entries",
     "dcm_to_quat",
@@ -99,6 +100,16 @@ def radii(lat):
     w = 1.0 - _E2 * s * s
     sw = math.sqrt(w)
     return _A * (1.0 - _E2) / (w * sw), _A / sw  # independent: a short dependency chain
+
+
+@kernel(error_model="numpy", inline="always")
+def c_en_entries(lat, lon):
+    """The nine entries, row by row, of the DCM from NED to ECEF at ``lat``, ``lon`` [rad]
+    (:func:`navreplay.geo.earth.C_en`)."""
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    return (-sl * co, -so, -cl * co,
+            -sl * so, co, -cl * so,
+            cl, 0.0, -sl)  # fmt: skip
 
 
 @kernel(error_model="numpy")

@@ -452,6 +452,13 @@ def test_dcm_kernels_equal_geo_rotations(q):
     np.testing.assert_allclose(kernels.dcm_to_quat(*entries), rot.dcm_to_quat(C), atol=1e-15)
 
 
+@pytest.mark.parametrize("lat, lon", [(0.0, 0.0), (0.655, 2.213), (-1.2, -3.0),
+                                      (np.pi / 2, 0.3)])
+def test_c_en_kernel_equals_geo_earth(lat, lon):
+    np.testing.assert_allclose(np.reshape(kernels.c_en_entries(lat, lon), (3, 3)),
+                               earth.C_en(lat, lon), rtol=0, atol=1e-15)
+
+
 @pytest.mark.parametrize("axis", [None, 0, 1, 2])
 def test_dcm_to_quat_kernel_takes_each_pivot_as_numpy(axis):
     """Half turns about x, y and z make each diagonal entry the pivot; the quaternion is
