@@ -155,9 +155,6 @@ def concat(blocks: Sequence[RunResult], *, consume: bool = False) -> RunResult:
     out: dict[str, Any] = {n: joined([getattr(b, n) for b in full if b is not None])
                            for n in names}
     extras = {k: joined([b.extras[k] for b in full if b is not None]) for k in first.extras}
-    template = dataclasses.replace(first, t=first.t[:0], x=first.x[:0], P=first.P[:0],
-                                   extras={}, innovations={})
-    del first
     a = 0
     for i, b in enumerate(full):
         assert b is not None
@@ -167,10 +164,10 @@ def concat(blocks: Sequence[RunResult], *, consume: bool = False) -> RunResult:
         for n, v in extras.items():
             v[a:a + k] = b.extras[n]
         a += k
-        if consume:
+        if consume:  # (the first stays held, for its metadata: one block)
             full[i] = None
         del b
-    return dataclasses.replace(template, **out, extras=extras, innovations=innovations)
+    return dataclasses.replace(first, **out, extras=extras, innovations=innovations)
 
 
 _ROW_ARRAYS = ("t", "x", "P", "nav_pos", "nav_v_n", "nav_q_nb")
